@@ -1,0 +1,56 @@
+"""The project's exception family.
+
+Every error raised on purpose by :mod:`switchobs_core` is a :class:`SwitchobsError`.
+Each concrete type also derives from the builtin it refines, so a caller may catch
+either the precise type or the builtin (the python-control convention).
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "SwitchobsError",
+    "InvalidArgument",
+    "InvalidSystem",
+    "UnobservableSystem",
+    "DesignError",
+    "InfeasibleDesign",
+    "VerificationError",
+    "GainTableError",
+    "ScheduleError",
+]
+
+
+class SwitchobsError(Exception):
+    """Base class of every error raised on purpose by switchobs."""
+
+
+class InvalidArgument(SwitchobsError, ValueError):
+    """An argument has the wrong shape, a non-finite entry or an impossible value."""
+
+
+class InvalidSystem(InvalidArgument):
+    """A system description (matrices, channels, YAML file) is malformed."""
+
+
+class UnobservableSystem(InvalidSystem):
+    """Assumption A1 fails: (A, [C_1; ...; C_N]) is not observable."""
+
+
+class DesignError(SwitchobsError, RuntimeError):
+    """The offline gain design could not be carried out."""
+
+
+class InfeasibleDesign(DesignError):
+    """No decay rate / gain satisfies the requested design conditions."""
+
+
+class VerificationError(DesignError):
+    """A synthesized gain failed its a-posteriori floating-point verification."""
+
+
+class GainTableError(SwitchobsError, ValueError):
+    """A gain table file is unreadable, corrupt, of another version or for another system."""
+
+
+class ScheduleError(InvalidArgument):
+    """A switching cycle or schedule is malformed (tau <= 0, s outside (0, 1), ...)."""
