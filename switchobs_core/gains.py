@@ -1,0 +1,375 @@
+"""Gain tables: the designs of :mod:`switchobs_core.design`, and their file.
+
+A :class:`CycleDesign` holds, for one cycle (or for a residence-time box, the robust
+design), one verified gain per channel with its eta, kappa, mu and the paper's cycle
+factor f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i) (e:f11_le_delta_main).
+
+File format (JSON, ``format = "switchobs-gain-table"``, ``format_version = 1``)::
+
+    {
+      "format": "switchobs-gain-table", "format_version": 1,
+      "software_version": "0.1.0",
+      "system": {"name", "fingerprint", "n", "p": [...], "N"},
+      "delta": [delta_1, ..., delta_N],
+      "settings": {"margin": {"kind", "value"}, "solver", "theta_slack", "rank_rtol"},
+      "channels": [{"r", "mu", "T_o": [[...]], "kappa_curve": {"eta": [...], "kappa": [...]}}],
+      "designs": [design, ...],          # kind "cycle"
+      "robust": design | null,           # kind "robust"
+      "payload_sha256": "..."            # sha256 of the canonical JSON of everything else
+    }
+
+    design = {"kind", "cycle": {"tau", "h"} | null, "h_bounds": [h_min, h_max] | null,
+              "delta": [...], "channels": [{"eta_min", "eta", "kappa", "kappa_star", "mu",
+              "active", "inactive", "f", "eta_verified", "abscissa",
+              "L_o": [[...]], "L": [[...]], "P": [[...]]}]}
+
+Floats are written with Python's shortest round-trip repr, so a table round-trips bit
+for bit. The file is written atomically (temporary file in the same folder, fsync,
+rename). Loading checks the format and version, the checksum, that every number is
+finite, and (given a system) the system fingerprint and that the stored observable
+bases T_o are the system's.
+
+Lookup tolerance: :meth:`GainTable.lookup` matches a cycle when every active time agrees
+within ``atol + rtol * tau`` (defaults ``schedule.CYCLE_RTOL = 1e-6``,
+``schedule.CYCLE_ATOL = 1e-9`` s).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from . import __version__
+from .exceptions import GainTableError, InvalidArgument
+from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
+
+if TYPE_CHECKING:
+    from .system import LTISystem
+
+__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "switchobs-gain-table"
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ChannelGain:
+    """The verified gain of one channel in one design.
+
+    ``active``/``inactive`` are the durations the design was made for (h_i and
+    tau - h_i; for a robust design the worst case of the box).
+    """
+
+    eta_min: float | None
+    eta: float
+    kappa: float
+    kappa_star: float
+    mu: float
+    active: float
+    inactive: float
+    f: float
+    eta_verified: float
+    abscissa: float
+    L_o: np.ndarray
+    L: np.ndarray
+    P: np.ndarray
+
+    def factor(self, active: float, inactive: float) -> float:
+        """The paper's cycle factor kappa exp(mu * inactive - eta * active) for other durations."""
+        return float(self.kappa * math.exp(self.mu * inactive - self.eta * active))
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {k: getattr(self, k) for k in ("eta_min", "eta", "kappa", "kappa_star", "mu", "active",
+                                            "inactive", "f", "eta_verified", "abscissa")}
+        d.update(L_o=self.L_o.tolist(), L=self.L.tolist(), P=self.P.tolist())
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ChannelGain:
+        kw = {k: (None if d[k] is None else float(d[k])) for k in ("eta_min",)}
+        kw.update({k: float(d[k]) for k in ("eta", "kappa", "kappa_star", "mu", "active", "inactive",
+                                             "f", "eta_verified", "abscissa")})
+        kw.update({k: np.array(d[k], dtype=float) for k in ("L_o", "L", "P")})
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class CertifyCheck:
+    """Whether a design's gains satisfy the paper's cycle condition on an observed cycle.
+
+    Attributes
+    ----------
+    ok : bool
+        f_ii(observed) <= delta_i for every channel: the paper's condition
+        e:f11_le_delta_main holds for the observed durations with these gains.
+    dominated : bool
+        The simpler sufficient rule: every observed active time >= the designed one and
+        every observed inactive time <= the designed one (for mu_i >= 0; reversed in the
+        inactive time for mu_i < 0).
+    f : tuple of float
+        f_ii for the observed durations.
+    """
+
+    ok: bool
+    dominated: bool
+    f: tuple[float, ...]
+    delta: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class CycleDesign:
+    """One gain set: per channel a verified gain for a cycle (or a residence-time box)."""
+
+    kind: str
+    cycle: Cycle | None
+    h_bounds: tuple[float, float] | None
+    delta: tuple[float, ...]
+    channels: tuple[ChannelGain, ...]
+
+    @property
+    def N(self) -> int:
+        return len(self.channels)
+
+    @property
+    def L(self) -> tuple[np.ndarray, ...]:
+        """Embedded gains L_i = T_i [L_o^(i); 0] (e:L_original), n x p_i."""
+        return tuple(c.L for c in self.channels)
+
+    @property
+    def eta(self) -> tuple[float, ...]:
+        return tuple(c.eta for c in self.channels)
+
+    @property
+    def eta_min(self) -> tuple[float | None, ...]:
+        return tuple(c.eta_min for c in self.channels)
+
+    @property
+    def kappa(self) -> tuple[float, ...]:
+        return tuple(c.kappa for c in self.channels)
+
+    @property
+    def mu(self) -> tuple[float, ...]:
+        return tuple(c.mu for c in self.channels)
+
+    @property
+    def f(self) -> tuple[float, ...]:
+        """The paper's cycle factors f_ii at the design durations."""
+        return tuple(c.f for c in self.channels)
+
+    @property
+    def certified(self) -> bool:
+        """Whether f_ii <= delta_i for all i (the paper's condition; not a guarantee, see DESIGN.md)."""
+        return all(f <= d for f, d in zip(self.f, self.delta))
+
+    def label(self) -> str:
+        if self.kind == "robust" and self.h_bounds is not None:
+            return f"robust h in [{self.h_bounds[0]:g}, {self.h_bounds[1]:g}]"
+        return self.cycle.label() if self.cycle is not None else self.kind
+
+    def certifies(self, observed: Cycle) -> CertifyCheck:
+        """Check the paper's cycle condition for an observed cycle with these gains."""
+        if observed.N != self.N:
+            raise InvalidArgument(f"observed cycle has {observed.N} channels; the design has {self.N}")
+        fs, dom = [], True
+        for i, c in enumerate(self.channels):
+            act, ina = observed.h[i], observed.inactive(i + 1)
+            fs.append(c.factor(act, ina))
+            ok_in = ina <= c.inactive * (1 + 1e-12) if c.mu >= 0 else ina >= c.inactive * (1 - 1e-12)
+            dom &= act >= c.active * (1 - 1e-12) and ok_in
+        ok = all(f <= d for f, d in zip(fs, self.delta))
+        return CertifyCheck(ok=ok, dominated=bool(dom), f=tuple(fs), delta=self.delta)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "cycle": None if self.cycle is None else self.cycle.to_dict(),
+            "h_bounds": None if self.h_bounds is None else list(self.h_bounds),
+            "delta": list(self.delta),
+            "channels": [c.to_dict() for c in self.channels],
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CycleDesign:
+        return cls(
+            kind=str(d["kind"]),
+            cycle=None if d["cycle"] is None else Cycle(d["cycle"]["h"]),
+            h_bounds=None if d["h_bounds"] is None else (float(d["h_bounds"][0]), float(d["h_bounds"][1])),
+            delta=tuple(float(x) for x in d["delta"]),
+            channels=tuple(ChannelGain.from_dict(c) for c in d["channels"]),
+        )
+
+
+@dataclass
+class GainTable:
+    """Designs for one system, with what is needed to check they belong to it."""
+
+    system_name: str
+    fingerprint: str
+    n: int
+    p: tuple[int, ...]
+    delta: tuple[float, ...]
+    settings: dict[str, Any]
+    channels: list[dict[str, Any]]
+    designs: list[CycleDesign] = field(default_factory=list)
+    robust: CycleDesign | None = None
+    software_version: str = __version__
+
+    @property
+    def N(self) -> int:
+        return len(self.p)
+
+    def lookup(self, cycle: Cycle, *, rtol: float = CYCLE_RTOL, atol: float = CYCLE_ATOL) -> CycleDesign:
+        """The stored design of ``cycle`` (tolerance in the module docstring)."""
+        for d in self.designs:
+            if d.cycle is not None and d.cycle.matches(cycle, rtol=rtol, atol=atol):
+                return d
+        have = ", ".join(d.label() for d in self.designs) or "none"
+        raise GainTableError(f"no design for cycle {cycle.label()} in the table (designed cycles: {have})")
+
+    def find(self, cycle: Cycle) -> CycleDesign | None:
+        """Like :meth:`lookup` but ``None`` when absent."""
+        try:
+            return self.lookup(cycle)
+        except GainTableError:
+            return None
+
+    def certifying(self, observed: Cycle) -> list[CycleDesign]:
+        """All stored designs (robust included) whose gains satisfy the paper's condition on ``observed``."""
+        cands = self.designs + ([self.robust] if self.robust is not None else [])
+        return [d for d in cands if d.certifies(observed).ok]
+
+    def T_o(self, channel: int) -> np.ndarray:
+        """Stored observable basis T_o of a channel (1-based)."""
+        return np.array(self.channels[channel - 1]["T_o"], dtype=float)
+
+    def kappa_curve(self, channel: int) -> tuple[np.ndarray, np.ndarray]:
+        """Stored (eta, kappa) samples of a channel's kappa curve."""
+        kc = self.channels[channel - 1]["kappa_curve"]
+        return np.array(kc["eta"], float), np.array(kc["kappa"], float)
+
+    # ------------------------------------------------------------------ file
+    def _payload(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "software_version": self.software_version,
+            "system": {"name": self.system_name, "fingerprint": self.fingerprint, "n": self.n,
+                       "p": list(self.p), "N": self.N},
+            "delta": list(self.delta),
+            "settings": self.settings,
+            "channels": self.channels,
+            "designs": [d.to_dict() for d in self.designs],
+            "robust": None if self.robust is None else self.robust.to_dict(),
+        }
+
+    @staticmethod
+    def _digest(payload: dict[str, Any]) -> str:
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, allow_nan=True).encode()).hexdigest()
+
+    def to_json(self) -> str:
+        """The file's text."""
+        payload = self._payload()
+        _check_finite(payload, "gain table")
+        payload["payload_sha256"] = self._digest(payload)
+        return json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n"
+
+    def save(self, path: str | Path) -> Path:
+        """Write the table atomically (temporary file, fsync, rename)."""
+        path = Path(path)
+        text = self.to_json()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    @classmethod
+    def from_json(cls, text: str, *, source: str = "<text>", system: LTISystem | None = None) -> GainTable:
+        """Parse and check a table (see module docstring); ``system`` adds the fingerprint check."""
+
+        def _reject_constant(name: str) -> float:
+            raise GainTableError(f"{source}: contains a non-finite number ({name})")
+
+        try:
+            data = json.loads(text, parse_constant=_reject_constant)
+        except json.JSONDecodeError as err:
+            raise GainTableError(f"{source}: not a complete gain table (JSON error at line {err.lineno}: {err.msg}); "
+                                 "the file may be truncated: design it again") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise GainTableError(f"{source}: not a switchobs gain table (format field missing or wrong)")
+        if data.get("format_version") != FORMAT_VERSION:
+            raise GainTableError(f"{source}: gain table format version {data.get('format_version')} "
+                                 f"is not supported (this software reads version {FORMAT_VERSION})")
+        digest = data.pop("payload_sha256", None)
+        _check_finite(data, source)
+        if digest != cls._digest(data):
+            raise GainTableError(f"{source}: checksum mismatch: the file was modified or corrupted after it was written")
+        try:
+            sysd = data["system"]
+            table = cls(
+                system_name=str(sysd["name"]), fingerprint=str(sysd["fingerprint"]), n=int(sysd["n"]),
+                p=tuple(int(x) for x in sysd["p"]), delta=tuple(float(x) for x in data["delta"]),
+                settings=dict(data["settings"]), channels=list(data["channels"]),
+                designs=[CycleDesign.from_dict(d) for d in data["designs"]],
+                robust=None if data["robust"] is None else CycleDesign.from_dict(data["robust"]),
+                software_version=str(data["software_version"]),
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise GainTableError(f"{source}: malformed gain table ({type(err).__name__}: {err})") from None
+        if system is not None:
+            table.check_system(system, source=source)
+        return table
+
+    @classmethod
+    def load(cls, path: str | Path, *, system: LTISystem | None = None) -> GainTable:
+        """Read and check a table file; with ``system``, also that it was made for it."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise GainTableError(f"gain table {path} does not exist (make one with `switchobs design`)") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise GainTableError(f"cannot read gain table {path}: {err}") from None
+        return cls.from_json(text, source=str(path), system=system)
+
+    def check_system(self, system: LTISystem, *, source: str = "gain table") -> None:
+        """Raise :class:`GainTableError` unless this table was designed for ``system``."""
+        if system.fingerprint() != self.fingerprint:
+            raise GainTableError(
+                f"{source} was designed for another system ('{self.system_name}', fingerprint "
+                f"{self.fingerprint[:12]}...) than '{system.name}' ({system.fingerprint()[:12]}...): design it again"
+            )
+        for i in range(1, system.N + 1):
+            T = system.decomposition(i).T_o
+            S = self.T_o(i)
+            if T.shape != S.shape or not np.allclose(T, S, rtol=0, atol=1e-9):
+                raise GainTableError(f"{source}: stored observable basis of channel {i} differs from this "
+                                     "software's decomposition (made by another version?): design it again")
+
+
+def _check_finite(obj: Any, source: str, where: str = "") -> None:
+    """Raise GainTableError at the first non-finite float in a JSON-like tree."""
+    if isinstance(obj, float):
+        if not math.isfinite(obj):
+            raise GainTableError(f"{source}: non-finite number {obj} at {where or 'top level'}")
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            _check_finite(v, source, f"{where}.{k}" if where else str(k))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            _check_finite(v, source, f"{where}[{i}]")

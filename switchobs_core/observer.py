@@ -1,0 +1,529 @@
+"""The online switched Luenberger observer (Section 4, e:switched_observer).
+
+.. math::
+
+    \\dot{\\hat x}(t) = A \\hat x(t) + B u(t) + L(t) \\big(y(t) - C_{\\rho(t)} \\hat x(t)\\big)
+
+driven by samples ``(t_k, rho_k, y_k)``. Between two samples the observer is propagated
+exactly with the gain of the current channel and the last measurement held
+(zero-order hold): ``x_hat(t_{k+1}) = Phi x_hat(t_k) + Gamma (B u_k + L_i y_k)`` with
+``(Phi, Gamma)`` from the augmented exponential of :mod:`switchobs_core.propagation`,
+cached per (gain, step). A change of channel is a switching instant (e:switching_instants);
+two consecutive starts of channel 1 bound a switching cycle (e:tau_k, e:s_k), written for N
+channels visited in the cyclic order 1, 2, ..., N.
+
+Gains come from a :class:`switchobs_core.gains.GainTable`. Modes:
+
+``periodic``
+    ``cycles=[c]``: one design for every cycle (the paper's periodic case).
+``sequence``
+    ``cycles=[c_0, c_1, ...]``: cycle k uses the design of ``c_{k mod K}`` (the paper's
+    nonperiodic case, Table ``T:eta_values``).
+``robust``
+    the table's residence-time-box design ``table.robust``, meant for any schedule
+    with ``h_min <= h_i <= h_max`` (assumption A2).
+
+At the end of every cycle a :class:`CycleRecord` stores the measured ``tau_k``, ``h_k``,
+``s_k``, the paper's factors ``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)``
+(e:f11_le_delta_main) for the *measured* durations and the gains used, and whether the
+cycle matched the promise (order 1..N, durations within ``match_tol`` of the scheduled
+cycle; in robust mode, A2's box).
+
+Channel numbers are 1-based, as in the paper and docs/api.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .envelope import Envelope, EnvelopeTracker, alpha as _alpha
+from .exceptions import InvalidArgument, ScheduleError
+from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
+
+__all__ = ["SwitchedObserver", "CycleRecord", "MODES"]
+
+#: Schedule modes accepted by :class:`SwitchedObserver`.
+MODES = ("periodic", "sequence", "robust")
+
+
+@dataclass(frozen=True)
+class CycleRecord:
+    """One completed switching cycle, as measured by the observer.
+
+    Attributes
+    ----------
+    k : int
+        Cycle index (0 for the cycle that starts at the first channel-1 start).
+    t_start, t_end : float
+        The two channel-1 starts that bound the cycle (``t_{2k}``, ``t_{2k+2}``).
+    tau : float
+        Measured length ``tau_k = t_end - t_start`` (e:tau_k).
+    h : tuple of float
+        Measured active time of each channel in the cycle (``h_1 = s_k tau_k``).
+    s : float
+        Measured duty fraction ``s_k = h_1 / tau_k`` (e:s_k).
+    f : tuple of float
+        The paper's factors ``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` for the
+        measured durations and the gains used (e:f11_le_delta_main, e:f22_le_delta_main).
+        The paper claims contraction when all are < 1; that claim is not a proof (DESIGN.md).
+    order : tuple of int
+        Channels in the order they were active during the cycle.
+    promised : Any
+        The scheduled :class:`~switchobs_core.schedule.Cycle` (None in robust mode).
+    matched : bool
+        Order was 1..N and every ``|h_i - promised.h_i| <= match_tol`` (robust mode:
+        order 1..N and A2 held).
+    a2_ok : bool or None
+        Robust mode: every ``h_i`` within ``[h_min - match_tol, h_max + match_tol]``;
+        None when no box is known.
+    design_index : int
+        Which entry of the mode's design list was used.
+    """
+
+    k: int
+    t_start: float
+    t_end: float
+    tau: float
+    h: tuple
+    s: float
+    f: tuple
+    order: tuple
+    promised: Any
+    matched: bool
+    a2_ok: bool | None
+    design_index: int
+
+
+def _paper_factors(design: Any, tau: float, h: Sequence[float]) -> tuple:
+    """``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` for measured durations."""
+    return tuple(
+        float(k * math.exp(m * (tau - hi) - e * hi))
+        for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h)
+    )
+
+
+class SwitchedObserver:
+    """Switched Luenberger observer with exact ZOH propagation (e:switched_observer).
+
+    ``obs = SwitchedObserver(system, table, mode="periodic", cycles=[c])``
+
+    Parameters
+    ----------
+    system : LTISystem
+        Provides ``A (n, n)``, ``B (n, m)``, ``C`` (tuple of ``(p_i, n)``) and
+        ``decomposition(i)`` (for alpha, e:alpha_def).
+    table : GainTable
+        Provides ``lookup(cycle) -> CycleDesign`` and ``robust``. A CycleDesign has
+        per-channel ``L`` (n x p_i, embedded gains ``L_i = T_i [L_o; 0]``, e:L_original),
+        ``kappa``, ``eta``, ``mu`` and ``cycle``.
+    mode : {"periodic", "sequence", "robust"}
+    cycles : sequence of Cycle, optional
+        Required for periodic (one cycle) and sequence (K >= 1 cycles); ignored for robust.
+    x0 : (n,) array_like, optional
+        Initial estimate ``x_hat(t0)`` (zeros by default).
+    t0 : float
+        Initial time in seconds.
+    e0 : float
+        Initial error bound ``||x_tilde(t0)|| <= e0``, used by :meth:`envelope`.
+    bounds : (float, float), optional
+        ``(h_min, h_max)`` of A2 for robust mode; default from ``table.robust`` if it
+        carries ``h_min``/``h_max``.
+    match_tol : float
+        Tolerance in seconds on each measured ``h_i`` (default 0.05).
+    cache_size : int
+        LRU size of the ZOH step cache (default 64).
+    dt_resolution : float or None
+        Step quantum of the cache (default 1 ns, see :mod:`switchobs_core.propagation`).
+    max_records : int
+        Number of :class:`CycleRecord` kept (oldest dropped first).
+
+    Raises
+    ------
+    InvalidArgument
+        On a bad mode, cycle list, x0, t0 or e0.
+
+    Notes
+    -----
+    Samples before the first one are propagated open loop (``L = 0``). The design index
+    of cycle ``k`` is ``k mod K`` in sequence mode; the partial cycle before the first
+    channel-1 start uses design 0. The exact bound is ``||Phi(t, t0)|| e0`` with
+    ``Phi(t, t0)`` the product of the step transitions ``expm((A - L_i C_i) dt)`` used
+    so far: a guarantee in the continuous-output limit; for sampled outputs it is the
+    error-to-error part of the joint transition (see
+    :func:`switchobs_core.simulate.sampled_error_transition`). The paper's bound
+    ``alpha * sum z_i`` is reported as the paper's claim, not as a guarantee.
+
+    Examples
+    --------
+    >>> obs = SwitchedObserver(sys, table, mode="periodic", cycles=[Cycle.from_ts(2.0, 0.6)])
+    >>> obs.update(0.01, 1, y)          # doctest: +SKIP
+    """
+
+    def __init__(self, system: Any, table: Any, mode: str = "periodic",
+                 cycles: Sequence[Any] | None = None, x0: Any = None, t0: float = 0.0,
+                 e0: float = 1.0, *, bounds: tuple[float, float] | None = None,
+                 match_tol: float = 0.05, cache_size: int = 64,
+                 dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
+                 max_records: int = 100_000):
+        self.system = system
+        self.table = table
+        self.A = np.ascontiguousarray(system.A, dtype=float)
+        self.n = self.A.shape[0]
+        B = np.asarray(system.B, dtype=float)
+        self.B = B.reshape(self.n, -1) if B.size else np.zeros((self.n, 0))
+        self.m = self.B.shape[1]
+        self.C = tuple(np.ascontiguousarray(Ci, dtype=float) for Ci in system.C)
+        self.N = len(self.C)
+        self.p = tuple(Ci.shape[0] for Ci in self.C)
+        if mode not in MODES:
+            raise InvalidArgument(f"mode must be one of {MODES}; got {mode!r}")
+        self.mode = mode
+        self.match_tol = float(match_tol)
+        if not (math.isfinite(self.match_tol) and self.match_tol >= 0):
+            raise InvalidArgument(f"match_tol must be a finite number >= 0; got {match_tol}")
+        # 1. designs of the mode
+        if mode == "robust":
+            d = getattr(table, "robust", None)
+            if d is None:
+                raise InvalidArgument("table has no robust design (table.robust is None); "
+                                      "design one with design_table(..., robust=(h_min, h_max))")
+            self.designs = (d,)
+            self.promised = (None,)
+            if bounds is None:
+                hmin, hmax = getattr(d, "h_min", None), getattr(d, "h_max", None)
+                bounds = None if hmin is None or hmax is None else (hmin, hmax)
+            if bounds is not None:
+                hmin, hmax = (float(b) for b in bounds)
+                if not (0 < hmin <= hmax and math.isfinite(hmax)):
+                    raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
+                bounds = (hmin, hmax)
+            self.bounds = bounds
+        else:
+            if cycles is None:
+                raise InvalidArgument(f"cycles is required in {mode} mode")
+            if not isinstance(cycles, (list, tuple)):
+                cycles = [cycles]
+            if len(cycles) == 0:
+                raise InvalidArgument("cycles must hold at least one cycle")
+            if mode == "periodic" and len(cycles) != 1:
+                raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} "
+                                      "(use mode='sequence')")
+            designs = []
+            for c in cycles:
+                h = getattr(c, "h", None)
+                if h is None or len(h) != self.N:
+                    raise ScheduleError(f"cycles: {c!r} does not have {self.N} residence times h")
+                designs.append(table.lookup(c))
+            self.designs = tuple(designs)
+            self.promised = tuple(cycles)
+            self.bounds = None
+        for d in self.designs:
+            for i, Li in enumerate(d.L):
+                if np.shape(Li) != (self.n, self.p[i]):
+                    raise InvalidArgument(f"design gain L_{i + 1} has shape {np.shape(Li)}; "
+                                          f"expected {(self.n, self.p[i])}")
+        self._L = tuple(tuple(np.ascontiguousarray(Li, dtype=float) for Li in d.L)
+                        for d in self.designs)
+        # 2. alpha of (e:alpha_def) from the observable subspaces
+        try:
+            self.alpha = float(system.alpha)
+        except AttributeError:
+            from .decomposition import observability_decomposition
+            self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
+        e0 = float(e0)
+        if not (math.isfinite(e0) and e0 >= 0):
+            raise InvalidArgument(f"e0 must be a finite number >= 0; got {e0}")
+        self.e0 = e0
+        self._cache = ZOHCache(cache_size, dt_resolution)
+        self._cache.register(("open",), self.A, None, self.B)
+        self._keys: dict = {}
+        self._records: deque = deque(maxlen=int(max_records))
+        self._x0_init = x0
+        self._t0_init = t0
+        self.reset(x0, t0)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, x0: Any = None, t0: float | None = None) -> None:
+        """Restart at ``x_hat(t0) = x0`` (zeros if None; ``t0`` defaults to the constructor's).
+
+        The ZOH cache is kept; cycle records, envelopes and ``Phi`` are cleared.
+        """
+        if t0 is None:
+            t0 = self._t0_init
+        t0 = float(t0)
+        if not math.isfinite(t0):
+            raise InvalidArgument(f"t0 must be finite; got {t0}")
+        if x0 is None:
+            x = np.zeros(self.n)
+        else:
+            x = np.array(x0, dtype=float).reshape(-1)
+            if x.size != self.n:
+                raise InvalidArgument(f"x0 must have n = {self.n} entries; got {x.size}")
+            if not np.isfinite(x).all():
+                raise InvalidArgument("x0 has a non-finite entry")
+        self._x = x
+        self._t = t0
+        self.t0 = t0
+        self._channel = 0
+        self._y = np.zeros(0)
+        self._u = np.zeros(self.m)
+        self._u_zero = True
+        self._key = ("open",)
+        self._entry_L = False
+        self._Phi = np.eye(self.n)
+        self._k = -1
+        self._cycle_start: float | None = None
+        self._interval_start = t0
+        self._h_acc = np.zeros(self.N)
+        self._order: list[int] = []
+        self._records.clear()
+        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0)
+
+    @property
+    def x_hat(self) -> np.ndarray:
+        """Current estimate ``x_hat(t)`` (a copy), shape (n,)."""
+        return self._x.copy()
+
+    @property
+    def t(self) -> float:
+        """Time of the last sample (or of the reset)."""
+        return self._t
+
+    @property
+    def channel(self) -> int:
+        """Active channel, 1-based (0 before the first sample)."""
+        return self._channel
+
+    @property
+    def design_index(self) -> int:
+        """Index into ``designs`` of the gains in use."""
+        return max(self._k, 0) % len(self.designs)
+
+    @property
+    def current_design(self) -> Any:
+        """The CycleDesign whose gains are in use."""
+        return self.designs[self.design_index]
+
+    @property
+    def completed_cycles(self) -> list[CycleRecord]:
+        """The completed cycles, oldest first (at most ``max_records``)."""
+        return list(self._records)
+
+    @property
+    def Phi(self) -> np.ndarray:
+        """Error-to-error transition ``Phi(t, t0)``: the product of the step transitions."""
+        return self._Phi.copy()
+
+    @property
+    def cache(self) -> ZOHCache:
+        """The ZOH step cache (``hits``, ``misses``)."""
+        return self._cache
+
+    # ------------------------------------------------------------------ gains
+    def _gain_key(self, channel: int, rows: Any) -> tuple:
+        """Cache key of channel ``channel`` with output rows ``rows`` under the current design."""
+        di = self.design_index
+        ck = (di, channel, rows)
+        key = self._keys.get(ck)
+        if key is not None:
+            return key
+        Ci = self.C[channel - 1]
+        Li = self._L[di][channel - 1]
+        if rows is not None:
+            Ci = Ci[list(rows), :]
+            Li = Li[:, list(rows)]
+        M = self.A - Li @ Ci
+        key = ck
+        self._cache.register(key, M, Li, self.B)
+        self._keys[ck] = key
+        return key
+
+    def _rows(self, channel: int, rows: Any) -> tuple | None:
+        if rows is None:
+            return None
+        try:
+            r = tuple(int(i) for i in rows)
+        except (TypeError, ValueError):
+            raise InvalidArgument(f"rows must be a sequence of row indices; got {rows!r}") from None
+        p = self.p[channel - 1]
+        if not r or len(set(r)) != len(r) or min(r) < 0 or max(r) >= p:
+            raise InvalidArgument(f"rows must be distinct indices in 0..{p - 1} of C_{channel}'s "
+                                  f"rows; got {rows!r}")
+        return None if r == tuple(range(p)) else r
+
+    # ------------------------------------------------------------------ online
+    def update(self, t: float, channel: int, y: Any, u: Any = None, rows: Any = None) -> np.ndarray:
+        """Take one sample ``y = C_channel x(t)`` (or the ``rows`` of it) at time ``t``.
+
+        Propagate exactly from the last time to ``t`` with the current gain and the last
+        sample held, then hold ``y`` (and ``u``) from ``t`` on. A change of channel is a
+        switching instant.
+
+        Parameters
+        ----------
+        t : float
+            Sample time in seconds, ``t >= obs.t``.
+        channel : int
+            Active channel, 1-based.
+        y : (p_channel,) or (len(rows),) array_like
+            The measurement.
+        u : (m,) array_like, optional
+            Input held from ``t`` on (zero if None).
+        rows : sequence of int, optional
+            0-based positions of the rows of ``C_channel`` that ``y`` holds (partial-state
+            input, e.g. only the camera rows); the matching columns of ``L_channel`` are used.
+
+        Returns
+        -------
+        (n,) ndarray
+            ``x_hat(t)`` (the observer's own array; copy it to keep it).
+
+        Raises
+        ------
+        InvalidArgument
+            ``t`` earlier than the current time or not finite, channel out of range,
+            ``y``/``u``/``rows`` of the wrong size or not finite.
+        """
+        dt = t - self._t
+        if not dt >= 0:
+            raise InvalidArgument(f"t = {t!r} is earlier than the observer's time {self._t!r} "
+                                  "(samples must come in time order)" if dt < 0 else
+                                  f"t must be a finite time; got {t!r}")
+        if dt == math.inf:
+            raise InvalidArgument(f"t must be a finite time; got {t!r}")
+        if (channel != self._channel or not self._channel) and not (
+                isinstance(channel, (int, np.integer)) and 1 <= channel <= self.N):
+            raise InvalidArgument(f"channel must be an integer in 1..{self.N}; got {channel!r}")
+        y = np.asarray(y, dtype=float)
+        if rows is not None:
+            rows = self._rows(channel, rows)
+        p = self.p[channel - 1] if rows is None else len(rows)
+        if y.shape != (p,):
+            y = y.reshape(-1)
+            if y.size != p:
+                raise InvalidArgument(f"y must have {p} entries for channel {channel}"
+                                      f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
+        if not np.isfinite(y).all():
+            raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
+        if u is not None:
+            u = np.asarray(u, dtype=float).reshape(-1)
+            if u.size != self.m or not np.isfinite(u).all():
+                raise InvalidArgument(f"u must hold {self.m} finite entries; got {u.tolist()}")
+        # 1. exact ZOH step over [t_prev, t]: x <- Phi x + Gamma (L y_held + B u_held)
+        if dt > 0:
+            e = self._cache.step(self._key, dt)
+            x = e.Phi @ self._x
+            if self._entry_L:
+                x += e.GL @ self._y
+            if not self._u_zero:
+                x += e.GB @ self._u
+            self._x = x
+            self._Phi = e.Phi @ self._Phi
+        self._t = t
+        # 2. switching instant
+        if channel != self._channel:
+            self._switch(t, channel)
+        # 3. hold the new sample (and input) from t on
+        self._y = y
+        if u is not None:
+            self._u = u
+            self._u_zero = not u.any()
+        self._key = self._gain_key(channel, rows)
+        self._entry_L = True
+        return self._x
+
+    def _switch(self, t: float, channel: int) -> None:
+        """Bookkeeping at a switching instant (e:switching_instants)."""
+        old = self._channel
+        if old:
+            self._h_acc[old - 1] += t - self._interval_start
+        if channel == 1:
+            if self._cycle_start is not None:
+                self._close_cycle(t)
+            self._k += 1
+            self._cycle_start = t
+            self._h_acc[:] = 0.0
+            self._order = []
+        self._order.append(channel)
+        self._interval_start = t
+        self._channel = channel
+        d = self.current_design
+        self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
+
+    def _close_cycle(self, t: float) -> None:
+        di = max(self._k, 0) % len(self.designs)
+        d = self.designs[di]
+        tau = t - self._cycle_start
+        h = tuple(float(v) for v in self._h_acc)
+        order = tuple(self._order)
+        order_ok = order == tuple(range(1, self.N + 1))
+        promised = self.promised[di]
+        tol = self.match_tol
+        a2_ok = None
+        if self.mode == "robust":
+            if self.bounds is not None:
+                hmin, hmax = self.bounds
+                a2_ok = all(hmin - tol <= hi <= hmax + tol for hi in h)
+            matched = order_ok and a2_ok is not False
+        else:
+            matched = order_ok and all(abs(hi - ph) <= tol for hi, ph in zip(h, promised.h))
+        self._records.append(CycleRecord(
+            k=self._k, t_start=self._cycle_start, t_end=t, tau=tau, h=h,
+            s=h[0] / tau if tau > 0 else float("nan"), f=_paper_factors(d, tau, h),
+            order=order, promised=promised, matched=bool(matched), a2_ok=a2_ok,
+            design_index=di))
+
+    def predict(self, t: float, *, hold: bool = False) -> np.ndarray:
+        """Prediction ``x_hat(t)`` for ``t >= obs.t`` without a sample; the state is unchanged.
+
+        Parameters
+        ----------
+        t : float
+        hold : bool
+            False (default): open loop, ``xdot = A x + B u_held`` (no correction).
+            True: what :meth:`update` would propagate, with the last sample held.
+
+        Returns
+        -------
+        (n,) ndarray
+        """
+        dt = float(t) - self._t
+        if not dt >= 0 or not math.isfinite(dt):
+            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
+        if dt == 0:
+            return self._x.copy()
+        key = self._key if hold else ("open",)
+        e = self._cache.step(key, dt)
+        x = e.Phi @ self._x
+        if key != ("open",) and self._entry_L:
+            x += e.GL @ self._y
+        if not self._u_zero:
+            x += e.GB @ self._u
+        return x
+
+    def envelope(self, t: float | None = None) -> Envelope:
+        """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
+
+        Returns
+        -------
+        Envelope
+            ``z`` (e:z1_evolution, e:z2_evolution), ``paper_bound = alpha sum z``
+            (the paper's claim, not a guarantee; DESIGN.md) and
+            ``exact_bound = ||Phi(t, t0)|| e0`` (ours; see the class Notes).
+        """
+        if t is None:
+            t = self._t
+        dt = float(t) - self._t
+        if not dt >= 0 or not math.isfinite(dt):
+            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
+        Phi = self._Phi
+        if dt > 0:
+            Phi = self._cache.step(self._key, dt).Phi @ Phi
+        z = self._tracker.z(float(t))
+        return Envelope(z=z, paper_bound=float(self.alpha * z.sum()),
+                        exact_bound=float(np.linalg.norm(Phi, 2) * self.e0), t=float(t))

@@ -1,0 +1,107 @@
+"""Built-in systems: the paper's camera and two agents (Sec. ``subsec:sim_model``) and its
+generalization to one camera and M agents.
+
+Each body j (camera c, agents 1..M) is a planar double integrator with velocity matrix
+D_j (e:sim_Aj): chi_j = [p_x, p_y, v_x, v_y], A_j = [[0, I], [0, D_j]], and
+A = blkdiag(A_c, A_1, ..., A_M) (e:sim_A_blkdiag). Channel rho measures the camera
+position and the position of agent rho: y_rho = [p_c; p_rho]. Each channel alone is
+unobservable and (with an unstable agent mode) not detectable; all together are
+observable.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .exceptions import InvalidSystem
+from .system import LTISystem
+
+__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "PAPER_D"]
+
+#: The paper's velocity matrices (Sec. ``subsec:sim_params``): D_c, D_1, D_2 diagonals.
+PAPER_D: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.2), (0.0, 0.1))
+
+
+def _body(d: Sequence[float]) -> np.ndarray:
+    A = np.zeros((4, 4))
+    A[0, 2] = A[1, 3] = 1.0
+    A[2, 2], A[3, 3] = float(d[0]), float(d[1])
+    return A
+
+
+def camera_agents(
+    agents: int = 2,
+    *,
+    D_c: Sequence[float] = (0.0, 0.0),
+    D_agents: Sequence[Sequence[float]] | None = None,
+    name: str | None = None,
+) -> LTISystem:
+    """One camera and M agents, each a planar double integrator.
+
+    ``sys = camera_agents(M, D_c=(0, 0), D_agents=[(0, 0.2), (0, 0.1), ...])``
+
+    Parameters
+    ----------
+    agents : int
+        M >= 2 (one channel per agent).
+    D_c : (2,) sequence
+        Diagonal of the camera's velocity matrix.
+    D_agents : sequence of M (2,) sequences, optional
+        Diagonals of the agents' velocity matrices. Default: the paper's (0, 0.2) and
+        (0, 0.1) for the first two, then (0, 0.1 + 0.05 k) for agent k + 1 > 2... (so
+        every agent has an unstable mode and no two agents are alike).
+    """
+    M = int(agents)
+    if M < 2:
+        raise InvalidSystem(f"camera_agents needs at least 2 agents (one channel each); got {M}")
+    if D_agents is None:
+        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.05 * (k - 1)) for k in range(M)]
+    D_agents = [tuple(float(v) for v in d) for d in D_agents]
+    if len(D_agents) != M or any(len(d) != 2 for d in D_agents) or len(D_c) != 2:
+        raise InvalidSystem(f"D_c must have 2 entries and D_agents {M} pairs")
+    bodies = [_body(D_c)] + [_body(d) for d in D_agents]
+    n = 4 * (M + 1)
+    A = np.zeros((n, n))
+    for j, Aj in enumerate(bodies):
+        A[4 * j : 4 * j + 4, 4 * j : 4 * j + 4] = Aj
+    Cs = []
+    for rho in range(1, M + 1):
+        Ci = np.zeros((4, n))
+        Ci[0, 0] = Ci[1, 1] = 1.0
+        Ci[2, 4 * rho] = Ci[3, 4 * rho + 1] = 1.0
+        Cs.append(Ci)
+    body_names = ["camera"] + [f"agent{k}" for k in range(1, M + 1)]
+    labels = [f"{b}.{q}" for b in body_names for q in ("p_x", "p_y", "v_x", "v_y")]
+    outputs = [("camera.p_x", "camera.p_y", f"agent{k}.p_x", f"agent{k}.p_y") for k in range(1, M + 1)]
+    return LTISystem(
+        A,
+        None,
+        Cs,
+        name=name or ("paper" if M == 2 and list(D_agents) == list(PAPER_D[1:]) and tuple(D_c) == (0, 0) else f"camera_{M}_agents"),
+        state_labels=labels,
+        channel_names=[f"agent{k}" for k in range(1, M + 1)],
+        output_labels=outputs,
+    )
+
+
+def paper_system() -> LTISystem:
+    """The paper's 12-state camera/two-agent model with D_1 = diag(0, 0.2), D_2 = diag(0, 0.1)."""
+    return camera_agents(2, D_c=PAPER_D[0], D_agents=PAPER_D[1:], name="paper")
+
+
+SCENARIOS: dict[str, Callable[..., LTISystem]] = {
+    "paper": paper_system,
+    "camera_agents": camera_agents,
+}
+
+
+def build_scenario(name: str, **params: Any) -> LTISystem:
+    """Build a built-in scenario by name with its keyword parameters."""
+    if name not in SCENARIOS:
+        raise InvalidSystem(f"unknown scenario '{name}'; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
+    try:
+        return SCENARIOS[name](**params)
+    except TypeError as err:
+        raise InvalidSystem(f"scenario '{name}': bad parameters ({err})") from None

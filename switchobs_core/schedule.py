@@ -1,0 +1,256 @@
+"""Switching cycles and schedules (e:switching_instants, e:tau_k, e:s_k).
+
+Channels are visited in the fixed cyclic order 1, 2, ..., N. A cycle k is the interval
+from one channel-1 start to the next; channel i is active for h_i seconds in it, so
+tau = h_1 + ... + h_N. For two channels the paper writes (tau, s) with h_1 = s tau and
+h_2 = (1 - s) tau.
+
+Schedules say which channel is active when:
+
+* :class:`PeriodicSchedule` -- one cycle repeated (the paper's periodic case);
+* :class:`SequenceSchedule` -- a list of cycles, repeated (the paper's nonperiodic case);
+* :class:`RandomSchedule` -- residence times drawn uniformly from [h_min, h_max]
+  (assumption A2), seeded: a test bench for robust designs.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .exceptions import ScheduleError
+from .validation import as_finite
+
+__all__ = [
+    "Cycle",
+    "Schedule",
+    "PeriodicSchedule",
+    "SequenceSchedule",
+    "RandomSchedule",
+    "parse_schedule",
+    "CYCLE_RTOL",
+    "CYCLE_ATOL",
+]
+
+#: Default tolerance of :meth:`Cycle.matches` (relative, absolute in seconds).
+CYCLE_RTOL = 1e-6
+CYCLE_ATOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """One switching cycle: channel i active for h[i - 1] seconds, in order 1..N.
+
+    ``Cycle((h_1, ..., h_N))`` or ``Cycle.from_ts(tau, s)`` for two channels.
+
+    Raises
+    ------
+    ScheduleError
+        Fewer than two channels, a non-finite or non-positive active time.
+    """
+
+    h: tuple[float, ...]
+
+    def __init__(self, h: Sequence[float]) -> None:
+        try:
+            hs = tuple(as_finite(x, f"h_{i + 1}") for i, x in enumerate(h))
+        except Exception as err:  # noqa: BLE001 - re-raised as ScheduleError with context
+            raise ScheduleError(f"bad cycle {h!r}: {err}") from None
+        if len(hs) < 2:
+            raise ScheduleError(f"a cycle needs active times for N >= 2 channels; got {len(hs)}")
+        for i, x in enumerate(hs):
+            if x <= 0:
+                raise ScheduleError(f"active time h_{i + 1} must be > 0; got {x}")
+        object.__setattr__(self, "h", hs)
+
+    @classmethod
+    def from_ts(cls, tau: float, s: float) -> Cycle:
+        """Two-channel cycle of length tau > 0 with duty fraction s in (0, 1) (e:s_k)."""
+        tau = as_finite(tau, "tau")
+        s = as_finite(s, "s")
+        if tau <= 0:
+            raise ScheduleError(f"cycle length tau must be > 0; got {tau}")
+        if not 0 < s < 1:
+            raise ScheduleError(f"duty fraction s must lie in (0, 1); got {s}")
+        return cls((s * tau, (1 - s) * tau))
+
+    @property
+    def N(self) -> int:
+        """Number of channels."""
+        return len(self.h)
+
+    @property
+    def tau(self) -> float:
+        """Cycle length tau = sum h_i (e:tau_k)."""
+        return float(sum(self.h))
+
+    @property
+    def s(self) -> float:
+        """Duty fraction of channel 1, h_1 / tau (e:s_k)."""
+        return self.h[0] / self.tau
+
+    def inactive(self, channel: int) -> float:
+        """tau - h_channel: how long channel ``channel`` (1-based) is off in this cycle."""
+        return self.tau - self.h[channel - 1]
+
+    def matches(self, other: Cycle, *, rtol: float = CYCLE_RTOL, atol: float = CYCLE_ATOL) -> bool:
+        """Whether every active time agrees within ``atol + rtol * tau``."""
+        if other.N != self.N:
+            return False
+        tol = atol + rtol * max(self.tau, other.tau)
+        return all(abs(a - b) <= tol for a, b in zip(self.h, other.h))
+
+    def label(self) -> str:
+        """``(tau, s)`` for two channels, ``h=(h_1, ..., h_N)`` otherwise."""
+        if self.N == 2:
+            return f"({self.tau:g} s, {self.s:g})"
+        return "h=(" + ", ".join(f"{x:g}" for x in self.h) + ")"
+
+    def to_dict(self) -> dict:
+        """JSON-ready form."""
+        return {"tau": self.tau, "h": list(self.h)}
+
+
+class Schedule:
+    """Which channel is active when; cycles start at t0 with channel 1."""
+
+    t0: float = 0.0
+
+    def cycle(self, k: int) -> Cycle:
+        """The k-th cycle (k = 0, 1, ...)."""
+        raise NotImplementedError
+
+    @property
+    def N(self) -> int:
+        """Number of channels."""
+        return self.cycle(0).N
+
+    def switching_instants(self, t_end: float) -> np.ndarray:
+        """All switching instants t_l in [t0, t_end), starting with t0 (e:switching_instants)."""
+        out, t, k = [], self.t0, 0
+        while t < t_end:
+            for h in self.cycle(k).h:
+                if t >= t_end:
+                    break
+                out.append(t)
+                t += h
+            k += 1
+        return np.asarray(out)
+
+    def channel_at(self, t: float) -> int:
+        """The active channel rho(t) in 1..N (channel 1 before t0)."""
+        if t < self.t0:
+            return 1
+        tt, k = self.t0, 0
+        while True:
+            c = self.cycle(k)
+            if t < tt + c.tau:
+                off = t - tt
+                acc = 0.0
+                for i, h in enumerate(c.h):
+                    acc += h
+                    if off < acc:
+                        return i + 1
+                return c.N
+            tt += c.tau
+            k += 1
+
+
+class PeriodicSchedule(Schedule):
+    """One cycle repeated forever (the paper's periodic case)."""
+
+    def __init__(self, cycle: Cycle, t0: float = 0.0) -> None:
+        self._cycle = cycle
+        self.t0 = float(t0)
+        self._starts = np.concatenate([[0.0], np.cumsum(cycle.h)])
+
+    def cycle(self, k: int) -> Cycle:
+        return self._cycle
+
+    @property
+    def cycles(self) -> list[Cycle]:
+        """The cycle types of the schedule."""
+        return [self._cycle]
+
+    def channel_at(self, t: float) -> int:
+        if t < self.t0:
+            return 1
+        off = (t - self.t0) % self._cycle.tau
+        i = bisect.bisect_right(self._starts, off) - 1
+        return min(max(i, 0), self._cycle.N - 1) + 1
+
+
+class SequenceSchedule(Schedule):
+    """A list of cycles, repeated (the paper's nonperiodic case)."""
+
+    def __init__(self, cycles: Sequence[Cycle], t0: float = 0.0) -> None:
+        cycles = list(cycles)
+        if not cycles:
+            raise ScheduleError("a sequence schedule needs at least one cycle")
+        if len({c.N for c in cycles}) != 1:
+            raise ScheduleError("all cycles of a schedule must have the same number of channels")
+        self._cycles = cycles
+        self.t0 = float(t0)
+
+    def cycle(self, k: int) -> Cycle:
+        return self._cycles[k % len(self._cycles)]
+
+    @property
+    def cycles(self) -> list[Cycle]:
+        """The cycle list (one period)."""
+        return list(self._cycles)
+
+
+class RandomSchedule(Schedule):
+    """Residence times drawn uniformly from [h_min, h_max] (assumption A2), seeded."""
+
+    def __init__(self, N: int, h_min: float, h_max: float, *, seed: int = 0, t0: float = 0.0) -> None:
+        h_min, h_max = as_finite(h_min, "h_min"), as_finite(h_max, "h_max")
+        if not 0 < h_min <= h_max:
+            raise ScheduleError(f"need 0 < h_min <= h_max; got [{h_min}, {h_max}]")
+        if N < 2:
+            raise ScheduleError(f"need N >= 2 channels; got {N}")
+        self.N_ = int(N)
+        self.h_min, self.h_max = h_min, h_max
+        self.t0 = float(t0)
+        self._rng = np.random.default_rng(seed)
+        self._drawn: list[Cycle] = []
+
+    def cycle(self, k: int) -> Cycle:
+        while len(self._drawn) <= k:
+            self._drawn.append(Cycle(self._rng.uniform(self.h_min, self.h_max, self.N_)))
+        return self._drawn[k]
+
+
+def parse_schedule(text: str, *, N: int = 2) -> Schedule:
+    """Parse ``periodic:TAU,S``, ``periodic-h:H1,...,HN``, ``sequence:T,S;T,S;...`` or
+    ``random:HMIN,HMAX[,SEED]``.
+    """
+    kind, _, rest = text.partition(":")
+    try:
+        if kind == "periodic":
+            tau, s = (float(x) for x in rest.split(","))
+            return PeriodicSchedule(Cycle.from_ts(tau, s))
+        if kind == "periodic-h":
+            return PeriodicSchedule(Cycle([float(x) for x in rest.split(",")]))
+        if kind == "sequence":
+            cycles = []
+            for part in rest.replace(" ", ";").split(";"):
+                if part:
+                    tau, s = (float(x) for x in part.split(","))
+                    cycles.append(Cycle.from_ts(tau, s))
+            return SequenceSchedule(cycles)
+        if kind == "random":
+            vals = rest.split(",")
+            seed = int(vals[2]) if len(vals) > 2 else 0
+            return RandomSchedule(N, float(vals[0]), float(vals[1]), seed=seed)
+    except ValueError as err:
+        if isinstance(err, ScheduleError):
+            raise
+        raise ScheduleError(f"cannot parse schedule '{text}': {err}") from None
+    raise ScheduleError(
+        f"unknown schedule '{text}'; use periodic:TAU,S, periodic-h:H1,..,HN, sequence:T,S;T,S;... or random:HMIN,HMAX[,SEED]"
+    )
