@@ -178,9 +178,7 @@ def canonical_basis(V: np.ndarray) -> np.ndarray:
     return q * np.sign(np.diag(r))
 
 
-def observability_decomposition(
-    A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL
-) -> Decomposition:
+def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL) -> Decomposition:
     """Orthogonal observability decomposition of (A, C) (Lemma ``t:decomposition``).
 
     ``D = observability_decomposition(A, C)``

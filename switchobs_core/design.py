@@ -30,18 +30,18 @@ makes f_ii <= delta_i for every admissible cycle, so one gain set serves all sch
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
-from scipy.optimize import brentq
 from scipy.interpolate import PchipInterpolator
+from scipy.optimize import brentq
 
 from .decomposition import Decomposition
 from .exceptions import InfeasibleDesign, InvalidArgument, ScheduleError
 from .gains import ChannelGain, CycleDesign, GainTable
 from .schedule import Cycle
-from .synthesis import THETA_SLACK, KappaCurve, LMISynthesizer
+from .synthesis import KAPPA_GRID, THETA_SLACK, KappaCurve, LMISynthesizer
 from .system import LTISystem
 from .validation import as_finite
 
@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: Fixed scan grid of eta (shared by all cycles so SDP solves are cached).
-ETA_GRID = np.concatenate([[0.0], 0.05 * 1.12 ** np.arange(0, 111)])  # up to about 1.4e4
+ETA_GRID = KAPPA_GRID
 #: Smallest selected decay rate (Theorem t:main needs eta > 0).
 ETA_FLOOR = 1e-3
 
@@ -106,7 +106,9 @@ class ChannelDesigner:
         self.synth = LMISynthesizer(decomp.A_o, decomp.C_o, solver=solver)
         self.curve = KappaCurve(self.synth)
 
-    def g(self, eta: float, active: float, inactive: float, delta: float, kappa: Callable[[float], float] | None = None) -> float:
+    def g(
+        self, eta: float, active: float, inactive: float, delta: float, kappa: Callable[[float], float] | None = None
+    ) -> float:
         """g(eta) = eta h - mu u - ln(kappa(eta) / delta) (>= 0 iff e:eta1_bound holds)."""
         k = (kappa or self.curve.kappa)(eta)
         return eta * active - self.mu * inactive - math.log(k / delta)
@@ -133,16 +135,21 @@ class ChannelDesigner:
         is interpolated (PCHIP), so the result is approximate (not used for gains).
         """
         prev = None
-        for j, eta in enumerate(ETA_GRID):
+        for eta in ETA_GRID:
             if self.g(eta, active, inactive, delta) >= 0:
-                if prev is None:
-                    return 0.0
-                e, k = self.curve.points()
-                f = PchipInterpolator(e, np.log(k))
-                kap = lambda x: math.exp(float(f(x)))  # noqa: E731
-                return float(brentq(lambda x: self.g(x, active, inactive, delta, kap), prev, eta, xtol=1e-7))
+                break
             prev = eta
-        return float("nan")
+        else:
+            return float("nan")
+        if prev is None:
+            return 0.0
+        e, k = self.curve.points()
+        interp = PchipInterpolator(e, np.log(k))
+
+        def kap(x: float) -> float:
+            return math.exp(float(interp(x)))
+
+        return float(brentq(lambda x: self.g(x, active, inactive, delta, kap), prev, eta, xtol=1e-7))
 
 
 class Designer:
@@ -169,7 +176,9 @@ class Designer:
         """(eta_min_1, ..., eta_min_N) of a cycle (e:eta1_fixed, e:eta2_fixed)."""
         self._check_cycle(cycle)
         return tuple(
-            ch.eta_min(cycle.h[i], cycle.inactive(i + 1), self.delta[i], what=f"cycle {cycle.label()}, channel {i + 1}: ")
+            ch.eta_min(
+                cycle.h[i], cycle.inactive(i + 1), self.delta[i], what=f"cycle {cycle.label()}, channel {i + 1}: "
+            )
             for i, ch in enumerate(self.channels)
         )
 
@@ -186,12 +195,24 @@ class Designer:
         L = T_o @ g.L_o  # L_i = T_i [L_o; 0] (e:L_original)
         f = g.kappa * math.exp(ch.mu * inactive - eta * active)
         return ChannelGain(
-            eta_min=eta_min, eta=eta, kappa=g.kappa, kappa_star=g.kappa_star, mu=ch.mu,
-            active=active, inactive=inactive, f=f, eta_verified=g.eta_verified,
-            abscissa=g.abscissa, L_o=g.L_o, L=L, P=g.P,
+            eta_min=eta_min,
+            eta=eta,
+            kappa=g.kappa,
+            kappa_star=g.kappa_star,
+            mu=ch.mu,
+            active=active,
+            inactive=inactive,
+            f=f,
+            eta_verified=g.eta_verified,
+            abscissa=g.abscissa,
+            L_o=g.L_o,
+            L=L,
+            P=g.P,
         )
 
-    def _finish(self, kind: str, cycle: Cycle | None, bounds, gains: list[ChannelGain], explicit: bool, what: str) -> CycleDesign:
+    def _finish(
+        self, kind: str, cycle: Cycle | None, bounds, gains: list[ChannelGain], explicit: bool, what: str
+    ) -> CycleDesign:
         d = CycleDesign(kind=kind, cycle=cycle, h_bounds=bounds, delta=self.delta, channels=tuple(gains))
         if not explicit:
             for i, c in enumerate(gains):
@@ -213,7 +234,9 @@ class Designer:
             etas = [as_finite(e, f"eta_{i + 1}") for i, e in enumerate(eta)]
             if len(etas) != self.system.N or any(e <= 0 for e in etas):
                 raise InvalidArgument(f"eta must give {self.system.N} positive rates; got {list(eta)}")
-        gains = [self._channel_gain(i, etas[i], emin[i], cycle.h[i], cycle.inactive(i + 1)) for i in range(self.system.N)]
+        gains = [
+            self._channel_gain(i, etas[i], emin[i], cycle.h[i], cycle.inactive(i + 1)) for i in range(self.system.N)
+        ]
         return self._finish("cycle", cycle, None, gains, eta is not None, what)
 
     def design_robust(self, h_min: float, h_max: float) -> CycleDesign:
@@ -268,18 +291,28 @@ class Designer:
             n=self.system.n,
             p=self.system.p,
             delta=self.delta,
-            settings={"margin": self.margin.to_dict(), "solver": self.solver, "theta_slack": THETA_SLACK,
-                      "rank_rtol": self.system.rtol},
+            settings={
+                "margin": self.margin.to_dict(),
+                "solver": self.solver,
+                "theta_slack": THETA_SLACK,
+                "rank_rtol": self.system.rtol,
+            },
             channels=[
-                {"r": ch.decomp.r, "mu": ch.mu, "T_o": ch.decomp.T_o.tolist(),
-                 "kappa_curve": {"eta": ch.curve.points()[0].tolist(), "kappa": ch.curve.points()[1].tolist()}}
+                {
+                    "r": ch.decomp.r,
+                    "mu": ch.mu,
+                    "T_o": ch.decomp.T_o.tolist(),
+                    "kappa_curve": {"eta": ch.curve.points()[0].tolist(), "kappa": ch.curve.points()[1].tolist()},
+                }
                 for ch in self.channels
             ],
             designs=designs,
             robust=rob,
         )
 
-    def eta_min_map(self, taus: Sequence[float], s_values: Sequence[float], *, progress: bool | None = None) -> np.ndarray:
+    def eta_min_map(
+        self, taus: Sequence[float], s_values: Sequence[float], *, progress: bool | None = None
+    ) -> np.ndarray:
         """eta_min over a (tau, s) grid for two channels: array (len(taus), len(s), 2).
 
         Uses the interpolated kappa curve (``ChannelDesigner.eta_min_interp``): a map for the

@@ -87,16 +87,33 @@ class ChannelGain:
         return float(self.kappa * math.exp(self.mu * inactive - self.eta * active))
 
     def to_dict(self) -> dict[str, Any]:
-        d = {k: getattr(self, k) for k in ("eta_min", "eta", "kappa", "kappa_star", "mu", "active",
-                                            "inactive", "f", "eta_verified", "abscissa")}
+        d = {
+            k: getattr(self, k)
+            for k in (
+                "eta_min",
+                "eta",
+                "kappa",
+                "kappa_star",
+                "mu",
+                "active",
+                "inactive",
+                "f",
+                "eta_verified",
+                "abscissa",
+            )
+        }
         d.update(L_o=self.L_o.tolist(), L=self.L.tolist(), P=self.P.tolist())
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ChannelGain:
         kw = {k: (None if d[k] is None else float(d[k])) for k in ("eta_min",)}
-        kw.update({k: float(d[k]) for k in ("eta", "kappa", "kappa_star", "mu", "active", "inactive",
-                                             "f", "eta_verified", "abscissa")})
+        kw.update(
+            {
+                k: float(d[k])
+                for k in ("eta", "kappa", "kappa_star", "mu", "active", "inactive", "f", "eta_verified", "abscissa")
+            }
+        )
         kw.update({k: np.array(d[k], dtype=float) for k in ("L_o", "L", "P")})
         return cls(**kw)
 
@@ -261,8 +278,13 @@ class GainTable:
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "software_version": self.software_version,
-            "system": {"name": self.system_name, "fingerprint": self.fingerprint, "n": self.n,
-                       "p": list(self.p), "N": self.N},
+            "system": {
+                "name": self.system_name,
+                "fingerprint": self.fingerprint,
+                "n": self.n,
+                "p": list(self.p),
+                "N": self.N,
+            },
             "delta": list(self.delta),
             "settings": self.settings,
             "channels": self.channels,
@@ -308,23 +330,33 @@ class GainTable:
         try:
             data = json.loads(text, parse_constant=_reject_constant)
         except json.JSONDecodeError as err:
-            raise GainTableError(f"{source}: not a complete gain table (JSON error at line {err.lineno}: {err.msg}); "
-                                 "the file may be truncated: design it again") from None
+            raise GainTableError(
+                f"{source}: not a complete gain table (JSON error at line {err.lineno}: {err.msg}); "
+                "the file may be truncated: design it again"
+            ) from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise GainTableError(f"{source}: not a switchobs gain table (format field missing or wrong)")
         if data.get("format_version") != FORMAT_VERSION:
-            raise GainTableError(f"{source}: gain table format version {data.get('format_version')} "
-                                 f"is not supported (this software reads version {FORMAT_VERSION})")
+            raise GainTableError(
+                f"{source}: gain table format version {data.get('format_version')} "
+                f"is not supported (this software reads version {FORMAT_VERSION})"
+            )
         digest = data.pop("payload_sha256", None)
         _check_finite(data, source)
         if digest != cls._digest(data):
-            raise GainTableError(f"{source}: checksum mismatch: the file was modified or corrupted after it was written")
+            raise GainTableError(
+                f"{source}: checksum mismatch: the file was modified or corrupted after it was written"
+            )
         try:
             sysd = data["system"]
             table = cls(
-                system_name=str(sysd["name"]), fingerprint=str(sysd["fingerprint"]), n=int(sysd["n"]),
-                p=tuple(int(x) for x in sysd["p"]), delta=tuple(float(x) for x in data["delta"]),
-                settings=dict(data["settings"]), channels=list(data["channels"]),
+                system_name=str(sysd["name"]),
+                fingerprint=str(sysd["fingerprint"]),
+                n=int(sysd["n"]),
+                p=tuple(int(x) for x in sysd["p"]),
+                delta=tuple(float(x) for x in data["delta"]),
+                settings=dict(data["settings"]),
+                channels=list(data["channels"]),
                 designs=[CycleDesign.from_dict(d) for d in data["designs"]],
                 robust=None if data["robust"] is None else CycleDesign.from_dict(data["robust"]),
                 software_version=str(data["software_version"]),
@@ -358,8 +390,10 @@ class GainTable:
             T = system.decomposition(i).T_o
             S = self.T_o(i)
             if T.shape != S.shape or not np.allclose(T, S, rtol=0, atol=1e-9):
-                raise GainTableError(f"{source}: stored observable basis of channel {i} differs from this "
-                                     "software's decomposition (made by another version?): design it again")
+                raise GainTableError(
+                    f"{source}: stored observable basis of channel {i} differs from this "
+                    "software's decomposition (made by another version?): design it again"
+                )
 
 
 def _check_finite(obj: Any, source: str, where: str = "") -> None:

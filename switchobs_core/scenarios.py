@@ -11,7 +11,8 @@ observable.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +80,10 @@ def camera_agents(
         A,
         None,
         Cs,
-        name=name or ("paper" if M == 2 and list(D_agents) == list(PAPER_D[1:]) and tuple(D_c) == (0, 0) else f"camera_{M}_agents"),
+        name=name
+        or (
+            "paper" if M == 2 and list(D_agents) == list(PAPER_D[1:]) and tuple(D_c) == (0, 0) else f"camera_{M}_agents"
+        ),
         state_labels=labels,
         channel_names=[f"agent{k}" for k in range(1, M + 1)],
         output_labels=outputs,

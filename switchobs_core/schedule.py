@@ -16,8 +16,8 @@ Schedules say which channel is active when:
 from __future__ import annotations
 
 import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -57,7 +57,7 @@ class Cycle:
     def __init__(self, h: Sequence[float]) -> None:
         try:
             hs = tuple(as_finite(x, f"h_{i + 1}") for i, x in enumerate(h))
-        except Exception as err:  # noqa: BLE001 - re-raised as ScheduleError with context
+        except Exception as err:
             raise ScheduleError(f"bad cycle {h!r}: {err}") from None
         if len(hs) < 2:
             raise ScheduleError(f"a cycle needs active times for N >= 2 channels; got {len(hs)}")
@@ -252,5 +252,6 @@ def parse_schedule(text: str, *, N: int = 2) -> Schedule:
             raise
         raise ScheduleError(f"cannot parse schedule '{text}': {err}") from None
     raise ScheduleError(
-        f"unknown schedule '{text}'; use periodic:TAU,S, periodic-h:H1,..,HN, sequence:T,S;T,S;... or random:HMIN,HMAX[,SEED]"
+        f"unknown schedule '{text}'; use periodic:TAU,S, periodic-h:H1,..,HN, "
+        "sequence:T,S;T,S;... or random:HMIN,HMAX[,SEED]"
     )

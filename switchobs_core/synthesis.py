@@ -38,7 +38,7 @@ from .decomposition import spectral_abscissa
 from .exceptions import DesignError, InvalidArgument, VerificationError
 from .validation import as_finite, as_matrix
 
-__all__ = ["GainSynthesis", "LMISynthesizer", "KappaCurve", "verify_gain", "THETA_SLACK"]
+__all__ = ["GainSynthesis", "LMISynthesizer", "KappaCurve", "verify_gain", "THETA_SLACK", "KAPPA_GRID"]
 
 #: Relative slack on theta* in the least-norm gain selection (kappa grows by <= 5e-5).
 THETA_SLACK = 1e-4
@@ -149,9 +149,7 @@ class LMISynthesizer:
         base = [lyap, P >> I, P << theta * I]
         self._P, self._Y, self._theta = P, Y, theta
         self._stage1 = cp.Problem(cp.Minimize(theta), base)
-        self._stage2 = cp.Problem(
-            cp.Minimize(cp.norm(cp.hstack([P, Y]), "fro")), base + [theta <= self._theta_cap]
-        )
+        self._stage2 = cp.Problem(cp.Minimize(cp.norm(cp.hstack([P, Y]), "fro")), base + [theta <= self._theta_cap])
         self.n_solves = 0
 
     def _solve(self, prob, what: str) -> str:
@@ -200,9 +198,19 @@ class LMISynthesizer:
             raise VerificationError(f"the SDP at eta = {eta:.6g} returned a non-finite gain")
         eta_v, kappa, ab = verify_gain(self.A, self.C, L, P, eta)
         return GainSynthesis(
-            eta=eta, L_o=L, P=P, kappa=kappa, kappa_star=math.sqrt(theta),
-            eta_verified=eta_v, abscissa=ab, solver=solver,
+            eta=eta,
+            L_o=L,
+            P=P,
+            kappa=kappa,
+            kappa_star=math.sqrt(theta),
+            eta_verified=eta_v,
+            abscissa=ab,
+            solver=solver,
         )
+
+
+#: Fixed eta grid of the kappa curves: {0} U {0.05 * 1.12^k}, up to about 1.4e4.
+KAPPA_GRID = np.concatenate([[0.0], 0.05 * 1.12 ** np.arange(0, 111)])
 
 
 @dataclass
@@ -211,13 +219,15 @@ class KappaCurve:
 
     kappa depends on eta only, not on the cycle (DESIGN.md), so one curve serves every
     design of the channel: a design over many cycles costs root-finding on cached
-    values, not new SDPs. Values are cached by eta (exact float key). :meth:`kappa`
-    returns the running maximum over cached values at smaller eta, so the curve is
-    non-decreasing even where the solver's last digits are not.
+    values, not new SDPs. :meth:`kappa` is made non-decreasing (where the solver's last
+    digits are not) by taking the max with the values at the fixed grid points
+    :data:`KAPPA_GRID` below eta. It is a function of eta alone, whatever was solved
+    before: no result depends on the order of solves.
     """
 
     synthesizer: LMISynthesizer
     cache: dict[float, float] = field(default_factory=dict)
+    grid: np.ndarray = field(default_factory=lambda: KAPPA_GRID)
 
     def raw(self, eta: float) -> float:
         """kappa*(eta) from the SDP (cached)."""
@@ -227,19 +237,15 @@ class KappaCurve:
         return self.cache[eta]
 
     def kappa(self, eta: float) -> float:
-        """Non-decreasing kappa(eta): max of raw values at cached eta' <= eta."""
-        val = self.raw(eta)
-        below = [k for e, k in self.cache.items() if e <= eta]
-        return max(val, *below) if below else val
-
-    def grid(self, etas: ArrayLike) -> np.ndarray:
-        """kappa on a grid of eta values (each a cached SDP)."""
-        return np.array([self.kappa(e) for e in np.asarray(etas, float)])
+        """Non-decreasing kappa(eta) = max(raw(eta), raw(g) for grid points g <= eta)."""
+        eta = float(eta)
+        below = self.grid[self.grid <= eta]
+        return max([self.raw(eta)] + [self.raw(g) for g in below])
 
     def points(self) -> tuple[np.ndarray, np.ndarray]:
-        """All cached (eta, kappa) pairs, sorted by eta, monotone."""
-        if not self.cache:
+        """The evaluated grid points (eta, kappa), sorted, monotone: the stored curve."""
+        e = np.array([g for g in self.grid if float(g) in self.cache])
+        if e.size == 0:
             return np.zeros(0), np.zeros(0)
-        e = np.array(sorted(self.cache))
-        k = np.maximum.accumulate(np.array([self.cache[x] for x in e]))
+        k = np.maximum.accumulate(np.array([self.cache[float(x)] for x in e]))
         return e, k

@@ -25,9 +25,10 @@ or a built-in scenario with its parameters::
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -145,9 +146,7 @@ class LTISystem:
         decomp = tuple(observability_decomposition(A, Ci, rtol=rtol) for Ci in C)
         for i, d in enumerate(decomp):
             if d.r == 0:
-                raise InvalidSystem(
-                    f"channel {i + 1} ({cnames[i]}) observes no direction of the state (r_{i + 1} = 0)"
-                )
+                raise InvalidSystem(f"channel {i + 1} ({cnames[i]}) observes no direction of the state (r_{i + 1} = 0)")
         object.__setattr__(self, "_decomp", decomp)
         self._check_a1()
 
@@ -334,6 +333,4 @@ def load_system(spec: str | Path) -> LTISystem:
         if not path.exists():
             raise InvalidSystem(f"system file {path} does not exist")
         return LTISystem.from_yaml(path)
-    raise InvalidSystem(
-        f"unknown scenario '{s}' and no such file; built-in scenarios: {', '.join(sorted(SCENARIOS))}"
-    )
+    raise InvalidSystem(f"unknown scenario '{s}' and no such file; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
