@@ -38,7 +38,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 from .decomposition import Decomposition
-from .exceptions import InfeasibleDesign, InvalidArgument, ScheduleError
+from .exceptions import DesignError, InfeasibleDesign, InvalidArgument, ScheduleError
 from .gains import ChannelGain, CycleDesign, GainTable
 from .schedule import Cycle
 from .synthesis import KAPPA_GRID, THETA_SLACK, KappaCurve, LMISynthesizer
@@ -117,7 +117,14 @@ class ChannelDesigner:
         """Smallest eta >= 0 with g(eta) >= 0 (grid scan, then Brent on the exact g)."""
         prev = None
         for eta in ETA_GRID:
-            val = self.g(eta, active, inactive, delta)
+            try:
+                val = self.g(eta, active, inactive, delta)
+            except DesignError as err:
+                raise InfeasibleDesign(
+                    f"{what}no decay rate up to {prev or 0.0:.4g} satisfies the cycle condition (active "
+                    f"{active:g} s, inactive {inactive:g} s, delta {delta:g}), and the SDP fails beyond "
+                    f"eta = {eta:.4g} ({err}); lengthen the active time"
+                ) from None
             if val >= 0:
                 if prev is None:
                     return 0.0

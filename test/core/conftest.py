@@ -1,0 +1,20 @@
+"""Shared fixtures of the core tests (no ROS needed)."""
+
+from __future__ import annotations
+
+import pytest
+
+from switchobs_core.design import Designer
+from switchobs_core.scenarios import paper_system
+
+
+@pytest.fixture(scope="session")
+def paper():
+    """The paper's 12-state camera/two-agent system."""
+    return paper_system()
+
+
+@pytest.fixture(scope="session")
+def paper_designer(paper):
+    """One designer for the session: its kappa curves are cached across tests."""
+    return Designer(paper, delta=0.99)

@@ -1,0 +1,107 @@
+"""Orthogonal observability decomposition (Lemma t:decomposition): properties on random systems."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from switchobs_core.decomposition import canonical_basis, log_norm, observability_decomposition
+
+
+def random_pair(seed: int, n: int, p: int, r: int, scale_exp: float):
+    """A pair (A, C) with a planted unobservable subspace of dimension n - r, rotated by
+    a random orthogonal Q, and state scaling diag(10^[-e, e]) (badly scaled when e > 0)."""
+    rng = np.random.default_rng(seed)
+    Ao = rng.standard_normal((r, r))
+    Co = rng.standard_normal((p, r))
+    Au = rng.standard_normal((n - r, n - r))
+    Auo = rng.standard_normal((n - r, r))
+    A = np.block([[Ao, np.zeros((r, n - r))], [Auo, Au]])
+    C = np.hstack([Co, np.zeros((p, n - r))])
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    S = np.diag(10.0 ** rng.uniform(-scale_exp, scale_exp, n))
+    Si = np.linalg.inv(S)
+    # x = Q S z: A_z = S^-1 Q' A Q S, C_z = C Q S
+    return Si @ Q.T @ A @ Q @ S, C @ Q @ S
+
+
+def obsv(A, C):
+    return np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(A.shape[0])])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(2, 9),
+    p=st.integers(1, 3),
+    data=st.data(),
+    scale_exp=st.sampled_from([0.0, 1.0, 2.0]),
+)
+def test_decomposition_properties(seed, n, p, data, scale_exp):
+    r = data.draw(st.integers(1, n))
+    A, C = random_pair(seed, n, p, r, scale_exp)
+    d = observability_decomposition(A, C)
+    T = d.T
+    # T orthogonal
+    assert np.allclose(T.T @ T, np.eye(n), atol=1e-10)
+    scale = max(np.linalg.norm(A, 2), np.linalg.norm(C, 2), 1.0)
+    # the zero blocks are zero to tolerance (e:A_obs_decomp, e:C_obs_decomp)
+    At = T.T @ A @ T
+    assert np.linalg.norm(At[: d.r, d.r :]) <= 1e-7 * scale
+    assert np.linalg.norm((C @ T)[:, d.r :]) <= 1e-7 * scale
+    # (A_o, C_o) observable: the smallest singular value of its observability matrix is
+    # clearly nonzero relative to its norm (not a rank call on a power stack of the big pair)
+    O = obsv(d.A_o, d.C_o)
+    sv = np.linalg.svd(O, compute_uv=False)
+    assert sv[-1] > 1e-12 * sv[0]
+    # r equals the rank of the observability matrix where that is well conditioned
+    O_full = obsv(A, C)
+    s_full = np.linalg.svd(O_full, compute_uv=False)
+    gap_ok = s_full[r - 1] > 1e-6 * s_full[0] and (r == n or s_full[r] < 1e-11 * s_full[0])
+    if gap_ok:
+        assert d.r == r == np.linalg.matrix_rank(O_full, tol=1e-9 * s_full[0])
+
+
+def test_badly_scaled_system_keeps_structure():
+    # States scaled by 1e-3 .. 1e3: the planted r is recovered, blocks are zero.
+    A, C = random_pair(7, 8, 2, 5, 3.0)
+    d = observability_decomposition(A, C)
+    assert d.r == 5
+    assert d.residual < 1e-9
+
+
+def test_canonical_basis_is_basis_independent():
+    rng = np.random.default_rng(1)
+    V, _ = np.linalg.qr(rng.standard_normal((7, 3)))
+    R, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    B1 = canonical_basis(V)
+    B2 = canonical_basis(V @ R)
+    assert np.allclose(B1, B2, atol=1e-12)
+    assert np.allclose(B1.T @ B1, np.eye(3), atol=1e-12)
+
+
+def test_decomposition_deterministic_under_state_rotation_of_basis(paper):
+    # Same subspaces, different input order of an orthonormal basis: identical T.
+    d1 = observability_decomposition(paper.A, paper.C[0])
+    d2 = observability_decomposition(paper.A, paper.C[0][::-1])  # rows permuted: same ker C
+    assert np.array_equal(d1.T, d2.T)
+    # For the paper's coordinate-aligned subspaces the canonical basis is the coordinate axes.
+    assert np.allclose(np.abs(d1.T_o), np.eye(12)[:, :8])
+
+
+def test_observable_channel_has_no_unobservable_part():
+    A = np.array([[0.0, 1.0], [-2.0, -3.0]])
+    d = observability_decomposition(A, [[1.0, 0.0]])
+    assert d.r == 2 and d.T_u.shape == (2, 0) and d.observable and d.detectable
+
+
+def test_log_norm_closed_form():
+    M = np.array([[0.0, 1.0], [0.0, 0.2]])
+    assert log_norm(M) == pytest.approx(0.1 + np.sqrt(0.01 + 0.25))
+    # ||expm(M t)|| <= exp(mu t) (e:exp_bound_mu_p)
+    from scipy.linalg import expm
+
+    for t in (0.1, 1.0, 3.0):
+        assert np.linalg.norm(expm(M * t), 2) <= np.exp(log_norm(M) * t) * (1 + 1e-12)
