@@ -5,10 +5,25 @@
     \\dot{\\hat x}(t) = A \\hat x(t) + B u(t) + L(t) \\big(y(t) - C_{\\rho(t)} \\hat x(t)\\big)
 
 driven by samples ``(t_k, rho_k, y_k)``. Between two samples the observer is propagated
-exactly with the gain of the current channel and the last measurement held
-(zero-order hold): ``x_hat(t_{k+1}) = Phi x_hat(t_k) + Gamma (B u_k + L_i y_k)`` with
-``(Phi, Gamma)`` from the augmented exponential of :mod:`switchobs_core.propagation`,
-cached per (gain, step). A change of channel is a switching instant (e:switching_instants);
+exactly (augmented matrix exponentials of :mod:`switchobs_core.propagation`, cached per
+(gain, step)) with what the last sample said held constant:
+
+``hold="innovation"`` (default)
+    the innovation ``nu_k = y_k - C_i x_hat(t_k)`` is held:
+    ``x_hat(t_{k+1}) = e^{A dt} x_hat(t_k) + Gamma_A (B u_k + L_i nu_k)``. The error then
+    obeys ``x_tilde(t_{k+1}) = (e^{A dt} - Gamma_A L_i C_i) x_tilde(t_k)`` exactly, whatever
+    the plant does, so the exact bound is a guarantee for sampled outputs too, and the
+    error converges on plants with unstable modes at any sample rate the design allows.
+``hold="measurement"``
+    the measurement ``y_k`` is held (the literal zero-order hold of e:switched_observer):
+    ``x_hat(t_{k+1}) = e^{M dt} x_hat(t_k) + Gamma_M (B u_k + L_i y_k)``, ``M = A - L_i C_i``.
+    The held y lags a moving plant, so the error picks up a term driven by the plant state
+    (first order in 1/rate; :func:`switchobs_core.simulate.sampled_error_transition`). On
+    the paper's model at 100 Hz the error grows with the unstable agents (33x in 40 s),
+    which is why it is not the default.
+
+Both coincide with the continuous-output observer as the sample rate grows (first order
+in the step). A change of channel is a switching instant (e:switching_instants);
 two consecutive starts of channel 1 bound a switching cycle (e:tau_k, e:s_k), written for N
 channels visited in the cyclic order 1, 2, ..., N.
 
@@ -36,19 +51,23 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
-from .envelope import Envelope, EnvelopeTracker, alpha as _alpha
+from .envelope import Envelope, EnvelopeTracker
+from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
 
-__all__ = ["SwitchedObserver", "CycleRecord", "MODES"]
+__all__ = ["HOLDS", "MODES", "CycleRecord", "SwitchedObserver"]
 
 #: Schedule modes accepted by :class:`SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
+#: What may be held between samples (module docstring).
+HOLDS = ("innovation", "measurement")
 
 
 @dataclass(frozen=True)
@@ -131,8 +150,7 @@ class SwitchedObserver:
     e0 : float
         Initial error bound ``||x_tilde(t0)|| <= e0``, used by :meth:`envelope`.
     bounds : (float, float), optional
-        ``(h_min, h_max)`` of A2 for robust mode; default from ``table.robust`` if it
-        carries ``h_min``/``h_max``.
+        ``(h_min, h_max)`` of A2 for robust mode; default ``table.robust.h_bounds``.
     match_tol : float
         Tolerance in seconds on each measured ``h_i`` (default 0.05).
     cache_size : int
@@ -141,6 +159,8 @@ class SwitchedObserver:
         Step quantum of the cache (default 1 ns, see :mod:`switchobs_core.propagation`).
     max_records : int
         Number of :class:`CycleRecord` kept (oldest dropped first).
+    hold : {"innovation", "measurement"}
+        What is held between samples (module docstring). Default ``"innovation"``.
 
     Raises
     ------
@@ -152,11 +172,12 @@ class SwitchedObserver:
     Samples before the first one are propagated open loop (``L = 0``). The design index
     of cycle ``k`` is ``k mod K`` in sequence mode; the partial cycle before the first
     channel-1 start uses design 0. The exact bound is ``||Phi(t, t0)|| e0`` with
-    ``Phi(t, t0)`` the product of the step transitions ``expm((A - L_i C_i) dt)`` used
-    so far: a guarantee in the continuous-output limit; for sampled outputs it is the
-    error-to-error part of the joint transition (see
-    :func:`switchobs_core.simulate.sampled_error_transition`). The paper's bound
-    ``alpha * sum z_i`` is reported as the paper's claim, not as a guarantee.
+    ``Phi(t, t0)`` the product of the steps' error maps. With ``hold="innovation"`` it is a
+    guarantee for the sampled observer (noise-free samples): ``||x_tilde(t)|| <= ||Phi|| e0``.
+    With ``hold="measurement"`` it is the error-to-error part of the joint transition (see
+    :func:`switchobs_core.simulate.sampled_error_transition`), a guarantee only in the
+    continuous-output limit. The paper's bound ``alpha * sum z_i`` is reported as the
+    paper's claim, not as a guarantee.
 
     Examples
     --------
@@ -169,7 +190,7 @@ class SwitchedObserver:
                  e0: float = 1.0, *, bounds: tuple[float, float] | None = None,
                  match_tol: float = 0.05, cache_size: int = 64,
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
-                 max_records: int = 100_000):
+                 max_records: int = 100_000, hold: str = "innovation"):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -183,6 +204,9 @@ class SwitchedObserver:
         if mode not in MODES:
             raise InvalidArgument(f"mode must be one of {MODES}; got {mode!r}")
         self.mode = mode
+        if hold not in HOLDS:
+            raise InvalidArgument(f"hold must be one of {HOLDS}; got {hold!r}")
+        self.hold = hold
         self.match_tol = float(match_tol)
         if not (math.isfinite(self.match_tol) and self.match_tol >= 0):
             raise InvalidArgument(f"match_tol must be a finite number >= 0; got {match_tol}")
@@ -195,8 +219,7 @@ class SwitchedObserver:
             self.designs = (d,)
             self.promised = (None,)
             if bounds is None:
-                hmin, hmax = getattr(d, "h_min", None), getattr(d, "h_max", None)
-                bounds = None if hmin is None or hmax is None else (hmin, hmax)
+                bounds = getattr(d, "h_bounds", None)
             if bounds is not None:
                 hmin, hmax = (float(b) for b in bounds)
                 if not (0 < hmin <= hmax and math.isfinite(hmax)):
@@ -242,6 +265,7 @@ class SwitchedObserver:
         self._cache = ZOHCache(cache_size, dt_resolution)
         self._cache.register(("open",), self.A, None, self.B)
         self._keys: dict = {}
+        self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
         self._x0_init = x0
         self._t0_init = t0
@@ -316,7 +340,11 @@ class SwitchedObserver:
 
     @property
     def Phi(self) -> np.ndarray:
-        """Error-to-error transition ``Phi(t, t0)``: the product of the step transitions."""
+        """Error transition ``Phi(t, t0)``: the product of the steps' error maps ``E``.
+
+        With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
+        with no noise and a known input); with measurement hold it is the error-to-error part.
+        """
         return self._Phi.copy()
 
     @property
@@ -337,9 +365,12 @@ class SwitchedObserver:
         if rows is not None:
             Ci = Ci[list(rows), :]
             Li = Li[:, list(rows)]
-        M = self.A - Li @ Ci
         key = ck
-        self._cache.register(key, M, Li, self.B)
+        if self.hold == "innovation":
+            self._cache.register(key, self.A, Li, self.B, C=Ci)
+        else:
+            self._cache.register(key, self.A - Li @ Ci, Li, self.B)
+        self._Crows[key] = Ci
         self._keys[ck] = key
         return key
 
@@ -361,8 +392,8 @@ class SwitchedObserver:
         """Take one sample ``y = C_channel x(t)`` (or the ``rows`` of it) at time ``t``.
 
         Propagate exactly from the last time to ``t`` with the current gain and the last
-        sample held, then hold ``y`` (and ``u``) from ``t`` on. A change of channel is a
-        switching instant.
+        sample's innovation (or, with ``hold="measurement"``, the sample) held, then hold the
+        new one (and ``u``) from ``t`` on. A change of channel is a switching instant.
 
         Parameters
         ----------
@@ -414,7 +445,7 @@ class SwitchedObserver:
             u = np.asarray(u, dtype=float).reshape(-1)
             if u.size != self.m or not np.isfinite(u).all():
                 raise InvalidArgument(f"u must hold {self.m} finite entries; got {u.tolist()}")
-        # 1. exact ZOH step over [t_prev, t]: x <- Phi x + Gamma (L y_held + B u_held)
+        # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         if dt > 0:
             e = self._cache.step(self._key, dt)
             x = e.Phi @ self._x
@@ -423,17 +454,17 @@ class SwitchedObserver:
             if not self._u_zero:
                 x += e.GB @ self._u
             self._x = x
-            self._Phi = e.Phi @ self._Phi
+            self._Phi = e.E @ self._Phi
         self._t = t
         # 2. switching instant
         if channel != self._channel:
             self._switch(t, channel)
-        # 3. hold the new sample (and input) from t on
-        self._y = y
+        # 3. hold the new sample's innovation (or the sample) and input from t on
         if u is not None:
             self._u = u
             self._u_zero = not u.any()
         self._key = self._gain_key(channel, rows)
+        self._y = y - self._Crows[self._key] @ self._x if self.hold == "innovation" else y
         self._entry_L = True
         return self._x
 
@@ -523,7 +554,7 @@ class SwitchedObserver:
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
         Phi = self._Phi
         if dt > 0:
-            Phi = self._cache.step(self._key, dt).Phi @ Phi
+            Phi = self._cache.step(self._key, dt).E @ Phi
         z = self._tracker.z(float(t))
         return Envelope(z=z, paper_bound=float(self.alpha * z.sum()),
                         exact_bound=float(np.linalg.norm(Phi, 2) * self.e0), t=float(t))

@@ -16,6 +16,21 @@ solution over a step ``dt`` is ``x(t + dt) = Phi x(t) + Gamma w`` with
     = \\exp\\left(\\begin{bmatrix} M & I \\\\ 0 & 0 \\end{bmatrix} dt\\right),
     \\qquad \\Phi = e^{M dt}, \\quad \\Gamma = \\int_0^{dt} e^{M s}\\, ds .
 
+Innovation hold (the default of the observer). Holding the *measurement* makes the
+sampled error depend on the plant's own motion (the held y lags a moving plant), which on
+a plant with unstable modes lets the error grow with the state. Holding the *innovation*
+``nu_k = y_k - C_i x_hat(t_k)`` instead,
+
+.. math::
+
+    \\dot{\\hat x} = A \\hat x + B u + L_i \\nu_k, \\qquad
+    \\hat x(t_k + dt) = e^{A dt} \\hat x(t_k) + \\Gamma_A (B u + L_i \\nu_k),
+
+gives the error map ``E = e^{A dt} - Gamma_A L_i C_i`` per step: exact, independent of
+the plant state, and equal to ``e^{(A - L_i C_i) dt}`` up to O(dt^2). For such a key the
+cache entry holds ``Phi = e^{A dt}``, ``GL = Gamma_A L``, ``GB = Gamma_A B`` and ``E``; for a
+measurement-hold key ``E = Phi = e^{(A - L C) dt}`` (the error map of continuous outputs).
+
 No ODE solver and no tolerance is involved. :class:`ZOHCache` keeps ``(Phi, Gamma)``
 (and the products ``Gamma L`` and ``Gamma B``) per (gain key, quantised ``dt``) in a
 small LRU, so a repeated step costs three matrix-vector products.
@@ -30,7 +45,7 @@ is at most ``dt_resolution / 2`` per step; pass ``dt_resolution=None`` for no ro
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import Hashable
+from collections.abc import Hashable
 
 import numpy as np
 from scipy.linalg import expm
@@ -111,16 +126,18 @@ def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.n
 
 
 class ZOHEntry:
-    """One cached step: ``Phi``, ``Gamma`` and the input products ``GL = Gamma L``, ``GB = Gamma B``."""
+    """One cached step: ``Phi``, ``Gamma``, the input products ``GL = Gamma L``, ``GB = Gamma B``,
+    and the error map ``E`` of the step (module docstring)."""
 
-    __slots__ = ("Phi", "Gamma", "GL", "GB", "dt")
+    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt")
 
-    def __init__(self, Phi, Gamma, GL, GB, dt):
+    def __init__(self, Phi, Gamma, GL, GB, dt, E=None):
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
         self.GB = GB
         self.dt = dt
+        self.E = Phi if E is None else E
 
 
 class ZOHCache:
@@ -147,18 +164,23 @@ class ZOHCache:
         self.maxsize = int(maxsize)
         self.dt_resolution = dt_resolution
         self._inv_res = None if dt_resolution is None else 1.0 / dt_resolution
-        self._gains: dict[Hashable, tuple[np.ndarray, np.ndarray | None, np.ndarray | None]] = {}
+        self._gains: dict[Hashable, tuple] = {}
         self._lru: OrderedDict = OrderedDict()
         self.hits = 0
         self.misses = 0
 
     def register(self, key: Hashable, M: np.ndarray, L: np.ndarray | None = None,
-                 B: np.ndarray | None = None) -> None:
-        """Register the system ``xdot = M x + L y + B u`` under ``key`` (idempotent)."""
+                 B: np.ndarray | None = None, *, C: np.ndarray | None = None) -> None:
+        """Register ``xdot = M x + L v + B u`` under ``key`` (idempotent).
+
+        With ``C`` given, the key is an innovation-hold key: ``M`` must be ``A`` itself, ``v``
+        is the held innovation and the entry's error map is ``E = e^{A dt} - Gamma_A L C``.
+        """
         if key not in self._gains:
             self._gains[key] = (np.ascontiguousarray(M, dtype=float),
                                 None if L is None else np.ascontiguousarray(L, dtype=float),
-                                None if B is None else np.ascontiguousarray(B, dtype=float))
+                                None if B is None else np.ascontiguousarray(B, dtype=float),
+                                None if C is None else np.ascontiguousarray(C, dtype=float))
 
     def has(self, key: Hashable) -> bool:
         """Whether ``key`` has been registered."""
@@ -175,12 +197,12 @@ class ZOHCache:
             lru.move_to_end(lk)
             return entry
         self.misses += 1
-        M, L, B = self._gains[key]
+        M, L, B, C = self._gains[key]
         dtq = dt if self._inv_res is None else q * self.dt_resolution
         Phi, Gamma = zoh_pair(M, dtq)
-        entry = ZOHEntry(Phi, Gamma,
-                         None if L is None else Gamma @ L,
-                         None if B is None else Gamma @ B, dtq)
+        GL = None if L is None else Gamma @ L
+        E = None if C is None or GL is None else Phi - GL @ C
+        entry = ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E)
         lru[lk] = entry
         if len(lru) > self.maxsize:
             lru.popitem(last=False)

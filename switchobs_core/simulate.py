@@ -1,0 +1,572 @@
+"""Exact plant and observer simulation (Sections 2 and 7), seeded.
+
+Two output settings:
+
+*Continuous outputs* (``rate=None``), the paper's setting: ``y(t) = C_rho(t) x(t)``
+is available at every instant. Between switching instants plant and observer form
+the linear system
+
+.. math::
+
+    \\frac{d}{dt}\\begin{bmatrix} x \\\\ \\hat x \\end{bmatrix}
+    = \\begin{bmatrix} A & 0 \\\\ L_i C_i & A - L_i C_i \\end{bmatrix}
+      \\begin{bmatrix} x \\\\ \\hat x \\end{bmatrix}
+    + \\begin{bmatrix} B \\\\ B \\end{bmatrix} u ,
+
+propagated exactly by augmented matrix exponentials on the output grid (with ``u``
+held on each grid step); the error then obeys (e:xtilde_dyn_piecewise) exactly.
+
+*Sampled outputs* (``rate`` in Hz): the plant is advanced exactly to each sample time
+``t_k = t0 + k / rate``, measured on the channel active at ``t_k`` (plus seeded noise),
+and the observer integrates with the sample's innovation held (``hold="innovation"``,
+the default) or the sample itself held (``hold="measurement"``), exactly as the online
+:class:`~switchobs_core.observer.SwitchedObserver` does (see its module docstring). The simulator's observer
+propagation is its own code (direct ``expm`` of the augmented matrix, gains chosen
+from the schedule's cycle index), so that comparing it with ``SwitchedObserver`` is
+a cross-implementation check.
+
+Error transition with sampled outputs. With innovation hold one step maps the error by
+``E = e^{A dt} - Gamma_A L C``, independent of the plant. With measurement hold, ``u = 0``
+and no noise, one sample step ``dt`` with gain ``L`` maps ``(x, x_tilde)`` by
+
+.. math::
+
+    x^+ = e^{A dt} x, \\qquad
+    \\tilde x^+ = \\Phi \\tilde x + (\\Phi + \\Gamma L C - e^{A dt}) x,
+
+(``Phi, Gamma`` the ZOH pair of ``M = A - L C``): the held sample adds a term driven by
+the plant state, of order ``dt^2``. :func:`sampled_error_transition` returns the two
+blocks ``(Phi_ee, Phi_ex)`` of the product over the steps, so
+``x_tilde(t) = Phi_ee x_tilde(0) + Phi_ex x(0)`` exactly.
+
+Convergence to continuous outputs is first order in ``1 / rate``. Measured on the paper's
+model, periodic (2 s, 0.6), first 20 s, error trajectories against continuous outputs:
+innovation hold 0.36 % at 1 kHz and 3.6 % at 100 Hz, whatever the plant state; measurement
+hold 10 % at 1 kHz for a unit-size plant state and 1 % for a plant state of 0.1 randn (the
+held sample lags the moving plant); each 10x in rate divides these by 10.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.linalg import expm
+
+from .envelope import Segment, envelope_z, error_transitions
+from .exceptions import InvalidArgument
+from .propagation import van_loan, zoh_pair
+
+__all__ = [
+    "Plant",
+    "SimulationResult",
+    "simulate",
+    "schedule_segments",
+    "sampled_error_transition",
+    "designs_for",
+]
+
+
+class Plant:
+    """Exact plant ``xdot = A x + B u + w`` (e:system) with seeded noise.
+
+    ``plant = Plant(system, x0, seed=0, process_noise=0.0)``
+
+    Parameters
+    ----------
+    system : LTISystem
+    x0 : (n,) array_like, optional
+        Initial state (zeros if None).
+    seed : int
+        Seed of the noise generator (numpy ``default_rng``).
+    process_noise : float or (n, n) array_like
+        Spectral density of the white process noise ``w``: a scalar ``q`` means
+        ``Qc = q**2 I``; a matrix is ``Qc`` itself. 0 (default) for none.
+    t0 : float
+        Initial time.
+
+    Notes
+    -----
+    :meth:`advance` is exact: ``x <- e^{A dt} x + Gamma B u + w_d`` with ``w_d`` drawn
+    from the exact discretised covariance ``Qd = int_0^dt e^{As} Qc e^{A's} ds``
+    (Van Loan), ``u`` held over the step.
+    """
+
+    def __init__(self, system: Any, x0: Any = None, seed: int = 0,
+                 process_noise: Any = 0.0, *, t0: float = 0.0):
+        self.A = np.asarray(system.A, dtype=float)
+        self.n = self.A.shape[0]
+        B = np.asarray(system.B, dtype=float)
+        self.B = B.reshape(self.n, -1) if B.size else np.zeros((self.n, 0))
+        self.C = tuple(np.asarray(Ci, dtype=float) for Ci in system.C)
+        self._x = np.zeros(self.n) if x0 is None else np.array(x0, dtype=float).reshape(-1)
+        if self._x.size != self.n or not np.isfinite(self._x).all():
+            raise InvalidArgument(f"x0 must hold n = {self.n} finite entries; got {self._x.size}")
+        self._t = float(t0)
+        self.rng = np.random.default_rng(seed)
+        Qc = np.asarray(process_noise, dtype=float)
+        if Qc.ndim == 0:
+            if not (math.isfinite(float(Qc)) and Qc >= 0):
+                raise InvalidArgument(f"process_noise must be >= 0; got {process_noise}")
+            Qc = float(Qc) ** 2 * np.eye(self.n)
+        elif Qc.shape != (self.n, self.n) or not np.isfinite(Qc).all():
+            raise InvalidArgument(f"process_noise must be a scalar or an ({self.n}, {self.n}) matrix")
+        self.Qc = Qc
+        self._noisy = bool(np.any(Qc))
+        self._steps: dict = {}
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current state (a copy)."""
+        return self._x.copy()
+
+    @property
+    def t(self) -> float:
+        """Current time."""
+        return self._t
+
+    def _step(self, dt: float):
+        s = self._steps.get(dt)
+        if s is None:
+            F, G = zoh_pair(self.A, dt)
+            Lq = None
+            if self._noisy:
+                _, Qd = van_loan(self.A, self.Qc, dt)
+                w, V = np.linalg.eigh(Qd)
+                Lq = V * np.sqrt(np.clip(w, 0, None))
+            s = self._steps[dt] = (F, G @ self.B, Lq)
+            if len(self._steps) > 256:
+                self._steps.pop(next(iter(self._steps)))
+        return s
+
+    def advance(self, t: float, u: Any = None) -> np.ndarray:
+        """Advance exactly to ``t`` with ``u`` held over ``[plant.t, t]``; returns ``x(t)``."""
+        dt = float(t) - self._t
+        if not dt >= 0 or not math.isfinite(dt):
+            raise InvalidArgument(f"t = {t!r} must be a finite time >= the plant's time {self._t!r}")
+        if dt > 0:
+            F, GB, Lq = self._step(dt)
+            x = F @ self._x
+            if u is not None:
+                u = np.asarray(u, dtype=float).reshape(-1)
+                if u.size != self.B.shape[1]:
+                    raise InvalidArgument(f"u must have m = {self.B.shape[1]} entries; got {u.size}")
+                x += GB @ u
+            if Lq is not None:
+                x += Lq @ self.rng.standard_normal(self.n)
+            self._x = x
+        self._t = float(t)
+        return self._x.copy()
+
+    def measure(self, channel: int, noise_std: float = 0.0, rows: Any = None) -> np.ndarray:
+        """``y = C_channel x + v`` with ``v ~ N(0, noise_std^2 I)`` (channel 1-based)."""
+        if not (isinstance(channel, (int, np.integer)) and 1 <= channel <= len(self.C)):
+            raise InvalidArgument(f"channel must be an integer in 1..{len(self.C)}; got {channel!r}")
+        Ci = self.C[channel - 1]
+        if rows is not None:
+            Ci = Ci[list(rows), :]
+        y = Ci @ self._x
+        if noise_std:
+            if not (math.isfinite(noise_std) and noise_std > 0):
+                raise InvalidArgument(f"noise_std must be >= 0; got {noise_std}")
+            y = y + noise_std * self.rng.standard_normal(y.size)
+        return y
+
+
+def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str, list]:
+    """Mode and per-cycle design list for ``schedule``: ``design(k) = designs[k % len]``.
+
+    Periodic/sequence schedules look their cycles up in ``table``; a random (A2) schedule,
+    or ``mode="robust"``, uses ``table.robust``.
+    """
+    from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
+
+    if mode is None:
+        if isinstance(schedule, RandomSchedule):
+            mode = "robust"
+        elif isinstance(schedule, PeriodicSchedule):
+            mode = "periodic"
+        elif isinstance(schedule, SequenceSchedule):
+            mode = "sequence"
+        else:
+            raise InvalidArgument(f"schedule: cannot tell the mode of {type(schedule).__name__}; "
+                                  "pass mode=")
+    if mode == "robust":
+        if getattr(table, "robust", None) is None:
+            raise InvalidArgument("table has no robust design (table.robust is None)")
+        return mode, [table.robust]
+    return mode, [table.lookup(c) for c in schedule.cycles]
+
+
+def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> list[Segment]:
+    """The active intervals of ``schedule`` on ``[t0, t_end)``; cycle k uses ``designs[k % K]``."""
+    segs: list[Segment] = []
+    t, k = float(schedule.t0), 0
+    while t < t_end:
+        c = schedule.cycle(k)
+        d = designs[k % len(designs)]
+        for i, h in enumerate(c.h):
+            if t >= t_end:
+                break
+            segs.append(Segment(t, t + h, i + 1, d))
+            t += h
+        k += 1
+    return segs
+
+
+def sampled_error_transition(A: np.ndarray, C: Sequence[np.ndarray],
+                             steps: Sequence[tuple[float, int, np.ndarray]]
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """Exact error transition of the sampled (ZOH) observer, ``u = 0``, no noise.
+
+    Parameters
+    ----------
+    A : (n, n) ndarray
+    C : sequence of (p_i, n) ndarray
+    steps : sequence of (dt, channel, L)
+        The sample steps in order: step length, channel held over it (1-based), gain.
+
+    Returns
+    -------
+    Phi_ee, Phi_ex : (n, n) ndarray
+        ``x_tilde(t) = Phi_ee x_tilde(0) + Phi_ex x(0)``. ``Phi_ee`` is the product of
+        ``expm((A - L C) dt)``; ``Phi_ex`` collects the held-sample terms
+        ``(Phi + Gamma L C - e^{A dt})`` (module docstring), zero for continuous outputs.
+    """
+    A = np.asarray(A, dtype=float)
+    n = A.shape[0]
+    Pee, Pex, Pxx = np.eye(n), np.zeros((n, n)), np.eye(n)
+    for dt, ch, L in steps:
+        Ci = np.asarray(C[ch - 1], dtype=float)
+        Phi, Gamma = zoh_pair(A - L @ Ci, dt)
+        F = expm(A * dt)
+        D = Phi + Gamma @ L @ Ci - F
+        Pee, Pex, Pxx = Phi @ Pee, Phi @ Pex + D @ Pxx, F @ Pxx
+    return Pee, Pex
+
+
+@dataclass
+class SimulationResult:
+    """Arrays of one simulation (times along axis 0 unless said otherwise).
+
+    Attributes
+    ----------
+    t : (T,) ndarray
+    x, x_hat, error : (T, n) ndarray
+        Plant state, estimate and ``x_tilde = x_hat - x`` (e:est_error).
+    channel : (T,) ndarray of int
+        Channel whose gain acts from ``t`` on (1-based).
+    z : (N, T) ndarray
+        The paper's envelopes (e:z1_evolution, e:z2_evolution), ``z_i(0^-) = e0``.
+    paper_bound : (T,) ndarray
+        ``alpha sum z_i``: the paper's claim (not a guarantee).
+    exact_bound : (T,) ndarray
+        ``||Phi(t, t0)|| e0``: ours; a guarantee for continuous outputs (and noiseless,
+        sampled outputs up to the held-sample term, see :attr:`hold_bound`).
+    hold_bound : (T,) ndarray or None
+        Sampled outputs only: ``||Phi_ee|| e0 + ||Phi_ex|| ||x(0)||``, a guarantee for
+        noiseless samples with ``u = 0`` (module docstring).
+    xo_norms : (N, T) ndarray
+        ``||x_tilde_o^(i)(t)|| = ||T_io' x_tilde(t)||`` (e:xtilde_decomp).
+    switching_times : ndarray
+        Switching instants used (for sampled outputs: the first sample of each interval).
+    cycle_ends : ndarray
+        Times at which a cycle ends (channel-1 starts after the first).
+    alpha, e0 : float
+    rate : float or None
+    segments : list of Segment
+    y : list of ndarray or None
+        Sampled outputs only: the sample ``y_k`` (with noise) taken at ``t[k]``.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    x_hat: np.ndarray
+    error: np.ndarray
+    channel: np.ndarray
+    z: np.ndarray
+    paper_bound: np.ndarray
+    exact_bound: np.ndarray
+    xo_norms: np.ndarray
+    switching_times: np.ndarray
+    cycle_ends: np.ndarray
+    alpha: float
+    e0: float
+    rate: float | None
+    segments: list = field(default_factory=list, repr=False)
+    hold_bound: np.ndarray | None = None
+    y: list | None = field(default=None, repr=False)
+
+    @property
+    def error_norm(self) -> np.ndarray:
+        """``||x_tilde(t)||``, shape (T,)."""
+        return np.linalg.norm(self.error, axis=1)
+
+    def at(self, t: float) -> int:
+        """Index of the last output time <= t."""
+        return int(np.searchsorted(self.t, t, side="right") - 1)
+
+    def summary(self) -> dict:
+        """JSON-ready summary: final error, bounds and violations of the paper's bound."""
+        en = self.error_norm
+        viol = [int(np.sum(self.xo_norms[i] > self.z[i] * (1 + 1e-9))) for i in range(self.z.shape[0])]
+        ends = [self.at(tc) for tc in self.cycle_ends]
+        return {
+            "t_end": float(self.t[-1]),
+            "rate_hz": self.rate,
+            "e0": self.e0,
+            "alpha": self.alpha,
+            "final_error": float(en[-1]),
+            "final_paper_bound": float(self.paper_bound[-1]),
+            "final_exact_bound": float(self.exact_bound[-1]),
+            "exact_bound_violations": int(np.sum(en > self.exact_bound * (1 + 1e-9) + 1e-300))
+            if self.rate is None else None,
+            "paper_bound_violations": int(np.sum(en > self.paper_bound * (1 + 1e-9))),
+            "envelope_violations": viol,
+            "max_envelope_ratio": [float(np.max(self.xo_norms[i] / np.maximum(self.z[i], 1e-300)))
+                                   for i in range(self.z.shape[0])],
+            "cycle_end_errors": [float(en[j]) for j in ends],
+            "cycles": len(self.cycle_ends),
+        }
+
+
+def _u_at(u: Any, t: float, m: int) -> np.ndarray | None:
+    if u is None:
+        return None
+    val = u(t) if callable(u) else u
+    val = np.asarray(val, dtype=float).reshape(-1)
+    if val.size != m:
+        raise InvalidArgument(f"u must have m = {m} entries; got {val.size}")
+    return val
+
+
+def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end: float, *,
+             rate: float | None = None, noise_std: float = 0.0, process_noise: Any = 0.0,
+             seed: int = 0, mode: str | None = None, dt_out: float = 0.01,
+             u: Any = None, e0: float | None = None, t0: float | None = None,
+             hold: str = "innovation") -> SimulationResult:
+    """Simulate plant and switched observer exactly (e:system, e:switched_observer).
+
+    ``res = simulate(system, table, schedule, x0, xhat0, t_end, rate=None)``
+
+    Parameters
+    ----------
+    system : LTISystem
+    table : GainTable
+        Designs, looked up per cycle of the schedule (``table.robust`` for robust mode).
+    schedule : Schedule
+        :mod:`switchobs_core.schedule` (periodic, sequence or random-A2).
+    x0, xhat0 : (n,) array_like
+        Initial plant state and estimate; ``x_tilde(0) = xhat0 - x0``.
+    t_end : float
+        End time in seconds (> t0).
+    rate : float, optional
+        Sample rate in Hz; None (default) is the paper's continuous-output setting.
+    noise_std : float
+        Measurement noise standard deviation (sampled outputs only).
+    process_noise : float or (n, n) array_like
+        See :class:`Plant`.
+    seed : int
+        Seed of every random draw.
+    mode : {"periodic", "sequence", "robust"}, optional
+        Default from the schedule type.
+    dt_out : float
+        Output grid step for continuous outputs (switching instants are added).
+    u : (m,) array_like or callable ``t -> (m,)``, optional
+        Input, held over each propagation step (ZOH).
+    e0 : float, optional
+        Initial error bound for the envelopes and the exact bound (default
+        ``||xhat0 - x0||``).
+    t0 : float, optional
+        Start time (default ``schedule.t0``).
+    hold : {"innovation", "measurement"}
+        Sampled outputs: what the observer holds between samples (module docstring).
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    InvalidArgument
+        Bad sizes, ``t_end <= t0``, non-positive rate, noise with continuous outputs.
+    """
+    A = np.asarray(system.A, dtype=float)
+    n = A.shape[0]
+    B = np.asarray(system.B, dtype=float)
+    B = B.reshape(n, -1) if B.size else np.zeros((n, 0))
+    C = tuple(np.asarray(Ci, dtype=float) for Ci in system.C)
+    N = len(C)
+    x0 = np.array(x0, dtype=float).reshape(-1)
+    xhat0 = np.array(xhat0, dtype=float).reshape(-1)
+    for name, v in (("x0", x0), ("xhat0", xhat0)):
+        if v.size != n or not np.isfinite(v).all():
+            raise InvalidArgument(f"{name} must hold n = {n} finite entries; got {v.size}")
+    t0 = float(schedule.t0 if t0 is None else t0)
+    t_end = float(t_end)
+    if not (math.isfinite(t_end) and t_end > t0):
+        raise InvalidArgument(f"t_end must be a finite time > t0 = {t0}; got {t_end}")
+    if rate is not None and not (math.isfinite(rate) and rate > 0):
+        raise InvalidArgument(f"rate must be a positive number of Hz or None; got {rate}")
+    if rate is None and noise_std:
+        raise InvalidArgument("noise_std needs sampled outputs (pass rate=HZ); continuous white "
+                              "measurement noise is not modelled")
+    if not (math.isfinite(noise_std) and noise_std >= 0):
+        raise InvalidArgument(f"noise_std must be >= 0; got {noise_std}")
+    if hold not in ("innovation", "measurement"):
+        raise InvalidArgument(f"hold must be 'innovation' or 'measurement'; got {hold!r}")
+    if not (math.isfinite(dt_out) and dt_out > 0):
+        raise InvalidArgument(f"dt_out must be > 0; got {dt_out}")
+    mode, designs = designs_for(table, schedule, mode)
+    segments = schedule_segments(schedule, designs, t_end)
+    e0 = float(np.linalg.norm(xhat0 - x0)) if e0 is None else float(e0)
+    T_o = [system.decomposition(i + 1).T_o for i in range(N)]
+    try:
+        alpha_ = float(system.alpha)
+    except AttributeError:
+        from .envelope import alpha as _alpha
+        alpha_ = _alpha(T_o)
+    if rate is None:
+        res = _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u,
+                                   process_noise, seed)
+        t, X, Xh, ch = res
+        Phis = error_transitions(A, C, t, segments)
+        exact = np.linalg.norm(Phis, 2, axis=(1, 2)) * e0
+        eff_segments = segments
+        hold_b = ys = None
+    else:
+        t, X, Xh, ch, exact, hold_b, eff_segments, ys = _simulate_sampled(
+            A, B, C, segments, x0, xhat0, t0, t_end, rate, u, process_noise, noise_std, seed, e0, hold)
+    err = Xh - X
+    z = envelope_z(t, eff_segments, e0)
+    xo = np.stack([np.linalg.norm(err @ Ti, axis=1) for Ti in T_o])
+    sw = np.array([s.t0 for s in eff_segments])
+    ends = np.array([s.t0 for s in eff_segments if s.channel == 1 and s.t0 > eff_segments[0].t0])
+    return SimulationResult(t=t, x=X, x_hat=Xh, error=err, channel=ch, z=z,
+                            paper_bound=alpha_ * z.sum(axis=0), exact_bound=exact, xo_norms=xo,
+                            switching_times=sw, cycle_ends=ends, alpha=alpha_, e0=e0,
+                            rate=rate, segments=eff_segments, hold_bound=hold_b, y=ys)
+
+
+def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, process_noise, seed):
+    """Joint (x, x_hat) propagation between grid points and switching instants."""
+    n, m = B.shape
+    grid = t0 + dt_out * np.arange(int(math.floor((t_end - t0) / dt_out + 1e-9)) + 1)
+    grid = np.union1d(grid[grid <= t_end], [s.t0 for s in segments] + [t_end])
+    Qc = np.asarray(process_noise, dtype=float)
+    if Qc.ndim == 0:
+        Qc = float(Qc) ** 2 * np.eye(n)
+    noisy = bool(np.any(Qc))
+    rng = np.random.default_rng(seed)
+    Qj = np.zeros((2 * n, 2 * n))
+    Qj[:n, :n] = Qc
+    Bj = np.vstack([B, B])
+    zc = np.concatenate([x0, xhat0])
+    out = np.empty((grid.size, 2 * n))
+    ch = np.empty(grid.size, dtype=int)
+    cache: dict = {}
+    si = 0
+    for k, tk in enumerate(grid):
+        if k > 0:
+            ta = grid[k - 1]
+            seg = segments[si]
+            dt = tk - ta
+            key = (id(seg.design), seg.channel, dt)
+            step = cache.get(key)
+            if step is None:
+                Ci = C[seg.channel - 1]
+                L = seg.L
+                J = np.zeros((2 * n, 2 * n))
+                J[:n, :n] = A
+                J[n:, :n] = L @ Ci
+                J[n:, n:] = A - L @ Ci
+                Phi, Gam = zoh_pair(J, dt)
+                Lq = None
+                if noisy:
+                    _, Qd = van_loan(J, Qj, dt)
+                    w, V = np.linalg.eigh(Qd)
+                    Lq = V * np.sqrt(np.clip(w, 0, None))
+                step = cache[key] = (Phi, Gam @ Bj, Lq)
+            Phi, GB, Lq = step
+            zc = Phi @ zc
+            uk = _u_at(u, ta, m)
+            if uk is not None:
+                zc += GB @ uk
+            if Lq is not None:
+                zc += Lq @ rng.standard_normal(2 * n)
+        while si + 1 < len(segments) and segments[si + 1].t0 <= tk:
+            si += 1
+        out[k] = zc
+        ch[k] = segments[si].channel
+    return grid, out[:, :n], out[:, n:], ch
+
+
+def _simulate_sampled(A, B, C, segments, x0, xhat0, t0, t_end, rate, u, process_noise,
+                      noise_std, seed, e0, hold_mode="innovation"):
+    """Plant advanced exactly to each sample; observer with the innovation or the sample held."""
+    n, m = B.shape
+    K = int(math.floor((t_end - t0) * rate + 1e-9))
+    ts = t0 + np.arange(K + 1) / rate
+
+    class _S:  # minimal system view for Plant
+        pass
+
+    sysv = _S()
+    sysv.A, sysv.B, sysv.C = A, B, C
+    plant = Plant(sysv, x0, seed=seed, process_noise=process_noise, t0=t0)
+    X = np.empty((ts.size, n))
+    Xh = np.empty((ts.size, n))
+    ch = np.empty(ts.size, dtype=int)
+    exact = np.empty(ts.size)
+    hold = np.empty(ts.size)
+    xh = xhat0.copy()
+    Pee, Pex, Pxx = np.eye(n), np.zeros((n, n)), np.eye(n)
+    x0n = float(np.linalg.norm(x0))
+    cache: dict = {}
+    si = 0
+    eff: list[Segment] = []
+    held = None  # (seg, y, u)
+    ys: list = []
+    for k, tk in enumerate(ts):
+        if k > 0:
+            dt = tk - ts[k - 1]
+            seg, y, uh = held
+            key = (id(seg.design), seg.channel, dt)
+            step = cache.get(key)
+            if step is None:
+                Ci = C[seg.channel - 1]
+                L = seg.L
+                F = expm(A * dt)
+                if hold_mode == "innovation":
+                    # x_hat+ = F x_hat + Gamma_A (L nu + B u); error map E = F - Gamma_A L C, D = 0
+                    _, GamA = zoh_pair(A, dt)
+                    GL = GamA @ L
+                    step = cache[key] = (F, GL, GamA @ B, F - GL @ Ci, np.zeros((n, n)), F)
+                else:
+                    Phi, Gam = zoh_pair(A - L @ Ci, dt)
+                    step = cache[key] = (Phi, Gam @ L, Gam @ B, Phi, Phi + Gam @ L @ Ci - F, F)
+            Phi, GL, GB, E, D, F = step
+            xh = Phi @ xh + GL @ y
+            if uh is not None:
+                xh = xh + GB @ uh
+            Pee, Pex, Pxx = E @ Pee, E @ Pex + D @ Pxx, F @ Pxx
+        uk = _u_at(u, tk, m)
+        x = plant.advance(tk, held[2] if held is not None else None) if k > 0 else plant.x
+        while si + 1 < len(segments) and segments[si + 1].t0 <= tk:
+            si += 1
+        seg = segments[si]
+        if not eff or eff[-1].channel != seg.channel or eff[-1].design is not seg.design:
+            if eff:
+                eff[-1] = Segment(eff[-1].t0, tk, eff[-1].channel, eff[-1].design)
+            eff.append(Segment(tk, math.inf, seg.channel, seg.design))
+        y = plant.measure(seg.channel, noise_std)
+        ys.append(y)
+        held = (seg, y - C[seg.channel - 1] @ xh if hold_mode == "innovation" else y, uk)
+        X[k], Xh[k], ch[k] = x, xh, seg.channel
+        exact[k] = np.linalg.norm(Pee, 2) * e0
+        hold[k] = exact[k] + np.linalg.norm(Pex, 2) * x0n
+    eff[-1] = Segment(eff[-1].t0, math.inf, eff[-1].channel, eff[-1].design)
+    return ts, X, Xh, ch, exact, hold, eff, ys

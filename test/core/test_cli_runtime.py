@@ -1,0 +1,66 @@
+"""Tests of ``switchobs simulate`` and ``switchobs certify`` (in process, no subprocess)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from _paper_designs import paper_table
+
+from switchobs_core.cli import main
+
+
+@pytest.fixture(scope="module")
+def table_path(paper, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "gains.json"
+    paper_table(paper).save(path)
+    return path
+
+
+def test_simulate_json(table_path, capsys, tmp_path):
+    png = tmp_path / "sim.png"
+    rc = main(["simulate", "paper", "--table", str(table_path), "--schedule", "periodic:2,0.6",
+               "--t-end", "20", "--json", "--plot", str(png)])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and png.stat().st_size > 10_000
+    assert out["final_error"] < 1e-3 and out["cycles"] == 9
+    ends = out["cycle_end_errors"]
+    assert all(b < a for a, b in zip(ends, ends[1:]))
+    assert out["exact_bound_violations"] == 0
+
+
+def test_simulate_sampled_text(table_path, capsys):
+    rc = main(["simulate", "paper", "--table", str(table_path), "--schedule", "sequence:4,0.5;3,0.6;3,0.6;2,0.4",
+               "--t-end", "12", "--rate", "100", "--noise", "0.001"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "sampled at 100 Hz" in out and "paper bound (claim)" in out
+
+
+def test_certify_json_side_by_side(table_path, capsys):
+    rc = main(["certify", str(table_path), "--system", "paper", "--sequence", "4,0.5", "3,0.6", "2,0.4",
+               "--json", "--no-box"])
+    rep = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    d = next(e for e in rep["designs"] if e["cycle"] == "(2 s, 0.6)")
+    assert d["paper"]["claims_convergence"] and d["sound"]["converges"]
+    assert d["envelope_ratio"]["worst"][1] > 1.08  # the paper's z_2 is exceeded (proof gap)
+    assert rep["sequence"]["sound"]["verified"] and rep["sequence"]["sound"]["converges_any_order"]
+
+
+def test_certify_text_labels(table_path, capsys):
+    assert main(["certify", str(table_path), "--no-box"]) == 0
+    out = capsys.readouterr().out
+    assert "claim" in out and "verified" in out and "env. ratio" in out
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["simulate", "paper", "--table", "/nonexistent/gains.json"], "error"),
+    (["simulate", "paper", "--table", "TABLE", "--schedule", "weekly:1"], "unknown schedule"),
+    (["simulate", "paper", "--table", "TABLE", "--rate", "-5"], "rate"),
+    (["certify", "TABLE", "--ratio-cycles", "0", "--system", "paper"], "ratio-cycles"),
+])
+def test_errors_exit_2(table_path, capsys, argv, match):
+    argv = [str(table_path) if a == "TABLE" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert match in err and len(err.strip().splitlines()) == 1
