@@ -14,6 +14,7 @@ import sys
 
 from .. import __version__
 from ..exceptions import SwitchobsError
+from ..threads import single_threaded_blas
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -42,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``switchobs`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    single_threaded_blas()  # small matrices: see switchobs_core.threads
     try:
         return int(args.func(args) or 0)
     except SwitchobsError as err:

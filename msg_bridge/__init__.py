@@ -1,0 +1,64 @@
+"""msg_bridge: ROS 2 messages <-> numpy, and validation of what arrives.
+
+Imports message types only: no node, no executor, no numerics beyond reshaping
+(shared/DESIGN.md, "Three layers"). Channel numbers are the paper's 1-based numbers
+everywhere here, as on the ``camera/active_channel`` topic.
+
+Modules
+-------
+stamps    header stamps <-> integer nanoseconds
+convert   PoseStamped <-> planar position, labelled Float64MultiArray (state, envelope,
+          truth), per-body nav_msgs/Odometry
+validate  checks of incoming messages returning a :class:`Rejection` with a
+          :class:`Reason` code
+"""
+
+from .convert import (
+    STAMP_PAD,
+    Body,
+    LabelledArray,
+    LabelledArrayWriter,
+    OdometryWriter,
+    bodies,
+    body_odometry,
+    envelope_labels,
+    labelled_array,
+    pose_to_xy,
+    state_odometries,
+    unpack_labelled,
+    xy_to_pose,
+)
+from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
+from .validate import (
+    BridgeError,
+    Reason,
+    Rejection,
+    check_channel,
+    check_pose,
+    check_stamp,
+)
+
+__all__ = [
+    "STAMP_PAD",
+    "Body",
+    "BridgeError",
+    "LabelledArray",
+    "LabelledArrayWriter",
+    "OdometryWriter",
+    "Reason",
+    "Rejection",
+    "bodies",
+    "body_odometry",
+    "check_channel",
+    "check_pose",
+    "check_stamp",
+    "envelope_labels",
+    "labelled_array",
+    "ns_to_stamp",
+    "pose_to_xy",
+    "stamp_to_ns",
+    "stamp_to_sec",
+    "state_odometries",
+    "unpack_labelled",
+    "xy_to_pose",
+]

@@ -1,0 +1,117 @@
+"""Validation of incoming messages: a :class:`Rejection` with a :class:`Reason` code, or None.
+
+The node counts rejections by reason (diagnostics) and keeps running; see shared/DESIGN.md,
+"Conventions". The checks are pure functions of the message and what the caller knows (the
+last accepted stamp on the same topic, the node's clock).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from geometry_msgs.msg import PoseStamped
+from std_msgs.msg import UInt8
+
+from .stamps import stamp_to_ns
+
+__all__ = ["BridgeError", "Reason", "Rejection", "check_channel", "check_pose", "check_stamp"]
+
+
+class Reason(enum.Enum):
+    """Why an incoming message was rejected (the value is the diagnostics key)."""
+
+    NON_FINITE = "non_finite"            # NaN or inf in a pose field
+    TOO_LARGE = "too_large"              # |value| above the configured bound (e.g. 1e300)
+    WRONG_FRAME = "wrong_frame"          # header.frame_id is not the expected frame
+    ZERO_STAMP = "zero_stamp"            # header.stamp == 0 (unset)
+    OLD_STAMP = "old_stamp"              # older than the last accepted stamp on this topic
+    DUPLICATE_STAMP = "duplicate_stamp"  # equal to the last accepted stamp on this topic
+    FUTURE_STAMP = "future_stamp"        # ahead of the node clock by more than the tolerance
+    BAD_CHANNEL = "bad_channel"          # active channel outside 1..N
+    NO_CHANNEL = "no_channel"            # a pose before any active-channel message
+    STALE_AFTER_SWITCH = "stale_after_switch"  # target pose not newer than the last switch
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A rejected message: the reason code, the offending field and a one-line detail."""
+
+    reason: Reason
+    field: str
+    detail: str
+
+    def __str__(self) -> str:
+        return f"{self.reason.value}: {self.field}: {self.detail}"
+
+
+class BridgeError(ValueError):
+    """Raised by callers that prefer an exception; carries the :class:`Rejection`."""
+
+    def __init__(self, rejection: Rejection):
+        super().__init__(str(rejection))
+        self.rejection = rejection
+
+
+def check_stamp(
+    stamp_ns: int,
+    *,
+    last_ns: int | None = None,
+    now_ns: int | None = None,
+    future_tolerance_ns: int = 500_000_000,
+    field: str = "header.stamp",
+) -> Rejection | None:
+    """Zero, older-than-last, duplicate and future stamps.
+
+    ``now_ns`` None or 0 (a sim-time clock that has not ticked yet) skips the future check.
+    """
+    if stamp_ns == 0:
+        return Rejection(Reason.ZERO_STAMP, field, "stamp is 0 (unset)")
+    if last_ns is not None:
+        if stamp_ns == last_ns:
+            return Rejection(Reason.DUPLICATE_STAMP, field, f"same stamp as the last accepted ({stamp_ns} ns)")
+        if stamp_ns < last_ns:
+            return Rejection(Reason.OLD_STAMP, field,
+                             f"{(last_ns - stamp_ns) * 1e-9:.6f} s older than the last accepted")
+    if now_ns and stamp_ns > now_ns + future_tolerance_ns:
+        return Rejection(Reason.FUTURE_STAMP, field,
+                         f"{(stamp_ns - now_ns) * 1e-9:.6f} s ahead of the node clock "
+                         f"(tolerance {future_tolerance_ns * 1e-9:g} s)")
+    return None
+
+
+def check_pose(
+    msg: PoseStamped,
+    *,
+    frame_id: str | None = None,
+    max_abs: float = 1e6,
+    last_ns: int | None = None,
+    now_ns: int | None = None,
+    future_tolerance_ns: int = 500_000_000,
+) -> Rejection | None:
+    """Every pose field finite, positions within ``max_abs``, the frame, then the stamp.
+
+    ``frame_id`` None or "" accepts any frame.
+    """
+    p, q = msg.pose.position, msg.pose.orientation
+    for name, v in (("x", p.x), ("y", p.y), ("z", p.z)):
+        if not math.isfinite(v):
+            return Rejection(Reason.NON_FINITE, f"pose.position.{name}", f"{v}")
+        if abs(v) > max_abs:
+            return Rejection(Reason.TOO_LARGE, f"pose.position.{name}", f"|{v:g}| > {max_abs:g}")
+    for name, v in (("x", q.x), ("y", q.y), ("z", q.z), ("w", q.w)):
+        if not math.isfinite(v):
+            return Rejection(Reason.NON_FINITE, f"pose.orientation.{name}", f"{v}")
+    if frame_id and msg.header.frame_id != frame_id:
+        return Rejection(Reason.WRONG_FRAME, "header.frame_id",
+                         f"'{msg.header.frame_id}' (expected '{frame_id}')")
+    return check_stamp(stamp_to_ns(msg.header.stamp), last_ns=last_ns, now_ns=now_ns,
+                       future_tolerance_ns=future_tolerance_ns)
+
+
+def check_channel(msg: UInt8, N: int) -> Rejection | None:
+    """An active channel must be one of the system's channels 1..N."""
+    if not 1 <= int(msg.data) <= N:
+        return Rejection(Reason.BAD_CHANNEL, "data", f"channel {int(msg.data)} is not in 1..{N}")
+    return None

@@ -1,0 +1,26 @@
+# Shared by the scripts: repository paths, the venv, and a ROS_DOMAIN_ID of our own.
+# Source it: `. "$(dirname "$0")/lib.sh"`.
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${SWITCHOBS_VENV:-$REPO/.venv}"
+export PATH="$VENV/bin:$PATH"
+
+# Localhost-only DDS discovery: without it, discovery multicasts out of the machine.
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+unset ROS_LOCALHOST_ONLY ROS_STATIC_PEERS
+
+# Claim a ROS_DOMAIN_ID no concurrent run uses: an exclusive flock on a lock file held (fd kept
+# open) for the life of this shell. Same lock files as switchobs_ros/domain.py.
+claim_ros_domain() {
+    local id fd dir="${TMPDIR:-/tmp}"
+    for id in $(shuf -i 1-100); do
+        exec {fd}>"$dir/switchobs-ros-domain-$id.lock" || continue
+        if flock -n "$fd"; then
+            export ROS_DOMAIN_ID="$id"
+            return 0
+        fi
+        exec {fd}>&-
+    done
+    echo "no free ROS_DOMAIN_ID in 1..100" >&2
+    return 1
+}

@@ -1,0 +1,6 @@
+"""switchobs_ros: the ROS 2 nodes of switchobs (thin glue: parameters, topics, QoS, clocks,
+diagnostics; no estimation math -- that is switchobs_core).
+
+Executables: ``estimator`` (:mod:`switchobs_ros.estimator`), ``camera_sim``
+(:mod:`switchobs_ros.camera_sim`); the demo runner is ``python -m switchobs_ros.demo``.
+"""

@@ -1,0 +1,197 @@
+"""camera_sim: the paper's camera and agents, simulated exactly, published as the camera would.
+
+``ros2 run switchobs_ros camera_sim --ros-args --params-file config/camera_sim.yaml``
+
+The plant is :class:`switchobs_core.simulate.Plant` (exact propagation with ``expm``) of the
+configured system (default: the paper's camera + 2 agents, D_c = diag(0, 0), D_1 =
+diag(0, 0.2), D_2 = diag(0, 0.1)). The camera switches between agents by a schedule of
+:mod:`switchobs_core.schedule` (periodic or a sequence of cycles, or random within A2's
+box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
+
+1. ``/clock`` (only with ``publish_clock``),
+2. ``camera/active_channel`` (std_msgs/UInt8, the channel rho(t_k); reliable, transient local),
+3. ``camera/pose`` and ``target/pose`` (PoseStamped, same stamp ``t_k``, sensor-data QoS),
+4. ``sim/truth`` (the true state x(t_k), a labelled Float64MultiArray stamped t_k; reliable).
+
+Time: tick k is at plant time ``k / rate`` and stamp ``epoch + k / rate``. Without
+``publish_clock`` the epoch is the node clock at start and ticks follow the node clock
+(so ``use_sim_time`` on camera_sim works as for any node). With ``publish_clock`` camera_sim
+*is* the clock: it publishes ``/clock`` itself, starting at ``clock_start``, and runs
+``time_scale`` times faster than the wall clock; run the estimator with ``use_sim_time:=true``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import Float64MultiArray, UInt8
+
+import msg_bridge as mb
+from switchobs_core.exceptions import SwitchobsError
+
+from . import qos
+from .core_config import camera_target_rows, cycles_from_params, load_system_param
+from .estimator import run_node
+from .params import ConfigError, Param, declare_all
+
+__all__ = ["CameraSimNode", "PARAMS", "DEFAULT_X0", "main"]
+
+#: Default true initial state (camera moving, agents drifting in x; the unstable v_y modes
+#: start at rest so the 30 s demo stays bounded): x = [chi_c; chi_1; chi_2], chi = [p, v].
+DEFAULT_X0 = (0.0, 0.0, 0.2, 0.1, 3.0, 1.0, -0.1, 0.0, -2.0, 2.0, 0.1, 0.0)
+
+PARAMS = [
+    Param("system", "paper", "The simulated system: a built-in scenario name or a system YAML path (its "
+          "channels must fit the camera/target topics)."),
+    Param("rate", 100.0, "Measurement rate in Hz (ticks of plant time)."),
+    Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or random "
+          "(residence times uniform in [schedule.h_min, schedule.h_max], seeded)."),
+    Param("schedule.tau", (2.0,), "Cycle lengths tau_k in seconds (two-channel systems).", float),
+    Param("schedule.s", (0.6,), "Duty fractions s_k, one per schedule.tau entry.", float),
+    Param("schedule.h", (), "N-channel cycles: N active times per cycle, concatenated (overrides tau/s).", float),
+    Param("schedule.h_min", 0.0, "random mode: shortest residence time (s)."),
+    Param("schedule.h_max", 0.0, "random mode: longest residence time (s)."),
+    Param("initial_state", (), "True initial state x(0), n values (empty: the default scene for the paper "
+          "model, zeros otherwise).", float),
+    Param("noise_std", 0.0, "Standard deviation of the measurement noise added to every position (m)."),
+    Param("process_noise", 0.0, "Process noise intensity q (Qc = q^2 I) of the plant."),
+    Param("seed", 0, "Seed of all noise draws."),
+    Param("world_frame", "map", "header.frame_id of the published poses."),
+    Param("camera_body", "camera", "Name of the camera body in the system's output labels."),
+    Param("duration", 0.0, "Simulated seconds to run, then exit 0 (0: forever)."),
+    Param("publish_clock", False, "Publish /clock and run on that simulated clock (see time_scale)."),
+    Param("time_scale", 1.0, "With publish_clock: simulated seconds per wall-clock second."),
+    Param("clock_start", 1.0, "With publish_clock: the simulated clock's value at tick 0 (s, > 0)."),
+    Param("wait_for_subscribers", 0, "Before tick 0, wait until target/pose has this many subscribers."),
+    Param("wait_for_truth_subscribers", 0, "Before tick 0, wait until sim/truth has this many subscribers."),
+]
+
+
+class CameraSimNode(Node):
+    """Publishes the simulated camera measurements and the truth."""
+
+    def __init__(self, **kwargs):
+        super().__init__("camera_sim", **kwargs)
+        from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
+        from switchobs_core.simulate import Plant
+
+        cfg = declare_all(self, PARAMS)
+        self.cfg = cfg
+        self.exit_code = 0
+        self.system = sys_ = load_system_param(cfg["system"])
+        mode = cfg["schedule.mode"]
+        try:
+            if mode == "random":
+                self.schedule = RandomSchedule(sys_.N, cfg["schedule.h_min"], cfg["schedule.h_max"], seed=cfg["seed"])
+            elif mode in ("periodic", "sequence"):
+                cycles = cycles_from_params(mode, cfg["schedule.tau"], cfg["schedule.s"], cfg["schedule.h"], sys_.N)
+                self.schedule = PeriodicSchedule(cycles[0]) if mode == "periodic" else SequenceSchedule(cycles)
+            else:
+                raise ConfigError(f"parameter 'schedule.mode' must be periodic, sequence or random; got '{mode}'")
+        except SwitchobsError as err:
+            raise ConfigError(f"schedule: {err}") from None
+        if not cfg["rate"] > 0:
+            raise ConfigError(f"parameter 'rate' must be > 0; got {cfg['rate']}")
+        x0 = cfg["initial_state"]
+        if not x0:
+            x0 = DEFAULT_X0 if sys_.n == len(DEFAULT_X0) else (0.0,) * sys_.n
+        if len(x0) != sys_.n:
+            raise ConfigError(f"parameter 'initial_state' has {len(x0)} values; the system has n = {sys_.n}")
+        try:
+            self.plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg["seed"], process_noise=cfg["process_noise"])
+        except SwitchobsError as err:
+            raise ConfigError(f"plant: {err}") from None
+        self.rows = camera_target_rows(sys_, cfg["camera_body"])
+        self.rng = np.random.default_rng(cfg["seed"] + 1)
+        self.labels = tuple(sys_.state_labels)
+        self.frame = cfg["world_frame"]
+        self.period_ns = round(1e9 / cfg["rate"])
+        self.k = -1
+        self.started = False
+        self.epoch_ns = 0
+        self.t_wait = time.monotonic()
+        self.k_end = round(cfg["duration"] * cfg["rate"]) if cfg["duration"] > 0 else None
+
+        self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos.CLOCK) if cfg["publish_clock"] else None
+        self.pub_channel = self.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
+        self.pub_camera = self.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
+        self.pub_target = self.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        self.pub_truth = self.create_publisher(Float64MultiArray, "sim/truth", qos.TRUTH)
+        if cfg["publish_clock"]:
+            if not cfg["time_scale"] > 0 or not cfg["clock_start"] > 0:
+                raise ConfigError("time_scale and clock_start must be > 0")
+            period = 1.0 / (cfg["rate"] * cfg["time_scale"])
+            self.timer = self.create_timer(period, self.tick_callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        else:
+            self.timer = self.create_timer(1.0 / cfg["rate"], self.tick_callback)
+        self.get_logger().info(
+            f"camera_sim: system '{sys_.name}', {cfg['rate']:g} Hz, schedule {mode}, "
+            f"{'clock ' + format(cfg['time_scale'], 'g') + 'x' if cfg['publish_clock'] else 'node clock'}")
+
+    def _ready(self) -> bool:
+        c = self.cfg
+        if self.pub_target.get_subscription_count() < c["wait_for_subscribers"]:
+            return False
+        if self.pub_truth.get_subscription_count() < c["wait_for_truth_subscribers"]:
+            return False
+        return True
+
+    def tick_callback(self) -> None:
+        c = self.cfg
+        if not self.started:
+            if not self._ready():
+                return
+            self.started = True
+            self.k = -1
+            if c["publish_clock"]:
+                self.epoch_ns = round(c["clock_start"] * 1e9)
+            else:
+                self.epoch_ns = self.get_clock().now().nanoseconds
+            self.get_logger().info("subscribers present: starting the simulation")
+        if c["publish_clock"]:
+            k = self.k + 1
+        else:
+            # the tick due now on the node clock (ticks that a slow timer missed are skipped)
+            k = (self.get_clock().now().nanoseconds - self.epoch_ns) // self.period_ns
+            if k <= self.k:
+                return
+        if self.k_end is not None and k > self.k_end:
+            self.get_logger().info(f"duration {c['duration']} s reached: exiting")
+            self.timer.cancel()
+            raise SystemExit(0)
+        self.k = k
+        self.publish_tick(k)
+
+    def publish_tick(self, k: int) -> None:
+        t = k * self.period_ns * 1e-9
+        stamp_ns = self.epoch_ns + k * self.period_ns
+        stamp = mb.ns_to_stamp(stamp_ns)
+        if self.pub_clock is not None:
+            self.pub_clock.publish(ClockMsg(clock=stamp))
+        self.plant.advance(t)
+        rho = int(self.schedule.channel_at(t))
+        y = self.plant.measure(rho, noise_std=0.0)
+        if self.cfg["noise_std"] > 0:
+            y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
+        (cx, cy), (tx, ty) = self.rows[rho - 1]
+        self.pub_channel.publish(UInt8(data=rho))
+        self.pub_camera.publish(mb.xy_to_pose((y[cx], y[cy]), stamp_ns, self.frame))
+        self.pub_target.publish(mb.xy_to_pose((y[tx], y[ty]), stamp_ns, self.frame))
+        self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))
+
+
+def main(args=None) -> int:
+    try:
+        return run_node(CameraSimNode, "camera_sim", args)
+    except SystemExit as done:   # duration reached
+        return int(done.code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,137 @@
+"""From parameter values to switchobs_core objects: system, cycles, gain table.
+
+Shared by the estimator and camera_sim. Every failure is a :class:`ConfigError` with one
+line that says what is wrong and what to do.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.schedule import Cycle
+from switchobs_core.system import LTISystem, load_system
+
+from .params import ConfigError
+
+__all__ = [
+    "camera_target_rows",
+    "cycles_from_params",
+    "load_or_design_table",
+    "load_system_param",
+    "table_cache_path",
+]
+
+
+def load_system_param(spec: str) -> LTISystem:
+    """``system`` parameter: a built-in scenario name or a YAML file path."""
+    try:
+        return load_system(spec)
+    except SwitchobsError as err:
+        raise ConfigError(f"parameter 'system': {err}") from None
+    except Exception as err:
+        raise ConfigError(f"parameter 'system': cannot load '{spec}': {type(err).__name__}: {err}") from None
+
+
+def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int) -> list[Cycle]:
+    """The cycle list of a schedule given by ``schedule.tau``/``schedule.s`` (two channels)
+    or ``schedule.h`` (N channels: N active times per cycle, cycles concatenated).
+    """
+    try:
+        if h:
+            if len(h) % N:
+                raise ConfigError(f"parameter 'schedule.h' has {len(h)} values; expected a multiple of N = {N} "
+                                  "(N active times per cycle)")
+            cycles = [Cycle(h[k:k + N]) for k in range(0, len(h), N)]
+        else:
+            if N != 2:
+                raise ConfigError(f"the system has N = {N} channels: give 'schedule.h' (N active times per "
+                                  "cycle) instead of schedule.tau/schedule.s")
+            if len(tau) != len(s) or not tau:
+                raise ConfigError(f"parameters 'schedule.tau' ({len(tau)} values) and 'schedule.s' "
+                                  f"({len(s)} values) must have the same, non-zero length")
+            cycles = [Cycle.from_ts(t, si) for t, si in zip(tau, s)]
+    except SwitchobsError as err:
+        raise ConfigError(f"schedule: {err}") from None
+    if mode == "periodic" and len(cycles) != 1:
+        raise ConfigError(f"schedule.mode 'periodic' takes one cycle; got {len(cycles)} (use 'sequence')")
+    return cycles
+
+
+def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[Cycle],
+                     robust: tuple[float, float] | None, delta: float) -> Path:
+    """Where a gain table designed at start-up is cached: keyed by everything it depends on."""
+    from switchobs_core import __version__
+
+    key = json.dumps({"fingerprint": system.fingerprint(), "mode": mode,
+                      "cycles": [list(c.h) for c in cycles], "robust": robust, "delta": delta,
+                      "version": __version__}, sort_keys=True)
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in system.name)
+    return Path(os.path.expanduser(cache_dir)) / f"{safe}-{digest}.json"
+
+
+def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str,
+                         cycles: list[Cycle], robust: tuple[float, float] | None, delta: float,
+                         log: Callable[[str], None]):
+    """The gain table: from ``path``; else from the cache; else designed now and cached.
+
+    Returns ``(table, where)`` with ``where`` the file the table came from or went to.
+    """
+    from switchobs_core.gains import GainTable
+
+    if path:
+        try:
+            table = GainTable.load(os.path.expanduser(path), system=system)
+        except SwitchobsError as err:
+            raise ConfigError(f"parameter 'gain_table': {err}") from None
+        return table, Path(path)
+    cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta)
+    if cache.exists():
+        try:
+            table = GainTable.load(cache, system=system)
+            log(f"gain_table not set: using the cached table {cache}")
+            return table, cache
+        except SwitchobsError as err:
+            log(f"cached gain table {cache} unusable ({err}); designing again")
+    try:
+        from switchobs_core.design import design_table
+    except ImportError as err:
+        raise ConfigError(f"gain_table not set and design is unavailable ({err})") from None
+    log(f"gain_table not set: designing gains for system '{system.name}', mode {mode}, "
+        f"cycles {[c.label() for c in cycles]}, delta {delta} (takes a few seconds)")
+    try:
+        table = design_table(system, cycles=cycles, robust=robust, delta=delta)
+    except SwitchobsError as err:
+        raise ConfigError(f"gain design failed: {err}") from None
+    try:
+        table.save(cache)
+        log(f"wrote the designed gain table to {cache} (set gain_table to it to skip the design)")
+    except OSError as err:
+        log(f"could not cache the gain table at {cache}: {err}")
+    return table, cache
+
+
+def camera_target_rows(system: LTISystem, camera_body: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """Per channel, the output rows (p_x, p_y) of the camera and of the target.
+
+    The topic contract: channel rho's output is ``[p_camera; p_target]``, rows labelled
+    ``<camera>.p_x``, ``<camera>.p_y``, ``<target>.p_x``, ``<target>.p_y`` in any order
+    (system.output_labels). Returns ``[((cam_x, cam_y), (tgt_x, tgt_y)), ...]`` (0-based rows).
+    """
+    out = []
+    for i, labels in enumerate(system.output_labels, start=1):
+        cam = {lab.rpartition(".")[2]: k for k, lab in enumerate(labels) if lab.rpartition(".")[0] == camera_body}
+        tgt = {lab.rpartition(".")[2]: k for k, lab in enumerate(labels) if lab.rpartition(".")[0] != camera_body}
+        bodies = {lab.rpartition(".")[0] for lab in labels} - {camera_body}
+        if len(labels) != 4 or set(cam) != {"p_x", "p_y"} or set(tgt) != {"p_x", "p_y"} or len(bodies) != 1:
+            raise ConfigError(
+                f"system '{system.name}' does not fit the camera/target topics: channel {i} outputs {list(labels)}; "
+                f"expected {camera_body}.p_x, {camera_body}.p_y and <target>.p_x, <target>.p_y"
+            )
+        out.append(((cam["p_x"], cam["p_y"]), (tgt["p_x"], tgt["p_y"])))
+    return out

@@ -1,0 +1,119 @@
+"""Declared parameters: one table per node, declared with descriptions, read and checked once.
+
+A node's parameters are listed as :class:`Param` entries (name, default, description). The
+table is the single source of the parameter reference in docs/ros.md (a test checks that
+every parameter is documented there). :func:`declare_all` declares them on a node with a
+``ParameterDescriptor`` and returns their values; a wrong type or a parameter in the params
+file that the node does not know raises :class:`ConfigError` (the node refuses to start).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    ParameterUninitializedException,
+)
+from rclpy.node import Node
+
+__all__ = ["ConfigError", "Param", "declare_all"]
+
+
+class ConfigError(Exception):
+    """A bad configuration: the node logs one line and exits non-zero."""
+
+
+_TYPES = {
+    bool: ParameterType.PARAMETER_BOOL,
+    int: ParameterType.PARAMETER_INTEGER,
+    float: ParameterType.PARAMETER_DOUBLE,
+    str: ParameterType.PARAMETER_STRING,
+}
+_ARRAY_TYPES = {
+    float: ParameterType.PARAMETER_DOUBLE_ARRAY,
+    int: ParameterType.PARAMETER_INTEGER_ARRAY,
+    str: ParameterType.PARAMETER_STRING_ARRAY,
+}
+_TYPE_NAMES = {
+    ParameterType.PARAMETER_BOOL: "bool", ParameterType.PARAMETER_INTEGER: "integer",
+    ParameterType.PARAMETER_DOUBLE: "double", ParameterType.PARAMETER_STRING: "string",
+    ParameterType.PARAMETER_DOUBLE_ARRAY: "double array",
+    ParameterType.PARAMETER_INTEGER_ARRAY: "integer array",
+    ParameterType.PARAMETER_STRING_ARRAY: "string array",
+}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: ``name``, ``default`` (its type is the parameter's), ``description``.
+
+    For an array parameter, ``default`` is a tuple and ``item`` the element type (needed when
+    the default is empty).
+    """
+
+    name: str
+    default: Any
+    description: str
+    item: type | None = None
+    read_only: bool = True
+
+    @property
+    def type(self) -> int:
+        if isinstance(self.default, tuple):
+            item = self.item or type(self.default[0])
+            return _ARRAY_TYPES[item]
+        return _TYPES[type(self.default)]
+
+    @property
+    def type_name(self) -> str:
+        return _TYPE_NAMES[self.type]
+
+
+def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
+    """Declare ``params`` on ``node``; return ``{name: value}``.
+
+    Raises
+    ------
+    ConfigError
+        A parameter of the wrong type in the params file or on the command line, or a
+        parameter override that the node does not declare (a typo would otherwise be
+        ignored silently).
+    """
+    values: dict[str, Any] = {}
+    for p in params:
+        desc = ParameterDescriptor(name=p.name, type=p.type, description=p.description,
+                                   read_only=p.read_only)
+        try:
+            if isinstance(p.default, tuple) and not p.default:
+                # an empty default has no type of its own: declare by type, fall back below
+                from rclpy.parameter import Parameter
+                ptype = Parameter.Type(p.type)
+                node.declare_parameter(p.name, ptype, desc)
+            else:
+                node.declare_parameter(p.name, list(p.default) if isinstance(p.default, tuple) else p.default,
+                                       desc)
+        except InvalidParameterTypeException as err:
+            got = getattr(err, "parameter", None)
+            floats = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY)
+            hint = "; write floats with a decimal point, e.g. 2.0" if p.type in floats else ""
+            got_s = "" if got is None else f" (got {got.type_.name.lower()})"
+            raise ConfigError(f"parameter '{p.name}' must be a {p.type_name}{got_s}{hint}") from None
+        try:
+            v = node.get_parameter(p.name).value
+        except ParameterUninitializedException:
+            v = p.default
+        if v is None:
+            v = p.default
+        if isinstance(p.default, tuple):
+            v = tuple(v)
+        values[p.name] = v
+    overrides = getattr(node, "_parameter_overrides", {}) or {}
+    declared = {p.name for p in params} | {"use_sim_time", "start_type_description_service"}
+    unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides."))
+    if unknown:
+        raise ConfigError(f"unknown parameter(s) {', '.join(unknown)} for node '{node.get_name()}' "
+                          f"(known: {', '.join(sorted(p.name for p in params))})")
+    return values

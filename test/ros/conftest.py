@@ -1,0 +1,68 @@
+"""ROS tests: a ROS_DOMAIN_ID of this session's own, localhost-only discovery.
+
+Set at import (before any rclpy use or child process): ``ROS_AUTOMATIC_DISCOVERY_RANGE =
+LOCALHOST`` and a ``ROS_DOMAIN_ID`` claimed with a lock file (switchobs_ros.domain), held
+for the whole session, so concurrent sessions on the machine never share a domain.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+try:
+    import rclpy  # noqa: F401
+    HAVE_ROS = True
+except ImportError:  # pragma: no cover - the ROS wheels are in requirements.txt
+    HAVE_ROS = False
+
+if HAVE_ROS:
+    from switchobs_ros.domain import claim_domain
+
+    _LEASE = claim_domain()
+    os.environ["ROS_DOMAIN_ID"] = str(_LEASE.domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    os.environ["SWITCHOBS_CLAIM_DOMAIN"] = "0"   # the demo runner uses ours
+    os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+else:
+    collect_ignore_glob = ["test_*.py"]
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "test/ros" in str(item.fspath).replace(os.sep, "/"):
+            item.add_marker(pytest.mark.ros)
+
+
+@pytest.fixture(scope="session")
+def ros_domain() -> int:
+    return int(os.environ["ROS_DOMAIN_ID"])
+
+
+@pytest.fixture(scope="session")
+def paper_tables(tmp_path_factory):
+    """Gain tables for the paper's periodic and sequence schedules, designed once per session."""
+    from switchobs_core.design import design_table
+    from switchobs_core.schedule import Cycle
+    from switchobs_core.system import load_system
+
+    d = tmp_path_factory.mktemp("tables")
+    sys_ = load_system("paper")
+    per = design_table(sys_, [Cycle.from_ts(2.0, 0.6)], delta=0.99)
+    seq = design_table(sys_, [Cycle.from_ts(4.0, 0.5), Cycle.from_ts(3.0, 0.6), Cycle.from_ts(2.0, 0.4)], delta=0.99)
+    return {"periodic": str(per.save(d / "periodic.json")), "sequence": str(seq.save(d / "sequence.json"))}
+
+
+@pytest.fixture
+def ros_node():
+    """An rclpy context and a plain node for the test's own publishers/subscribers."""
+    import rclpy
+    from rclpy.node import Node
+
+    rclpy.init()
+    node = Node("switchobs_test")
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown()
