@@ -9,6 +9,9 @@ export PATH="$VENV/bin:$PATH"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 unset ROS_LOCALHOST_ONLY ROS_STATIC_PEERS
 
+# Small matrices only: multi-threaded BLAS just contends for the cores (switchobs_core/threads.py).
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
+
 # Claim a ROS_DOMAIN_ID no concurrent run uses: an exclusive flock on a lock file held (fd kept
 # open) for the life of this shell. Same lock files as switchobs_ros/domain.py.
 claim_ros_domain() {

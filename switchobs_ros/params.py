@@ -1,7 +1,7 @@
 """Declared parameters: one table per node, declared with descriptions, read and checked once.
 
 A node's parameters are listed as :class:`Param` entries (name, default, description). The
-table is the single source of the parameter reference in docs/ros.md (a test checks that
+table is the single source of the parameter reference in README.md (a test checks that
 every parameter is documented there). :func:`declare_all` declares them on a node with a
 ``ParameterDescriptor`` and returns their values; a wrong type or a parameter in the params
 file that the node does not know raises :class:`ConfigError` (the node refuses to start).

@@ -1,4 +1,4 @@
-"""docs/ros.md documents every declared parameter of the nodes, with its default."""
+"""The README documents every declared parameter of the nodes, with its default."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import pytest
 
 from switchobs_ros import camera_sim, estimator
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "ros.md"
+DOC = Path(__file__).resolve().parents[2] / "README.md"
 
 
 @pytest.mark.parametrize("mod", [estimator, camera_sim])
 def test_every_parameter_documented(mod):
     text = DOC.read_text()
     missing = [p.name for p in mod.PARAMS if f"| `{p.name}` |" not in text]
-    assert not missing, f"parameters missing from docs/ros.md: {missing}"
+    assert not missing, f"parameters missing from README.md: {missing}"
 
 
 @pytest.mark.parametrize("mod,cfg", [(estimator, "estimator.yaml"), (camera_sim, "camera_sim.yaml")])
@@ -23,7 +23,7 @@ def test_default_params_file_lists_every_parameter(mod, cfg):
     import yaml
 
     node = "estimator" if mod is estimator else "camera_sim"
-    data = yaml.safe_load((DOC.parents[1] / "config" / cfg).read_text())[node]["ros__parameters"]
+    data = yaml.safe_load((DOC.parent / "config" / cfg).read_text())[node]["ros__parameters"]
 
     def flat(d, prefix=""):
         for k, v in d.items():
