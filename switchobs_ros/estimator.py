@@ -18,6 +18,12 @@ send the new channel before the first target pose of that channel (camera_sim do
 Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every output carries the stamp of the sample it answers.
+
+Clock jumps: a jump of the node clock backwards (with ``use_sim_time``, a looped bag restarting
+its ``/clock``) resets the estimator, so the replay's samples are accepted again and the
+estimate converges again; a jump forwards by more than ``sensor_timeout`` is counted. Both are
+reported in ``/diagnostics``. Replays must therefore publish ``/clock`` (the bag tools do): stamps
+that go back without the clock going back are rejected as ``old_stamp``, never silently used.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from rclpy.clock import JumpThreshold, TimeJump
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -200,6 +208,13 @@ class EstimatorNode(Node):
         self.sub_camera = self.create_subscription(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
         self.sub_target = self.create_subscription(PoseStamped, "target/pose", self.target_callback, qos.SENSOR_SUB)
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
+        self.clock_jumps_back = 0
+        self.clock_jumps_forward = 0
+        self.last_clock_jump = ""
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=Duration(nanoseconds=int(self.sensor_timeout * 1e9)),
+                          min_backward=Duration(nanoseconds=-1), on_clock_change=False),
+            post_callback=self.clock_jump_callback)
         self.diag_timer = self.create_timer(cfg["diagnostics_period"], self.diagnostics_callback)
         self.pair_timer = self.create_timer(max(self.pair_timeout / 2, 0.005), self.pairing_callback)
 
@@ -334,6 +349,21 @@ class EstimatorNode(Node):
         self.resets += 1
         self.get_logger().info(f"estimator reset ({why})")
 
+    def clock_jump_callback(self, jump: TimeJump) -> None:
+        """A jump of the node clock: backwards resets the estimator (a looped replay), forwards is counted."""
+        try:
+            delta = jump.delta.nanoseconds * 1e-9
+            if delta < 0:
+                self.clock_jumps_back += 1
+                self.last_clock_jump = f"back by {-delta:.6g} s"
+                self.reset_estimator(f"clock jumped back by {-delta:.6g} s")
+            else:
+                self.clock_jumps_forward += 1
+                self.last_clock_jump = f"forward by {delta:.6g} s"
+                self.get_logger().warn(f"clock jumped forward by {delta:.6g} s")
+        except Exception as err:
+            self._internal_error("clock jump", err)
+
     def reset_callback(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.reset_estimator("~/reset service")
         response.success = True
@@ -374,7 +404,11 @@ class EstimatorNode(Node):
               kv("current design index", obs.design_index), kv("current eta", d.eta), kv("current kappa", d.kappa),
               kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L]),
               kv("updates", self.updates), kv("partial updates", self.partial_updates),
-              kv("switches", self.switches), kv("resets", self.resets)]
+              kv("switches", self.switches), kv("resets", self.resets),
+              kv("clock jumps back (resets)", self.clock_jumps_back),
+              kv("clock jumps forward", self.clock_jumps_forward)]
+        if self.last_clock_jump:
+            ob.append(kv("last clock jump", self.last_clock_jump))
         recs = obs.completed_cycles
         if recs:
             r = recs[-1]
