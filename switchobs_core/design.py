@@ -105,6 +105,7 @@ class ChannelDesigner:
         self.mu = decomp.mu
         self.synth = LMISynthesizer(decomp.A_o, decomp.C_o, solver=solver)
         self.curve = KappaCurve(self.synth)
+        self._interp: tuple[int, PchipInterpolator] | None = None  # (grid points used, interpolant)
 
     def g(
         self, eta: float, active: float, inactive: float, delta: float, kappa: Callable[[float], float] | None = None
@@ -151,7 +152,9 @@ class ChannelDesigner:
         if prev is None:
             return 0.0
         e, k = self.curve.points()
-        interp = PchipInterpolator(e, np.log(k))
+        if self._interp is None or self._interp[0] != e.size:  # rebuilt only when the curve grew
+            self._interp = (e.size, PchipInterpolator(e, np.log(k)))
+        interp = self._interp[1]
 
         def kap(x: float) -> float:
             return math.exp(float(interp(x)))

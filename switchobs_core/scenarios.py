@@ -51,14 +51,15 @@ def camera_agents(
         Diagonal of the camera's velocity matrix.
     D_agents : sequence of M (2,) sequences, optional
         Diagonals of the agents' velocity matrices. Default: the paper's (0, 0.2) and
-        (0, 0.1) for the first two, then (0, 0.1 + 0.05 k) for agent k + 1 > 2... (so
-        every agent has an unstable mode and no two agents are alike).
+        (0, 0.1) for agents 1 and 2, then (0, 0.1 + 0.03 (j - 2)) for agent j >= 3
+        (0.13, 0.16, 0.19, 0.22, ...), so every agent has an unstable mode and no two
+        agents are alike.
     """
     M = int(agents)
     if M < 2:
         raise InvalidSystem(f"camera_agents needs at least 2 agents (one channel each); got {M}")
     if D_agents is None:
-        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.05 * (k - 1)) for k in range(M)]
+        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.03 * (k - 1)) for k in range(M)]
     D_agents = [tuple(float(v) for v in d) for d in D_agents]
     if len(D_agents) != M or any(len(d) != 2 for d in D_agents) or len(D_c) != 2:
         raise InvalidSystem(f"D_c must have 2 entries and D_agents {M} pairs")

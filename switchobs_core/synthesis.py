@@ -228,6 +228,8 @@ class KappaCurve:
     synthesizer: LMISynthesizer
     cache: dict[float, float] = field(default_factory=dict)
     grid: np.ndarray = field(default_factory=lambda: KAPPA_GRID)
+    #: prefix maxima of raw() over grid[0..j], filled left to right as far as needed
+    _prefix: list[float] = field(default_factory=list, repr=False)
 
     def raw(self, eta: float) -> float:
         """kappa*(eta) from the SDP (cached)."""
@@ -239,8 +241,12 @@ class KappaCurve:
     def kappa(self, eta: float) -> float:
         """Non-decreasing kappa(eta) = max(raw(eta), raw(g) for grid points g <= eta)."""
         eta = float(eta)
-        below = self.grid[self.grid <= eta]
-        return max([self.raw(eta)] + [self.raw(g) for g in below])
+        j = int(np.searchsorted(self.grid, eta, side="right"))  # grid[:j] <= eta
+        while len(self._prefix) < j:
+            g = float(self.grid[len(self._prefix)])
+            self._prefix.append(max(self.raw(g), self._prefix[-1]) if self._prefix else self.raw(g))
+        val = self.raw(eta)
+        return max(val, self._prefix[j - 1]) if j else val
 
     def points(self) -> tuple[np.ndarray, np.ndarray]:
         """The evaluated grid points (eta, kappa), sorted, monotone: the stored curve."""

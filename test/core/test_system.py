@@ -127,3 +127,11 @@ def test_fingerprint_changes_with_any_matrix(paper):
     other = LTISystem(A, None, paper.C)
     assert other.fingerprint() != paper.fingerprint()
     assert LTISystem(paper.A, None, paper.C).fingerprint() == paper.fingerprint()
+
+
+def test_camera_agents_default_agents_all_differ():
+    # Every agent has its own unstable mode, so no two channels are alike (M = 10).
+    s = camera_agents(10)
+    d = [s.A[4 * j + 3, 4 * j + 3] for j in range(1, 11)]
+    assert d[:2] == [0.2, 0.1] and len(set(d)) == 10 and min(d) > 0
+    assert len({round(c.mu, 12) for c in s.channels()}) == 10
