@@ -13,7 +13,8 @@ from switchobs_ros import demo
 @pytest.mark.slow
 @pytest.mark.parametrize("schedule", ["periodic", "sequence"])
 def test_converges_over_dds(schedule, paper_tables, tmp_path):
-    res = demo.run(schedule, duration=21.0, time_scale=3.0, init="zeros", gain_table=paper_tables[schedule],
+    # real time (time_scale 1): at 3x a loaded 2-core machine made the node drop best-effort samples
+    res = demo.run(schedule, duration=21.0, time_scale=1.0, init="zeros", gain_table=paper_tables[schedule],
                    out=None, quiet=True)
     t, err, e0 = res["t"], res["err"], res["e0"]
     assert e0 > 1.0                                           # zeros vs. the scene: ||x(0)|| ~ 4.3
