@@ -46,6 +46,7 @@ setup(
             "estimator = switchobs_ros.estimator:main",
             "camera_sim = switchobs_ros.camera_sim:main",
             "switchobs = switchobs_core.cli:main",
+            "switchobs_bag = switchobs_ros.bag.cli:main",
         ],
     },
 )

@@ -5,15 +5,17 @@
 Thin glue (shared/DESIGN.md): parameters, topics, QoS, clocks, diagnostics. The estimation
 is :class:`switchobs_core.observer.SwitchedObserver`; messages go through :mod:`msg_bridge`.
 
-Measurement pairing
--------------------
-Channel rho's output is ``y = [p_camera; p_target]``. ``camera/pose`` and ``target/pose``
-arrive separately with (normally) the same header stamp: the node keeps the pending samples
-by stamp (up to 8) and calls ``observer.update(t, rho, y)`` when both halves are there. A half
-whose partner does not come (a newer pair completes, or ``pairing_timeout`` passes) is used alone
-through the observer's partial-rows input (``rows=``). The target pose is attributed to the
-latest channel received on ``camera/active_channel`` (UInt8 has no stamp): a publisher must
-send the new channel before the first target pose of that channel (camera_sim does).
+Input handling (validation, measurement pairing, the observer, the counters) is
+:class:`switchobs_ros.pipeline.EstimatorPipeline`, shared with the offline bag tools
+(``switchobs_bag estimate``); this module is the rclpy glue around it: parameters,
+subscriptions, publishing each estimate, the pairing timer (``pairing_timeout``, wall clock),
+the clock-jump callback, ``~/reset`` and ``/diagnostics``.
+
+Measurement pairing (see the pipeline): channel rho's output is ``y = [p_camera; p_target]``;
+``camera/pose`` and ``target/pose`` are paired by header stamp, a half whose partner does not
+come is used alone. The target pose is attributed to the latest channel received on
+``camera/active_channel`` (UInt8 has no stamp): a publisher must send the new channel before
+the first target pose of that channel (camera_sim does).
 
 Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
@@ -28,7 +30,6 @@ that go back without the clock going back are rejected as ``old_stamp``, never s
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections import Counter
@@ -47,20 +48,16 @@ from std_msgs.msg import Float64MultiArray, UInt8
 from std_srvs.srv import Trigger
 
 import msg_bridge as mb
-from msg_bridge import Reason, Rejection
-from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.threads import single_threaded_blas
 
 from . import qos
-from .core_config import (
-    camera_target_rows,
-    cycles_from_params,
-    load_or_design_table,
-    load_system_param,
-)
 from .params import ConfigError, Param, declare_all
+from .pipeline import Estimate, EstimatorPipeline, PipelineLog
 
-__all__ = ["PARAMS", "EstimatorNode", "main"]
+__all__ = ["PARAMS", "PREDICTION_BOUND_LABELS", "EstimatorNode", "main"]
+
+#: Element names of ``~/prediction/bound``.
+PREDICTION_BOUND_LABELS = ("exact_bound", "seconds_since_measurement")
 
 PARAMS = [
     Param("system", "paper", "The system: a built-in scenario name (paper, camera_agents) or a path to a "
@@ -92,21 +89,26 @@ PARAMS = [
     Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock)."),
 ]
 
-_PARTS = ("camera", "target")
-#: Samples kept waiting for their other half (a backlog reorders the two topics a little).
-MAX_PENDING = 8
+class _NodeLog(PipelineLog):
+    """The pipeline's log on the node's logger (repeating messages throttled to 1/s)."""
 
+    def __init__(self, logger):
+        self._logger = logger
 
-class _Pending:
-    """One sample being assembled: the halves that have arrived for one stamp."""
+    def info(self, text: str) -> None:
+        self._logger.info(text)
 
-    __slots__ = ("channel", "since", "stamp_ns", "xy")
+    def warn(self, text: str, throttle: bool = False) -> None:
+        if throttle:
+            self._logger.warn(text, throttle_duration_sec=1.0)
+        else:
+            self._logger.warn(text)
 
-    def __init__(self, stamp_ns: int):
-        self.stamp_ns = stamp_ns
-        self.xy: dict[str, np.ndarray] = {}
-        self.channel = 0
-        self.since = time.monotonic()
+    def error(self, text: str, throttle: bool = False) -> None:
+        if throttle:
+            self._logger.error(text, throttle_duration_sec=1.0)
+        else:
+            self._logger.error(text)
 
 
 class EstimatorNode(Node):
@@ -125,75 +127,27 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ configuration
     def _configure(self, cfg: dict) -> None:
-        from switchobs_core.observer import MODES, SwitchedObserver
-
-        self.system = sys_ = load_system_param(cfg["system"])
-        self.mode = cfg["schedule.mode"]
-        if self.mode not in MODES:
-            raise ConfigError(f"parameter 'schedule.mode' must be one of {', '.join(MODES)}; got '{self.mode}'")
-        robust = None
-        if self.mode == "robust":
-            hmin, hmax = cfg["schedule.h_min"], cfg["schedule.h_max"]
-            if not 0 < hmin <= hmax:
-                raise ConfigError(f"robust mode needs 0 < schedule.h_min <= schedule.h_max; got {hmin}, {hmax}")
-            robust = (hmin, hmax)
-            self.cycles = []
-        else:
-            self.cycles = cycles_from_params(self.mode, cfg["schedule.tau"], cfg["schedule.s"],
-                                             cfg["schedule.h"], sys_.N)
-        for name in ("delta", "e0", "sensor_timeout", "future_tolerance", "max_abs_value",
-                     "pairing_timeout", "diagnostics_period"):
-            v = cfg[name]
-            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
-                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
-        x0 = cfg["initial_estimate"]
-        if x0 and len(x0) != sys_.n:
-            raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
-                              f"states ({', '.join(sys_.state_labels)})")
-        self.x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
-        self.rows = camera_target_rows(sys_, cfg["camera_body"])
+        # the input handling (validation, pairing, observer, counters) is the pipeline's
+        self.pipeline = pl = EstimatorPipeline.from_params(cfg, _NodeLog(self.get_logger()))
+        self.system = sys_ = pl.system
+        self.mode = pl.mode
+        self.cycles = pl.cycles
+        self.table, self.table_path = pl.table, pl.table_path
+        self.observer = pl.observer
         self.bodies = mb.bodies(sys_.state_labels)
         frames = cfg["body_frames"]
         if frames and len(frames) != len(self.bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(self.bodies)} bodies "
                               f"({', '.join(b.name for b in self.bodies)})")
         self.child_frames = list(frames) if frames else [b.name for b in self.bodies]
-        self.table, self.table_path = load_or_design_table(
-            cfg["gain_table"], cfg["gain_table_cache_dir"], sys_, self.mode, self.cycles, robust,
-            cfg["delta"], self.get_logger().info)
-        try:
-            self.observer = SwitchedObserver(sys_, self.table, mode=self.mode, cycles=self.cycles or None,
-                                             x0=self.x0, t0=0.0, e0=cfg["e0"], bounds=robust)
-        except SwitchobsError as err:
-            raise ConfigError(f"observer: {err}") from None
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N)
         self.frame = cfg["world_frame"]
         self.w_state = mb.LabelledArrayWriter(self.state_labels)
         self.w_env = mb.LabelledArrayWriter(self.env_labels)
         self.w_odom = [mb.OdometryWriter(b, self.frame, c) for b, c in zip(self.bodies, self.child_frames)]
-        self.in_frame = cfg["input_frame_id"]
-        self.max_abs = cfg["max_abs_value"]
-        self.future_ns = int(cfg["future_tolerance"] * 1e9)
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
-
-        # run-time state (cleared by reset)
-        self.channel = 0
-        self.last_ns: dict[str, int | None] = {p: None for p in _PARTS}
-        self.pending: dict[int, _Pending] = {}   # by stamp (ns)
-        self.origin_ns: int | None = None
-        self.obs_ns: int | None = None     # stamp of the last observer update
-        self.last_accept_clock_ns: int | None = None
-        # counters (never cleared: diagnostics report totals)
-        self.accepted = Counter()          # per input topic
-        self.rejected = Counter()          # per (topic, reason)
-        self.updates = 0
-        self.partial_updates = 0
-        self.switches = 0
-        self.resets = 0
-        self.errors = 0
-        self.last_rejection = ""
         self._rate_base = (self.get_clock().now().nanoseconds, Counter(), 0)
 
         # publishers (reliable), then subscriptions (sensor data; channel reliable). The
@@ -203,6 +157,13 @@ class EstimatorNode(Node):
         self.pub_env = self.create_publisher(Float64MultiArray, "~/envelope", qos.OUTPUT)
         self.pub_odom = [self.create_publisher(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.OUTPUT)
+        # sensor outage: the prediction and its exact bound, once per diagnostics period, on
+        # topics of their own (~/state stays one answer per measurement)
+        self.pub_pred = self.create_publisher(Float64MultiArray, "~/prediction", qos.OUTPUT)
+        self.pub_pred_bound = self.create_publisher(Float64MultiArray, "~/prediction/bound", qos.OUTPUT)
+        self.w_pred_bound = mb.LabelledArrayWriter(PREDICTION_BOUND_LABELS)
+        self.predictions = 0
+        self.last_prediction = None
         self.sub_channel = self.create_subscription(UInt8, "camera/active_channel", self.channel_callback,
                                                     qos.CHANNEL_SUB)
         self.sub_camera = self.create_subscription(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
@@ -220,134 +181,31 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def channel_callback(self, msg: UInt8) -> None:
-        try:
-            rej = mb.check_channel(msg, self.system.N)
-            if rej is not None:
-                self._reject("camera/active_channel", rej)
-                return
-            self.accepted["camera/active_channel"] += 1
-            c = int(msg.data)
-            if c != self.channel:
-                if self.channel:
-                    self.switches += 1
-                self.channel = c
-        except Exception as err:
-            self._internal_error("camera/active_channel", err)
+        self.pipeline.on_channel(msg)
 
     def camera_callback(self, msg: PoseStamped) -> None:
-        self._pose("camera", "camera/pose", msg)
+        self._publish_all(self.pipeline.on_pose("camera", msg, self.get_clock().now().nanoseconds))
 
     def target_callback(self, msg: PoseStamped) -> None:
-        self._pose("target", "target/pose", msg)
-
-    def _pose(self, part: str, topic: str, msg: PoseStamped) -> None:
-        try:
-            now_ns = self.get_clock().now().nanoseconds
-            rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=self.last_ns[part],
-                                now_ns=now_ns, future_tolerance_ns=self.future_ns)
-            stamp_ns = mb.stamp_to_ns(msg.header.stamp)
-            if rej is None and not self.channel:
-                rej = Rejection(Reason.NO_CHANNEL, "camera/active_channel", "no active channel received yet")
-            if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
-                rej = Rejection(Reason.OLD_STAMP, "header.stamp",
-                                f"not newer than the estimate ({(self.obs_ns - stamp_ns) * 1e-9:.6f} s older)")
-            if rej is not None:
-                self._reject(topic, rej)
-                return
-            self.accepted[topic] += 1
-            self.last_ns[part] = stamp_ns
-            self.last_accept_clock_ns = now_ns
-            pend = self.pending.get(stamp_ns)
-            if pend is None:
-                pend = self.pending[stamp_ns] = _Pending(stamp_ns)
-                if len(self.pending) > MAX_PENDING:      # the oldest half's partner is overdue
-                    self._flush(min(self.pending))
-            pend.xy[part] = mb.pose_to_xy(msg)
-            if part == "target" or not pend.channel:
-                pend.channel = self.channel
-            if len(pend.xy) == 2:
-                # older samples will not be completed now: use their halves alone, in order
-                for s_old in sorted(s for s in self.pending if s < stamp_ns):
-                    self._flush(s_old)
-                self._flush(stamp_ns)
-        except Exception as err:
-            self._internal_error(topic, err)
+        self._publish_all(self.pipeline.on_pose("target", msg, self.get_clock().now().nanoseconds))
 
     def pairing_callback(self) -> None:
+        self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
+
+    def _publish_all(self, estimates: list[Estimate]) -> None:
         try:
-            now = time.monotonic()
-            for s in sorted(self.pending):
-                if now - self.pending[s].since <= self.pair_timeout:
-                    break
-                self._flush(s)
+            for e in estimates:
+                self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
+                self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
+                for pub, w in zip(self.pub_odom, self.w_odom):
+                    pub.publish(w.msg(e.x_hat, e.stamp_ns))
         except Exception as err:
-            self._internal_error("pairing", err)
-
-    def _flush(self, stamp_ns: int) -> None:
-        """Run the observer on a pending sample (both halves, or one alone) and publish."""
-        pend = self.pending.pop(stamp_ns, None)
-        if pend is None or (self.obs_ns is not None and stamp_ns <= self.obs_ns):
-            return
-        c = pend.channel
-        (cx, cy), (tx, ty) = self.rows[c - 1]
-        cam, tgt = pend.xy.get("camera"), pend.xy.get("target")
-        if cam is not None and tgt is not None:
-            y = np.empty(4)
-            y[cx], y[cy], y[tx], y[ty] = cam[0], cam[1], tgt[0], tgt[1]
-            rows = None
-        elif cam is not None:
-            y, rows = cam, (cx, cy)
-        else:
-            y, rows = tgt, (tx, ty)
-        if self.origin_ns is None:
-            self.origin_ns = pend.stamp_ns
-            self.observer.reset(self.x0, 0.0)
-        t = (pend.stamp_ns - self.origin_ns) * 1e-9
-        x_hat = self.observer.update(t, c, y, rows=rows)
-        self.obs_ns = pend.stamp_ns
-        self.updates += 1
-        if rows is not None:
-            self.partial_updates += 1
-        self._publish(pend.stamp_ns, x_hat)
-
-    def _publish(self, stamp_ns: int, x_hat: np.ndarray) -> None:
-        env = self.observer.envelope()
-        env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]])
-        if not (np.isfinite(x_hat).all() and np.isfinite(env_vals).all()):
-            self.errors += 1
-            self.get_logger().error("non-finite estimate: not published; resetting the estimator")
-            self.reset_estimator("non-finite estimate")
-            return
-        self.pub_state.publish(self.w_state.msg(x_hat, stamp_ns))
-        self.pub_env.publish(self.w_env.msg(env_vals, stamp_ns))
-        for pub, w in zip(self.pub_odom, self.w_odom):
-            pub.publish(w.msg(x_hat, stamp_ns))
-
-    def _reject(self, topic: str, rej: Rejection) -> None:
-        self.rejected[(topic, rej.reason.value)] += 1
-        self.last_rejection = f"{topic}: {rej}"
-        self.get_logger().warn(f"rejected {topic}: {rej}", throttle_duration_sec=1.0)
-
-    def _internal_error(self, where: str, err: Exception) -> None:
-        self.errors += 1
-        self.rejected[(where, "internal_error")] += 1
-        self.last_rejection = f"{where}: internal_error: {type(err).__name__}: {err}"
-        self.get_logger().error(f"{where}: {type(err).__name__}: {err}", throttle_duration_sec=1.0)
+            self.pipeline.internal_error("publish", err)
 
     # ------------------------------------------------------------------ reset
     def reset_estimator(self, why: str) -> None:
-        """Back to the initial estimate; the next accepted sample becomes the new time origin.
-
-        Clears the pending sample and the per-topic stamp history (so a replay that starts
-        over is accepted); keeps the active channel and all counters.
-        """
-        self.pending = {}
-        self.origin_ns = None
-        self.obs_ns = None
-        self.last_ns = {p: None for p in _PARTS}
-        self.observer.reset(self.x0, 0.0)
-        self.resets += 1
-        self.get_logger().info(f"estimator reset ({why})")
+        """Back to the initial estimate (see :meth:`EstimatorPipeline.reset`)."""
+        self.pipeline.reset(why)
 
     def clock_jump_callback(self, jump: TimeJump) -> None:
         """A jump of the node clock: backwards resets the estimator (a looped replay), forwards is counted."""
@@ -357,25 +215,46 @@ class EstimatorNode(Node):
                 self.clock_jumps_back += 1
                 self.last_clock_jump = f"back by {-delta:.6g} s"
                 self.reset_estimator(f"clock jumped back by {-delta:.6g} s")
+            elif self.get_clock().now().nanoseconds == jump.delta.nanoseconds:
+                pass     # the first /clock of a sim-time clock (from 0): the clock starts, no jump
             else:
                 self.clock_jumps_forward += 1
                 self.last_clock_jump = f"forward by {delta:.6g} s"
                 self.get_logger().warn(f"clock jumped forward by {delta:.6g} s")
         except Exception as err:
-            self._internal_error("clock jump", err)
+            self.pipeline.internal_error("clock jump", err)
 
     def reset_callback(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.reset_estimator("~/reset service")
         response.success = True
-        response.message = f"reset to the initial estimate (reset #{self.resets})"
+        response.message = f"reset to the initial estimate (reset #{self.pipeline.resets})"
         return response
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics_callback(self) -> None:
         try:
+            self.prediction_tick(self.get_clock().now().nanoseconds)
+        except Exception as err:
+            self.pipeline.internal_error("prediction", err)
+        try:
             self.pub_diag.publish(self.diagnostics())
         except Exception as err:
-            self._internal_error("diagnostics", err)
+            self.pipeline.internal_error("diagnostics", err)
+
+    def prediction_tick(self, now_ns: int) -> None:
+        """During a sensor outage (no accepted measurement for sensor_timeout), publish the
+        observer's prediction at the node clock on ``~/prediction`` and its exact bound on
+        ``~/prediction/bound`` (stamped with the node clock, not a measurement stamp)."""
+        last = self.pipeline.last_accept_clock_ns
+        if last is None or (now_ns - last) * 1e-9 <= self.sensor_timeout:
+            return
+        p = self.pipeline.predict(now_ns)
+        if p is None:
+            return
+        self.pub_pred.publish(self.w_state.msg(p.x_hat, p.stamp_ns))
+        self.pub_pred_bound.publish(self.w_pred_bound.msg(np.array([p.exact_bound, p.age]), p.stamp_ns))
+        self.predictions += 1
+        self.last_prediction = p
 
     def diagnostics(self) -> DiagnosticArray:
         """The /diagnostics message: configuration, observer, inputs."""
@@ -386,6 +265,7 @@ class EstimatorNode(Node):
             return KeyValue(key=str(k), value=v if isinstance(v, str) else _fmt(v))
 
         obs = self.observer
+        pl = self.pipeline
         # configuration (static)
         conf = [kv("system", self.system.name), kv("fingerprint", self.system.fingerprint()[:16]),
                 kv("gain_table", str(self.table_path)), kv("mode", self.mode),
@@ -403,8 +283,8 @@ class EstimatorNode(Node):
               kv("current cycle s", cyc.s if cyc is not None else "robust"),
               kv("current design index", obs.design_index), kv("current eta", d.eta), kv("current kappa", d.kappa),
               kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L]),
-              kv("updates", self.updates), kv("partial updates", self.partial_updates),
-              kv("switches", self.switches), kv("resets", self.resets),
+              kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
+              kv("switches", pl.switches), kv("resets", pl.resets),
               kv("clock jumps back (resets)", self.clock_jumps_back),
               kv("clock jumps forward", self.clock_jumps_forward)]
         if self.last_clock_jump:
@@ -415,39 +295,57 @@ class EstimatorNode(Node):
             ob += [kv("cycles completed", len(recs)), kv("last cycle measured tau", r.tau),
                    kv("last cycle measured s", r.s), kv("last cycle measured h", r.h),
                    kv("last cycle paper factors f", r.f), kv("last cycle matched schedule", r.matched)]
+            if r.a2_ok is not None:
+                ob.append(kv("last cycle A2 held", r.a2_ok))
         else:
             ob.append(kv("cycles completed", 0))
-        if self.origin_ns is not None:
+        res = pl.residence()
+        if res is not None:
+            ob += [kv("active channel residence (s)", res.current),
+                   kv(f"designed residence (s, {res.kind})", [res.lo, res.hi]),
+                   kv("residence violations", res.violations)]
+            if res.last is not None:
+                ob.append(kv("last residence (channel, s)", [res.last[0], res.last[1]]))
+            if res.f is not None:
+                ob.append(kv("cycle so far paper factors f", res.f))
+        if pl.origin_ns is not None:
             env = obs.envelope()
             ob += [kv("paper bound", env.paper_bound), kv("exact bound", env.exact_bound)]
         level, msg = DiagnosticStatus.OK, "estimating"
-        if self.last_accept_clock_ns is None:
+        if pl.last_accept_clock_ns is None:
             level, msg = DiagnosticStatus.WARN, "waiting for measurements"
         else:
-            age = (now_ns - self.last_accept_clock_ns) * 1e-9
+            age = (now_ns - pl.last_accept_clock_ns) * 1e-9
             ob.append(kv("seconds since last measurement", age))
             if age > self.sensor_timeout:
                 level = DiagnosticStatus.WARN
                 msg = f"no measurement for {age:.2f} s (sensor_timeout {self.sensor_timeout} s)"
+            if age > self.sensor_timeout and self.last_prediction is not None \
+                    and self.last_prediction.stamp_ns > (pl.obs_ns or 0):
+                ob += [kv("outage: predicting (last innovation held), exact bound", self.last_prediction.exact_bound),
+                       kv("outage predictions published", self.predictions)]
         if recs and not recs[-1].matched:
             level = max(level, DiagnosticStatus.WARN)
             msg += "; last cycle did not match the schedule"
+        if res is not None and res.problem:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += f"; {res.problem}"
         # inputs: rates over the last period (node clock), rejected totals by reason
         t0_ns, acc0, _ = self._rate_base
         dt = (now_ns - t0_ns) * 1e-9
         inp = []
         for topic in ("camera/pose", "target/pose", "camera/active_channel"):
-            rate = (self.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
+            rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
             inp.append(kv(f"{topic} rate (Hz)", rate))
-            inp.append(kv(f"{topic} accepted", self.accepted[topic]))
-        total_rej = sum(self.rejected.values())
-        for (topic, reason), n in sorted(self.rejected.items()):
+            inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
+        total_rej = sum(pl.rejected.values())
+        for (topic, reason), n in sorted(pl.rejected.items()):
             inp.append(kv(f"rejected {topic} {reason}", n))
         inp.append(kv("rejected total", total_rej))
-        if self.last_rejection:
-            inp.append(kv("last rejection", self.last_rejection))
+        if pl.last_rejection:
+            inp.append(kv("last rejection", pl.last_rejection))
         new_rej = total_rej - self._rate_base[2]
-        self._rate_base = (now_ns, Counter(self.accepted), total_rej)
+        self._rate_base = (now_ns, Counter(pl.accepted), total_rej)
         arr = DiagnosticArray()
         arr.header.stamp = now.to_msg()
         name = self.get_fully_qualified_name()

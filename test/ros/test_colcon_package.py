@@ -38,6 +38,8 @@ def test_colcon_build_and_ament_index_run(tmp_path, paper_tables):
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     install = ws / "install"
     assert (install / "switchobs_ros" / "lib" / "switchobs_ros" / "estimator").exists()
+    for exe in ("camera_sim", "switchobs", "switchobs_bag"):
+        assert (install / "switchobs_ros" / "lib" / "switchobs_ros" / exe).exists(), exe
     assert (install / "switchobs_ros" / "share" / "switchobs_ros" / "config" / "estimator.yaml").exists()
 
     # what `ros2 run switchobs_ros estimator` does, after `source install/setup.bash`

@@ -1,0 +1,310 @@
+"""Reading and writing rosbag2 bags: the container from ``rosbags``, the bytes from rclpy.
+
+A bag here is a real rosbag2 bag (a folder with ``metadata.yaml``, version 9, and one ``.mcap``
+or ``.db3`` file) as ``ros2 bag record`` writes it. Messages are CDR bytes, serialised and
+deserialised with ``rclpy.serialization`` (the same bytes rosbags' own CDR serialiser
+produces), so the player publishes exactly the recorded bytes and the offline estimator
+deserialises exactly what the node would receive. Topic names in bags are absolute
+(``/camera/pose``), as rosbag2 records them.
+
+Message order: :meth:`BagIn.messages` returns the messages sorted by their log time (the
+receive time on the recorder's clock), ties broken by :data:`TOPIC_RANK` (``/clock``, then the
+active channel, then the poses) and then by the order in the file. The player publishes in
+this order and the offline estimator processes in it, so both see the same sequence.
+
+Every failure is a :class:`BagError` with one line naming the file or the topic.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from switchobs_core.exceptions import SwitchobsError
+
+__all__ = [
+    "CONTRACT_TYPES",
+    "STORAGES",
+    "TOPIC_RANK",
+    "BagError",
+    "BagIn",
+    "BagMessage",
+    "BagOut",
+    "msg_class",
+    "qos_for",
+    "type_name",
+]
+
+#: Storage plugins, by the name rosbag2 uses (``--storage``).
+STORAGES = ("mcap", "sqlite3")
+
+#: Types of the topics of the node contract (README, "Topics"), absolute names.
+CONTRACT_TYPES = {
+    "/camera/pose": "geometry_msgs/msg/PoseStamped",
+    "/target/pose": "geometry_msgs/msg/PoseStamped",
+    "/camera/active_channel": "std_msgs/msg/UInt8",
+    "/sim/truth": "std_msgs/msg/Float64MultiArray",
+    "/clock": "rosgraph_msgs/msg/Clock",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
+
+#: Order of messages that share a log time (see the module docstring); other topics rank 9.
+TOPIC_RANK = {"/clock": 0, "/camera/active_channel": 1, "/camera/pose": 2, "/target/pose": 3, "/sim/truth": 4}
+
+
+class BagError(SwitchobsError, ValueError):
+    """A bag that cannot be used: missing, unreadable, truncated, a missing topic or a wrong type."""
+
+
+def msg_class(type_name_: str) -> type:
+    """The rclpy message class of ``pkg/msg/Name``."""
+    try:
+        pkg, kind, name = type_name_.split("/")
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ValueError, ImportError, AttributeError):
+        raise BagError(f"message type '{type_name_}' is not available here (no Python module {type_name_})") from None
+
+
+def type_name(cls: type) -> str:
+    """``pkg/msg/Name`` of an rclpy message class."""
+    pkg = cls.__module__.split(".")[0]
+    return f"{pkg}/msg/{cls.__name__}"
+
+
+# --------------------------------------------------------------------------------- QoS
+def _qos_kinds():
+    from switchobs_ros import qos
+    return {"sensor": qos.SENSOR, "channel": qos.CHANNEL_PUB, "truth": qos.TRUTH, "clock": qos.CLOCK,
+            "output": qos.OUTPUT}
+
+
+def qos_kind(topic: str) -> str:
+    """The QoS the node contract gives a topic (README, "Topics"), as a kind name."""
+    if topic in ("/camera/pose", "/target/pose"):
+        return "sensor"
+    if topic == "/camera/active_channel":
+        return "channel"
+    if topic == "/sim/truth":
+        return "truth"
+    if topic == "/clock":
+        return "clock"
+    return "output"
+
+
+def qos_for(topic: str):
+    """The rclpy QoSProfile a publisher of ``topic`` uses under the node contract.
+
+    Sensor poses: sensor data (best effort); the active channel: reliable, transient local,
+    depth 1 (as camera_sim); ``/clock``: best effort; ``/sim/truth``: reliable, depth 100;
+    everything else (the estimator's outputs, ``/diagnostics``): reliable, depth 10.
+    """
+    return _qos_kinds()[qos_kind(topic)]
+
+
+def _rosbags_qos(profile):
+    """rosbags' Qos of an rclpy QoSProfile (for ``offered_qos_profiles`` in metadata.yaml)."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+    zero = QosTime(0, 0)
+    return Qos(history=QosHistory(int(profile.history)), depth=int(profile.depth),
+               reliability=QosReliability(int(profile.reliability)),
+               durability=QosDurability(int(profile.durability)), deadline=zero, lifespan=zero,
+               liveliness=QosLiveliness(int(profile.liveliness)), liveliness_lease_duration=zero,
+               avoid_ros_namespace_conventions=False)
+
+
+# --------------------------------------------------------------------------------- reading
+@dataclass(frozen=True)
+class BagMessage:
+    """One message of a bag: topic, type name, log time (ns), CDR bytes."""
+
+    topic: str
+    type: str
+    log_ns: int
+    data: bytes
+
+
+class BagIn:
+    """A rosbag2 bag opened for reading (``with BagIn(path) as bag:``).
+
+    ``bag.topics``: ``{topic: type}``; ``bag.counts``: ``{topic: message count}``;
+    ``bag.storage``: ``"mcap"`` or ``"sqlite3"``.
+    """
+
+    def __init__(self, path: str | Path):
+        from rosbags.rosbag2 import Reader
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f"bag {self.path}: no such file or folder")
+        if not (self.path / "metadata.yaml").exists():
+            raise BagError(f"bag {self.path}: not a rosbag2 bag folder (no metadata.yaml)")
+        try:
+            self._reader = Reader(self.path)
+            self._reader.open()
+        except Exception as err:
+            raise BagError(f"bag {self.path}: cannot open ({_one_line(err)}); truncated or not a rosbag2 bag?") \
+                from None
+        self.topics: dict[str, str] = {}
+        self.counts: dict[str, int] = {}
+        for c in self._reader.connections:
+            self.topics.setdefault(c.topic, c.msgtype)
+            self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
+        self.storage = "mcap" if any(self.path.glob("*.mcap")) else "sqlite3"
+        self.message_count = sum(self.counts.values())
+
+    def __enter__(self) -> BagIn:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if getattr(self, "_reader", None) is not None:
+            try:
+                self._reader.close()
+            except Exception:
+                pass
+            self._reader = None
+
+    def require(self, needed: Mapping[str, str | Iterable[str]], what: str = "") -> None:
+        """Check that every topic of ``needed`` is in the bag with (one of) the given type(s)."""
+        for topic, types in needed.items():
+            allowed = (types,) if isinstance(types, str) else tuple(types)
+            if topic not in self.topics:
+                have = ", ".join(f"{t} ({ty})" for t, ty in sorted(self.topics.items())) or "none"
+                raise BagError(f"bag {self.path}: topic {topic} is missing{what} (the bag has: {have})")
+            if self.topics[topic] not in allowed:
+                raise BagError(f"bag {self.path}: topic {topic} has type {self.topics[topic]}; expected "
+                               f"{' or '.join(allowed)}")
+
+    def messages(self, topics: Iterable[str] | None = None, order: str = "log") -> list[BagMessage]:
+        """The messages (of ``topics``, default all).
+
+        ``order="log"``: by log time (see the module docstring), what a player publishes.
+        ``order="file"``: as written, i.e. in receive order for a recorded bag (a recording on sim
+        time of a looped replay has log times that go back; its passes stay apart in this order).
+
+        Raises :class:`BagError` if the file ends early or a record is damaged, or if fewer
+        messages than metadata.yaml counts could be read (a truncated file).
+        """
+        want = None if topics is None else set(topics)
+        conns = [c for c in self._reader.connections if want is None or c.topic in want]
+        out: list[tuple] = []
+        got: dict[str, int] = {}
+        try:
+            if order == "file":
+                it = self._file_order({c.topic for c in conns})
+            else:
+                it = ((c.topic, c.msgtype, t, d) for c, t, d in self._reader.messages(connections=conns))
+            for seq, (topic, msgtype, t, data) in enumerate(it):
+                out.append((t, TOPIC_RANK.get(topic, 9), seq, BagMessage(topic, msgtype, t, bytes(data))))
+                got[topic] = got.get(topic, 0) + 1
+        except Exception as err:
+            raise BagError(f"bag {self.path}: reading messages failed after {len(out)} messages "
+                           f"({_one_line(err)}); the file is truncated or damaged") from None
+        for c in conns:
+            if got.get(c.topic, 0) < self.counts.get(c.topic, 0):
+                raise BagError(f"bag {self.path}: topic {c.topic} has {got.get(c.topic, 0)} readable messages "
+                               f"but metadata.yaml counts {self.counts[c.topic]}; the file is truncated")
+        if order != "file":
+            out.sort(key=lambda r: r[:3])
+        return [r[3] for r in out]
+
+    def _file_order(self, topics: set[str]):
+        """``(topic, type, log_ns, data)`` in the order written (mcap: records; sqlite3: row ids)."""
+        if self.storage == "mcap":
+            from mcap.reader import make_reader
+            for f in sorted(self.path.glob("*.mcap")):
+                with f.open("rb") as fh:
+                    for _schema, ch, msg in make_reader(fh).iter_messages(topics=sorted(topics),
+                                                                          log_time_order=False):
+                        yield ch.topic, self.topics[ch.topic], msg.log_time, msg.data
+        else:
+            import sqlite3
+            for f in sorted(self.path.glob("*.db3")):
+                db = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+                try:
+                    q = ("SELECT topics.name, topics.type, messages.timestamp, messages.data FROM messages "
+                         "JOIN topics ON messages.topic_id = topics.id ORDER BY messages.id")
+                    for name, ty, t, data in db.execute(q):
+                        if name in topics:
+                            yield name, ty, t, data
+                finally:
+                    db.close()
+
+
+def deserialize(m: BagMessage, cls: type):
+    """The rclpy message of ``m`` (:class:`BagError` naming the topic if the bytes are bad)."""
+    from rclpy.serialization import deserialize_message
+    try:
+        return deserialize_message(m.data, cls)
+    except Exception as err:
+        raise BagError(f"topic {m.topic}: cannot deserialise a {m.type} at log time {m.log_ns} ns "
+                       f"({_one_line(err)}); truncated or damaged message") from None
+
+
+# --------------------------------------------------------------------------------- writing
+class BagOut:
+    """A new rosbag2 bag (version 9) written with rosbags; ``with BagOut(path, "mcap") as out:``.
+
+    ``out.add(topic, type_name)`` once per topic (the offered QoS written to metadata.yaml is
+    the node contract's, :func:`qos_for`), then ``out.write(topic, log_ns, cdr_bytes)``.
+    """
+
+    def __init__(self, path: str | Path, storage: str = "mcap"):
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        if storage not in STORAGES:
+            raise BagError(f"storage '{storage}' is not supported; use one of {', '.join(STORAGES)}")
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"bag {self.path} exists already; choose a new folder (bags are never overwritten)")
+        self.storage = storage
+        self._typestore = get_typestore(Stores.ROS2_JAZZY)
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        self._w = Writer(self.path, version=9, storage_plugin=plugin)
+        try:
+            self._w.open()
+        except Exception as err:
+            raise BagError(f"bag {self.path}: cannot create ({_one_line(err)})") from None
+        self._conns: dict[str, object] = {}
+        self.count = 0
+
+    def __enter__(self) -> BagOut:
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close()
+
+    def add(self, topic: str, type_name_: str, qos=None) -> None:
+        if topic in self._conns:
+            return
+        if type_name_ not in self._typestore.types:
+            raise BagError(f"topic {topic}: type {type_name_} is not in the ROS 2 Jazzy type store")
+        prof = qos if qos is not None else qos_for(topic)
+        self._conns[topic] = self._w.add_connection(topic, type_name_, typestore=self._typestore,
+                                                    offered_qos_profiles=[_rosbags_qos(prof)])
+
+    def write(self, topic: str, log_ns: int, data: bytes) -> None:
+        self._w.write(self._conns[topic], int(log_ns), data)
+        self.count += 1
+
+    def close(self) -> None:
+        if self._w is not None:
+            self._w.close()
+            self._w = None
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__

@@ -1,0 +1,213 @@
+"""``switchobs_bag report``: error against the truth, the bounds and the channel, from a bag.
+
+Input: a bag with the estimator's outputs (``<node>/state``, ``<node>/envelope``), recorded live
+or written by ``switchobs_bag estimate``; with ``/sim/truth`` if present, and
+``/camera/active_channel`` and ``/diagnostics`` if present.
+
+Estimates and truth are matched by stamp (the stamp every labelled array carries). Messages
+are read in the order written (receive order). A bag of a looped replay holds several passes
+(the stamps start over): each pass is reported on its own.
+
+Outputs: a PNG (top: ``||x_hat - x||``, the paper's bound and the exact bound on a log scale
+with agent 2's residence intervals shaded; bottom: the active channel), and a summary: per
+pass the initial and final error, the per-cycle contraction (the error at each cycle end over
+the error at the previous cycle end; a cycle ends where the channel goes back to channel 1),
+and the rejected inputs reported in the last ``/diagnostics`` of the estimator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io import BagError, BagIn, deserialize
+
+__all__ = ["PassSummary", "Report", "load_report", "plot_report"]
+
+
+@dataclass
+class PassSummary:
+    """One pass over the data (a looped replay has several)."""
+
+    t: np.ndarray                      # s since the pass's first estimate
+    stamps: np.ndarray                 # ns
+    err: np.ndarray | None             # ||x_hat - x|| at stamps with a truth (nan where none)
+    paper: np.ndarray
+    exact: np.ndarray
+    channel_t: np.ndarray              # channel signal (s since the pass start)
+    channel: np.ndarray
+    cycle_ends: list = field(default_factory=list)     # s
+    cycle_err: list = field(default_factory=list)      # error at each cycle end
+    contraction: list = field(default_factory=list)    # ratio to the previous cycle end
+
+    @property
+    def e_first(self) -> float:
+        return float(self.err[np.isfinite(self.err)][0]) if self.err is not None and np.isfinite(self.err).any() \
+            else float("nan")
+
+    @property
+    def e_final(self) -> float:
+        return float(self.err[np.isfinite(self.err)][-1]) if self.err is not None and np.isfinite(self.err).any() \
+            else float("nan")
+
+
+@dataclass
+class Report:
+    bag: str
+    passes: list
+    rejected: dict
+    n_estimates: int
+    has_truth: bool
+
+
+def _labelled(bag_msgs, topic, cls):
+    import msg_bridge as mb
+    out = []
+    for m in bag_msgs:
+        if m.topic == topic:
+            a = mb.unpack_labelled(deserialize(m, cls))
+            out.append((m.log_ns, a.stamp_ns, a.values))
+    return out
+
+
+def load_report(bag_path, node: str = "/estimator") -> Report:
+    """Read the bag and compute the per-pass series and summary."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64MultiArray, UInt8
+
+    node = "/" + node.strip("/")
+    t_state, t_env = f"{node}/state", f"{node}/envelope"
+    with BagIn(bag_path) as bag:
+        bag.require({t_state: "std_msgs/msg/Float64MultiArray", t_env: "std_msgs/msg/Float64MultiArray"},
+                    " (the estimator's outputs: record them, or run `switchobs_bag estimate`)")
+        opt = {"/sim/truth": "std_msgs/msg/Float64MultiArray", "/camera/active_channel": "std_msgs/msg/UInt8",
+               "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+        present = [t for t in opt if t in bag.topics]
+        bag.require({t: opt[t] for t in present})
+        msgs = bag.messages([t_state, t_env, *present], order="file")
+    states = _labelled(msgs, t_state, Float64MultiArray)
+    envs = {s: v for _, s, v in _labelled(msgs, t_env, Float64MultiArray)}
+    truth = {s: v for _, s, v in _labelled(msgs, "/sim/truth", Float64MultiArray)}
+    chan = [(m.log_ns, int(deserialize(m, UInt8).data)) for m in msgs if m.topic == "/camera/active_channel"]
+    if not states:
+        raise BagError(f"bag {bag_path}: topic {t_state} has no messages")
+    rejected: dict[str, int] = {}
+    for m in msgs:
+        if m.topic == "/diagnostics":
+            arr = deserialize(m, DiagnosticArray)
+            for st in arr.status:
+                if st.name.startswith(node + ":"):
+                    for kv in st.values:
+                        if kv.key.startswith("rejected ") and kv.key != "rejected total":
+                            rejected[kv.key[len("rejected "):]] = int(kv.value)
+    # split into passes where the stamps go back (a looped replay)
+    passes_idx: list[list[int]] = [[]]
+    last = None
+    for i, (_, s, _) in enumerate(states):
+        if last is not None and s <= last:
+            passes_idx.append([])
+        passes_idx[-1].append(i)
+        last = s
+    passes = []
+    for idx in passes_idx:
+        log0, log1 = states[idx[0]][0], states[idx[-1]][0]
+        stamps = np.array([states[i][1] for i in idx], dtype=np.int64)
+        t = (stamps - stamps[0]) * 1e-9
+        err = None
+        if truth:
+            err = np.array([np.linalg.norm(states[i][2] - truth[states[i][1]]) if states[i][1] in truth else np.nan
+                            for i in idx])
+        env = np.array([envs.get(states[i][1], np.full(2, np.nan))[-2:] for i in idx])
+        ch = [(ln, c) for ln, c in chan if log0 - 1 <= ln <= log1]
+        ct = np.array([(ln - log0) * 1e-9 + t[0] for ln, _ in ch]) if ch else np.zeros(0)
+        cv = np.array([c for _, c in ch]) if ch else np.zeros(0, dtype=int)
+        p = PassSummary(t=t, stamps=stamps, err=err, paper=env[:, 0], exact=env[:, 1], channel_t=ct, channel=cv)
+        # cycle ends: the channel goes back to 1
+        for k in range(1, len(cv)):
+            if cv[k] == 1 and cv[k - 1] != 1:
+                p.cycle_ends.append(float(ct[k]))
+        if err is not None:
+            for te in p.cycle_ends:
+                j = int(np.searchsorted(t, te - 1e-9))
+                j = min(max(j - 1, 0), len(t) - 1)      # the last estimate of the ending cycle
+                p.cycle_err.append(float(err[j]))
+            p.contraction = [b / a if a > 0 else float("nan") for a, b in zip(p.cycle_err, p.cycle_err[1:])]
+        passes.append(p)
+    return Report(bag=str(bag_path), passes=passes, rejected=rejected, n_estimates=len(states),
+                  has_truth=bool(truth))
+
+
+def summary_table(rep: Report) -> str:
+    """A Markdown summary of the report."""
+    lines = [f"Bag `{rep.bag}`: {rep.n_estimates} estimates in {len(rep.passes)} pass(es); "
+             f"truth {'present' if rep.has_truth else 'absent (no error, bounds only)'}.", "",
+             "| pass | estimates | span [s] | initial error | final error | final exact bound | final paper bound "
+             "| cycles | median contraction/cycle | worst contraction/cycle |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for k, p in enumerate(rep.passes, 1):
+        c = np.array(p.contraction) if p.contraction else np.array([np.nan])
+        lines.append(f"| {k} | {len(p.t)} | {p.t[-1]:.2f} | {p.e_first:.3e} | {p.e_final:.3e} | {p.exact[-1]:.3e} "
+                     f"| {p.paper[-1]:.3e} | {len(p.cycle_ends)} | {np.nanmedian(c):.3g} | {np.nanmax(c):.3g} |")
+    lines += ["", "Rejected inputs (estimator diagnostics): " +
+              (", ".join(f"{k}: {v}" for k, v in sorted(rep.rejected.items())) if rep.rejected else "none")]
+    if rep.passes and rep.passes[0].cycle_err:
+        p = rep.passes[-1]
+        lines += ["", "Per-cycle error at cycle ends (last pass): " +
+                  ", ".join(f"{e:.2e}" for e in p.cycle_err[:12]) + (" ..." if len(p.cycle_err) > 12 else "")]
+    return "\n".join(lines)
+
+
+def plot_report(rep: Report, png: str | Path, title: str = "") -> None:
+    """The PNG: error and bounds (log) over the channel signal, one column per pass (at most 3)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    passes = rep.passes[:3]
+    fig, axes = plt.subplots(2, len(passes), figsize=(9.5 if len(passes) == 1 else 6 * len(passes), 6.2),
+                             gridspec_kw={"height_ratios": [4, 1]}, sharex="col", squeeze=False,
+                             constrained_layout=True)
+    for k, p in enumerate(passes):
+        ax, axc = axes[0, k], axes[1, k]
+        ax.semilogy(p.t, p.paper, color="tab:orange", lw=1.6, label="paper's bound $\\alpha\\sum_i z_i$ (claimed)")
+        ax.semilogy(p.t, p.exact, color="tab:green", lw=1.6, ls="--", label="exact bound $\\|\\Phi(t,t_0)\\|\\,e_0$")
+        if p.err is not None:
+            ax.semilogy(p.t, p.err, color="tab:blue", lw=1.3, label="$\\|\\hat x - x\\|$ (estimate vs truth)")
+            if p.cycle_ends and p.cycle_err:
+                ax.plot(p.cycle_ends[:len(p.cycle_err)], p.cycle_err, "o", ms=3.5, color="tab:blue", mfc="white",
+                        label="error at cycle ends")
+        # agent 2 (channel != 1) shaded
+        if len(p.channel):
+            on = None
+            for tc, c in zip(np.append(p.channel_t, p.t[-1]), np.append(p.channel, 1)):
+                if c != 1 and on is None:
+                    on = tc
+                elif c == 1 and on is not None:
+                    ax.axvspan(on, tc, color="0.92", lw=0, zorder=0)
+                    axc.axvspan(on, tc, color="0.92", lw=0, zorder=0)
+                    on = None
+            axc.step(p.channel_t, p.channel, where="post", color="0.25", lw=1.2)
+            axc.set_yticks(sorted(set(int(c) for c in p.channel)))
+        axc.set_ylabel("channel")
+        axc.set_xlabel("time since the first estimate [s]")
+        vals = [v for v in (p.paper, p.exact, p.err) if v is not None]
+        finite = np.concatenate([v[np.isfinite(v) & (v > 0)] for v in vals])
+        if finite.size:
+            ax.set_ylim(max(finite.min() / 3, 1e-12), finite.max() * 3)
+        ax.set_xlim(p.t[0], p.t[-1])
+        ax.grid(True, which="major", alpha=0.4)
+        ax.grid(True, which="minor", alpha=0.12)
+        ax.set_ylabel("estimation error norm")
+        sub = f"pass {k + 1}: " if len(rep.passes) > 1 else ""
+        if p.err is not None:
+            con = f", median contraction per cycle {np.median(p.contraction):.3f}" if p.contraction else ""
+            ax.set_title(f"{sub}error {p.e_first:.2e} -> {p.e_final:.2e}{con}", fontsize=10)
+        else:
+            ax.set_title(f"{sub}no truth in the bag: bounds only", fontsize=10)
+        if k == 0:
+            ax.legend(loc="lower left", fontsize=8.5, framealpha=0.95)
+    fig.suptitle(title or f"switchobs: {Path(rep.bag).name} (agent 2 in view shaded)", fontsize=11)
+    fig.savefig(png, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,509 @@
+"""The estimator's input handling, without a node: validation, pairing, the observer, counters.
+
+:class:`EstimatorPipeline` is what the estimator node runs on every message, and what the bag
+tools run over a bag without DDS (``switchobs_bag estimate``), so the live node and the
+offline run compute the same estimates from the same messages. It holds no rclpy node,
+executor or publisher: the caller passes each incoming message with the node clock (``now_ns``)
+and publishes (or writes) the :class:`Estimate` objects it gets back.
+
+Measurement pairing
+-------------------
+Channel rho's output is ``y = [p_camera; p_target]``. ``camera/pose`` and ``target/pose``
+arrive separately with (normally) the same header stamp: the pipeline keeps the pending samples
+by stamp (up to :data:`MAX_PENDING`) and calls ``observer.update(t, rho, y)`` when both halves
+are there. A half whose partner does not come (a newer pair completes, or the caller's
+:meth:`EstimatorPipeline.flush_overdue` finds it older than ``pairing_timeout``) is used alone
+through the observer's partial-rows input (``rows=``). The target pose is attributed to the
+latest channel received on ``camera/active_channel`` (UInt8 has no stamp): a publisher must
+send the new channel before the first target pose of that channel.
+
+Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
+sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
+Every estimate carries the stamp of the sample it answers.
+
+Failure behaviour (issue 6; the table is docs/failure-table.md)
+----------------------------------------------------------------
+* Every message is validated (:mod:`msg_bridge.validate`); a rejected one is counted under
+  ``(topic, reason)`` and changes nothing else. A target pose stamped at or before the newest
+  pose received before the latest channel change is ``stale_after_switch``: it was taken while
+  the previous channel was active (the channel message has no stamp, so this is all the node
+  knows of the switching instant).
+* Any exception while handling a message is caught, counted (``internal_error``) and logged;
+  an estimate that is not finite is never returned (the estimator resets instead).
+* Residence times are measured from the sample stamps at every switch and compared with
+  what the gains were designed for: ``[h_min, h_max]`` (assumption A2) in robust mode, the
+  scheduled ``h_i +- match_tol`` otherwise (:meth:`EstimatorPipeline.residence`). A channel that
+  stays longer, or a switch that comes sooner, is reported with the measured time and the
+  paper's factors of the cycle so far; the estimate keeps going with the gains it has.
+* Without samples, :meth:`EstimatorPipeline.predict` gives the observer's prediction at a
+  later time (what the next update will propagate: the last innovation held) and its exact
+  bound ``||Phi(t, t0)|| e0``, which grows honestly with the outage.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from std_msgs.msg import UInt8
+
+import msg_bridge as mb
+from msg_bridge import Reason, Rejection
+from switchobs_core.exceptions import SwitchobsError
+
+from .core_config import (
+    camera_target_rows,
+    cycles_from_params,
+    load_or_design_table,
+    load_system_param,
+)
+from .params import ConfigError
+
+__all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "POSE_TOPICS", "Estimate", "EstimatorPipeline",
+           "PipelineLog", "Prediction", "Residence"]
+
+PARTS = ("camera", "target")
+#: Input topic of each pose part, and of the channel (relative names, as the node subscribes).
+POSE_TOPICS = {"camera": "camera/pose", "target": "target/pose"}
+CHANNEL_TOPIC = "camera/active_channel"
+INPUT_TOPICS = (POSE_TOPICS["camera"], POSE_TOPICS["target"], CHANNEL_TOPIC)
+#: Samples kept waiting for their other half (a backlog reorders the two topics a little).
+MAX_PENDING = 8
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The observer's prediction at a time with no sample (sensor outage).
+
+    ``x_hat`` is what the observer will have propagated to ``stamp_ns`` when the next sample
+    comes (the last innovation held); ``exact_bound`` is ``||Phi(t, t0)|| e0`` of that
+    prediction (verified, like ``~/envelope``'s); ``age`` is the time since the last accepted
+    measurement (node clock, s).
+    """
+
+    stamp_ns: int
+    x_hat: np.ndarray
+    exact_bound: float
+    age: float
+
+
+@dataclass(frozen=True)
+class Residence:
+    """The active channel's residence time against what the gains were designed for.
+
+    ``kind`` is ``"A2"`` (robust mode: ``[lo, hi] = [h_min, h_max]``) or ``"schedule"``
+    (``h_i +- match_tol`` of the scheduled cycle). ``current`` is the active channel's time so
+    far (s, from sample stamps); ``last`` the last completed residence ``(channel, h, lo, hi)``;
+    ``f`` the paper's factors of the cycle so far (measured h; None before the first switch);
+    ``problem`` a one-line statement when the assumption is broken now, else "".
+    """
+
+    kind: str
+    channel: int
+    current: float
+    lo: float
+    hi: float
+    last: tuple | None
+    f: tuple | None
+    violations: int
+    problem: str
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One observer update: the stamp it answers, ``x_hat`` and the envelope values.
+
+    ``envelope`` is ``[z_1..z_N, paper_bound, exact_bound]`` (the ``~/envelope`` layout).
+    """
+
+    stamp_ns: int
+    x_hat: np.ndarray
+    envelope: np.ndarray
+
+
+class PipelineLog:
+    """Where the pipeline reports: ``info``/``warn``/``error`` (text, throttle).
+
+    ``throttle`` marks messages that may repeat at the input rate (the node throttles them to
+    one per second). The default discards everything (offline use).
+    """
+
+    def info(self, text: str) -> None:
+        pass
+
+    def warn(self, text: str, throttle: bool = False) -> None:
+        pass
+
+    def error(self, text: str, throttle: bool = False) -> None:
+        pass
+
+
+class _Pending:
+    """One sample being assembled: the halves that have arrived for one stamp."""
+
+    __slots__ = ("channel", "since", "stamp_ns", "xy")
+
+    def __init__(self, stamp_ns: int, since: float):
+        self.stamp_ns = stamp_ns
+        self.xy: dict[str, np.ndarray] = {}
+        self.channel = 0
+        self.since = since
+
+
+class EstimatorPipeline:
+    """Validation, pairing and the switched observer for the estimator's three input topics.
+
+    Build it with :meth:`from_params` (the estimator's parameter values). Feed it with
+    :meth:`on_channel` and :meth:`on_pose`; both return the estimates they produced (possibly
+    none), in stamp order.
+
+    Counters (never cleared, reported in diagnostics): ``accepted`` (per input topic),
+    ``rejected`` (per ``(topic, reason)``), ``updates``, ``partial_updates``, ``switches``,
+    ``resets``, ``errors``; ``last_rejection`` is the latest rejection's text.
+    """
+
+    def __init__(self, system, table, observer, *, x0: np.ndarray, rows, input_frame_id: str = "map",
+                 max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000,
+                 log: PipelineLog | None = None, table_path: Any = None, mode: str = "periodic",
+                 cycles: list | None = None):
+        self.system = system
+        self.table = table
+        self.table_path = table_path
+        self.mode = mode
+        self.cycles = list(cycles or [])
+        self.observer = observer
+        self.x0 = np.array(x0, dtype=float)
+        self.rows = rows
+        self.in_frame = input_frame_id
+        self.max_abs = max_abs
+        self.future_ns = int(future_tolerance_ns)
+        self.log = log or PipelineLog()
+        self.N = system.N
+        # run-time state (cleared by reset)
+        self.channel = 0
+        self.last_ns: dict[str, int | None] = {p: None for p in PARTS}
+        self.pending: dict[int, _Pending] = {}   # by stamp (ns)
+        self.origin_ns: int | None = None
+        self.obs_ns: int | None = None           # stamp of the last observer update
+        self.last_accept_clock_ns: int | None = None
+        self.switch_ns: int | None = None        # newest pose stamp before the latest channel change
+        self._res_clear()
+        self.residence_violations = 0
+        # counters (never cleared)
+        self.accepted: Counter = Counter()
+        self.rejected: Counter = Counter()
+        self.updates = 0
+        self.partial_updates = 0
+        self.switches = 0
+        self.resets = 0
+        self.errors = 0
+        self.last_rejection = ""
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_params(cls, cfg: dict, log: PipelineLog | None = None) -> EstimatorPipeline:
+        """The pipeline of the estimator's parameter values ``cfg`` (names of estimator.PARAMS).
+
+        Loads the system, the schedule and the gain table (designing and caching one if
+        ``gain_table`` is empty). Raises :class:`~switchobs_ros.params.ConfigError` with one
+        line on any bad value.
+        """
+        from switchobs_core.observer import MODES, SwitchedObserver
+
+        log = log or PipelineLog()
+        sys_ = load_system_param(cfg["system"])
+        mode = cfg["schedule.mode"]
+        if mode not in MODES:
+            raise ConfigError(f"parameter 'schedule.mode' must be one of {', '.join(MODES)}; got '{mode}'")
+        robust = None
+        if mode == "robust":
+            hmin, hmax = cfg["schedule.h_min"], cfg["schedule.h_max"]
+            if not 0 < hmin <= hmax:
+                raise ConfigError(f"robust mode needs 0 < schedule.h_min <= schedule.h_max; got {hmin}, {hmax}")
+            robust = (hmin, hmax)
+            cycles = []
+        else:
+            cycles = cycles_from_params(mode, cfg["schedule.tau"], cfg["schedule.s"], cfg["schedule.h"], sys_.N)
+        for name in ("delta", "e0", "sensor_timeout", "future_tolerance", "max_abs_value",
+                     "pairing_timeout", "diagnostics_period"):
+            v = cfg[name]
+            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
+                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
+        x0 = cfg["initial_estimate"]
+        if x0 and len(x0) != sys_.n:
+            raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
+                              f"states ({', '.join(sys_.state_labels)})")
+        x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
+        rows = camera_target_rows(sys_, cfg["camera_body"])
+        table, table_path = load_or_design_table(
+            cfg["gain_table"], cfg["gain_table_cache_dir"], sys_, mode, cycles, robust, cfg["delta"], log.info)
+        try:
+            observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=x0, t0=0.0,
+                                        e0=cfg["e0"], bounds=robust)
+        except SwitchobsError as err:
+            raise ConfigError(f"observer: {err}") from None
+        return cls(sys_, table, observer, x0=x0, rows=rows, input_frame_id=cfg["input_frame_id"],
+                   max_abs=cfg["max_abs_value"], future_tolerance_ns=int(cfg["future_tolerance"] * 1e9),
+                   log=log, table_path=table_path, mode=mode, cycles=cycles)
+
+    # ------------------------------------------------------------------ inputs
+    def on_channel(self, msg: UInt8) -> None:
+        """A ``camera/active_channel`` message: validate, count, remember the channel."""
+        try:
+            rej = mb.check_channel(msg, self.N)
+            if rej is not None:
+                self.reject(CHANNEL_TOPIC, rej)
+                return
+            self.accepted[CHANNEL_TOPIC] += 1
+            c = int(msg.data)
+            if c != self.channel:
+                if self.channel:
+                    self.switches += 1
+                self.channel = c
+                seen = [s for s in self.last_ns.values() if s is not None]
+                if seen:
+                    self.switch_ns = max(seen)
+        except Exception as err:
+            self.internal_error(CHANNEL_TOPIC, err)
+
+    def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None) -> list[Estimate]:
+        """A pose of ``part`` (``"camera"`` or ``"target"``) received at node-clock ``now_ns``.
+
+        ``now_mono`` (default ``time.monotonic()``) starts the pairing timeout of a new
+        pending sample. Returns the estimates produced (none while waiting for the other half).
+        """
+        topic = POSE_TOPICS[part]
+        out: list[Estimate] = []
+        try:
+            rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=self.last_ns[part],
+                                now_ns=now_ns, future_tolerance_ns=self.future_ns)
+            stamp_ns = mb.stamp_to_ns(msg.header.stamp)
+            if rej is None and not self.channel:
+                rej = Rejection(Reason.NO_CHANNEL, CHANNEL_TOPIC, "no active channel received yet")
+            if rej is None and part == "target":
+                rej = mb.check_after_switch(stamp_ns, self.switch_ns)
+            if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
+                rej = Rejection(Reason.OLD_STAMP, "header.stamp",
+                                f"not newer than the estimate ({(self.obs_ns - stamp_ns) * 1e-9:.6f} s older)")
+            if rej is not None:
+                self.reject(topic, rej)
+                return out
+            self.accepted[topic] += 1
+            self.last_ns[part] = stamp_ns
+            self.last_accept_clock_ns = now_ns
+            pend = self.pending.get(stamp_ns)
+            if pend is None:
+                pend = self.pending[stamp_ns] = _Pending(stamp_ns, time.monotonic() if now_mono is None else now_mono)
+                if len(self.pending) > MAX_PENDING:      # the oldest half's partner is overdue
+                    self._flush(min(self.pending), out)
+            pend.xy[part] = mb.pose_to_xy(msg)
+            if part == "target" or not pend.channel:
+                pend.channel = self.channel
+            if len(pend.xy) == 2:
+                # older samples will not be completed now: use their halves alone, in order
+                for s_old in sorted(s for s in self.pending if s < stamp_ns):
+                    self._flush(s_old, out)
+                self._flush(stamp_ns, out)
+        except Exception as err:
+            self.internal_error(topic, err)
+        return out
+
+    def flush_overdue(self, now_mono: float, timeout: float) -> list[Estimate]:
+        """Use alone the pending halves that waited longer than ``timeout`` (s, monotonic clock)."""
+        out: list[Estimate] = []
+        try:
+            for s in sorted(self.pending):
+                if now_mono - self.pending[s].since <= timeout:
+                    break
+                self._flush(s, out)
+        except Exception as err:
+            self.internal_error("pairing", err)
+        return out
+
+    def flush_all(self) -> list[Estimate]:
+        """Use every pending half now, in stamp order (end of a bag)."""
+        out: list[Estimate] = []
+        try:
+            for s in sorted(self.pending):
+                self._flush(s, out)
+        except Exception as err:
+            self.internal_error("pairing", err)
+        return out
+
+    def _flush(self, stamp_ns: int, out: list[Estimate]) -> None:
+        """Run the observer on a pending sample (both halves, or one alone); append the estimate."""
+        pend = self.pending.pop(stamp_ns, None)
+        if pend is None or (self.obs_ns is not None and stamp_ns <= self.obs_ns):
+            return
+        c = pend.channel
+        (cx, cy), (tx, ty) = self.rows[c - 1]
+        cam, tgt = pend.xy.get("camera"), pend.xy.get("target")
+        if cam is not None and tgt is not None:
+            y = np.empty(4)
+            y[cx], y[cy], y[tx], y[ty] = cam[0], cam[1], tgt[0], tgt[1]
+            rows = None
+        elif cam is not None:
+            y, rows = cam, (cx, cy)
+        else:
+            y, rows = tgt, (tx, ty)
+        if self.origin_ns is None:
+            self.origin_ns = pend.stamp_ns
+            self.observer.reset(self.x0, 0.0)
+        t = (pend.stamp_ns - self.origin_ns) * 1e-9
+        x_hat = self.observer.update(t, c, y, rows=rows)
+        self.obs_ns = pend.stamp_ns
+        if c != self._res_channel:
+            self._res_switch(c, t)
+        self.updates += 1
+        if rows is not None:
+            self.partial_updates += 1
+        env = self.observer.envelope()
+        env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]])
+        if not (np.isfinite(x_hat).all() and np.isfinite(env_vals).all()):
+            self.errors += 1
+            self.log.error("non-finite estimate: not published; resetting the estimator")
+            self.reset("non-finite estimate")
+            return
+        out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals))
+
+    # ------------------------------------------------------------------ bookkeeping
+    def reject(self, topic: str, rej: Rejection) -> None:
+        """Count a rejected message under ``(topic, reason)``."""
+        self.rejected[(topic, rej.reason.value)] += 1
+        self.last_rejection = f"{topic}: {rej}"
+        self.log.warn(f"rejected {topic}: {rej}", throttle=True)
+
+    def internal_error(self, where: str, err: Exception) -> None:
+        """Count an exception raised while handling an input (the caller keeps running)."""
+        self.errors += 1
+        self.rejected[(where, "internal_error")] += 1
+        self.last_rejection = f"{where}: internal_error: {type(err).__name__}: {err}"
+        self.log.error(f"{where}: {type(err).__name__}: {err}", throttle=True)
+
+    def reset(self, why: str) -> None:
+        """Back to the initial estimate; the next accepted sample becomes the new time origin.
+
+        Clears the pending samples and the per-topic stamp history (so a replay that starts
+        over is accepted); keeps the active channel and all counters.
+        """
+        self.pending = {}
+        self.origin_ns = None
+        self.obs_ns = None
+        self.last_ns = {p: None for p in PARTS}
+        self.switch_ns = None
+        self._res_clear()
+        self.observer.reset(self.x0, 0.0)
+        self.resets += 1
+        self.log.info(f"estimator reset ({why})")
+
+
+    # ------------------------------------------------------------------ residence times (A2)
+    def _res_clear(self) -> None:
+        self._res_channel = 0
+        self._res_since = 0.0
+        self._res_limits = (0.0, math.inf)
+        self._cycle_h = np.zeros(self.N)
+        self._res_last: tuple | None = None
+        self._res_started = False
+
+    def _limits(self, channel: int) -> tuple[float, float]:
+        """Designed residence interval of ``channel`` under the gains now in use."""
+        obs = self.observer
+        if self.mode == "robust":
+            b = getattr(obs, "bounds", None)     # A2's box, with the observer's tolerance (a2_ok)
+            return (max(float(b[0]) - obs.match_tol, 0.0), float(b[1]) + obs.match_tol) if b else (0.0, math.inf)
+        h = obs.current_design.cycle.h[channel - 1]
+        return (max(h - obs.match_tol, 0.0), h + obs.match_tol)
+
+    def _res_switch(self, c: int, t: float) -> None:
+        """Bookkeeping at a switching instant seen by the observer (time ``t``, from the stamps)."""
+        old = self._res_channel
+        if old:
+            h = t - self._res_since
+            lo, hi = self._res_limits
+            # the first residence after start-up or a reset began before the first sample: its
+            # measured time is only a lower bound, so it is not judged against h_min
+            if h > hi or (h < lo and self._res_started):
+                self.residence_violations += 1
+                self.log.warn(self._res_text(old, h, lo, hi, done=True), throttle=True)
+            self._cycle_h[old - 1] += h
+            self._res_last = (old, h, lo, hi, self._res_started)
+            self._res_started = True
+        if c == 1:
+            self._cycle_h[:] = 0.0
+        self._res_channel = c
+        self._res_since = t
+        self._res_limits = self._limits(c)
+
+    def _res_text(self, c: int, h: float, lo: float, hi: float, *, done: bool) -> str:
+        what = "A2" if self.mode == "robust" else "schedule"
+        tol = self.observer.match_tol
+        if self.mode == "robust":
+            bound = f"h_max {hi - tol:g} s" if h > hi else f"h_min {lo + tol:g} s"
+        else:
+            bound = f"the scheduled {(hi + lo) / 2:g} s"
+        bound += f" (tolerance {tol:g} s)"
+        verb = "was active" if done else "active"
+        rel = ">" if h > hi else "<"
+        return f"{what} broken: channel {c} {verb} {h:.3f} s {rel} {bound}"
+
+    def residence(self) -> Residence | None:
+        """The active channel's residence against the design (None before the first sample)."""
+        c = self._res_channel
+        if not c:
+            return None
+        obs = self.observer
+        cur = obs.t - self._res_since
+        lo, hi = self._res_limits
+        problem = ""
+        if cur > hi:
+            problem = self._res_text(c, cur, lo, hi, done=False)
+        elif self._res_last is not None:
+            lc, lh, llo, lhi, judged = self._res_last
+            if lh > lhi or (lh < llo and judged):
+                problem = self._res_text(lc, lh, llo, lhi, done=True)
+        f = None
+        if self._res_started:
+            h = self._cycle_h.copy()
+            h[c - 1] += cur
+            try:
+                from switchobs_core.certificate import paper_factors
+                f = paper_factors(obs.current_design, tuple(h))
+            except SwitchobsError:
+                f = None
+        return Residence(kind="A2" if self.mode == "robust" else "schedule", channel=c, current=cur, lo=lo, hi=hi,
+                         last=None if self._res_last is None else self._res_last[:4], f=f,
+                         violations=self.residence_violations, problem=problem)
+
+    # ------------------------------------------------------------------ outage prediction
+    def predict(self, now_ns: int) -> Prediction | None:
+        """The observer's prediction for node-clock time ``now_ns``.
+
+        The prediction is for the stamp ``obs_ns + (now_ns - last_accept_clock_ns)``: the last
+        sample's stamp advanced by the node-clock time elapsed since the last accepted
+        measurement, so a fixed offset between header stamps and the node clock (latency, a
+        replay without ``/clock``) does not matter. None before the first sample, when no time
+        has elapsed, or when the prediction is not representable (a very long outage of an
+        unstable system overflows). The observer's state is not changed.
+        """
+        if self.origin_ns is None or self.obs_ns is None or self.last_accept_clock_ns is None:
+            return None
+        elapsed = now_ns - self.last_accept_clock_ns
+        if elapsed <= 0:
+            return None
+        stamp = self.obs_ns + elapsed
+        t = (stamp - self.origin_ns) * 1e-9
+        try:
+            with np.errstate(all="ignore"):
+                x = self.observer.predict(t, hold=True)
+                bound = self.observer.envelope(t).exact_bound
+        except (SwitchobsError, ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None
+        if not (np.isfinite(x).all() and math.isfinite(bound)):
+            return None
+        return Prediction(int(stamp), x, float(bound), elapsed * 1e-9)
