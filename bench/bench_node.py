@@ -14,7 +14,7 @@
 2. Start-up: spawn -> the node's ``~/state`` publisher is discovered, and spawn -> first
    answer, with a cached gain table and with design at start-up (empty cache folder).
 
-Writes a Markdown section to stdout (copy into bench/RESULTS-node.md).
+Writes a Markdown section to stdout (recorded in bench/RESULTS.md).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from std_msgs.msg import UInt8
 
 from .stamps import stamp_to_ns
 
-__all__ = ["BridgeError", "Reason", "Rejection", "check_channel", "check_pose", "check_stamp"]
+__all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp"]
 
 
 class Reason(enum.Enum):
@@ -26,12 +26,14 @@ class Reason(enum.Enum):
     TOO_LARGE = "too_large"              # |value| above the configured bound (e.g. 1e300)
     WRONG_FRAME = "wrong_frame"          # header.frame_id is not the expected frame
     ZERO_STAMP = "zero_stamp"            # header.stamp == 0 (unset)
+    BAD_STAMP = "bad_stamp"              # negative seconds or nanosec >= 1e9 (not a valid time)
     OLD_STAMP = "old_stamp"              # older than the last accepted stamp on this topic
     DUPLICATE_STAMP = "duplicate_stamp"  # equal to the last accepted stamp on this topic
     FUTURE_STAMP = "future_stamp"        # ahead of the node clock by more than the tolerance
     BAD_CHANNEL = "bad_channel"          # active channel outside 1..N
     NO_CHANNEL = "no_channel"            # a pose before any active-channel message
-    STALE_AFTER_SWITCH = "stale_after_switch"  # target pose not newer than the last switch
+    STALE_AFTER_SWITCH = "stale_after_switch"  # target pose taken before the last switch
+    INTERNAL_ERROR = "internal_error"    # an exception while handling the message (counted, node runs on)
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,8 @@ def check_stamp(
     """
     if stamp_ns == 0:
         return Rejection(Reason.ZERO_STAMP, field, "stamp is 0 (unset)")
+    if stamp_ns < 0:
+        return Rejection(Reason.BAD_STAMP, field, f"negative stamp ({stamp_ns} ns)")
     if last_ns is not None:
         if stamp_ns == last_ns:
             return Rejection(Reason.DUPLICATE_STAMP, field, f"same stamp as the last accepted ({stamp_ns} ns)")
@@ -106,8 +110,27 @@ def check_pose(
     if frame_id and msg.header.frame_id != frame_id:
         return Rejection(Reason.WRONG_FRAME, "header.frame_id",
                          f"'{msg.header.frame_id}' (expected '{frame_id}')")
-    return check_stamp(stamp_to_ns(msg.header.stamp), last_ns=last_ns, now_ns=now_ns,
+    st = msg.header.stamp
+    if st.sec < 0 or st.nanosec >= 1_000_000_000:
+        return Rejection(Reason.BAD_STAMP, "header.stamp",
+                         f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
+    return check_stamp(stamp_to_ns(st), last_ns=last_ns, now_ns=now_ns,
                        future_tolerance_ns=future_tolerance_ns)
+
+
+def check_after_switch(stamp_ns: int, switch_ns: int | None, field: str = "header.stamp") -> Rejection | None:
+    """A target pose must be newer than the last switch.
+
+    ``switch_ns`` is the newest target pose stamp received before the latest change of the
+    active channel (None: no switch yet). ``camera/active_channel`` has no
+    stamp, so that is all the node knows of the switching instant: a target pose stamped at or
+    before it was taken while the previous channel was active and cannot be attributed.
+    """
+    if switch_ns is not None and stamp_ns <= switch_ns:
+        return Rejection(Reason.STALE_AFTER_SWITCH, field,
+                         f"{(switch_ns - stamp_ns) * 1e-9:.6f} s older than the last channel switch "
+                         "(taken while the previous channel was active)")
+    return None
 
 
 def check_channel(msg: UInt8, N: int) -> Rejection | None:

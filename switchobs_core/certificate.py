@@ -34,6 +34,7 @@ from scipy.linalg import expm
 
 from .envelope import Segment, envelope_z, error_transitions
 from .exceptions import InvalidArgument
+from .validation import as_finite, as_matrix
 
 __all__ = [
     "paper_factors",
@@ -73,9 +74,24 @@ def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float,
         if design.cycle is None:
             raise InvalidArgument("h is required for a design without a cycle (robust design)")
         h = design.cycle.h
+    h = _residences(h, len(design.kappa), allow_zero=True)
     tau = float(sum(h))
     return tuple(float(k * math.exp(m * (tau - hi) - e * hi))
                  for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
+
+
+def _residences(h: Any, N: int, *, allow_zero: bool = False) -> tuple[float, ...]:
+    """``h`` as N finite residence times > 0 (>= 0 with ``allow_zero``, tau > 0), or
+    InvalidArgument naming ``h``."""
+    try:
+        hs = tuple(float(x) for x in h)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"h must be a sequence of {N} residence times; got {h!r}") from None
+    ok = all(math.isfinite(x) and (x >= 0 if allow_zero else x > 0) for x in hs) and sum(hs) > 0
+    if len(hs) != N or not ok:
+        raise InvalidArgument(f"h must hold {N} finite residence times {'>= 0' if allow_zero else '> 0'}; "
+                              f"got {hs}")
+    return hs
 
 
 # ---------------------------------------------------------------------- exact cycle map
@@ -97,12 +113,16 @@ def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[flo
     -------
     (n, n) ndarray
     """
-    A = np.asarray(A, dtype=float)
+    A = as_matrix(A, "A", square=True)
+    n = A.shape[0]
     if not (len(C) == len(L) == len(h)):
         raise InvalidArgument(f"C, L and h must have one entry per channel; got {len(C)}, {len(L)}, {len(h)}")
-    Phi = np.eye(A.shape[0])
+    h = _residences(h, len(C))
+    C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]
+    L = [as_matrix(Li, f"L_{i + 1}", rows=n, cols=Ci.shape[0]) for i, (Li, Ci) in enumerate(zip(L, C))]
+    Phi = np.eye(n)
     for Ci, Li, hi in zip(C, L, h):
-        Phi = expm((A - np.asarray(Li, float) @ np.asarray(Ci, float)) * float(hi)) @ Phi
+        Phi = expm((A - Li @ Ci) * hi) @ Phi
     return Phi
 
 
@@ -144,9 +164,7 @@ def certify_cycle(system: Any, design: Any, h: Sequence[float] | None = None) ->
         if design.cycle is None:
             raise InvalidArgument("h is required for a robust design")
         h = design.cycle.h
-    h = tuple(float(x) for x in h)
-    if len(h) != len(system.C) or min(h) <= 0:
-        raise InvalidArgument(f"h must hold {len(system.C)} positive residence times; got {h}")
+    h = _residences(h, len(system.C))
     f = paper_factors(design, h)
     Phi = cycle_transition(system.A, system.C, design.L, h)
     return CycleCertificate(h=h, f=f, paper_ok=max(f) < 1, Phi=Phi,
@@ -238,12 +256,18 @@ def common_lyapunov(Phis: Sequence[Any], *, rel_tol: float = 1e-3, margin: float
     """
     import cvxpy as cp
 
-    Phis = [np.asarray(F, dtype=float) for F in Phis]
+    Phis = [as_matrix(F, f"Phis[{j}]", square=True) for j, F in enumerate(Phis)]
     if not Phis:
         raise InvalidArgument("Phis must hold at least one matrix")
     n = Phis[0].shape[0]
     if any(F.shape != (n, n) for F in Phis):
         raise InvalidArgument("Phis must all be square of one size")
+    for name, v in (("rel_tol", rel_tol), ("margin", margin), ("theta_max", theta_max)):
+        v = as_finite(v, name)
+        if v <= 0 if name != "margin" else v < 0:
+            raise InvalidArgument(f"{name} must be > 0; got {v}")
+    if int(max_iter) < 1:
+        raise InvalidArgument(f"max_iter must be >= 1; got {max_iter}")
     lo = max(float(np.max(np.abs(np.linalg.eigvals(F)))) for F in Phis)
     best_P = np.eye(n)
     hi = _rate_of(best_P, Phis) * (1 + margin)
@@ -436,9 +460,9 @@ def certify_box(system: Any, design: Any, h_min: float | None = None, h_max: flo
         if hb is None:
             raise InvalidArgument("h_min and h_max are required (the design has no h_bounds)")
         h_min, h_max = hb
-    h_min, h_max = float(h_min), float(h_max)
-    if not (0 < h_min <= h_max and math.isfinite(h_max)):
-        raise InvalidArgument(f"need 0 < h_min <= h_max; got [{h_min}, {h_max}]")
+    h_min, h_max = as_finite(h_min, "h_min"), as_finite(h_max, "h_max")
+    if not (0 < h_min <= h_max):
+        raise InvalidArgument(f"need 0 < h_min <= h_max; got h_min = {h_min}, h_max = {h_max}")
     A = np.asarray(system.A, dtype=float)
     n = A.shape[0]
     Lams = [A - np.asarray(Li, float) @ np.asarray(Ci, float) for Li, Ci in zip(design.L, system.C)]
@@ -552,7 +576,16 @@ def envelope_ratio(system: Any, segments: Sequence[Segment], t_end: float, *,
     -------
     EnvelopeRatio
     """
+    segments = list(segments)
+    if not segments:
+        raise InvalidArgument("segments: need at least one Segment")
     t0 = segments[0].t0
+    t_end = as_finite(t_end, "t_end")
+    if t_end <= t0:
+        raise InvalidArgument(f"t_end must be > the first segment's start {t0}; got {t_end}")
+    dt = as_finite(dt, "dt")
+    if dt <= 0:
+        raise InvalidArgument(f"dt must be > 0; got {dt}")
     grid = np.union1d(t0 + dt * np.arange(int((t_end - t0) / dt) + 1),
                       [s.t0 for s in segments if s.t0 <= t_end])
     Phis = error_transitions(system.A, system.C, grid, segments)
@@ -613,6 +646,10 @@ def certify_table(system: Any, table: Any, *, sequence: Sequence[Any] | None = N
     from .schedule import PeriodicSchedule, SequenceSchedule
     from .simulate import schedule_segments
 
+    if not isinstance(ratio_cycles, (int, np.integer)) or ratio_cycles < 1:
+        raise InvalidArgument(f"ratio_cycles must be an integer >= 1; got {ratio_cycles!r}")
+    if as_finite(ratio_dt, "ratio_dt") <= 0:
+        raise InvalidArgument(f"ratio_dt must be > 0; got {ratio_dt}")
     rep = TableReport()
     for d in table.designs:
         cert = certify_cycle(system, d)

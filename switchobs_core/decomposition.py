@@ -33,11 +33,13 @@ subspaces (the paper's model) the result is the coordinate axes themselves.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .exceptions import InvalidArgument
 from .validation import as_matrix
 
 __all__ = [
@@ -141,6 +143,7 @@ def unobservable_subspace(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_R
     """
     A = as_matrix(A, "A", square=True)
     C = as_matrix(C, "C", cols=A.shape[0])
+    rtol = _check_rtol(rtol)
     scale_a = max(np.linalg.norm(A, 2), np.finfo(float).tiny)
     scale_c = np.linalg.norm(C, 2) if C.size else 0.0
     V = _null_space(C, rtol * scale_c)
@@ -161,6 +164,7 @@ def unobservable_subspace(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_R
 
 def canonical_basis(V: np.ndarray) -> np.ndarray:
     """Canonical orthonormal basis of range(V) (rule in the module docstring)."""
+    V = as_matrix(V, "V")
     n, k = V.shape
     if k == 0:
         return np.zeros((n, 0))
@@ -202,6 +206,7 @@ def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEF
     """
     A = as_matrix(A, "A", square=True)
     C = as_matrix(C, "C", cols=A.shape[0])
+    rtol = _check_rtol(rtol)
     n = A.shape[0]
     Vu = canonical_basis(unobservable_subspace(A, C, rtol=rtol))
     To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
@@ -226,7 +231,7 @@ def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEF
 
 def log_norm(M: ArrayLike) -> float:
     """Logarithmic 2-norm mu(M) = lambda_max((M + M') / 2) (e:mu2_formula)."""
-    M = np.asarray(M, dtype=float)
+    M = _square_or_empty(M)
     if M.size == 0:
         return float("-inf")
     return float(np.linalg.eigvalsh((M + M.T) / 2)[-1])
@@ -234,7 +239,25 @@ def log_norm(M: ArrayLike) -> float:
 
 def spectral_abscissa(M: ArrayLike) -> float:
     """alpha(M) = max Re lambda(M) (Lemma ``t:uniform-euclidean-bound``)."""
-    M = np.asarray(M, dtype=float)
+    M = _square_or_empty(M)
     if M.size == 0:
         return float("-inf")
     return float(np.max(np.linalg.eigvals(M).real))
+
+
+def _square_or_empty(M: ArrayLike) -> np.ndarray:
+    """``M`` as a finite square matrix (an empty one allowed: r_i = 0), or InvalidArgument naming M."""
+    arr = np.asarray(M, dtype=float) if not isinstance(M, np.ndarray) else M.astype(float, copy=False)
+    if arr.size == 0:
+        return arr.reshape(0, 0)
+    return as_matrix(arr, "M", square=True)
+
+
+def _check_rtol(rtol: float) -> float:
+    try:
+        val = float(rtol)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"rtol must be a number; got {rtol!r}") from None
+    if not (math.isfinite(val) and 0 <= val < 1):
+        raise InvalidArgument(f"rtol must be a finite relative tolerance in [0, 1); got {val}")
+    return val

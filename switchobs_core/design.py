@@ -75,9 +75,9 @@ class Margin:
     def __post_init__(self) -> None:
         if self.kind not in ("absolute", "relative"):
             raise InvalidArgument(f"margin kind must be 'absolute' or 'relative'; got {self.kind!r}")
-        v = as_finite(self.value, "margin")
+        v = as_finite(self.value, "margin value")
         if v < 0:
-            raise InvalidArgument(f"margin must be >= 0; got {v}")
+            raise InvalidArgument(f"margin value must be >= 0; got {v}")
 
     @classmethod
     def parse(cls, text: str | float) -> Margin:
@@ -176,6 +176,8 @@ class Designer:
         margin: Margin | None = None,
         solver: str = "CLARABEL",
     ) -> None:
+        if not hasattr(system, "decompositions") or not hasattr(system, "N"):
+            raise InvalidArgument(f"system must be an LTISystem (load_system(...)); got {system!r}")
         self.system = system
         self.delta = _deltas(delta, system.N)
         self.margin = margin or Margin()
@@ -244,9 +246,12 @@ class Designer:
             etas = [as_finite(e, f"eta_{i + 1}") for i, e in enumerate(eta)]
             if len(etas) != self.system.N or any(e <= 0 for e in etas):
                 raise InvalidArgument(f"eta must give {self.system.N} positive rates; got {list(eta)}")
-        gains = [
-            self._channel_gain(i, etas[i], emin[i], cycle.h[i], cycle.inactive(i + 1)) for i in range(self.system.N)
-        ]
+        gains = []
+        for i in range(self.system.N):
+            try:
+                gains.append(self._channel_gain(i, etas[i], emin[i], cycle.h[i], cycle.inactive(i + 1)))
+            except DesignError as err:   # name the cycle and channel whose SDP failed
+                raise type(err)(f"{what}, channel {i + 1}: {err}") from None
         return self._finish("cycle", cycle, None, gains, eta is not None, what)
 
     def design_robust(self, h_min: float, h_max: float) -> CycleDesign:
@@ -260,7 +265,10 @@ class Designer:
         for i, ch in enumerate(self.channels):
             inactive = (N - 1) * (h_max if ch.mu >= 0 else h_min)
             emin = ch.eta_min(h_min, inactive, self.delta[i], what=f"{what}, channel {i + 1}: ")
-            gains.append(self._channel_gain(i, self.margin.apply(emin), emin, h_min, inactive))
+            try:
+                gains.append(self._channel_gain(i, self.margin.apply(emin), emin, h_min, inactive))
+            except DesignError as err:
+                raise type(err)(f"{what}, channel {i + 1}: {err}") from None
         return self._finish("robust", None, (h_min, h_max), gains, False, what)
 
     def table(
@@ -273,6 +281,16 @@ class Designer:
     ) -> GainTable:
         """Design every cycle (and the robust box) and collect them in a :class:`GainTable`."""
         cycles = list(cycles)
+        for k, c in enumerate(cycles):
+            if not isinstance(c, Cycle):
+                raise InvalidArgument(f"cycles[{k}] must be a Cycle; got {c!r}")
+        if robust is not None:
+            try:
+                hmin, hmax = (float(b) for b in robust)
+            except (TypeError, ValueError):
+                raise InvalidArgument(f"robust must be a pair (h_min, h_max); got {robust!r}") from None
+            if not (math.isfinite(hmin) and math.isfinite(hmax) and 0 < hmin <= hmax):
+                raise InvalidArgument(f"robust must be (h_min, h_max) with 0 < h_min <= h_max; got {robust!r}")
         uniq: list[tuple[Cycle, Sequence[float] | None]] = []
         for k, c in enumerate(cycles):
             e = etas[k] if etas is not None else None
@@ -280,7 +298,7 @@ class Designer:
                 uniq.append((c, e))
         jobs = len(uniq) + (1 if robust else 0)
         if jobs == 0:
-            raise InvalidArgument("nothing to design: give at least one cycle or a robust box")
+            raise InvalidArgument("nothing to design: give at least one cycle in cycles or a robust box")
         bar = _progress(jobs, progress)
         designs = []
         try:

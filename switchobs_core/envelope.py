@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidArgument
+from .validation import as_matrix, as_vector
 
 __all__ = [
     "Envelope",
@@ -97,6 +98,16 @@ class Segment:
     channel: int
     design: Any
 
+    def __post_init__(self) -> None:
+        t0 = _finite(self.t0, "t0")
+        t1 = float(self.t1)
+        if math.isnan(t1) or t1 < t0:
+            raise InvalidArgument(f"t1 must be >= t0 = {t0}; got {self.t1!r}")
+        kappa = getattr(self.design, "kappa", None)
+        N = len(kappa) if kappa is not None else None
+        if not isinstance(self.channel, (int, np.integer)) or self.channel < 1 or (N and self.channel > N):
+            raise InvalidArgument(f"channel must be a channel number in 1..{N or 'N'}; got {self.channel!r}")
+
     @property
     def L(self) -> np.ndarray:
         """The gain ``L_i`` of the active channel."""
@@ -121,7 +132,15 @@ def alpha(T_o: Sequence[np.ndarray]) -> float:
     InvalidArgument
         If H is rank deficient ((A, [C_1; ...; C_N]) unobservable, A1 fails).
     """
-    H = np.vstack([np.asarray(T, dtype=float).T for T in T_o])
+    T_o = list(T_o)
+    if not T_o:
+        raise InvalidArgument("T_o: need the observable bases of N >= 1 channels; got none")
+    mats = [as_matrix(T, f"T_o[{i}]", exc=InvalidArgument) for i, T in enumerate(T_o)]
+    n = mats[0].shape[0]
+    for i, T in enumerate(mats):
+        if T.shape[0] != n:
+            raise InvalidArgument(f"T_o[{i}] has {T.shape[0]} rows; T_o[0] has {n} (every T_io is n x r_i)")
+    H = np.vstack([T.T for T in mats])
     if H.shape[0] < H.shape[1]:
         raise InvalidArgument(f"T_o: H = [T_1o'; ...] has {H.shape[0]} rows < n = {H.shape[1]}; "
                               "the channels together are not observable (A1)")
@@ -133,12 +152,19 @@ def alpha(T_o: Sequence[np.ndarray]) -> float:
 
 def paper_bound(z: np.ndarray, alpha_: float) -> np.ndarray:
     """The paper's claimed bound ``alpha * sum_i z_i`` (e:xtilde_alpha_z_main); not a guarantee."""
-    return alpha_ * np.sum(np.asarray(z, dtype=float), axis=0)
+    a = _finite(alpha_, "alpha_")
+    if a < 0:
+        raise InvalidArgument(f"alpha_ must be >= 0; got {a}")
+    z = np.asarray(z, dtype=float)
+    if not np.isfinite(z).all():
+        raise InvalidArgument("z has a non-finite entry")
+    return a * np.sum(z, axis=0)
 
 
 def exact_bound(Phi: np.ndarray, e0: float) -> float:
     """``||Phi(t, 0)||_2 * e0``: the exact worst-case error over ``||x_tilde(0)|| <= e0``."""
-    return float(np.linalg.norm(Phi, 2) * e0)
+    Phi = as_matrix(Phi, "Phi", square=True)
+    return float(np.linalg.norm(Phi, 2) * _check_e0(e0))
 
 
 class EnvelopeTracker:
@@ -159,7 +185,11 @@ class EnvelopeTracker:
     """
 
     def __init__(self, mu: Sequence[float], z0: float, t0: float = 0.0):
-        self.mu = np.asarray(mu, dtype=float).copy()
+        self.mu = as_vector(mu, "mu").copy()
+        z0 = float(z0)
+        if not (math.isfinite(z0) and z0 >= 0):
+            raise InvalidArgument(f"z0 must be a finite number >= 0; got {z0}")
+        t0 = _finite(t0, "t0")
         self.N = self.mu.size
         self.t_a = np.full(self.N, float(t0))
         self.z_a = np.full(self.N, float(z0))
@@ -173,6 +203,8 @@ class EnvelopeTracker:
     def switch(self, t: float, channel: int, kappa: Sequence[float], eta: Sequence[float],
                mu: Sequence[float] | None = None) -> None:
         """Channel ``channel`` (1-based) becomes active at ``t`` with the design's ``kappa``, ``eta``."""
+        if not isinstance(channel, (int, np.integer)) or not 1 <= channel <= self.N:
+            raise InvalidArgument(f"channel must be in 1..{self.N}; got {channel!r}")
         zt = self.z(t)
         if mu is not None:
             self.mu = np.asarray(mu, dtype=float).copy()
@@ -202,7 +234,11 @@ def envelope_z(t: np.ndarray, segments: Sequence[Segment], z0: float) -> np.ndar
     (N, T) ndarray
         ``z_i(t_k)``; at a switching instant the value after the jump.
     """
-    t = np.asarray(t, dtype=float)
+    t = _times(t)
+    segments = _segments(segments)
+    z0 = float(z0)
+    if not (math.isfinite(z0) and z0 >= 0):
+        raise InvalidArgument(f"z0 must be a finite number >= 0; got {z0}")
     d0 = segments[0].design
     tracker = EnvelopeTracker(d0.mu, z0, segments[0].t0)
     out = np.empty((len(d0.mu), t.size))
@@ -253,9 +289,11 @@ def error_transitions(A: np.ndarray, C: Sequence[np.ndarray], t: np.ndarray,
     """
     from .propagation import transition
 
-    A = np.asarray(A, dtype=float)
-    t = np.asarray(t, dtype=float)
+    A = as_matrix(A, "A", square=True)
     n = A.shape[0]
+    C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]
+    t = _times(t)
+    segments = _segments(segments)
     out = np.empty((t.size, n, n))
     Phi = np.eye(n)
     cache: dict = {}
@@ -271,6 +309,32 @@ def error_transitions(A: np.ndarray, C: Sequence[np.ndarray], t: np.ndarray,
         if k is not None:
             out[k] = Phi
     return out
+
+
+def _finite(x: Any, name: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"{name} must be a number; got {x!r}") from None
+    if not math.isfinite(v):
+        raise InvalidArgument(f"{name} must be finite; got {v}")
+    return v
+
+
+def _times(t: Any) -> np.ndarray:
+    t = np.asarray(t, dtype=float).reshape(-1)
+    if not np.isfinite(t).all():
+        raise InvalidArgument("t has a non-finite time")
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        raise InvalidArgument("t must be nondecreasing")
+    return t
+
+
+def _segments(segments: Any) -> list:
+    segments = list(segments)
+    if not segments:
+        raise InvalidArgument("segments: need at least one Segment")
+    return segments
 
 
 def _check_e0(e0: float) -> float:

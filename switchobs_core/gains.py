@@ -193,6 +193,8 @@ class CycleDesign:
 
     def certifies(self, observed: Cycle) -> CertifyCheck:
         """Check the paper's cycle condition for an observed cycle with these gains."""
+        if not isinstance(observed, Cycle):
+            raise InvalidArgument(f"observed must be a Cycle; got {observed!r}")
         if observed.N != self.N:
             raise InvalidArgument(f"observed cycle has {observed.N} channels; the design has {self.N}")
         fs, dom = [], True
@@ -245,6 +247,8 @@ class GainTable:
 
     def lookup(self, cycle: Cycle, *, rtol: float = CYCLE_RTOL, atol: float = CYCLE_ATOL) -> CycleDesign:
         """The stored design of ``cycle`` (tolerance in the module docstring)."""
+        if not isinstance(cycle, Cycle):
+            raise GainTableError(f"cycle must be a Cycle (e.g. Cycle.from_ts(2.0, 0.6)); got {cycle!r}")
         for d in self.designs:
             if d.cycle is not None and d.cycle.matches(cycle, rtol=rtol, atol=atol):
                 return d
@@ -269,6 +273,8 @@ class GainTable:
 
     def kappa_curve(self, channel: int) -> tuple[np.ndarray, np.ndarray]:
         """Stored (eta, kappa) samples of a channel's kappa curve."""
+        if not isinstance(channel, int) or not 1 <= channel <= len(self.channels):
+            raise GainTableError(f"channel must be in 1..{len(self.channels)}; got {channel!r}")
         kc = self.channels[channel - 1]["kappa_curve"]
         return np.array(kc["eta"], float), np.array(kc["kappa"], float)
 

@@ -62,12 +62,15 @@ from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
 
-__all__ = ["HOLDS", "MODES", "CycleRecord", "SwitchedObserver"]
+__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "CycleRecord", "SwitchedObserver"]
 
 #: Schedule modes accepted by :class:`SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
 #: What may be held between samples (module docstring).
 HOLDS = ("innovation", "measurement")
+#: Largest accepted magnitude of a sample or input entry: beyond it the products with the
+#: gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
+MAX_ABS_SAMPLE = 1e150
 
 
 @dataclass(frozen=True)
@@ -210,6 +213,9 @@ class SwitchedObserver:
         self.match_tol = float(match_tol)
         if not (math.isfinite(self.match_tol) and self.match_tol >= 0):
             raise InvalidArgument(f"match_tol must be a finite number >= 0; got {match_tol}")
+        for name, v in (("cache_size", cache_size), ("max_records", max_records)):
+            if not isinstance(v, (int, np.integer)) or v < 1:
+                raise InvalidArgument(f"{name} must be an integer >= 1; got {v!r}")
         # 1. designs of the mode
         if mode == "robust":
             d = getattr(table, "robust", None)
@@ -441,10 +447,14 @@ class SwitchedObserver:
                                       f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
         if not np.isfinite(y).all():
             raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
+        if y.size and np.abs(y).max() > MAX_ABS_SAMPLE:
+            raise InvalidArgument(f"y has an entry of magnitude {np.abs(y).max():.3g} > {MAX_ABS_SAMPLE:g}: "
+                                  "the update would overflow")
         if u is not None:
             u = np.asarray(u, dtype=float).reshape(-1)
-            if u.size != self.m or not np.isfinite(u).all():
-                raise InvalidArgument(f"u must hold {self.m} finite entries; got {u.tolist()}")
+            if u.size != self.m or not np.isfinite(u).all() or (u.size and np.abs(u).max() > MAX_ABS_SAMPLE):
+                raise InvalidArgument(f"u must hold {self.m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
+                                      f"got {u.tolist()}")
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         if dt > 0:
             e = self._cache.step(self._key, dt)

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import math
 
+from .exceptions import InvalidArgument
+from .validation import as_finite
+
 __all__ = ["MU", "TABLE", "SEQUENCE", "PERIODIC", "PERIODIC_ETA", "DELTA", "D_OFFSETS", "kappa_closed_form"]
 
 #: mu^(1), mu^(2) (Sec. subsec:sim_gain).
@@ -31,5 +34,8 @@ D_OFFSETS = (0.2, 0.1)
 
 def kappa_closed_form(eta: float, channel: int) -> float:
     """kappa_i(eta) of the paper's model in closed form (DESIGN.md): an independent oracle."""
+    if not isinstance(channel, int) or not 1 <= channel <= len(D_OFFSETS):
+        raise InvalidArgument(f"channel must be 1 or 2 (the paper's model); got {channel!r}")
+    eta = as_finite(eta, "eta")
     a = eta + D_OFFSETS[channel - 1]
     return a + math.sqrt(1 + a * a)

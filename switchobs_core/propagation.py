@@ -44,6 +44,7 @@ is at most ``dt_resolution / 2`` per step; pass ``dt_resolution=None`` for no ro
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Hashable
 
@@ -51,6 +52,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .exceptions import InvalidArgument
+from .validation import as_matrix
 
 __all__ = [
     "zoh_pair",
@@ -68,14 +70,29 @@ DEFAULT_DT_RESOLUTION = 1e-9
 
 def quantize_dt(dt: float, resolution: float | None) -> float:
     """Round ``dt`` to a multiple of ``resolution`` (no rounding if ``resolution`` is None)."""
+    dt = _check_dt(dt)
     if resolution is None:
-        return float(dt)
+        return dt
+    if not (isinstance(resolution, (int, float, np.floating)) and math.isfinite(resolution) and resolution > 0):
+        raise InvalidArgument(f"resolution must be a finite number > 0 or None; got {resolution!r}")
     return round(dt / resolution) * resolution
+
+
+def _check_dt(dt: float, name: str = "dt") -> float:
+    """``dt`` as a finite float >= 0, or InvalidArgument naming it."""
+    try:
+        val = float(dt)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"{name} must be a number; got {dt!r}") from None
+    if not (math.isfinite(val) and val >= 0):
+        raise InvalidArgument(f"{name} must be a finite step >= 0 (seconds); got {val}")
+    return val
 
 
 def transition(M: np.ndarray, dt: float) -> np.ndarray:
     """State transition ``Phi = expm(M dt)`` of ``xdot = M x``."""
-    return expm(np.asarray(M, dtype=float) * float(dt))
+    M = as_matrix(M, "M", square=True)
+    return expm(M * _check_dt(dt))
 
 
 def zoh_pair(M: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -96,12 +113,12 @@ def zoh_pair(M: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     Phi, Gamma : (n, n) ndarray
         ``Phi = e^{M dt}`` and ``Gamma = int_0^dt e^{M s} ds``.
     """
-    M = np.asarray(M, dtype=float)
+    M = as_matrix(M, "M", square=True)
     n = M.shape[0]
     aug = np.zeros((2 * n, 2 * n))
     aug[:n, :n] = M
     aug[:n, n:] = np.eye(n)
-    E = expm(aug * float(dt))
+    E = expm(aug * _check_dt(dt))
     return np.ascontiguousarray(E[:n, :n]), np.ascontiguousarray(E[:n, n:])
 
 
@@ -112,13 +129,14 @@ def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.n
     ``Qd = int_0^dt e^{A s} Qc e^{A' s} ds`` from
     ``expm([[-A, Qc], [0, A']] dt) = [[., F^{-1} Qd], [0, F']]``.
     """
-    A = np.asarray(A, dtype=float)
+    A = as_matrix(A, "A", square=True)
     n = A.shape[0]
+    Qc = as_matrix(Qc, "Qc", rows=n, cols=n)
     aug = np.zeros((2 * n, 2 * n))
     aug[:n, :n] = -A
     aug[:n, n:] = Qc
     aug[n:, n:] = A.T
-    E = expm(aug * float(dt))
+    E = expm(aug * _check_dt(dt))
     F = E[n:, n:].T
     Qd = F @ E[:n, n:]
     Qd = 0.5 * (Qd + Qd.T)
@@ -177,17 +195,26 @@ class ZOHCache:
         is the held innovation and the entry's error map is ``E = e^{A dt} - Gamma_A L C``.
         """
         if key not in self._gains:
-            self._gains[key] = (np.ascontiguousarray(M, dtype=float),
-                                None if L is None else np.ascontiguousarray(L, dtype=float),
-                                None if B is None else np.ascontiguousarray(B, dtype=float),
-                                None if C is None else np.ascontiguousarray(C, dtype=float))
+            M = as_matrix(M, "M", square=True)
+            n = M.shape[0]
+            L = None if L is None else as_matrix(L, "L", rows=n)
+            B = None if B is None or np.size(B) == 0 else as_matrix(B, "B", rows=n)
+            if C is not None:
+                C = as_matrix(C, "C", cols=n, rows=None if L is None else L.shape[1])
+            self._gains[key] = (np.ascontiguousarray(M), L, B, C)
 
     def has(self, key: Hashable) -> bool:
         """Whether ``key`` has been registered."""
         return key in self._gains
 
     def step(self, key: Hashable, dt: float) -> ZOHEntry:
-        """Return the cached :class:`ZOHEntry` of ``key`` for step ``dt`` (computed on a miss)."""
+        """Return the cached :class:`ZOHEntry` of ``key`` for step ``dt`` (computed on a miss).
+
+        Raises InvalidArgument for a key that was never registered or a ``dt`` that is not a
+        finite number >= 0.
+        """
+        if not 0 <= dt < math.inf:
+            dt = _check_dt(dt)
         q = dt if self._inv_res is None else round(dt * self._inv_res)
         lk = (key, q)
         lru = self._lru
@@ -197,7 +224,10 @@ class ZOHCache:
             lru.move_to_end(lk)
             return entry
         self.misses += 1
-        M, L, B, C = self._gains[key]
+        try:
+            M, L, B, C = self._gains[key]
+        except KeyError:
+            raise InvalidArgument(f"key {key!r} was never registered (call register first)") from None
         dtq = dt if self._inv_res is None else q * self.dt_resolution
         Phi, Gamma = zoh_pair(M, dtq)
         GL = None if L is None else Gamma @ L

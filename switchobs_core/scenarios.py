@@ -11,6 +11,7 @@ observable.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -60,9 +61,18 @@ def camera_agents(
         raise InvalidSystem(f"camera_agents needs at least 2 agents (one channel each); got {M}")
     if D_agents is None:
         D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.03 * (k - 1)) for k in range(M)]
-    D_agents = [tuple(float(v) for v in d) for d in D_agents]
-    if len(D_agents) != M or any(len(d) != 2 for d in D_agents) or len(D_c) != 2:
-        raise InvalidSystem(f"D_c must have 2 entries and D_agents {M} pairs")
+    try:
+        D_agents = [tuple(float(v) for v in d) for d in D_agents]
+        D_c = tuple(float(v) for v in D_c)
+    except (TypeError, ValueError) as err:
+        raise InvalidSystem(f"D_c and D_agents must hold numbers ({err})") from None
+    if len(D_c) != 2 or not all(math.isfinite(v) for v in D_c):
+        raise InvalidSystem(f"D_c must have 2 finite entries; got {D_c}")
+    if len(D_agents) != M or any(len(d) != 2 for d in D_agents):
+        raise InvalidSystem(f"D_agents must hold {M} pairs (one per agent); got {D_agents}")
+    bad = [k + 1 for k, d in enumerate(D_agents) if not all(math.isfinite(v) for v in d)]
+    if bad:
+        raise InvalidSystem(f"D_agents has a non-finite entry for agent(s) {bad}: {D_agents}")
     bodies = [_body(D_c)] + [_body(d) for d in D_agents]
     n = 4 * (M + 1)
     A = np.zeros((n, n))

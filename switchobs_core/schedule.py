@@ -16,6 +16,7 @@ Schedules say which channel is active when:
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,7 +61,7 @@ class Cycle:
         except Exception as err:
             raise ScheduleError(f"bad cycle {h!r}: {err}") from None
         if len(hs) < 2:
-            raise ScheduleError(f"a cycle needs active times for N >= 2 channels; got {len(hs)}")
+            raise ScheduleError(f"h: a cycle needs active times h_1..h_N for N >= 2 channels; got {len(hs)}")
         for i, x in enumerate(hs):
             if x <= 0:
                 raise ScheduleError(f"active time h_{i + 1} must be > 0; got {x}")
@@ -130,6 +131,7 @@ class Schedule:
 
     def switching_instants(self, t_end: float) -> np.ndarray:
         """All switching instants t_l in [t0, t_end), starting with t0 (e:switching_instants)."""
+        t_end = as_finite(t_end, "t_end")
         out, t, k = [], self.t0, 0
         while t < t_end:
             for h in self.cycle(k).h:
@@ -142,6 +144,7 @@ class Schedule:
 
     def channel_at(self, t: float) -> int:
         """The active channel rho(t) in 1..N (channel 1 before t0)."""
+        t = as_finite(t, "t")
         if t < self.t0:
             return 1
         tt, k = self.t0, 0
@@ -163,8 +166,10 @@ class PeriodicSchedule(Schedule):
     """One cycle repeated forever (the paper's periodic case)."""
 
     def __init__(self, cycle: Cycle, t0: float = 0.0) -> None:
+        if not isinstance(cycle, Cycle):
+            raise ScheduleError(f"cycle must be a Cycle (e.g. Cycle.from_ts(2.0, 0.6)); got {cycle!r}")
         self._cycle = cycle
-        self.t0 = float(t0)
+        self.t0 = as_finite(t0, "t0")
         self._starts = np.concatenate([[0.0], np.cumsum(cycle.h)])
 
     def cycle(self, k: int) -> Cycle:
@@ -176,6 +181,8 @@ class PeriodicSchedule(Schedule):
         return [self._cycle]
 
     def channel_at(self, t: float) -> int:
+        if not math.isfinite(t):
+            raise ScheduleError(f"t must be a finite time; got {t!r}")
         if t < self.t0:
             return 1
         off = (t - self.t0) % self._cycle.tau
@@ -189,11 +196,14 @@ class SequenceSchedule(Schedule):
     def __init__(self, cycles: Sequence[Cycle], t0: float = 0.0) -> None:
         cycles = list(cycles)
         if not cycles:
-            raise ScheduleError("a sequence schedule needs at least one cycle")
+            raise ScheduleError("cycles: a sequence schedule needs at least one cycle")
+        for k, c in enumerate(cycles):
+            if not isinstance(c, Cycle):
+                raise ScheduleError(f"cycles[{k}] must be a Cycle; got {c!r}")
         if len({c.N for c in cycles}) != 1:
-            raise ScheduleError("all cycles of a schedule must have the same number of channels")
+            raise ScheduleError("cycles: all cycles of a schedule must have the same number of channels")
         self._cycles = cycles
-        self.t0 = float(t0)
+        self.t0 = as_finite(t0, "t0")
 
     def cycle(self, k: int) -> Cycle:
         return self._cycles[k % len(self._cycles)]
@@ -211,11 +221,11 @@ class RandomSchedule(Schedule):
         h_min, h_max = as_finite(h_min, "h_min"), as_finite(h_max, "h_max")
         if not 0 < h_min <= h_max:
             raise ScheduleError(f"need 0 < h_min <= h_max; got [{h_min}, {h_max}]")
-        if N < 2:
-            raise ScheduleError(f"need N >= 2 channels; got {N}")
+        if not isinstance(N, (int, np.integer)) or N < 2:
+            raise ScheduleError(f"N: need an integer N >= 2 channels; got {N!r}")
         self.N_ = int(N)
         self.h_min, self.h_max = h_min, h_max
-        self.t0 = float(t0)
+        self.t0 = as_finite(t0, "t0")
         self._rng = np.random.default_rng(seed)
         self._drawn: list[Cycle] = []
 
@@ -251,6 +261,8 @@ def parse_schedule(text: str, *, N: int = 2) -> Schedule:
         if isinstance(err, ScheduleError):
             raise
         raise ScheduleError(f"cannot parse schedule '{text}': {err}") from None
+    except TypeError as err:
+        raise ScheduleError(f"schedule must be a string like periodic:2,0.6; got {text!r} ({err})") from None
     raise ScheduleError(
         f"unknown schedule '{text}'; use periodic:TAU,S, periodic-h:H1,..,HN, "
         "sequence:T,S;T,S;... or random:HMIN,HMAX[,SEED]"

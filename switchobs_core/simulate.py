@@ -59,6 +59,7 @@ from scipy.linalg import expm
 from .envelope import Segment, envelope_z, error_transitions
 from .exceptions import InvalidArgument
 from .propagation import van_loan, zoh_pair
+from .validation import as_matrix
 
 __all__ = [
     "Plant",
@@ -106,6 +107,8 @@ class Plant:
         if self._x.size != self.n or not np.isfinite(self._x).all():
             raise InvalidArgument(f"x0 must hold n = {self.n} finite entries; got {self._x.size}")
         self._t = float(t0)
+        if not math.isfinite(self._t):
+            raise InvalidArgument(f"t0 must be finite; got {t0!r}")
         self.rng = np.random.default_rng(seed)
         Qc = np.asarray(process_noise, dtype=float)
         if Qc.ndim == 0:
@@ -194,6 +197,8 @@ def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str
         else:
             raise InvalidArgument(f"schedule: cannot tell the mode of {type(schedule).__name__}; "
                                   "pass mode=")
+    if mode not in ("periodic", "sequence", "robust"):
+        raise InvalidArgument(f"mode must be periodic, sequence, robust or None; got {mode!r}")
     if mode == "robust":
         if getattr(table, "robust", None) is None:
             raise InvalidArgument("table has no robust design (table.robust is None)")
@@ -203,6 +208,15 @@ def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str
 
 def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> list[Segment]:
     """The active intervals of ``schedule`` on ``[t0, t_end)``; cycle k uses ``designs[k % K]``."""
+    try:
+        t_end = float(t_end)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"t_end must be a number; got {t_end!r}") from None
+    if not math.isfinite(t_end):
+        raise InvalidArgument(f"t_end must be finite; got {t_end}")
+    designs = list(designs)
+    if not designs:
+        raise InvalidArgument("designs: need at least one design")
     segs: list[Segment] = []
     t, k = float(schedule.t0), 0
     while t < t_end:
@@ -236,11 +250,19 @@ def sampled_error_transition(A: np.ndarray, C: Sequence[np.ndarray],
         ``expm((A - L C) dt)``; ``Phi_ex`` collects the held-sample terms
         ``(Phi + Gamma L C - e^{A dt})`` (module docstring), zero for continuous outputs.
     """
-    A = np.asarray(A, dtype=float)
+    A = as_matrix(A, "A", square=True)
     n = A.shape[0]
+    C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]
     Pee, Pex, Pxx = np.eye(n), np.zeros((n, n)), np.eye(n)
-    for dt, ch, L in steps:
-        Ci = np.asarray(C[ch - 1], dtype=float)
+    for k, step in enumerate(steps):
+        try:
+            dt, ch, L = step
+        except (TypeError, ValueError):
+            raise InvalidArgument(f"steps[{k}] must be (dt, channel, L); got {step!r}") from None
+        if not (isinstance(ch, (int, np.integer)) and 1 <= ch <= len(C)):
+            raise InvalidArgument(f"steps[{k}]: channel must be in 1..{len(C)}; got {ch!r}")
+        Ci = C[ch - 1]
+        L = as_matrix(L, f"steps[{k}] L", rows=n, cols=Ci.shape[0])
         Phi, Gamma = zoh_pair(A - L @ Ci, dt)
         F = expm(A * dt)
         D = Phi + Gamma @ L @ Ci - F

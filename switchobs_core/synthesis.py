@@ -92,10 +92,14 @@ def verify_gain(A: ArrayLike, C: ArrayLike, L: ArrayLike, P: ArrayLike, eta: flo
     VerificationError
         P is not positive definite, eta_v < eta, or alpha(Lambda) >= -eta.
     """
-    A = np.asarray(A, float)
-    P = np.asarray(P, float)
+    A = as_matrix(A, "A", square=True)
+    n = A.shape[0]
+    C = as_matrix(C, "C", cols=n)
+    L = as_matrix(L, "L", rows=n, cols=C.shape[0])
+    P = as_matrix(P, "P", rows=n, cols=n)
+    eta = as_finite(eta, "eta")
     P = (P + P.T) / 2
-    Lam = A - np.asarray(L, float) @ np.asarray(C, float)
+    Lam = A - L @ C
     w, V = np.linalg.eigh(P)
     if w[0] <= 0:
         raise VerificationError(f"the Lyapunov matrix P is not positive definite (lambda_min = {w[0]:.3g})")

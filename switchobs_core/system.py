@@ -116,7 +116,7 @@ class LTISystem:
             raise InvalidSystem("C must be a list of channel output matrices [C_1, ..., C_N]")
         C = tuple(as_matrix(Ci, f"C_{i + 1}", cols=n, exc=InvalidSystem) for i, Ci in enumerate(C))
         if len(C) < 2:
-            raise InvalidSystem(f"a switched-output system needs N >= 2 channels; got {len(C)}")
+            raise InvalidSystem(f"C: a switched-output system needs N >= 2 channels (C_1..C_N); got {len(C)}")
         for i, Ci in enumerate(C):
             if Ci.shape[0] == 0:
                 raise InvalidSystem(f"C_{i + 1} has no rows: channel {i + 1} measures nothing")

@@ -21,13 +21,14 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every estimate carries the stamp of the sample it answers.
 
-Failure behaviour (issue 6; the table is docs/failure-table.md)
+Failure behaviour (issue 6; the table is in README.md, "Failure behaviour")
 ----------------------------------------------------------------
 * Every message is validated (:mod:`msg_bridge.validate`); a rejected one is counted under
   ``(topic, reason)`` and changes nothing else. A target pose stamped at or before the newest
-  pose received before the latest channel change is ``stale_after_switch``: it was taken while
-  the previous channel was active (the channel message has no stamp, so this is all the node
-  knows of the switching instant).
+  target pose received before the latest channel change is ``stale_after_switch``: it was taken
+  while the previous channel was active (the channel message has no stamp, so this is all the
+  node knows of the switching instant; camera poses do not depend on the channel, so a camera
+  pose that DDS delivers before the channel message of the same tick changes nothing).
 * Any exception while handling a message is caught, counted (``internal_error``) and logged;
   an estimate that is not finite is never returned (the estimator resets instead).
 * Residence times are measured from the sample stamps at every switch and compared with
@@ -44,6 +45,7 @@ from __future__ import annotations
 
 import math
 import time
+import traceback
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -202,6 +204,7 @@ class EstimatorPipeline:
         self.switches = 0
         self.resets = 0
         self.errors = 0
+        self.nonfinite = 0          # estimates withheld because not finite (each followed by a reset)
         self.last_rejection = ""
 
     # ------------------------------------------------------------------ construction
@@ -213,7 +216,7 @@ class EstimatorPipeline:
         ``gain_table`` is empty). Raises :class:`~switchobs_ros.params.ConfigError` with one
         line on any bad value.
         """
-        from switchobs_core.observer import MODES, SwitchedObserver
+        from switchobs_core.observer import MAX_ABS_SAMPLE, MODES, SwitchedObserver
 
         log = log or PipelineLog()
         sys_ = load_system_param(cfg["system"])
@@ -234,6 +237,9 @@ class EstimatorPipeline:
             v = cfg[name]
             if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
                 raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
+        if cfg["max_abs_value"] > MAX_ABS_SAMPLE:
+            raise ConfigError(f"parameter 'max_abs_value' must be <= {MAX_ABS_SAMPLE:g} (larger samples could "
+                              f"overflow the observer's exact step); got {cfg['max_abs_value']:g}")
         x0 = cfg["initial_estimate"]
         if x0 and len(x0) != sys_.n:
             raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
@@ -265,9 +271,10 @@ class EstimatorPipeline:
                 if self.channel:
                     self.switches += 1
                 self.channel = c
-                seen = [s for s in self.last_ns.values() if s is not None]
-                if seen:
-                    self.switch_ns = max(seen)
+                # camera poses do not depend on the channel; target poses up to this stamp
+                # were taken while the previous channel was active
+                if self.last_ns["target"] is not None:
+                    self.switch_ns = self.last_ns["target"]
         except Exception as err:
             self.internal_error(CHANNEL_TOPIC, err)
 
@@ -285,8 +292,8 @@ class EstimatorPipeline:
             stamp_ns = mb.stamp_to_ns(msg.header.stamp)
             if rej is None and not self.channel:
                 rej = Rejection(Reason.NO_CHANNEL, CHANNEL_TOPIC, "no active channel received yet")
-            if rej is None and part == "target":
-                rej = mb.check_after_switch(stamp_ns, self.switch_ns)
+            if part == "target" and (rej is None or rej.reason in (Reason.OLD_STAMP, Reason.DUPLICATE_STAMP)):
+                rej = mb.check_after_switch(stamp_ns, self.switch_ns) or rej   # the more specific reason
             if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
                 rej = Rejection(Reason.OLD_STAMP, "header.stamp",
                                 f"not newer than the estimate ({(self.obs_ns - stamp_ns) * 1e-9:.6f} s older)")
@@ -355,20 +362,29 @@ class EstimatorPipeline:
             self.origin_ns = pend.stamp_ns
             self.observer.reset(self.x0, 0.0)
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
-        x_hat = self.observer.update(t, c, y, rows=rows)
-        self.obs_ns = pend.stamp_ns
-        if c != self._res_channel:
-            self._res_switch(c, t)
-        self.updates += 1
-        if rows is not None:
-            self.partial_updates += 1
-        env = self.observer.envelope()
-        env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]])
+        dt = t - self.observer.t
+        with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
+            x_hat = self.observer.update(t, c, y, rows=rows)
+            self.obs_ns = pend.stamp_ns
+            self.updates += 1
+            if rows is not None:
+                self.partial_updates += 1
+            try:
+                env = self.observer.envelope()
+                env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]])
+            except (np.linalg.LinAlgError, ArithmeticError, ValueError):
+                env_vals = np.full(self.N + 2, np.nan)     # e.g. the SVD of an overflowed Phi
         if not (np.isfinite(x_hat).all() and np.isfinite(env_vals).all()):
+            # e.g. a gap so long that the exact step of an unstable system overflows: never
+            # publish it; start again from the initial estimate at the next sample
             self.errors += 1
-            self.log.error("non-finite estimate: not published; resetting the estimator")
+            self.nonfinite += 1
+            self.log.error(f"non-finite estimate at stamp {pend.stamp_ns} (step of {dt:.6g} s): not published; "
+                           "resetting the estimator")
             self.reset("non-finite estimate")
             return
+        if c != self._res_channel:
+            self._res_switch(c, t)
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals))
 
     # ------------------------------------------------------------------ bookkeeping
@@ -383,7 +399,9 @@ class EstimatorPipeline:
         self.errors += 1
         self.rejected[(where, "internal_error")] += 1
         self.last_rejection = f"{where}: internal_error: {type(err).__name__}: {err}"
-        self.log.error(f"{where}: {type(err).__name__}: {err}", throttle=True)
+        tb = traceback.extract_tb(err.__traceback__)
+        at = f" (at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
+        self.log.error(f"{where}: {type(err).__name__}: {err}{at}", throttle=True)
 
     def reset(self, why: str) -> None:
         """Back to the initial estimate; the next accepted sample becomes the new time origin.

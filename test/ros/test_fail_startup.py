@@ -1,0 +1,64 @@
+"""Start-up refuses a bad gain table or a failing design with one clear line and exit code 2.
+
+(A table for another system, a missing file and bad parameters: test_startup_failures.py.)
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+from test_startup_failures import _assert_one_line_failure, _run
+
+from switchobs_ros.launch import ros_args
+
+
+def test_truncated_table(paper_tables, tmp_path):
+    text = open(paper_tables["periodic"]).read()
+    bad = tmp_path / "truncated.json"
+    bad.write_text(text[: len(text) * 2 // 3])
+    res = _run("estimator", ros_args(params={"gain_table": str(bad)}))
+    _assert_one_line_failure(res, "estimator", "gain_table", "truncated.json", "truncated")
+
+
+def test_table_with_a_nan(paper_tables, tmp_path):
+    text = open(paper_tables["periodic"]).read()
+    data = json.loads(text)
+    assert data["designs"][0]["channels"][0]["L"]       # where the gains are stored
+    # replace the first number of the first gain by NaN (as a writer without allow_nan=False would)
+    i = text.index('"L"')
+    m = re.compile(r"-?\d+\.\d+(e[-+]?\d+)?").search(text, i)
+    bad = tmp_path / "nan.json"
+    bad.write_text(text[: m.start()] + "NaN" + text[m.end():])
+    res = _run("estimator", ros_args(params={"gain_table": str(bad)}))
+    _assert_one_line_failure(res, "estimator", "gain_table", "nan.json", "non-finite number (NaN)")
+
+
+def test_edited_table_checksum(paper_tables, tmp_path):
+    text = open(paper_tables["periodic"]).read()
+    i = text.index('"L"')
+    m = re.compile(r"\d\.\d").search(text, i)
+    digit = text[m.start()]
+    bad = tmp_path / "edited.json"
+    bad.write_text(text[: m.start()] + str((int(digit) + 1) % 10) + text[m.start() + 1:])
+    res = _run("estimator", ros_args(params={"gain_table": str(bad)}))
+    _assert_one_line_failure(res, "estimator", "gain_table", "checksum mismatch")
+
+
+@pytest.mark.parametrize("params,needles", [
+    # an active time of 2 ms: no decay rate satisfies the cycle condition before the SDP fails
+    ({"schedule.s": [0.001]}, ("gain design failed", "cycle (2 s, 0.001), channel 1", "infeasible")),
+    # delta so small that the SDP for the gain itself fails (solver status), named by its cycle
+    ({"delta": 1e-300}, ("gain design failed", "cycle (2 s, 0.6), channel 1", "did not solve")),
+], ids=["infeasible", "sdp_fails"])
+def test_design_failure_names_the_cycle(params, needles, tmp_path):
+    params = dict(params, gain_table_cache_dir=str(tmp_path / "cache"))
+    res = _run("estimator", ros_args(params=params), timeout=120)
+    _assert_one_line_failure(res, "estimator", *needles)
+    assert not list((tmp_path / "cache").glob("*.json"))     # nothing cached
+
+
+def test_max_abs_value_beyond_what_the_observer_takes(paper_tables):
+    res = _run("estimator", ros_args(params={"gain_table": paper_tables["periodic"], "max_abs_value": 1e300}))
+    _assert_one_line_failure(res, "estimator", "max_abs_value", "<= 1e+150")
