@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidArgument
-from .validation import as_matrix, as_vector
+from .validation import as_finite, as_matrix, as_vector
 
 __all__ = [
     "Envelope",
@@ -99,7 +99,7 @@ class Segment:
     design: Any
 
     def __post_init__(self) -> None:
-        t0 = _finite(self.t0, "t0")
+        t0 = as_finite(self.t0, "t0")
         t1 = float(self.t1)
         if math.isnan(t1) or t1 < t0:
             raise InvalidArgument(f"t1 must be >= t0 = {t0}; got {self.t1!r}")
@@ -152,7 +152,7 @@ def alpha(T_o: Sequence[np.ndarray]) -> float:
 
 def paper_bound(z: np.ndarray, alpha_: float) -> np.ndarray:
     """The paper's claimed bound ``alpha * sum_i z_i`` (e:xtilde_alpha_z_main); not a guarantee."""
-    a = _finite(alpha_, "alpha_")
+    a = as_finite(alpha_, "alpha_")
     if a < 0:
         raise InvalidArgument(f"alpha_ must be >= 0; got {a}")
     z = np.asarray(z, dtype=float)
@@ -189,7 +189,7 @@ class EnvelopeTracker:
         z0 = float(z0)
         if not (math.isfinite(z0) and z0 >= 0):
             raise InvalidArgument(f"z0 must be a finite number >= 0; got {z0}")
-        t0 = _finite(t0, "t0")
+        t0 = as_finite(t0, "t0")
         self.N = self.mu.size
         self.t_a = np.full(self.N, float(t0))
         self.z_a = np.full(self.N, float(z0))
@@ -309,16 +309,6 @@ def error_transitions(A: np.ndarray, C: Sequence[np.ndarray], t: np.ndarray,
         if k is not None:
             out[k] = Phi
     return out
-
-
-def _finite(x: Any, name: str) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise InvalidArgument(f"{name} must be a number; got {x!r}") from None
-    if not math.isfinite(v):
-        raise InvalidArgument(f"{name} must be finite; got {v}")
-    return v
 
 
 def _times(t: Any) -> np.ndarray:

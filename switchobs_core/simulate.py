@@ -59,7 +59,7 @@ from scipy.linalg import expm
 from .envelope import Segment, envelope_z, error_transitions
 from .exceptions import InvalidArgument
 from .propagation import van_loan, zoh_pair
-from .validation import as_matrix
+from .validation import as_finite, as_matrix
 
 __all__ = [
     "Plant",
@@ -208,12 +208,7 @@ def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str
 
 def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> list[Segment]:
     """The active intervals of ``schedule`` on ``[t0, t_end)``; cycle k uses ``designs[k % K]``."""
-    try:
-        t_end = float(t_end)
-    except (TypeError, ValueError):
-        raise InvalidArgument(f"t_end must be a number; got {t_end!r}") from None
-    if not math.isfinite(t_end):
-        raise InvalidArgument(f"t_end must be finite; got {t_end}")
+    t_end = as_finite(t_end, "t_end")
     designs = list(designs)
     if not designs:
         raise InvalidArgument("designs: need at least one design")
