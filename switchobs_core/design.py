@@ -129,7 +129,12 @@ class ChannelDesigner:
             if val >= 0:
                 if prev is None:
                     return 0.0
-                return float(brentq(lambda e: self.g(e, active, inactive, delta), prev, eta, xtol=1e-9, rtol=1e-10))
+                try:
+                    return float(brentq(lambda e: self.g(e, active, inactive, delta), prev, eta, xtol=1e-9, rtol=1e-10))
+                except DesignError as err:
+                    raise DesignError(
+                        f"{what}{err} (while refining eta_min between {prev:.4g} and {eta:.4g})"
+                    ) from None
             prev = eta
         raise InfeasibleDesign(
             f"{what}no decay rate up to {ETA_GRID[-1]:.3g} satisfies the cycle condition "

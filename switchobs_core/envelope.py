@@ -27,10 +27,13 @@ observable subspaces overlap (DESIGN.md). ``z_i`` can be exceeded; see
 ``Phi(t, 0)`` the ordered product of ``expm((A - L_i C_i) dt)`` over the intervals,
 and ``||x_tilde(t)|| <= ||Phi(t, 0)|| e0`` for every ``||x_tilde(0)|| <= e0``, with
 equality for the top right singular vector of ``Phi(t, 0)``. That is a guarantee
-(up to floating-point rounding in expm) for continuous outputs. For sampled outputs
-held between samples (the online observer), ``Phi(t, 0)`` is the error-to-error block
-of the joint transition and the error has a further term driven by the plant
-trajectory; :func:`switchobs_core.simulate.sampled_error_transition` gives it.
+(up to floating-point rounding in expm) for continuous outputs. For sampled outputs the
+online observer's ``Phi`` is the product of its per-sample error maps: with the default
+innovation hold, ``e^{A dt} - Gamma_A L C``, exact for noise-free samples, so the bound is
+a guarantee there too; with measurement hold it is only the error-to-error block and the
+error has a further term driven by the plant trajectory
+(:func:`switchobs_core.simulate.sampled_error_transition` gives it). Every such bound
+assumes ``||x_tilde(t0)|| <= e0`` at the time origin and noise-free outputs.
 
 Envelope convention: ``z_i(0^-) = e0`` for every channel (an initial error bound,
 ``||x_o^(i)(0)|| <= ||x_tilde(0)|| <= e0``); at an activation the envelope jumps to
@@ -73,8 +76,9 @@ class Envelope:
     paper_bound : float
         ``alpha * sum(z)`` (e:xtilde_alpha_z_main): **the paper's claim, not a guarantee**.
     exact_bound : float
-        ``||Phi(t, t0)|| e0``: ours; a guarantee in the continuous-output setting
-        (see the module docstring for sampled outputs).
+        ``||Phi(t, t0)|| e0``: ours; a guarantee for continuous outputs and for sampled
+        outputs with innovation hold, given ``||x_tilde(t0)|| <= e0`` and noise-free outputs
+        (module docstring; with measurement hold see the simulator's ``hold_bound``).
     t : float
         Time the bounds refer to.
     """

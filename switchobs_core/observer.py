@@ -307,6 +307,8 @@ class SwitchedObserver:
         self._entry_L = False
         self._Phi = np.eye(self.n)
         self._k = -1
+        self._phase = 0  # sequence mode: offset of the design index, re-synced on mismatch
+        self.resyncs = 0
         self._cycle_start: float | None = None
         self._interval_start = t0
         self._h_acc = np.zeros(self.N)
@@ -332,7 +334,7 @@ class SwitchedObserver:
     @property
     def design_index(self) -> int:
         """Index into ``designs`` of the gains in use."""
-        return max(self._k, 0) % len(self.designs)
+        return (max(self._k, 0) + self._phase) % len(self.designs)
 
     @property
     def current_design(self) -> Any:
@@ -433,8 +435,8 @@ class SwitchedObserver:
                                   f"t must be a finite time; got {t!r}")
         if dt == math.inf:
             raise InvalidArgument(f"t must be a finite time; got {t!r}")
-        if (channel != self._channel or not self._channel) and not (
-                isinstance(channel, (int, np.integer)) and 1 <= channel <= self.N):
+        if isinstance(channel, (bool, np.bool_)) or not isinstance(channel, (int, np.integer)) \
+                or not 1 <= channel <= self.N:
             raise InvalidArgument(f"channel must be an integer in 1..{self.N}; got {channel!r}")
         y = np.asarray(y, dtype=float)
         if rows is not None:
@@ -497,7 +499,7 @@ class SwitchedObserver:
         self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
 
     def _close_cycle(self, t: float) -> None:
-        di = max(self._k, 0) % len(self.designs)
+        di = self.design_index
         d = self.designs[di]
         tau = t - self._cycle_start
         h = tuple(float(v) for v in self._h_acc)
@@ -513,11 +515,25 @@ class SwitchedObserver:
             matched = order_ok and a2_ok is not False
         else:
             matched = order_ok and all(abs(hi - ph) <= tol for hi, ph in zip(h, promised.h))
+            if not matched and order_ok and self.mode == "sequence":
+                self._resync(h, tol)
         self._records.append(CycleRecord(
             k=self._k, t_start=self._cycle_start, t_end=t, tau=tau, h=h,
             s=h[0] / tau if tau > 0 else float("nan"), f=_paper_factors(d, tau, h),
             order=order, promised=promised, matched=bool(matched), a2_ok=a2_ok,
             design_index=di))
+
+    def _resync(self, h: tuple, tol: float) -> None:
+        """Sequence mode: after a cycle that did not match its promise (a late start, a reset,
+        a skipped cycle), find the first cycle of the sequence it did match and continue the
+        sequence from there, so the next cycle uses the gains of the one after it. Repeated
+        cycle types (the paper's (3, 0.6) twice) are resolved by the following mismatches."""
+        K = len(self.promised)
+        for j, c in enumerate(self.promised):
+            if all(abs(hi - ph) <= tol for hi, ph in zip(h, c.h)):
+                self._phase = (j - self._k) % K
+                self.resyncs += 1
+                return
 
     def predict(self, t: float, *, hold: bool = False) -> np.ndarray:
         """Prediction ``x_hat(t)`` for ``t >= obs.t`` without a sample; the state is unchanged.

@@ -281,8 +281,9 @@ class SimulationResult:
     paper_bound : (T,) ndarray
         ``alpha sum z_i``: the paper's claim (not a guarantee).
     exact_bound : (T,) ndarray
-        ``||Phi(t, t0)|| e0``: ours; a guarantee for continuous outputs (and noiseless,
-        sampled outputs up to the held-sample term, see :attr:`hold_bound`).
+        ``||Phi(t, t0)|| e0``: ours; a guarantee for noise-free continuous outputs and for
+        noise-free sampled outputs with innovation hold (the default); with measurement
+        hold it misses the held-sample term, see :attr:`hold_bound`.
     hold_bound : (T,) ndarray or None
         Sampled outputs only: ``||Phi_ee|| e0 + ||Phi_ex|| ||x(0)||``, a guarantee for
         noiseless samples with ``u = 0`` (module docstring).

@@ -325,7 +325,10 @@ class EstimatorNode(Node):
                 ob.append(kv("cycle so far paper factors f", res.f))
         if pl.origin_ns is not None:
             env = obs.envelope()
-            ob += [kv("paper bound", env.paper_bound), kv("exact bound", env.exact_bound)]
+            pl = self.pipeline
+            ob += [kv("paper bound", env.paper_bound),
+                   kv("exact bound", env.exact_bound if pl.bound_valid else "none (after a reset)"),
+                   kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
         level, msg = DiagnosticStatus.OK, "estimating"
         if pl.last_accept_clock_ns is None:
             level, msg = DiagnosticStatus.WARN, "waiting for measurements"

@@ -66,10 +66,16 @@ from .core_config import (
 )
 from .params import ConfigError
 
-__all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "POSE_TOPICS", "Estimate", "EstimatorPipeline",
+__all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate", "EstimatorPipeline",
            "PipelineLog", "Prediction", "Residence"]
 
 PARTS = ("camera", "target")
+#: ``exact_bound`` published after a reset: no bound is known any more. ``||Phi(t, t0)|| e0`` holds
+#: only if ``||x_hat(t0) - x(t0)|| <= e0`` at the time origin; the configured ``e0`` is the user's
+#: claim for the start, but after a reset (``~/reset``, a clock jump back, a non-finite estimate)
+#: the plant has moved on and nothing bounds the new initial error. -1 is finite (the node never
+#: publishes non-finite values) and cannot be a norm bound.
+NO_BOUND = -1.0
 #: Input topic of each pose part, and of the channel (relative names, as the node subscribes).
 POSE_TOPICS = {"camera": "camera/pose", "target": "target/pose"}
 CHANNEL_TOPIC = "camera/active_channel"
@@ -203,6 +209,8 @@ class EstimatorPipeline:
         self.partial_updates = 0
         self.switches = 0
         self.resets = 0
+        self.bound_valid = True     # False after any reset: see NO_BOUND
+        self.bound_invalid_why = ""
         self.errors = 0
         self.nonfinite = 0          # estimates withheld because not finite (each followed by a reset)
         self.last_rejection = ""
@@ -385,6 +393,8 @@ class EstimatorPipeline:
             return
         if c != self._res_channel:
             self._res_switch(c, t)
+        if not self.bound_valid:
+            env_vals[-1] = NO_BOUND
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals))
 
     # ------------------------------------------------------------------ bookkeeping
@@ -417,7 +427,9 @@ class EstimatorPipeline:
         self._res_clear()
         self.observer.reset(self.x0, 0.0)
         self.resets += 1
-        self.log.info(f"estimator reset ({why})")
+        self.bound_valid = False
+        self.bound_invalid_why = why
+        self.log.info(f"estimator reset ({why}); exact_bound is {NO_BOUND:g} (no bound known) from now on")
 
 
     # ------------------------------------------------------------------ residence times (A2)
@@ -524,4 +536,4 @@ class EstimatorPipeline:
             return None
         if not (np.isfinite(x).all() and math.isfinite(bound)):
             return None
-        return Prediction(int(stamp), x, float(bound), elapsed * 1e-9)
+        return Prediction(int(stamp), x, float(bound) if self.bound_valid else NO_BOUND, elapsed * 1e-9)

@@ -148,7 +148,8 @@ def summary_table(rep: Report) -> str:
              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for k, p in enumerate(rep.passes, 1):
         c = np.array(p.contraction) if p.contraction else np.array([np.nan])
-        lines.append(f"| {k} | {len(p.t)} | {p.t[-1]:.2f} | {p.e_first:.3e} | {p.e_final:.3e} | {p.exact[-1]:.3e} "
+        exact = f"{p.exact[-1]:.3e}" if p.exact[-1] > 0 else "none (after a reset)"
+        lines.append(f"| {k} | {len(p.t)} | {p.t[-1]:.2f} | {p.e_first:.3e} | {p.e_final:.3e} | {exact} "
                      f"| {p.paper[-1]:.3e} | {len(p.cycle_ends)} | {np.nanmedian(c):.3g} | {np.nanmax(c):.3g} |")
     lines += ["", "Rejected inputs (estimator diagnostics): " +
               (", ".join(f"{k}: {v}" for k, v in sorted(rep.rejected.items())) if rep.rejected else "none")]
@@ -172,7 +173,11 @@ def plot_report(rep: Report, png: str | Path, title: str = "") -> None:
     for k, p in enumerate(passes):
         ax, axc = axes[0, k], axes[1, k]
         ax.semilogy(p.t, p.paper, color="tab:orange", lw=1.6, label="paper's bound $\\alpha\\sum_i z_i$ (claimed)")
-        ax.semilogy(p.t, p.exact, color="tab:green", lw=1.6, ls="--", label="exact bound $\\|\\Phi(t,t_0)\\|\\,e_0$")
+        # exact_bound = -1 after a reset of the estimator: no bound is known (pipeline.NO_BOUND)
+        known = p.exact > 0
+        ax.semilogy(p.t, np.where(known, p.exact, np.nan), color="tab:green", lw=1.6, ls="--",
+                    label="exact bound $\\|\\Phi(t,t_0)\\|\\,e_0$" if known.any()
+                    else "exact bound: none after a reset (the initial error is unknown)")
         if p.err is not None:
             ax.semilogy(p.t, p.err, color="tab:blue", lw=1.3, label="$\\|\\hat x - x\\|$ (estimate vs truth)")
             if p.cycle_ends and p.cycle_err:

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 from _paper_designs import NONPERIODIC, PERIODIC, paper_table
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from switchobs_core.exceptions import InvalidArgument
@@ -74,12 +76,22 @@ def test_single_steps_innovation_hold(paper, table):
                                rtol=1e-11, atol=1e-13)
 
 
-def test_innovation_hold_exact_bound_is_exact_for_samples(paper, table):
-    """With innovation hold the error obeys x_tilde(t) = Phi(t, 0) x_tilde(0) exactly for noiseless
-    samples of a moving, unstable plant: the exact bound holds and Phi predicts the error."""
-    rng = np.random.default_rng(11)
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), worst=st.booleans())
+def test_innovation_hold_exact_bound_is_exact_for_samples(paper, table, seed, worst):
+    """Property: with innovation hold the error obeys x_tilde(t) = Phi(t, 0) x_tilde(0) exactly for
+    noiseless samples of a moving, unstable plant (random plant state, random initial error): the
+    true error never exceeds the exact bound, and in the worst direction (top right singular vector
+    of the final Phi) it attains it."""
+    rng = np.random.default_rng(seed)
     x0 = 5.0 * rng.standard_normal(12)  # a large, fast plant state
     e = 0.1 * rng.standard_normal(12)
+    if worst:
+        probe = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC])
+        samp = simulate(paper, table, PeriodicSchedule(PERIODIC), x0, x0, 6.0, rate=100.0)
+        for k, tk in enumerate(samp.t):
+            probe.update(float(tk), int(samp.channel[k]), samp.y[k])
+        e = 0.1 * np.linalg.svd(probe.Phi)[2][0]
     res = simulate(paper, table, PeriodicSchedule(PERIODIC), x0, x0 + e, 6.0, rate=100.0)
     obs = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC], x0=x0 + e,
                            e0=float(np.linalg.norm(e)))
@@ -88,6 +100,8 @@ def test_innovation_hold_exact_bound_is_exact_for_samples(paper, table):
         err = obs.x_hat - res.x[k]
         np.testing.assert_allclose(err, obs.Phi @ e, rtol=1e-8, atol=1e-11)
         assert np.linalg.norm(err) <= obs.envelope().exact_bound * (1 + 1e-9)
+    if worst:
+        assert np.linalg.norm(err) == pytest.approx(obs.envelope().exact_bound, rel=1e-8)
 
 
 @pytest.mark.parametrize("hold", ["innovation", "measurement"])
@@ -194,3 +208,30 @@ def test_update_rejects_bad_input(paper, table, call, match):
 def test_constructor_rejects_bad_arguments(paper, table, kw, match):
     with pytest.raises(InvalidArgument, match=match):
         SwitchedObserver(paper, table, **kw)
+
+
+def test_sequence_mode_resyncs_after_a_late_start(paper, table):
+    """Started 4 s into the paper's sequence (4,0.5),(3,0.6),(3,0.6),(2,0.4), the observer's
+    cycle count is off by one; after mismatched cycles it finds its place in the sequence, and
+    from then on every cycle is run with the gains designed for it."""
+    sched = SequenceSchedule(NONPERIODIC)
+    obs = SwitchedObserver(paper, table, mode="sequence", cycles=NONPERIODIC)
+    for t in np.arange(4.0, 60.0, 0.01):
+        obs.update(float(t), sched.channel_at(float(t) + 1e-9), np.zeros(4))
+    recs = obs.completed_cycles
+    assert not recs[0].matched and obs.resyncs >= 1
+    first_ok = next(i for i, r in enumerate(recs) if r.matched)
+    assert first_ok <= 3
+    assert all(r.matched for r in recs[first_ok:])
+    # the gains used are those of the cycle that was run
+    for r in recs[first_ok:]:
+        assert NONPERIODIC[r.design_index].matches(r.promised)
+        assert r.h == pytest.approx(r.promised.h, abs=0.011)
+
+
+@pytest.mark.parametrize("channel", [1.0, True, 0, 3, "1"])
+def test_channel_must_be_an_integer_in_range(paper, table, channel):
+    obs = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC])
+    obs.update(0.0, 1, np.zeros(4))
+    with pytest.raises(InvalidArgument, match="channel must be an integer in 1..2"):
+        obs.update(0.1, channel, np.zeros(4))

@@ -65,7 +65,12 @@ def test_clock_jump_back_resets_and_estimation_resumes(estimator, ros_node):
     assert spin_until(ros_node, lambda: len(io.msgs["state"]) >= n_before + len(second), 10.0), estimator.output()
     answered = [mb.unpack_labelled(m).stamp_ns for m in io.msgs["state"][n_before:]]
     assert answered == second                            # every sample after the jump is answered
+    # before the reset the exact bound is ||Phi|| e0 > 0; after it no bound is known: -1 (NO_BOUND)
+    env = [mb.unpack_labelled(m) for m in io.msgs["envelope"]]
+    assert all(e.values[-1] > 0 for e in env[:n_before])
+    assert all(e.values[-1] == -1.0 for e in env[n_before:]) and len(env) == n_before + len(second)
     assert spin_until(ros_node, lambda: io.diag_values().get("clock jumps back (resets)") == "1", 10.0)
     d = io.diag_values()
     assert d["resets"] == "1" and d["last clock jump"].startswith("back by 50.")
+    assert d["exact bound valid"].startswith("false (clock jumped back")
     assert d.get("rejected camera/pose old_stamp") == "1"  # nothing after the jump was rejected

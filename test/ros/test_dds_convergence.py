@@ -27,6 +27,8 @@ def test_converges_over_dds(schedule, paper_tables, tmp_path):
     assert rel[0] < 1e-3, f"relative error {rel[0]:.2e} at t = {t[i20]:.2f} s"
     assert rel.max() < 1e-3, f"relative error up to {rel.max():.2e} after 20 s"
     assert err[0] / e0 > 0.5                                  # it did start far away
-    # the exact bound is published and covers the error while the transient dominates
-    i5 = int(np.searchsorted(t, 5.0))
-    assert np.all(err[:i5] <= res["exact"][:i5] * (1 + 1e-6) + 5e-3)
+    # the published exact bound covers the published error at every answered measurement: with
+    # innovation hold the node's error map is exact for noise-free samples, also when DDS drops one
+    exact = res["exact"]
+    assert np.all(exact > 0)
+    assert np.all(err <= exact * (1 + 1e-6) + 1e-12), float(np.max(err / exact))
