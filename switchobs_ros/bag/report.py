@@ -72,6 +72,21 @@ def _labelled(bag_msgs, topic, cls):
     return out
 
 
+def _split_passes(series, indices: bool = False):
+    """Split ``(log_ns, stamp_ns, values)`` in file order where the stamp goes back (a looped
+    replay): lists of indices, or one ``{stamp: values}`` dict per pass."""
+    passes: list = [[]]
+    last = None
+    for i, (_, s, _) in enumerate(series):
+        if last is not None and s <= last:
+            passes.append([])
+        passes[-1].append(i)
+        last = s
+    if indices:
+        return passes
+    return [{series[i][1]: series[i][2] for i in idx} for idx in passes if idx]
+
+
 def load_report(bag_path, node: str = "/estimator") -> Report:
     """Read the bag and compute the per-pass series and summary."""
     from diagnostic_msgs.msg import DiagnosticArray
@@ -88,7 +103,7 @@ def load_report(bag_path, node: str = "/estimator") -> Report:
         bag.require({t: opt[t] for t in present})
         msgs = bag.messages([t_state, t_env, *present], order="file")
     states = _labelled(msgs, t_state, Float64MultiArray)
-    envs = {s: v for _, s, v in _labelled(msgs, t_env, Float64MultiArray)}
+    env_passes = _split_passes(_labelled(msgs, t_env, Float64MultiArray))
     truth = {s: v for _, s, v in _labelled(msgs, "/sim/truth", Float64MultiArray)}
     chan = [(m.log_ns, int(deserialize(m, UInt8).data)) for m in msgs if m.topic == "/camera/active_channel"]
     if not states:
@@ -102,16 +117,12 @@ def load_report(bag_path, node: str = "/estimator") -> Report:
                     for kv in st.values:
                         if kv.key.startswith("rejected ") and kv.key != "rejected total":
                             rejected[kv.key[len("rejected "):]] = int(kv.value)
-    # split into passes where the stamps go back (a looped replay)
-    passes_idx: list[list[int]] = [[]]
-    last = None
-    for i, (_, s, _) in enumerate(states):
-        if last is not None and s <= last:
-            passes_idx.append([])
-        passes_idx[-1].append(i)
-        last = s
+    # split into passes where the stamps go back (a looped replay); the envelopes likewise, so
+    # that each pass is matched with its own envelopes (the stamps repeat from pass to pass)
+    passes_idx = _split_passes(states, indices=True)
     passes = []
-    for idx in passes_idx:
+    for k_pass, idx in enumerate(passes_idx):
+        envs = env_passes[k_pass] if k_pass < len(env_passes) else {}
         log0, log1 = states[idx[0]][0], states[idx[-1]][0]
         stamps = np.array([states[i][1] for i in idx], dtype=np.int64)
         t = (stamps - stamps[0]) * 1e-9

@@ -70,6 +70,9 @@ def test_looped_live_replay_sqlite_resets_and_converges_again(paper_tables, tmp_
     # the report splits the recording into its two passes: the same accuracy again
     rep = load_report(tmp_path / "rec")
     assert len(rep.passes) == 2
+    # each pass is matched with its own envelopes (the stamps repeat): pass 1 has the verified bound,
+    # pass 2, after the reset, none (-1: the new initial error is unknown)
+    assert np.all(rep.passes[0].exact > 0) and np.all(rep.passes[1].exact == -1.0)
     truth = {s: np.asarray(m.data[2:]) for s, msgs in scenario_ticks(cfg) for t, m in msgs if t == "/sim/truth"}
     final = np.linalg.norm(off.x_hat[-1] - truth[int(off.stamps[-1])])
     assert final < 0.2 * np.linalg.norm(off.x_hat[0] - truth[int(off.stamps[0])])
