@@ -68,9 +68,10 @@ __all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "CycleRecord", "SwitchedObserver"
 MODES = ("periodic", "sequence", "robust")
 #: What may be held between samples (module docstring).
 HOLDS = ("innovation", "measurement")
-#: Largest accepted magnitude of a sample or input entry: beyond it the products with the
-#: gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
+#: Largest accepted norm of a sample (and magnitude of an input entry): beyond it the products
+#: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
+_MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
 
 
 @dataclass(frozen=True)
@@ -447,10 +448,12 @@ class SwitchedObserver:
             if y.size != p:
                 raise InvalidArgument(f"y must have {p} entries for channel {channel}"
                                       f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
-        if not np.isfinite(y).all():
-            raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
-        if y.size and np.abs(y).max() > MAX_ABS_SAMPLE:
-            raise InvalidArgument(f"y has an entry of magnitude {np.abs(y).max():.3g} > {MAX_ABS_SAMPLE:g}: "
+        # one dot product checks both (hot path; 0.3 us vs 2 us for max|y|): y'y <= bound^2 is
+        # False for NaN, for inf and for any entry beyond the bound
+        if p and not float(y @ y) <= _MAX_SQ:
+            if not np.isfinite(y).all():
+                raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
+            raise InvalidArgument(f"y is too large (||y|| = {float(np.linalg.norm(y)):.3g} > {MAX_ABS_SAMPLE:g}): "
                                   "the update would overflow")
         if u is not None:
             u = np.asarray(u, dtype=float).reshape(-1)

@@ -235,3 +235,15 @@ def test_channel_must_be_an_integer_in_range(paper, table, channel):
     obs.update(0.0, 1, np.zeros(4))
     with pytest.raises(InvalidArgument, match="channel must be an integer in 1..2"):
         obs.update(0.1, channel, np.zeros(4))
+
+
+@pytest.mark.parametrize("y, match", [
+    ([np.nan, 0, 0, 0], "non-finite entry"), ([0, -np.inf, 0, 0], "non-finite entry"),
+    ([0, 0, 1e151, 0], "too large"), ([1e150, 1e150, 0, 0], "too large"),
+])
+def test_update_refuses_samples_that_would_overflow(paper, table, y, match):
+    obs = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC])
+    obs.update(0.0, 1, np.zeros(4))
+    with pytest.raises(InvalidArgument, match=match):
+        obs.update(0.01, 1, np.array(y, dtype=float))
+    obs.update(0.01, 1, np.array([1e149, 0.0, 0.0, -1e149]))  # large but representable: accepted
