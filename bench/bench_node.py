@@ -30,6 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _pacing import sleep_until
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 RATES = (250, 500, 1000, 2000, 3000)
@@ -103,12 +106,7 @@ def run_rate(driver: Driver, rate: float, seconds: float) -> dict:
     def send():
         t_next = time.perf_counter()
         for k in range(n):
-            while True:
-                d = t_next - time.perf_counter()
-                if d <= 0:
-                    break
-                if d > 0.0015:
-                    time.sleep(d - 0.001)
+            sleep_until(t_next)
             s = time.time_ns()
             driver.pub_cam.publish(mb.xy_to_pose((0.001 * k, 0.0), s, "map"))
             driver.pub_tgt.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))

@@ -35,6 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _pacing import sleep_until
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 S = 1_000_000_000
@@ -164,12 +167,7 @@ def main(argv=None) -> int:
             sent[f"bad_{kind}"] += 1
 
         for k in range(n):
-            while True:
-                d = t_next - time.perf_counter()
-                if d <= 0:
-                    break
-                if d > 0.0015:
-                    time.sleep(d - 0.001)
+            sleep_until(t_next)
             t_next += period
             s = time.time_ns()
             c = sched.channel_at((s - t0_ns) * 1e-9)

@@ -221,6 +221,23 @@ def _rate_of(P: np.ndarray, Phis: Sequence[np.ndarray]) -> float:
     return max(float(np.linalg.norm(R @ Phi @ Rinv, 2)) for Phi in Phis)
 
 
+def _solve_feasibility(prob) -> bool:
+    """Solve an LMI feasibility problem (Clarabel, no warm start, solver warnings silenced).
+
+    True if the solver reports a (possibly inaccurate) solution; False on infeasibility or a
+    solver failure. Callers verify any solution in floating point themselves.
+    """
+    import cvxpy as cp
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            prob.solve(solver=cp.CLARABEL, warm_start=False)
+    except cp.error.SolverError:
+        return False
+    return prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+
 def _verify(P: np.ndarray, Phis: Sequence[np.ndarray], rho: float) -> float:
     """Smallest eigenvalue of ``rho^2 P - Phi_j' P Phi_j`` over j, minus a rounding allowance.
 
@@ -305,16 +322,8 @@ def common_lyapunov(Phis: Sequence[Any], *, rel_tol: float = 1e-3, margin: float
             break
         mid = 0.5 * (lo + hi)
         rho2.value = mid ** 2
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                prob.solve(solver=cp.CLARABEL, warm_start=False)
-        except cp.error.SolverError:
-            lo = mid
-            continue
-        finally:
-            solves += 1
-        if prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) and P.value is not None:
+        solves += 1
+        if _solve_feasibility(prob) and P.value is not None:
             Pv = 0.5 * (P.value + P.value.T)
             try:
                 r = _rate_of(Pv, Phis) * (1 + margin)
@@ -509,14 +518,7 @@ def certify_box(system: Any, design: Any, h_min: float | None = None, h_max: flo
             break
         mid = 0.5 * (lo + hi)
         c.value = mid
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                prob.solve(solver=cp.CLARABEL, warm_start=False)
-        except cp.error.SolverError:
-            lo = mid
-            continue
-        if prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
+        if _solve_feasibility(prob):
             cand = [0.5 * (X.value + X.value.T) for X in Pv]
             try:
                 for X in cand:
