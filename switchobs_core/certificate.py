@@ -42,6 +42,7 @@ from .exceptions import InvalidArgument
 from .validation import as_finite, as_matrix
 
 __all__ = [
+    "cycle_factor",
     "paper_factors",
     "cycle_transition",
     "CycleCertificate",
@@ -58,6 +59,32 @@ __all__ = [
 
 
 # ---------------------------------------------------------------------- the paper's
+def cycle_factor(kappa: float, mu: float, eta: float, active: float, inactive: float) -> float:
+    """The paper's cycle factor of one channel (e:Fk, e:f11_le_delta_main).
+
+    ``f = kappa exp(mu (tau - h) - eta h)``: the channel decays at rate ``eta`` for its
+    active time ``h`` and grows at most at rate ``mu`` for the rest of the cycle
+    ``tau - h``; ``kappa`` is the overshoot of its observer (e:eta1_fixed).
+
+    Parameters
+    ----------
+    kappa, mu, eta : float
+        The channel's overshoot, growth bound and designed decay rate.
+    active : float
+        ``h``, the time the channel is active in the cycle (s).
+    inactive : float
+        ``tau - h``, the time it is inactive (s); for a robust design the worst case of
+        the box, which need not equal ``tau - h`` of one cycle.
+
+    Returns
+    -------
+    float
+        ``kappa * exp(mu * inactive - eta * active)``; the single place this formula is
+        evaluated.
+    """
+    return float(kappa * math.exp(mu * inactive - eta * active))
+
+
 def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float, ...]:
     """The paper's cycle factors ``f_ii`` (e:Fk, e:f11_le_delta_main), N channels.
 
@@ -81,7 +108,7 @@ def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float,
         h = design.cycle.h
     h = _residences(h, len(design.kappa), allow_zero=True)
     tau = float(sum(h))
-    return tuple(float(k * math.exp(m * (tau - hi) - e * hi))
+    return tuple(cycle_factor(k, m, e, hi, tau - hi)
                  for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
 
 

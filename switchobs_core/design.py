@@ -37,6 +37,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
+from .certificate import cycle_factor
 from .decomposition import Decomposition
 from .exceptions import DesignError, InfeasibleDesign, InvalidArgument, ScheduleError
 from .gains import ChannelGain, CycleDesign, GainTable
@@ -210,7 +211,7 @@ class Designer:
         g = ch.synth.gain(eta)
         T_o = ch.decomp.T_o
         L = T_o @ g.L_o  # L_i = T_i [L_o; 0] (e:L_original)
-        f = g.kappa * math.exp(ch.mu * inactive - eta * active)
+        f = cycle_factor(g.kappa, ch.mu, eta, active, inactive)
         return ChannelGain(
             eta_min=eta_min,
             eta=eta,

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import __version__
+from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 
@@ -84,7 +85,7 @@ class ChannelGain:
 
     def factor(self, active: float, inactive: float) -> float:
         """The paper's cycle factor kappa exp(mu * inactive - eta * active) for other durations."""
-        return float(self.kappa * math.exp(self.mu * inactive - self.eta * active))
+        return cycle_factor(self.kappa, self.mu, self.eta, active, inactive)
 
     def to_dict(self) -> dict[str, Any]:
         d = {

@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from .certificate import cycle_factor
 from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
@@ -124,10 +125,7 @@ class CycleRecord:
 
 def _paper_factors(design: Any, tau: float, h: Sequence[float]) -> tuple:
     """``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` for measured durations."""
-    return tuple(
-        float(k * math.exp(m * (tau - hi) - e * hi))
-        for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h)
-    )
+    return tuple(cycle_factor(k, m, e, hi, tau - hi) for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
 
 
 class SwitchedObserver:
