@@ -81,7 +81,16 @@ def cycle_factor(kappa: float, mu: float, eta: float, active: float, inactive: f
     float
         ``kappa * exp(mu * inactive - eta * active)``; the single place this formula is
         evaluated.
+
+    Raises
+    ------
+    InvalidArgument
+        An argument is not a finite number, or a duration is negative.
     """
+    for name, v in (("kappa", kappa), ("mu", mu), ("eta", eta), ("active", active), ("inactive", inactive)):
+        if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v)) or (
+                name in ("active", "inactive") and v < 0):
+            raise InvalidArgument(f"cycle_factor: {name} must be a finite number (a duration >= 0); got {v!r}")
     return float(kappa * math.exp(mu * inactive - eta * active))
 
 

@@ -52,12 +52,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .certificate import cycle_factor
+from .cycles import CycleRecord, CycleTracker, Residence
 from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
@@ -73,59 +72,6 @@ HOLDS = ("innovation", "measurement")
 #: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
 _MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
-
-
-@dataclass(frozen=True)
-class CycleRecord:
-    """One completed switching cycle, as measured by the observer.
-
-    Attributes
-    ----------
-    k : int
-        Cycle index (0 for the cycle that starts at the first channel-1 start).
-    t_start, t_end : float
-        The two channel-1 starts that bound the cycle (``t_{2k}``, ``t_{2k+2}``).
-    tau : float
-        Measured length ``tau_k = t_end - t_start`` (e:tau_k).
-    h : tuple of float
-        Measured active time of each channel in the cycle (``h_1 = s_k tau_k``).
-    s : float
-        Measured duty fraction ``s_k = h_1 / tau_k`` (e:s_k).
-    f : tuple of float
-        The paper's factors ``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` for the
-        measured durations and the gains used (e:f11_le_delta_main, e:f22_le_delta_main).
-        The paper claims contraction when all are < 1; that claim is not a proof (DESIGN.md).
-    order : tuple of int
-        Channels in the order they were active during the cycle.
-    promised : Any
-        The scheduled :class:`~switchobs_core.schedule.Cycle` (None in robust mode).
-    matched : bool
-        Order was 1..N and every ``|h_i - promised.h_i| <= match_tol`` (robust mode:
-        order 1..N and A2 held).
-    a2_ok : bool or None
-        Robust mode: every ``h_i`` within ``[h_min - match_tol, h_max + match_tol]``;
-        None when no box is known.
-    design_index : int
-        Which entry of the mode's design list was used.
-    """
-
-    k: int
-    t_start: float
-    t_end: float
-    tau: float
-    h: tuple
-    s: float
-    f: tuple
-    order: tuple
-    promised: Any
-    matched: bool
-    a2_ok: bool | None
-    design_index: int
-
-
-def _paper_factors(design: Any, tau: float, h: Sequence[float]) -> tuple:
-    """``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` for measured durations."""
-    return tuple(cycle_factor(k, m, e, hi, tau - hi) for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
 
 
 class SwitchedObserver:
@@ -272,6 +218,7 @@ class SwitchedObserver:
         self._keys: dict = {}
         self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
+        self._cycles = CycleTracker(self.N, self.mode, self.bounds, self.match_tol, float(t0))
         self._x0_init = x0
         self._t0_init = t0
         self.reset(x0, t0)
@@ -308,10 +255,7 @@ class SwitchedObserver:
         self._k = -1
         self._phase = 0  # sequence mode: offset of the design index, re-synced on mismatch
         self.resyncs = 0
-        self._cycle_start: float | None = None
-        self._interval_start = t0
-        self._h_acc = np.zeros(self.N)
-        self._order: list[int] = []
+        self._cycles.reset(t0)
         self._records.clear()
         self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0)
 
@@ -482,59 +426,53 @@ class SwitchedObserver:
         return self._x
 
     def _switch(self, t: float, channel: int) -> None:
-        """Bookkeeping at a switching instant (e:switching_instants)."""
-        old = self._channel
-        if old:
-            self._h_acc[old - 1] += t - self._interval_start
+        """Bookkeeping at a switching instant (e:switching_instants), kept by the tracker."""
+        cyc = self._cycles
+        cyc.end_residence(t)
         if channel == 1:
-            if self._cycle_start is not None:
+            if cyc.cycle_start is not None:
                 self._close_cycle(t)
             self._k += 1
-            self._cycle_start = t
-            self._h_acc[:] = 0.0
-            self._order = []
-        self._order.append(channel)
-        self._interval_start = t
         self._channel = channel
         d = self.current_design
+        cyc.begin(t, channel, cyc.limits_for(d, channel))
         self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
 
     def _close_cycle(self, t: float) -> None:
         di = self.design_index
-        d = self.designs[di]
-        tau = t - self._cycle_start
-        h = tuple(float(v) for v in self._h_acc)
-        order = tuple(self._order)
-        order_ok = order == tuple(range(1, self.N + 1))
-        promised = self.promised[di]
-        tol = self.match_tol
-        a2_ok = None
-        if self.mode == "robust":
-            if self.bounds is not None:
-                hmin, hmax = self.bounds
-                a2_ok = all(hmin - tol <= hi <= hmax + tol for hi in h)
-            matched = order_ok and a2_ok is not False
-        else:
-            matched = order_ok and all(abs(hi - ph) <= tol for hi, ph in zip(h, promised.h))
-            if not matched and order_ok and self.mode == "sequence":
-                self._resync(h, tol)
-        self._records.append(CycleRecord(
-            k=self._k, t_start=self._cycle_start, t_end=t, tau=tau, h=h,
-            s=h[0] / tau if tau > 0 else float("nan"), f=_paper_factors(d, tau, h),
-            order=order, promised=promised, matched=bool(matched), a2_ok=a2_ok,
-            design_index=di))
+        rec, resync = self._cycles.close_cycle(t, self._k, self.designs[di], di, self.promised[di],
+                                               self.mode == "sequence")
+        if resync:
+            self._resync(rec.h)
+        self._records.append(rec)
 
-    def _resync(self, h: tuple, tol: float) -> None:
+    def _resync(self, h: tuple) -> None:
         """Sequence mode: after a cycle that did not match its promise (a late start, a reset,
         a skipped cycle), find the first cycle of the sequence it did match and continue the
         sequence from there, so the next cycle uses the gains of the one after it. Repeated
         cycle types (the paper's (3, 0.6) twice) are resolved by the following mismatches."""
         K = len(self.promised)
         for j, c in enumerate(self.promised):
-            if all(abs(hi - ph) <= tol for hi, ph in zip(h, c.h)):
+            if self._cycles.matches(h, c):
                 self._phase = (j - self._k) % K
                 self.resyncs += 1
                 return
+
+    @property
+    def residence_violations(self) -> int:
+        """Residences outside their designed interval since construction (kept by :meth:`reset`)."""
+        return self._cycles.violations
+
+    @property
+    def residence_problem(self) -> str:
+        """The statement of the residence that ended at the latest sample, if it broke its
+        interval, else ""."""
+        return self._cycles.problem_at_switch
+
+    def residence(self) -> Residence | None:
+        """The active channel's residence at the observer's time against the gains in use
+        (None before the first sample); see :class:`~switchobs_core.cycles.CycleTracker`."""
+        return self._cycles.residence(self._t, self.current_design)
 
     def predict(self, t: float, *, hold: bool = False) -> np.ndarray:
         """Prediction ``x_hat(t)`` for ``t >= obs.t`` without a sample; the state is unchanged.

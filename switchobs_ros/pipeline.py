@@ -56,6 +56,7 @@ from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 
 from .core_config import (
@@ -98,28 +99,6 @@ class Prediction:
     x_hat: np.ndarray
     exact_bound: float
     age: float
-
-
-@dataclass(frozen=True)
-class Residence:
-    """The active channel's residence time against what the gains were designed for.
-
-    ``kind`` is ``"A2"`` (robust mode: ``[lo, hi] = [h_min, h_max]``) or ``"schedule"``
-    (``h_i +- match_tol`` of the scheduled cycle). ``current`` is the active channel's time so
-    far (s, from sample stamps); ``last`` the last completed residence ``(channel, h, lo, hi)``;
-    ``f`` the paper's factors of the cycle so far (measured h; None before the first switch);
-    ``problem`` a one-line statement when the assumption is broken now, else "".
-    """
-
-    kind: str
-    channel: int
-    current: float
-    lo: float
-    hi: float
-    last: tuple | None
-    f: tuple | None
-    violations: int
-    problem: str
 
 
 @dataclass(frozen=True)
@@ -200,8 +179,6 @@ class EstimatorPipeline:
         self.obs_ns: int | None = None           # stamp of the last observer update
         self.last_accept_clock_ns: int | None = None
         self.switch_ns: int | None = None        # newest pose stamp before the latest channel change
-        self._res_clear()
-        self.residence_violations = 0
         # counters (never cleared)
         self.accepted: Counter = Counter()
         self.rejected: Counter = Counter()
@@ -372,6 +349,7 @@ class EstimatorPipeline:
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         dt = t - self.observer.t
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
+            violations = self.observer.residence_violations
             x_hat = self.observer.update(t, c, y, rows=rows)
             self.obs_ns = pend.stamp_ns
             self.updates += 1
@@ -391,8 +369,8 @@ class EstimatorPipeline:
                            "resetting the estimator")
             self.reset("non-finite estimate")
             return
-        if c != self._res_channel:
-            self._res_switch(c, t)
+        if self.observer.residence_violations != violations:     # the residence that ended at t
+            self.log.warn(self.observer.residence_problem, throttle=True)
         if not self.bound_valid:
             env_vals[-1] = NO_BOUND
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals))
@@ -424,7 +402,6 @@ class EstimatorPipeline:
         self.obs_ns = None
         self.last_ns = {p: None for p in PARTS}
         self.switch_ns = None
-        self._res_clear()
         self.observer.reset(self.x0, 0.0)
         self.resets += 1
         self.bound_valid = False
@@ -433,82 +410,14 @@ class EstimatorPipeline:
 
 
     # ------------------------------------------------------------------ residence times (A2)
-    def _res_clear(self) -> None:
-        self._res_channel = 0
-        self._res_since = 0.0
-        self._res_limits = (0.0, math.inf)
-        self._cycle_h = np.zeros(self.N)
-        self._res_last: tuple | None = None
-        self._res_started = False
-
-    def _limits(self, channel: int) -> tuple[float, float]:
-        """Designed residence interval of ``channel`` under the gains now in use."""
-        obs = self.observer
-        if self.mode == "robust":
-            b = getattr(obs, "bounds", None)     # A2's box, with the observer's tolerance (a2_ok)
-            return (max(float(b[0]) - obs.match_tol, 0.0), float(b[1]) + obs.match_tol) if b else (0.0, math.inf)
-        h = obs.current_design.cycle.h[channel - 1]
-        return (max(h - obs.match_tol, 0.0), h + obs.match_tol)
-
-    def _res_switch(self, c: int, t: float) -> None:
-        """Bookkeeping at a switching instant seen by the observer (time ``t``, from the stamps)."""
-        old = self._res_channel
-        if old:
-            h = t - self._res_since
-            lo, hi = self._res_limits
-            # the first residence after start-up or a reset began before the first sample: its
-            # measured time is only a lower bound, so it is not judged against h_min
-            if h > hi or (h < lo and self._res_started):
-                self.residence_violations += 1
-                self.log.warn(self._res_text(old, h, lo, hi, done=True), throttle=True)
-            self._cycle_h[old - 1] += h
-            self._res_last = (old, h, lo, hi, self._res_started)
-            self._res_started = True
-        if c == 1:
-            self._cycle_h[:] = 0.0
-        self._res_channel = c
-        self._res_since = t
-        self._res_limits = self._limits(c)
-
-    def _res_text(self, c: int, h: float, lo: float, hi: float, *, done: bool) -> str:
-        what = "A2" if self.mode == "robust" else "schedule"
-        tol = self.observer.match_tol
-        if self.mode == "robust":
-            bound = f"h_max {hi - tol:g} s" if h > hi else f"h_min {lo + tol:g} s"
-        else:
-            bound = f"the scheduled {(hi + lo) / 2:g} s"
-        bound += f" (tolerance {tol:g} s)"
-        verb = "was active" if done else "active"
-        rel = ">" if h > hi else "<"
-        return f"{what} broken: channel {c} {verb} {h:.3f} s {rel} {bound}"
+    @property
+    def residence_violations(self) -> int:
+        """Residences outside what the gains were designed for (the observer counts them)."""
+        return self.observer.residence_violations
 
     def residence(self) -> Residence | None:
         """The active channel's residence against the design (None before the first sample)."""
-        c = self._res_channel
-        if not c:
-            return None
-        obs = self.observer
-        cur = obs.t - self._res_since
-        lo, hi = self._res_limits
-        problem = ""
-        if cur > hi:
-            problem = self._res_text(c, cur, lo, hi, done=False)
-        elif self._res_last is not None:
-            lc, lh, llo, lhi, judged = self._res_last
-            if lh > lhi or (lh < llo and judged):
-                problem = self._res_text(lc, lh, llo, lhi, done=True)
-        f = None
-        if self._res_started:
-            h = self._cycle_h.copy()
-            h[c - 1] += cur
-            try:
-                from switchobs_core.certificate import paper_factors
-                f = paper_factors(obs.current_design, tuple(h))
-            except SwitchobsError:
-                f = None
-        return Residence(kind="A2" if self.mode == "robust" else "schedule", channel=c, current=cur, lo=lo, hi=hi,
-                         last=None if self._res_last is None else self._res_last[:4], f=f,
-                         violations=self.residence_violations, problem=problem)
+        return self.observer.residence()
 
     # ------------------------------------------------------------------ outage prediction
     def predict(self, now_ns: int) -> Prediction | None:

@@ -62,6 +62,8 @@ def _bad(M, i=0, j=0, v=NAN):
 # (id, argument name the message must contain, call(small) -> raises)
 CASES = [
     # --- validation helpers
+    ("cycle_factor.kappa", "kappa", lambda s: cert.cycle_factor(NAN, 0.5, 1.0, 1.0, 1.0)),
+    ("cycle_factor.active", "active", lambda s: cert.cycle_factor(2.0, 0.5, 1.0, -1.0, 1.0)),
     ("as_matrix.3d", "Q", lambda s: val.as_matrix(np.zeros((2, 2, 2)), "Q")),
     ("as_matrix.nan", "Q", lambda s: val.as_matrix([[NAN]], "Q")),
     ("as_matrix.square", "Q", lambda s: val.as_matrix(np.zeros((2, 3)), "Q", square=True)),
