@@ -51,8 +51,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     from switchobs_core.design import design_table
+    from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle
-    from switchobs_core.system import load_system
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.bag.estimate import estimate, estimator_params
     from switchobs_ros.bag.generate import GenerateConfig, generate

@@ -174,7 +174,7 @@ parser = cli.build_parser()          # imports every subcommand module, as `swit
 t1 = time.perf_counter()
 import cvxpy  # noqa: F401  (imported lazily by LMISynthesizer)
 t2 = time.perf_counter()
-from switchobs_core.system import load_system
+from switchobs_core.scenarios import load_system
 from switchobs_core.design import Designer
 from switchobs_core.schedule import Cycle
 system = load_system("paper")

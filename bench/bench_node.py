@@ -175,8 +175,8 @@ def main(argv=None) -> int:
     from std_msgs.msg import Float64MultiArray
 
     from switchobs_core.design import design_table
+    from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle
-    from switchobs_core.system import load_system
     from switchobs_ros.launch import NodeProcess, ros_args
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_node_"))

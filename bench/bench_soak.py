@@ -72,8 +72,8 @@ def main(argv=None) -> int:
 
     import msg_bridge as mb
     from switchobs_core.design import design_table
+    from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle, PeriodicSchedule
-    from switchobs_core.system import load_system
     from switchobs_ros import qos
     from switchobs_ros.launch import NodeProcess, ros_args
 

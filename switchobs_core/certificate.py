@@ -39,6 +39,8 @@ from scipy.linalg import expm
 
 from .envelope import Segment, envelope_z, error_transitions
 from .exceptions import InvalidArgument
+from .schedule import PeriodicSchedule, SequenceSchedule
+from .simulate import schedule_segments
 from .validation import as_finite, as_matrix
 
 __all__ = [
@@ -702,9 +704,6 @@ def certify_table(system: Any, table: Any, *, sequence: Sequence[Any] | None = N
     each, a common quadratic Lyapunov function for their cycle maps (any order), and the
     envelope ratio over the repeated sequence. For ``table.robust``: the box certificate.
     """
-    from .schedule import PeriodicSchedule, SequenceSchedule
-    from .simulate import schedule_segments
-
     if not isinstance(ratio_cycles, (int, np.integer)) or ratio_cycles < 1:
         raise InvalidArgument(f"ratio_cycles must be an integer >= 1; got {ratio_cycles!r}")
     if as_finite(ratio_dt, "ratio_dt") <= 0:

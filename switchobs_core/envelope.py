@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidArgument
+from .propagation import transition
 from .validation import as_finite, as_matrix, as_vector
 
 __all__ = [
@@ -291,8 +292,6 @@ def error_transitions(A: np.ndarray, C: Sequence[np.ndarray], t: np.ndarray,
     -------
     (T, n, n) ndarray
     """
-    from .propagation import transition
-
     A = as_matrix(A, "A", square=True)
     n = A.shape[0]
     C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]

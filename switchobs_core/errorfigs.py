@@ -19,7 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from .design import design_cycle
 from .exceptions import InvalidArgument
+from .schedule import Cycle, PeriodicSchedule, SequenceSchedule
+from .simulate import simulate
 
 __all__ = ["write_error_figures", "plot_result", "PERIODIC", "NONPERIODIC", "paper_cases"]
 
@@ -36,8 +39,6 @@ def paper_cases(system: Any, table_or_designs: Any = None) -> dict:
     ``table_or_designs``: a GainTable (looked up per cycle), a dict ``{Cycle: design}``,
     or None (designed here with the paper's selected rates via ``design_cycle``).
     """
-    from .schedule import Cycle, PeriodicSchedule, SequenceSchedule
-
     out = {}
     for name, (ts, etas) in (("periodic", PERIODIC), ("nonperiodic", NONPERIODIC)):
         cycles = [Cycle.from_ts(*x) for x in ts]
@@ -48,8 +49,6 @@ def paper_cases(system: Any, table_or_designs: Any = None) -> dict:
                 designs.append(memo[c])
                 continue
             if table_or_designs is None:
-                from .design import design_cycle
-
                 d = design_cycle(system, c, eta=eta)
             elif isinstance(table_or_designs, dict):
                 d = table_or_designs[c]
@@ -148,8 +147,6 @@ def write_error_figures(system: Any, table_or_designs: Any, outdir: str | Path, 
     list of Path
         ``error_periodic.png``, ``error_nonperiodic.png``.
     """
-    from .simulate import simulate
-
     outdir = Path(outdir)
     rng = np.random.default_rng(seed)
     x0 = rng.standard_normal(system.n)

@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from .cycles import CycleRecord, CycleTracker, Residence
+from .decomposition import observability_decomposition
 from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
@@ -207,7 +208,6 @@ class SwitchedObserver:
         try:
             self.alpha = float(system.alpha)
         except AttributeError:
-            from .decomposition import observability_decomposition
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
         e0 = float(e0)
         if not (math.isfinite(e0) and e0 >= 0):

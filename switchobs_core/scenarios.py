@@ -13,14 +13,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .exceptions import InvalidSystem
-from .system import LTISystem
+from .system import LTISystem, read_spec
 
-__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "PAPER_D"]
+__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system", "PAPER_D"]
 
 #: The paper's velocity matrices (Sec. ``subsec:sim_params``): D_c, D_1, D_2 diagonals.
 PAPER_D: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.2), (0.0, 0.1))
@@ -120,3 +121,25 @@ def build_scenario(name: str, **params: Any) -> LTISystem:
         return SCENARIOS[name](**params)
     except TypeError as err:
         raise InvalidSystem(f"scenario '{name}': bad parameters ({err})") from None
+
+
+def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
+    """A system from a parsed YAML mapping: ``scenario: name`` with the scenario's
+    parameters, or the explicit schema of :meth:`LTISystem.from_dict`."""
+    if isinstance(spec, dict) and "scenario" in spec:
+        params = {k: v for k, v in spec.items() if k != "scenario"}
+        return build_scenario(str(spec["scenario"]), **params)
+    return LTISystem.from_dict(spec, source=source)
+
+
+def load_system(spec: str | Path) -> LTISystem:
+    """A built-in scenario by name (``paper``, ``camera_agents``, ...) or a YAML file path."""
+    s = str(spec)
+    if s in SCENARIOS:
+        return build_scenario(s)
+    path = Path(s)
+    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists():
+        if not path.exists():
+            raise InvalidSystem(f"system file {path} does not exist")
+        return system_from_dict(read_spec(path), source=str(path))
+    raise InvalidSystem(f"unknown scenario '{s}' and no such file; built-in scenarios: {', '.join(sorted(SCENARIOS))}")

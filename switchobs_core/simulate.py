@@ -57,8 +57,10 @@ import numpy as np
 from scipy.linalg import expm
 
 from .envelope import Segment, envelope_z, error_transitions
+from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument
 from .propagation import van_loan, zoh_pair
+from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 from .validation import as_finite, as_matrix
 
 __all__ = [
@@ -185,8 +187,6 @@ def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str
     Periodic/sequence schedules look their cycles up in ``table``; a random (A2) schedule,
     or ``mode="robust"``, uses ``table.robust``.
     """
-    from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
-
     if mode is None:
         if isinstance(schedule, RandomSchedule):
             mode = "robust"
@@ -445,7 +445,6 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     try:
         alpha_ = float(system.alpha)
     except AttributeError:
-        from .envelope import alpha as _alpha
         alpha_ = _alpha(T_o)
     if rate is None:
         res = _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u,

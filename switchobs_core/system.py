@@ -37,7 +37,7 @@ from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposit
 from .exceptions import InvalidSystem, UnobservableSystem
 from .validation import as_matrix
 
-__all__ = ["LTISystem", "ChannelInfo", "load_system"]
+__all__ = ["LTISystem", "ChannelInfo", "read_spec"]
 
 
 @dataclass(frozen=True)
@@ -258,10 +258,8 @@ class LTISystem:
         if not isinstance(spec, dict):
             raise InvalidSystem(f"{source}: the top level must be a mapping with A and channels")
         if "scenario" in spec:
-            from .scenarios import build_scenario
-
-            params = {k: v for k, v in spec.items() if k != "scenario"}
-            return build_scenario(str(spec["scenario"]), **params)
+            raise InvalidSystem(f"{source}: a 'scenario' mapping names a built-in scenario; build it with "
+                                "switchobs_core.scenarios.system_from_dict or load_system")
         for key in ("A", "channels"):
             if key not in spec:
                 raise InvalidSystem(f"{source}: missing required key '{key}'")
@@ -293,19 +291,9 @@ class LTISystem:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> LTISystem:
-        """Load a system from a YAML file (schema in the module docstring)."""
-        import yaml
-
-        path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as err:
-            raise InvalidSystem(f"cannot read system file {path}: {err.strerror}") from None
-        try:
-            spec = yaml.safe_load(text)
-        except yaml.YAMLError as err:
-            raise InvalidSystem(f"{path}: not valid YAML ({err})") from None
-        return cls.from_dict(spec, source=str(path))
+        """Load a system from a YAML file (schema in the module docstring; a ``scenario``
+        file is read by :func:`switchobs_core.scenarios.load_system`)."""
+        return cls.from_dict(read_spec(path), source=str(path))
 
     def to_dict(self) -> dict[str, Any]:
         """The YAML mapping that :meth:`from_dict` reads back to this system."""
@@ -321,16 +309,16 @@ class LTISystem:
         }
 
 
-def load_system(spec: str | Path) -> LTISystem:
-    """A built-in scenario by name (``paper``, ``camera_agents``, ...) or a YAML file path."""
-    from .scenarios import SCENARIOS, build_scenario
+def read_spec(path: str | Path) -> Any:
+    """The parsed YAML mapping of a system file (schema in the module docstring)."""
+    import yaml
 
-    s = str(spec)
-    if s in SCENARIOS:
-        return build_scenario(s)
-    path = Path(s)
-    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists():
-        if not path.exists():
-            raise InvalidSystem(f"system file {path} does not exist")
-        return LTISystem.from_yaml(path)
-    raise InvalidSystem(f"unknown scenario '{s}' and no such file; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise InvalidSystem(f"cannot read system file {path}: {err.strerror}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise InvalidSystem(f"{path}: not valid YAML ({err})") from None

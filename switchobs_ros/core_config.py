@@ -13,8 +13,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.scenarios import load_system
 from switchobs_core.schedule import Cycle
-from switchobs_core.system import LTISystem, load_system
+from switchobs_core.system import LTISystem
 
 from .params import ConfigError
 

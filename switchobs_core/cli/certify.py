@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..certificate import certify_table, format_report
 from ..exceptions import InvalidArgument
 from ..gains import GainTable
-from ..system import load_system
+from ..scenarios import load_system
 from ._common import parse_ts, print_json
 
 __all__ = ["register", "run"]
@@ -37,8 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..certificate import certify_table, format_report
-
     if args.system:
         system = load_system(args.system)
     else:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..design import Designer, Margin
 from ..gains import CycleDesign, GainTable
-from ..system import load_system
+from ..scenarios import load_system
 from ._common import fmt_table, parse_h, parse_pair, parse_ts, print_json
 
 __all__ = ["register", "run", "design_rows", "table_summary"]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import paper
 from ..design import Designer
+from ..figures import eta_min_figures, kappa_figure
 from ..scenarios import paper_system
 from ..schedule import Cycle
 from ._common import fmt_table, print_json
@@ -63,8 +64,6 @@ def run(args: argparse.Namespace) -> int:
     des, res = reproduce(args.delta)
     figs: list[str] = []
     if args.figures:
-        from ..figures import eta_min_figures, kappa_figure
-
         figs += [str(p) for p in eta_min_figures(des, args.figures, progress=args.progress)]
         figs.append(str(kappa_figure(des, args.figures, oracle=paper.kappa_closed_form)))
         try:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..gains import GainTable
-from ..system import load_system
+from ..scenarios import load_system
 from ._common import fmt_table, print_json
 from .design import print_designs, table_summary
 

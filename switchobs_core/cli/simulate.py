@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errorfigs import plot_result
 from ..exceptions import InvalidArgument
 from ..gains import GainTable
+from ..scenarios import load_system
 from ..schedule import parse_schedule
-from ..system import load_system
+from ..simulate import simulate
 from ._common import fmt_table, print_json
 
 __all__ = ["register", "run"]
@@ -48,8 +50,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..simulate import simulate
-
     system = load_system(args.config)
     table = GainTable.load(args.table, system=system)
     schedule = parse_schedule(args.schedule, N=system.N)
@@ -66,8 +66,6 @@ def run(args: argparse.Namespace) -> int:
     summ["bounds"] = {"paper_bound": "alpha * sum z_i: the paper's claim (its proof has a gap)",
                       "guaranteed_bound": status}
     if args.plot:
-        from ..errorfigs import plot_result
-
         summ["plot"] = str(plot_result(res, args.plot, f"{system.name}: {args.schedule}"
                                        + ("" if args.rate is None else f", {args.rate:g} Hz")))
     if args.json:

@@ -104,7 +104,9 @@ CASES = [
     ("LTISystem.C.inf", "C_1", lambda s: sy.LTISystem(A4, None, (_bad(C4[0], v=INF), C4[1]))),
     ("LTISystem.C.one", "C", lambda s: sy.LTISystem(A4, None, (C4[0],))),
     ("LTISystem.labels", "state_labels", lambda s: sy.LTISystem(A4, None, C4, state_labels=("a", "b"))),
-    ("load_system.missing", "nope.yaml", lambda s: sy.load_system("/nonexistent/nope.yaml")),
+    ("system_from_dict.A", "A", lambda s: scn.system_from_dict({"A": [[1, 2]], "channels": [{"C": [[1, 0]]}] * 2})),
+    ("read_spec.missing", "nope.yaml", lambda s: sy.read_spec("/nonexistent/nope.yaml")),
+    ("load_system.missing", "nope.yaml", lambda s: scn.load_system("/nonexistent/nope.yaml")),
     ("from_dict.A", "A", lambda s: sy.LTISystem.from_dict({"A": [[1, 2]], "channels": [{"C": [[1, 0]]}] * 2})),
     # --- schedule
     ("Cycle.empty", "h", lambda s: sch.Cycle(())),

@@ -1,0 +1,108 @@
+"""Import structure of switchobs_core: every module imports on its own, project-internal
+imports sit at module top (lazy only for heavy optional dependencies), no import cycle."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import switchobs_core
+
+PKG = Path(switchobs_core.__file__).parent
+#: Imports allowed inside functions: heavy or optional third-party dependencies.
+LAZY_OK = {"cvxpy", "matplotlib", "tqdm", "threadpoolctl", "yaml"}
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in sorted(PKG.rglob("*.py")):
+        parts = list(p.relative_to(PKG.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        if parts[-1] != "__main__":     # runs the command line
+            out[".".join(parts)] = p
+    return out
+
+
+def _target(mod: str, is_pkg: bool, node: ast.ImportFrom | ast.Import) -> list[str]:
+    """Absolute names a node imports (for ``from . import x``, also ``pkg.x``)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    if node.level:
+        base = base[: len(base) - (node.level - 1)]
+        name = ".".join(base + ([node.module] if node.module else []))
+    else:
+        name = node.module or ""
+    return [name] + [f"{name}.{a.name}" for a in node.names]
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    t = node.test
+    return (isinstance(t, ast.Name) and t.id == "TYPE_CHECKING") or (
+        isinstance(t, ast.Attribute) and t.attr == "TYPE_CHECKING")
+
+
+def _scan(mod: str, path: Path) -> tuple[set[str], list[str]]:
+    """(project modules imported at run time at module level, imports inside functions)."""
+    tree = ast.parse(path.read_text())
+    is_pkg = path.name == "__init__.py"
+    top: set[str] = set()
+    lazy: list[str] = []
+
+    def visit(node: ast.AST, in_func: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and _is_type_checking(child):
+                continue
+            f = in_func or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, (ast.Import, ast.ImportFrom)):
+                names = _target(mod, is_pkg, child)
+                if f and names[0].split(".")[0] not in LAZY_OK:
+                    lazy.append(f"{mod}:{child.lineno} {names[0]}")
+                elif not f:
+                    top.update(n for n in names if n.split(".")[0] == "switchobs_core")
+            visit(child, f)
+
+    visit(tree, False)
+    return top, lazy
+
+
+def test_every_module_imports_in_a_fresh_interpreter():
+    mods = sorted(_modules())
+    code = f"import importlib\nfor m in {mods!r}:\n    importlib.import_module(m)\n"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+
+
+def test_no_import_inside_functions_except_heavy_optional_deps():
+    lazy = [x for m, p in _modules().items() for x in _scan(m, p)[1]]
+    assert not lazy, lazy
+
+
+def test_module_import_graph_has_no_cycle():
+    mods = _modules()
+    graph = {}
+    for m, p in mods.items():
+        deps = {d for d in _scan(m, p)[0] if d in mods and d != m}
+        # importing a.b.c runs the packages a.b's __init__ too (not a cycle of m's own making)
+        graph[m] = {d for d in deps if not m.startswith(d + ".")}
+    state: dict[str, int] = {}
+    path: list[str] = []
+
+    def dfs(u: str) -> None:
+        state[u] = 1
+        path.append(u)
+        for v in sorted(graph[u]):
+            if state.get(v) == 1:
+                raise AssertionError("import cycle: " + " -> ".join(path[path.index(v):] + [v]))
+            if v not in state:
+                dfs(v)
+        path.pop()
+        state[u] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            dfs(m)
+    assert "switchobs_core.observer" in graph and graph["switchobs_core.observer"]   # the scan sees imports
