@@ -28,9 +28,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from switchobs_core.design import design_table
 from switchobs_core.observer import SwitchedObserver
+from switchobs_core.plant import Plant
 from switchobs_core.scenarios import paper_system
 from switchobs_core.schedule import Cycle, PeriodicSchedule
-from switchobs_core.simulate import Plant
 from switchobs_core.threads import single_threaded_blas
 
 

@@ -78,8 +78,8 @@ class CameraSimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("camera_sim", **kwargs)
+        from switchobs_core.plant import Plant
         from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
-        from switchobs_core.simulate import Plant
 
         cfg = declare_all(self, PARAMS)
         self.cfg = cfg

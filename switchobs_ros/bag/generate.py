@@ -63,7 +63,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
 
     import msg_bridge as mb
     from switchobs_core.exceptions import SwitchobsError
-    from switchobs_core.simulate import Plant
+    from switchobs_core.plant import Plant
     from switchobs_ros.camera_sim import DEFAULT_X0
     from switchobs_ros.core_config import camera_target_rows, load_system_param
     from switchobs_ros.params import ConfigError

@@ -21,6 +21,7 @@ from switchobs_core import decomposition as dec
 from switchobs_core import design as des
 from switchobs_core import envelope as env
 from switchobs_core import paper as pap
+from switchobs_core import plant as pla
 from switchobs_core import propagation as prop
 from switchobs_core import scenarios as scn
 from switchobs_core import schedule as sch
@@ -211,14 +212,14 @@ CASES = [
     ("certify_table.ratio_cycles", "ratio_cycles", lambda s: cert.certify_table(s[0], s[1], ratio_cycles=0)),
     ("certify_table.ratio_dt", "ratio_dt", lambda s: cert.certify_table(s[0], s[1], ratio_dt=NAN)),
     # --- simulate
-    ("Plant.x0", "x0", lambda s: sim.Plant(s[0], np.zeros(3))),
-    ("Plant.x0.nan", "x0", lambda s: sim.Plant(s[0], np.full(12, NAN))),
-    ("Plant.process_noise", "process_noise", lambda s: sim.Plant(s[0], np.zeros(12), process_noise=-1.0)),
-    ("Plant.t0", "t0", lambda s: sim.Plant(s[0], np.zeros(12), t0=INF)),
-    ("Plant.advance.t", "t", lambda s: sim.Plant(s[0], np.zeros(12)).advance(NAN)),
-    ("Plant.advance.back", "t", lambda s: sim.Plant(s[0], np.zeros(12), t0=1.0).advance(0.5)),
-    ("Plant.measure.channel", "channel", lambda s: sim.Plant(s[0], np.zeros(12)).measure(3)),
-    ("Plant.measure.noise", "noise_std", lambda s: sim.Plant(s[0], np.zeros(12)).measure(1, noise_std=-1.0)),
+    ("Plant.x0", "x0", lambda s: pla.Plant(s[0], np.zeros(3))),
+    ("Plant.x0.nan", "x0", lambda s: pla.Plant(s[0], np.full(12, NAN))),
+    ("Plant.process_noise", "process_noise", lambda s: pla.Plant(s[0], np.zeros(12), process_noise=-1.0)),
+    ("Plant.t0", "t0", lambda s: pla.Plant(s[0], np.zeros(12), t0=INF)),
+    ("Plant.advance.t", "t", lambda s: pla.Plant(s[0], np.zeros(12)).advance(NAN)),
+    ("Plant.advance.back", "t", lambda s: pla.Plant(s[0], np.zeros(12), t0=1.0).advance(0.5)),
+    ("Plant.measure.channel", "channel", lambda s: pla.Plant(s[0], np.zeros(12)).measure(3)),
+    ("Plant.measure.noise", "noise_std", lambda s: pla.Plant(s[0], np.zeros(12)).measure(1, noise_std=-1.0)),
     ("simulate.t_end", "t_end", lambda s: sim.simulate(s[0], s[1], sch.PeriodicSchedule(CYC), np.zeros(12),
                                                          np.zeros(12), -1.0)),
     ("simulate.x0", "x0", lambda s: sim.simulate(s[0], s[1], sch.PeriodicSchedule(CYC), np.zeros(3),
@@ -291,7 +292,7 @@ def test_every_public_callable_has_a_case():
     }
     missing = []
     for mod in ("certificate", "decomposition", "design", "envelope", "gains", "observer", "paper",
-                "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation"):
+                "plant", "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation"):
         m = importlib.import_module(f"switchobs_core.{mod}")
         for n in m.__all__:
             obj = getattr(m, n)

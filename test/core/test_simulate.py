@@ -12,8 +12,9 @@ from scipy.linalg import expm
 from switchobs_core.certificate import cycle_transition
 from switchobs_core.envelope import error_transitions
 from switchobs_core.exceptions import InvalidArgument
+from switchobs_core.plant import Plant
 from switchobs_core.schedule import PeriodicSchedule, SequenceSchedule
-from switchobs_core.simulate import Plant, sampled_error_transition, schedule_segments, simulate
+from switchobs_core.simulate import sampled_error_transition, schedule_segments, simulate
 
 
 @pytest.fixture(scope="module")

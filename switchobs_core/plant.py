@@ -1,0 +1,126 @@
+"""The simulated plant (e:system): ``xdot = A x + B u + w``, advanced exactly between
+sample times by matrix exponentials, with seeded process noise of the exact discretised
+covariance. Used by the offline simulation and by the ROS camera simulator.
+
+Equation labels (``e:...``) are those of the paper and resolve in ``docs/equations.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .exceptions import InvalidArgument
+from .propagation import van_loan, zoh_pair
+
+__all__ = ["Plant"]
+
+
+class Plant:
+    """Exact plant ``xdot = A x + B u + w`` (e:system) with seeded noise.
+
+    ``plant = Plant(system, x0, seed=0, process_noise=0.0)``
+
+    Parameters
+    ----------
+    system : LTISystem
+    x0 : (n,) array_like, optional
+        Initial state (zeros if None).
+    seed : int
+        Seed of the noise generator (numpy ``default_rng``).
+    process_noise : float or (n, n) array_like
+        Spectral density of the white process noise ``w``: a scalar ``q`` means
+        ``Qc = q**2 I``; a matrix is ``Qc`` itself. 0 (default) for none.
+    t0 : float
+        Initial time.
+
+    Notes
+    -----
+    :meth:`advance` is exact: ``x <- e^{A dt} x + Gamma B u + w_d`` with ``w_d`` drawn
+    from the exact discretised covariance ``Qd = int_0^dt e^{As} Qc e^{A's} ds``
+    (Van Loan), ``u`` held over the step.
+    """
+
+    def __init__(self, system: Any, x0: Any = None, seed: int = 0,
+                 process_noise: Any = 0.0, *, t0: float = 0.0):
+        self.A = np.asarray(system.A, dtype=float)
+        self.n = self.A.shape[0]
+        B = np.asarray(system.B, dtype=float)
+        self.B = B.reshape(self.n, -1) if B.size else np.zeros((self.n, 0))
+        self.C = tuple(np.asarray(Ci, dtype=float) for Ci in system.C)
+        self._x = np.zeros(self.n) if x0 is None else np.array(x0, dtype=float).reshape(-1)
+        if self._x.size != self.n or not np.isfinite(self._x).all():
+            raise InvalidArgument(f"x0 must hold n = {self.n} finite entries; got {self._x.size}")
+        self._t = float(t0)
+        if not math.isfinite(self._t):
+            raise InvalidArgument(f"t0 must be finite; got {t0!r}")
+        self.rng = np.random.default_rng(seed)
+        Qc = np.asarray(process_noise, dtype=float)
+        if Qc.ndim == 0:
+            if not (math.isfinite(float(Qc)) and Qc >= 0):
+                raise InvalidArgument(f"process_noise must be >= 0; got {process_noise}")
+            Qc = float(Qc) ** 2 * np.eye(self.n)
+        elif Qc.shape != (self.n, self.n) or not np.isfinite(Qc).all():
+            raise InvalidArgument(f"process_noise must be a scalar or an ({self.n}, {self.n}) matrix")
+        self.Qc = Qc
+        self._noisy = bool(np.any(Qc))
+        self._steps: dict = {}
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current state (a copy)."""
+        return self._x.copy()
+
+    @property
+    def t(self) -> float:
+        """Current time."""
+        return self._t
+
+    def _step(self, dt: float):
+        s = self._steps.get(dt)
+        if s is None:
+            F, G = zoh_pair(self.A, dt)
+            Lq = None
+            if self._noisy:
+                _, Qd = van_loan(self.A, self.Qc, dt)
+                w, V = np.linalg.eigh(Qd)
+                Lq = V * np.sqrt(np.clip(w, 0, None))
+            s = self._steps[dt] = (F, G @ self.B, Lq)
+            if len(self._steps) > 256:
+                self._steps.pop(next(iter(self._steps)))
+        return s
+
+    def advance(self, t: float, u: Any = None) -> np.ndarray:
+        """Advance exactly to ``t`` with ``u`` held over ``[plant.t, t]``; returns ``x(t)``."""
+        dt = float(t) - self._t
+        if not dt >= 0 or not math.isfinite(dt):
+            raise InvalidArgument(f"t = {t!r} must be a finite time >= the plant's time {self._t!r}")
+        if dt > 0:
+            F, GB, Lq = self._step(dt)
+            x = F @ self._x
+            if u is not None:
+                u = np.asarray(u, dtype=float).reshape(-1)
+                if u.size != self.B.shape[1]:
+                    raise InvalidArgument(f"u must have m = {self.B.shape[1]} entries; got {u.size}")
+                x += GB @ u
+            if Lq is not None:
+                x += Lq @ self.rng.standard_normal(self.n)
+            self._x = x
+        self._t = float(t)
+        return self._x.copy()
+
+    def measure(self, channel: int, noise_std: float = 0.0, rows: Any = None) -> np.ndarray:
+        """``y = C_channel x + v`` with ``v ~ N(0, noise_std^2 I)`` (channel 1-based)."""
+        if not (isinstance(channel, (int, np.integer)) and 1 <= channel <= len(self.C)):
+            raise InvalidArgument(f"channel must be an integer in 1..{len(self.C)}; got {channel!r}")
+        Ci = self.C[channel - 1]
+        if rows is not None:
+            Ci = Ci[list(rows), :]
+        y = Ci @ self._x
+        if noise_std:
+            if not (math.isfinite(noise_std) and noise_std > 0):
+                raise InvalidArgument(f"noise_std must be >= 0; got {noise_std}")
+            y = y + noise_std * self.rng.standard_normal(y.size)
+        return y
