@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle

@@ -63,7 +63,7 @@ from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
 
-__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "CycleRecord", "SwitchedObserver"]
+__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "SwitchedObserver"]
 
 #: Schedule modes accepted by :class:`SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
