@@ -22,13 +22,16 @@ any orthogonal method can: the decision is relative to ||A|| and ||C||, so state
 scaling that makes modes differ by more than 1/rtol in magnitude will hide them.
 
 Canonical basis. The subspaces are unique but their orthonormal bases are not; gains
-and trajectories depend on the basis (DESIGN.md). :func:`canonical_basis` fixes one by
+and trajectories depend on the basis (any orthonormal basis of the observable subspace fits).
+:func:`canonical_basis` fixes one by
 a stated rule: the eigenvectors of the compression V' W V of the fixed weighting
 W = diag(1, 2, ..., n), sorted by eigenvalue, each signed so that its entry of largest
 magnitude is positive. Any two orthonormal bases V and V R of one subspace give the
 same result (when the compression's eigenvalues are distinct, which holds
 generically), so the basis depends on the subspace only. For coordinate-aligned
 subspaces (the paper's model) the result is the coordinate axes themselves.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -25,6 +25,8 @@ Robust design (assumption A2, beyond the paper): if every residence time lies in
 [h_min, h_max], channel i is active at least h_min and inactive at most (N - 1) h_max
 per cycle (at least (N - 1) h_min when mu_i < 0). Designing eta_i for that worst case
 makes f_ii <= delta_i for every admissible cycle, so one gain set serves all schedules.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

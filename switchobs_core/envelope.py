@@ -19,7 +19,7 @@ with ``alpha = 1 / sigma_min(H)``, ``H = [T_1o'; ...; T_No']`` (e:alpha_def).
 observable error of channel i != j evolves by ``A_o^(i)`` alone
 (e:xo1_dynamics_piecewise); in fact
 ``d/dt x_o^(i) = A_o^(i) x_o^(i) - T_io' L_j C_j x_tilde``, and ``T_io' L_j != 0`` when
-observable subspaces overlap (DESIGN.md). ``z_i`` can be exceeded; see
+observable subspaces overlap (the cross term that e:xo1_dynamics_piecewise omits). ``z_i`` can be exceeded; see
 :func:`switchobs_core.certificate.envelope_ratio` for the worst case.
 
 *The exact bound* (ours). In the paper's continuous-output setting the error obeys
@@ -39,6 +39,8 @@ Envelope convention: ``z_i(0^-) = e0`` for every channel (an initial error bound
 ``||x_o^(i)(0)|| <= ||x_tilde(0)|| <= e0``); at an activation the envelope jumps to
 ``kappa_i z_i(t_on^-)``, which is how the recursion (e:Fz_system), (e:Fk) reads the
 piecewise definition.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

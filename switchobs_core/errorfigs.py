@@ -10,6 +10,8 @@ switching signal ``rho(t)``. Continuous outputs (the paper's setting), initial e
 Cases: periodic ``(2 s, 0.6)`` with ``(eta_1, eta_2) = (1.6, 3.5)``; nonperiodic
 ``(4, 0.5), (3, 0.6), (3, 0.6), (2, 0.4)`` repeated with the paper's selected rates
 (Table ``T:eta_values``).
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

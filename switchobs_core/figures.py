@@ -1,5 +1,7 @@
 """The paper's design figures: eta_min over (tau, s) (f:eta_min1, f:eta_min2) and kappa*(eta)
 (f:kappa_LMI). Matplotlib with the Agg backend; PNG files.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -32,6 +32,8 @@ bases T_o are the system's.
 Lookup tolerance: :meth:`GainTable.lookup` matches a cycle when every active time agrees
 within ``atol + rtol * tau`` (defaults ``schedule.CYCLE_RTOL = 1e-6``,
 ``schedule.CYCLE_ATOL = 1e-9`` s).
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations
@@ -184,7 +186,8 @@ class CycleDesign:
 
     @property
     def certified(self) -> bool:
-        """Whether f_ii <= delta_i for all i (the paper's condition; not a guarantee, see DESIGN.md)."""
+        """Whether f_ii <= delta_i for all i (the paper's condition; not a guarantee, see
+        :mod:`switchobs_core.certificate`)."""
         return all(f <= d for f, d in zip(self.f, self.delta))
 
     def label(self) -> str:

@@ -45,6 +45,8 @@ cycle matched the promise (order 1..N, durations within ``match_tol`` of the sch
 cycle; in robust mode, A2's box).
 
 Channel numbers are 1-based, as in the paper and docs/api.md.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations
@@ -509,7 +511,7 @@ class SwitchedObserver:
         -------
         Envelope
             ``z`` (e:z1_evolution, e:z2_evolution), ``paper_bound = alpha sum z``
-            (the paper's claim, not a guarantee; DESIGN.md) and
+            (the paper's claim, not a guarantee; see :mod:`switchobs_core.certificate`) and
             ``exact_bound = ||Phi(t, t0)|| e0`` (ours; see the class Notes).
         """
         if t is None:

@@ -40,6 +40,8 @@ Time quantisation. ``dt`` is rounded to a multiple of ``dt_resolution`` (default
 propagated is exactly the rounded one. Without this, float jitter in ``t_k - t_{k-1}``
 (about 1e-16 s) would make every step at a fixed rate a cache miss. The discrepancy
 is at most ``dt_resolution / 2`` per step; pass ``dt_resolution=None`` for no rounding.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -7,6 +7,8 @@ A = blkdiag(A_c, A_1, ..., A_M) (e:sim_A_blkdiag). Channel rho measures the came
 position and the position of agent rho: y_rho = [p_c; p_rho]. Each channel alone is
 unobservable and (with an unstable agent mode) not detectable; all together are
 observable.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

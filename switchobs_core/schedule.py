@@ -11,6 +11,8 @@ Schedules say which channel is active when:
 * :class:`SequenceSchedule` -- a list of cycles, repeated (the paper's nonperiodic case);
 * :class:`RandomSchedule` -- residence times drawn uniformly from [h_min, h_max]
   (assumption A2), seeded: a test bench for robust designs.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -44,6 +44,8 @@ model, periodic (2 s, 0.6), first 20 s, error trajectories against continuous ou
 innovation hold 0.36 % at 1 kHz and 3.6 % at 100 Hz, whatever the plant state; measurement
 hold 10 % at 1 kHz for a unit-size plant state and 1 % for a plant state of 0.1 randn (the
 held sample lags the moving plant); each 10x in rate divides these by 10.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -23,6 +23,8 @@ V = x'Px decays at rate 2 eta), and the spectral abscissa of Lambda must be < -e
 To leave room for solver tolerances the SDP is solved at eta_s = eta (1 + 1e-6) + 1e-7,
 and the gain is verified at eta. The kappa we report for a gain is
 sqrt(cond(P)) of the verified P (>= kappa*(eta) by a hair), never the solver's theta.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations
@@ -221,7 +223,7 @@ KAPPA_GRID = np.concatenate([[0.0], 0.05 * 1.12 ** np.arange(0, 111)])
 class KappaCurve:
     """kappa_i(eta) = sqrt(theta*(eta)) of one channel, computed lazily and cached.
 
-    kappa depends on eta only, not on the cycle (DESIGN.md), so one curve serves every
+    kappa depends on eta only, not on the cycle (the SDP e:SDP_1 has no cycle in it), so one curve serves every
     design of the channel: a design over many cycles costs root-finding on cached
     values, not new SDPs. :meth:`kappa` is made non-decreasing (where the solver's last
     digits are not) by taking the max with the values at the fixed grid points

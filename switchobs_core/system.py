@@ -20,6 +20,8 @@ or a built-in scenario with its parameters::
     scenario: camera_agents        # see switchobs_core.scenarios
     agents: 3
     D_agents: [[0, 0.2], [0, 0.1], [0, 0.15]]
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

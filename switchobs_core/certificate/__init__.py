@@ -2,7 +2,7 @@
 
 *The paper's certificate* (Theorem ``t:main``): per cycle the factors
 ``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` (e:Fk, e:f11_le_delta_main) and the
-claim ``||F_k|| <= delta < 1``. Its proof has a gap (DESIGN.md): while channel j is
+claim ``||F_k|| <= delta < 1``. Its proof has a gap: while channel j is
 active the observable error of channel i != j is also driven by ``-T_io' L_j C_j
 x_tilde``, which (e:xo1_dynamics_piecewise) omits. The factors are reported as *the
 paper's claim*; :func:`envelope_ratio` measures how far its envelopes are exceeded.
@@ -30,6 +30,8 @@ Modules: :mod:`.paper` (the paper's factors, envelope ratio), :mod:`.cycle` (cyc
 :mod:`.lyapunov` (common Lyapunov SDP), :mod:`.box` (residence-time box proof),
 :mod:`.report` (whole-table certificates and their report). Everything public is re-exported
 here: ``from switchobs_core.certificate import X``.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations

@@ -120,7 +120,7 @@ class EnvelopeRatio:
 
 def envelope_ratio(system: Any, segments: Sequence[Segment], t_end: float, *,
                    dt: float = 0.002) -> EnvelopeRatio:
-    """Worst-case excess of the paper's per-channel envelopes (the proof gap, DESIGN.md).
+    """Worst-case excess of the paper's per-channel envelopes (the proof gap, see :mod:`switchobs_core.certificate`).
 
     With ``z_i(0^-) = ||x_tilde(0)||`` (the initial error bound), ``z_i(t) = g_i(t)
     ||x_tilde(0)||`` with ``g_i`` from (e:z1_evolution, e:z2_evolution), and
