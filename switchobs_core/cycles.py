@@ -236,8 +236,8 @@ class CycleTracker:
         resync = False
         if self.robust:
             if self.bounds is not None:
-                hmin, hmax = self.bounds
-                a2_ok = all(hmin - tol <= hi <= hmax + tol for hi in h)
+                lo, hi_ = residence_limits(True, self.bounds, tol, None)
+                a2_ok = all(lo <= hi <= hi_ for hi in h)
             matched = order_ok and a2_ok is not False
         else:
             matched = order_ok and self.matches(h, promised)
