@@ -467,8 +467,9 @@ class SwitchedObserver:
 
     @property
     def residence_problem(self) -> str:
-        """The statement of the residence that ended at the latest sample, if it broke its
-        interval, else ""."""
+        """The statement of the residence that ended at the latest switching instant, if it
+        broke its interval, else "" (compare ``residence_violations`` before and after an
+        update to tell whether this update ended it)."""
         return self._cycles.problem_at_switch
 
     def residence(self) -> Residence | None:
