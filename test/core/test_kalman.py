@@ -224,7 +224,7 @@ def test_table_filter_with_drops_close_to_online(design):
     tab, on = TableKalman(design), OnlineKalman(PAPER, design.noise)
     err_t, err_o = [], []
     drops = 0
-    for k, t, ch, rows, x, y in _simulate(design, 1, 3000, seed=3, drop=0.02, channel_at=True):
+    for _k, t, ch, rows, x, y in _simulate(design, 1, 3000, seed=3, drop=0.02, channel_at=True):
         drops += rows is not None
         tab.update(t, ch, y[:, 0], rows)
         on.update(t, ch, y[:, 0], rows)
