@@ -180,8 +180,9 @@ def test_periodic_riccati_reports_non_convergence():
 def _simulate(design, runs, n_samples, seed, drop=0.0, channel_at=False):
     """Plant with exactly the declared noise (van Loan Q_d, R per row), all runs at once."""
     rng = np.random.default_rng(seed)
-    noise, n = design.noise, PAPER.n
-    F, Qd = van_loan(PAPER.A, noise.Q_c, 1 / RATE)
+    noise, sysm = design.noise, design.system
+    n = sysm.n
+    F, Qd = van_loan(sysm.A, noise.Q_c, 1 / RATE)
     Lq = np.linalg.cholesky(Qd)
     x = np.linalg.cholesky(noise.P0) @ rng.standard_normal((n, runs))  # x_hat0 = 0, x0 ~ N(0, P0)
     sch = PeriodicSchedule(CYC)
@@ -191,7 +192,7 @@ def _simulate(design, runs, n_samples, seed, drop=0.0, channel_at=False):
         t = k * round(1e9 / RATE) * 1e-9
         ch = sch.channel_at(t) if channel_at else design.pattern.channels[k % design.pattern.K]
         rows = [0, 1] if rng.uniform() < drop else None
-        H = PAPER.C[ch - 1] if rows is None else PAPER.C[ch - 1][rows]
+        H = sysm.C[ch - 1] if rows is None else sysm.C[ch - 1][rows]
         std = np.sqrt(np.diag(noise.R(ch, rows)))
         y = H @ x + std[:, None] * rng.standard_normal((H.shape[0], runs))
         yield k, t, ch, rows, x, y
@@ -218,20 +219,26 @@ def test_monte_carlo_nees_in_chi2_band(design):
         assert lo <= nees <= hi, (k, nees, lo, hi)
 
 
-def test_table_filter_with_drops_close_to_online(design):
-    """2 % dropped target rows and the simulator's channel rule (tie flips included): the table-lookup
-    filter's RMS error is within 5 % of the online filter's."""
-    tab, on = TableKalman(design), OnlineKalman(PAPER, design.noise)
+def test_table_filter_with_drops_close_to_online():
+    """2 % dropped target rows and the simulator's channel rule over 266 s (in floating point the
+    tie sample at 1.2 s into a cycle flips to channel 1 from about 257 s on): the table-lookup
+    filter's RMS error is within 5 % of the online filter's. Agents with stable velocity modes,
+    so that the plant state stays of moderate size over the long run (the paper's unstable agents
+    grow by e^{0.2 t}, and the error would drown in the rounding of a 1e23 m state)."""
+    sysm = camera_agents(2, D_agents=[(0.0, -0.2), (0.0, -0.1)])
+    design = design_kalman(sysm, CYC, RATE)
+    tab, on = TableKalman(design), OnlineKalman(sysm, design.noise)
     err_t, err_o = [], []
-    drops = 0
-    for _k, t, ch, rows, x, y in _simulate(design, 1, 3000, seed=3, drop=0.02, channel_at=True):
+    drops = flips = 0
+    for k, t, ch, rows, x, y in _simulate(design, 1, 13300, seed=3, drop=0.02, channel_at=True):
         drops += rows is not None
+        flips += ch != design.pattern.channels[k % design.pattern.K]
         tab.update(t, ch, y[:, 0], rows)
         on.update(t, ch, y[:, 0], rows)
         if t >= 2.0:
             err_t.append(x[:, 0] - tab.x)
             err_o.append(x[:, 0] - on.x)
     rms_t, rms_o = (float(np.sqrt(np.mean(np.square(e)))) for e in (err_t, err_o))
-    assert drops >= 30
+    assert drops >= 150 and flips >= 3
     assert rms_t <= 1.05 * rms_o
     assert rms_t != rms_o  # the table filter is not the online filter in disguise
