@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
+from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.kalman import (
     KalmanDesign,
     KalmanDesignError,
@@ -242,3 +243,41 @@ def test_table_filter_with_drops_close_to_online():
     assert drops >= 150 and flips >= 3
     assert rms_t <= 1.05 * rms_o
     assert rms_t != rms_o  # the table filter is not the online filter in disguise
+
+
+def test_partial_rows_gain_and_posterior(design):
+    """A dropped target pose: K_r = P^- H_r' (H_r P^- H_r' + R_r)^-1 from the stored prior, and the
+    Joseph posterior with it is larger than the full-sample posterior."""
+    ph = design.phase_at(30 * 2.0 + 0.5)
+    e = design.entry(ph)
+    Kr = design.gain(ph, rows=[0, 1])
+    H, R = PAPER.C[e.channel - 1][[0, 1]], design.noise.R(e.channel, [0, 1])
+    assert np.allclose(Kr, e.P_prior @ H.T @ np.linalg.inv(H @ e.P_prior @ H.T + R), rtol=1e-10, atol=0)
+    assert design.gain(ph, rows=[0, 1, 2, 3]) is e.K
+    gap = design.posterior(ph, rows=[0, 1]) - design.posterior(ph)
+    assert np.linalg.eigvalsh(gap)[0] >= -1e-15 and np.trace(gap) > 0
+
+
+@pytest.mark.parametrize(
+    "call, exc, match",
+    [
+        (lambda: design_kalman(PAPER, CYC, -50.0), ValueError, "rate must be a finite number > 0"),
+        (lambda: design_kalman(PAPER, CYC, True), ValueError, "rate must be a finite number > 0"),
+        (lambda: design_kalman(PAPER, [], 50.0), ValueError, "non-empty list of Cycles"),
+        (lambda: design_kalman(PAPER, CYC, 50.0, noise=1e-3), ValueError, "noise must be a NoiseModel"),
+        (lambda: design_kalman(PAPER, CYC, 50.0, default_noise(camera_agents(3))), ValueError,
+         "noise model is for n = 16"),
+        (lambda: OnlineKalman(PAPER, "x"), ValueError, "noise must be a NoiseModel"),
+    ],
+)
+def test_bad_arguments(call, exc, match):
+    with pytest.raises(exc, match=match) as err:
+        call()
+    assert isinstance(err.value, SwitchobsError)
+
+
+def test_online_filter_refuses_time_going_back():
+    f = OnlineKalman(PAPER)
+    f.update(1.0, 1, np.zeros(4))
+    with pytest.raises(ValueError, match="before the previous sample"):
+        f.update(0.5, 2, np.zeros(4))
