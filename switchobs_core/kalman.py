@@ -1,0 +1,460 @@
+"""Offline periodic Kalman gains for a known schedule (the ``kalman`` gain family; beyond the paper).
+
+For a schedule known in advance (one cycle repeated, or a list of cycles repeated: the paper's
+periodic and nonperiodic cases, e:switching_instants, e:tau_k) and a nominal sample rate f,
+the Riccati recursion of :mod:`.riccati` depends only on the sample pattern, ``Q_c``, ``R``
+and ``P0``, not on the data. So the gains are computed here once and looked up by sample
+phase at run time: the cost of a table lookup, the accuracy of a Kalman filter.
+
+Sample pattern. Samples are at ``t_k = k / f`` from the start of the cycle sequence, on the
+channel ``schedule.channel_at(t_k)`` (the rule of the simulator and the camera simulator).
+The pattern repeats after ``K`` samples when ``K = m T f`` is an integer (within 1e-9) for
+the super-cycle length ``T = sum tau`` and the smallest ``m`` in ``1..max_repeat``;
+otherwise :func:`design_kalman` raises (pick a rate with ``T f`` rational of small
+denominator). A sample within 1 ns of a switching instant is a *tie*: in floating point
+``channel_at`` gives it either channel from one period to the next; the design uses the
+channel of the first period and lists the tie phases, and :meth:`KalmanDesign.gain` serves a
+sample whose channel differs from its phase's with a gain from the stored prior.
+
+Detectability. Before iterating, the period pair is checked: with ``Phi = e^{A/f}``, the
+monodromy ``Phi^K`` and the stacked observations ``O = [H_0; H_1 Phi; ...; H_{K-1} Phi^{K-1}]``
+of the period's full-row samples, every eigenvalue of ``Phi^K`` with ``|lambda| >= 1`` must
+be observable from ``O`` (PBH; computed as the unobservable subspace of ``(Phi^K, O)`` with
+:func:`~switchobs_core.decomposition.observability_decomposition`, which is ``Phi^K``-invariant,
+so the test is on the eigenvalues of ``Phi^K`` restricted to it; d:obs_detect,
+e:detectability_condition in discrete time).
+
+Lookup. :meth:`KalmanDesign.phase_at` maps the time since the sequence start to the nearest
+sample (stamp jitter), start-up first (the recursion from ``P0`` until it meets the periodic
+solution), then periodic. A sample with only some rows (a dropped target pose) gets
+``K_r = P^- H_r' (H_r P^- H_r' + R_r)^{-1}`` from the stored prior of its phase. The
+table-lookup filter does not track the covariance: at the next sample it uses the stored
+prior of that phase again, as if the full sample had arrived (after a partial sample the true
+covariance is a little larger; the loss is measured in the tests).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .decomposition import observability_decomposition
+from .exceptions import DesignError, InvalidArgument
+from .noise import NoiseModel, default_noise
+from .riccati import (
+    DiscretizationCache,
+    Step,
+    correct_state,
+    discretize,
+    gain,
+    joseph,
+    periodic_riccati,
+)
+from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule
+
+__all__ = [
+    "KalmanDesignError",
+    "UndetectableSchedule",
+    "SamplePattern",
+    "sample_pattern",
+    "check_detectable",
+    "KalmanPhase",
+    "Phase",
+    "KalmanDesign",
+    "design_kalman",
+    "TableKalman",
+    "TIE_TOL",
+]
+
+#: A sample closer than this (s) to a switching instant is a tie (module docstring).
+TIE_TOL = 1e-9
+_PERIOD_TOL = 1e-9
+_UNIT_CIRCLE_TOL = 1e-9
+
+
+class KalmanDesignError(DesignError):
+    """The offline Kalman design could not be carried out (sample pattern, convergence)."""
+
+
+class UndetectableSchedule(KalmanDesignError):
+    """The sampled periodic pair is not detectable: some unstable mode is never seen."""
+
+
+@dataclass(frozen=True)
+class SamplePattern:
+    """One period of samples: ``channel[k]`` of sample ``k`` at ``t_k = k / rate``, ``k < K``."""
+
+    rate: float
+    cycles: tuple[Cycle, ...]
+    repeat: int
+    channels: tuple[int, ...]
+    ties: tuple[int, ...]
+
+    @property
+    def K(self) -> int:
+        """Samples per period."""
+        return len(self.channels)
+
+    @property
+    def period(self) -> float:
+        """Period in seconds (``repeat`` super-cycles)."""
+        return self.repeat * sum(c.tau for c in self.cycles)
+
+
+def _schedule(cycles: Sequence[Cycle]) -> Schedule:
+    return PeriodicSchedule(cycles[0]) if len(cycles) == 1 else SequenceSchedule(cycles)
+
+
+def _as_cycles(cycles: Cycle | Sequence[Cycle]) -> tuple[Cycle, ...]:
+    if isinstance(cycles, Cycle):
+        return (cycles,)
+    try:
+        out = tuple(cycles)
+    except TypeError:
+        raise InvalidArgument(f"cycles must be a Cycle or a list of Cycles; got {cycles!r}") from None
+    if not out or not all(isinstance(c, Cycle) for c in out):
+        raise InvalidArgument(
+            f"cycles must be a non-empty list of Cycles (e.g. [Cycle.from_ts(2, 0.6)]); got {cycles!r}"
+        )
+    return out
+
+
+def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: int = 64) -> SamplePattern:
+    """The channel of every sample over one period (module docstring).
+
+    Raises
+    ------
+    KalmanDesignError
+        ``m T f`` is not an integer for any ``m <= max_repeat``.
+    """
+    cyc = _as_cycles(cycles)
+    if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)) or not (
+        math.isfinite(rate) and rate > 0
+    ):
+        raise InvalidArgument(f"rate must be a finite number > 0 (Hz); got {rate!r}")
+    rate = float(rate)
+    T = sum(c.tau for c in cyc)
+    for m in range(1, int(max_repeat) + 1):
+        x = m * T * rate
+        if abs(x - round(x)) <= _PERIOD_TOL * max(1.0, x):
+            K = int(round(x))
+            break
+    else:
+        raise KalmanDesignError(
+            f"the cycle sequence (length T = {T:g} s) at {rate:g} Hz has T f = {T * rate:.9g} samples, not a whole "
+            f"number even over {max_repeat} repetitions; choose a rate with T f an integer "
+            f"(e.g. {max(1, round(T * rate))}/T Hz)"
+        )
+    sch = _schedule(cyc)
+    ts = np.arange(K) / rate
+    channels = tuple(int(sch.channel_at(float(t))) for t in ts)
+    sw = sch.switching_instants(m * T + TIE_TOL)
+    ties = tuple(k for k, t in enumerate(ts) if np.min(np.abs(sw - t)) <= TIE_TOL and k > 0)
+    return SamplePattern(rate, cyc, m, channels, ties)
+
+
+def check_detectable(system: Any, pattern: SamplePattern) -> None:
+    """Raise :class:`UndetectableSchedule` unless the sampled periodic pair is detectable (module docstring)."""
+    A = np.asarray(system.A, dtype=float)
+    n, K = A.shape[0], pattern.K
+    Phi = discretize(A, np.zeros((n, 0)), np.zeros((n, n)), 1.0 / pattern.rate)[0]
+    rows, Pk = [], np.eye(n)
+    for k in range(K):
+        rows.append(system.C[pattern.channels[k] - 1] @ Pk)
+        Pk = Phi @ Pk
+    O = np.vstack(rows)
+    d = observability_decomposition(Pk, O / max(1.0, np.linalg.norm(O, 2)))
+    if d.r == n:
+        return
+    ev = np.linalg.eigvals(d.A_u)
+    bad = [z for z in ev if abs(z) >= 1 - _UNIT_CIRCLE_TOL]
+    if not bad:
+        return
+    labels = getattr(system, "state_labels", tuple(f"x{j}" for j in range(n)))
+    dirs = []
+    for j in range(d.T_u.shape[1]):
+        v = d.T_u[:, j]
+        dirs.append(" ".join(f"{v[i]:+.3g}*{labels[i]}" for i in np.argsort(-np.abs(v))[:4] if abs(v[i]) > 1e-6))
+    unseen = sorted(set(range(1, system.N + 1)) - set(pattern.channels))
+    hint = f" Channel(s) {unseen} get no sample in the period." if unseen else ""
+    rates = ", ".join(f"{math.log(abs(z)) / pattern.period:.4g}" for z in bad)
+    raise UndetectableSchedule(
+        f"schedule {', '.join(c.label() for c in pattern.cycles)} at {pattern.rate:g} Hz is not detectable: "
+        f"{len(bad)} mode(s) of the period transition with |lambda| >= 1 (growth rates {rates} 1/s) are never "
+        f"observed. Undetectable direction(s): {'; '.join(dirs)}.{hint} Raise the rate or lengthen the short "
+        "active times."
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanPhase:
+    """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain ``K``."""
+
+    channel: int
+    dt: float
+    P_prior: np.ndarray
+    K: np.ndarray
+
+
+@dataclass(frozen=True)
+class Phase:
+    """A looked-up sample: ``startup`` segment or periodic, ``index`` into it, sample number ``k``,
+    and ``offset`` = stamp minus the nominal sample time (s)."""
+
+    startup: bool
+    index: int
+    k: int
+    offset: float
+
+
+def _phases_to_dict(ph: Sequence[KalmanPhase]) -> dict[str, list]:
+    return {
+        "channel": [p.channel for p in ph],
+        "dt": [p.dt for p in ph],
+        "P_prior": [p.P_prior.tolist() for p in ph],
+        "K": [p.K.tolist() for p in ph],
+    }
+
+
+def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
+    try:
+        return [
+            KalmanPhase(int(c), float(dt), np.array(P, dtype=float), np.array(K, dtype=float))
+            for c, dt, P, K in zip(d["channel"], d["dt"], d["P_prior"], d["K"], strict=True)
+        ]
+    except (KeyError, TypeError, ValueError) as err:
+        raise KalmanDesignError(f"stored Kalman phases are malformed ({err})") from None
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanDesign:
+    """Offline periodic Kalman gains of one (super-)cycle at a nominal rate.
+
+    Attributes
+    ----------
+    system : LTISystem
+    noise : NoiseModel
+    pattern : SamplePattern
+        Rate, cycles, repeat count, channel of each sample, tie phases.
+    periodic : list of KalmanPhase
+        K phases of the periodic solution (sample k >= len(startup) uses ``periodic[k % K]``).
+    startup : list of KalmanPhase
+        Samples 0..S-1 of the recursion from P0, before it meets the periodic solution.
+    periods : int
+        Whole periods iterated until the priors repeated within ``rtol``.
+    change : float
+        Relative change of the priors over the last period.
+    error_transition : (n, n) ndarray
+        ``prod_k (I - K_k H_k) Phi`` over one period, from the posterior of phase 0 to that of
+        the next period's phase 0 (noise-free error map, e:error_dynamics sampled).
+    rho, norm : float
+        Its spectral radius and 2-norm.
+    """
+
+    system: Any
+    noise: NoiseModel
+    pattern: SamplePattern
+    periodic: list[KalmanPhase]
+    startup: list[KalmanPhase]
+    periods: int
+    change: float
+    error_transition: np.ndarray
+    rho: float
+    norm: float
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def rate(self) -> float:
+        """Nominal sample rate (Hz)."""
+        return self.pattern.rate
+
+    @property
+    def cycles(self) -> tuple[Cycle, ...]:
+        """The cycle sequence (one period of the schedule)."""
+        return self.pattern.cycles
+
+    def phase_at(self, t: float, *, max_jitter: float = 0.25) -> Phase:
+        """The nearest sample to time ``t`` (s since the sequence start), start-up first.
+
+        Raises InvalidArgument for ``t < 0`` (beyond half a sample) or a stamp farther than
+        ``max_jitter`` sample periods from the nominal grid.
+        """
+        t = float(t)
+        f = self.pattern.rate
+        k = round(t * f)
+        if not math.isfinite(t) or k < 0:
+            raise InvalidArgument(f"t must be a finite time >= 0 since the cycle sequence started; got {t!r}")
+        off = t - k / f
+        if abs(off) * f > max_jitter:
+            raise InvalidArgument(
+                f"t = {t!r} s is {abs(off) * f:.3g} sample periods off the {f:g} Hz grid (max_jitter {max_jitter:g})"
+            )
+        S = len(self.startup)
+        if k < S:
+            return Phase(True, k, k, off)
+        return Phase(False, k % self.pattern.K, k, off)
+
+    def entry(self, phase: Phase) -> KalmanPhase:
+        """The stored sample of ``phase``."""
+        return self.startup[phase.index] if phase.startup else self.periodic[phase.index]
+
+    def H(self, channel: int, rows: Sequence[int] | None = None) -> np.ndarray:
+        """Rows ``rows`` (0-based, default all) of ``C_channel`` (e:outputs)."""
+        C = self.system.C[channel - 1]
+        return C if rows is None else C[list(rows)]
+
+    def gain(self, phase: Phase, channel: int | None = None, rows: Sequence[int] | None = None) -> np.ndarray:
+        """The gain of a sample at ``phase`` on ``channel`` (default: the phase's) with ``rows``.
+
+        The stored full-row gain when channel and rows are the phase's; otherwise
+        ``K_r = P^- H_r' (H_r P^- H_r' + R_r)^{-1}`` from the stored prior (cached).
+        """
+        e = self.entry(phase)
+        ch = e.channel if channel is None else int(channel)
+        if ch == e.channel and (rows is None or len(rows) == e.K.shape[1] and list(rows) == list(range(e.K.shape[1]))):
+            return e.K
+        key = (phase.startup, phase.index, ch, None if rows is None else tuple(rows))
+        K = self._cache.get(key)
+        if K is None:
+            K = self._cache[key] = gain(e.P_prior, self.H(ch, rows), self.noise.R(ch, rows))
+        return K
+
+    def posterior(self, phase: Phase, channel: int | None = None, rows: Sequence[int] | None = None) -> np.ndarray:
+        """Covariance after the correction at ``phase`` (Joseph form from the stored prior)."""
+        e = self.entry(phase)
+        ch = e.channel if channel is None else int(channel)
+        return joseph(e.P_prior, self.gain(phase, ch, rows), self.H(ch, rows), self.noise.R(ch, rows))
+
+    # ------------------------------------------------------------ persistence
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (plain lists of floats; :meth:`from_dict` restores it exactly)."""
+        return {
+            "family": "kalman",
+            "system_fingerprint": self.system.fingerprint(),
+            "noise": self.noise.to_dict(),
+            "rate": self.pattern.rate,
+            "cycles": [list(c.h) for c in self.pattern.cycles],
+            "repeat": self.pattern.repeat,
+            "ties": list(self.pattern.ties),
+            "periodic": _phases_to_dict(self.periodic),
+            "startup": _phases_to_dict(self.startup),
+            "periods": self.periods,
+            "change": self.change,
+            "error_transition": self.error_transition.tolist(),
+            "rho": self.rho,
+            "norm": self.norm,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], system: Any) -> KalmanDesign:
+        """Inverse of :meth:`to_dict`; ``system`` must have the stored fingerprint."""
+        try:
+            if d.get("family") != "kalman":
+                raise KalmanDesignError(f"not a kalman design (family {d.get('family')!r})")
+            if d["system_fingerprint"] != system.fingerprint():
+                raise KalmanDesignError("the stored Kalman design was made for another system (fingerprint differs)")
+            periodic = _phases_from_dict(d["periodic"])
+            pattern = SamplePattern(float(d["rate"]), tuple(Cycle(h) for h in d["cycles"]), int(d["repeat"]),
+                                    tuple(p.channel for p in periodic), tuple(int(k) for k in d["ties"]))
+            return cls(system, NoiseModel.from_dict(d["noise"]), pattern, periodic, _phases_from_dict(d["startup"]),
+                       int(d["periods"]), float(d["change"]), np.array(d["error_transition"], dtype=float),
+                       float(d["rho"]), float(d["norm"]))
+        except (KeyError, TypeError, AttributeError) as err:
+            raise KalmanDesignError(f"stored Kalman design is malformed (missing or bad {err})") from None
+
+    def describe(self) -> str:
+        """One line: rate, cycles, period, start-up length, convergence, rho and norm."""
+        return (
+            f"kalman: {self.rate:g} Hz, {', '.join(c.label() for c in self.cycles)}, period {self.pattern.K} samples, "
+            f"start-up {len(self.startup)} samples, converged in {self.periods} periods, period error transition "
+            f"rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
+        )
+
+
+def design_kalman(
+    system: Any,
+    cycles: Cycle | Sequence[Cycle],
+    rate: float,
+    noise: NoiseModel | None = None,
+    *,
+    rtol: float = 1e-12,
+    startup_rtol: float = 1e-11,
+    max_periods: int = 500,
+    max_repeat: int = 64,
+) -> KalmanDesign:
+    """Offline periodic Kalman gains for ``cycles`` (one cycle, or a sequence repeated) at ``rate`` Hz.
+
+    ``design = design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0, default_noise(system))``
+
+    Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair;
+    3. periodic Riccati solution by whole-period iteration from ``P0`` (relative change
+    ``<= rtol``), and the start-up segment (``startup_rtol``); 4. the period's error transition.
+
+    Raises
+    ------
+    KalmanDesignError
+        No whole number of samples per period (see :func:`sample_pattern`).
+    UndetectableSchedule
+        Some unstable mode is never observed by the sampled schedule.
+    RiccatiError
+        No convergence within ``max_periods``.
+    """
+    noise = default_noise(system) if noise is None else noise
+    if not isinstance(noise, NoiseModel):
+        raise InvalidArgument(f"noise must be a NoiseModel; got {type(noise).__name__}")
+    noise.check_system(system)
+    # 1. sample pattern
+    pattern = sample_pattern(cycles, rate, max_repeat=max_repeat)
+    # 2. detectability
+    check_detectable(system, pattern)
+    # 3. periodic Riccati solution and start-up
+    A = np.asarray(system.A, dtype=float)
+    dt = 1.0 / pattern.rate
+    Phi, _, Qd = discretize(A, np.asarray(system.B, dtype=float), noise.Q_c, dt)
+    steps = [Step(Phi, Qd, system.C[c - 1], noise.R(c)) for c in pattern.channels]
+    sol = periodic_riccati(steps, noise.P0, rtol=rtol, startup_rtol=startup_rtol, max_periods=max_periods)
+    K = pattern.K
+    periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k]) for k in range(K)]
+    startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk)
+               for k, (P, Kk) in enumerate(zip(sol.startup_P, sol.startup_K))]
+    # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
+    n = A.shape[0]
+    M = np.eye(n)
+    for k in list(range(1, K)) + [0]:
+        M = (np.eye(n) - sol.K[k] @ steps[k].H) @ Phi @ M
+    return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M,
+                        float(np.max(np.abs(np.linalg.eigvals(M)))), float(np.linalg.norm(M, 2)))
+
+
+class TableKalman:
+    """The table-lookup filter: exact prediction, correction with the stored gain of the phase.
+
+    ``f = TableKalman(design, x0)``; ``x = f.update(t, channel, y, rows=None, u=None)`` with ``t``
+    the time since the cycle sequence started. Uses the same step formulas as the online
+    filter (:mod:`.riccati`); no covariance is propagated (module docstring).
+    """
+
+    def __init__(self, design: KalmanDesign, x0: Any = None) -> None:
+        self.design = design
+        sysm = design.system
+        n = sysm.n
+        self.x = np.zeros(n) if x0 is None else np.array(x0, dtype=float).reshape(n)
+        self.t: float | None = None
+        self.phase: Phase | None = None
+        self._cache = DiscretizationCache(np.asarray(sysm.A, float), np.asarray(sysm.B, float), np.zeros((n, n)))
+
+    def update(self, t: float, channel: int, y: Any, rows: Sequence[int] | None = None, u: Any = None) -> np.ndarray:
+        """Predict to ``t`` (``u`` held since the last sample), correct with ``y`` (rows ``rows``)."""
+        if self.t is not None:
+            Phi, GB, _ = self._cache.get(t - self.t)
+            # x^- = Phi x^+ + Gamma B u
+            self.x = Phi @ self.x if u is None else Phi @ self.x + GB @ np.asarray(u, float)
+        self.t = float(t)
+        self.phase = ph = self.design.phase_at(t)
+        K = self.design.gain(ph, channel, rows)
+        self.x = correct_state(self.x, K, self.design.H(channel, rows), np.asarray(y, dtype=float))
+        return self.x
