@@ -242,7 +242,8 @@ class CycleTracker:
         else:
             matched = order_ok and self.matches(h, promised)
             resync = not matched and order_ok and sequence
-        f = tuple(cycle_factor(kk, m, e, hi, tau - hi) for kk, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
+        f = () if design.kappa is None else tuple(   # Kalman gains: no paper factors
+            cycle_factor(kk, m, e, hi, tau - hi) for kk, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
         rec = CycleRecord(k=k, t_start=self.cycle_start, t_end=t, tau=tau, h=h,
                           s=h[0] / tau if tau > 0 else float("nan"), f=f, order=order, promised=promised,
                           matched=bool(matched), a2_ok=a2_ok, design_index=design_index)
@@ -268,7 +269,7 @@ class CycleTracker:
             if lh > lhi or (lh < llo and judged):
                 problem = self.text(lc, lh, llo, lhi, done=True)
         f = None
-        if self.started:
+        if self.started and design.kappa is not None:
             h = self.h.copy()
             h[c - 1] += cur
             try:

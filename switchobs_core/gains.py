@@ -4,10 +4,16 @@ A :class:`CycleDesign` holds, for one cycle (or for a residence-time box, the ro
 design), one verified gain per channel with its eta, kappa, mu and the paper's cycle
 factor f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i) (e:f11_le_delta_main).
 
-File format (JSON, ``format = "switchobs-gain-table"``, ``format_version = 1``)::
+A table holds one gain *family* (``family``): ``"lmi"``, the paper's LMI gains per cycle
+(:mod:`switchobs_core.design`), or ``"kalman"``, offline periodic Kalman gains per sample phase
+of a (super-)cycle at a nominal rate (:mod:`switchobs_core.kalman`). The observer, the exact
+bound and the certificates only use the error maps the observer applies, so they serve both.
+
+File format (JSON, ``format = "switchobs-gain-table"``, ``format_version = 2``; version 1
+files, which are LMI tables without the two last keys, still load)::
 
     {
-      "format": "switchobs-gain-table", "format_version": 1,
+      "format": "switchobs-gain-table", "format_version": 2,
       "software_version": "0.1.0",
       "system": {"name", "fingerprint", "n", "p": [...], "N"},
       "delta": [delta_1, ..., delta_N],
@@ -15,6 +21,9 @@ File format (JSON, ``format = "switchobs-gain-table"``, ``format_version = 1``):
       "channels": [{"r", "mu", "T_o": [[...]], "kappa_curve": {"eta": [...], "kappa": [...]}}],
       "designs": [design, ...],          # kind "cycle"
       "robust": design | null,           # kind "robust"
+      "family": "lmi" | "kalman",
+      "kalman": [kalman_design, ...],    # KalmanDesign.to_dict(): rate, cycles, noise model,
+                                         # periodic and start-up phases (P^-, K per sample)
       "payload_sha256": "..."            # sha256 of the canonical JSON of everything else
     }
 
@@ -43,6 +52,7 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -51,16 +61,22 @@ import numpy as np
 
 from ._version import __version__
 from .certificate import cycle_factor
-from .exceptions import GainTableError, InvalidArgument
+from .exceptions import GainTableError, InvalidArgument, SwitchobsError
+from .kalman import KalmanDesign
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 
 if TYPE_CHECKING:
     from .system import LTISystem
 
-__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION", "FAMILIES",
+           "kalman_table"]
 
 FORMAT = "switchobs-gain-table"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this software reads (1: LMI tables from before the Kalman family).
+READABLE_VERSIONS = (1, 2)
+#: Gain families a table can hold.
+FAMILIES = ("lmi", "kalman")
 
 
 @dataclass(frozen=True)
@@ -244,6 +260,9 @@ class GainTable:
     designs: list[CycleDesign] = field(default_factory=list)
     robust: CycleDesign | None = None
     software_version: str = __version__
+    family: str = "lmi"
+    kalman: list[dict[str, Any]] = field(default_factory=list)
+    _kalman_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def N(self) -> int:
@@ -258,6 +277,30 @@ class GainTable:
                 return d
         have = ", ".join(d.label() for d in self.designs) or "none"
         raise GainTableError(f"no design for cycle {cycle.label()} in the table (designed cycles: {have})")
+
+    def kalman_design(self, cycles: Sequence[Cycle], system: LTISystem, *, rtol: float = CYCLE_RTOL,
+                      atol: float = CYCLE_ATOL) -> KalmanDesign:
+        """The stored Kalman design of the cycle sequence ``cycles`` (one cycle: periodic).
+
+        Matches the sequence in order, each cycle within the tolerance of :meth:`lookup`.
+        ``system`` rebuilds the design (its fingerprint is checked).
+        """
+        cycles = [cycles] if isinstance(cycles, Cycle) else list(cycles)
+        for d in self.kalman:
+            stored = [Cycle(h) for h in d.get("cycles", [])]
+            if len(stored) == len(cycles) and all(a.matches(b, rtol=rtol, atol=atol) for a, b in zip(stored, cycles)):
+                key = id(d)
+                kd = self._kalman_cache.get(key)
+                if kd is None:
+                    try:
+                        kd = self._kalman_cache[key] = KalmanDesign.from_dict(d, system)
+                    except SwitchobsError as err:
+                        raise GainTableError(f"gain table: stored Kalman design unusable: {err}") from None
+                return kd
+        have = "; ".join(", ".join(Cycle(h).label() for h in d.get("cycles", [])) for d in self.kalman) or "none"
+        want = ", ".join(c.label() for c in cycles)
+        raise GainTableError(f"no Kalman design for the cycle sequence {want} in the table (designed: {have}); "
+                             "design it with `switchobs design ... --gains kalman`")
 
     def find(self, cycle: Cycle) -> CycleDesign | None:
         """Like :meth:`lookup` but ``None`` when absent."""
@@ -300,6 +343,8 @@ class GainTable:
             "channels": self.channels,
             "designs": [d.to_dict() for d in self.designs],
             "robust": None if self.robust is None else self.robust.to_dict(),
+            "family": self.family,
+            "kalman": self.kalman,
         }
 
     @staticmethod
@@ -346,10 +391,11 @@ class GainTable:
             ) from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise GainTableError(f"{source}: not a switchobs gain table (format field missing or wrong)")
-        if data.get("format_version") != FORMAT_VERSION:
+        version = data.get("format_version")
+        if isinstance(version, bool) or version not in READABLE_VERSIONS:
             raise GainTableError(
-                f"{source}: gain table format version {data.get('format_version')} "
-                f"is not supported (this software reads version {FORMAT_VERSION})"
+                f"{source}: gain table format version {version} "
+                f"is not supported (this software reads versions {', '.join(map(str, READABLE_VERSIONS))})"
             )
         digest = data.pop("payload_sha256", None)
         _check_finite(data, source)
@@ -370,9 +416,15 @@ class GainTable:
                 designs=[CycleDesign.from_dict(d) for d in data["designs"]],
                 robust=None if data["robust"] is None else CycleDesign.from_dict(data["robust"]),
                 software_version=str(data["software_version"]),
+                family=str(data.get("family", "lmi")),
+                kalman=list(data.get("kalman", [])),
             )
         except (KeyError, TypeError, ValueError) as err:
             raise GainTableError(f"{source}: malformed gain table ({type(err).__name__}: {err})") from None
+        if table.family not in FAMILIES:
+            raise GainTableError(f"{source}: unknown gain family {table.family!r} (known: {', '.join(FAMILIES)})")
+        if table.family == "kalman" and not table.kalman:
+            raise GainTableError(f"{source}: a kalman gain table without a Kalman design")
         if system is not None:
             table.check_system(system, source=source)
         return table
@@ -404,6 +456,32 @@ class GainTable:
                     f"{source}: stored observable basis of channel {i} differs from this "
                     "software's decomposition (made by another version?): design it again"
                 )
+
+
+def kalman_table(system: LTISystem, designs: Sequence[KalmanDesign]) -> GainTable:
+    """A gain table of family ``"kalman"`` holding the offline Kalman ``designs`` of ``system``.
+
+    The table's system fingerprint and observable bases are the system's (so loading checks
+    them as for LMI tables); each design carries its noise model, rate and cycle sequence, and
+    the checksum covers them (a table for another noise model or rate is another table).
+    """
+    designs = list(designs)
+    if not designs:
+        raise InvalidArgument("kalman_table needs at least one Kalman design")
+    for d in designs:
+        if not isinstance(d, KalmanDesign) or d.system.fingerprint() != system.fingerprint():
+            raise InvalidArgument("kalman_table: every design must be a KalmanDesign of this system")
+    return GainTable(
+        system_name=system.name,
+        fingerprint=system.fingerprint(),
+        n=system.n,
+        p=tuple(system.p),
+        delta=(),
+        settings={"family": "kalman", "rank_rtol": system.rtol},
+        channels=[{"r": dc.r, "T_o": dc.T_o.tolist()} for dc in system.decompositions],
+        family="kalman",
+        kalman=[d.to_dict() for d in designs],
+    )
 
 
 def _check_finite(obj: Any, source: str, where: str = "") -> None:

@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,18 +64,74 @@ from .decomposition import observability_decomposition
 from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument, ScheduleError
+from .kalman import KalmanDesign, Phase
+from .noise import NoiseModel, default_noise
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
+from .riccati import DiscretizationCache, joseph, symmetrize
+from .riccati import gain as riccati_gain
 
-__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "SwitchedObserver"]
+__all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
+
+#: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
+NOT_APPLICABLE = -1.0
 
 #: Schedule modes accepted by :class:`SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
+#: Gain families (module docstring): the paper's LMI gains, offline Kalman tables, online Riccati.
+FAMILIES = ("lmi", "kalman", "kalman-online")
 #: What may be held between samples (module docstring).
 HOLDS = ("innovation", "measurement")
 #: Largest accepted norm of a sample (and magnitude of an input entry): beyond it the products
 #: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
 _MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
+
+
+@dataclass(frozen=True)
+class ScheduledCycle:
+    """A promised cycle of a Kalman-family observer (the residence bookkeeping's design).
+
+    Kalman gains have no per-channel ``kappa``, ``eta``, ``mu`` (the paper's quantities of LMI
+    gains): they are None, and the paper's factors and envelopes are not applicable.
+    """
+
+    cycle: Any
+    h_bounds: Any = None
+    kappa: Any = None
+    eta: Any = None
+    mu: Any = None
+    f: Any = None
+    kind: str = "kalman"
+
+    def label(self) -> str:
+        return "any schedule (online Riccati)" if self.cycle is None else self.cycle.label()
+
+
+def _check_bounds(bounds: Any) -> tuple[float, float] | None:
+    """A2's ``(h_min, h_max)`` as floats with ``0 < h_min <= h_max < inf`` (None passes)."""
+    if bounds is None:
+        return None
+    hmin, hmax = (float(b) for b in bounds)
+    if not (0 < hmin <= hmax and math.isfinite(hmax)):
+        raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
+    return (hmin, hmax)
+
+
+def _check_cycles(cycles: Any, mode: str, N: int) -> list:
+    """The promised cycles of periodic (one) or sequence (K >= 1) mode, each with N times."""
+    if cycles is None:
+        raise InvalidArgument(f"cycles is required in {mode} mode")
+    if not isinstance(cycles, (list, tuple)):
+        cycles = [cycles]
+    if len(cycles) == 0:
+        raise InvalidArgument("cycles must hold at least one cycle")
+    if mode == "periodic" and len(cycles) != 1:
+        raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} (use mode='sequence')")
+    for c in cycles:
+        h = getattr(c, "h", None)
+        if h is None or len(h) != N:
+            raise ScheduleError(f"cycles: {c!r} does not have {N} residence times h")
+    return list(cycles)
 
 
 class SwitchedObserver:
@@ -141,7 +198,9 @@ class SwitchedObserver:
                  e0: float = 1.0, *, bounds: tuple[float, float] | None = None,
                  match_tol: float = 0.05, cache_size: int = 64,
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
-                 max_records: int = 100_000, hold: str = "innovation"):
+                 max_records: int = 100_000, hold: str = "innovation",
+                 family: str | None = None, noise: NoiseModel | None = None,
+                 track_covariance: bool | None = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -164,48 +223,57 @@ class SwitchedObserver:
         for name, v in (("cache_size", cache_size), ("max_records", max_records)):
             if not isinstance(v, (int, np.integer)) or v < 1:
                 raise InvalidArgument(f"{name} must be an integer >= 1; got {v!r}")
-        # 1. designs of the mode
-        if mode == "robust":
+        # 1. gain family (module docstring): the table's, or kalman-online on request; a
+        #    kalman table in robust mode (no promised schedule) runs the recursion online
+        family = getattr(table, "family", "lmi") if family is None else family
+        if family not in FAMILIES:
+            raise InvalidArgument(f"family must be one of {FAMILIES}; got {family!r}")
+        if family == "kalman" and mode == "robust":
+            family = "kalman-online"
+        if family != "lmi" and hold != "innovation":
+            raise InvalidArgument("hold='measurement' applies to the LMI family only")
+        if family == "lmi" and getattr(table, "family", "lmi") != "lmi":
+            raise InvalidArgument(f"family 'lmi' needs an LMI gain table; this table holds {table.family!r} gains")
+        self.family = family
+        self.kalman: KalmanDesign | None = None
+        # 2. designs of the mode
+        if family != "lmi":
+            self._init_kalman(table, mode, cycles, bounds, noise)
+        elif mode == "robust":
             d = getattr(table, "robust", None)
             if d is None:
                 raise InvalidArgument("table has no robust design (table.robust is None); "
                                       "design one with design_table(..., robust=(h_min, h_max))")
             self.designs = (d,)
             self.promised = (None,)
-            if bounds is None:
-                bounds = getattr(d, "h_bounds", None)
-            if bounds is not None:
-                hmin, hmax = (float(b) for b in bounds)
-                if not (0 < hmin <= hmax and math.isfinite(hmax)):
-                    raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
-                bounds = (hmin, hmax)
-            self.bounds = bounds
+            self.bounds = _check_bounds(getattr(d, "h_bounds", None) if bounds is None else bounds)
         else:
-            if cycles is None:
-                raise InvalidArgument(f"cycles is required in {mode} mode")
-            if not isinstance(cycles, (list, tuple)):
-                cycles = [cycles]
-            if len(cycles) == 0:
-                raise InvalidArgument("cycles must hold at least one cycle")
-            if mode == "periodic" and len(cycles) != 1:
-                raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} "
-                                      "(use mode='sequence')")
-            designs = []
-            for c in cycles:
-                h = getattr(c, "h", None)
-                if h is None or len(h) != self.N:
-                    raise ScheduleError(f"cycles: {c!r} does not have {self.N} residence times h")
-                designs.append(table.lookup(c))
-            self.designs = tuple(designs)
+            cycles = _check_cycles(cycles, mode, self.N)
+            self.designs = tuple(table.lookup(c) for c in cycles)
             self.promised = tuple(cycles)
             self.bounds = None
-        for d in self.designs:
+        for d in self.designs if family == "lmi" else ():
             for i, Li in enumerate(d.L):
                 if np.shape(Li) != (self.n, self.p[i]):
                     raise InvalidArgument(f"design gain L_{i + 1} has shape {np.shape(Li)}; "
                                           f"expected {(self.n, self.p[i])}")
         self._L = tuple(tuple(np.ascontiguousarray(Li, dtype=float) for Li in d.L)
-                        for d in self.designs)
+                        for d in self.designs) if family == "lmi" else ()
+        # covariance: the filter's own for the Kalman families; for LMI gains propagated under
+        # the noise model when one is given (or asked for)
+        if family == "lmi":
+            if track_covariance is None:
+                track_covariance = noise is not None
+            if track_covariance and noise is None:
+                noise = default_noise(system)
+            if track_covariance and hold != "innovation":
+                raise InvalidArgument("track_covariance needs hold='innovation' (the exact error map)")
+            self.noise = noise
+        self.track_covariance = bool(track_covariance) or family != "lmi"
+        if self.noise is not None:
+            self.noise.check_system(system)
+            self._dcache = DiscretizationCache(self.A, self.B, self.noise.Q_c,
+                                               dt_resolution=dt_resolution or DEFAULT_DT_RESOLUTION)
         # 2. alpha of (e:alpha_def) from the observable subspaces
         try:
             self.alpha = float(system.alpha)
@@ -259,7 +327,16 @@ class SwitchedObserver:
         self.resyncs = 0
         self._cycles.reset(t0)
         self._records.clear()
-        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0)
+        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self.family == "lmi" else None
+        # covariance and Kalman bookkeeping
+        self._P = self.noise.P0.copy() if self.track_covariance else None
+        self._P_fresh = True
+        self._R_held = None
+        self._origin: float | None = None
+        self._kphase: Phase | None = None
+        self._kgain: tuple | None = None
+        self._online = self.family == "kalman-online"
+        self.kalman_fallback = ""
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -414,6 +491,8 @@ class SwitchedObserver:
                 x += e.GB @ self._u
             self._x = x
             self._Phi = e.E @ self._Phi
+            if self._P is not None and (self.family == "lmi" or self._online):
+                self._propagate_covariance(e, dt)
         self._t = t
         # 2. switching instant
         if channel != self._channel:
@@ -422,10 +501,105 @@ class SwitchedObserver:
         if u is not None:
             self._u = u
             self._u_zero = not u.any()
-        self._key = self._gain_key(channel, rows)
-        self._y = y - self._Crows[self._key] @ self._x if self.hold == "innovation" else y
-        self._entry_L = True
+        if self.family == "lmi":
+            self._key = self._gain_key(channel, rows)
+            self._y = y - self._Crows[self._key] @ self._x if self.hold == "innovation" else y
+            self._entry_L = True
+            if self._P is not None:
+                self._R_held = self.noise.R(channel, rows)
+        else:
+            self._correct(t, channel, y, rows)
         return self._x
+
+    # ------------------------------------------------------------------ Kalman families
+    def _init_kalman(self, table: Any, mode: str, cycles: Any, bounds: Any, noise: NoiseModel | None) -> None:
+        """Designs of the Kalman families: the stored table design of the promised cycle
+        sequence (``kalman``) or the noise model alone (``kalman-online``)."""
+        stored = getattr(table, "family", "lmi") == "kalman"
+        if mode == "robust":
+            self.designs = (ScheduledCycle(None, h_bounds=bounds),)
+            self.promised = (None,)
+            self.bounds = _check_bounds(bounds)
+            cycles = []
+        else:
+            cycles = _check_cycles(cycles, mode, self.N)
+            self.designs = tuple(ScheduledCycle(c) for c in cycles)
+            self.promised = tuple(cycles)
+            self.bounds = None
+        if self.family == "kalman":
+            self.kalman = table.kalman_design(cycles, self.system)
+            if noise is not None and noise.fingerprint() != self.kalman.noise.fingerprint():
+                raise InvalidArgument("noise differs from the noise model the Kalman table was designed for; "
+                                      "design the table again with that noise model")
+            noise = self.kalman.noise
+        elif noise is None:
+            noise = NoiseModel.from_dict(table.kalman[0]["noise"]) if stored else default_noise(self.system)
+        self.noise = noise
+
+    def _propagate_covariance(self, e: Any, dt: float) -> None:
+        """Covariance of the error over one step (Joseph-free: the map is exact).
+
+        ``P <- E P E' + Q_d(dt) + (Gamma L) R (Gamma L)'`` with ``E`` the step's error map,
+        ``Q_d`` the van Loan discretisation of the process intensity, and the last term (LMI
+        gains, innovation hold) the held measurement noise driven through ``Gamma L``; for the
+        Kalman families ``E = e^{A dt}`` and the term is absent (the correction follows).
+        """
+        _, _, Q_d = self._dcache.get(dt)
+        P = e.E @ self._P @ e.E.T + Q_d
+        if self.family == "lmi" and self._entry_L:
+            P += e.GL @ self._R_held @ e.GL.T
+        self._P = symmetrize(P)
+
+    def _correct(self, t: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
+        """Kalman correction ``x^+ = x^- + K (y - H x^-)`` and its error map ``(I - K H)``.
+
+        ``kalman``: ``K`` from the table at the sample phase (time since the first sample
+        after construction or reset, nearest sample under jitter). A sample the table does not
+        describe (channel other than the phase's, a stamp off the design's grid) switches the
+        observer to the online recursion from the stored prior of the nearest phase, which is
+        the Kalman filter for whatever schedule follows (``kalman_fallback`` says why).
+        ``kalman-online``: the Riccati recursion (Joseph form) on the observer's own ``P``.
+        """
+        H = self.C[channel - 1] if rows is None else self.C[channel - 1][list(rows)]
+        K = None
+        if not self._online:
+            if self._origin is None:
+                self._origin = t
+            ph = None
+            try:
+                ph = self.kalman.phase_at(t - self._origin)
+                ent = self.kalman.entry(ph)
+                if ent.channel != channel and ph.k % self.kalman.pattern.K not in self.kalman.pattern.ties:
+                    raise ScheduleError(f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman "
+                                        f"table's schedule has channel {ent.channel}")
+                K = self.kalman.gain(ph, channel, rows)
+                self._kphase = ph
+                self._kgain = (ph, channel, rows)
+            except (InvalidArgument, ScheduleError) as err:
+                self.kalman_fallback = f"{err}; running the Riccati recursion online from here"
+                self._online = True
+                self._P = (self.kalman.entry(ph).P_prior if ph is not None else self.noise.P0).copy()
+        if self._online:
+            R = self.noise.R(channel, rows)
+            K = riccati_gain(self._P, H, R)
+            self._P = joseph(self._P, K, H, R)
+        x = self._x
+        x += K @ (y - H @ x)
+        self._Phi -= K @ (H @ self._Phi)
+
+    @property
+    def P(self) -> np.ndarray | None:
+        """Error covariance at the last sample (a copy), or None when not tracked.
+
+        Kalman families: the filter's posterior covariance (from the table: the stored prior of
+        the phase with the Joseph update of the rows received). LMI gains: the covariance
+        propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
+        """
+        if self.family == "kalman" and not self._online:
+            if self._kgain is None:
+                return self.noise.P0.copy()
+            return self.kalman.posterior(*self._kgain)
+        return None if self._P is None else self._P.copy()
 
     def _switch(self, t: float, channel: int) -> None:
         """Bookkeeping at a switching instant (e:switching_instants), kept by the tracker."""
@@ -438,7 +612,8 @@ class SwitchedObserver:
         self._channel = channel
         d = self.current_design
         cyc.begin(t, channel, cyc.limits_for(d, channel))
-        self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
+        if self._tracker is not None:
+            self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
 
     def _close_cycle(self, t: float) -> None:
         di = self.design_index
@@ -523,6 +698,9 @@ class SwitchedObserver:
         Phi = self._Phi
         if dt > 0:
             Phi = self._cache.step(self._key, dt).E @ Phi
+        if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
+            return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
+                            exact_bound=float(np.linalg.norm(Phi, 2) * self.e0), t=float(t))
         z = self._tracker.z(float(t))
         return Envelope(z=z, paper_bound=float(self.alpha * z.sum()),
                         exact_bound=float(np.linalg.norm(Phi, 2) * self.e0), t=float(t))
