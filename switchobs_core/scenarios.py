@@ -21,9 +21,11 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidSystem
+from .noise import NoiseModel
 from .system import LTISystem, read_spec
 
-__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system", "PAPER_D"]
+__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system",
+           "load_noise", "PAPER_D"]
 
 #: The paper's velocity matrices (Sec. ``subsec:sim_params``): D_c, D_1, D_2 diagonals.
 PAPER_D: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.2), (0.0, 0.1))
@@ -128,10 +130,27 @@ def build_scenario(name: str, **params: Any) -> LTISystem:
 def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
     """A system from a parsed YAML mapping: ``scenario: name`` with the scenario's
     parameters, or the explicit schema of :meth:`LTISystem.from_dict`."""
+    if isinstance(spec, dict) and "noise" in spec:     # the noise model is read by load_noise
+        spec = {k: v for k, v in spec.items() if k != "noise"}
     if isinstance(spec, dict) and "scenario" in spec:
         params = {k: v for k, v in spec.items() if k != "scenario"}
         return build_scenario(str(spec["scenario"]), **params)
     return LTISystem.from_dict(spec, source=source)
+
+
+def load_noise(spec: str | Path, system: LTISystem, *, meas_std: Any = None,
+               process_q: float | None = None) -> NoiseModel:
+    """The noise model of a system: the ``noise:`` mapping of its YAML file (defaults for a
+    built-in scenario or a file without one, :func:`switchobs_core.noise.default_noise`),
+    then the command-line overrides ``meas_std`` (``--meas-noise``) and ``process_q``
+    (``--process-noise``); see :meth:`NoiseModel.from_mapping`."""
+    s = str(spec)
+    mapping, source = None, "noise"
+    if s not in SCENARIOS:
+        data = read_spec(Path(s))
+        if isinstance(data, dict):
+            mapping, source = data.get("noise"), f"{s}: noise"
+    return NoiseModel.from_mapping(mapping, system, meas_std=meas_std, process_q=process_q, source=source)
 
 
 def load_system(spec: str | Path) -> LTISystem:

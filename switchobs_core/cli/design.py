@@ -6,11 +6,18 @@ import argparse
 from pathlib import Path
 
 from ..design import Designer, Margin
-from ..gains import CycleDesign, GainTable
-from ..scenarios import load_system
+from ..exceptions import InvalidArgument
+from ..gains import CycleDesign, GainTable, kalman_table
+from ..kalman import design_kalman
+from ..scenarios import load_noise, load_system
+from ..schedule import Cycle
+from ..system import LTISystem
 from ._common import fmt_table, parse_h, parse_pair, parse_ts, print_json
 
-__all__ = ["register", "run", "design_rows", "table_summary"]
+__all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]
+
+#: Gain families ``--gains`` designs (``kalman-online`` needs no table).
+FAMILIES = ("lmi", "kalman")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -50,6 +57,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=Margin(),
         metavar="M",
         help="eta = eta_min + M (absolute, e.g. 0.1) or eta_min*(1+M) (relative, e.g. 5%%); default 5%%",
+    )
+    p.add_argument(
+        "--gains",
+        choices=FAMILIES,
+        default="lmi",
+        help="gain family: lmi (the paper's LMI gains, per cycle) or kalman (offline periodic Kalman gains per "
+        "sample phase at --rate; several --cycle flags form one repeating sequence, in that order)",
+    )
+    p.add_argument("--rate", type=float, metavar="HZ", help="nominal sample rate in Hz (required with --gains kalman)")
+    p.add_argument(
+        "--meas-noise",
+        type=float,
+        metavar="STD",
+        help="measurement noise std on every output row (overrides the system's noise: section; default 1 mm)",
+    )
+    p.add_argument(
+        "--process-noise",
+        type=float,
+        metavar="Q",
+        help="process noise q on every state: continuous white noise of intensity Q_c = q^2 I, discretised by "
+        "van Loan (the same meaning as `switchobs_bag generate --process-noise`)",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="gain table file to write (JSON)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -118,9 +146,60 @@ def print_designs(table: GainTable) -> None:
     )
 
 
+def kalman_summary(table: GainTable, system: LTISystem) -> dict:
+    """JSON summary of a kalman table: per design the rate, cycles, noise, period and certificate."""
+    out = []
+    for d in table.kalman:
+        kd = table.kalman_design([Cycle(h) for h in d["cycles"]], system)
+        out.append({
+            "cycles": [c.to_dict() for c in kd.cycles],
+            "rate_hz": kd.rate,
+            "noise": kd.noise.to_dict(),
+            "period_samples": kd.pattern.K,
+            "startup_samples": len(kd.startup),
+            "periods_to_converge": kd.periods,
+            "period_error_transition": {"spectral_radius": kd.rho, "norm": kd.norm},
+        })
+    return {"system": table.system_name, "fingerprint": table.fingerprint, "family": table.family, "kalman": out}
+
+
+def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle]) -> int:
+    """``--gains kalman``: one offline periodic Kalman design for the cycle sequence."""
+    if args.rate is None:
+        raise InvalidArgument("--gains kalman needs the nominal sample rate: add --rate HZ")
+    if not cycles:
+        raise InvalidArgument("--gains kalman needs the schedule: give --cycle TAU,S (or --cycle-h) once for a "
+                              "periodic schedule, several times for a repeating sequence")
+    if args.robust is not None:
+        raise InvalidArgument("--robust designs LMI gains for any schedule in a box; Kalman gains need a known "
+                              "schedule (without one the estimator runs the Riccati recursion online: mode robust)")
+    noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
+    kd = design_kalman(system, cycles, args.rate, noise)
+    table = kalman_table(system, [kd])
+    table.save(args.output)
+    if args.json:
+        out = kalman_summary(table, system)
+        out["output"] = str(args.output)
+        print_json(out)
+        return 0
+    print(system.describe())
+    print()
+    print(noise.describe())
+    print(kd.describe())
+    print("sound certificate of the periodic closed loop: the period's error transition has the spectral radius "
+          "and norm above (< 1: the error contracts every period, for noise-free samples on the schedule)")
+    print(f"wrote {args.output}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     cycles = list(args.cycle) + list(args.cycle_h)
+    if args.gains == "kalman":
+        return run_kalman(args, system, cycles)
+    if args.rate is not None or args.meas_noise is not None or args.process_noise is not None:
+        raise InvalidArgument("--rate, --meas-noise and --process-noise belong to --gains kalman "
+                              "(the paper's LMI gains do not depend on them)")
     designer = Designer(system, delta=args.delta, margin=args.margin)
     table = designer.table(cycles, robust=args.robust, progress=args.progress)
     table.save(args.output)

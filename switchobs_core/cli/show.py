@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..gains import GainTable
 from ..scenarios import load_system
+from ..schedule import Cycle
 from ._common import fmt_table, print_json
 from .design import print_designs, table_summary
 
@@ -28,6 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.system) if args.system else None
     table = GainTable.load(args.table, system=system)
+    if table.family == "kalman":
+        return _show_kalman(args, table, system)
     if args.json:
         out = table_summary(table)
         out["checked_against_system"] = system is not None
@@ -48,4 +51,41 @@ def run(args: argparse.Namespace) -> int:
     print(fmt_table(["channel", "r_i", "mu_i", "kappa samples"], rows))
     print()
     print_designs(table)
+    return 0
+
+
+def _kalman_rows(table: GainTable) -> list[dict]:
+    """What a kalman table holds, read from the stored designs (no system needed)."""
+    return [
+        {
+            "cycles": [Cycle(h).label() for h in d["cycles"]],
+            "rate_hz": d["rate"],
+            "period_samples": len(d["periodic"]["channel"]),
+            "startup_samples": len(d["startup"]["channel"]),
+            "periods_to_converge": d["periods"],
+            "spectral_radius": d["rho"],
+            "norm": d["norm"],
+            "noise": d["noise"],
+        }
+        for d in table.kalman
+    ]
+
+
+def _show_kalman(args: argparse.Namespace, table: GainTable, system: object) -> int:
+    rows = _kalman_rows(table)
+    if args.json:
+        print_json({"system": table.system_name, "fingerprint": table.fingerprint, "family": "kalman",
+                    "software_version": table.software_version, "kalman": rows,
+                    "checked_against_system": system is not None})
+        return 0
+    print(f"gain table {args.table} (family kalman: offline periodic Kalman gains per sample phase)")
+    print(f"  system     {table.system_name} (n = {table.n}, p = {list(table.p)}), "
+          f"fingerprint {table.fingerprint[:16]}...")
+    if system is not None:
+        print(f"  checked    matches system '{table.system_name}'")
+    print(f"  software   switchobs {table.software_version}")
+    print(fmt_table(["cycle sequence", "rate", "period", "start-up", "rho (period)", "||period map||"],
+                    [[", ".join(r["cycles"]), f"{r['rate_hz']:g} Hz", f"{r['period_samples']} samples",
+                      f"{r['startup_samples']} samples", f"{r['spectral_radius']:.4g}", f"{r['norm']:.4g}"]
+                     for r in rows]))
     return 0

@@ -30,7 +30,7 @@ from switchobs_core import synthesis as syn
 from switchobs_core import system as sy
 from switchobs_core import validation as val
 from switchobs_core.exceptions import GainTableError, SwitchobsError
-from switchobs_core.gains import GainTable
+from switchobs_core.gains import GainTable, kalman_table
 from switchobs_core.observer import SwitchedObserver
 
 NAN, INF = math.nan, math.inf
@@ -235,6 +235,13 @@ CASES = [
      lambda s: sim.sampled_error_transition(A4, C4, [(0.1, 3, np.zeros((4, 1)))])),
     ("designs_for.mode", "mode", lambda s: sim.designs_for(s[1], sch.PeriodicSchedule(CYC), "weekly")),
     # --- observer
+    ("SwitchedObserver.family", "family", lambda s: _obs(s, family="particle")),
+    ("SwitchedObserver.family.table", "kalman", lambda s: _obs(s, family="kalman")),
+    ("SwitchedObserver.track_covariance", "hold", lambda s: _obs(s, track_covariance=True, hold="measurement")),
+    ("kalman_table.empty", "design", lambda s: kalman_table(s[0], [])),
+    ("kalman_table.foreign", "KalmanDesign", lambda s: kalman_table(s[0], [s[2]])),
+    ("load_noise.meas", "measurement_std", lambda s: scn.load_noise("paper", s[0], meas_std=-1.0)),
+    ("load_noise.process", "process_std", lambda s: scn.load_noise("paper", s[0], process_q=math.inf)),
     ("SwitchedObserver.mode", "mode", lambda s: SwitchedObserver(s[0], s[1], mode="weekly", cycles=[CYC])),
     ("SwitchedObserver.cycles", "cycles", lambda s: SwitchedObserver(s[0], s[1], mode="periodic")),
     ("SwitchedObserver.x0", "x0", lambda s: _obs(s, x0=np.zeros(3))),
@@ -289,6 +296,7 @@ def test_every_public_callable_has_a_case():
         "Decomposition", "GainSynthesis", "KappaCurve", "ChannelDesigner", "Envelope", "ChannelGain",
         "CycleDesign", "CertifyCheck", "FORMAT", "FORMAT_VERSION", "CycleRecord", "ZOHEntry", "Schedule",
         "SimulationResult", "ChannelInfo", "single_threaded_blas", "GainTable", "paper_system",
+        "ScheduledCycle",
     }
     missing = []
     for mod in ("certificate", "decomposition", "design", "envelope", "gains", "observer", "paper",
