@@ -1,0 +1,191 @@
+"""The Kalman gain families in the observer: table lookup equals the online Riccati recursion,
+the exact bound holds with Kalman gains, off-schedule samples fall back to the online
+recursion, tables round-trip (and version-1 tables still load), covariances are honest."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+from scipy.stats import chi2
+
+from switchobs_core.design import design_table
+from switchobs_core.exceptions import GainTableError, InvalidArgument
+from switchobs_core.gains import GainTable, kalman_table
+from switchobs_core.kalman import design_kalman
+from switchobs_core.noise import NoiseModel
+from switchobs_core.observer import NOT_APPLICABLE, SwitchedObserver
+from switchobs_core.propagation import van_loan
+from switchobs_core.scenarios import paper_system
+from switchobs_core.schedule import Cycle, PeriodicSchedule, SequenceSchedule
+
+RATE = 50.0
+CYC = Cycle.from_ts(2.0, 0.6)
+SEQ = [Cycle.from_ts(4, 0.5), Cycle.from_ts(3, 0.6), Cycle.from_ts(3, 0.6), Cycle.from_ts(2, 0.4)]
+X0 = np.array([0, 0, 0.1, 0, 1, 2, 0.2, -0.1, -1, 3, 0, 0.2], float)
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return paper_system()
+
+
+@pytest.fixture(scope="module")
+def ktable(paper):
+    """A kalman table (periodic (2 s, 0.6) and the paper's sequence at 50 Hz), through its JSON text."""
+    t = kalman_table(paper, [design_kalman(paper, CYC, RATE), design_kalman(paper, SEQ, RATE)])
+    return GainTable.from_json(t.to_json(), system=paper)
+
+
+def _run(system, observers, schedule, seconds, *, x0=X0, skip=()):
+    """Feed noise-free samples of the exact plant at RATE to every observer; errors per observer."""
+    F = expm(system.A / RATE)
+    x = x0.copy()
+    errs = [[] for _ in observers]
+    for k in range(int(seconds * RATE) + 1):
+        t = k / RATE
+        if k:
+            x = F @ x
+        ch = schedule.channel_at(t)
+        y = system.C[ch - 1] @ x
+        for o, e in zip(observers, errs):
+            if k in skip:
+                continue
+            o.update(t, ch, y)
+            e.append((np.linalg.norm(o.x_hat - x), o.envelope().exact_bound))
+    return [np.array(e) for e in errs]
+
+
+@pytest.mark.parametrize("mode,cycles", [("periodic", [CYC]), ("sequence", SEQ)])
+def test_table_lookup_equals_online_riccati(paper, mode, cycles):
+    """At 48 Hz no sample falls on a switching instant (1.2 * 48 is not whole), so the table's
+    sample pattern is exactly the stream's: the looked-up gains are the online recursion's, and
+    so are the estimates and covariances, through the start-up and several periods (noisy data,
+    so the estimates are compared at the scale of their errors)."""
+    rate = 48.0
+    table = kalman_table(paper, [design_kalman(paper, cycles, rate)])
+    table_obs = SwitchedObserver(paper, table, mode, cycles, e0=10.0)
+    online = SwitchedObserver(paper, table, mode, cycles, e0=10.0, family="kalman-online")
+    assert (table_obs.family, online.family) == ("kalman", "kalman-online")
+    schedule = PeriodicSchedule(CYC) if mode == "periodic" else SequenceSchedule(SEQ)
+    seconds = 20.0 if mode == "periodic" else 30.0        # start-up and several periods
+    F = expm(paper.A / rate)
+    rng = np.random.default_rng(3)
+    x = X0.copy()
+    worst_x = worst_P = 0.0
+    for k in range(int(seconds * rate)):
+        t = k / rate
+        if k:
+            x = F @ x
+        ch = schedule.channel_at(t)
+        y = paper.C[ch - 1] @ x + rng.normal(scale=1e-3, size=4)
+        a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
+        worst_x = max(worst_x, np.linalg.norm(a - b) / np.linalg.norm(b - x))
+        Pa, Pb = table_obs.P, online.P
+        worst_P = max(worst_P, np.abs(Pa - Pb).max() / np.abs(Pb).max())
+    assert worst_x < 1e-6 and worst_P < 1e-7, (worst_x, worst_P)
+    assert table_obs.kalman_fallback == ""
+
+
+def test_tie_samples_take_the_streams_channel(paper, ktable):
+    """At 50 Hz the sample 1.2 s into each cycle lies on a switching instant; in floating point
+    the stream puts it on either channel. The table serves the stream's channel from the stored
+    prior, so the estimate stays within a small factor of the online filter's."""
+    table_obs = SwitchedObserver(paper, ktable, "periodic", [CYC])
+    online = SwitchedObserver(paper, ktable, "periodic", [CYC], family="kalman-online")
+    F = expm(paper.A / RATE)
+    rng = np.random.default_rng(4)
+    x = X0.copy()
+    sq = np.zeros(2)
+    sched = PeriodicSchedule(CYC)
+    for k in range(int(30 * RATE)):
+        t = k / RATE
+        if k:
+            x = F @ x
+        ch = sched.channel_at(t)
+        y = paper.C[ch - 1] @ x + rng.normal(scale=1e-3, size=4)
+        a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
+        if t >= 15.0:
+            sq += (np.sum((a - x) ** 2), np.sum((b - x) ** 2))
+    assert table_obs.kalman_fallback == ""
+    assert sq[0] <= 1.02 * sq[1], np.sqrt(sq[0] / sq[1])
+
+
+def test_exact_bound_holds_with_kalman_gains(paper, ktable):
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=float(np.linalg.norm(X0)) * 1.0000001)
+    (err,) = _run(paper, [obs], PeriodicSchedule(CYC), 40.0)
+    assert np.all(err[:, 0] <= err[:, 1] * (1 + 1e-9) + 1e-12)
+    # and it is informative: the noise-free error falls by orders of magnitude within 10 s
+    assert err[int(10 * RATE), 0] < 1e-6 * err[0, 0] + 1e-9
+    env = obs.envelope()
+    assert np.all(env.z == NOT_APPLICABLE) and env.paper_bound == NOT_APPLICABLE
+
+
+def test_off_schedule_sample_falls_back_to_online(paper, ktable):
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=10.0)
+    # late2 misses the first 0.5 s: its first sample is phase 0 of its own clock, so channel
+    # changes arrive where its table expects none -> online recursion from the stored prior
+    _run(paper, [obs], PeriodicSchedule(CYC), 20.0)
+    assert obs.kalman_fallback == ""
+    late2 = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=10.0)
+    (e2,) = _run(paper, [late2], PeriodicSchedule(CYC), 20.0, skip=range(25))
+    assert "running the Riccati recursion online" in late2.kalman_fallback
+    assert e2[-1, 0] < 1e-8 * e2[0, 0]                 # still converges (it is the Kalman filter)
+    assert np.all(e2[:, 0] <= e2[:, 1] * (1 + 1e-9) + 1e-12)
+
+
+def test_version_1_lmi_table_still_loads(paper):
+    table = design_table(paper, cycles=[CYC], delta=0.99, progress=False)
+    data = json.loads(table.to_json())
+    data.pop("payload_sha256")
+    data.pop("family")
+    data.pop("kalman")
+    data["format_version"] = 1
+    data["payload_sha256"] = GainTable._digest(data)
+    old = GainTable.from_json(json.dumps(data), system=paper)
+    assert old.family == "lmi" and old.lookup(CYC).eta == table.lookup(CYC).eta
+    with pytest.raises(InvalidArgument, match="LMI gain table"):
+        SwitchedObserver(paper, kalman_table(paper, [design_kalman(paper, CYC, RATE)]), "periodic", [CYC],
+                         family="lmi")
+
+
+def test_table_for_another_schedule_is_refused(paper, ktable):
+    with pytest.raises(GainTableError, match="no Kalman design for the cycle sequence"):
+        SwitchedObserver(paper, ktable, "periodic", [Cycle.from_ts(2.0, 0.5)])
+
+
+def test_noise_model_and_rate_are_part_of_the_checksum(paper):
+    a = kalman_table(paper, [design_kalman(paper, CYC, RATE)]).to_json()
+    b = kalman_table(paper, [design_kalman(paper, CYC, RATE, NoiseModel.for_system(paper, measurement_std=1e-2))])
+    c = kalman_table(paper, [design_kalman(paper, CYC, 25.0)])
+    digests = {json.loads(t)["payload_sha256"] for t in (a, b.to_json(), c.to_json())}
+    assert len(digests) == 3
+
+
+def test_lmi_covariance_is_consistent(paper):
+    """LMI gains with a noise model: the propagated covariance P matches the Monte Carlo spread
+    of the error (average NEES in the chi-square 95 % band), process and measurement noise on."""
+    table = design_table(paper, cycles=[CYC], delta=0.99, progress=False)
+    noise = NoiseModel.for_system(paper, measurement_std=1e-2, process_std=0.05, P0=0.25)
+    F, Qd = van_loan(paper.A, noise.Q_c, 1 / RATE)
+    Lq = np.linalg.cholesky(Qd + 1e-18 * np.eye(12))
+    runs, steps = 60, int(6 * RATE)
+    nees = np.zeros(runs)
+    sched = PeriodicSchedule(CYC)
+    for r in range(runs):
+        rng = np.random.default_rng(r)
+        obs = SwitchedObserver(paper, table, "periodic", [CYC], noise=noise)
+        x = rng.normal(scale=0.5, size=12)           # x_hat(0) = 0, so x_tilde(0) ~ N(0, P0)
+        for k in range(steps):
+            t = k / RATE
+            if k:
+                x = F @ x + Lq @ rng.normal(size=12)
+            ch = sched.channel_at(t)
+            y = paper.C[ch - 1] @ x + rng.normal(scale=1e-2, size=4)
+            obs.update(t, ch, y)
+        e = obs.x_hat - x
+        nees[r] = e @ np.linalg.solve(obs.P, e)
+    lo, hi = chi2.ppf([0.025, 0.975], runs * 12) / runs
+    assert lo <= nees.mean() <= hi, (nees.mean(), lo, hi)
