@@ -29,10 +29,14 @@ from . import (
     envelope,
     exceptions,
     gains,
+    kalman,
+    kalman_online,
+    noise,
     observer,
     paper,  # noqa: F401  (the paper's numbers: so.paper.TABLE)
     plant,
     propagation,
+    riccati,
     scenarios,
     schedule,
     simulate,
@@ -49,9 +53,13 @@ from .design import *  # noqa: F403
 from .envelope import *  # noqa: F403
 from .exceptions import *  # noqa: F403
 from .gains import *  # noqa: F403
+from .kalman import *  # noqa: F403
+from .kalman_online import *  # noqa: F403
+from .noise import *  # noqa: F403
 from .observer import *  # noqa: F403
 from .plant import *  # noqa: F403
 from .propagation import *  # noqa: F403
+from .riccati import *  # noqa: F403
 from .scenarios import *  # noqa: F403
 from .schedule import *  # noqa: F403
 from .simulate import *  # noqa: F403
@@ -65,7 +73,8 @@ from .validation import *  # noqa: F403
 simulate = _sys.modules[f"{__name__}.simulate"]  # noqa: F811
 
 #: Every module whose ``__all__`` is re-exported here.
-MODULES = (certificate, cycles, decomposition, design, envelope, exceptions, gains, observer, plant,
-           propagation, scenarios, schedule, simulate, synthesis, system, threads, validation)
+MODULES = (certificate, cycles, decomposition, design, envelope, exceptions, gains, kalman, kalman_online, noise,
+           observer, plant, propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads,
+           validation)
 
 __all__ = ["__version__", *(name for m in MODULES for name in m.__all__ if name not in ("simulate",))]

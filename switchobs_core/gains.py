@@ -68,7 +68,7 @@ from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 if TYPE_CHECKING:
     from .system import LTISystem
 
-__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION", "FAMILIES",
+__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION", "TABLE_FAMILIES",
            "kalman_table"]
 
 FORMAT = "switchobs-gain-table"
@@ -76,7 +76,7 @@ FORMAT_VERSION = 2
 #: Versions this software reads (1: LMI tables from before the Kalman family).
 READABLE_VERSIONS = (1, 2)
 #: Gain families a table can hold.
-FAMILIES = ("lmi", "kalman")
+TABLE_FAMILIES = ("lmi", "kalman")
 
 
 @dataclass(frozen=True)
@@ -421,8 +421,8 @@ class GainTable:
             )
         except (KeyError, TypeError, ValueError) as err:
             raise GainTableError(f"{source}: malformed gain table ({type(err).__name__}: {err})") from None
-        if table.family not in FAMILIES:
-            raise GainTableError(f"{source}: unknown gain family {table.family!r} (known: {', '.join(FAMILIES)})")
+        if table.family not in TABLE_FAMILIES:
+            raise GainTableError(f"{source}: unknown gain family {table.family!r} (known: {', '.join(TABLE_FAMILIES)})")
         if table.family == "kalman" and not table.kalman:
             raise GainTableError(f"{source}: a kalman gain table without a Kalman design")
         if system is not None:

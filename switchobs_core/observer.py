@@ -72,6 +72,10 @@ from .riccati import gain as riccati_gain
 
 __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
 
+#: Largest stamp offset from the Kalman table's sample grid, in sample periods (as phase_at).
+_MAX_JITTER = 0.25
+#: Entries of the Kalman table's fused step cache (phase, channel, rows, dt) before it is cleared.
+_FUSED_MAX = 8192
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
 
@@ -200,7 +204,7 @@ class SwitchedObserver:
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
-                 track_covariance: bool | None = None):
+                 track_covariance: bool | None = None, relock_rtol: float = 1e-2):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -236,6 +240,9 @@ class SwitchedObserver:
             raise InvalidArgument(f"family 'lmi' needs an LMI gain table; this table holds {table.family!r} gains")
         self.family = family
         self.kalman: KalmanDesign | None = None
+        self.relock_rtol = float(relock_rtol)
+        if not (math.isfinite(self.relock_rtol) and self.relock_rtol >= 0):
+            raise InvalidArgument(f"relock_rtol must be a finite number >= 0; got {relock_rtol!r}")
         # 2. designs of the mode
         if family != "lmi":
             self._init_kalman(table, mode, cycles, bounds, noise)
@@ -285,6 +292,7 @@ class SwitchedObserver:
         self.e0 = e0
         self._cache = ZOHCache(cache_size, dt_resolution)
         self._cache.register(("open",), self.A, None, self.B)
+        self._fused: dict = {}
         self._keys: dict = {}
         self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
@@ -337,6 +345,8 @@ class SwitchedObserver:
         self._kgain: tuple | None = None
         self._online = self.family == "kalman-online"
         self.kalman_fallback = ""
+        self.kalman_departures = 0
+        self.kalman_relocks = 0
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -482,17 +492,10 @@ class SwitchedObserver:
                 raise InvalidArgument(f"u must hold {self.m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
                                       f"got {u.tolist()}")
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
-        if dt > 0:
-            e = self._cache.step(self._key, dt)
-            x = e.Phi @ self._x
-            if self._entry_L:
-                x += e.GL @ self._y
-            if not self._u_zero:
-                x += e.GB @ self._u
-            self._x = x
-            self._Phi = e.E @ self._Phi
-            if self._P is not None and (self.family == "lmi" or self._online):
-                self._propagate_covariance(e, dt)
+        #    (the Kalman table fuses it with its correction: one map per phase, see _correct)
+        fuse = self.family == "kalman" and not self._online and self._u_zero
+        if dt > 0 and not fuse:
+            self._step(dt)
         self._t = t
         # 2. switching instant
         if channel != self._channel:
@@ -508,8 +511,21 @@ class SwitchedObserver:
             if self._P is not None:
                 self._R_held = self.noise.R(channel, rows)
         else:
-            self._correct(t, channel, y, rows)
+            self._correct(t, dt if fuse else 0.0, channel, y, rows)
         return self._x
+
+    def _step(self, dt: float) -> None:
+        """Exact step over ``dt`` with the held innovation/measurement and input (step 1)."""
+        e = self._cache.step(self._key, dt)
+        x = e.Phi @ self._x
+        if self._entry_L:
+            x += e.GL @ self._y
+        if not self._u_zero:
+            x += e.GB @ self._u
+        self._x = x
+        self._Phi = e.E @ self._Phi
+        if self._P is not None and (self.family == "lmi" or self._online):
+            self._propagate_covariance(e, dt)
 
     # ------------------------------------------------------------------ Kalman families
     def _init_kalman(self, table: Any, mode: str, cycles: Any, bounds: Any, noise: NoiseModel | None) -> None:
@@ -550,35 +566,75 @@ class SwitchedObserver:
             P += e.GL @ self._R_held @ e.GL.T
         self._P = symmetrize(P)
 
-    def _correct(self, t: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
+    def _correct(self, t: float, dt: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
         """Kalman correction ``x^+ = x^- + K (y - H x^-)`` and its error map ``(I - K H)``.
 
         ``kalman``: ``K`` from the table at the sample phase (time since the first sample
-        after construction or reset, nearest sample under jitter). A sample the table does not
-        describe (channel other than the phase's, a stamp off the design's grid) switches the
-        observer to the online recursion from the stored prior of the nearest phase, which is
-        the Kalman filter for whatever schedule follows (``kalman_fallback`` says why).
+        after construction or reset, nearest sample under jitter). A sample on another channel
+        than the table's at that phase (a stamp on a switching instant that floating point put
+        on the other side, a jittered stamp across it, a schedule that departs from the design)
+        switches the observer to the online recursion from the stored prior of that phase: the
+        Kalman filter for whatever happened. It returns to the table (*re-locks*) at the first
+        sample whose online prior covariance is within ``relock_rtol`` of the stored one, from
+        where the gains are the table's again. ``kalman_departures``, ``kalman_relocks`` count
+        both; ``kalman_fallback`` says why the latest departure happened.
         ``kalman-online``: the Riccati recursion (Joseph form) on the observer's own ``P``.
+
+        ``dt > 0``: the open-loop step over ``dt`` has not been taken yet; the table path takes
+        it with the correction, and ``Phi <- E_k Phi`` uses the sample's error map
+        ``E_k = (I - K H) e^{A dt}`` cached per (phase, channel, rows, dt).
         """
+        kd = self.kalman
+        if kd is not None and not self._online and rows is None and dt > 0 and self._origin is not None \
+                and self._correct_locked(t, dt, channel, y):
+            return
         H = self.C[channel - 1] if rows is None else self.C[channel - 1][list(rows)]
         K = None
-        if not self._online:
+        if kd is not None:
             if self._origin is None:
                 self._origin = t
-            ph = None
+            ph, why = None, ""
             try:
-                ph = self.kalman.phase_at(t - self._origin)
-                ent = self.kalman.entry(ph)
-                if ent.channel != channel and ph.k % self.kalman.pattern.K not in self.kalman.pattern.ties:
-                    raise ScheduleError(f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman "
-                                        f"table's schedule has channel {ent.channel}")
-                K = self.kalman.gain(ph, channel, rows)
-                self._kphase = ph
-                self._kgain = (ph, channel, rows)
-            except (InvalidArgument, ScheduleError) as err:
-                self.kalman_fallback = f"{err}; running the Riccati recursion online from here"
+                ph = kd.phase_at(t - self._origin)
+                ent = kd.entry(ph)
+                if ent.channel != channel:
+                    why = (f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman table's "
+                           f"schedule has channel {ent.channel}")
+            except InvalidArgument as err:
+                why = str(err)
+            if not self._online and why:
+                self.kalman_fallback = f"{why}; running the Riccati recursion online from here"
+                self.kalman_departures += 1
                 self._online = True
-                self._P = (self.kalman.entry(ph).P_prior if ph is not None else self.noise.P0).copy()
+                self._P = (ent.P_prior if ph is not None else self.noise.P0).copy()
+                if dt > 0:              # the prior above is this sample's: step the state only
+                    e = self._cache.step(self._key, dt)
+                    self._x = e.Phi @ self._x
+                    self._Phi = e.E @ self._Phi
+                    dt = 0.0
+            elif self._online and not why:
+                S = ent.P_prior
+                if np.abs(self._P - S).max() <= self.relock_rtol * np.abs(S).max():
+                    self._online = False
+                    self.kalman_relocks += 1
+            if not self._online:
+                K = kd.gain(ph, channel, rows)
+                self._kgain = (ph, channel, rows)
+                if dt > 0:
+                    fk = (ph.startup, ph.index, channel, rows, round(dt * 1e9))
+                    hit = self._fused.get(fk)
+                    if hit is None:
+                        if len(self._fused) >= _FUSED_MAX:
+                            self._fused.clear()
+                        Phi = self._cache.step(self._key, dt).Phi
+                        hit = self._fused[fk] = (Phi, Phi - K @ (H @ Phi))
+                    # x^- = e^{A dt} x^+, then the innovation form (the small y - H x^- first
+                    # keeps the rounding of the estimate at the level of the error, not of ||x||)
+                    x = hit[0] @ self._x
+                    x += K @ (y - H @ x)
+                    self._x = x
+                    self._Phi = hit[1] @ self._Phi
+                    return
         if self._online:
             R = self.noise.R(channel, rows)
             K = riccati_gain(self._P, H, R)
@@ -586,6 +642,40 @@ class SwitchedObserver:
         x = self._x
         x += K @ (y - H @ x)
         self._Phi -= K @ (H @ self._Phi)
+
+    def _correct_locked(self, t: float, dt: float, channel: int, y: np.ndarray) -> bool:
+        """The hot path of :meth:`_correct` (table locked, all rows, a step to take): the same
+        arithmetic with the phase found inline and one cached tuple ``(e^{A dt}, E_k, K, H)``
+        per (sample, dt). Returns False (nothing done) whenever the general path is needed."""
+        kd = self.kalman
+        tau = t - self._origin
+        f = kd.pattern.rate
+        k = round(tau * f)
+        if k < 0 or abs(tau - k / f) * f > _MAX_JITTER:
+            return False
+        S = len(kd.startup)
+        startup = k < S
+        idx = k if startup else k % kd.pattern.K
+        fk = (startup, idx, channel, round(dt * 1e9))
+        hit = self._fused.get(fk)
+        if hit is None:
+            ent = kd.startup[idx] if startup else kd.periodic[idx]
+            if ent.channel != channel:
+                return False
+            if len(self._fused) >= _FUSED_MAX:
+                self._fused.clear()
+            H = self.C[channel - 1]
+            Phi = self._cache.step(self._key, dt).Phi
+            hit = self._fused[fk] = (Phi, Phi - ent.K @ (H @ Phi), ent.K, H)
+        Phi, E, K, H = hit
+        # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
+        # level of the error, not of ||x||); Phi <- (I - K H) e^{A dt} Phi
+        x = Phi @ self._x
+        x += K @ (y - H @ x)
+        self._x = x
+        self._Phi = E @ self._Phi
+        self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
+        return True
 
     @property
     def P(self) -> np.ndarray | None:
@@ -596,9 +686,12 @@ class SwitchedObserver:
         propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
         """
         if self.family == "kalman" and not self._online:
-            if self._kgain is None:
+            g = self._kgain
+            if g is None:
                 return self.noise.P0.copy()
-            return self.kalman.posterior(*self._kgain)
+            if len(g) == 4:
+                g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
+            return self.kalman.posterior(*g)
         return None if self._P is None else self._P.copy()
 
     def _switch(self, t: float, channel: int) -> None:

@@ -231,7 +231,10 @@ class ZOHCache:
         except KeyError:
             raise InvalidArgument(f"key {key!r} was never registered (call register first)") from None
         dtq = dt if self._inv_res is None else q * self.dt_resolution
-        Phi, Gamma = zoh_pair(M, dtq)
+        if L is None and B is None:      # open loop, no input: Phi alone (half the expm size)
+            Phi, Gamma = expm(M * dtq), None
+        else:
+            Phi, Gamma = zoh_pair(M, dtq)
         GL = None if L is None else Gamma @ L
         E = None if C is None or GL is None else Phi - GL @ C
         entry = ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E)

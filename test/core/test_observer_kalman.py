@@ -91,8 +91,9 @@ def test_table_lookup_equals_online_riccati(paper, mode, cycles):
 
 def test_tie_samples_take_the_streams_channel(paper, ktable):
     """At 50 Hz the sample 1.2 s into each cycle lies on a switching instant; in floating point
-    the stream puts it on either channel. The table serves the stream's channel from the stored
-    prior, so the estimate stays within a small factor of the online filter's."""
+    the stream puts it on either channel. Where it differs from the table's, the observer runs
+    the recursion online from the stored prior and re-locks to the table once its covariance is
+    back within relock_rtol: the estimate is the online filter's to a fraction of a percent."""
     table_obs = SwitchedObserver(paper, ktable, "periodic", [CYC])
     online = SwitchedObserver(paper, ktable, "periodic", [CYC], family="kalman-online")
     F = expm(paper.A / RATE)
@@ -109,13 +110,14 @@ def test_tie_samples_take_the_streams_channel(paper, ktable):
         a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
         if t >= 15.0:
             sq += (np.sum((a - x) ** 2), np.sum((b - x) ** 2))
-    assert table_obs.kalman_fallback == ""
-    assert sq[0] <= 1.02 * sq[1], np.sqrt(sq[0] / sq[1])
+    # a tie the stream put on the other channel: online from the stored prior, then back to the table
+    assert table_obs.kalman_departures >= 1 and table_obs.kalman_relocks >= table_obs.kalman_departures - 1
+    assert sq[0] <= 1.005 * sq[1], np.sqrt(sq[0] / sq[1])
 
 
 def test_exact_bound_holds_with_kalman_gains(paper, ktable):
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=float(np.linalg.norm(X0)) * 1.0000001)
-    (err,) = _run(paper, [obs], PeriodicSchedule(CYC), 40.0)
+    (err,) = _run(paper, [obs], PeriodicSchedule(CYC), 20.0)
     assert np.all(err[:, 0] <= err[:, 1] * (1 + 1e-9) + 1e-12)
     # and it is informative: the noise-free error falls by orders of magnitude within 10 s
     assert err[int(10 * RATE), 0] < 1e-6 * err[0, 0] + 1e-9
@@ -124,16 +126,15 @@ def test_exact_bound_holds_with_kalman_gains(paper, ktable):
 
 
 def test_off_schedule_sample_falls_back_to_online(paper, ktable):
-    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=10.0)
-    # late2 misses the first 0.5 s: its first sample is phase 0 of its own clock, so channel
-    # changes arrive where its table expects none -> online recursion from the stored prior
-    _run(paper, [obs], PeriodicSchedule(CYC), 20.0)
-    assert obs.kalman_fallback == ""
-    late2 = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=10.0)
-    (e2,) = _run(paper, [late2], PeriodicSchedule(CYC), 20.0, skip=range(25))
-    assert "running the Riccati recursion online" in late2.kalman_fallback
-    assert e2[-1, 0] < 1e-8 * e2[0, 0]                 # still converges (it is the Kalman filter)
-    assert np.all(e2[:, 0] <= e2[:, 1] * (1 + 1e-9) + 1e-12)
+    """An observer that starts 0.5 s into the schedule takes its first sample as phase 0, so
+    the channel changes arrive where its table has none: it runs the recursion online (the
+    Kalman filter for what really happens), converges, and its exact bound holds."""
+    late = SwitchedObserver(paper, ktable, "periodic", [CYC], e0=10.0)
+    (err,) = _run(paper, [late], PeriodicSchedule(CYC), 20.0, skip=range(25))
+    assert late.kalman_departures >= 1
+    assert "running the Riccati recursion online" in late.kalman_fallback
+    assert err[-1, 0] < 1e-8 * err[0, 0]
+    assert np.all(err[:, 0] <= err[:, 1] * (1 + 1e-9) + 1e-12)
 
 
 def test_version_1_lmi_table_still_loads(paper):
