@@ -84,10 +84,11 @@ class Step:
 
 def discretize(A: np.ndarray, B: np.ndarray, Q_c: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact discretisation over ``dt``: ``(Phi, Gamma B, Q_d)`` (module docstring)."""
+    Phi, Qd = van_loan(A, Q_c, dt)
+    if not B.size:                    # no input: van Loan's exponential alone gives Phi
+        return Phi, np.zeros((A.shape[0], 0)), Qd
     Phi, Gamma = zoh_pair(A, dt)
-    _, Qd = van_loan(A, Q_c, dt)
-    GB = Gamma @ B if B.size else np.zeros((A.shape[0], 0))
-    return Phi, GB, Qd
+    return Phi, Gamma @ B, Qd
 
 
 class DiscretizationCache:
