@@ -34,6 +34,9 @@ from .stamps import ns_to_stamp
 
 __all__ = [
     "STAMP_PAD",
+    "UNESTIMATED_VARIANCE",
+    "covariance_labels",
+    "odometry_covariances",
     "LabelledArrayWriter",
     "OdometryWriter",
     "Body",
@@ -159,12 +162,42 @@ def bodies(state_labels: Sequence[str]) -> tuple[Body, ...]:
     return tuple(Body(name, **idx) for name, idx in index.items() if len(idx) == 4)
 
 
-def body_odometry(x: np.ndarray, body: Body, stamp_ns: int, frame_id: str, child_frame_id: str) -> Odometry:
-    """``nav_msgs/Odometry`` of one body: position and velocity from ``x``.
+#: Variance written for what the model does not estimate (z, roll, pitch, yaw and their rates):
+#: large, so a consumer such as robot_localization does not fuse them (a zero says "certain").
+UNESTIMATED_VARIANCE = 1e6
+
+
+def covariance_labels(state_labels: Sequence[str]) -> tuple[str, ...]:
+    """Element names of ``~/covariance``: ``"a|b"`` for entry (a, b) of P, row-major."""
+    return tuple(f"{a}|{b}" for a in state_labels for b in state_labels)
+
+
+def odometry_covariances(P: np.ndarray | None, body: Body) -> tuple[list[float], list[float]]:
+    """Row-major 6x6 pose and twist covariances of one body from the state covariance ``P``.
+
+    Pose (x, y, z, roll, pitch, yaw): the (p_x, p_y) block of P; twist (vx, vy, vz, wx, wy,
+    wz): the (v_x, v_y) block. Everything the planar model does not estimate gets
+    :data:`UNESTIMATED_VARIANCE`; with ``P`` None (no covariance known) every variance does.
+    """
+    pose = np.zeros((6, 6))
+    twist = np.zeros((6, 6))
+    np.fill_diagonal(pose, UNESTIMATED_VARIANCE)
+    np.fill_diagonal(twist, UNESTIMATED_VARIANCE)
+    if P is not None:
+        ip, iv = [body.p_x, body.p_y], [body.v_x, body.v_y]
+        pose[:2, :2] = P[np.ix_(ip, ip)]
+        twist[:2, :2] = P[np.ix_(iv, iv)]
+    return pose.ravel().tolist(), twist.ravel().tolist()
+
+
+def body_odometry(x: np.ndarray, body: Body, stamp_ns: int, frame_id: str, child_frame_id: str,
+                  P: np.ndarray | None = None) -> Odometry:
+    """``nav_msgs/Odometry`` of one body: position and velocity from ``x``, covariances from ``P``.
 
     The velocity is written in ``twist`` (REP 105 puts it in the child frame; with the
-    identity orientation used here that equals the world frame). Covariances stay zero:
-    the observer's bounds are on ``~/envelope``, not a covariance.
+    identity orientation used here that equals the world frame). The orientation is not
+    estimated: its variance (and every other unestimated one) is :data:`UNESTIMATED_VARIANCE`
+    (:func:`odometry_covariances`).
     """
     msg = Odometry()
     msg.header.stamp = ns_to_stamp(stamp_ns)
@@ -175,6 +208,7 @@ def body_odometry(x: np.ndarray, body: Body, stamp_ns: int, frame_id: str, child
     msg.pose.pose.orientation.w = 1.0
     msg.twist.twist.linear.x = float(x[body.v_x])
     msg.twist.twist.linear.y = float(x[body.v_y])
+    msg.pose.covariance, msg.twist.covariance = odometry_covariances(P, body)
     return msg
 
 
@@ -221,8 +255,13 @@ class OdometryWriter:
         self._msg = body_odometry(np.zeros(max(body.p_x, body.p_y, body.v_x, body.v_y) + 1), body, 0,
                                   frame_id, child_frame_id)
 
-    def msg(self, x: np.ndarray, stamp_ns: int) -> Odometry:
+    def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> Odometry:
         m, b = self._msg, self.body
+        if P is not None:
+            ip, iv = [b.p_x, b.p_y], [b.v_x, b.v_y]
+            pc, tc = m.pose.covariance, m.twist.covariance      # 6x6 row-major: (0,0) (0,1) (1,0) (1,1)
+            pc[0], pc[1], pc[6], pc[7] = P[ip[0], ip[0]], P[ip[0], ip[1]], P[ip[1], ip[0]], P[ip[1], ip[1]]
+            tc[0], tc[1], tc[6], tc[7] = P[iv[0], iv[0]], P[iv[0], iv[1]], P[iv[1], iv[0]], P[iv[1], iv[1]]
         sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
         m.header.stamp.sec = sec
         m.header.stamp.nanosec = nsec

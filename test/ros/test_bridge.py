@@ -141,3 +141,25 @@ def test_writers_match_the_functions():
     for stamp in (3_000_000_001, 4_000_000_002):
         o, ref = ow.msg(x * stamp, stamp), mb.body_odometry(x * stamp, body, stamp, "map", "a1")
         assert o == ref
+
+
+def test_odometry_covariance_from_P_and_large_for_unestimated():
+    """Odometry carries the (p_x, p_y) and (v_x, v_y) blocks of P; z, roll, pitch, yaw and their
+    rates (and everything, when no P is known) get a large variance, never zero ("certain")."""
+    labels = [f"{b}.{q}" for b in ("camera", "agent1") for q in ("p_x", "p_y", "v_x", "v_y")]
+    body = mb.bodies(labels)[1]
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(8, 8))
+    P = M @ M.T
+    x = rng.normal(size=8)
+    for m in (mb.body_odometry(x, body, 5, "map", "agent1", P=P),
+              mb.OdometryWriter(body, "map", "agent1").msg(x, 5, P)):
+        pose = np.reshape(m.pose.covariance, (6, 6))
+        twist = np.reshape(m.twist.covariance, (6, 6))
+        np.testing.assert_array_equal(pose[:2, :2], P[4:6, 4:6])
+        np.testing.assert_array_equal(twist[:2, :2], P[6:8, 6:8])
+        assert np.all(np.diag(pose)[2:] == mb.UNESTIMATED_VARIANCE)
+        assert np.all(np.diag(twist)[2:] == mb.UNESTIMATED_VARIANCE)
+    unknown = np.reshape(mb.body_odometry(x, body, 5, "map", "agent1").pose.covariance, (6, 6))
+    assert np.all(np.diag(unknown) == mb.UNESTIMATED_VARIANCE)
+    assert len(mb.covariance_labels(labels)) == 64 and mb.covariance_labels(labels)[1] == "camera.p_x|camera.p_y"
