@@ -36,16 +36,19 @@ def test_documented_imports_resolve():
 def objects(paper):
     table = paper_table(paper, robust=(0.8, 1.2))
     c = Cycle.from_ts(2.0, 0.6)
+    kd = so.design_kalman(paper, [c], 50.0)
+    ktable = so.kalman_table(paper, [kd])
     return {
         "so": so, "sys": paper, "table": table, "c": c, "d": table.lookup(c),
         "schedule": PeriodicSchedule(c), "obs": SwitchedObserver(paper, table, cycles=[c]),
         "plant": Plant(paper, np.zeros(paper.n)), "so.simulate": so.simulate, "so.paper": so.paper,
+        "kd": kd, "ktable": ktable, "noise": kd.noise,
     }
 
 
 def test_documented_attributes_exist_on_real_objects(objects):
     code = _code()
-    uses = re.findall(r"(?<![\w.])((?:so\.simulate|so\.paper|so|sys|table|c|d|schedule|obs|plant))\.(\w+)", code)
+    uses = re.findall(r"(?<![\w.])((?:so\.simulate|so\.paper|so|sys|table|ktable|kd|noise|c|d|schedule|obs|plant))\.(\w+)", code)
     assert len(uses) >= 40
     missing = [f"{var}.{attr}" for var, attr in uses if not hasattr(objects[var], attr)]
     assert not missing, missing
