@@ -48,7 +48,8 @@ def objects(paper):
 
 def test_documented_attributes_exist_on_real_objects(objects):
     code = _code()
-    uses = re.findall(r"(?<![\w.])((?:so\.simulate|so\.paper|so|sys|table|ktable|kd|noise|c|d|schedule|obs|plant))\.(\w+)", code)
+    names = r"so\.simulate|so\.paper|so|sys|table|ktable|kd|noise|c|d|schedule|obs|plant"
+    uses = re.findall(rf"(?<![\w.])((?:{names}))\.(\w+)", code)
     assert len(uses) >= 40
     missing = [f"{var}.{attr}" for var, attr in uses if not hasattr(objects[var], attr)]
     assert not missing, missing
