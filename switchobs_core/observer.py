@@ -678,6 +678,12 @@ class SwitchedObserver:
         return True
 
     @property
+    def gains_source(self) -> str:
+        """Where the gain of the last sample came from: ``"table"`` (LMI or Kalman table) or
+        ``"online"`` (the Riccati recursion: kalman-online, or a departure from the table)."""
+        return "online" if self._online else "table"
+
+    @property
     def P(self) -> np.ndarray | None:
         """Error covariance at the last sample (a copy), or None when not tracked.
 

@@ -13,19 +13,40 @@ from collections.abc import Callable
 from pathlib import Path
 
 from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.scenarios import load_system
+from switchobs_core.gains import kalman_table
+from switchobs_core.kalman import design_kalman
+from switchobs_core.noise import NoiseModel
+from switchobs_core.scenarios import load_noise, load_system
 from switchobs_core.schedule import Cycle
 from switchobs_core.system import LTISystem
 
 from .params import ConfigError
 
 __all__ = [
+    "GAIN_FAMILY_PARAM",
+    "noise_from_params",
     "camera_target_rows",
     "cycles_from_params",
     "load_or_design_table",
     "load_system_param",
     "table_cache_path",
 ]
+
+
+#: Values of the ``gain_family`` parameter ('' = the table's family).
+GAIN_FAMILY_PARAM = ("", "lmi", "kalman", "kalman-online")
+
+
+def noise_from_params(cfg: dict, system: LTISystem) -> NoiseModel:
+    """The noise model: the system's ``noise:`` section (or the defaults), then the parameters
+    ``noise.measurement_std`` / ``noise.process_std`` where they are >= 0."""
+    meas = cfg.get("noise.measurement_std", -1.0)
+    proc = cfg.get("noise.process_std", -1.0)
+    try:
+        return load_noise(cfg["system"], system, meas_std=None if meas < 0 else meas,
+                          process_q=None if proc < 0 else proc)
+    except SwitchobsError as err:
+        raise ConfigError(f"parameters 'noise.*': {err}") from None
 
 
 def load_system_param(spec: str) -> LTISystem:
@@ -64,13 +85,17 @@ def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int) -> lis
 
 
 def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[Cycle],
-                     robust: tuple[float, float] | None, delta: float) -> Path:
+                     robust: tuple[float, float] | None, delta: float, *, family: str = "lmi",
+                     rate: float = 0.0, noise: NoiseModel | None = None) -> Path:
     """Where a gain table designed at start-up is cached: keyed by everything it depends on."""
     from switchobs_core import __version__
 
-    key = json.dumps({"fingerprint": system.fingerprint(), "mode": mode,
-                      "cycles": [list(c.h) for c in cycles], "robust": robust, "delta": delta,
-                      "version": __version__}, sort_keys=True)
+    spec = {"fingerprint": system.fingerprint(), "mode": mode,
+            "cycles": [list(c.h) for c in cycles], "robust": robust, "delta": delta,
+            "version": __version__}
+    if family != "lmi":
+        spec.update(family=family, rate=rate, noise=None if noise is None else noise.fingerprint())
+    key = json.dumps(spec, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in system.name)
     return Path(os.path.expanduser(cache_dir)) / f"{safe}-{digest}.json"
@@ -78,9 +103,12 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
 
 def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str,
                          cycles: list[Cycle], robust: tuple[float, float] | None, delta: float,
-                         log: Callable[[str], None]):
+                         log: Callable[[str], None], *, family: str = "lmi", rate: float = 0.0,
+                         noise: NoiseModel | None = None):
     """The gain table: from ``path``; else from the cache; else designed now and cached.
 
+    ``family`` says what to design when there is no table: the paper's LMI gains, or offline
+    Kalman gains for the cycle sequence at ``rate`` Hz under ``noise``.
     Returns ``(table, where)`` with ``where`` the file the table came from or went to.
     """
     from switchobs_core.gains import GainTable
@@ -91,7 +119,14 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
         except SwitchobsError as err:
             raise ConfigError(f"parameter 'gain_table': {err}") from None
         return table, Path(path)
-    cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta)
+    if family == "kalman":
+        if mode == "robust":
+            raise ConfigError("gain_family 'kalman' needs a known schedule (periodic or sequence); without one "
+                              "use gain_family 'kalman-online'")
+        if not rate > 0:
+            raise ConfigError("gain_family 'kalman' with no gain_table designs the table at start-up: set 'rate' "
+                              "(the nominal sample rate in Hz)")
+    cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta, family=family, rate=rate, noise=noise)
     if cache.exists():
         try:
             table = GainTable.load(cache, system=system)
@@ -103,10 +138,14 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
         from switchobs_core.design import design_table
     except ImportError as err:
         raise ConfigError(f"gain_table not set and design is unavailable ({err})") from None
-    log(f"gain_table not set: designing gains for system '{system.name}', mode {mode}, "
-        f"cycles {[c.label() for c in cycles]}, delta {delta} (takes a few seconds)")
+    log(f"gain_table not set: designing {family} gains for system '{system.name}', mode {mode}, "
+        f"cycles {[c.label() for c in cycles]}, " + (f"delta {delta} (takes a few seconds)" if family == "lmi"
+                                                     else f"rate {rate:g} Hz, {noise.describe()}"))
     try:
-        table = design_table(system, cycles=cycles, robust=robust, delta=delta)
+        if family == "kalman":
+            table = kalman_table(system, [design_kalman(system, cycles, rate, noise)])
+        else:
+            table = design_table(system, cycles=cycles, robust=robust, delta=delta)
     except SwitchobsError as err:
         raise ConfigError(f"gain design failed: {err}") from None
     try:

@@ -66,6 +66,16 @@ PARAMS = [
           "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
     Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up."),
     Param("delta", 0.99, "Contraction target delta of the design (used only when designing at start-up)."),
+    Param("gain_family", "", "Gain family: '' (the table's: lmi or kalman), 'kalman-online' (the Riccati recursion "
+          "online, any schedule), or, when designing at start-up, 'lmi' (the paper's gains) or 'kalman' (offline "
+          "periodic Kalman gains; needs rate)."),
+    Param("rate", 0.0, "Nominal sample rate in Hz: needed to design a kalman table at start-up (0: not set)."),
+    Param("noise.measurement_std", -1.0, "Measurement noise std on every output row (m) for the covariance and the "
+          "Kalman families (< 0: the system's noise: section, or 1 mm)."),
+    Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
+          "section, or 0.01)."),
+    Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
+          "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
           "(the table's residence-time-box design; needs schedule.h_min/h_max to design)."),
     Param("schedule.tau", (2.0,), "Cycle lengths tau_k in seconds (two-channel systems).", float),
@@ -169,6 +179,10 @@ class EstimatorNode(Node):
         # are ready together, the executor takes the channel first.
         self.pub_state = self.create_publisher(Float64MultiArray, "~/state", qos.OUTPUT)
         self.pub_env = self.create_publisher(Float64MultiArray, "~/envelope", qos.OUTPUT)
+        self.pub_cov = None
+        if pl.publish_covariance:
+            self.w_cov = mb.LabelledArrayWriter(mb.covariance_labels(self.state_labels))
+            self.pub_cov = self.create_publisher(Float64MultiArray, "~/covariance", qos.OUTPUT)
         self.pub_odom = [self.create_publisher(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.OUTPUT)
         # sensor outage: the prediction and its exact bound, once per diagnostics period, on
@@ -211,8 +225,10 @@ class EstimatorNode(Node):
             for e in estimates:
                 self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
                 self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
+                if self.pub_cov is not None and e.P is not None:
+                    self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
                 for pub, w in zip(self.pub_odom, self.w_odom):
-                    pub.publish(w.msg(e.x_hat, e.stamp_ns))
+                    pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
         except Exception as err:
             self.pipeline.internal_error("publish", err)
 
@@ -284,8 +300,12 @@ class EstimatorNode(Node):
         conf = [kv("system", self.system.name), kv("fingerprint", self.system.fingerprint()[:16]),
                 kv("gain_table", str(self.table_path)), kv("mode", self.mode),
                 kv("cycles", " ".join(c.label() for c in self.cycles) or "robust"),
-                kv("e0", obs.e0)]
-        for k, d in enumerate(obs.designs):
+                kv("e0", obs.e0), kv("gain family", obs.family)]
+        if obs.noise is not None:
+            conf.append(kv("noise model", obs.noise.describe()))
+        if obs.kalman is not None:
+            conf += [kv("kalman", obs.kalman.describe())]
+        for k, d in enumerate(obs.designs if obs.family == "lmi" else ()):
             conf.append(kv(f"design[{k}].eta", d.eta))
             conf.append(kv(f"design[{k}].kappa", d.kappa))
             conf.append(kv(f"design[{k}].f (paper factors)", d.f))
@@ -295,13 +315,21 @@ class EstimatorNode(Node):
         ob = [kv("channel", obs.channel), kv("estimate time (s since origin)", obs.t),
               kv("current cycle tau", cyc.tau if cyc is not None else "robust"),
               kv("current cycle s", cyc.s if cyc is not None else "robust"),
-              kv("current design index", obs.design_index), kv("current eta", d.eta), kv("current kappa", d.kappa),
-              kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L]),
+              kv("current design index", obs.design_index),
               kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
               kv("switches", pl.switches), kv("resets", pl.resets),
               kv("estimates withheld (non-finite, then reset)", pl.nonfinite), kv("internal errors", pl.errors),
               kv("clock jumps back (resets)", self.clock_jumps_back),
               kv("clock jumps forward", self.clock_jumps_forward)]
+        if obs.family == "lmi":
+            ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
+                   kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]
+        if obs.kalman is not None:
+            ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
+                   kv("kalman table re-locks", obs.kalman_relocks),
+                   kv("kalman gains now", obs.gains_source)]
+            if obs.kalman_fallback:
+                ob.append(kv("last kalman departure", obs.kalman_fallback))
         if self.last_clock_jump:
             ob.append(kv("last clock jump", self.last_clock_jump))
         recs = obs.completed_cycles

@@ -60,10 +60,12 @@ from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 
 from .core_config import (
+    GAIN_FAMILY_PARAM,
     camera_target_rows,
     cycles_from_params,
     load_or_design_table,
     load_system_param,
+    noise_from_params,
 )
 from .params import ConfigError
 
@@ -103,7 +105,8 @@ class Prediction:
 
 @dataclass(frozen=True)
 class Estimate:
-    """One observer update: the stamp it answers, ``x_hat`` and the envelope values.
+    """One observer update: the stamp it answers, ``x_hat``, the envelope values and the
+    error covariance ``P`` (None when not published).
 
     ``envelope`` is ``[z_1..z_N, paper_bound, exact_bound]`` (the ``~/envelope`` layout).
     """
@@ -111,6 +114,7 @@ class Estimate:
     stamp_ns: int
     x_hat: np.ndarray
     envelope: np.ndarray
+    P: np.ndarray | None = None
 
 
 class PipelineLog:
@@ -190,6 +194,7 @@ class EstimatorPipeline:
         self.bound_invalid_why = ""
         self.errors = 0
         self.nonfinite = 0          # estimates withheld because not finite (each followed by a reset)
+        self.publish_covariance = bool(observer.track_covariance)   # Estimate.P (from_params: the parameter)
         self.last_rejection = ""
 
     # ------------------------------------------------------------------ construction
@@ -231,16 +236,33 @@ class EstimatorPipeline:
                               f"states ({', '.join(sys_.state_labels)})")
         x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
         rows = camera_target_rows(sys_, cfg["camera_body"])
+        family = cfg.get("gain_family", "")
+        if family not in GAIN_FAMILY_PARAM:
+            raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
+                              f"got {family!r}")
+        noise = noise_from_params(cfg, sys_)
+        rate = float(cfg.get("rate", 0.0))
+        publish = bool(cfg.get("publish_covariance", True))
         table, table_path = load_or_design_table(
-            cfg["gain_table"], cfg["gain_table_cache_dir"], sys_, mode, cycles, robust, cfg["delta"], log.info)
+            cfg["gain_table"], cfg["gain_table_cache_dir"], sys_, mode, cycles, robust, cfg["delta"], log.info,
+            family="kalman" if family == "kalman" else "lmi", rate=rate, noise=noise)
+        if family in ("lmi", "kalman") and table.family != family:
+            raise ConfigError(f"parameter 'gain_family' is '{family}' but the gain table holds {table.family} gains")
         try:
+            fam = "kalman-online" if family == "kalman-online" else None
+            lmi = table.family == "lmi" and fam is None
+            # the kalman table brings its own noise model; the LMI covariance is tracked only if published
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=x0, t0=0.0,
-                                        e0=cfg["e0"], bounds=robust)
+                                        e0=cfg["e0"], bounds=robust, family=fam,
+                                        noise=None if table.family == "kalman" and fam is None else noise,
+                                        track_covariance=publish if lmi else None)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
-        return cls(sys_, table, observer, x0=x0, rows=rows, input_frame_id=cfg["input_frame_id"],
+        pipe = cls(sys_, table, observer, x0=x0, rows=rows, input_frame_id=cfg["input_frame_id"],
                    max_abs=cfg["max_abs_value"], future_tolerance_ns=int(cfg["future_tolerance"] * 1e9),
                    log=log, table_path=table_path, mode=mode, cycles=cycles)
+        pipe.publish_covariance = publish
+        return pipe
 
     # ------------------------------------------------------------------ inputs
     def on_channel(self, msg: UInt8) -> None:
@@ -373,7 +395,10 @@ class EstimatorPipeline:
             self.log.warn(self.observer.residence_problem, throttle=True)
         if not self.bound_valid:
             env_vals[-1] = NO_BOUND
-        out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals))
+        P = self.observer.P if self.publish_covariance else None
+        if P is not None and not np.isfinite(P).all():
+            P = None
+        out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P))
 
     # ------------------------------------------------------------------ bookkeeping
     def reject(self, topic: str, rej: Rejection) -> None:

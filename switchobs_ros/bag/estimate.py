@@ -107,6 +107,7 @@ class EstimateResult:
     x_hat: np.ndarray                  # (K, n)
     envelope: np.ndarray               # (K, N + 2)
     state_labels: tuple
+    P: np.ndarray | None = field(default=None, kw_only=True)   # (K, n, n) error covariances, if published
     envelope_labels: tuple
     messages_in: int                   # messages read from the bag
     inputs: int                        # estimator input messages among them
@@ -154,15 +155,19 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     w_odom = [(Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
                         doubles=odom_paths), (b.p_x, b.p_y, b.v_x, b.v_y)) for b, c in zip(bodies, frames)]
     node = "/" + node.strip("/")
-    t_state, t_env = f"{node}/state", f"{node}/envelope"
+    t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
-    outputs = {t_state, t_env, *t_odom}
+    outputs = {t_state, t_env, t_cov, *t_odom}
+    w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
+        if pl.publish_covariance else None
 
     writer = BagOut(out, storage) if out is not None else None
     try:
         if writer is not None:
             writer.add(t_state, type_name(Float64MultiArray))
             writer.add(t_env, type_name(Float64MultiArray))
+            if w_cov is not None:
+                writer.add(t_cov, type_name(Float64MultiArray))
             for t in t_odom:
                 writer.add(t, type_name(Odometry))
             writer.add("/diagnostics", type_name(DiagnosticArray))
@@ -173,12 +178,18 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         stamps: list[int] = []
         xs: list[np.ndarray] = []
         envs: list[np.ndarray] = []
+        covs: list[np.ndarray] = []
 
         def emit(ests, log_ns):
             for e in ests:
                 stamps.append(e.stamp_ns)
                 xs.append(e.x_hat)
                 envs.append(e.envelope)
+                if w_cov is not None:
+                    covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
+                    if writer is not None and e.P is not None:
+                        sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
+                        writer.write(t_cov, log_ns, w_cov.bytes(array=[sec, nsec, *e.P.ravel().tolist()]))
                 if writer is not None:
                     sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
                     x = e.x_hat.tolist()
@@ -231,6 +242,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     res = EstimateResult(
         stamps=np.array(stamps, dtype=np.int64), x_hat=np.array(xs).reshape(-1, n),
         envelope=np.array(envs).reshape(-1, len(env_labels)), state_labels=state_labels,
+        P=np.array(covs).reshape(-1, n, n) if w_cov is not None else None,
         envelope_labels=env_labels, messages_in=len(msgs), inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, seconds=seconds,

@@ -44,6 +44,8 @@ class EstimatorIO:
             node.create_subscription(Float64MultiArray, f"{ns}/envelope", keep("envelope"), qos.TRUTH),
             node.create_subscription(DiagnosticArray, "/diagnostics", keep("diagnostics"), qos.OUTPUT),
         ] + [node.create_subscription(Odometry, f"{ns}/{b}/odom", keep(b), qos.TRUTH) for b in self.BODIES]
+        # not among self.subs (wait_matched): an estimator with publish_covariance false has no publisher
+        self.sub_cov = node.create_subscription(Float64MultiArray, f"{ns}/covariance", keep("covariance"), qos.TRUTH)
         self.reset_client = node.create_client(Trigger, f"{ns}/reset")
 
     def wait_matched(self, timeout: float = 20.0) -> bool:
