@@ -93,8 +93,8 @@ def main(argv=None) -> int:
     live_walls, live_diff, live_n = [], [], []
     if not a.no_live:
         from switchobs_ros.bag.io import BagIn, deserialize
-        from switchobs_ros.bag.live import live_replay
-        from switchobs_ros.domain import claim_domain, localhost_env
+        from tools.domain import claim_domain, localhost_env
+        from tools.live_replay import live_replay
 
         lease = claim_domain()
         os.environ.update(localhost_env(lease.domain_id))

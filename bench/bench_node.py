@@ -133,7 +133,7 @@ def startup(cache_dir: str | None, table: str, domain_env: dict) -> dict:
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
-    from switchobs_ros.launch import NodeProcess, ros_args
+    from tools.launch import NodeProcess, ros_args
 
     params = {"gain_table": table}
     if cache_dir is not None:
@@ -166,7 +166,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--rates", default=",".join(map(str, RATES)))
     a = ap.parse_args(argv)
-    from switchobs_ros.domain import claim_domain, localhost_env
+    from tools.domain import claim_domain, localhost_env
 
     lease = claim_domain()
     os.environ.update(localhost_env(lease.domain_id))
@@ -177,7 +177,7 @@ def main(argv=None) -> int:
     from switchobs_core.design import design_table
     from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle
-    from switchobs_ros.launch import NodeProcess, ros_args
+    from tools.launch import NodeProcess, ros_args
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_node_"))
     table = str(design_table(load_system("paper"), [Cycle.from_ts(2.0, 0.6)]).save(tmp / "paper.json"))

@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="")
     a = ap.parse_args(argv)
 
-    from switchobs_ros.domain import claim_domain, localhost_env
+    from tools.domain import claim_domain, localhost_env
 
     lease = claim_domain()
     os.environ.update(localhost_env(lease.domain_id))
@@ -75,7 +75,7 @@ def main(argv=None) -> int:
     from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle, PeriodicSchedule
     from switchobs_ros import qos
-    from switchobs_ros.launch import NodeProcess, ros_args
+    from tools.launch import NodeProcess, ros_args
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_soak_"))
     cycle = Cycle.from_ts(2.0, 0.6)

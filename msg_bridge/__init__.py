@@ -1,7 +1,7 @@
 """msg_bridge: ROS 2 messages <-> numpy, and validation of what arrives.
 
 Imports message types only: no node, no executor, no numerics beyond reshaping
-(shared/DESIGN.md, "Three layers"). Channel numbers are the paper's 1-based numbers
+(docs/architecture.md). Channel numbers are the paper's 1-based numbers
 everywhere here, as on the ``camera/active_channel`` topic.
 
 Modules

@@ -13,7 +13,7 @@ unset ROS_LOCALHOST_ONLY ROS_STATIC_PEERS
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 
 # Claim a ROS_DOMAIN_ID no concurrent run uses: an exclusive flock on a lock file held (fd kept
-# open) for the life of this shell. Same lock files as switchobs_ros/domain.py.
+# open) for the life of this shell. Same lock files as tools/domain.py.
 claim_ros_domain() {
     local id fd dir="${TMPDIR:-/tmp}"
     for id in $(shuf -i 1-100); do

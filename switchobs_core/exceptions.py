@@ -8,6 +8,7 @@ either the precise type or the builtin (the python-control convention).
 from __future__ import annotations
 
 __all__ = [
+    "one_line",
     "SwitchobsError",
     "InvalidArgument",
     "InvalidSystem",
@@ -54,3 +55,12 @@ class GainTableError(SwitchobsError, ValueError):
 
 class ScheduleError(InvalidArgument):
     """A switching cycle or schedule is malformed (tau <= 0, s outside (0, 1), ...)."""
+
+
+def one_line(err: BaseException, *, with_type: bool = False) -> str:
+    """``err`` as one line for a command's error message: whitespace folded, the exception's
+    type name when it has no text (or, with ``with_type``, always in front of it)."""
+    text = " ".join(str(err).split())
+    if not text:
+        return type(err).__name__
+    return f"{type(err).__name__}: {text}" if with_type else text

@@ -53,6 +53,7 @@ __all__ = [
     "DEFAULT_PROCESS_STD",
     "DEFAULT_P0",
     "NOISE_KEYS",
+    "MAX_ABS_ENTRY",
 ]
 
 #: Default measurement noise std of every output row (1 mm for the camera scenarios).
@@ -71,6 +72,10 @@ _PSD_RTOL = 1e-12
 
 class NoiseModelError(InvalidArgument):
     """A noise model (measurement std, process intensity, P0) is malformed."""
+
+
+#: Largest magnitude of a covariance or intensity entry (a std: its square root).
+MAX_ABS_ENTRY = 1e100
 
 
 def _number(x: Any, where: str) -> float:
@@ -110,12 +115,23 @@ def _std(x: Any, where: str) -> float:
     val = _number(x, where)
     if not math.isfinite(val) or val <= 0:
         raise NoiseModelError(f"{where} must be a finite standard deviation > 0; got {val}")
+    if val > math.sqrt(MAX_ABS_ENTRY):
+        raise NoiseModelError(f"{where} = {val:.3g} is beyond the supported {math.sqrt(MAX_ABS_ENTRY):g}")
     return val
 
 
 def _psd(x: Any, n: int, where: str, *, square_scalar: bool = False) -> np.ndarray:
-    """Scalar (times I), n-vector (diagonal) or n x n symmetric PSD matrix; checked, symmetrised."""
+    """Scalar (times I), n-vector (diagonal) or n x n symmetric PSD matrix; checked, symmetrised.
+
+    Entries beyond :data:`MAX_ABS_ENTRY` in magnitude are refused (squares and sums of them
+    would overflow, and no physical covariance is that large)."""
     arr = _array(x, where)
+    with np.errstate(invalid="ignore"):
+        big = np.isfinite(arr) & (np.abs(arr) > (math.sqrt(MAX_ABS_ENTRY) if square_scalar and arr.ndim == 0
+                                                 else MAX_ABS_ENTRY))
+    if np.any(big):
+        raise NoiseModelError(f"{where}: an entry of magnitude {float(np.max(np.abs(arr[big]))):.3g} is beyond the "
+                              f"supported {MAX_ABS_ENTRY:g}")
     if arr.ndim == 0:
         v = float(arr)
         if not math.isfinite(v) or v < 0:

@@ -2,5 +2,5 @@
 diagnostics; no estimation math -- that is switchobs_core).
 
 Executables: ``estimator`` (:mod:`switchobs_ros.estimator`), ``camera_sim``
-(:mod:`switchobs_ros.camera_sim`); the demo runner is ``python -m switchobs_ros.demo``.
+(:mod:`switchobs_ros.camera_sim`); the demo runner is ``python -m tools.demo``.
 """

@@ -34,17 +34,16 @@ from std_msgs.msg import Float64MultiArray, UInt8
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.plant import Plant
+from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 
 from . import qos
-from .core_config import camera_target_rows, cycles_from_params, load_system_param
-from .estimator import run_node
+from .core_config import DEFAULT_X0, camera_target_rows, cycles_from_params, load_system_param
 from .params import ConfigError, Param, declare_all
+from .runner import run_node
 
 __all__ = ["CameraSimNode", "PARAMS", "DEFAULT_X0", "main"]
 
-#: Default true initial state (camera moving, agents drifting in x; the unstable v_y modes
-#: start at rest so the 30 s demo stays bounded): x = [chi_c; chi_1; chi_2], chi = [p, v].
-DEFAULT_X0 = (0.0, 0.0, 0.2, 0.1, 3.0, 1.0, -0.1, 0.0, -2.0, 2.0, 0.1, 0.0)
 
 PARAMS = [
     Param("system", "paper", "The simulated system: a built-in scenario name or a system YAML path (its "
@@ -78,9 +77,6 @@ class CameraSimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("camera_sim", **kwargs)
-        from switchobs_core.plant import Plant
-        from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
-
         cfg = declare_all(self, PARAMS)
         self.cfg = cfg
         self.exit_code = 0

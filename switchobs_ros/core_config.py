@@ -12,8 +12,10 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
+from switchobs_core import __version__
+from switchobs_core.design import design_table
 from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.gains import kalman_table
+from switchobs_core.gains import GainTable, kalman_table
 from switchobs_core.kalman import design_kalman
 from switchobs_core.noise import NoiseModel
 from switchobs_core.scenarios import load_noise, load_system
@@ -23,6 +25,7 @@ from switchobs_core.system import LTISystem
 from .params import ConfigError
 
 __all__ = [
+    "DEFAULT_X0",
     "GAIN_FAMILY_PARAM",
     "noise_from_params",
     "camera_target_rows",
@@ -32,6 +35,11 @@ __all__ = [
     "table_cache_path",
 ]
 
+
+#: Default true initial state of the simulated paper scene (camera moving, agents drifting in x;
+#: the unstable v_y modes start at rest so a 30 s demo stays bounded): x = [chi_c; chi_1; chi_2],
+#: chi = [p, v]. camera_sim, the bag generator and the demo start from it.
+DEFAULT_X0 = (0.0, 0.0, 0.2, 0.1, 3.0, 1.0, -0.1, 0.0, -2.0, 2.0, 0.1, 0.0)
 
 #: Values of the ``gain_family`` parameter ('' = the table's family).
 GAIN_FAMILY_PARAM = ("", "lmi", "kalman", "kalman-online")
@@ -88,8 +96,6 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
                      robust: tuple[float, float] | None, delta: float, *, family: str = "lmi",
                      rate: float = 0.0, noise: NoiseModel | None = None) -> Path:
     """Where a gain table designed at start-up is cached: keyed by everything it depends on."""
-    from switchobs_core import __version__
-
     spec = {"fingerprint": system.fingerprint(), "mode": mode,
             "cycles": [list(c.h) for c in cycles], "robust": robust, "delta": delta,
             "version": __version__}
@@ -111,8 +117,6 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
     Kalman gains for the cycle sequence at ``rate`` Hz under ``noise``.
     Returns ``(table, where)`` with ``where`` the file the table came from or went to.
     """
-    from switchobs_core.gains import GainTable
-
     if path:
         try:
             table = GainTable.load(os.path.expanduser(path), system=system)
@@ -134,10 +138,6 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
             return table, cache
         except SwitchobsError as err:
             log(f"cached gain table {cache} unusable ({err}); designing again")
-    try:
-        from switchobs_core.design import design_table
-    except ImportError as err:
-        raise ConfigError(f"gain_table not set and design is unavailable ({err})") from None
     log(f"gain_table not set: designing {family} gains for system '{system.name}', mode {mode}, "
         f"cycles {[c.label() for c in cycles]}, " + (f"delta {delta} (takes a few seconds)" if family == "lmi"
                                                      else f"rate {rate:g} Hz, {noise.describe()}"))

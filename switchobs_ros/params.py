@@ -18,11 +18,14 @@ from rclpy.exceptions import (
     ParameterUninitializedException,
 )
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from switchobs_core.exceptions import SwitchobsError
 
 __all__ = ["ConfigError", "Param", "declare_all"]
 
 
-class ConfigError(Exception):
+class ConfigError(SwitchobsError, ValueError):
     """A bad configuration: the node logs one line and exits non-zero."""
 
 
@@ -89,7 +92,6 @@ def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
         try:
             if isinstance(p.default, tuple) and not p.default:
                 # an empty default has no type of its own: declare by type, fall back below
-                from rclpy.parameter import Parameter
                 ptype = Parameter.Type(p.type)
                 node.declare_parameter(p.name, ptype, desc)
             else:

@@ -21,8 +21,8 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every estimate carries the stamp of the sample it answers.
 
-Failure behaviour (issue 6; the table is in README.md, "Failure behaviour")
-----------------------------------------------------------------
+Failure behaviour (the table is in README.md, "Failure behaviour")
+-------------------------------------------------------------------
 * Every message is validated (:mod:`msg_bridge.validate`); a rejected one is counted under
   ``(topic, reason)`` and changes nothing else. A target pose stamped at or before the newest
   target pose received before the latest channel change is ``stale_after_switch``: it was taken
@@ -58,15 +58,10 @@ import msg_bridge as mb
 from msg_bridge import Reason, Rejection
 from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.observer import SwitchedObserver
 
-from .core_config import (
-    GAIN_FAMILY_PARAM,
-    camera_target_rows,
-    cycles_from_params,
-    load_or_design_table,
-    load_system_param,
-    noise_from_params,
-)
+from .config import EstimatorConfig
+from .core_config import load_or_design_table
 from .params import ConfigError
 
 __all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate", "EstimatorPipeline",
@@ -199,69 +194,37 @@ class EstimatorPipeline:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_params(cls, cfg: dict, log: PipelineLog | None = None) -> EstimatorPipeline:
-        """The pipeline of the estimator's parameter values ``cfg`` (names of estimator.PARAMS).
+    def from_params(cls, cfg: dict | EstimatorConfig, log: PipelineLog | None = None) -> EstimatorPipeline:
+        """The pipeline of the estimator's configuration (an :class:`~switchobs_ros.config.EstimatorConfig`,
+        or parameter values by name, checked into one).
 
-        Loads the system, the schedule and the gain table (designing and caching one if
-        ``gain_table`` is empty). Raises :class:`~switchobs_ros.params.ConfigError` with one
-        line on any bad value.
+        Loads the gain table (designing and caching one if ``gain_table`` is empty: LMI gains, or
+        Kalman gains with ``gain_family: kalman``) and builds the observer. Raises
+        :class:`~switchobs_ros.params.ConfigError` with one line on any bad value.
         """
-        from switchobs_core.observer import MAX_ABS_SAMPLE, MODES, SwitchedObserver
-
+        conf = cfg if isinstance(cfg, EstimatorConfig) else EstimatorConfig.from_values(cfg)
         log = log or PipelineLog()
-        sys_ = load_system_param(cfg["system"])
-        mode = cfg["schedule.mode"]
-        if mode not in MODES:
-            raise ConfigError(f"parameter 'schedule.mode' must be one of {', '.join(MODES)}; got '{mode}'")
-        robust = None
-        if mode == "robust":
-            hmin, hmax = cfg["schedule.h_min"], cfg["schedule.h_max"]
-            if not 0 < hmin <= hmax:
-                raise ConfigError(f"robust mode needs 0 < schedule.h_min <= schedule.h_max; got {hmin}, {hmax}")
-            robust = (hmin, hmax)
-            cycles = []
-        else:
-            cycles = cycles_from_params(mode, cfg["schedule.tau"], cfg["schedule.s"], cfg["schedule.h"], sys_.N)
-        for name in ("delta", "e0", "sensor_timeout", "future_tolerance", "max_abs_value",
-                     "pairing_timeout", "diagnostics_period"):
-            v = cfg[name]
-            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
-                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
-        if cfg["max_abs_value"] > MAX_ABS_SAMPLE:
-            raise ConfigError(f"parameter 'max_abs_value' must be <= {MAX_ABS_SAMPLE:g} (larger samples could "
-                              f"overflow the observer's exact step); got {cfg['max_abs_value']:g}")
-        x0 = cfg["initial_estimate"]
-        if x0 and len(x0) != sys_.n:
-            raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
-                              f"states ({', '.join(sys_.state_labels)})")
-        x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
-        rows = camera_target_rows(sys_, cfg["camera_body"])
-        family = cfg.get("gain_family", "")
-        if family not in GAIN_FAMILY_PARAM:
-            raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
-                              f"got {family!r}")
-        noise = noise_from_params(cfg, sys_)
-        rate = float(cfg.get("rate", 0.0))
-        publish = bool(cfg.get("publish_covariance", True))
+        sys_, mode, cycles, family = conf.system, conf.mode, list(conf.cycles), conf.family
         table, table_path = load_or_design_table(
-            cfg["gain_table"], cfg["gain_table_cache_dir"], sys_, mode, cycles, robust, cfg["delta"], log.info,
-            family="kalman" if family == "kalman" else "lmi", rate=rate, noise=noise)
+            conf["gain_table"], conf["gain_table_cache_dir"], sys_, mode, cycles, conf.robust, conf["delta"],
+            log.info, family="kalman" if family == "kalman" else "lmi", rate=conf.rate, noise=conf.noise)
         if family in ("lmi", "kalman") and table.family != family:
             raise ConfigError(f"parameter 'gain_family' is '{family}' but the gain table holds {table.family} gains")
         try:
             fam = "kalman-online" if family == "kalman-online" else None
             lmi = table.family == "lmi" and fam is None
             # the kalman table brings its own noise model; the LMI covariance is tracked only if published
-            observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=x0, t0=0.0,
-                                        e0=cfg["e0"], bounds=robust, family=fam,
-                                        noise=None if table.family == "kalman" and fam is None else noise,
-                                        track_covariance=publish if lmi else None)
+            observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
+                                        e0=conf["e0"], bounds=conf.robust, family=fam,
+                                        noise=None if table.family == "kalman" and fam is None else conf.noise,
+                                        track_covariance=conf.publish_covariance if lmi else None)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
-        pipe = cls(sys_, table, observer, x0=x0, rows=rows, input_frame_id=cfg["input_frame_id"],
-                   max_abs=cfg["max_abs_value"], future_tolerance_ns=int(cfg["future_tolerance"] * 1e9),
+        pipe = cls(sys_, table, observer, x0=conf.x0, rows=list(conf.rows), input_frame_id=conf["input_frame_id"],
+                   max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
                    log=log, table_path=table_path, mode=mode, cycles=cycles)
-        pipe.publish_covariance = publish
+        pipe.publish_covariance = conf.publish_covariance
+        pipe.config = conf
         return pipe
 
     # ------------------------------------------------------------------ inputs

@@ -23,80 +23,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64MultiArray, UInt8
 
+import msg_bridge as mb
+
+from ..config import params_from_file
+from ..pipeline import EstimatorPipeline
 from .cdr import Template, decode_pose, decode_uint8
 from .io import CONTRACT_TYPES, BagError, BagIn, BagOut, deserialize, type_name
 
 __all__ = ["EstimateResult", "estimate", "estimator_params"]
 
+#: The estimator's parameter values from params files (owned by switchobs_ros.config).
+estimator_params = params_from_file
+
 INPUTS = {t: CONTRACT_TYPES[t] for t in ("/camera/active_channel", "/camera/pose", "/target/pose")}
 _PART = {"/camera/pose": "camera", "/target/pose": "target"}
-
-
-def estimator_params(params_files=(), overrides: dict | None = None, node_name: str = "estimator") -> dict:
-    """The estimator's parameter values: defaults, then params files (ROS 2 YAML), then overrides.
-
-    A params file is ``<node>: ros__parameters: {...}`` (or ``/**:``), nested keys joined with
-    ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names or values of the
-    wrong type raise :class:`~switchobs_ros.params.ConfigError`, as the node does.
-    """
-    from switchobs_ros.estimator import PARAMS
-    from switchobs_ros.params import ConfigError
-
-    known = {p.name: p for p in PARAMS}
-    cfg = {p.name: p.default for p in PARAMS}
-
-    def flat(d, prefix=""):
-        for k, v in d.items():
-            if isinstance(v, dict):
-                yield from flat(v, f"{prefix}{k}.")
-            else:
-                yield f"{prefix}{k}", v
-
-    def num(v, is_float):
-        # ROS reads 1.0e6 as a double; YAML 1.1 (PyYAML) reads it as a string
-        if is_float and isinstance(v, str):
-            try:
-                return float(v)
-            except ValueError:
-                return v
-        if is_float and isinstance(v, int) and not isinstance(v, bool):
-            return float(v)
-        return v
-
-    def put(name, v, where):
-        if name in ("use_sim_time",):
-            return
-        if name not in known:
-            raise ConfigError(f"{where}: unknown estimator parameter '{name}' (known: {', '.join(sorted(known))})")
-        d = known[name].default
-        if isinstance(d, tuple):
-            if not isinstance(v, (list, tuple)):
-                raise ConfigError(f"{where}: parameter '{name}' must be a list")
-            item = known[name].item or (type(d[0]) if d else float)
-            v = tuple(num(x, item is float) for x in v)
-        elif isinstance(d, float):
-            v = num(v, True)
-        elif isinstance(d, str) and v is None:
-            v = ""
-        if not isinstance(d, tuple) and type(v) is not type(d):
-            raise ConfigError(f"{where}: parameter '{name}' must be a {type(d).__name__}; got {v!r}")
-        cfg[name] = v
-
-    for f in params_files:
-        try:
-            doc = yaml.safe_load(Path(f).read_text()) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise ConfigError(f"params file {f}: {err}") from None
-        for key in (node_name, "/" + node_name, "/**"):
-            sect = doc.get(key) if isinstance(doc, dict) else None
-            if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
-                for name, v in flat(sect["ros__parameters"]):
-                    put(name, v, f"params file {f}")
-    for name, v in (overrides or {}).items():
-        put(name, v, "parameter override")
-    return cfg
 
 
 @dataclass
@@ -124,15 +70,6 @@ class EstimateResult:
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
              storage: str | None = None, inputs: bool = True, node: str = "/estimator") -> EstimateResult:
     """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring)."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    from geometry_msgs.msg import PoseStamped
-    from nav_msgs.msg import Odometry
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import Float64MultiArray, UInt8
-
-    import msg_bridge as mb
-    from switchobs_ros.pipeline import EstimatorPipeline
-
     with BagIn(bag_path) as bag:
         bag.require(INPUTS, " (the estimator's inputs)")
         pl = EstimatorPipeline.from_params(cfg)

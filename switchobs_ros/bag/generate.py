@@ -18,7 +18,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import UInt8
 
+import msg_bridge as mb
+from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.plant import Plant
+from switchobs_core.schedule import RandomSchedule, parse_schedule
+
+from ..core_config import DEFAULT_X0, camera_target_rows, load_system_param
+from ..params import ConfigError
 from .io import CONTRACT_TYPES, BagError, BagOut
 
 __all__ = ["GenerateConfig", "generate", "scenario_ticks"]
@@ -45,8 +54,6 @@ class GenerateConfig:
 
 
 def _schedule(cfg: GenerateConfig, N: int):
-    from switchobs_core.schedule import RandomSchedule, parse_schedule
-
     spec = {"periodic": "periodic:2,0.6", "sequence": "sequence:4,0.5;3,0.6;3,0.6;2,0.4"}.get(cfg.schedule,
                                                                                              cfg.schedule)
     kind, _, rest = spec.partition(":")
@@ -58,16 +65,6 @@ def _schedule(cfg: GenerateConfig, N: int):
 
 def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, object]]]]:
     """Yield ``(stamp_ns, [(topic, rclpy message), ...])`` per tick, as camera_sim publishes them."""
-    from rosgraph_msgs.msg import Clock as ClockMsg
-    from std_msgs.msg import UInt8
-
-    import msg_bridge as mb
-    from switchobs_core.exceptions import SwitchobsError
-    from switchobs_core.plant import Plant
-    from switchobs_ros.camera_sim import DEFAULT_X0
-    from switchobs_ros.core_config import camera_target_rows, load_system_param
-    from switchobs_ros.params import ConfigError
-
     try:
         sys_ = load_system_param(cfg.system)
         schedule = _schedule(cfg, sys_.N)

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.exceptions import SwitchobsError, one_line
 
 __all__ = [
     "CONTRACT_TYPES",
@@ -151,8 +151,8 @@ class BagIn:
             self._reader = Reader(self.path)
             self._reader.open()
         except Exception as err:
-            raise BagError(f"bag {self.path}: cannot open ({_one_line(err)}); truncated or not a rosbag2 bag?") \
-                from None
+            raise BagError(f"bag {self.path}: cannot open ({one_line(err, with_type=True)}); "
+                           "truncated or not a rosbag2 bag?") from None
         self.topics: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         for c in self._reader.connections:
@@ -210,7 +210,7 @@ class BagIn:
                 got[topic] = got.get(topic, 0) + 1
         except Exception as err:
             raise BagError(f"bag {self.path}: reading messages failed after {len(out)} messages "
-                           f"({_one_line(err)}); the file is truncated or damaged") from None
+                           f"({one_line(err, with_type=True)}); the file is truncated or damaged") from None
         for c in conns:
             if got.get(c.topic, 0) < self.counts.get(c.topic, 0):
                 raise BagError(f"bag {self.path}: topic {c.topic} has {got.get(c.topic, 0)} readable messages "
@@ -249,7 +249,7 @@ def deserialize(m: BagMessage, cls: type):
         return deserialize_message(m.data, cls)
     except Exception as err:
         raise BagError(f"topic {m.topic}: cannot deserialise a {m.type} at log time {m.log_ns} ns "
-                       f"({_one_line(err)}); truncated or damaged message") from None
+                       f"({one_line(err, with_type=True)}); truncated or damaged message") from None
 
 
 # --------------------------------------------------------------------------------- writing
@@ -276,7 +276,7 @@ class BagOut:
         try:
             self._w.open()
         except Exception as err:
-            raise BagError(f"bag {self.path}: cannot create ({_one_line(err)})") from None
+            raise BagError(f"bag {self.path}: cannot create ({one_line(err, with_type=True)})") from None
         self._conns: dict[str, object] = {}
         self.count = 0
 
@@ -304,7 +304,3 @@ class BagOut:
             self._w.close()
             self._w = None
 
-
-def _one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split())
-    return f"{type(err).__name__}: {text}" if text else type(err).__name__

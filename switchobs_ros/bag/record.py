@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from .io import CONTRACT_TYPES, BagError, BagOut, qos_kind
+from .io import CONTRACT_TYPES, BagError, BagOut, msg_class, qos_kind
 
 __all__ = ["RecordConfig", "default_topics", "record"]
 
@@ -68,8 +68,6 @@ def _subscription_qos(node, topic: str, depth: int):
 def record(out_path, cfg: RecordConfig, *, node, log=print, should_stop=lambda: False) -> dict:
     """Record on ``node`` (an rclpy node; its clock gives the log times) into a new bag."""
     import rclpy
-
-    from .io import msg_class
 
     wanted = default_topics() if not cfg.topics else {t: None for t in cfg.topics}
     known = default_topics()

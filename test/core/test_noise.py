@@ -15,6 +15,7 @@ from switchobs_core.noise import (
     DEFAULT_MEAS_STD,
     DEFAULT_P0,
     DEFAULT_PROCESS_STD,
+    MAX_ABS_ENTRY,
     NoiseModel,
     NoiseModelError,
     default_noise,
@@ -124,9 +125,9 @@ def test_parser_random_valid_models_round_trip(form, vals, qdiag, L):
     v=st.floats(allow_nan=True, allow_infinity=True),
 )
 def test_parser_random_bad_shapes_or_values(shape, v):
-    """A wrong shape, or a negative / non-finite value, is refused with a NoiseModelError."""
+    """A wrong shape, or a negative, non-finite or absurdly large value, is refused with a NoiseModelError."""
     arr = np.full(shape, v)
-    ok_scalar = shape == () and math.isfinite(v) and v >= 0
+    ok_scalar = shape == () and math.isfinite(v) and 0 <= v <= MAX_ABS_ENTRY
     if ok_scalar:
         assert NoiseModel.from_mapping({"process_intensity": float(v)}, PAPER).Q_c[0, 0] == v
         return

@@ -1,7 +1,7 @@
 """ROS tests: a ROS_DOMAIN_ID of this session's own, localhost-only discovery.
 
 Set at import (before any rclpy use or child process): ``ROS_AUTOMATIC_DISCOVERY_RANGE =
-LOCALHOST`` and a ``ROS_DOMAIN_ID`` claimed with a lock file (switchobs_ros.domain), held
+LOCALHOST`` and a ``ROS_DOMAIN_ID`` claimed with a lock file (tools.domain), held
 for the whole session, so concurrent sessions on the machine never share a domain.
 """
 
@@ -18,7 +18,7 @@ except ImportError:  # pragma: no cover - the ROS wheels are in requirements.txt
     HAVE_ROS = False
 
 if HAVE_ROS:
-    from switchobs_ros.domain import claim_domain
+    from tools.domain import claim_domain
 
     _LEASE = claim_domain()
     os.environ["ROS_DOMAIN_ID"] = str(_LEASE.domain_id)

@@ -14,8 +14,8 @@ import msg_bridge as mb
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate, scenario_ticks
 from switchobs_ros.bag.io import BagIn, deserialize
-from switchobs_ros.bag.live import OUTPUT_TOPICS, live_replay
 from switchobs_ros.bag.report import load_report
+from tools.live_replay import OUTPUT_TOPICS, live_replay
 
 
 def _recorded(path, topic, order="file"):
@@ -91,7 +91,7 @@ def test_record_on_sim_time_count_limit_and_sigterm(ros_node, tmp_path):
     from rosgraph_msgs.msg import Clock
 
     from switchobs_ros import qos
-    from switchobs_ros.launch import NodeProcess
+    from tools.launch import NodeProcess
 
     cmd = [sys.executable, "-m", "switchobs_ros.bag"]
     rec = NodeProcess("record", ["record", str(tmp_path / "a"), "--topics", "/sim/truth", "--count", "20",

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from switchobs_ros.launch import NodeProcess
+from tools.launch import NodeProcess
 
 REPO = Path(__file__).resolve().parents[2]
 PARTS = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "switchobs_core", "msg_bridge",

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from switchobs_ros import demo
+from tools import demo
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
 
 import msg_bridge as mb
-from switchobs_ros.launch import NodeProcess, ros_args
+from tools.launch import NodeProcess, ros_args
 
 LABELS = tuple(f"{b}.{q}" for b in ("camera", "agent1", "agent2") for q in ("p_x", "p_y", "v_x", "v_y"))
 

@@ -17,7 +17,7 @@ from std_msgs.msg import Float64MultiArray, UInt8
 
 import msg_bridge as mb
 from switchobs_ros import qos
-from switchobs_ros.launch import NodeProcess, ros_args
+from tools.launch import NodeProcess, ros_args
 
 S = 1_000_000_000
 MS = 1_000_000

@@ -20,7 +20,7 @@ from ros_harness import EstimatorIO, spin_until
 from test_fail_inputs import _stream
 
 import msg_bridge as mb
-from switchobs_ros.launch import NodeProcess, ros_args
+from tools.launch import NodeProcess, ros_args
 
 N_MSGS = int(os.environ.get("SWITCHOBS_DDS_FUZZ", "10000"))
 

@@ -11,7 +11,7 @@ import re
 import pytest
 from test_startup_failures import _assert_one_line_failure, _run
 
-from switchobs_ros.launch import ros_args
+from tools.launch import ros_args
 
 
 def test_truncated_table(paper_tables, tmp_path):

@@ -19,7 +19,7 @@ from switchobs_core.scenarios import load_system
 from switchobs_core.schedule import Cycle
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate, scenario_ticks
-from switchobs_ros.launch import NodeProcess, ros_args
+from tools.launch import NodeProcess, ros_args
 
 NOISE, PROCESS, RATE = 0.01, 0.01, 100.0
 

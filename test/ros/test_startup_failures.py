@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from switchobs_ros.launch import ros_args
+from tools.launch import ros_args
 
 
 def _run(node: str, args: list[str], timeout: float = 60.0) -> subprocess.CompletedProcess:

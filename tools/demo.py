@@ -1,6 +1,6 @@
 """The demo: estimator and camera_sim as separate processes over DDS on localhost.
 
-``python -m switchobs_ros.demo [--schedule periodic|sequence] [--duration 30] [--out DIR]``
+``python -m tools.demo [--schedule periodic|sequence] [--duration 30] [--out DIR]``
 
 camera_sim simulates the paper's camera + 2 agents and is the clock (``/clock``, faster than
 real time by ``--time-scale``); the estimator runs with ``use_sim_time``. The demo listens to
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import rclpy
 
-from .camera_sim import DEFAULT_X0
-from .domain import claim_domain
-from .launch import Collector, NodeProcess, ros_args
+from switchobs_ros.core_config import DEFAULT_X0
+from tools.domain import claim_domain
+from tools.launch import Collector, NodeProcess, ros_args
 
 SCHEDULES = {
     "periodic": {"schedule.mode": "periodic", "schedule.tau": [2.0], "schedule.s": [0.6]},

@@ -6,7 +6,7 @@ Every process here that starts a ROS node runs with
 ``flock`` on ``$TMPDIR/switchobs-ros-domain-<id>.lock`` for its lifetime; the shell scripts
 use the same lock files (scripts/lib.sh), so tests, demo and benchmark never share a domain.
 
-``python -m switchobs_ros.domain`` prints a free id (without holding it: for humans).
+``python -m tools.domain`` prints a free id (without holding it: for humans).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 There is no ``launch`` package in the PyPI ROS 2 wheels, so the demo, the tests and the
 benchmark start the executables with :class:`NodeProcess` and listen with a
 :class:`Collector` node. Every child gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the
-caller's ``ROS_DOMAIN_ID`` (see :mod:`switchobs_ros.domain`).
+caller's ``ROS_DOMAIN_ID`` (see :mod:`tools.domain`).
 """
 
 from __future__ import annotations
@@ -21,8 +21,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 import msg_bridge as mb
-
-from . import qos
+from switchobs_ros import qos
 
 __all__ = ["NodeProcess", "Collector", "ros_args"]
 
@@ -54,7 +53,7 @@ class NodeProcess:
         env = dict(os.environ if env is None else env)
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         if "ROS_DOMAIN_ID" not in env:
-            raise RuntimeError("ROS_DOMAIN_ID must be set (claim one with switchobs_ros.domain)")
+            raise RuntimeError("ROS_DOMAIN_ID must be set (claim one with tools.domain)")
         env.setdefault("PYTHONUNBUFFERED", "1")
         env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
         self.log_path = Path(log) if log else None

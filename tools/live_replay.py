@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from switchobs_ros.launch import NodeProcess, ros_args
+from tools.launch import NodeProcess, ros_args
 
 __all__ = ["OUTPUT_TOPICS", "live_replay"]
 

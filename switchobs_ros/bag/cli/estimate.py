@@ -1,0 +1,64 @@
+"""``switchobs_bag estimate``: the estimator's pipeline over a bag, offline; a bag and/or a CSV out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import yaml
+
+from ...config import params_from_file
+from ..estimate import estimate
+from ..io import BagError
+
+__all__ = ["register", "run", "params_of"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("estimate", help="run the estimator pipeline over a bag, offline; write a bag and CSV")
+    p.add_argument("bag")
+    p.add_argument("-o", "--out", help="new bag folder for the estimates (and the copied inputs)")
+    p.add_argument("--csv", help="CSV file of the estimates")
+    p.add_argument("--storage", choices=["mcap", "sqlite3"], default=None, help="default: the input bag's")
+    p.add_argument("--estimates-only", action="store_true", help="do not copy the input topics")
+    p.add_argument("--params-file", action="append", default=[], help="estimator params file (ROS 2 YAML)")
+    p.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE")
+    p.add_argument("--gain-table", help="shortcut for -p gain_table:=FILE")
+    p.add_argument("--node", default="/estimator", help="namespace of the output topics (default /estimator)")
+    p.add_argument("--json", action="store_true")
+
+    p.set_defaults(func=run)
+
+
+def params_of(a: argparse.Namespace) -> dict:
+    """The estimator's parameter values from ``--params-file``, ``-p NAME:=VALUE`` and ``--gain-table``."""
+    over = {}
+    for item in a.param:
+        name, sep, val = item.partition(":=")
+        if not sep:
+            raise BagError(f"-p {item}: expected NAME:=VALUE")
+        over[name] = yaml.safe_load(val) if val != "" else ""
+    if a.gain_table:
+        over["gain_table"] = a.gain_table
+    return params_from_file(a.params_file, over)
+
+
+def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
+    if not a.out and not a.csv:
+        raise BagError("give -o OUT (a new bag) and/or --csv FILE")
+    res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
+                   node=a.node)
+    rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
+    info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
+            "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
+            "partial_updates": res.partial_updates, "rejected": res.rejected, "out": res.out, "csv": res.csv}
+    if a.json:
+        print(json.dumps(info))
+        return 0
+    print(f"{res.stamps.size} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
+          f"({rate:,.0f} messages/s); partial updates {res.partial_updates}; rejected "
+          f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
+    for what in ("out", "csv"):
+        if info[what]:
+            print(f"wrote {info[what]}")
+    return 0

@@ -1,0 +1,41 @@
+"""``switchobs_bag report``: plots and a summary from a bag with estimates (and truth)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..report import load_report, plot_report, summary_table
+
+__all__ = ["register", "run"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("report", help="plots and a summary from a bag with estimates (and truth)")
+    p.add_argument("bag")
+    p.add_argument("-o", "--out", default="report.png", help="PNG file (default report.png)")
+    p.add_argument("--summary", help="also write the summary (Markdown) to this file")
+    p.add_argument("--node", default="/estimator")
+    p.add_argument("--title", default="")
+    p.add_argument("--json", action="store_true")
+
+    p.set_defaults(func=run)
+
+
+def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
+    rep = load_report(a.bag, a.node)
+    plot_report(rep, a.out, a.title)
+    text = summary_table(rep)
+    if a.summary:
+        Path(a.summary).write_text(text + "\n")
+    if a.json:
+        print(json.dumps({"passes": [{"estimates": len(p.t), "initial_error": p.e_first, "final_error": p.e_final,
+                                      "final_exact_bound": float(p.exact[-1]),
+                                      "final_paper_bound": float(p.paper[-1]),
+                                      "contraction": p.contraction} for p in rep.passes],
+                          "rejected": rep.rejected, "png": a.out}))
+    else:
+        print(text)
+        print(f"wrote {a.out}" + (f" and {a.summary}" if a.summary else ""))
+    return 0

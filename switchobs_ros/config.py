@@ -1,0 +1,226 @@
+"""The estimator's configuration: its declared parameters, the params-file reader, and the typed
+:class:`EstimatorConfig` that checks every value in one place.
+
+One configuration for every way the estimator runs: the node reads its parameters from rclpy
+(:func:`~switchobs_ros.params.declare_all`), the offline bag estimator from params files
+(:func:`params_from_file`, the same names, types and errors); both become an
+:class:`EstimatorConfig` (:meth:`EstimatorConfig.from_values`), which turns the values into core
+objects (system, schedule, noise model) and refuses a bad one with a single
+:class:`~switchobs_ros.params.ConfigError` line. :class:`~switchobs_ros.pipeline.EstimatorPipeline`
+takes it from there (gain table, observer).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+import msg_bridge as mb
+from switchobs_core.noise import NoiseModel
+from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
+from switchobs_core.schedule import Cycle
+from switchobs_core.system import LTISystem
+
+from .core_config import (
+    GAIN_FAMILY_PARAM,
+    camera_target_rows,
+    cycles_from_params,
+    load_system_param,
+    noise_from_params,
+)
+from .params import ConfigError, Param
+
+__all__ = ["PARAMS", "EstimatorConfig", "params_from_file"]
+
+#: The estimator node's parameters (the README's parameter table is checked against it).
+PARAMS = [
+    Param("system", "paper", "The system: a built-in scenario name (paper, camera_agents) or a path to a "
+          "system YAML file."),
+    Param("gain_table", "", "Path of the gain table (JSON, from `switchobs design`). Empty: use a cached "
+          "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
+    Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up."),
+    Param("delta", 0.99, "Contraction target delta of the design (used only when designing at start-up)."),
+    Param("gain_family", "", "Gain family: '' (the table's: lmi or kalman), 'kalman-online' (the Riccati recursion "
+          "online, any schedule), or, when designing at start-up, 'lmi' (the paper's gains) or 'kalman' (offline "
+          "periodic Kalman gains; needs rate)."),
+    Param("rate", 0.0, "Nominal sample rate in Hz: needed to design a kalman table at start-up (0: not set)."),
+    Param("noise.measurement_std", -1.0, "Measurement noise std on every output row (m) for the covariance and the "
+          "Kalman families (< 0: the system's noise: section, or 1 mm)."),
+    Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
+          "section, or 0.01)."),
+    Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
+          "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
+    Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
+          "(the table's residence-time-box design; needs schedule.h_min/h_max to design)."),
+    Param("schedule.tau", (2.0,), "Cycle lengths tau_k in seconds (two-channel systems).", float),
+    Param("schedule.s", (0.6,), "Duty fractions s_k = h_1/tau_k, one per schedule.tau entry.", float),
+    Param("schedule.h", (), "N-channel cycles: N active times per cycle, cycles concatenated "
+          "(overrides schedule.tau/s when set).", float),
+    Param("schedule.h_min", 0.0, "Robust mode: shortest residence time h_min of assumption A2 (s)."),
+    Param("schedule.h_max", 0.0, "Robust mode: longest residence time h_max of assumption A2 (s)."),
+    Param("initial_estimate", (), "Initial estimate x_hat(t0), n values in state order (empty: zeros).", float),
+    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound."),
+    Param("world_frame", "map", "frame_id of the published odometry (and of the expected input poses)."),
+    Param("input_frame_id", "map", "Expected header.frame_id of camera/pose and target/pose ('' accepts any)."),
+    Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
+          "camera, agent1, ...).", str),
+    Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
+    Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN."),
+    Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected."),
+    Param("max_abs_value", 1.0e6, "Largest accepted |coordinate| of an input pose (m). At most 1e150 (the observer "
+          "refuses larger samples: the next exact step could overflow)."),
+    Param("pairing_timeout", 0.2, "Seconds (wall) to wait for the other half of a camera/target pair before "
+          "using one half alone."),
+    Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock)."),
+]
+
+
+def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | None = None,
+                     node_name: str = "estimator") -> dict:
+    """The estimator's parameter values: defaults, then params files (ROS 2 YAML), then overrides.
+
+    A params file is ``<node>: ros__parameters: {...}`` (or ``/**:``), nested keys joined with
+    ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names or values of the
+    wrong type raise :class:`~switchobs_ros.params.ConfigError`, as the node does.
+    """
+    known = {p.name: p for p in PARAMS}
+    cfg = {p.name: p.default for p in PARAMS}
+
+    def flat(d, prefix=""):
+        for k, v in d.items():
+            if isinstance(v, dict):
+                yield from flat(v, f"{prefix}{k}.")
+            else:
+                yield f"{prefix}{k}", v
+
+    def num(v, is_float):
+        # ROS reads 1.0e6 as a double; YAML 1.1 (PyYAML) reads it as a string
+        if is_float and isinstance(v, str):
+            try:
+                return float(v)
+            except ValueError:
+                return v
+        if is_float and isinstance(v, int) and not isinstance(v, bool):
+            return float(v)
+        return v
+
+    def put(name, v, where):
+        if name in ("use_sim_time",):
+            return
+        if name not in known:
+            raise ConfigError(f"{where}: unknown estimator parameter '{name}' (known: {', '.join(sorted(known))})")
+        d = known[name].default
+        if isinstance(d, tuple):
+            if not isinstance(v, (list, tuple)):
+                raise ConfigError(f"{where}: parameter '{name}' must be a list")
+            item = known[name].item or (type(d[0]) if d else float)
+            v = tuple(num(x, item is float) for x in v)
+        elif isinstance(d, float):
+            v = num(v, True)
+        elif isinstance(d, str) and v is None:
+            v = ""
+        if not isinstance(d, tuple) and type(v) is not type(d):
+            raise ConfigError(f"{where}: parameter '{name}' must be a {type(d).__name__}; got {v!r}")
+        cfg[name] = v
+
+    for f in params_files:
+        try:
+            doc = yaml.safe_load(Path(f).read_text()) or {}
+        except (OSError, yaml.YAMLError) as err:
+            raise ConfigError(f"params file {f}: {err}") from None
+        for key in (node_name, "/" + node_name, "/**"):
+            sect = doc.get(key) if isinstance(doc, dict) else None
+            if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
+                for name, v in flat(sect["ros__parameters"]):
+                    put(name, v, f"params file {f}")
+    for name, v in (overrides or {}).items():
+        put(name, v, "parameter override")
+    return cfg
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """The estimator's checked configuration: the raw parameter ``values`` and the core objects
+    made from them. Build it with :meth:`from_values` (or :meth:`from_files`)."""
+
+    values: dict
+    system: LTISystem
+    mode: str
+    cycles: tuple[Cycle, ...]
+    robust: tuple[float, float] | None
+    x0: np.ndarray
+    rows: tuple
+    family: str
+    noise: NoiseModel
+    rate: float
+    publish_covariance: bool
+    child_frames: tuple[str, ...]
+
+    def __getitem__(self, name: str) -> Any:
+        """The raw value of parameter ``name``."""
+        return self.values[name]
+
+    @classmethod
+    def from_files(cls, params_files: Sequence[str | Path] = (), overrides: dict | None = None) -> EstimatorConfig:
+        """Defaults, then params files, then overrides (:func:`params_from_file`), checked."""
+        return cls.from_values(params_from_file(params_files, overrides))
+
+    @classmethod
+    def from_values(cls, cfg: dict) -> EstimatorConfig:
+        """Check every parameter value (names of :data:`PARAMS`) and build the core objects.
+
+        Raises :class:`~switchobs_ros.params.ConfigError` with one line on any bad value.
+        """
+        values = {p.name: p.default for p in PARAMS}
+        values.update(cfg)
+        sys_ = load_system_param(values["system"])
+        mode = values["schedule.mode"]
+        if mode not in MODES:
+            raise ConfigError(f"parameter 'schedule.mode' must be one of {', '.join(MODES)}; got '{mode}'")
+        robust = None
+        if mode == "robust":
+            hmin, hmax = values["schedule.h_min"], values["schedule.h_max"]
+            if not 0 < hmin <= hmax:
+                raise ConfigError(f"robust mode needs 0 < schedule.h_min <= schedule.h_max; got {hmin}, {hmax}")
+            robust = (hmin, hmax)
+            cycles = []
+        else:
+            cycles = cycles_from_params(mode, values["schedule.tau"], values["schedule.s"], values["schedule.h"],
+                                        sys_.N)
+        for name in ("delta", "e0", "sensor_timeout", "future_tolerance", "max_abs_value",
+                     "pairing_timeout", "diagnostics_period"):
+            v = values[name]
+            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
+                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
+        if values["max_abs_value"] > MAX_ABS_SAMPLE:
+            raise ConfigError(f"parameter 'max_abs_value' must be <= {MAX_ABS_SAMPLE:g} (larger samples could "
+                              f"overflow the observer's exact step); got {values['max_abs_value']:g}")
+        x0 = values["initial_estimate"]
+        if x0 and len(x0) != sys_.n:
+            raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
+                              f"states ({', '.join(sys_.state_labels)})")
+        x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
+        rows = camera_target_rows(sys_, values["camera_body"])
+        family = values["gain_family"]
+        if family not in GAIN_FAMILY_PARAM:
+            raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
+                              f"got {family!r}")
+        rate = float(values["rate"])
+        if not (math.isfinite(rate) and rate >= 0):
+            raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
+        noise = noise_from_params(values, sys_)
+        bodies = [b.name for b in mb.bodies(sys_.state_labels)]
+        frames = values["body_frames"]
+        if frames and len(frames) != len(bodies):
+            raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
+                              f"({', '.join(bodies)})")
+        return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
+                   rows=tuple(rows), family=family, noise=noise, rate=rate,
+                   publish_covariance=bool(values["publish_covariance"]),
+                   child_frames=tuple(frames) if frames else tuple(bodies))

@@ -1,0 +1,173 @@
+"""The estimator's ``/diagnostics``: what the node reports, built outside the node.
+
+Three statuses, in the shape of ROS's diagnostic_updater (not among the PyPI wheels): the
+configuration (static: system, table, schedule, gain family, noise model, designs), the observer
+(dynamic: channel, cycle, gains, bounds, residence times against the design, sensor outage) and
+the inputs (rates over the last period on the node clock, accepted and rejected counts by
+reason). :class:`EstimatorDiagnostics` reads the pipeline and its observer; the node passes what
+only it knows (clock jumps, outage predictions) as a :class:`NodeState`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+__all__ = ["EstimatorDiagnostics", "NodeState", "kv"]
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return str(v).lower()
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return str(v)
+
+
+def kv(k: Any, v: Any) -> KeyValue:
+    """One diagnostic value: strings as they are, numbers with 6 significant digits, lists bracketed."""
+    return KeyValue(key=str(k), value=v if isinstance(v, str) else _fmt(v))
+
+
+@dataclass
+class NodeState:
+    """What the node knows beyond the pipeline: clock jumps, the sensor timeout, outage predictions."""
+
+    clock_jumps_back: int
+    clock_jumps_forward: int
+    last_clock_jump: str
+    sensor_timeout: float
+    last_prediction: Any
+    predictions: int
+
+
+class EstimatorDiagnostics:
+    """Builds the estimator's DiagnosticArray (module docstring); keeps the input-rate baseline."""
+
+    def __init__(self, name: str, pipeline: Any, now_ns: int):
+        self.name = name
+        self.pipeline = pipeline
+        self._rate_base = (now_ns, Counter(), 0)
+
+    def array(self, now, node: NodeState) -> DiagnosticArray:
+        """The /diagnostics message at node-clock time ``now`` (an rclpy Time)."""
+        now_ns = now.nanoseconds
+
+        obs = self.pipeline.observer
+        pl = self.pipeline
+        # configuration (static)
+        conf = [kv("system", self.pipeline.system.name), kv("fingerprint", self.pipeline.system.fingerprint()[:16]),
+                kv("gain_table", str(self.pipeline.table_path)), kv("mode", self.pipeline.mode),
+                kv("cycles", " ".join(c.label() for c in self.pipeline.cycles) or "robust"),
+                kv("e0", obs.e0), kv("gain family", obs.family)]
+        if obs.noise is not None:
+            conf.append(kv("noise model", obs.noise.describe()))
+        if obs.kalman is not None:
+            conf += [kv("kalman", obs.kalman.describe())]
+        for k, d in enumerate(obs.designs if obs.family == "lmi" else ()):
+            conf.append(kv(f"design[{k}].eta", d.eta))
+            conf.append(kv(f"design[{k}].kappa", d.kappa))
+            conf.append(kv(f"design[{k}].f (paper factors)", d.f))
+        # observer (dynamic)
+        d = obs.current_design
+        cyc = getattr(d, "cycle", None)
+        ob = [kv("channel", obs.channel), kv("estimate time (s since origin)", obs.t),
+              kv("current cycle tau", cyc.tau if cyc is not None else "robust"),
+              kv("current cycle s", cyc.s if cyc is not None else "robust"),
+              kv("current design index", obs.design_index),
+              kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
+              kv("switches", pl.switches), kv("resets", pl.resets),
+              kv("estimates withheld (non-finite, then reset)", pl.nonfinite), kv("internal errors", pl.errors),
+              kv("clock jumps back (resets)", node.clock_jumps_back),
+              kv("clock jumps forward", node.clock_jumps_forward)]
+        if obs.family == "lmi":
+            ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
+                   kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]
+        if obs.kalman is not None:
+            ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
+                   kv("kalman table re-locks", obs.kalman_relocks),
+                   kv("kalman gains now", obs.gains_source)]
+            if obs.kalman_fallback:
+                ob.append(kv("last kalman departure", obs.kalman_fallback))
+        if node.last_clock_jump:
+            ob.append(kv("last clock jump", node.last_clock_jump))
+        recs = obs.completed_cycles
+        if recs:
+            r = recs[-1]
+            ob += [kv("cycles completed", len(recs)), kv("last cycle measured tau", r.tau),
+                   kv("last cycle measured s", r.s), kv("last cycle measured h", r.h),
+                   kv("last cycle paper factors f", r.f), kv("last cycle matched schedule", r.matched)]
+            if r.a2_ok is not None:
+                ob.append(kv("last cycle A2 held", r.a2_ok))
+        else:
+            ob.append(kv("cycles completed", 0))
+        res = pl.residence()
+        if res is not None:
+            ob += [kv("active channel residence (s)", res.current),
+                   kv(f"designed residence (s, {res.kind})", [res.lo, res.hi]),
+                   kv("residence violations", res.violations)]
+            if res.last is not None:
+                ob.append(kv("last residence (channel, s)", [res.last[0], res.last[1]]))
+            if res.f is not None:
+                ob.append(kv("cycle so far paper factors f", res.f))
+        if pl.origin_ns is not None:
+            env = obs.envelope()
+            pl = self.pipeline
+            ob += [kv("paper bound", env.paper_bound),
+                   kv("exact bound", env.exact_bound if pl.bound_valid else "none (after a reset)"),
+                   kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
+        level, msg = DiagnosticStatus.OK, "estimating"
+        if pl.last_accept_clock_ns is None:
+            level, msg = DiagnosticStatus.WARN, "waiting for measurements"
+        else:
+            age = (now_ns - pl.last_accept_clock_ns) * 1e-9
+            ob.append(kv("seconds since last measurement", age))
+            if age > node.sensor_timeout:
+                level = DiagnosticStatus.WARN
+                msg = f"no measurement for {age:.2f} s (sensor_timeout {node.sensor_timeout} s)"
+            if age > node.sensor_timeout and node.last_prediction is not None \
+                    and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
+                ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
+                       kv("outage predictions published", node.predictions)]
+        if recs and not recs[-1].matched:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += "; last cycle did not match the schedule"
+        if res is not None and res.problem:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += f"; {res.problem}"
+        # inputs: rates over the last period (node clock), rejected totals by reason
+        t0_ns, acc0, _ = self._rate_base
+        dt = (now_ns - t0_ns) * 1e-9
+        inp = []
+        for topic in ("camera/pose", "target/pose", "camera/active_channel"):
+            rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
+            inp.append(kv(f"{topic} rate (Hz)", rate))
+            inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
+        total_rej = sum(pl.rejected.values())
+        for (topic, reason), n in sorted(pl.rejected.items()):
+            inp.append(kv(f"rejected {topic} {reason}", n))
+        inp.append(kv("rejected total", total_rej))
+        if pl.last_rejection:
+            inp.append(kv("last rejection", pl.last_rejection))
+        new_rej = total_rej - self._rate_base[2]
+        self._rate_base = (now_ns, Counter(pl.accepted), total_rej)
+        arr = DiagnosticArray()
+        arr.header.stamp = now.to_msg()
+        name = self.name
+        arr.status = [
+            DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{name}: configuration", message="loaded",
+                             hardware_id="switchobs", values=conf),
+            DiagnosticStatus(level=level, name=f"{name}: observer", message=msg, hardware_id="switchobs",
+                             values=ob),
+            DiagnosticStatus(level=DiagnosticStatus.WARN if new_rej else DiagnosticStatus.OK,
+                             name=f"{name}: inputs",
+                             message=f"{new_rej} rejected in the last period" if new_rej else "ok",
+                             hardware_id="switchobs", values=inp),
+        ]
+        return arr
+

@@ -1,0 +1,53 @@
+"""The ``main`` of every node: the Jazzy demos' pattern, plus the project's start-up contract.
+
+``rclpy.init``, build the node, spin; Ctrl-C or an external shutdown ends it with exit code 0; a
+bad configuration (:class:`~switchobs_ros.params.ConfigError`, a parameter of the wrong type)
+prints one line, ``<prog>: error: ...``, and exits 2. A second signal during the clean-up (or one
+that arrives before the spin) must not turn the exit into a traceback or a death by SIGINT: the
+clean-up swallows KeyboardInterrupt.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+
+from switchobs_core.exceptions import one_line
+from switchobs_core.threads import single_threaded_blas
+
+from .params import ConfigError
+
+__all__ = ["run_node"]
+
+
+def run_node(node_cls, prog: str, args=None) -> int:
+    """Run ``node_cls()`` until shutdown; the process's exit code (see the module docstring)."""
+    single_threaded_blas()  # small matrices; see switchobs_core.threads
+    try:
+        rclpy.init(args=args)
+    except KeyboardInterrupt:
+        return 0
+    except Exception as err:
+        print(f"{prog}: error: cannot start ROS 2: {one_line(err)}", file=sys.stderr)
+        return 2
+    node = None
+    code = 0
+    try:
+        node = node_cls()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ConfigError, ParameterException) as err:
+        print(f"{prog}: error: {one_line(err)}", file=sys.stderr)
+        code = 2
+    finally:
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        except KeyboardInterrupt:
+            pass
+    return code or getattr(node, "exit_code", 0)
