@@ -31,6 +31,7 @@ from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from .stamps import ns_to_stamp
+from .validate import BridgeError
 
 __all__ = [
     "STAMP_PAD",
@@ -90,15 +91,15 @@ class LabelledArray:
 def labelled_array(values: Sequence[float], labels: Sequence[str], stamp_ns: int) -> Float64MultiArray:
     """A Float64MultiArray with the stamp in its padding and labelled elements.
 
-    Raises ``ValueError`` if the number of labels and values differ or a label contains a
-    comma.
+    Raises :class:`~msg_bridge.validate.BridgeError` (a ``ValueError``) if the number of labels
+    and values differ or a label contains a comma.
     """
     values = np.asarray(values, dtype=float).ravel()
     labels = tuple(labels)
     if len(labels) != values.size:
-        raise ValueError(f"{values.size} values but {len(labels)} labels")
+        raise BridgeError(f"{values.size} values but {len(labels)} labels")
     if any("," in lab for lab in labels):
-        raise ValueError("labels must not contain ','")
+        raise BridgeError("labels must not contain ','")
     n = values.size
     stamp_ns = int(stamp_ns)
     msg = Float64MultiArray()
@@ -113,20 +114,20 @@ def labelled_array(values: Sequence[float], labels: Sequence[str], stamp_ns: int
 
 
 def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
-    """Inverse of :func:`labelled_array`. Raises ``ValueError`` on another layout."""
+    """Inverse of :func:`labelled_array`. Raises :class:`~msg_bridge.validate.BridgeError` on another layout."""
     lay = msg.layout
     if lay.data_offset != STAMP_PAD or len(lay.dim) != 1:
-        raise ValueError(
+        raise BridgeError(
             f"not a labelled switchobs array (data_offset {lay.data_offset}, {len(lay.dim)} dims; "
             f"expected data_offset {STAMP_PAD} and 1 dim)"
         )
     n = lay.dim[0].size
     data = np.asarray(msg.data, dtype=float)
     if data.size != STAMP_PAD + n:
-        raise ValueError(f"layout says {n} elements after the stamp but data has {data.size - STAMP_PAD}")
+        raise BridgeError(f"layout says {n} elements after the stamp but data has {data.size - STAMP_PAD}")
     labels = tuple(lay.dim[0].label.split(",")) if n else ()
     if len(labels) != n:
-        raise ValueError(f"{len(labels)} labels for {n} elements")
+        raise BridgeError(f"{len(labels)} labels for {n} elements")
     stamp_ns = int(data[0]) * 1_000_000_000 + int(data[1])
     return LabelledArray(stamp_ns, labels, data[STAMP_PAD:].copy())
 

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from geometry_msgs.msg import PoseStamped
 from std_msgs.msg import UInt8
 
+from switchobs_core.exceptions import SwitchobsError
+
 from .stamps import stamp_to_ns
 
 __all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp"]
@@ -48,12 +50,13 @@ class Rejection:
         return f"{self.reason.value}: {self.field}: {self.detail}"
 
 
-class BridgeError(ValueError):
-    """Raised by callers that prefer an exception; carries the :class:`Rejection`."""
+class BridgeError(SwitchobsError, ValueError):
+    """A message or array that msg_bridge cannot convert: a :class:`Rejection` (``rejection``,
+    for callers that prefer an exception to a return value) or a layout that is not ours."""
 
-    def __init__(self, rejection: Rejection):
-        super().__init__(str(rejection))
-        self.rejection = rejection
+    def __init__(self, what: Rejection | str):
+        super().__init__(str(what))
+        self.rejection = what if isinstance(what, Rejection) else None
 
 
 def check_stamp(

@@ -4,6 +4,7 @@ accepts the replay's older stamps again and answers them; diagnostics count the 
 from __future__ import annotations
 
 import pytest
+from rclpy.duration import Duration
 from ros_harness import EstimatorIO, spin_until
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt8
@@ -51,6 +52,9 @@ def test_clock_jump_back_resets_and_estimation_resumes(estimator, ros_node):
     assert spin_until(ros_node, lambda: pub_clock.get_subscription_count() > 0, 10.0)
     _clock(pub_clock, 100 * S)
     io.pub_channel.publish(UInt8(data=1))
+    # reliable: wait until the estimator acknowledged the channel (on a loaded machine the poses,
+    # best effort, could otherwise arrive first and be rejected as no_channel)
+    assert io.pub_channel.wait_for_all_acked(Duration(seconds=5.0))
     spin_until(ros_node, lambda: False, 0.3)
     first = _run(io, ros_node, pub_clock, 100 * S, 40)
     assert spin_until(ros_node, lambda: len(io.msgs["state"]) >= len(first), 10.0), estimator.output()
