@@ -39,6 +39,19 @@ def ktable(paper):
     return GainTable.from_json(t.to_json(), system=paper)
 
 
+def _noisy(system, schedule, rate, seconds, *, seed):
+    """(t, channel, y, x) of the exact plant from X0 at ``rate``, 1 mm measurement noise (seeded)."""
+    F = expm(system.A / rate)
+    rng = np.random.default_rng(seed)
+    x = X0.copy()
+    for k in range(int(seconds * rate)):
+        t = k / rate
+        if k:
+            x = F @ x
+        ch = schedule.channel_at(t)
+        yield t, ch, system.C[ch - 1] @ x + rng.normal(scale=1e-3, size=system.C[ch - 1].shape[0]), x
+
+
 def _run(system, observers, schedule, seconds, *, x0=X0, skip=()):
     """Feed noise-free samples of the exact plant at RATE to every observer; errors per observer."""
     F = expm(system.A / RATE)
@@ -71,16 +84,8 @@ def test_table_lookup_equals_online_riccati(paper, mode, cycles):
     assert (table_obs.family, online.family) == ("kalman", "kalman-online")
     schedule = PeriodicSchedule(CYC) if mode == "periodic" else SequenceSchedule(SEQ)
     seconds = 20.0 if mode == "periodic" else 30.0        # start-up and several periods
-    F = expm(paper.A / rate)
-    rng = np.random.default_rng(3)
-    x = X0.copy()
     worst_x = worst_P = 0.0
-    for k in range(int(seconds * rate)):
-        t = k / rate
-        if k:
-            x = F @ x
-        ch = schedule.channel_at(t)
-        y = paper.C[ch - 1] @ x + rng.normal(scale=1e-3, size=4)
+    for t, ch, y, x in _noisy(paper, schedule, rate, seconds, seed=3):
         a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
         worst_x = max(worst_x, np.linalg.norm(a - b) / np.linalg.norm(b - x))
         Pa, Pb = table_obs.P, online.P
@@ -96,17 +101,8 @@ def test_tie_samples_take_the_streams_channel(paper, ktable):
     back within relock_rtol: the estimate is the online filter's to a fraction of a percent."""
     table_obs = SwitchedObserver(paper, ktable, "periodic", [CYC])
     online = SwitchedObserver(paper, ktable, "periodic", [CYC], family="kalman-online")
-    F = expm(paper.A / RATE)
-    rng = np.random.default_rng(4)
-    x = X0.copy()
     sq = np.zeros(2)
-    sched = PeriodicSchedule(CYC)
-    for k in range(int(30 * RATE)):
-        t = k / RATE
-        if k:
-            x = F @ x
-        ch = sched.channel_at(t)
-        y = paper.C[ch - 1] @ x + rng.normal(scale=1e-3, size=4)
+    for t, ch, y, x in _noisy(paper, PeriodicSchedule(CYC), RATE, 30.0, seed=4):
         a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
         if t >= 15.0:
             sq += (np.sum((a - x) ** 2), np.sum((b - x) ** 2))
