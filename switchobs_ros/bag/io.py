@@ -24,6 +24,8 @@ from pathlib import Path
 
 from switchobs_core.exceptions import SwitchobsError, one_line
 
+from .. import qos
+
 __all__ = [
     "CONTRACT_TYPES",
     "STORAGES",
@@ -75,7 +77,6 @@ def type_name(cls: type) -> str:
 
 # --------------------------------------------------------------------------------- QoS
 def _qos_kinds():
-    from switchobs_ros import qos
     return {"sensor": qos.SENSOR, "channel": qos.CHANNEL_PUB, "truth": qos.TRUTH, "clock": qos.CLOCK,
             "output": qos.OUTPUT}
 

@@ -30,6 +30,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import msg_bridge as mb
+
 from .io import TOPIC_RANK, BagError, BagIn, msg_class, qos_for
 
 __all__ = ["PlayConfig", "play"]
@@ -132,8 +134,6 @@ def _wait(node, pubs, pub_clock, cfg: PlayConfig, log, should_stop) -> None:
 
 def _run(msgs, pubs, pub_clock, cfg: PlayConfig, log, should_stop) -> dict:
     from rosgraph_msgs.msg import Clock
-
-    import msg_bridge as mb
 
     t0_log = msgs[0].log_ns
     published = 0

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+import msg_bridge as mb
+
 from .io import BagError, BagIn, deserialize
 
 __all__ = ["PassSummary", "Report", "load_report", "plot_report"]
@@ -63,7 +65,6 @@ class Report:
 
 
 def _labelled(bag_msgs, topic, cls):
-    import msg_bridge as mb
     out = []
     for m in bag_msgs:
         if m.topic == topic:
