@@ -12,7 +12,7 @@ from ..kalman import design_kalman
 from ..scenarios import load_noise, load_system
 from ..schedule import Cycle
 from ..system import LTISystem
-from ._common import fmt_table, parse_h, parse_pair, parse_ts, print_json
+from ._common import fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json
 
 __all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]
 
@@ -57,6 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=Margin(),
         metavar="M",
         help="eta = eta_min + M (absolute, e.g. 0.1) or eta_min*(1+M) (relative, e.g. 5%%); default 5%%",
+    )
+    p.add_argument(
+        "--eta",
+        metavar="E1,E2[,...]",
+        help="set the decay rates eta_i explicitly (one per channel, the same for every --cycle) instead of "
+        "eta_min + margin; the gains are verified and the paper's factors f_ii printed (the paper's condition "
+        "f_ii <= delta may then fail: the table says so)",
     )
     p.add_argument(
         "--gains",
@@ -200,8 +207,16 @@ def run(args: argparse.Namespace) -> int:
     if args.rate is not None or args.meas_noise is not None or args.process_noise is not None:
         raise InvalidArgument("--rate, --meas-noise and --process-noise belong to --gains kalman "
                               "(the paper's LMI gains do not depend on them)")
+    etas = None
+    if args.eta is not None:
+        eta = parse_floats(args.eta, "--eta")
+        if len(eta) != system.N:
+            raise InvalidArgument(f"--eta takes one decay rate per channel (N = {system.N}); got {len(eta)}")
+        if not cycles:
+            raise InvalidArgument("--eta applies to the --cycle designs: give at least one --cycle")
+        etas = [eta] * len(cycles)
     designer = Designer(system, delta=args.delta, margin=args.margin)
-    table = designer.table(cycles, robust=args.robust, progress=args.progress)
+    table = designer.table(cycles, robust=args.robust, etas=etas, progress=args.progress)
     table.save(args.output)
     if args.json:
         out = table_summary(table)

@@ -57,3 +57,17 @@ def test_errors_are_one_line_exit_2(tmp_path, capsys):
 def test_module_entry_point(tmp_path):
     r = subprocess.run([sys.executable, "-m", "switchobs_core.cli", "--version"], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.startswith("switchobs ")
+
+
+def test_design_with_explicit_eta(tmp_path, capsys):
+    """--eta sets the rates: the paper's selected (1.6, 3.5) for (2 s, 0.6) meets its condition;
+    rates below eta_min are designed and verified, and the table says the condition fails."""
+    out = tmp_path / "eta.json"
+    assert main(["design", "paper", "--cycle", "2,0.6", "--eta", "1.6,3.5", "-o", str(out), "--json"]) == 0
+    (d,) = json.loads(capsys.readouterr().out)["designs"]
+    assert d["eta"] == [1.6, 3.5] and d["paper_condition_holds"] and max(d["f"]) < 0.99
+    assert main(["design", "paper", "--cycle", "2,0.6", "--eta", "1,1", "-o", str(out), "--json"]) == 0
+    (d,) = json.loads(capsys.readouterr().out)["designs"]
+    assert d["eta"] == [1.0, 1.0] and not d["paper_condition_holds"] and min(d["f"]) > 0.99
+    assert main(["design", "paper", "--cycle", "2,0.6", "--eta", "1.6", "-o", str(out)]) == 2
+    assert "one decay rate per channel" in capsys.readouterr().err

@@ -49,8 +49,9 @@ def test_edited_table_checksum(paper_tables, tmp_path):
 @pytest.mark.parametrize("params,needles", [
     # an active time of 2 ms: no decay rate satisfies the cycle condition before the SDP fails
     ({"schedule.s": [0.001]}, ("gain design failed", "cycle (2 s, 0.001), channel 1", "infeasible")),
-    # delta so small that the SDP for the gain itself fails (solver status), named by its cycle
-    ({"delta": 1e-300}, ("gain design failed", "cycle (2 s, 0.6), channel 1", "did not solve")),
+    # delta so small that the SDP for the gain itself fails (solver status), named by its cycle; both
+    # channels fail alike, and which one the solver reports first differs between CPUs: either is right
+    ({"delta": 1e-300}, ("gain design failed", "cycle (2 s, 0.6), channel ", "did not solve")),
 ], ids=["infeasible", "sdp_fails"])
 def test_design_failure_names_the_cycle(params, needles, tmp_path):
     params = dict(params, gain_table_cache_dir=str(tmp_path / "cache"))
