@@ -19,6 +19,8 @@ Estimators, side by side:
 ``kalman``
     offline periodic Kalman gains (switchobs design --gains kalman) looked up by sample phase;
     not applicable to the random schedule (no schedule is promised).
+``kalman (no bound)``
+    the same without the exact bound (``rounding_bound=False``): the cost of the lookup alone.
 ``kalman-online``
     the observer running the Riccati recursion online.
 ``reference``
@@ -187,6 +189,7 @@ def estimators(system, kind, rate, noise_std, tables):
         if key not in tables:
             tables[key] = kalman_table(system, [design_kalman(system, cycles, rate, noise)])
         out["kalman"] = lambda: SwitchedObserver(system, tables[key], mode, cycles)
+        out["kalman (no bound)"] = lambda: SwitchedObserver(system, tables[key], mode, cycles, rounding_bound=False)
     out["kalman-online"] = lambda: SwitchedObserver(system, tables["lmi"], mode, cycles, family="kalman-online",
                                                     noise=noise)
     out["reference"] = lambda: ReferenceKalman(system.A, system.C, float(noise.Q_c[0, 0]), noise_std,
@@ -288,12 +291,14 @@ def markdown(rows, agents, args):
         lines.append(f"| {a['M']} | {a['n']} | {a['kalman_us']:.1f} | {a['online_us']:.1f} | "
                      f"{a['reference_us']:.1f} | {a['ratio']:.3f} |")
     k = [r for r in rows if r["estimator"] == "kalman"]
+    kn = [r for r in rows if r["estimator"] == "kalman (no bound)"]
     o = [r for r in rows if r["estimator"] == "kalman-online"]
     lines += ["", "Goals: " + "; ".join([
         "kalman steady RMS <= 1.05x reference on every known-schedule stream: "
         f"worst {max(r['ss_ratio'] for r in k):.3f}",
         f"kalman at 10 s <= 1.2x: worst {max(r['e10_ratio'] for r in k):.3f}",
-        f"kalman cost <= 1/3 of the reference: worst {max(r['cost_ratio'] for r in k):.3f}",
+        f"kalman cost <= 1/3 of the reference: worst {max(r['cost_ratio'] for r in k):.3f} with the exact bound "
+        f"kept, {max(r['cost_ratio'] for r in kn):.3f} without",
         f"kalman-online steady RMS <= 1.02x: worst {max(r['ss_ratio'] for r in o):.3f}",
     ])]
     return "\n".join(lines) + "\n"

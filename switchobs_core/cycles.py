@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .certificate import cycle_factor, paper_factors
+from .certificate.paper import cycle_factor, paper_factors
 from .exceptions import SwitchobsError
 
 __all__ = ["CycleRecord", "Residence", "CycleTracker", "residence_limits", "residence_text"]

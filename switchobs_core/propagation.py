@@ -54,6 +54,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .exceptions import InvalidArgument
+from .rounding import expm_error
 from .validation import as_matrix
 
 __all__ = [
@@ -149,9 +150,12 @@ class ZOHEntry:
     """One cached step: ``Phi``, ``Gamma``, the input products ``GL = Gamma L``, ``GB = Gamma B``,
     and the error map ``E`` of the step (module docstring)."""
 
-    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt")
+    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "fPhi", "fGL")
 
-    def __init__(self, Phi, Gamma, GL, GB, dt, E=None):
+    def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0):
+        self.eps = eps           # bound on ||Phi - e^{M dt}||_F (rounding.expm_error)
+        self.fPhi = float(np.linalg.norm(Phi))                          # Frobenius norms for the
+        self.fGL = 0.0 if GL is None else float(np.linalg.norm(GL))    # rounding bound
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
@@ -185,6 +189,7 @@ class ZOHCache:
         self.dt_resolution = dt_resolution
         self._inv_res = None if dt_resolution is None else 1.0 / dt_resolution
         self._gains: dict[Hashable, tuple] = {}
+        self._checked: set = set()
         self._lru: OrderedDict = OrderedDict()
         self.hits = 0
         self.misses = 0
@@ -237,7 +242,12 @@ class ZOHCache:
             Phi, Gamma = zoh_pair(M, dtq)
         GL = None if L is None else Gamma @ L
         E = None if C is None or GL is None else Phi - GL @ C
-        entry = ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E)
+        # the exponential's error: checked against extended precision at a key's first step
+        # (rounding.expm_error), the model alone after that (a new step per sample under jitter)
+        first = key not in self._checked
+        self._checked.add(key)
+        eps = expm_error(M, dtq, Phi, check=first)
+        entry = ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
         lru[lk] = entry
         if len(lru) > self.maxsize:
             lru.popitem(last=False)

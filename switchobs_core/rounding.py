@@ -1,0 +1,163 @@
+"""A bound on the error of the *computed* estimate that includes floating-point rounding.
+
+The observer's exact bound ``||Phi(t, t0)|| e0`` (e:xtilde_dyn_piecewise) holds in exact
+arithmetic. The computed estimate cannot get closer to the true state than rounding allows,
+while the contraction makes ``||Phi|| e0`` shrink without limit (0.49x per cycle for the paper's
+gains, much faster for Kalman gains), so after a while it falls below the computed error. This
+module keeps a bound that stays valid.
+
+Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
+------------------------------------------------------------------------------
+1. Every step the observer applies is affine in the estimate with matrices it computed:
+   ``x_hat_{k+1} = fl(Phi~ x_hat_k + G~ nu_k)`` (LMI: ``nu_k = y_k - C x_hat_k`` held), or
+   ``x_hat^- = fl(Phi~ x_hat)``, ``x_hat^+ = fl(x_hat^- + K (y - H x_hat^-))`` (Kalman). The true
+   state moves by the exact ``Phi = e^{A dt}`` over the true step ``dt``.
+2. Subtracting, the error ``e = x_hat - x`` obeys ``e_{k+1} = M_k e_k + r_k`` with ``M_k`` the step's
+   error map built from the computed matrices (``Phi~ - G~ C`` or ``(I - K H) Phi~``; it is what
+   the observer multiplies into ``Phi``) and the residual
+   ``r_k = (Phi~ - Phi) x_k + delta_k`` (times ``I - K H`` for Kalman), where ``delta_k`` is the
+   rounding of the step's arithmetic.
+3. ``||Phi~ - Phi|| <= eps_Phi`` (:func:`expm_error`: the matrix exponential's own error, from a
+   model checked against an extended-precision recomputation, plus the step quantum's
+   ``|dt - dt_q| ||A|| e^{||A|| dt}``), and ``||x_k|| <= ||x_hat_k|| + ||e_k||``.
+4. ``||delta_k||`` follows from the standard model of floating point,
+   ``|fl(A x) - A x| <= gamma_m |A| |x|`` with ``gamma_m = m u / (1 - m u)`` and ``u = 2^-53``,
+   applied to each product and sum of the step (:func:`gamma`; the absolute matrices' Frobenius
+   norms bound ``|| |A| |x| ||``).
+5. With ``||r_k|| <= rho_k``, the set of possible errors stays inside the ellipsoid
+   ``{e : e' S^-1 e <= 1}`` if ``S_{k+1} = (1 + a) M S M' + (1 + 1/a) rho^2 I`` for any ``a > 0``
+   (the outer ellipsoid of the sum of an ellipsoid and a ball); ``a = rho / sqrt(lambda_max(M S M'))``
+   is the best choice for the largest axis, and ``S_0 = e0^2 I``. Then
+   ``||e_k|| <= sqrt(lambda_max(S_k))``. Without rounding (``rho = 0``) this is exactly
+   ``||Phi|| e0``.
+6. ``S`` itself is computed in floating point: each step adds ``eta I`` with
+   ``eta = gamma_{2n+2} n ||M||_F^2 ||S||_F`` (and the same allowance for the ball term), which
+   dominates the rounding of ``M S M'`` elementwise, so the computed ``S`` stays an upper bound
+   in the PSD order.
+
+Cost: two n x n products per step (like the transition product itself), one eigenvalue
+problem when the bound is read. ``sqrt(trace S)`` (cheaper, larger) bounds ``||e_k||`` inside
+``rho``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["UNIT_ROUNDOFF", "EXPM_ULPS", "gamma", "expm_error", "expm_extended", "ErrorEllipsoid"]
+
+#: Unit roundoff of IEEE double precision, ``u = 2^-53``.
+UNIT_ROUNDOFF = 2.0**-53
+#: Model of ``scipy.linalg.expm``'s accuracy for ``||M dt||_1 <= 1``: the computed exponential is
+#: within ``EXPM_ULPS * n * u * ||e^{M dt}||_F`` of the exact one (Frobenius norm). Checked against
+#: :func:`expm_extended` by :func:`expm_error` (and in the tests); a larger measured difference
+#: is used instead, times 4.
+EXPM_ULPS = 64.0
+
+
+def gamma(m: int) -> float:
+    """``gamma_m = m u / (1 - m u)``: the relative error of a length-m dot product (standard model)."""
+    mu = m * UNIT_ROUNDOFF
+    return mu / (1.0 - mu)
+
+
+def expm_extended(M: np.ndarray, dt: float) -> np.ndarray:
+    """``e^{M dt}`` in extended precision (``np.longdouble``): scaling and squaring of a Taylor
+    series summed to below the extended precision's unit roundoff."""
+    X = np.asarray(M, dtype=np.longdouble) * np.longdouble(dt)
+    nrm = float(np.abs(X).sum(axis=0).max()) if X.size else 0.0
+    s = max(0, int(math.ceil(math.log2(nrm))) + 1) if nrm > 0.5 else 0
+    X = X / np.longdouble(2.0**s)
+    n = X.shape[0]
+    E = np.eye(n, dtype=np.longdouble)
+    T = np.eye(n, dtype=np.longdouble)
+    tiny = np.finfo(np.longdouble).eps / 16
+    for k in range(1, 40):
+        T = T @ X / np.longdouble(k)
+        E = E + T
+        if float(np.abs(T).max()) <= tiny * float(np.abs(E).max()):
+            break
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
+def expm_error(M: np.ndarray, dt: float, Phi: np.ndarray, *, check: bool = True) -> float:
+    """Upper bound on ``||Phi - e^{M dt}||_F`` for the computed ``Phi`` (see :data:`EXPM_ULPS`).
+
+    Without ``check``: the model's ``EXPM_ULPS n u ||Phi||_F``. With ``check``: 4 times the
+    measured difference to :func:`expm_extended` plus that computation's own allowance (at least
+    ``n u ||Phi||_F``). On a platform whose ``longdouble`` is plain double the check is not
+    possible and the model, doubled, is used.
+    """
+    n = Phi.shape[0]
+    nphi = float(np.linalg.norm(Phi))
+    model = EXPM_ULPS * n * UNIT_ROUNDOFF * nphi
+    if not check:
+        return model
+    if np.finfo(np.longdouble).eps >= UNIT_ROUNDOFF:
+        return 2.0 * model
+    ref = expm_extended(M, dt)
+    diff = float(np.linalg.norm(np.asarray(Phi, dtype=np.longdouble) - ref))
+    own = 64.0 * n * float(np.finfo(np.longdouble).eps) * nphi
+    measured = 4.0 * (diff + own)
+    if measured > model:    # the model did not hold for this step: say so in its place
+        return measured
+    return max(measured, n * UNIT_ROUNDOFF * nphi)
+
+
+class ErrorEllipsoid:
+    """``S`` of the module docstring: ``||e|| <= sqrt(lambda_max(S))``, updated per affine step.
+
+    ``ell = ErrorEllipsoid(n, e0)``; ``ell.step(M, rho)`` after each step with error map ``M``
+    and residual bound ``rho``; ``ell.bound()`` (tight, an eigenvalue problem) or
+    ``ell.trace_bound()`` (cheap, larger).
+    """
+
+    def __init__(self, n: int, e0: float):
+        self.n = int(n)
+        self.S = (float(e0) ** 2) * np.eye(self.n)
+        self.tr = float(np.trace(self.S))          # trace S >= ||S||_F >= lambda_max (S is PSD)
+        self._g = gamma(2 * self.n + 2) * self.n
+        self._diag = np.arange(self.n) * (self.n + 1)
+
+    def propagate(self, M: np.ndarray, rho: float, fM2: float | None = None) -> tuple[np.ndarray, float]:
+        """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it. ``fM2`` is
+        ``||M||_F^2`` if the caller has it."""
+        S = M @ self.S @ M.T
+        if fM2 is None:
+            fM2 = float(np.dot(M.ravel(), M.ravel()))
+        # 6. rounding of M S M': an elementwise-dominating allowance on the diagonal (||S||_F <= trace S)
+        eta = self._g * fM2 * self.tr
+        lam = float(S.trace())                     # >= lambda_max(M S M')
+        if rho > 0.0:
+            # 5. outer ellipsoid of (ellipsoid + ball)
+            if lam > 0.0:
+                r = math.sqrt(lam)
+                S *= 1.0 + rho / r                       # (1 + a) with a = rho / r
+                lam *= 1.0 + rho / r
+                eta += rho * rho + rho * r               # (1 + 1/a) rho^2, without overflow
+            else:
+                eta += rho * rho
+        eta *= 1.0 + 4.0 * UNIT_ROUNDOFF
+        S.flat[self._diag] += eta
+        return S, (lam + self.n * eta) * (1.0 + 4.0 * self.n * UNIT_ROUNDOFF)
+
+    def step(self, M: np.ndarray, rho: float, fM2: float | None = None) -> None:
+        """Apply one step: ``e <- M e + r`` with ``||r|| <= rho``."""
+        self.S, self.tr = self.propagate(M, rho, fM2)
+
+    def trace_bound(self) -> float:
+        """``sqrt(trace S) >= ||e||`` (cheap)."""
+        return math.sqrt(max(self.tr, 0.0))
+
+    def bound(self, S: np.ndarray | None = None) -> float:
+        """``sqrt(lambda_max(S)) >= ||e||`` (of ``S``, default the current one), inflated for the
+        eigenvalue solver's own error (relative ``n u``)."""
+        S = self.S if S is None else S
+        S = 0.5 * (S + S.T)
+        lam = float(np.linalg.eigvalsh(S)[-1]) if self.n else 0.0
+        lam = max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * float(np.linalg.norm(S))
+        return math.sqrt(lam)

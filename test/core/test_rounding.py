@@ -1,0 +1,122 @@
+"""The exact bound with rounding (switchobs_core.rounding): it bounds the error of the *computed*
+estimate against the true state for long runs, with every gain family, at sample times that are
+not whole nanoseconds, and it stays tight where rounding does not matter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import expm
+
+import switchobs_core as so
+from switchobs_core.rounding import ErrorEllipsoid, expm_error, expm_extended
+
+PER = [so.Cycle.from_ts(2.0, 0.6)]
+SEQ = [so.Cycle.from_ts(4, 0.5), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(2, 0.4)]
+X0 = np.array([0, 0, 0.2, 0.1, 3, 1, -0.1, 0, -2, 2, 0.1, 0], dtype=float)
+
+
+def test_expm_extended_and_error_bound(paper):
+    for dt in (0.01, 1 / 30, 0.5):
+        Phi = expm(paper.A * dt)
+        ref = expm_extended(paper.A, dt)
+        diff = float(np.linalg.norm(np.asarray(Phi, np.longdouble) - ref))
+        assert diff <= 1e-14 * np.linalg.norm(Phi)
+        assert expm_error(paper.A, dt, Phi) >= diff
+        assert expm_error(paper.A, dt, Phi, check=False) >= diff
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), steps=st.integers(1, 30), rho=st.floats(0.0, 1e-3))
+def test_ellipsoid_contains_every_reachable_error(seed, steps, rho):
+    """Property: e <- M e + r with ||r|| <= rho, ||e_0|| <= e0: ||e_k|| <= bound() at every step."""
+    rng = np.random.default_rng(seed)
+    n, e0 = 5, 0.7
+    ell = ErrorEllipsoid(n, e0)
+    e = rng.standard_normal(n)
+    e *= e0 / np.linalg.norm(e)
+    for _ in range(steps):
+        M = rng.standard_normal((n, n)) * rng.uniform(0.1, 1.2) / np.sqrt(n)
+        r = rng.standard_normal(n)
+        e = M @ e + rho * r / np.linalg.norm(r)
+        ell.step(M, rho)
+        assert np.linalg.norm(e) <= ell.bound()
+
+
+def test_without_rounding_it_is_the_transition_norm():
+    rng = np.random.default_rng(0)
+    ell = ErrorEllipsoid(4, 2.0)
+    Phi = np.eye(4)
+    for _ in range(50):
+        M = rng.standard_normal((4, 4)) / 2
+        ell.step(M, 0.0)
+        Phi = M @ Phi
+    assert ell.bound() == pytest.approx(np.linalg.norm(Phi, 2) * 2.0, rel=1e-12)
+    assert ell.bound() >= np.linalg.norm(Phi, 2) * 2.0
+
+
+def _long_run(system, obs, schedule, rate, seconds):
+    """Exact plant in extended precision (longdouble exponentials), outputs rounded once to
+    double; returns (violations, samples, worst error/bound, final bound/error)."""
+    x = X0.astype(np.longdouble)
+    F = {}
+    viol = 0
+    worst = 0.0
+    t_prev = 0.0
+    K = int(seconds * rate)
+    for k in range(K + 1):
+        t = k / rate                         # not whole nanoseconds at 30 Hz
+        dt = t - t_prev
+        if dt > 0:
+            key = round(dt * 1e12)
+            if key not in F:
+                F[key] = expm_extended(system.A, dt)
+            x = F[key] @ x
+        t_prev = t
+        ch = schedule.channel_at(t)
+        y = np.array(system.C[ch - 1].astype(np.longdouble) @ x, dtype=float)
+        xh = obs.update(t, ch, y)
+        err = float(np.linalg.norm(xh.astype(np.longdouble) - x))
+        b = obs.envelope().exact_bound
+        viol += err > b
+        worst = max(worst, err / b) if b > 0 else (np.inf if err > 0 else worst)
+    return viol, K + 1, worst, b / max(err, 1e-300)
+
+
+@pytest.fixture(scope="module")
+def lmi_table(paper):
+    return so.design_table(paper, cycles=PER + SEQ, delta=0.99, progress=False)
+
+
+@pytest.mark.parametrize("family,mode,cycles", [("lmi", "periodic", PER), ("lmi", "sequence", SEQ),
+                                                ("kalman", "periodic", PER), ("kalman", "sequence", SEQ)])
+def test_bound_holds_for_minutes_of_an_unstable_plant(paper, lmi_table, family, mode, cycles):
+    """Three simulated minutes at 100 Hz (the unstable agents grow ||x|| to about 50; the exact-
+    arithmetic bound ||Phi|| e0 falls below the computed error within a minute): no violation."""
+    table = lmi_table if family == "lmi" else so.kalman_table(paper, [so.design_kalman(paper, cycles, 100.0)])
+    obs = so.SwitchedObserver(paper, table, mode, cycles, x0=np.zeros(12), e0=10.0)
+    sched = so.PeriodicSchedule(cycles[0]) if mode == "periodic" else so.SequenceSchedule(cycles)
+    viol, n, worst, final_ratio = _long_run(paper, obs, sched, 100.0, 180.0)
+    assert viol == 0, (viol, n, worst)
+    assert float(np.linalg.norm(obs.Phi, 2)) * 10.0 < 1e-12     # the old bound alone would be far too small
+    assert final_ratio < 1e6                                    # and the new one stays informative
+
+
+def test_sample_times_that_are_not_whole_nanoseconds(paper, lmi_table):
+    """t_k = k/30: the observer's step quantum (1 ns) enters the bound, which holds for minutes,
+    and predict(t) stays within envelope(t) between samples."""
+    obs = so.SwitchedObserver(paper, lmi_table, "periodic", PER, x0=np.zeros(12), e0=10.0)
+    viol, n, worst, _ = _long_run(paper, obs, so.PeriodicSchedule(PER[0]), 30.0, 120.0)
+    assert viol == 0, (viol, worst)
+    t = obs.t + 0.0123456789
+    x_true = np.asarray(expm_extended(paper.A, t), dtype=float) @ X0
+    assert np.linalg.norm(obs.predict(t, hold=True) - x_true) <= obs.envelope(t).exact_bound
+
+
+def test_zero_initial_error_bound_is_not_zero(paper, lmi_table):
+    """e0 = 0 (the estimate starts at the truth): the bound is the rounding's, never below the error."""
+    obs = so.SwitchedObserver(paper, lmi_table, "periodic", PER, x0=X0, e0=0.0)
+    viol, n, worst, _ = _long_run(paper, obs, so.PeriodicSchedule(PER[0]), 100.0, 20.0)
+    assert viol == 0 and obs.envelope().exact_bound > 0
