@@ -565,7 +565,7 @@ class SwitchedObserver:
         :mod:`switchobs_core.rounding`, steps 2-4): the exponential's error and the step
         quantum, times ``||x|| <= ||x_hat|| + ||e||``, plus the rounding of the products."""
         u = UNIT_ROUNDOFF
-        quant = abs(dt - e.dt) * self._fA * math.exp(self._nA * max(dt, e.dt))
+        quant = abs(dt - e.dt) * self._fA * math.exp(min(self._nA * max(dt, e.dt), 700.0))   # no OverflowError
         rho = (e.eps + quant) * (xn + self._ell.trace_bound()) + self._g_n * e.fPhi * xn + u * xn_new
         if self._entry_L:
             nu = math.sqrt(float(self._y @ self._y))

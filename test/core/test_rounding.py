@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 import switchobs_core as so
-from switchobs_core.rounding import ErrorEllipsoid, expm_error, expm_extended
+from switchobs_core.rounding import ErrorEllipsoid, expm_error, expm_extended, verify_against_extended
 
 PER = [so.Cycle.from_ts(2.0, 0.6)]
 SEQ = [so.Cycle.from_ts(4, 0.5), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(2, 0.4)]
@@ -58,31 +58,9 @@ def test_without_rounding_it_is_the_transition_norm():
 
 
 def _long_run(system, obs, schedule, rate, seconds):
-    """Exact plant in extended precision (longdouble exponentials), outputs rounded once to
-    double; returns (violations, samples, worst error/bound, final bound/error)."""
-    x = X0.astype(np.longdouble)
-    F = {}
-    viol = 0
-    worst = 0.0
-    t_prev = 0.0
-    K = int(seconds * rate)
-    for k in range(K + 1):
-        t = k / rate                         # not whole nanoseconds at 30 Hz
-        dt = t - t_prev
-        if dt > 0:
-            key = round(dt * 1e12)
-            if key not in F:
-                F[key] = expm_extended(system.A, dt)
-            x = F[key] @ x
-        t_prev = t
-        ch = schedule.channel_at(t)
-        y = np.array(system.C[ch - 1].astype(np.longdouble) @ x, dtype=float)
-        xh = obs.update(t, ch, y)
-        err = float(np.linalg.norm(xh.astype(np.longdouble) - x))
-        b = obs.envelope().exact_bound
-        viol += err > b
-        worst = max(worst, err / b) if b > 0 else (np.inf if err > 0 else worst)
-    return viol, K + 1, worst, b / max(err, 1e-300)
+    """(violations, samples, worst error/bound, final bound/error) against the extended-precision truth."""
+    r = verify_against_extended(system, obs, schedule, rate, seconds, X0)
+    return r["violations"], r["samples"], r["worst"], r["bound"] / max(r["error"], 1e-300)
 
 
 @pytest.fixture(scope="module")

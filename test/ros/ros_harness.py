@@ -9,6 +9,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
 from std_msgs.msg import Float64MultiArray, UInt8
 from std_srvs.srv import Trigger
 
@@ -60,3 +61,13 @@ class EstimatorIO:
             if any("estimator" in s.name for s in arr.status):
                 return {kv.key: kv.value for s in arr.status if "estimator" in s.name for kv in s.values}
         return {}
+
+
+def start_feed(io: EstimatorIO, channel: int, n: int, period_ns: int = 10_000_000) -> list[int]:
+    """Send the channel, wait until the estimator acknowledged it, and return ``n`` stamps from
+    now on at ``period_ns`` (the usual start of a test that feeds measurements)."""
+    io.pub_channel.publish(UInt8(data=channel))
+    io.pub_channel.wait_for_all_acked(Duration(seconds=5.0))
+    spin_until(io.node, lambda: False, 0.2)
+    base = time.time_ns()
+    return [base + k * period_ns for k in range(1, n + 1)]

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 import pytest
-from ros_harness import EstimatorIO, spin_until
+from ros_harness import EstimatorIO, spin_until, start_feed
 from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
 
@@ -37,10 +37,7 @@ def _send(io, stamp_ns, cam, tgt, frame="world_test"):
 def test_outputs_carry_stamp_frames_and_labels(estimator, ros_node):
     io = EstimatorIO(ros_node)
     assert io.wait_matched(), estimator.output()
-    io.pub_channel.publish(UInt8(data=1))
-    spin_until(ros_node, lambda: False, 0.2)
-    base = time.time_ns()
-    stamps = [base + k * 10_000_000 for k in range(1, 21)]
+    stamps = start_feed(io, 1, 20)
     for s in stamps:
         _send(io, s, (0.1, 0.2), (3.0, 1.0))
         spin_until(ros_node, lambda: False, 0.005)

@@ -4,12 +4,9 @@ and in the odometry, and are as accurate as the online filter, far more than the
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
-from ros_harness import EstimatorIO, spin_until
-from std_msgs.msg import UInt8
+from ros_harness import EstimatorIO, spin_until, start_feed
 
 import msg_bridge as mb
 from switchobs_core.gains import kalman_table
@@ -75,10 +72,7 @@ def kalman_node(kalman_setup, tmp_path_factory):
 def test_node_with_kalman_table_publishes_covariance(kalman_node, ros_node):
     io = EstimatorIO(ros_node)
     assert io.wait_matched(), kalman_node.output()
-    io.pub_channel.publish(UInt8(data=1))
-    spin_until(ros_node, lambda: False, 0.2)
-    base = time.time_ns()
-    stamps = [base + k * 10_000_000 for k in range(1, 31)]      # the table's 100 Hz grid
+    stamps = start_feed(io, 1, 30)      # the table's 100 Hz grid
     for s in stamps:
         io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), s, "map"))
         io.pub_target.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
