@@ -1,10 +1,10 @@
-"""Refactors change no number: the offline estimator (the node's pipeline) on stored bags gives,
-bit for bit, the estimates recorded with the code before the consolidation of configuration, cycle
-bookkeeping and the paper's factor (commit 5a18045): the estimates bit for bit, the paper's envelopes bit for bit, and the exact
-bound up to its new allowance for rounding; for the periodic, sequence and random
-(robust) schedules, with measurement and process noise, from mcap and sqlite3 bags and the gain
-tables (format version 1) that code wrote. The data: test/ros/data/regression (cases.json says
-how each bag and estimate were made)."""
+"""Refactors change no number: the offline estimator (the node's pipeline) on stored bags
+reproduces what the code before the consolidation of configuration, cycle bookkeeping and the
+paper's factor (commit 5a18045) recorded: the estimates bit for bit, the paper's envelopes bit for
+bit, and the exact bound up to its new allowance for rounding; for the periodic, sequence and
+random (robust) schedules, with measurement and process noise, from mcap and sqlite3 bags and the
+gain tables (format version 1) that code wrote. The data: test/ros/data/regression (cases.json
+says how each bag and estimate were made)."""
 
 from __future__ import annotations
 
