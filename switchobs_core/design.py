@@ -148,12 +148,17 @@ class ChannelDesigner:
         """eta_min from the monotone interpolant of the cached kappa curve (for maps and figures).
 
         The grid is extended with exact SDPs as far as needed; between grid points ln kappa
-        is interpolated (PCHIP), so the result is approximate (not used for gains).
+        is interpolated (PCHIP), so the result is approximate (not used for gains). NaN
+        when no grid rate satisfies the condition or the SDP fails before one does (the
+        point is not designable; figures draw it as such).
         """
         prev = None
         for eta in ETA_GRID:
-            if self.g(eta, active, inactive, delta) >= 0:
-                break
+            try:
+                if self.g(eta, active, inactive, delta) >= 0:
+                    break
+            except DesignError:
+                return float("nan")
             prev = eta
         else:
             return float("nan")
