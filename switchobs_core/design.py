@@ -118,7 +118,19 @@ class ChannelDesigner:
         return eta * active - self.mu * inactive - math.log(k / delta)
 
     def eta_min(self, active: float, inactive: float, delta: float, *, what: str = "") -> float:
-        """Smallest eta >= 0 with g(eta) >= 0 (grid scan, then Brent on the exact g)."""
+        """Smallest eta >= 0 with g(eta) >= 0 (grid scan, then Brent on the exact g).
+
+        Since kappa >= 1, g(eta) <= eta h - mu u + ln(delta); if that bound is negative
+        at the largest grid rate, no rate qualifies and no SDP is solved.
+        """
+        top = float(ETA_GRID[-1])
+        if top * active - self.mu * inactive + math.log(delta) < 0:
+            f_best = math.exp(self.mu * inactive - top * active)
+            raise InfeasibleDesign(
+                f"{what}no decay rate up to {top:.4g} satisfies the cycle condition (active {active:g} s, "
+                f"inactive {inactive:g} s, delta {delta:g}): even with kappa = 1, f = exp(mu u - eta h) = "
+                f"{f_best:.3g} > delta at eta = {top:.4g}; lengthen the active time"
+            )
         prev = None
         for eta in ETA_GRID:
             try:
