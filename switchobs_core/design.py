@@ -219,6 +219,12 @@ class Designer:
             for i, ch in enumerate(self.channels)
         )
 
+    def _eta_min_or_none(self, cycle: Cycle, i: int) -> float | None:
+        try:
+            return self.channels[i].eta_min(cycle.h[i], cycle.inactive(i + 1), self.delta[i])
+        except InfeasibleDesign:
+            return None
+
     def _check_cycle(self, cycle: Cycle) -> None:
         if not isinstance(cycle, Cycle):
             raise InvalidArgument(f"cycle must be a Cycle; got {type(cycle).__name__}")
@@ -264,7 +270,10 @@ class Designer:
         """Gains for one cycle: eta_i = eta_min_i + margin (or ``eta`` given explicitly)."""
         self._check_cycle(cycle)
         what = f"cycle {cycle.label()}"
-        emin = self.eta_min(cycle)
+        if eta is None:
+            emin: tuple[float | None, ...] = self.eta_min(cycle)
+        else:  # explicit rates: eta_min is information only (None where no rate meets delta)
+            emin = tuple(self._eta_min_or_none(cycle, i) for i in range(self.system.N))
         if eta is None:
             etas = [self.margin.apply(e) for e in emin]
         else:

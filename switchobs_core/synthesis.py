@@ -36,11 +36,10 @@ equivalent LMI divided by s = ||A|| + ||C|| + eta + 1,
 
 with a and b cvxpy Parameters (the problem is DPP: :meth:`LMISynthesizer.is_dpp`). If
 that form fails (no solution, or a gain that fails verification), the same problem is
-solved once more in the state scaling x = D x~, D = diag(d), d_i = sqrt(min_j P_jj / P_ii)
-from the P of the plain form at eta (or, if that returns no point, at eta/2, eta/4, ...;
-:class:`_ScaledSDP`). It is an exact change of variables, so theta* is unchanged; the
-least-norm rule is then applied to the scaled (Pt, Yt), and the gain is verified in the
-original coordinates like any other.
+solved in the state scaling x = D x~, D = diag(d), d_i = sqrt(min_j P_jj / P_ii) from
+the P of the plain form at eta, eta/2, ..., eta/32 in turn (:class:`_ScaledSDP`). It is an
+exact change of variables, so theta* is unchanged; the least-norm rule is then applied to
+the scaled (Pt, Yt), and the gain is verified in the original coordinates like any other.
 
 Solver chain (fixed order, no warm starts): the chosen solver, then the other one
 (Clarabel with defaults; SCS with eps 1e-9 and up to 2e4 iterations).
@@ -50,6 +49,7 @@ Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -233,17 +233,17 @@ class LMISynthesizer:
         opts = {"CLARABEL": {}, "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 20_000}}
         return [(s, opts[s]) for s in self.solvers]
 
-    def _solve(self, prob, what: str, *, accept_inaccurate: bool = False) -> str:
+    def _solve(self, prob, what: str, *, accept_inaccurate: bool = False, only_first: bool = False) -> str:
         """Solve ``prob`` with the first solver of the fallback chain that succeeds.
 
-        ``optimal`` is accepted at once; ``optimal_inaccurate`` only when ``accept_inaccurate``
-        (the caller then verifies the result in floating point) and no solver did better.
+        ``optimal`` is accepted; ``optimal_inaccurate`` only when ``accept_inaccurate``
+        (the caller then verifies the result in floating point), and then from the first
+        solver that reports it (later solvers are not preferred over an earlier one).
         """
         import cvxpy as cp
 
         last = "not attempted"
-        inaccurate = None
-        for s, opts in self._attempts():
+        for s, opts in self._attempts()[: 1 if only_first else None]:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
@@ -253,19 +253,9 @@ class LMISynthesizer:
                 continue
             finally:
                 self.n_solves += 1
-            if prob.status == cp.OPTIMAL:
+            if prob.status == cp.OPTIMAL or (prob.status == cp.OPTIMAL_INACCURATE and accept_inaccurate):
                 return s
             last = f"{s}: status {prob.status}"
-            if prob.status == cp.OPTIMAL_INACCURATE and accept_inaccurate and inaccurate is None:
-                inaccurate = (s, opts)
-        if inaccurate is not None:  # re-solve deterministically with the first inaccurate solver
-            s, opts = inaccurate
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                prob.solve(solver=s, warm_start=False, **opts)
-            self.n_solves += 1
-            if prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
-                return s
         raise DesignError(f"the SDP for {what} did not solve ({last})")
 
     def _theta(self, form: _ScaledSDP, eta: float, accept_inaccurate: bool) -> float:
@@ -273,43 +263,47 @@ class LMISynthesizer:
         self._solve(form.stage1, f"kappa(eta = {eta:.6g})", accept_inaccurate=accept_inaccurate)
         return float(form.theta.value)
 
-    def _rescaled(self, eta: float) -> _ScaledSDP | None:
-        """The problem in the state scaling that equilibrates the plain solve's P (or None)."""
+    def _rescaled(self, eta: float):
+        """Rescaled forms of the problem (see :class:`_ScaledSDP`), in a fixed order: state
+        scalings that equilibrate the P of the plain form solved at eta, eta/2, ..., eta/32
+        (those that return a point)."""
         f = self._plain
-        for k in range(6):  # the plain solve at eta, or else at eta/2, eta/4, ... (the first with a point)
+        for k in range(6):
             f.set_eta(eta / 2**k)
             try:
-                self._solve(f.stage1, "scaling", accept_inaccurate=True)
+                self._solve(f.stage1, "scaling", accept_inaccurate=True, only_first=True)
             except DesignError:
                 continue
             pt = f.point()
-            if pt is not None:
-                d = _scaling_from(pt[0])
-                return None if d is None else _ScaledSDP(self.A, self.C, d)
-        return None
+            d = None if pt is None else _scaling_from(pt[0])
+            if d is not None:
+                yield _ScaledSDP(self.A, self.C, d)
 
     def theta_star(self, eta: float, *, accept_inaccurate: bool = False) -> float:
         """theta*(eta), the optimal value of e:SDP_1-4 (kappa* = sqrt(theta*)).
 
-        Solved in the plain form; if that fails, once more in the rescaled form (state
-        scaling from the plain solve's P, see :class:`_ScaledSDP`).
+        Solved in the plain form; if that fails, in the rescaled forms in their fixed
+        order (:meth:`_rescaled`) until one solves.
         """
         eta = as_finite(eta, "eta")
         if eta < 0:
             raise InvalidArgument(f"eta must be >= 0; got {eta}")
         try:
             return self._theta(self._plain, eta, accept_inaccurate)
-        except DesignError:
-            form = self._rescaled(eta)
-            if form is None:
-                raise
-            return self._theta(form, eta, accept_inaccurate)
+        except DesignError as err:
+            first = err
+        for form in self._rescaled(eta):
+            try:
+                return self._theta(form, eta, accept_inaccurate)
+            except DesignError:
+                continue
+        raise first
 
     def gain(self, eta: float) -> GainSynthesis:
         """The verified least-norm gain at decay rate eta (rule in the module docstring).
 
         For each back-off r in :data:`ETA_BACKOFFS` in turn, the SDP is solved at
-        eta_s = eta (1 + r) + 1e-7, first in the plain form and then in the rescaled one;
+        eta_s = eta (1 + r) + 1e-7, first in the plain form and then in the rescaled ones;
         the first gain that passes the floating-point verification at eta itself is
         returned. Raises the last :class:`VerificationError` (or :class:`DesignError`)
         if none passes.
@@ -320,15 +314,9 @@ class LMISynthesizer:
         last: DesignError | None = None
         for rel in ETA_BACKOFFS:
             eta_s = eta * (1 + rel) + _ETA_ABS_MARGIN
-            forms = [self._plain]
-            for k in range(2):
-                if k == 1:
-                    form = self._rescaled(eta_s)
-                    if form is None:
-                        break
-                    forms.append(form)
+            for form in itertools.chain([self._plain], self._rescaled(eta_s)):
                 try:
-                    return self._gain_at(forms[k], eta, eta_s)
+                    return self._gain_at(form, eta, eta_s)
                 except DesignError as err:  # VerificationError is a DesignError
                     last = err
         assert last is not None

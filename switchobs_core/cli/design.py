@@ -6,9 +6,10 @@ import argparse
 from pathlib import Path
 
 from ..design import Designer, Margin
+from ..exceptions import InvalidArgument
 from ..gains import CycleDesign, GainTable
 from ..scenarios import load_system
-from ._common import fmt_table, parse_h, parse_pair, parse_ts, print_json
+from ._common import fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json
 
 __all__ = ["register", "run", "design_rows", "table_summary"]
 
@@ -50,6 +51,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=Margin(),
         metavar="M",
         help="eta = eta_min + M (absolute, e.g. 0.1) or eta_min*(1+M) (relative, e.g. 5%%); default 5%%",
+    )
+    p.add_argument(
+        "--eta",
+        type=_parse_eta,
+        action="append",
+        default=[],
+        metavar="E1,...,EN",
+        help="decay rates set explicitly, one per channel (instead of eta_min + margin). Given once, it applies "
+        "to every cycle; given k times, the j-th --eta applies to the j-th cycle (--cycle flags first, then "
+        "--cycle-h). Gains are verified; f_ii > delta is reported, not refused",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="gain table file to write (JSON)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -122,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     cycles = list(args.cycle) + list(args.cycle_h)
     designer = Designer(system, delta=args.delta, margin=args.margin)
-    table = designer.table(cycles, robust=args.robust, progress=args.progress)
+    etas = _etas_for(args.eta, cycles)
+    table = designer.table(cycles, robust=args.robust, etas=etas, progress=args.progress)
     table.save(args.output)
     if args.json:
         out = table_summary(table)
@@ -132,5 +144,37 @@ def run(args: argparse.Namespace) -> int:
     print(system.describe())
     print()
     print_designs(table)
+    for d in table.designs:
+        for i, (f, dl) in enumerate(zip(d.f, d.delta)):
+            if f > dl:
+                print(
+                    f"{d.label()}, channel {i + 1}: f = {f:.4f} > delta = {dl:g}: the paper's condition fails "
+                    "for this rate (choose a larger eta)"
+                )
     print(f"wrote {args.output}")
     return 0
+
+
+def _etas_for(etas: list[tuple[float, ...]], cycles: list) -> list | None:
+    """Explicit rates per cycle from the repeated ``--eta`` flags (rule in the flag's help)."""
+    if not etas:
+        return None
+    if len(etas) == 1:
+        return [etas[0]] * len(cycles)
+    if len(etas) != len(cycles):
+        raise InvalidArgument(
+            f"--eta was given {len(etas)} times for {len(cycles)} cycles: give it once (for every cycle) "
+            "or once per cycle, in the order of the --cycle and then --cycle-h flags"
+        )
+    return list(etas)
+
+
+def _parse_eta(text: str) -> tuple[float, ...]:
+    """``E1,...,EN`` -> positive rates (argparse type)."""
+    try:
+        vals = tuple(parse_floats(text, "--eta"))
+    except InvalidArgument as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    if any(v <= 0 for v in vals):
+        raise argparse.ArgumentTypeError(f"--eta rates must be > 0; got {text!r}")
+    return vals
