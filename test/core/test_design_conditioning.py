@@ -67,7 +67,7 @@ def cart_pair(tmp_path_factory):
     return load_system(p)
 
 
-@pytest.mark.parametrize("ts", [(2.0, 0.6), (2.0, 0.4), (4.0, 0.5), (10.0, 0.5)])
+@pytest.mark.parametrize("ts", [(2.0, 0.6), (2.0, 0.5), (2.0, 0.4), (1.0, 0.5), (4.0, 0.5), (4.0, 0.3), (10.0, 0.5)])
 def test_cart_pair_readme_cycles_design(cart_pair, ts):
     des = Designer(cart_pair)
     d = des.design(Cycle.from_ts(*ts))
@@ -75,6 +75,7 @@ def test_cart_pair_readme_cycles_design(cart_pair, ts):
     # the right channel's observable part has dimension 3: kappa grows like eta^2, so its
     # eta_min is far above the left channel's for the same active time
     assert d.eta_min[1] > d.eta_min[0] or ts[1] < 0.5
+    assert d.kappa[1] > d.eta[1] ** 2          # kappa ~ c eta^2 on the 3-dimensional channel
 
 
 def test_no_rate_even_with_kappa_one_is_refused_without_sdps():
