@@ -118,3 +118,15 @@ def test_cli_eta_count_must_match_cycles(tmp_path, capsys):
     assert code != 0
     assert "--eta was given 2 times for 3 cycles" in capsys.readouterr().err
     assert not (tmp_path / "g.json").exists()
+
+
+@pytest.mark.parametrize("factor", [1 - 1e-12, 1 + 1e-12])
+def test_reproduce_grid_is_designable_under_perturbed_rounding(factor):
+    """Every point of the paper's figure grid has an eta_min (the theory admits them all),
+    whichever way A is rounded."""
+    from switchobs_core.figures import S_VALUES, TAUS
+
+    des = Designer(_scaled(paper_system(), factor))
+    grid = des.eta_min_map(TAUS, S_VALUES, progress=False)
+    assert np.isfinite(grid).all(), np.argwhere(~np.isfinite(grid))
+    assert grid.max() > 300                    # the corner (1 s, 0.01) is in the grid
