@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from switchobs_core.certificate import cycle_factor
 from switchobs_core.cli import main
@@ -130,3 +132,21 @@ def test_reproduce_grid_is_designable_under_perturbed_rounding(factor):
     grid = des.eta_min_map(TAUS, S_VALUES, progress=False)
     assert np.isfinite(grid).all(), np.argwhere(~np.isfinite(grid))
     assert grid.max() > 300                    # the corner (1 s, 0.01) is in the grid
+
+
+@settings(max_examples=8, deadline=None, derandomize=True)
+@given(
+    damping=st.floats(-0.3, 0.3),
+    log_eta=st.floats(math.log(0.05), math.log(800.0)),
+    scale=st.sampled_from([1 - 1e-12, 1.0, 1 + 1e-12]),
+)
+def test_gain_verifies_over_a_wide_range_of_rates(damping, log_eta, scale):
+    """Position-measured second-order systems (r = 2, kappa ~ 2 eta): the gain at any rate
+    up to 800 is found and passes the floating-point check at that rate."""
+    eta = math.exp(log_eta)
+    A = np.array([[0.0, 1.0], [0.0, damping]]) * scale
+    C = np.array([[1.0, 0.0]])
+    g = LMISynthesizer(A, C).gain(eta)
+    eta_v, kappa, ab = verify_gain(A, C, g.L_o, g.P, eta)
+    assert eta_v >= eta and ab < -eta
+    assert kappa == pytest.approx(g.kappa, rel=1e-9)
