@@ -118,7 +118,19 @@ class ChannelDesigner:
         return eta * active - self.mu * inactive - math.log(k / delta)
 
     def eta_min(self, active: float, inactive: float, delta: float, *, what: str = "") -> float:
-        """Smallest eta >= 0 with g(eta) >= 0 (grid scan, then Brent on the exact g)."""
+        """Smallest eta >= 0 with g(eta) >= 0 (grid scan, then Brent on the exact g).
+
+        Since kappa >= 1, g(eta) <= eta h - mu u + ln(delta); if that bound is negative
+        at the largest grid rate, no rate qualifies and no SDP is solved.
+        """
+        top = float(ETA_GRID[-1])
+        if top * active - self.mu * inactive + math.log(delta) < 0:
+            f_best = math.exp(self.mu * inactive - top * active)
+            raise InfeasibleDesign(
+                f"{what}no decay rate up to {top:.4g} satisfies the cycle condition (active {active:g} s, "
+                f"inactive {inactive:g} s, delta {delta:g}): even with kappa = 1, f = exp(mu u - eta h) = "
+                f"{f_best:.3g} > delta at eta = {top:.4g}; lengthen the active time"
+            )
         prev = None
         for eta in ETA_GRID:
             try:
@@ -148,12 +160,17 @@ class ChannelDesigner:
         """eta_min from the monotone interpolant of the cached kappa curve (for maps and figures).
 
         The grid is extended with exact SDPs as far as needed; between grid points ln kappa
-        is interpolated (PCHIP), so the result is approximate (not used for gains).
+        is interpolated (PCHIP), so the result is approximate (not used for gains). NaN
+        when no grid rate satisfies the condition or the SDP fails before one does (the
+        point is not designable; figures draw it as such).
         """
         prev = None
         for eta in ETA_GRID:
-            if self.g(eta, active, inactive, delta) >= 0:
-                break
+            try:
+                if self.g(eta, active, inactive, delta) >= 0:
+                    break
+            except DesignError:
+                return float("nan")
             prev = eta
         else:
             return float("nan")
@@ -202,6 +219,12 @@ class Designer:
             for i, ch in enumerate(self.channels)
         )
 
+    def _eta_min_or_none(self, cycle: Cycle, i: int) -> float | None:
+        try:
+            return self.channels[i].eta_min(cycle.h[i], cycle.inactive(i + 1), self.delta[i])
+        except InfeasibleDesign:
+            return None
+
     def _check_cycle(self, cycle: Cycle) -> None:
         if not isinstance(cycle, Cycle):
             raise InvalidArgument(f"cycle must be a Cycle; got {type(cycle).__name__}")
@@ -247,7 +270,10 @@ class Designer:
         """Gains for one cycle: eta_i = eta_min_i + margin (or ``eta`` given explicitly)."""
         self._check_cycle(cycle)
         what = f"cycle {cycle.label()}"
-        emin = self.eta_min(cycle)
+        if eta is None:
+            emin: tuple[float | None, ...] = self.eta_min(cycle)
+        else:  # explicit rates: eta_min is information only (None where no rate meets delta)
+            emin = tuple(self._eta_min_or_none(cycle, i) for i in range(self.system.N))
         if eta is None:
             etas = [self.margin.apply(e) for e in emin]
         else:

@@ -44,9 +44,15 @@ def eta_min_figures(
     paths = []
     for i in range(2):
         fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+        bad = []
         for a, tau in enumerate(taus):
-            ax.plot(s, grid[a, :, i], label=f"tau = {tau:g} s")
+            (line,) = ax.plot(s, grid[a, :, i], label=f"tau = {tau:g} s")
+            bad += [(x, line.get_color()) for x, v in zip(s, grid[a, :, i]) if not np.isfinite(v)]
         ax.set_yscale("log")
+        if bad:  # points with no admissible eta: marked on the top edge, not silently dropped
+            top = ax.get_ylim()[1] if np.isfinite(grid[:, :, i]).any() else 1.0
+            for k, (x, c) in enumerate(bad):
+                ax.plot([x], [top], "x", color=c, clip_on=False, label="no admissible eta" if k == 0 else None)
         ax.set_xlabel("duty fraction s (channel 1 active for s*tau)")
         ax.set_ylabel(f"eta_min^({i + 1})")
         ax.set_title(f"Minimum decay rate of channel {i + 1} (delta = {designer.delta[i]:g})")

@@ -70,4 +70,4 @@ def test_design_with_explicit_eta(tmp_path, capsys):
     (d,) = json.loads(capsys.readouterr().out)["designs"]
     assert d["eta"] == [1.0, 1.0] and not d["paper_condition_holds"] and min(d["f"]) > 0.99
     assert main(["design", "paper", "--cycle", "2,0.6", "--eta", "1.6", "-o", str(out)]) == 2
-    assert "one decay rate per channel" in capsys.readouterr().err
+    assert "must give 2 positive rates" in capsys.readouterr().err

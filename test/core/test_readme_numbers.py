@@ -1,0 +1,54 @@
+"""Every ``<!-- readme-check ... -->`` block of the README: its ``switchobs`` commands run
+in-process, the last one with ``--json``, and each ``expect PATH = VALUE`` holds to the
+precision the README prints VALUE with (and VALUE is printed in the README's text)."""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from switchobs_core.cli import main
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+_BLOCK = re.compile(r"<!-- readme-check\n(.*?)-->", re.S)
+
+
+def _blocks() -> list[str]:
+    return _BLOCK.findall(README.read_text())
+
+
+def _lookup(obj, path: str):
+    for key in path.split("."):
+        obj = obj[int(key)] if isinstance(obj, list) else obj[key]
+    return obj
+
+
+def test_readme_has_check_blocks():
+    assert len(_blocks()) >= 2
+
+
+@pytest.mark.parametrize("block", _blocks(), ids=lambda b: b.split("\n")[0].strip()[:60])
+def test_readme_block(block, tmp_path, capsys):
+    text = README.read_text()
+    prose = _BLOCK.sub("", text)
+    lines = [ln.strip() for ln in block.strip().splitlines() if ln.strip()]
+    cmds = [ln for ln in lines if ln.startswith("switchobs ")]
+    expects = [ln[len("expect "):] for ln in lines if ln.startswith("expect ")]
+    assert cmds and expects, block
+    for cmd in cmds:
+        capsys.readouterr()
+        args = shlex.split(cmd.replace("{tmp}", str(tmp_path)))[1:]
+        if args[0] == "design":
+            args.append("--no-progress")
+        assert main(args) == 0, cmd
+    out = json.loads(capsys.readouterr().out)
+    for e in expects:
+        path, value = (x.strip() for x in e.split("="))
+        decimals = len(value.split(".")[1]) if "." in value else 0
+        got = float(_lookup(out, path))
+        assert abs(got - float(value)) <= 0.5 * 10.0**-decimals + 1e-12, (path, got, value)
+        assert re.search(rf"(?<![\d.]){re.escape(value)}(?![\d])", prose), f"{value} is not printed in the README"
