@@ -68,6 +68,7 @@ from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 from .validation import as_finite, as_matrix
 
 __all__ = [
+    "MAX_RESULT_BYTES",
     "SimulationResult",
     "simulate",
     "schedule_segments",
@@ -158,6 +159,10 @@ def sampled_error_transition(A: np.ndarray, C: Sequence[np.ndarray],
         D = Phi + Gamma @ L @ Ci - F
         Pee, Pex, Pxx = Phi @ Pee, Phi @ Pex + D @ Pxx, F @ Pxx
     return Pee, Pex
+
+
+MAX_RESULT_BYTES = 2 * 2**30
+"""Largest result (all output arrays) :func:`simulate` builds; longer runs are refused up front."""
 
 
 @dataclass
@@ -340,6 +345,12 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         raise InvalidArgument(f"hold must be 'innovation' or 'measurement'; got {hold!r}")
     if not (math.isfinite(dt_out) and dt_out > 0):
         raise InvalidArgument(f"dt_out must be > 0; got {dt_out}")
+    pts = (t_end - t0) * (rate if rate is not None else 1.0 / dt_out) + 1
+    need = pts * 8.0 * (4 * n + len(C) + 8)  # x, x_hat, error, y, xo_norms, bounds, channel
+    if need > MAX_RESULT_BYTES:
+        raise InvalidArgument(f"simulate would hold {need / 2**30:.2f} GiB of results for t_end - t0 = "
+                              f"{t_end - t0:g} s ({pts:.0f} output points; limit {MAX_RESULT_BYTES / 2**30:.0f} GiB): "
+                              "shorten t_end, lower the rate or raise dt_out")
     if getattr(table, "family", "lmi") != "lmi":
         return _simulate_filter(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise,
                                 seed, mode, u, e0)

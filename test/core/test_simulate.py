@@ -186,3 +186,9 @@ def test_plant_rejects_bad_arguments(paper):
         p.advance(0.5)
     with pytest.raises(InvalidArgument, match="channel"):
         p.measure(3)
+
+
+def test_simulate_refuses_results_beyond_memory_limit_up_front(paper):
+    x0 = np.ones(paper.A.shape[0])
+    with pytest.raises(InvalidArgument, match="GiB"):
+        simulate(paper, paper_table(paper), PeriodicSchedule(PERIODIC), x0, x0, 1e7, rate=1000.0)
