@@ -132,9 +132,11 @@ def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
     return LabelledArray(stamp_ns, labels, data[STAMP_PAD:].copy())
 
 
-def envelope_labels(N: int) -> tuple[str, ...]:
-    """Element names of ``~/envelope``: ``z_1..z_N``, ``paper_bound``, ``exact_bound``."""
-    return tuple(f"z_{i}" for i in range(1, N + 1)) + ("paper_bound", "exact_bound")
+def envelope_labels(N: int, noise_bound: bool = False) -> tuple[str, ...]:
+    """Element names of ``~/envelope``: ``z_1..z_N``, ``paper_bound``, ``exact_bound`` and, with a
+    declared measurement-noise bound, ``noise_bound``."""
+    return tuple(f"z_{i}" for i in range(1, N + 1)) + ("paper_bound", "exact_bound") \
+        + (("noise_bound",) if noise_bound else ())
 
 
 # --- bodies and odometry --------------------------------------------------------------------

@@ -84,12 +84,17 @@ class Envelope:
         (module docstring; with measurement hold see the simulator's ``hold_bound``).
     t : float
         Time the bounds refer to.
+    noise_bound : float or None
+        With a declared bound on the measurement noise (``noise_max``): a rigorous bound on the
+        error of the computed estimate under any noise within it (ours; rounding included).
+        None when no noise bound is declared; then ``exact_bound`` is the *noise-free* bound.
     """
 
     z: np.ndarray
     paper_bound: float
     exact_bound: float
     t: float = 0.0
+    noise_bound: float | None = None
 
 
 @dataclass(frozen=True)

@@ -102,8 +102,15 @@ def plot_result(res: Any, path: str | Path, title: str = "") -> Path:
     ax[1].plot(res.t, en, color="k", lw=1.5, label=r"$\|\tilde x(t)\|$")
     ax[1].plot(res.t, res.paper_bound, color=colors[3], lw=1.0, ls="--",
                label=r"paper's bound $\alpha \sum_i z_i$ (claim)")
+    bound, label, status = res.guarantee()
+    verdict = ("not a guarantee with noise" if label == "noise-free bound" else
+               "NOT verified" if "NOT verified" in status else "verified at every output")
     ax[1].plot(res.t, res.exact_bound, color=colors[2], lw=1.2,
-               label=r"exact bound $\|\Phi(t,0)\|\,\|\tilde x(0)\|$ (verified)")
+               label=r"exact bound $\|\Phi(t,0)\|\,e_0$, rounding included"
+               + (f" (noise-free: {verdict})" if label == "noise-free bound" else
+                  "" if bound is not res.exact_bound else f" ({verdict})"))
+    if bound is not None and bound is not res.exact_bound:
+        ax[1].plot(res.t, bound, color=colors[4], lw=1.2, ls="-.", label=f"{label} ({verdict})")
     ax[1].set_yscale("log")
     ax[1].set_ylabel("estimation error")
     ax[1].legend(fontsize=8, loc="lower left", framealpha=0.9)

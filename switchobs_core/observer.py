@@ -187,6 +187,14 @@ class SwitchedObserver:
     rounding_bound : bool
         Keep the exact bound with floating-point rounding (:mod:`switchobs_core.rounding`;
         about 9 us per sample for n = 12). Off: ``envelope().exact_bound`` is ``inf`` (no bound).
+    noise_max : float or (N,) sequence of float, optional
+        A declared bound on the measurement noise, ``|v_j| <= noise_max`` for every row ``j``
+        (one value for all channels, or one per channel). The observer then also keeps
+        ``envelope().noise_bound``, a rigorous bound on the error of the computed estimate
+        under any noise within that bound (same argument as the exact bound with the noise's
+        image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
+        :mod:`switchobs_core.rounding`; about as much work again per sample). Needs
+        ``rounding_bound`` and innovation hold.
 
     Raises
     ------
@@ -219,7 +227,7 @@ class SwitchedObserver:
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
                  track_covariance: bool | None = None, relock_rtol: float = 1e-2,
-                 rounding_bound: bool = True):
+                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -255,6 +263,7 @@ class SwitchedObserver:
             raise InvalidArgument(f"family 'lmi' needs an LMI gain table; this table holds {table.family!r} gains")
         self.family = family
         self.rounding_bound = bool(rounding_bound)
+        self.noise_max = self._check_noise_max(noise_max, hold)
         self.kalman: KalmanDesign | None = None
         self.relock_rtol = float(relock_rtol)
         if not (math.isfinite(self.relock_rtol) and self.relock_rtol >= 0):
@@ -354,6 +363,9 @@ class SwitchedObserver:
         self._Phi = np.eye(self.n)
         # the rounding-aware bound (module switchobs_core.rounding): innovation hold and Kalman
         self._ell = ErrorEllipsoid(self.n, self.e0) if self.hold == "innovation" and self.rounding_bound else None
+        # the same ellipsoid with the declared noise's image added to every step (noise_max)
+        self._ellv = ErrorEllipsoid(self.n, self.e0) if self._ell is not None and self.noise_max else None
+        self._vn = 0.0      # sqrt(p) v_max of the held sample (the noise's largest norm)
         self._nu_err = 0.0
         self._k = -1
         self._phase = 0  # sequence mode: offset of the design index, re-synced on mismatch
@@ -536,6 +548,8 @@ class SwitchedObserver:
                 Cr = self._Crows[self._key]
                 self._nu_err = (self._g_n * float(np.linalg.norm(Cr)) * math.sqrt(float(self._x @ self._x))
                                 + 2.0 * UNIT_ROUNDOFF * math.sqrt(float(y @ y)))
+            if self._ellv is not None:
+                self._vn = math.sqrt(p) * self.noise_max[channel - 1]
             self._entry_L = True
             if self._P is not None:
                 self._R_held = self.noise.R(channel, rows)
@@ -555,18 +569,40 @@ class SwitchedObserver:
         self._x = x
         self._Phi = e.E @ self._Phi
         if self._ell is not None:
-            self._ell.step(e.E, self._rho_step(e, dt, xn, math.sqrt(float(x @ x))))
+            xn_new = math.sqrt(float(x @ x))
+            self._ell.step(e.E, self._rho_step(e, dt, xn, xn_new, self._ell))
+            if self._ellv is not None:
+                self._noise_step(self._ellv, e.E, self._rho_step(e, dt, xn, xn_new, self._ellv), e.GL)
         if covariance and self._P is not None and (self.family == "lmi" or self._online):
             self._propagate_covariance(e, dt)
 
+    def _check_noise_max(self, noise_max: Any, hold: str) -> tuple[float, ...] | None:
+        """``noise_max`` as one bound per channel (None: no bound declared)."""
+        if noise_max is None:
+            return None
+        vals = np.atleast_1d(np.asarray(noise_max, dtype=object))
+        if vals.ndim != 1 or vals.size not in (1, self.N):
+            raise InvalidArgument(f"noise_max must be one number or {self.N} (one per channel); got {noise_max!r}")
+        out = []
+        for v in vals:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (math.isfinite(float(v)) and 0 <= float(v) <= MAX_ABS_SAMPLE):
+                raise InvalidArgument(f"noise_max must be finite numbers in [0, {MAX_ABS_SAMPLE:g}]; got {noise_max!r}")
+            out.append(float(v))
+        if not self.rounding_bound or hold != "innovation":
+            raise InvalidArgument("noise_max needs rounding_bound=True and hold='innovation' "
+                                  "(the noise bound extends the rounding-aware exact bound)")
+        return tuple(out * self.N if len(out) == 1 else out)
+
     # ------------------------------------------------------------------ rounding (exact_bound)
-    def _rho_step(self, e: Any, dt: float, xn: float, xn_new: float) -> float:
+    def _rho_step(self, e: Any, dt: float, xn: float, xn_new: float, ell: ErrorEllipsoid) -> float:
         """Residual bound ``rho`` of one exact step in floating point (module
         :mod:`switchobs_core.rounding`, steps 2-4): the exponential's error and the step
-        quantum, times ``||x|| <= ||x_hat|| + ||e||``, plus the rounding of the products."""
+        quantum, times ``||x|| <= ||x_hat|| + ||e||`` (``||e||`` from ``ell``, the ellipsoid
+        being stepped), plus the rounding of the products."""
         u = UNIT_ROUNDOFF
         quant = abs(dt - e.dt) * self._fA * math.exp(min(self._nA * max(dt, e.dt), 700.0))   # no OverflowError
-        rho = (e.eps + quant) * (xn + self._ell.trace_bound()) + self._g_n * e.fPhi * xn + u * xn_new
+        rho = (e.eps + quant) * (xn + ell.trace_bound()) + self._g_n * e.fPhi * xn + u * xn_new
         if self._entry_L:
             nu = math.sqrt(float(self._y @ self._y))
             rho += self._g_p * e.fGL * nu + e.fGL * self._nu_err
@@ -574,6 +610,20 @@ class SwitchedObserver:
             un = math.sqrt(float(self._u @ self._u))
             rho += (e.eps + self._g_n * float(np.linalg.norm(e.GB))) * un
         return rho
+
+    def _noise_step(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
+                    keep: bool = True) -> tuple | None:
+        """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
+        (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
+        if self._entry_L and GL is not None and self._vn > 0.0:
+            if keep:
+                ell.step_shaped(E, rho, GL, self._vn ** 2)
+                return None
+            return ell.propagate_shaped(E, rho, GL, self._vn ** 2)
+        if keep:
+            ell.step(E, rho)
+            return None
+        return ell.propagate(E, rho)
 
     def _rho_correct(self, fK: float, fH: float, xn_minus: float, yn: float, nun: float, xn_plus: float) -> float:
         """Residual bound of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating point
@@ -590,9 +640,12 @@ class SwitchedObserver:
         self._Phi -= K @ (H @ self._Phi)
         if self._ell is not None:
             M = self._I - K @ H
-            rho = self._rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), xn,
+            fK = float(np.linalg.norm(K))
+            rho = self._rho_correct(fK, float(np.linalg.norm(H)), xn,
                                     math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
             self._ell.step(M, rho)
+            if self._ellv is not None:      # e^+ = (I - K H) e^- + K v
+                self._ellv.step_shaped(M, rho, K, y.size * self.noise_max[self._channel - 1] ** 2)
 
     # ------------------------------------------------------------------ Kalman families
     def _init_kalman(self, table: Any, mode: str, cycles: Any, bounds: Any, noise: NoiseModel | None) -> None:
@@ -733,9 +786,12 @@ class SwitchedObserver:
         self._x = x
         self._Phi = E @ self._Phi
         if self._ell is not None:
-            rho = nIKH * self._rho_step(e, dt, x0n, xmn) + self._rho_correct(
-                fK, fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
-            self._ell.step(E, rho)
+            rc = self._rho_correct(fK, fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)),
+                                   math.sqrt(float(x @ x)))
+            self._ell.step(E, nIKH * self._rho_step(e, dt, x0n, xmn, self._ell) + rc)
+            if self._ellv is not None:      # e^+ = (I - K H) e^- + K v
+                self._ellv.step_shaped(E, nIKH * self._rho_step(e, dt, x0n, xmn, self._ellv) + rc, K,
+                                       y.size * self.noise_max[channel - 1] ** 2)
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
         return True
 
@@ -849,7 +905,8 @@ class SwitchedObserver:
         Envelope
             ``z`` (e:z1_evolution, e:z2_evolution), ``paper_bound = alpha sum z``
             (the paper's claim, not a guarantee; see :mod:`switchobs_core.certificate`) and
-            ``exact_bound = ||Phi(t, t0)|| e0`` (ours; see the class Notes).
+            ``exact_bound = ||Phi(t, t0)|| e0`` (ours; see the class Notes), and with a declared
+            ``noise_max`` the ``noise_bound`` that holds under noise within it.
         """
         if t is None:
             t = self._t
@@ -858,19 +915,27 @@ class SwitchedObserver:
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
         Phi = self._Phi
         step = self._cache.step(self._key, dt) if dt > 0 else None
+        noisy = None
         if self._ell is not None:       # rounding included (module switchobs_core.rounding)
             S = self._ell.S
+            Sv = None if self._ellv is None else self._ellv.S
             if step is not None:
+                xn = math.sqrt(float(self._x @ self._x))
                 xp = self.predict(float(t), hold=True)
-                S, _ = self._ell.propagate(step.E, self._rho_step(step, dt, math.sqrt(float(self._x @ self._x)),
-                                                                  math.sqrt(float(xp @ xp))))
+                xpn = math.sqrt(float(xp @ xp))
+                S, _ = self._ell.propagate(step.E, self._rho_step(step, dt, xn, xpn, self._ell))
+                if Sv is not None:
+                    Sv, _ = self._noise_step(self._ellv, step.E, self._rho_step(step, dt, xn, xpn, self._ellv),
+                                             step.GL, keep=False)
             exact = self._ell.bound(S)
+            noisy = None if Sv is None else self._ellv.bound(Sv)
         elif self.hold == "measurement":    # the error-to-error part, exact arithmetic (class Notes)
             exact = float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self.e0)
         else:                               # rounding_bound=False: no bound is kept
             exact = math.inf
         if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
             return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
-                            exact_bound=exact, t=float(t))
+                            exact_bound=exact, t=float(t), noise_bound=noisy)
         z = self._tracker.z(float(t))
-        return Envelope(z=z, paper_bound=float(self.alpha * z.sum()), exact_bound=exact, t=float(t))
+        return Envelope(z=z, paper_bound=float(self.alpha * z.sum()), exact_bound=exact, t=float(t),
+                        noise_bound=noisy)

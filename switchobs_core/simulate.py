@@ -19,11 +19,13 @@ held on each grid step); the error then obeys (e:xtilde_dyn_piecewise) exactly.
 *Sampled outputs* (``rate`` in Hz): the plant is advanced exactly to each sample time
 ``t_k = t0 + k / rate``, measured on the channel active at ``t_k`` (plus seeded noise),
 and the observer integrates with the sample's innovation held (``hold="innovation"``,
-the default) or the sample itself held (``hold="measurement"``), exactly as the online
-:class:`~switchobs_core.observer.SwitchedObserver` does (see its module docstring). The simulator's observer
-propagation is its own code (direct ``expm`` of the augmented matrix, gains chosen
-from the schedule's cycle index), so that comparing it with ``SwitchedObserver`` is
-a cross-implementation check.
+the default) or the sample itself held (``hold="measurement"``). With innovation hold (and
+every Kalman family) the samples go through :class:`~switchobs_core.observer.SwitchedObserver`
+itself, the code the node runs, with its rounding-aware exact bound, and the plant is kept in
+extended precision so the error column is the computed estimate's true error. Measurement
+hold is the simulator's own code (direct ``expm`` of the augmented matrix, gains chosen from
+the schedule's cycle index); with ``hold="innovation"`` that code (:func:`_simulate_sampled`)
+is the tests' cross-implementation check of the observer.
 
 Error transition with sampled outputs. With innovation hold one step maps the error by
 ``E = e^{A dt} - Gamma_A L C``, independent of the plant. With measurement hold, ``u = 0``
@@ -58,12 +60,13 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from .envelope import Segment, envelope_z, error_transitions
+from .envelope import Segment, envelope_z
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument
-from .observer import NOT_APPLICABLE, SwitchedObserver
+from .observer import SwitchedObserver
 from .plant import Plant
 from .propagation import van_loan, zoh_pair
+from .rounding import EXPM_ULPS, UNIT_ROUNDOFF, ErrorEllipsoid, expm_error, gamma
 from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 from .validation import as_finite, as_matrix
 
@@ -181,9 +184,15 @@ class SimulationResult:
     paper_bound : (T,) ndarray
         ``alpha sum z_i``: the paper's claim (not a guarantee).
     exact_bound : (T,) ndarray
-        ``||Phi(t, t0)|| e0``: ours; a guarantee for noise-free continuous outputs and for
-        noise-free sampled outputs with innovation hold (the default); with measurement
-        hold it misses the held-sample term, see :attr:`hold_bound`.
+        ``||Phi(t, t0)|| e0`` with the rounding of the computation included (ours; see
+        :mod:`switchobs_core.rounding`): a guarantee on :attr:`error` for noise-free continuous
+        outputs and for noise-free sampled outputs with innovation hold (the default) or Kalman
+        gains. With noise it is the *noise-free* bound, not a guarantee (:attr:`noisy`); with
+        measurement hold it is the exact-arithmetic error-to-error part, see :attr:`hold_bound`.
+    noise_bound : (T,) ndarray or None
+        With a declared ``noise_max``: the observer's bound under any noise within it (ours).
+    noisy : bool
+        Measurement or process noise was drawn.
     hold_bound : (T,) ndarray or None
         Sampled outputs only: ``||Phi_ee|| e0 + ||Phi_ex|| ||x(0)||``, a guarantee for
         noiseless samples with ``u = 0`` (module docstring).
@@ -218,6 +227,8 @@ class SimulationResult:
     hold_bound: np.ndarray | None = None
     y: list | None = field(default=None, repr=False)
     family: str = "lmi"
+    noise_bound: np.ndarray | None = None
+    noisy: bool = False
 
     @property
     def error_norm(self) -> np.ndarray:
@@ -227,6 +238,45 @@ class SimulationResult:
     def at(self, t: float) -> int:
         """Index of the last output time <= t."""
         return int(np.searchsorted(self.t, t, side="right") - 1)
+
+    def guarantee(self) -> tuple[np.ndarray | None, str, str]:
+        """The bound this run can honestly call guaranteed: ``(values, label, status)``.
+
+        ``label`` names the column in one phrase ("guaranteed bound", "noise-free bound", ...);
+        ``status`` says what it is and whether it held at every output (violations are counted
+        with a relative tolerance of 1e-9; any violation makes it "NOT verified").
+
+        - A declared noise bound (``noise_max``): the observer's ``noise_bound``.
+        - Measurement hold: ``hold_bound`` (exact arithmetic; the plant-driven term included).
+        - Noise without a declared bound: the exact bound is the *noise-free* bound, never
+          called guaranteed (measurement noise: declare ``noise_max`` for a guarantee).
+        - Otherwise: the exact bound, rounding included (:mod:`switchobs_core.rounding`).
+        """
+        en = self.error_norm
+
+        def checked(b: np.ndarray, what: str) -> str:
+            bad = en > b * (1 + 1e-9) + 1e-300
+            n_bad = int(np.sum(bad))
+            if n_bad:
+                return (f"{what}: NOT verified: below the error at {n_bad} of {len(self.t)} outputs "
+                        f"from t = {float(self.t[np.argmax(bad)]):.3g} s")
+            return f"{what}: verified at all {len(self.t)} outputs"
+
+        if self.noise_bound is not None:
+            return self.noise_bound, "guaranteed bound (bounded noise)", checked(
+                self.noise_bound, "||Phi|| e0 plus the declared noise's worst case, rounding included")
+        if self.hold_bound is not None and self.family == "lmi" and not self.noisy:
+            return self.hold_bound, "guaranteed bound", checked(
+                self.hold_bound, "||Phi_ee|| e0 + ||Phi_ex|| ||x(0)|| (measurement hold, noise-free, u = 0, "
+                "exact arithmetic)")
+        if self.noisy:
+            return self.exact_bound, "noise-free bound", (
+                "||Phi|| e0, the bound for noise-free outputs: NOT a guarantee for this run, whose outputs "
+                "or plant are noisy (declare a measurement-noise bound, --noise-max, for one)")
+        where = ("continuous outputs" if self.rate is None else "sampled outputs, innovation hold"
+                 if self.family == "lmi" else f"sampled outputs, {self.family} gains")
+        return self.exact_bound, "guaranteed bound", checked(
+            self.exact_bound, f"||Phi|| e0 with the computation's rounding ({where}, noise-free)")
 
     def summary(self) -> dict:
         """JSON-ready summary: final error, bounds and violations of the paper's bound."""
@@ -251,6 +301,10 @@ class SimulationResult:
             "cycle_end_errors": [float(en[j]) for j in ends],
             "cycles": len(self.cycle_ends),
             "gain_family": self.family,
+            "noisy": self.noisy,
+            "final_noise_bound": None if self.noise_bound is None else float(self.noise_bound[-1]),
+            "noise_bound_violations": None if self.noise_bound is None else
+            int(np.sum(en > self.noise_bound * (1 + 1e-9) + 1e-300)),
         }
         if not paper:
             for key in ("final_paper_bound", "paper_bound_violations", "envelope_violations", "max_envelope_ratio"):
@@ -272,7 +326,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
              rate: float | None = None, noise_std: float = 0.0, process_noise: Any = 0.0,
              seed: int = 0, mode: str | None = None, dt_out: float = 0.01,
              u: Any = None, e0: float | None = None, t0: float | None = None,
-             hold: str = "innovation") -> SimulationResult:
+             hold: str = "innovation", noise_max: Any = None) -> SimulationResult:
     """Simulate plant and switched observer exactly (e:system, e:switched_observer).
 
     ``res = simulate(system, table, schedule, x0, xhat0, t_end, rate=None)``
@@ -309,6 +363,10 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         Start time (default ``schedule.t0``).
     hold : {"innovation", "measurement"}
         Sampled outputs: what the observer holds between samples (module docstring).
+    noise_max : float or (N,) sequence, optional
+        A declared bound on the measurement noise (per row, one value or one per channel):
+        the noise draws are clipped to it and the result carries the observer's
+        ``noise_bound`` (innovation hold and the Kalman families).
 
     Returns
     -------
@@ -351,23 +409,24 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         raise InvalidArgument(f"simulate would hold {need / 2**30:.2f} GiB of results for t_end - t0 = "
                               f"{t_end - t0:g} s ({pts:.0f} output points; limit {MAX_RESULT_BYTES / 2**30:.0f} GiB): "
                               "shorten t_end, lower the rate or raise dt_out")
-    if getattr(table, "family", "lmi") != "lmi":
-        return _simulate_filter(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise,
-                                seed, mode, u, e0)
+    # e0: the computed ||xhat0 - x0|| inflated by its own rounding, so that it bounds the true one
+    e0 = float(np.linalg.norm(xhat0 - x0)) * (1.0 + gamma(n + 3)) if e0 is None else float(e0)
+    if noise_max is not None and (rate is None or hold != "innovation"):
+        raise InvalidArgument("noise_max (a declared noise bound) needs sampled outputs with innovation hold "
+                              "(--rate HZ, --hold innovation)")
+    if getattr(table, "family", "lmi") != "lmi" or (rate is not None and hold == "innovation"):
+        return _simulate_observer(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise,
+                                  seed, mode, u, e0, noise_max)
     mode, designs = designs_for(table, schedule, mode)
     segments = schedule_segments(schedule, designs, t_end)
-    e0 = float(np.linalg.norm(xhat0 - x0)) if e0 is None else float(e0)
     T_o = [system.decomposition(i + 1).T_o for i in range(N)]
     try:
         alpha_ = float(system.alpha)
     except AttributeError:
         alpha_ = _alpha(T_o)
     if rate is None:
-        res = _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u,
-                                   process_noise, seed)
-        t, X, Xh, ch = res
-        Phis = error_transitions(A, C, t, segments)
-        exact = np.linalg.norm(Phis, 2, axis=(1, 2)) * e0
+        t, X, Xh, ch, exact = _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u,
+                                                   process_noise, seed, e0)
         eff_segments = segments
         hold_b = ys = None
     else:
@@ -384,50 +443,72 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
                             rate=rate, segments=eff_segments, hold_bound=hold_b, y=ys)
 
 
-def _simulate_filter(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode,
-                     u, e0) -> SimulationResult:
-    """A Kalman gain table: the plant sampled at ``rate`` and :class:`SwitchedObserver` itself.
+def _simulate_observer(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode,
+                       u, e0, noise_max) -> SimulationResult:
+    """Sampled outputs through :class:`SwitchedObserver` itself, the code the node runs (innovation
+    hold with LMI gains, and every Kalman family), against an extended-precision plant.
 
-    The Kalman gains are a discrete filter (there is no continuous-output form), so the samples
-    go through the observer the node runs (table lookup by sample phase; the online recursion
-    where the table does not describe a sample, or for a random schedule). The paper's envelopes
-    do not apply to these gains: ``z`` and ``paper_bound`` are
-    :data:`~switchobs_core.observer.NOT_APPLICABLE`.
+    The plant is :class:`Plant` with ``extended=True`` (the reference of
+    :mod:`switchobs_core.rounding`): ``x`` is its state rounded once to double, and ``error``
+    is ``x_hat - x`` taken in extended precision, so the exact bound (which includes the
+    observer's rounding) is checked against the error of the computed estimate, not against
+    the simulator's own rounding. The paper's envelopes are the observer's (LMI gains; for the
+    Kalman gains ``z`` and ``paper_bound`` are :data:`~switchobs_core.observer.NOT_APPLICABLE`).
     """
     if rate is None:
-        raise InvalidArgument("a kalman gain table is a sampled filter: pass rate=HZ (--rate)")
+        raise InvalidArgument("a kalman gain table is a sampled filter: pass --rate HZ")
     if mode is None:
         mode = ("robust" if isinstance(schedule, RandomSchedule) else
                 "periodic" if isinstance(schedule, PeriodicSchedule) else "sequence")
     cycles = None if mode == "robust" else list(schedule.cycles)
-    e0 = float(np.linalg.norm(np.asarray(xhat0, float) - np.asarray(x0, float))) if e0 is None else float(e0)
-    obs = SwitchedObserver(system, table, mode, cycles, x0=xhat0, t0=t0, e0=e0)
-    plant = Plant(system, x0, seed=seed, process_noise=process_noise, t0=t0)
+    obs = SwitchedObserver(system, table, mode, cycles, x0=xhat0, t0=t0, e0=e0, noise_max=noise_max)
+    plant = Plant(system, x0, seed=seed, process_noise=process_noise, t0=t0, extended=True)
+    vmax = None if noise_max is None else np.broadcast_to(np.asarray(noise_max, dtype=float), (system.N,))
     K = int(math.floor((t_end - t0) * rate + 1e-9))
     n, N = system.n, system.N
     t = t0 + np.arange(K + 1) / rate
-    X, Xh = np.empty((K + 1, n)), np.empty((K + 1, n))
+    X, Xh, err = np.empty((K + 1, n)), np.empty((K + 1, n)), np.empty((K + 1, n))
     ch, exact = np.empty(K + 1, dtype=int), np.empty(K + 1)
+    noise_b = None if noise_max is None else np.empty(K + 1)
+    z, paper = np.empty((N, K + 1)), np.empty(K + 1)
+    ys = []
     for k, tk in enumerate(t):
         uk = _u_at(u, tk, plant.B.shape[1])
         X[k] = plant.advance(tk, uk)
         ch[k] = c = schedule.channel_at(tk)
-        Xh[k] = obs.update(tk, c, plant.measure(c, noise_std), u=uk)
-        exact[k] = obs.envelope().exact_bound
+        y = plant.measure(c, noise_std, noise_max=None if vmax is None else float(vmax[c - 1]))
+        ys.append(y)
+        Xh[k] = xh = obs.update(tk, c, y, u=uk)
+        err[k] = np.asarray(xh - plant.x_extended, dtype=float)
+        env = obs.envelope()
+        exact[k], z[:, k], paper[k] = env.exact_bound, env.z, env.paper_bound
+        if noise_b is not None:
+            noise_b[k] = env.noise_bound
     T_o = [system.decomposition(i + 1).T_o for i in range(N)]
-    err = Xh - X
     sw = t[np.r_[True, ch[1:] != ch[:-1]]]
     ends = t[1:][(ch[1:] == 1) & (ch[:-1] != 1)]
-    na = np.full(K + 1, NOT_APPLICABLE)
-    return SimulationResult(t=t, x=X, x_hat=Xh, error=err, channel=ch, z=np.full((N, K + 1), NOT_APPLICABLE),
-                            paper_bound=na, exact_bound=exact,
+    return SimulationResult(t=t, x=X, x_hat=Xh, error=err, channel=ch, z=z, paper_bound=paper, exact_bound=exact,
                             xo_norms=np.stack([np.linalg.norm(err @ Ti, axis=1) for Ti in T_o]),
                             switching_times=sw, cycle_ends=ends, alpha=float(system.alpha), e0=e0, rate=rate,
-                            family=obs.family)
+                            family=obs.family, y=ys, noise_bound=noise_b,
+                            noisy=bool(noise_std) or bool(np.any(plant.Qc)))
 
 
-def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, process_noise, seed):
-    """Joint (x, x_hat) propagation between grid points and switching instants."""
+def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, process_noise, seed, e0):
+    """Joint (x, x_hat) propagation between grid points and switching instants, with the exact
+    bound of the *computed* pair.
+
+    Bound (the argument of :mod:`switchobs_core.rounding` on the joint step): the computed pair
+    obeys ``z_{k+1} = fl(J~ z_k)`` with ``J~`` the computed ``e^{J dt}``; the exact joint map
+    keeps ``x_hat - x`` on ``e_{k+1} = E e_k`` (``E = e^{(A - L C) dt}``, the lower-right block
+    of ``e^{J dt}``, since ``J`` is block triangular). Hence the computed difference obeys
+    ``e_{k+1} = H~ e_k + r_k`` with ``H~`` the computed lower-right block and
+    ``||r_k|| <= sqrt(2) (eps_J + gamma_{2n+2} ||J~||_F) ||z_k|| + eps_J ||e_k||`` (``eps_J``
+    from :func:`~switchobs_core.rounding.expm_error`), plus the input's term; an
+    :class:`~switchobs_core.rounding.ErrorEllipsoid` keeps ``||e_k||``. The bound covers the
+    error column as computed (``x_hat - x`` rounded, a factor ``1 + 2u``): the difference between
+    the computed estimate and the computed plant that drives it.
+    """
     n, m = B.shape
     grid = t0 + dt_out * np.arange(int(math.floor((t_end - t0) / dt_out + 1e-9)) + 1)
     grid = np.union1d(grid[grid <= t_end], [s.t0 for s in segments] + [t_end])
@@ -444,6 +525,9 @@ def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, pro
     ch = np.empty(grid.size, dtype=int)
     cache: dict = {}
     si = 0
+    ell = ErrorEllipsoid(n, e0)
+    exact = np.empty(grid.size)
+    g2n, gm = gamma(2 * n + 2), gamma(m + 2)
     for k, tk in enumerate(grid):
         if k > 0:
             ta = grid[k - 1]
@@ -464,19 +548,30 @@ def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, pro
                     _, Qd = van_loan(J, Qj, dt)
                     w, V = np.linalg.eigh(Qd)
                     Lq = V * np.sqrt(np.clip(w, 0, None))
-                step = cache[key] = (Phi, Gam @ Bj, Lq)
-            Phi, GB, Lq = step
+                GB = Gam @ Bj
+                eps = expm_error(J, dt, Phi)
+                fGB = float(np.linalg.norm(GB))
+                # the input's effect on x_hat - x is 0 exactly; computed: the rows' difference,
+                # the expm model's error of Gamma and the rounding of GB u
+                du = float(np.linalg.norm(GB[n:] - GB[:n])) + (2 * EXPM_ULPS * (2 * n + m) * UNIT_ROUNDOFF + gm) * fGB
+                step = cache[key] = (Phi, GB, Lq, np.ascontiguousarray(Phi[n:, n:]), eps,
+                                     math.sqrt(2.0) * (eps + g2n * float(np.linalg.norm(Phi))), du)
+            Phi, GB, Lq, H, eps, rz, du = step
+            rho = rz * math.sqrt(float(zc @ zc)) + eps * ell.trace_bound()
             zc = Phi @ zc
             uk = _u_at(u, ta, m)
             if uk is not None:
                 zc += GB @ uk
+                rho += du * math.sqrt(float(uk @ uk))
             if Lq is not None:
                 zc += Lq @ rng.standard_normal(2 * n)
+            ell.step(H, rho * (1.0 + gamma(8)))
         while si + 1 < len(segments) and segments[si + 1].t0 <= tk:
             si += 1
         out[k] = zc
         ch[k] = segments[si].channel
-    return grid, out[:, :n], out[:, n:], ch
+        exact[k] = ell.bound() * (1.0 + 2.0 * UNIT_ROUNDOFF)
+    return grid, out[:, :n], out[:, n:], ch, exact
 
 
 def _simulate_sampled(A, B, C, segments, x0, xhat0, t0, t_end, rate, u, process_noise,

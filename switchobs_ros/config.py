@@ -54,6 +54,9 @@ PARAMS = [
           "Kalman families (< 0: the system's noise: section, or 1 mm)."),
     Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
           "section, or 0.01)."),
+    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row (< 0: none). With it "
+          "~/envelope gets a last element noise_bound, a guarantee under any noise within the bound; without it "
+          "exact_bound is the noise-free bound (a guarantee only for noise-free measurements)."),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
@@ -158,6 +161,7 @@ class EstimatorConfig:
     rows: tuple
     family: str
     noise: NoiseModel
+    noise_max: float | None
     rate: float
     publish_covariance: bool
     child_frames: tuple[str, ...]
@@ -215,12 +219,15 @@ class EstimatorConfig:
         if not (math.isfinite(rate) and rate >= 0):
             raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
         noise = noise_from_params(values, sys_)
+        vmax = float(values["noise.max"])
+        if not math.isfinite(vmax) or vmax > MAX_ABS_SAMPLE:
+            raise ConfigError(f"parameter 'noise.max' must be a finite number (< 0: no declared bound); got {vmax}")
         bodies = [b.name for b in mb.bodies(sys_.state_labels)]
         frames = values["body_frames"]
         if frames and len(frames) != len(bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
         return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
-                   rows=tuple(rows), family=family, noise=noise, rate=rate,
+                   rows=tuple(rows), family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
                    child_frames=tuple(frames) if frames else tuple(bodies))

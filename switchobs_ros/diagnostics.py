@@ -119,8 +119,12 @@ class EstimatorDiagnostics:
             env = obs.envelope()
             pl = self.pipeline
             ob += [kv("paper bound", env.paper_bound),
-                   kv("exact bound", env.exact_bound if pl.bound_valid else "none (after a reset)"),
+                   kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
+                      env.exact_bound if pl.bound_valid else "none (after a reset)"),
                    kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
+            if env.noise_bound is not None:
+                ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
+                             env.noise_bound if pl.bound_valid else "none (after a reset)"))
         level, msg = DiagnosticStatus.OK, "estimating"
         if pl.last_accept_clock_ns is None:
             level, msg = DiagnosticStatus.WARN, "waiting for measurements"

@@ -120,7 +120,7 @@ class EstimatorNode(Node):
         self.bodies = mb.bodies(sys_.state_labels)
         self.child_frames = list(conf.child_frames)
         self.state_labels = tuple(sys_.state_labels)
-        self.env_labels = mb.envelope_labels(sys_.N)
+        self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
         self.frame = cfg["world_frame"]
         self.w_state = mb.LabelledArrayWriter(self.state_labels)
         self.w_env = mb.LabelledArrayWriter(self.env_labels)

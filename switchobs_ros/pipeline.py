@@ -217,7 +217,8 @@ class EstimatorPipeline:
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
                                         e0=conf["e0"], bounds=conf.robust, family=fam,
                                         noise=None if table.family == "kalman" and fam is None else conf.noise,
-                                        track_covariance=conf.publish_covariance if lmi else None)
+                                        track_covariance=conf.publish_covariance if lmi else None,
+                                        noise_max=conf.noise_max)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         pipe = cls(sys_, table, observer, x0=conf.x0, rows=list(conf.rows), input_frame_id=conf["input_frame_id"],
@@ -342,9 +343,11 @@ class EstimatorPipeline:
                 self.partial_updates += 1
             try:
                 env = self.observer.envelope()
-                env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]])
+                env_vals = np.concatenate([env.z, [env.paper_bound, env.exact_bound]]
+                                          + ([] if env.noise_bound is None else [[env.noise_bound]]))
             except (np.linalg.LinAlgError, ArithmeticError, ValueError):
-                env_vals = np.full(self.N + 2, np.nan)     # e.g. the SVD of an overflowed Phi
+                # e.g. the SVD of an overflowed Phi
+                env_vals = np.full(self.N + 2 + (self.observer.noise_max is not None), np.nan)
         if not (np.isfinite(x_hat).all() and np.isfinite(env_vals).all()):
             # e.g. a gap so long that the exact step of an unstable system overflows: never
             # publish it; start again from the initial estimate at the next sample
@@ -357,7 +360,7 @@ class EstimatorPipeline:
         if self.observer.residence_violations != violations:     # the residence that ended at t
             self.log.warn(self.observer.residence_problem, throttle=True)
         if not self.bound_valid:
-            env_vals[-1] = NO_BOUND
+            env_vals[self.N + 1:] = NO_BOUND      # exact_bound (and noise_bound)
         P = self.observer.P if self.publish_covariance else None
         if P is not None and not np.isfinite(P).all():
             P = None

@@ -78,7 +78,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         storage = storage or bag.storage or "mcap"
     sys_ = pl.system
     state_labels = tuple(sys_.state_labels)
-    env_labels = mb.envelope_labels(sys_.N)
+    env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
     bodies = mb.bodies(state_labels)
     frames = list(cfg["body_frames"]) or [b.name for b in bodies]
     if len(frames) != len(bodies):

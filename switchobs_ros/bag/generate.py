@@ -51,6 +51,12 @@ class GenerateConfig:
     clock_start: float = 1.0
     world_frame: str = "map"
     camera_body: str = "camera"
+    #: generator only (camera_sim has neither): clip the noise to +-noise_max per row (< 0: no clip),
+    #: the bounded noise a declared ``noise.max`` of the estimator covers
+    noise_max: float = -1.0
+    #: generator only: the plant in extended precision (``Plant(extended=True)``), so that
+    #: ``/sim/truth`` is the exact state rounded once: the reference for long checks of the bounds
+    extended: bool = False
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -75,7 +81,8 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         x0 = cfg.initial_state or (DEFAULT_X0 if sys_.n == len(DEFAULT_X0) else (0.0,) * sys_.n)
         if len(x0) != sys_.n:
             raise BagError(f"initial state has {len(x0)} values; the system has n = {sys_.n}")
-        plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg.seed, process_noise=cfg.process_noise)
+        plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg.seed, process_noise=cfg.process_noise,
+                      extended=cfg.extended)
     except (SwitchobsError, ConfigError) as err:
         raise BagError(str(err)) from None
     rng = np.random.default_rng(cfg.seed + 1)
@@ -91,7 +98,8 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         rho = int(schedule.channel_at(t))
         y = plant.measure(rho, noise_std=0.0)
         if cfg.noise_std > 0:
-            y = y + cfg.noise_std * rng.standard_normal(y.shape)
+            v = cfg.noise_std * rng.standard_normal(y.shape)
+            y = y + (np.clip(v, -cfg.noise_max, cfg.noise_max) if cfg.noise_max >= 0 else v)
         (cx, cy), (tx, ty) = rows[rho - 1]
         yield stamp_ns, [
             ("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns))),

@@ -20,6 +20,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=30.0, help="simulated seconds (default 30)")
     p.add_argument("--noise", type=float, default=0.0, help="measurement noise std (m)")
     p.add_argument("--process-noise", type=float, default=0.0)
+    p.add_argument("--noise-max", type=float, default=-1.0,
+                   help="clip the measurement noise to +-NOISE_MAX per row (bounded noise; default: no clip)")
+    p.add_argument("--extended-truth", action="store_true",
+                   help="simulate the plant in extended precision: /sim/truth is the exact state rounded once "
+                        "(the reference for long checks of the exact bound)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--initial-state", default="", help="comma-separated x(0) (default: camera_sim's scene)")
     p.add_argument("--clock-start", type=float, default=1.0, help="stamp of tick 0 in seconds (default 1.0)")
@@ -31,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     x0 = tuple(float(v) for v in a.initial_state.split(",")) if a.initial_state else ()
     cfg = GenerateConfig(schedule=a.schedule, rate=a.rate, duration=a.duration, noise_std=a.noise,
-                         process_noise=a.process_noise, seed=a.seed, initial_state=x0, system=a.system,
+                         process_noise=a.process_noise, seed=a.seed, noise_max=a.noise_max,
+                         extended=a.extended_truth, initial_state=x0, system=a.system,
                          clock_start=a.clock_start)
     res = generate(a.out, cfg, a.storage)
     print(f"wrote {res['path']} ({res['storage']}): {res['ticks']} ticks, {res['messages']} messages, "

@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ..report import load_report, plot_report, summary_table
 
 __all__ = ["register", "run"]
@@ -30,10 +32,17 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     if a.summary:
         Path(a.summary).write_text(text + "\n")
     if a.json:
-        print(json.dumps({"passes": [{"estimates": len(p.t), "initial_error": p.e_first, "final_error": p.e_final,
+        def fin(v: float) -> float | None:     # JSON has no NaN: no truth, no number
+            return float(v) if np.isfinite(v) else None
+
+        print(json.dumps({"passes": [{"estimates": len(p.t), "initial_error": fin(p.e_first),
+                                      "final_error": fin(p.e_final),
                                       "final_exact_bound": float(p.exact[-1]),
+                                      "exact_bound_violations": p.violations(p.exact),
+                                      "final_noise_bound": None if p.noise is None else fin(p.noise[-1]),
+                                      "noise_bound_violations": p.violations(p.noise),
                                       "final_paper_bound": float(p.paper[-1]),
-                                      "contraction": p.contraction} for p in rep.passes],
+                                      "contraction": [fin(c) for c in p.contraction]} for p in rep.passes],
                           "rejected": rep.rejected, "png": a.out}))
     else:
         print(text)
