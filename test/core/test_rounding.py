@@ -28,19 +28,28 @@ def test_expm_extended_and_error_bound(paper):
         assert expm_error(paper.A, dt, Phi, check=False) >= diff
 
 
+def _random_start(seed: int, n: int = 5, e0: float = 0.7):
+    """(rng, n, ellipsoid with S_0 = e0^2 I, an initial error of norm e0)."""
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal(n)
+    return rng, n, ErrorEllipsoid(n, e0), e * (e0 / np.linalg.norm(e))
+
+
+def _random_step(rng, n: int, rho: float):
+    """A random error map (contracting or expanding) and a residual of norm rho."""
+    M = rng.standard_normal((n, n)) * rng.uniform(0.1, 1.2) / np.sqrt(n)
+    r = rng.standard_normal(n)
+    return M, rho * r / np.linalg.norm(r)
+
+
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), steps=st.integers(1, 30), rho=st.floats(0.0, 1e-3))
 def test_ellipsoid_contains_every_reachable_error(seed, steps, rho):
     """Property: e <- M e + r with ||r|| <= rho, ||e_0|| <= e0: ||e_k|| <= bound() at every step."""
-    rng = np.random.default_rng(seed)
-    n, e0 = 5, 0.7
-    ell = ErrorEllipsoid(n, e0)
-    e = rng.standard_normal(n)
-    e *= e0 / np.linalg.norm(e)
+    rng, n, ell, e = _random_start(seed)
     for _ in range(steps):
-        M = rng.standard_normal((n, n)) * rng.uniform(0.1, 1.2) / np.sqrt(n)
-        r = rng.standard_normal(n)
-        e = M @ e + rho * r / np.linalg.norm(r)
+        M, r = _random_step(rng, n, rho)
+        e = M @ e + r
         ell.step(M, rho)
         assert np.linalg.norm(e) <= ell.bound()
 
@@ -106,19 +115,14 @@ def test_zero_initial_error_bound_is_not_zero(paper, lmi_table):
 def test_shaped_ellipsoid_contains_every_noisy_error(seed, steps, rho, c, p):
     """Property: e <- M e + G v + r with ||v||^2 <= c, ||r|| <= rho: ||e_k|| <= bound() at every
     step, with v at the extremes (the worst case for a fixed direction)."""
-    rng = np.random.default_rng(seed)
-    n, e0 = 5, 0.7
-    ell = ErrorEllipsoid(n, e0)
-    e = rng.standard_normal(n)
-    e *= e0 / np.linalg.norm(e)
+    rng, n, ell, e = _random_start(seed)
     for _ in range(steps):
-        M = rng.standard_normal((n, n)) * rng.uniform(0.1, 1.2) / np.sqrt(n)
+        M, r = _random_step(rng, n, rho)
         G = rng.standard_normal((n, p))
         # the worst v for this step: along the top right singular vector of G, aligned with M e
         v = np.linalg.svd(G)[2][0]
         v *= np.sqrt(c) * np.sign(float((G @ v) @ (M @ e)) or 1.0)
-        r = rng.standard_normal(n)
-        e = M @ e + G @ v + rho * r / np.linalg.norm(r)
+        e = M @ e + G @ v + r
         ell.step_shaped(M, rho, G, c)
         assert np.linalg.norm(e) <= ell.bound()
 
