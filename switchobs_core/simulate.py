@@ -408,7 +408,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     if need > MAX_RESULT_BYTES:
         raise InvalidArgument(f"simulate would hold {need / 2**30:.2f} GiB of results for t_end - t0 = "
                               f"{t_end - t0:g} s ({pts:.0f} output points; limit {MAX_RESULT_BYTES / 2**30:.0f} GiB): "
-                              "shorten t_end, lower the rate or raise dt_out")
+                              "shorten the run (--t-end) or lower the rate (--rate); from Python also raise dt_out")
     # e0: the computed ||xhat0 - x0|| inflated by its own rounding, so that it bounds the true one
     e0 = float(np.linalg.norm(xhat0 - x0)) * (1.0 + gamma(n + 3)) if e0 is None else float(e0)
     if noise_max is not None and (rate is None or hold != "innovation"):

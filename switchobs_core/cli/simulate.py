@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,11 +12,14 @@ from ..errorfigs import plot_result
 from ..exceptions import InvalidArgument
 from ..gains import GainTable
 from ..scenarios import load_system
-from ..schedule import parse_schedule
+from ..schedule import RandomSchedule, parse_schedule
 from ..simulate import simulate
 from ._common import fmt_table, print_json
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "warn_a2"]
+
+#: Figure formats ``--plot`` writes (matplotlib's, by file name).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff", ".webp")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,12 +56,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def warn_a2(schedule, table) -> None:
+    """A warning on stderr where a random schedule's residence times leave the robust design's
+    box (assumption A2): the paper's envelope does not cover them (the exact bound still holds:
+    it follows the gains actually applied)."""
+    box = getattr(getattr(table, "robust", None), "h_bounds", None)
+    if isinstance(schedule, RandomSchedule) and box is not None:
+        lo, hi = box
+        if schedule.h_min < lo * (1 - 1e-9) or schedule.h_max > hi * (1 + 1e-9):
+            print(f"warning: --schedule draws residence times in [{schedule.h_min:g}, {schedule.h_max:g}] s, "
+                  f"outside the table's robust box [{lo:g}, {hi:g}] s (assumption A2): the paper's envelope "
+                  "does not cover them; the exact bound still holds", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     table = GainTable.load(args.table, system=system)
     schedule = parse_schedule(args.schedule, N=system.N)
-    if args.t_end <= 0:
+    if not args.t_end > 0:
         raise InvalidArgument(f"--t-end must be > 0; got {args.t_end}")
+    if args.plot is not None and args.plot.suffix.lower() not in PLOT_SUFFIXES:
+        raise InvalidArgument(f"--plot {args.plot}: the figure's file name must end in one of "
+                              f"{', '.join(PLOT_SUFFIXES)}")
+    warn_a2(schedule, table)
     rng = np.random.default_rng(args.seed)
     x0 = rng.standard_normal(system.n)
     xhat0 = x0 + args.e0 * rng.standard_normal(system.n)
@@ -96,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     viol = summ["envelope_violations"]
     if viol is not None:
         print("paper's envelopes z_i exceeded at "
-              + ", ".join(f"{v} of {len(res.t)} times (max ratio {r:.3f}) for i = {i + 1}"
+              + ", ".join(f"{v} of {len(res.t)} times (max ratio {r:.4g}) for i = {i + 1}"
                           for i, (v, r) in enumerate(zip(viol, summ["max_envelope_ratio"]))))
     if "plot" in summ:
         print(f"figure: {summ['plot']}")

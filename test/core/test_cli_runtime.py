@@ -90,3 +90,33 @@ def test_simulate_guaranteed_column_holds_or_is_labelled_noise_free(table_path, 
     else:
         assert guaranteed in status and "verified at all" in status
         assert all(float(r[2]) <= float(r[3]) for r in rows)
+
+
+def test_simulate_plot_name_checked_up_front(table_path, capsys, tmp_path):
+    """--plot with a file name matplotlib cannot write: one line, exit 2, before any simulation."""
+    assert main(["simulate", "paper", "--table", str(table_path), "--plot", str(tmp_path / "x.txt")]) == 2
+    err = capsys.readouterr().err
+    assert "--plot" in err and ".png" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.txt").exists()
+
+
+def test_simulate_zero_initial_error_bound_is_the_rounding_floor(table_path, capsys):
+    """--e0 0: the estimate starts at the truth; the guaranteed bound is the rounding's, not 0,
+    and never below the computed error (it was 0 below an error of 5.8e-15)."""
+    argv = ["simulate", "paper", "--table", str(table_path), "--t-end", "10", "--rate", "100", "--e0", "0", "--json"]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["e0"] == 0 and s["exact_bound_violations"] == 0
+    assert 0 < s["final_error"] < s["final_exact_bound"] < 1e-6
+
+
+def test_simulate_warns_when_a_random_schedule_breaks_a2(paper, tmp_path, capsys):
+    """A random schedule whose residence times leave the table's robust box: a warning naming both."""
+    path = tmp_path / "robust.json"
+    paper_table(paper, robust=(0.8, 1.2)).save(path)
+    base = ["simulate", "paper", "--table", str(path), "--t-end", "6"]
+    assert main(base + ["--schedule", "random:0.5,1.5"]) == 0
+    err = capsys.readouterr().err
+    assert "A2" in err and "[0.5, 1.5]" in err and "[0.8, 1.2]" in err
+    assert main(base + ["--schedule", "random:0.9,1.1"]) == 0
+    assert "A2" not in capsys.readouterr().err
