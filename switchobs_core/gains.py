@@ -63,6 +63,7 @@ from ._version import __version__
 from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument, SwitchobsError
 from .kalman import KalmanDesign
+from .loading import check_json_depth, read_text
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 
 if TYPE_CHECKING:
@@ -369,6 +370,11 @@ class GainTable:
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
+            # mkstemp makes the file 0600: give it the mode open() would (0666 less the umask),
+            # so that a service running as another user can read the table
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -382,6 +388,7 @@ class GainTable:
         def _reject_constant(name: str) -> float:
             raise GainTableError(f"{source}: contains a non-finite number ({name})")
 
+        check_json_depth(text, source, GainTableError)
         try:
             data = json.loads(text, parse_constant=_reject_constant)
         except json.JSONDecodeError as err:
@@ -399,6 +406,9 @@ class GainTable:
             )
         digest = data.pop("payload_sha256", None)
         _check_finite(data, source)
+        if digest is None:
+            raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written "
+                                 "by switchobs design, or was edited; design it again")
         if digest != cls._digest(data):
             raise GainTableError(
                 f"{source}: checksum mismatch: the file was modified or corrupted after it was written"
@@ -433,12 +443,9 @@ class GainTable:
     def load(cls, path: str | Path, *, system: LTISystem | None = None) -> GainTable:
         """Read and check a table file; with ``system``, also that it was made for it."""
         path = Path(path)
-        try:
-            text = path.read_text()
-        except FileNotFoundError:
-            raise GainTableError(f"gain table {path} does not exist (make one with `switchobs design`)") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise GainTableError(f"cannot read gain table {path}: {err}") from None
+        if not path.exists():
+            raise GainTableError(f"gain table {path} does not exist (make one with `switchobs design`)")
+        text = read_text(path, "gain table", GainTableError)
         return cls.from_json(text, source=str(path), system=system)
 
     def check_system(self, system: LTISystem, *, source: str = "gain table") -> None:

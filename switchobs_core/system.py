@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 
 from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposition
 from .exceptions import InvalidSystem, UnobservableSystem
+from .loading import check_file_matrix, parse_yaml, read_text
 from .validation import as_matrix
 
 __all__ = ["LTISystem", "ChannelInfo", "read_spec"]
@@ -269,11 +270,18 @@ class LTISystem:
         if not isinstance(chans, list):
             raise InvalidSystem(f"{source}: 'channels' must be a list of mappings with a 'C' entry")
         Cs, names, outs = [], [], []
+        check_file_matrix(spec["A"], f"{source}: A", InvalidSystem)
+        if spec.get("B") is not None:
+            check_file_matrix(spec["B"], f"{source}: B", InvalidSystem)
         for i, ch in enumerate(chans):
             if not isinstance(ch, dict) or "C" not in ch:
                 raise InvalidSystem(f"{source}: channels[{i}] must be a mapping with a 'C' entry")
+            check_file_matrix(ch["C"], f"{source}: channels[{i}].C", InvalidSystem)
             Cs.append(ch["C"])
-            names.append(str(ch.get("name", f"channel{i + 1}")))
+            name = str(ch.get("name", f"channel{i + 1}"))
+            if name in names:
+                raise InvalidSystem(f"{source}: channels[{i}]: duplicate channel name '{name}' (names must be unique)")
+            names.append(name)
             outs.append(ch.get("outputs"))
         output_labels = None
         if all(o is not None for o in outs):
@@ -313,14 +321,5 @@ class LTISystem:
 
 def read_spec(path: str | Path) -> Any:
     """The parsed YAML mapping of a system file (schema in the module docstring)."""
-    import yaml
-
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise InvalidSystem(f"cannot read system file {path}: {err.strerror}") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise InvalidSystem(f"{path}: not valid YAML ({err})") from None
+    text = read_text(path, "system file", InvalidSystem)
+    return parse_yaml(text, str(path), InvalidSystem)

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 import msg_bridge as mb
+from switchobs_core.loading import parse_yaml, read_text
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
 from switchobs_core.schedule import Cycle
@@ -133,10 +133,7 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
         cfg[name] = v
 
     for f in params_files:
-        try:
-            doc = yaml.safe_load(Path(f).read_text()) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise ConfigError(f"params file {f}: {err}") from None
+        doc = parse_yaml(read_text(f, "params file", ConfigError), f"params file {f}", ConfigError) or {}
         for key in (node_name, "/" + node_name, "/**"):
             sect = doc.get(key) if isinstance(doc, dict) else None
             if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
