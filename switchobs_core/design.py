@@ -43,7 +43,7 @@ from .certificate import cycle_factor
 from .decomposition import Decomposition
 from .exceptions import DesignError, InfeasibleDesign, InvalidArgument, ScheduleError
 from .gains import ChannelGain, CycleDesign, GainTable
-from .schedule import Cycle
+from .schedule import Cycle, check_cycle_horizon
 from .synthesis import KAPPA_GRID, THETA_SLACK, KappaCurve, LMISynthesizer
 from .system import LTISystem
 from .validation import as_finite
@@ -230,6 +230,7 @@ class Designer:
             raise InvalidArgument(f"cycle must be a Cycle; got {type(cycle).__name__}")
         if cycle.N != self.system.N:
             raise ScheduleError(f"cycle {cycle.label()} has {cycle.N} channels; the system has {self.system.N}")
+        check_cycle_horizon(self.system.A, cycle)
 
     def _channel_gain(self, i: int, eta: float, eta_min: float | None, active: float, inactive: float) -> ChannelGain:
         ch = self.channels[i]
@@ -429,7 +430,7 @@ def _deltas(delta: float | Sequence[float], N: int) -> tuple[float, ...]:
     out = tuple(as_finite(v, "delta") for v in vals)
     for v in out:
         if not 0 < v < 1:
-            raise InvalidArgument(f"delta must lie in (0, 1) (Theorem t:main); got {v}")
+            raise InvalidArgument(f"delta must lie in (0, 1) (the paper's Theorem 2); got {v}")
     return out
 
 

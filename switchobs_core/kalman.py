@@ -54,7 +54,7 @@ from .riccati import (
     joseph,
     periodic_riccati,
 )
-from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule
+from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon
 
 __all__ = [
     "KalmanDesignError",
@@ -407,7 +407,10 @@ def design_kalman(
     if not isinstance(noise, NoiseModel):
         raise InvalidArgument(f"noise must be a NoiseModel; got {type(noise).__name__}")
     noise.check_system(system)
-    # 1. sample pattern
+    # 1. sample pattern (of cycles short enough to be represented, see check_cycle_horizon)
+    for c in [cycles] if isinstance(cycles, Cycle) else list(cycles):
+        if isinstance(c, Cycle):
+            check_cycle_horizon(system.A, c)
     pattern = sample_pattern(cycles, rate, max_repeat=max_repeat)
     # 2. detectability
     check_detectable(system, pattern)

@@ -21,6 +21,7 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -36,7 +37,24 @@ __all__ = [
     "parse_schedule",
     "CYCLE_RTOL",
     "CYCLE_ATOL",
+    "MAX_NORM_TAU",
+    "check_cycle_horizon",
 ]
+
+#: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the transition over one cycle,
+#: e:PhiK) leaves double precision (``e^709`` overflows), and designs and certificates computed
+#: from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
+MAX_NORM_TAU = 600.0
+
+
+def check_cycle_horizon(A: Any, cycle: Cycle, what: str = "--cycle") -> None:
+    """Refuse a cycle too long for the system to be represented in floating point
+    (``||A||_2 tau > MAX_NORM_TAU``), naming the longest tau that works."""
+    nA = float(np.linalg.norm(np.asarray(A, dtype=float), 2))
+    if nA * cycle.tau > MAX_NORM_TAU:
+        raise ScheduleError(f"{what} {cycle.label()}: tau = {cycle.tau:g} s is too long for this system: the "
+                            f"transition over one cycle, e^(A tau) with ||A|| = {nA:.3g}, leaves double precision; "
+                            f"use tau <= {MAX_NORM_TAU / nA:.4g} s")
 
 #: Default tolerance of :meth:`Cycle.matches` (relative, absolute in seconds).
 CYCLE_RTOL = 1e-6

@@ -22,6 +22,7 @@ Time: tick k is at plant time ``k / rate`` and stamp ``epoch + k / rate``. Witho
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
@@ -63,7 +64,8 @@ PARAMS = [
     Param("seed", 0, "Seed of all noise draws."),
     Param("world_frame", "map", "header.frame_id of the published poses."),
     Param("camera_body", "camera", "Name of the camera body in the system's output labels."),
-    Param("duration", 0.0, "Simulated seconds to run, then exit 0 (0: forever)."),
+    Param("duration", 0.0, "Simulated seconds to run, then exit 0 (> 0; 0, the default, explicitly means: until "
+          "stopped; negative values are refused)."),
     Param("publish_clock", False, "Publish /clock and run on that simulated clock (see time_scale)."),
     Param("time_scale", 1.0, "With publish_clock: simulated seconds per wall-clock second."),
     Param("clock_start", 1.0, "With publish_clock: the simulated clock's value at tick 0 (s, > 0)."),
@@ -92,8 +94,15 @@ class CameraSimNode(Node):
                 raise ConfigError(f"parameter 'schedule.mode' must be periodic, sequence or random; got '{mode}'")
         except SwitchobsError as err:
             raise ConfigError(f"schedule: {err}") from None
-        if not cfg["rate"] > 0:
-            raise ConfigError(f"parameter 'rate' must be > 0; got {cfg['rate']}")
+        for name, lo in (("rate", "> 0"), ("duration", ">= 0"), ("noise_std", ">= 0"), ("process_noise", ">= 0"),
+                         ("time_scale", "> 0"), ("clock_start", "> 0")):
+            v = cfg[name]
+            ok = math.isfinite(v) and (v > 0 if lo == "> 0" else v >= 0)
+            if not ok:
+                raise ConfigError(f"parameter '{name}' must be a finite number {lo}; got {v}"
+                                  + (" (0 runs until stopped)" if name == "duration" else ""))
+        if not cfg["world_frame"]:
+            raise ConfigError("parameter 'world_frame' must not be empty")
         x0 = cfg["initial_state"]
         if not x0:
             x0 = DEFAULT_X0 if sys_.n == len(DEFAULT_X0) else (0.0,) * sys_.n

@@ -124,6 +124,9 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
                 raise ConfigError(f"{where}: parameter '{name}' must be a list")
             item = known[name].item or (type(d[0]) if d else float)
             v = tuple(num(x, item is float) for x in v)
+            if d and not v:
+                raise ConfigError(f"{where}: parameter '{name}' is empty; give at least one value, or leave it out "
+                                  f"for the default {list(d)}")
         elif isinstance(d, float):
             v = num(v, True)
         elif isinstance(d, str) and v is None:
@@ -216,6 +219,8 @@ class EstimatorConfig:
         if not (math.isfinite(rate) and rate >= 0):
             raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
         noise = noise_from_params(values, sys_)
+        if not values["world_frame"]:
+            raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
         vmax = float(values["noise.max"])
         if not math.isfinite(vmax) or vmax > MAX_ABS_SAMPLE:
             raise ConfigError(f"parameter 'noise.max' must be a finite number (< 0: no declared bound); got {vmax}")

@@ -75,6 +75,26 @@ class Param:
         return _TYPE_NAMES[self.type]
 
 
+def _coerce_override(overrides: dict, p: Param) -> None:
+    """Make harmless overrides fit the declared type, refuse empty ones (one line each):
+
+    - an integer for a double parameter (``-p e0:=5``), or integers for a double array, is
+      the same number: it is converted instead of refused;
+    - an empty list (``tau: []`` in a params file, which rcl reads as "not set") for a
+      parameter whose default is not empty is refused, not silently replaced by the default.
+    """
+    ov = overrides.get(p.name)
+    if ov is None:
+        return
+    if ov.type_ == Parameter.Type.NOT_SET and isinstance(p.default, tuple) and p.default:
+        raise ConfigError(f"parameter '{p.name}' is empty; give at least one value, or leave it out for the "
+                          f"default {list(p.default)}")
+    if p.type == ParameterType.PARAMETER_DOUBLE and ov.type_ == Parameter.Type.INTEGER:
+        overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(ov.value))
+    elif p.type == ParameterType.PARAMETER_DOUBLE_ARRAY and ov.type_ == Parameter.Type.INTEGER_ARRAY:
+        overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in ov.value])
+
+
 def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
     """Declare ``params`` on ``node``; return ``{name: value}``.
 
@@ -86,7 +106,9 @@ def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
         ignored silently).
     """
     values: dict[str, Any] = {}
+    overrides = getattr(node, "_parameter_overrides", None) or {}
     for p in params:
+        _coerce_override(overrides, p)
         desc = ParameterDescriptor(name=p.name, type=p.type, description=p.description,
                                    read_only=p.read_only)
         try:
@@ -112,7 +134,6 @@ def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
         if isinstance(p.default, tuple):
             v = tuple(v)
         values[p.name] = v
-    overrides = getattr(node, "_parameter_overrides", {}) or {}
     declared = {p.name for p in params} | {"use_sim_time", "start_type_description_service"}
     unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides."))
     if unknown:

@@ -2,9 +2,10 @@
 
 ``rclpy.init``, build the node, spin; Ctrl-C or an external shutdown ends it with exit code 0; a
 bad configuration (:class:`~switchobs_ros.params.ConfigError`, a parameter of the wrong type)
-prints one line, ``<prog>: error: ...``, and exits 2. A second signal during the clean-up (or one
-that arrives before the spin) must not turn the exit into a traceback or a death by SIGINT: the
-clean-up swallows KeyboardInterrupt.
+prints one line, ``<prog>: error: ...``, and exits 2. A signal while the node is still being
+built (its context shut down under it) is a stop as well: exit 0, no traceback. A second signal
+during the clean-up (or one that arrives before the spin) must not turn the exit into a traceback
+or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 """
 
 from __future__ import annotations
@@ -43,6 +44,12 @@ def run_node(node_cls, prog: str, args=None) -> int:
     except (ConfigError, ParameterException) as err:
         print(f"{prog}: error: {one_line(err)}", file=sys.stderr)
         code = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a signal during start-up shut the context down under the node's constructor (e.g.
+        # "failed to create timer: context is not valid"): that is a stop, not an error
+        code = 0
     finally:
         try:
             if node is not None:

@@ -14,6 +14,7 @@ Initialisation as in the paper: ``x_hat(0) = x(0) + 0.1 randn`` (seeded), ``e0 =
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 
+from switchobs_core.cli._common import OneLineParser
 from switchobs_ros.core_config import DEFAULT_X0
 from tools.domain import claim_domain
 from tools.launch import Collector, NodeProcess, ros_args
@@ -44,6 +46,10 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
         lease = claim_domain()
         os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    if not quiet:
+        dom = os.environ["ROS_DOMAIN_ID"]
+        print(f"demo: ROS_DOMAIN_ID={dom} (to watch from another shell: export ROS_DOMAIN_ID={dom} "
+              "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)", flush=True)
     out = Path(out) if out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
@@ -74,11 +80,14 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
                 raise RuntimeError("estimator did not come up within 120 s")
         cam = NodeProcess("camera_sim", ros_args(params=cam_params), log=logs / "camera_sim.log")
         t_wall = time.monotonic()
+        live = _LiveRows(sched, e0, quiet, noise_std)
         while cam.alive():
             rclpy.spin_once(node, timeout_sec=0.05)
+            live.update(node)
         t_end = time.monotonic() + 1.0
         while time.monotonic() < t_end:  # the last answers
             rclpy.spin_once(node, timeout_sec=0.05)
+        live.update(node, final=True)
         wall = time.monotonic() - t_wall
         if cam.proc.returncode != 0:
             raise RuntimeError(f"camera_sim exited with {cam.proc.returncode}:\n{cam.output()}")
@@ -126,20 +135,61 @@ def _cycle_ends(sched: dict, t_end: float) -> list[float]:
         k += 1
 
 
+class _LiveRows:
+    """One line per switching cycle while the demo runs (printed once the cycle's end is past in
+    the truth stream and its estimate has arrived)."""
+
+    def __init__(self, sched: dict, e0: float, quiet: bool, noise: float):
+        self.sched, self.e0, self.quiet, self.noise = sched, e0, quiet, noise
+        self.done = 0
+        self.t0: int | None = None
+
+    def update(self, node: Collector, final: bool = False) -> None:
+        if self.quiet:
+            return
+        truth, state, env = node.data["/sim/truth"], node.data["/estimator/state"], node.data["/estimator/envelope"]
+        if not truth or not state:
+            return
+        if self.t0 is None:
+            self.t0 = min(truth)
+            print(f"initial error ||x_hat(0) - x(0)|| = {self.e0:.4f} (known here because the simulation knows "
+                  "x(0); on a robot e0 is a declared bound)")
+            if self.noise > 0:
+                print(f"measurement noise std {self.noise:g}: the exact bound is the noise-free bound, printed for "
+                      "reference, not as a guarantee")
+            print(f"{'cycle':>5} {'t [s]':>7} {'||x_hat - x||':>14} {'relative':>10} {'paper bound':>12} "
+                  f"{'exact bound':>12}", flush=True)
+        latest = (max(state) - self.t0) * 1e-9
+        ends = _cycle_ends(self.sched, latest + (1.0 if final else 0.0))
+        for te in ends[self.done:]:
+            if not final and te > latest - 0.05:
+                break
+            s = self.t0 + round(te * 1e9)
+            stamps = [x for x in state if x <= s and x in truth]
+            if not stamps:
+                break
+            s = max(stamps)
+            err = float(np.linalg.norm(state[s] - truth[s]))
+            e = env.get(s, np.full(4, np.nan))
+            self.done += 1
+            print(f"{self.done:>5} {(s - self.t0) * 1e-9:>7.2f} {err:>14.3e} {err / self.e0:>10.2e} "
+                  + (f"{e[-2]:>12.3e}" if e[-2] > 0 else f"{'n/a':>12}") + f" {e[-1]:>12.3e}", flush=True)
+
+
 def _report(res: dict, sched: dict) -> None:
     t, err = res["t"], res["err"]
-    print(f"switchobs demo: schedule {res['schedule']}, {res['duration']:g} s simulated in {res['wall']:.1f} s "
-          f"wall ({res['rate']:g} Hz); {res['n_state']} estimates for {res['n_truth']} truth samples")
-    print(f"initial error ||x_hat(0) - x(0)|| = {res['e0']:.4f}")
-    if res.get("noise", 0.0) > 0:
-        print(f"measurement noise std {res['noise']:g}: the exact bound assumes noise-free samples, so it is "
-              "printed for reference, not as a guarantee")
-    print(f"{'cycle':>5} {'t [s]':>7} {'||x_hat - x||':>14} {'relative':>10} {'paper bound':>12} {'exact bound':>12}")
-    for k, te in enumerate(_cycle_ends(sched, t[-1])):
-        i = min(np.searchsorted(t, te - 1e-9), len(t) - 1)
-        print(f"{k + 1:>5} {t[i]:>7.2f} {err[i]:>14.3e} {err[i] / res['e0']:>10.2e} "
-              + (f"{res['paper'][i]:>12.3e}" if res['paper'][i] > 0 else f"{'n/a':>12}") + f" {res['exact'][i]:>12.3e}")
+    print(f"switchobs demo: schedule {_schedule_text(res['schedule'], sched)}, {res['duration']:g} s simulated in "
+          f"{res['wall']:.1f} s wall ({res['rate']:g} Hz); {res['n_state']} estimates for {res['n_truth']} truth "
+          "samples")
     print(f"final: t = {t[-1]:.2f} s, ||x_hat - x|| = {err[-1]:.3e} ({err[-1] / res['e0']:.2e} of the initial error)")
+
+
+def _schedule_text(name: str, sched: dict) -> str:
+    """``periodic (tau 2 s, s 0.6)`` / ``sequence ((4 s, 0.5), (3 s, 0.6), ...)``."""
+    pairs = list(zip(sched["schedule.tau"], sched["schedule.s"]))
+    if len(pairs) == 1:
+        return f"{name} (tau {pairs[0][0]:g} s, s {pairs[0][1]:g})"
+    return f"{name} (" + ", ".join(f"({t:g} s, {s:g})" for t, s in pairs) + ")"
 
 
 def _write(res: dict, out: Path, sched: dict) -> None:
@@ -183,19 +233,40 @@ def _write(res: dict, out: Path, sched: dict) -> None:
     ax.set_xlim(0, t[-1])
     ax.grid(True, which="major", alpha=0.4)
     ax.grid(True, which="minor", alpha=0.12)
-    ax.set_title(f"switchobs: estimator + camera_sim over DDS, {res['schedule']} schedule, "
-                 f"{res['rate']:g} Hz samples", fontsize=11)
+    ax.set_title(f"switchobs: estimator + camera_sim over DDS, {_schedule_text(res['schedule'], sched)} schedule, "
+                 f"{res['rate']:g} Hz samples", fontsize=10)
+    ax.text(0.99, 0.99, f"$e_0 = \\|\\hat x(0) - x(0)\\| = {res['e0']:.3g}$: the true initial error, known here "
+            "because\nthe simulation knows $x(0)$; on a robot $e_0$ is a declared bound", transform=ax.transAxes,
+            ha="right", va="top", fontsize=8, color="0.3")
     ax.legend(loc="lower left", fontsize=8.5, framealpha=0.95)
     fig.savefig(out / "error.png", dpi=130)
     plt.close(fig)
 
 
+def _number(text: str, positive: bool) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number; got {text!r}") from None
+    if not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
+        raise argparse.ArgumentTypeError(f"must be a finite number {'> 0' if positive else '>= 0'}; got {text}")
+    return v
+
+
+def _positive(text: str) -> float:
+    return _number(text, True)
+
+
+def _nonnegative(text: str) -> float:
+    return _number(text, False)
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="switchobs-demo", description=__doc__.split("\n\n")[0])
+    ap = OneLineParser(prog="switchobs-demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--schedule", choices=sorted(SCHEDULES), default="periodic")
-    ap.add_argument("--duration", type=float, default=30.0, help="simulated seconds (default 30)")
-    ap.add_argument("--time-scale", type=float, default=2.0, help="simulated seconds per wall second")
-    ap.add_argument("--rate", type=float, default=100.0, help="camera rate in Hz")
+    ap.add_argument("--duration", type=_positive, default=30.0, help="simulated seconds (> 0, default 30)")
+    ap.add_argument("--time-scale", type=_positive, default=2.0, help="simulated seconds per wall second (> 0)")
+    ap.add_argument("--rate", type=_positive, default=100.0, help="camera rate in Hz (> 0)")
     ap.add_argument("--init", choices=["paper", "zeros"], default="paper",
                     help="initial estimate: x(0) + 0.1 randn (paper) or zeros")
     ap.add_argument("--seed", type=int, default=0)
@@ -203,7 +274,7 @@ def main(argv=None) -> int:
     ap.add_argument("--gains", choices=["lmi", "kalman"], default="lmi",
                     help="gain family the estimator designs at start-up: the paper's LMI gains (default) or "
                          "offline Kalman gains at --rate (with --noise as the declared measurement noise)")
-    ap.add_argument("--noise", type=float, default=0.0, help="camera_sim's measurement noise std (m)")
+    ap.add_argument("--noise", type=_nonnegative, default=0.0, help="camera_sim's measurement noise std (m, >= 0)")
     ap.add_argument("--out", default="out/demo", help="folder for error.png, error.csv and the node logs")
     a = ap.parse_args(argv)
     try:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidArgument
-from ..schedule import PeriodicSchedule, SequenceSchedule
+from ..schedule import PeriodicSchedule, SequenceSchedule, check_cycle_horizon
 from ..simulate import schedule_segments
 from ..validation import as_finite
 from .box import certify_box
@@ -66,6 +66,8 @@ def certify_table(system: Any, table: Any, *, sequence: Sequence[Any] | None = N
     if as_finite(ratio_dt, "ratio_dt") <= 0:
         raise InvalidArgument(f"ratio_dt must be > 0; got {ratio_dt}")
     rep = TableReport()
+    for c in [d.cycle for d in table.designs] + list(sequence or ()):
+        check_cycle_horizon(system.A, c, "the table's cycle")
     for d in table.designs:
         cert = certify_cycle(system, d)
         sched = PeriodicSchedule(d.cycle)

@@ -15,6 +15,7 @@ import sys
 from .._version import __version__
 from ..exceptions import SwitchobsError
 from ..threads import single_threaded_blas
+from ._common import OneLineParser
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -22,7 +23,7 @@ SUBCOMMANDS = ("design", "show", "reproduce", "simulate", "certify")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="switchobs",
         description="Switched Luenberger observers for systems whose outputs are available one channel at a time.",
     )

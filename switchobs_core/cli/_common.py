@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from typing import Any
 
@@ -12,7 +13,8 @@ import numpy as np
 from ..exceptions import InvalidArgument
 from ..schedule import Cycle
 
-__all__ = ["parse_ts", "parse_pair", "parse_floats", "print_json", "fmt_table"]
+__all__ = ["parse_ts", "parse_pair", "parse_floats", "print_json", "fmt_table", "OneLineParser",
+           "join_negative_values"]
 
 
 def parse_floats(text: str, what: str) -> list[float]:
@@ -72,3 +74,37 @@ def fmt_table(header: list[str], rows: list[list[Any]]) -> str:
     lines = ["  ".join(c.ljust(w[j]) for j, c in enumerate(r)).rstrip() for r in cells]
     lines.insert(1, "  ".join("-" * x for x in w))
     return "\n".join(lines)
+
+
+_OPTION = re.compile(r"--[A-Za-z][\w-]*")
+_NEGATIVE_VALUE = re.compile(r"-(\d|\.\d)")
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """``--cycle -2,0.6`` -> ``--cycle=-2,0.6``: argparse takes a value that starts with ``-`` for
+    an option unless it is a plain negative number, so a comma list such as ``-2,0.6`` met
+    "expected one argument" instead of the value's own check. (Our commands have no flag that
+    is followed by a negative positional argument.)"""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        if _OPTION.fullmatch(tok) and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1]):
+            out.append(f"{tok}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """``argparse`` with the project's error convention: one line on stderr, ``PROG: error: ...``,
+    exit code 2 (the usage is in ``--help``), and negative-looking values after an option."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        args = join_negative_values(list(sys.argv[1:] if args is None else args))
+        return super().parse_known_args(args, namespace)

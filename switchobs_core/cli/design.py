@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "design",
         help="design gains for cycles and/or a residence-time box and write a gain table",
-        description="Design switched-observer gains offline (Sec. s:LMI_Gain) and write a gain table file.",
+        description="Design switched-observer gains offline (the paper's Section 7) and write a gain table file.",
         epilog="example: switchobs design paper --cycle 2,0.6 --delta 0.99 -o gains.json",
     )
     p.add_argument("config", help="built-in scenario name (paper, camera_agents) or a system YAML file")
@@ -210,6 +210,9 @@ def run(args: argparse.Namespace) -> int:
     if args.rate is not None or args.meas_noise is not None or args.process_noise is not None:
         raise InvalidArgument("--rate, --meas-noise and --process-noise belong to --gains kalman "
                               "(the paper's LMI gains do not depend on them)")
+    if not cycles and args.robust is None:
+        raise InvalidArgument("nothing to design: give the schedule with --cycle TAU,S (or --cycle-h H1,...,HN), "
+                              "repeated for a sequence, and/or a residence-time box with --robust HMIN,HMAX")
     designer = Designer(system, delta=args.delta, margin=args.margin)
     etas = _etas_for(args.eta, cycles)
     table = designer.table(cycles, robust=args.robust, etas=etas, progress=args.progress)

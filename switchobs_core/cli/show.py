@@ -26,6 +26,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _margin_text(m) -> str:
+    """The design's eta margin in words (``--margin``): ``eta = eta_min * 1.05`` or ``eta_min + 0.1``."""
+    if isinstance(m, dict) and m.get("kind") == "relative":
+        return f"{100 * float(m['value']):g} % (eta = eta_min * {1 + float(m['value']):g})"
+    if isinstance(m, dict) and m.get("kind") == "absolute":
+        return f"+{float(m['value']):g} (eta = eta_min + {float(m['value']):g})"
+    return str(m)
+
+
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.system) if args.system else None
     table = GainTable.load(args.table, system=system)
@@ -44,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     if system is not None:
         print(f"  checked    matches system '{system.name}'")
     print(
-        f"  software   switchobs {table.software_version}; margin {table.settings['margin']}, "
-        f"solver {table.settings['solver']}"
+        f"  software   switchobs {table.software_version}; eta margin {_margin_text(table.settings.get('margin'))}, "
+        f"solver {table.settings.get('solver', '?')}"
     )
     rows = [[i + 1, c["r"], f"{c['mu']:.4f}", len(c["kappa_curve"]["eta"])] for i, c in enumerate(table.channels)]
     print(fmt_table(["channel", "r_i", "mu_i", "kappa samples"], rows))

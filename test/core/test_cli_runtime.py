@@ -120,3 +120,43 @@ def test_simulate_warns_when_a_random_schedule_breaks_a2(paper, tmp_path, capsys
     assert "A2" in err and "[0.5, 1.5]" in err and "[0.8, 1.2]" in err
     assert main(base + ["--schedule", "random:0.9,1.1"]) == 0
     assert "A2" not in capsys.readouterr().err
+
+
+def _argparse_one_line(argv, capsys) -> str:
+    with pytest.raises(SystemExit) as ex:
+        main(argv)
+    assert ex.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+def test_negative_cycle_is_checked_not_taken_for_an_option(capsys, tmp_path):
+    """`--cycle -2,0.6` met argparse's "expected one argument"; now the value's own check speaks."""
+    err = _argparse_one_line(["design", "paper", "--cycle", "-2,0.6", "-o", str(tmp_path / "x.json")], capsys)
+    assert "tau must be > 0" in err and "--cycle" in err
+
+
+def test_cycle_too_long_to_represent_is_refused(capsys, tmp_path):
+    """`--cycle 1e9,0.6` designed and said "converges" (f = 0): e^(A tau) leaves double precision."""
+    assert main(["design", "paper", "--cycle", "1e9,0.6", "-o", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "too long for this system" in err and "use tau <= 588" in err and len(err.strip().splitlines()) == 1
+
+
+def test_messages_speak_flags_not_api_or_latex(capsys, tmp_path, table_path):
+    """No LaTeX label ("Sec. s:LMI_Gain", "Theorem t:main") in any --help; a design without a
+    schedule names the flags; `show` prints the margin in words, not a Python dict."""
+    import re
+
+    for cmd in ("design", "show", "reproduce", "simulate", "certify"):
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        out = capsys.readouterr().out
+        assert not re.search(r"\b[setfl]:[A-Za-z_]+", out), (cmd, re.search(r"\b[setfl]:[A-Za-z_]+", out))
+    assert main(["design", "paper", "-o", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--cycle TAU,S" in err and "--robust" in err and "in cycles" not in err
+    assert main(["show", str(table_path)]) == 0
+    out = capsys.readouterr().out
+    assert "{" not in out and "eta margin 5 %" in out

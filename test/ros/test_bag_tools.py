@@ -255,6 +255,25 @@ def test_report_png_and_summary(bags, paper_tables, tmp_path, capsys):
     assert "| 1 | 401 |" in (tmp_path / "s.md").read_text()
 
 
+def test_report_without_truth_says_n_a(bags, paper_tables, tmp_path, capsys):
+    """A bag of estimates only (inputs not copied, so no /sim/truth): n/a cells and JSON nulls, no
+    RuntimeWarning and no nan (they were both printed before)."""
+    import json
+    import warnings
+
+    d, _ = bags
+    estimate(d / "in_mcap", _params(paper_tables), out=tmp_path / "est", inputs=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert bag_main(["report", str(tmp_path / "est"), "-o", str(tmp_path / "r.png"), "--json"]) == 0
+        info = json.loads(capsys.readouterr().out)
+        assert bag_main(["report", str(tmp_path / "est"), "-o", str(tmp_path / "r.png")]) == 0
+    p = info["passes"][0]
+    assert p["initial_error"] is None and p["final_error"] is None and p["exact_bound_violations"] is None
+    text = capsys.readouterr().out
+    assert "absent" in text and "| n/a |" in text and "nan" not in text
+
+
 # --------------------------------------------------------------------------------- errors
 def _cli(args, capsys):
     rc = bag_main(args)

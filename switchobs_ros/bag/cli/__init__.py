@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from switchobs_core.cli._common import OneLineParser
 from switchobs_core.exceptions import SwitchobsError, one_line
 from switchobs_core.threads import single_threaded_blas
 
@@ -33,7 +34,7 @@ SUBCOMMANDS = (generate, record, play, estimate, report, info)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog=PROG, description="rosbag2 bags through the switchobs estimator.")
+    ap = OneLineParser(prog=PROG, description="rosbag2 bags through the switchobs estimator.")
     sub = ap.add_subparsers(dest="cmd", required=True)
     for mod in SUBCOMMANDS:
         mod.register(sub)

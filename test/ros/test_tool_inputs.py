@@ -1,0 +1,69 @@
+"""Bad arguments to the ROS-side tools and nodes (issue: every bad input gets one clear line):
+camera_sim's numbers, the demo's flags, the estimator's parameters (an integer for a double is
+accepted; an empty list or an empty world_frame is refused), a deep gain table, and negative-
+looking values after an option."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from test_startup_failures import _assert_one_line_failure, _run
+
+from switchobs_core.cli._common import join_negative_values
+from tools.launch import ros_args
+
+
+@pytest.mark.parametrize("params, needles", [
+    ({"duration": -5.0}, ("duration", ">= 0", "0 runs until stopped")),
+    ({"noise_std": -1.0}, ("noise_std", ">= 0")),
+    ({"rate": float("inf")}, ("rate", "finite")),
+    ({"world_frame": ""}, ("world_frame", "empty")),
+])
+def test_camera_sim_refuses_bad_numbers(params, needles):
+    """camera_sim took duration <= 0 as "run forever" and accepted a negative noise std."""
+    res = _run("camera_sim", ros_args(params=params), timeout=60)
+    _assert_one_line_failure(res, "camera_sim", *needles)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--duration", "-5"], "--duration: must be a finite number > 0; got -5"),
+    (["--rate", "0"], "--rate: must be a finite number > 0"),
+    (["--noise", "-1"], "--noise: must be a finite number >= 0"),
+])
+def test_demo_refuses_bad_flags_at_once(argv, needle):
+    """`scripts/demo.sh --duration -5` never ended and burned CPU: now one line, exit 2, at once."""
+    res = subprocess.run([sys.executable, "-m", "tools.demo", *argv], capture_output=True, text=True, timeout=30)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in res.stderr, res.stderr
+
+
+def test_estimator_accepts_an_integer_for_a_double_and_refuses_empty_values(paper_tables, tmp_path):
+    """-p e0:=5 is harmless (was refused); `tau: []` was silently replaced by the default; an empty
+    world_frame was accepted."""
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("estimator:\n  ros__parameters:\n    schedule:\n      tau: []\n")
+    res = _run("estimator", ["--ros-args", "--params-file", str(empty)])
+    _assert_one_line_failure(res, "estimator", "schedule.tau", "is empty", "[2.0]")
+    res = _run("estimator", ros_args(params={"world_frame": ""}))
+    _assert_one_line_failure(res, "estimator", "world_frame", "must not be empty")
+    # e0:=5 (an integer) with a bad table: the run gets past the parameter and fails on the table
+    res = _run("estimator", ["--ros-args", "-p", "e0:=5", "-p", f"gain_table:={tmp_path / 'nope.json'}"])
+    _assert_one_line_failure(res, "estimator", "nope.json", "does not exist")
+
+
+def test_estimator_deep_gain_table_is_one_line(tmp_path):
+    """A gain table nested 100 000 deep: the estimator's one-line error (was a traceback, exit 1)."""
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    res = _run("estimator", ros_args(params={"gain_table": str(deep)}))
+    _assert_one_line_failure(res, "estimator", "deep.json", "nested deeper")
+
+
+def test_negative_values_after_an_option():
+    assert join_negative_values(["design", "paper", "--cycle", "-2,0.6", "-o", "x"]) == \
+        ["design", "paper", "--cycle=-2,0.6", "-o", "x"]
+    assert join_negative_values(["--cycle", "2,0.6", "--json"]) == ["--cycle", "2,0.6", "--json"]
+    assert join_negative_values(["--eta", "-.5,1"]) == ["--eta=-.5,1"]
