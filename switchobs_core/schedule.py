@@ -41,8 +41,8 @@ __all__ = [
     "check_cycle_horizon",
 ]
 
-#: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the transition over one cycle,
-#: e:PhiK) leaves double precision (``e^709`` overflows), and designs and certificates computed
+#: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the open-loop transition over one
+#: cycle) leaves double precision (``e^709`` overflows), and designs and certificates computed
 #: from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
 MAX_NORM_TAU = 600.0
 

@@ -74,14 +74,56 @@ PARAMS = [
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
-    Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN."),
-    Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected."),
+    Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
+          "Changeable at run time.", read_only=False),
+    Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
+          "Changeable at run time.", read_only=False),
     Param("max_abs_value", 1.0e6, "Largest accepted |coordinate| of an input pose (m). At most 1e150 (the observer "
-          "refuses larger samples: the next exact step could overflow)."),
+          "refuses larger samples: the next exact step could overflow). Changeable at run time.", read_only=False),
     Param("pairing_timeout", 0.2, "Seconds (wall) to wait for the other half of a camera/target pair before "
-          "using one half alone."),
-    Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock)."),
+          "using one half alone. Changeable at run time.", read_only=False),
+    Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock). Changeable at run time.",
+          read_only=False),
+    Param("output.envelope_every", 1, "Publish ~/envelope for every k-th estimate (0: never; ~/state is always "
+          "published). Changeable at run time.", read_only=False),
+    Param("output.odometry_every", 1, "Publish the bodies' odometry for every k-th estimate (0: never). "
+          "Changeable at run time.", read_only=False),
+    Param("output.covariance_every", 1, "Publish ~/covariance for every k-th estimate (0: never; needs "
+          "publish_covariance). Changeable at run time.", read_only=False),
+    Param("executor", "single_threaded", "rclpy executor: single_threaded (SingleThreadedExecutor) or events "
+          "(rclpy.experimental.EventsExecutor, see bench/RESULTS.md)."),
+    Param("gc_freeze", True, "Call gc.freeze() once the node is built (start-up objects leave the garbage "
+          "collector's generations, see bench/RESULTS.md)."),
+    Param("autostart", True, "Managed (lifecycle) node only: configure and activate at start-up (today's "
+          "behaviour); false waits for the lifecycle services."),
 ]
+
+#: Parameters that can change while the node runs (the others need a restart: they shape the
+#: observer, its gain table or the topics), and the check of a new value: (ok, what it must be).
+RUNTIME_PARAMS = {
+    "sensor_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+    "future_tolerance": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+    "max_abs_value": (lambda v: math.isfinite(v) and 0 < v <= MAX_ABS_SAMPLE, f"in (0, {MAX_ABS_SAMPLE:g}]"),
+    "pairing_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+    "diagnostics_period": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+    "output.envelope_every": (lambda v: v >= 0, "an integer >= 0"),
+    "output.odometry_every": (lambda v: v >= 0, "an integer >= 0"),
+    "output.covariance_every": (lambda v: v >= 0, "an integer >= 0"),
+}
+
+#: Executors the ``executor`` parameter names.
+EXECUTORS = ("single_threaded", "events")
+
+
+def check_runtime_value(name: str, value: Any) -> str:
+    """'' if ``value`` is acceptable for runtime parameter ``name``, else the reason (one line)."""
+    if name not in RUNTIME_PARAMS:
+        return (f"parameter '{name}' cannot change while the node runs (it shapes the observer, the gain table "
+                f"or the topics); restart the node with the new value. Changeable: {', '.join(RUNTIME_PARAMS)}")
+    ok, what = RUNTIME_PARAMS[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not ok(value):
+        return f"parameter '{name}' must be {what}; got {value!r}"
+    return ""
 
 
 def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | None = None,
@@ -219,6 +261,12 @@ class EstimatorConfig:
         if not (math.isfinite(rate) and rate >= 0):
             raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
         noise = noise_from_params(values, sys_)
+        for name in RUNTIME_PARAMS:
+            why = check_runtime_value(name, values[name])
+            if why:
+                raise ConfigError(why)
+        if values["executor"] not in EXECUTORS:
+            raise ConfigError(f"parameter 'executor' must be one of {', '.join(EXECUTORS)}; got {values['executor']!r}")
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
         vmax = float(values["noise.max"])

@@ -17,7 +17,11 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ["EstimatorDiagnostics", "NodeState", "kv"]
+__all__ = ["EstimatorDiagnostics", "FREQUENCY_TOLERANCE", "NodeState", "kv"]
+
+#: Measured rates outside ``[lo, hi]`` times the expected one turn the inputs status WARN (the
+#: diagnostic_updater FrequencyStatus default tolerance, 10 %).
+FREQUENCY_TOLERANCE = (0.9, 1.1)
 
 def _fmt(v) -> str:
     if isinstance(v, bool):
@@ -52,7 +56,8 @@ class EstimatorDiagnostics:
     def __init__(self, name: str, pipeline: Any, now_ns: int):
         self.name = name
         self.pipeline = pipeline
-        self._rate_base = (now_ns, Counter(), 0)
+        self._t_first_ns = now_ns
+        self._rate_base = (now_ns, Counter(), 0, 0)
 
     def array(self, now, node: NodeState) -> DiagnosticArray:
         """The /diagnostics message at node-clock time ``now`` (an rclpy Time)."""
@@ -145,13 +150,28 @@ class EstimatorDiagnostics:
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; {res.problem}"
         # inputs: rates over the last period (node clock), rejected totals by reason
-        t0_ns, acc0, _ = self._rate_base
+        t0_ns, acc0, _, upd0 = self._rate_base
         dt = (now_ns - t0_ns) * 1e-9
         inp = []
+        rates = {}
         for topic in ("camera/pose", "target/pose", "camera/active_channel"):
-            rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
+            rates[topic] = rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
             inp.append(kv(f"{topic} rate (Hz)", rate))
             inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
+        # frequency status (as robot_localization's): measured against the expected rate
+        out_rate = (pl.updates - upd0) / dt if dt > 0 else 0.0
+        expected = float(getattr(pl, "config", None)["rate"]) if getattr(pl, "config", None) is not None else 0.0
+        inp.append(kv("estimates published rate (Hz)", out_rate))
+        inp.append(kv("expected measurement rate (Hz)", expected if expected > 0 else "not set (parameter rate)"))
+        freq_problem = ""
+        if expected > 0 and t0_ns > self._t_first_ns:
+            lo, hi = FREQUENCY_TOLERANCE
+            for what, r in (("target/pose", rates["target/pose"]), ("estimates", out_rate)):
+                if not lo * expected <= r <= hi * expected:
+                    freq_problem = (f"{what} at {r:.1f} Hz, outside [{lo * expected:.1f}, {hi * expected:.1f}] Hz "
+                                    f"(expected {expected:g} Hz)")
+                    break
+        inp.append(kv("frequency status", freq_problem or ("ok" if expected > 0 else "not checked (no rate)")))
         total_rej = sum(pl.rejected.values())
         for (topic, reason), n in sorted(pl.rejected.items()):
             inp.append(kv(f"rejected {topic} {reason}", n))
@@ -159,7 +179,7 @@ class EstimatorDiagnostics:
         if pl.last_rejection:
             inp.append(kv("last rejection", pl.last_rejection))
         new_rej = total_rej - self._rate_base[2]
-        self._rate_base = (now_ns, Counter(pl.accepted), total_rej)
+        self._rate_base = (now_ns, Counter(pl.accepted), total_rej, pl.updates)
         arr = DiagnosticArray()
         arr.header.stamp = now.to_msg()
         name = self.name
@@ -168,9 +188,10 @@ class EstimatorDiagnostics:
                              hardware_id="switchobs", values=conf),
             DiagnosticStatus(level=level, name=f"{name}: observer", message=msg, hardware_id="switchobs",
                              values=ob),
-            DiagnosticStatus(level=DiagnosticStatus.WARN if new_rej else DiagnosticStatus.OK,
+            DiagnosticStatus(level=DiagnosticStatus.WARN if new_rej or freq_problem else DiagnosticStatus.OK,
                              name=f"{name}: inputs",
-                             message=f"{new_rej} rejected in the last period" if new_rej else "ok",
+                             message="; ".join(x for x in (f"{new_rej} rejected in the last period" if new_rej else "",
+                                                           freq_problem) if x) or "ok",
                              hardware_id="switchobs", values=inp),
         ]
         return arr

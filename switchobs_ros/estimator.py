@@ -37,6 +37,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -46,7 +47,7 @@ from std_srvs.srv import Trigger
 import msg_bridge as mb
 
 from . import qos
-from .config import PARAMS, EstimatorConfig
+from .config import PARAMS, EstimatorConfig, check_runtime_value
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import declare_all
 from .pipeline import Estimate, EstimatorPipeline, PipelineLog
@@ -99,9 +100,10 @@ class EstimatorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("estimator", **kwargs)
         self.t_start = time.monotonic()
-        cfg = declare_all(self, PARAMS)
+        cfg = declare_all(self, PARAMS, gated=True)
         self.cfg = cfg
         self._configure(cfg)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
             f"estimator ready: system '{self.system.name}' (n={self.system.n}, N={self.system.N}), "
             f"mode {self.mode}, cycles {[c.label() for c in self.cycles]}, table {self.table_path}, "
@@ -127,6 +129,11 @@ class EstimatorNode(Node):
         self.w_odom = [mb.OdometryWriter(b, self.frame, c) for b, c in zip(self.bodies, self.child_frames)]
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
+        # output decimation (output.*_every; 0: never) and the runner's choices
+        self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance")}
+        self.n_published = 0
+        self.executor_kind = cfg["executor"]
+        self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
 
         # publishers (reliable), then subscriptions (sensor data; channel reliable). The
@@ -177,15 +184,48 @@ class EstimatorNode(Node):
 
     def _publish_all(self, estimates: list[Estimate]) -> None:
         try:
+            ev = self.every
             for e in estimates:
+                k = self.n_published
+                self.n_published = k + 1
                 self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
-                self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
-                if self.pub_cov is not None and e.P is not None:
+                if ev["envelope"] and k % ev["envelope"] == 0:
+                    self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
+                if self.pub_cov is not None and e.P is not None and ev["covariance"] and k % ev["covariance"] == 0:
                     self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
-                for pub, w in zip(self.pub_odom, self.w_odom):
-                    pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                if ev["odometry"] and k % ev["odometry"] == 0:
+                    for pub, w in zip(self.pub_odom, self.w_odom):
+                        pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
         except Exception as err:
             self.pipeline.internal_error("publish", err)
+
+    # ------------------------------------------------------------------ runtime parameters
+    def _on_set_parameters(self, params: list) -> SetParametersResult:
+        """Accept the runtime parameters (``config.RUNTIME_PARAMS``) with valid values, refuse the
+        rest with the reason; all or nothing."""
+        for p in params:
+            why = check_runtime_value(p.name, p.value)
+            if why:
+                return SetParametersResult(successful=False, reason=why)
+        for p in params:
+            self.cfg[p.name] = p.value
+            if p.name.startswith("output."):
+                self.every[p.name[len("output."):-len("_every")]] = int(p.value)
+            elif p.name == "sensor_timeout":
+                self.sensor_timeout = float(p.value)
+            elif p.name == "future_tolerance":
+                self.pipeline.future_ns = int(float(p.value) * 1e9)
+            elif p.name == "max_abs_value":
+                self.pipeline.max_abs = float(p.value)
+            elif p.name == "pairing_timeout":
+                self.pair_timeout = float(p.value)
+                self.destroy_timer(self.pair_timer)
+                self.pair_timer = self.create_timer(max(self.pair_timeout / 2, 0.005), self.pairing_callback)
+            elif p.name == "diagnostics_period":
+                self.destroy_timer(self.diag_timer)
+                self.diag_timer = self.create_timer(float(p.value), self.diagnostics_callback)
+            self.get_logger().info(f"parameter {p.name} set to {p.value!r}")
+        return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------ reset
     def reset_estimator(self, why: str) -> None:

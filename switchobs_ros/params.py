@@ -95,8 +95,11 @@ def _coerce_override(overrides: dict, p: Param) -> None:
         overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in ov.value])
 
 
-def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
+def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict[str, Any]:
     """Declare ``params`` on ``node``; return ``{name: value}``.
+
+    ``gated``: declare every parameter writable; the node's on-set-parameters callback decides
+    (and says why it refuses one). Otherwise ``Param.read_only`` is declared as is.
 
     Raises
     ------
@@ -110,7 +113,7 @@ def declare_all(node: Node, params: list[Param]) -> dict[str, Any]:
     for p in params:
         _coerce_override(overrides, p)
         desc = ParameterDescriptor(name=p.name, type=p.type, description=p.description,
-                                   read_only=p.read_only)
+                                   read_only=p.read_only and not gated)
         try:
             if isinstance(p.default, tuple) and not p.default:
                 # an empty default has no type of its own: declare by type, fall back below

@@ -10,9 +10,11 @@ or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 
 from __future__ import annotations
 
+import gc
 import sys
 
 import rclpy
+import rclpy.executors
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 
@@ -21,7 +23,16 @@ from switchobs_core.threads import single_threaded_blas
 
 from .params import ConfigError
 
-__all__ = ["run_node"]
+__all__ = ["make_executor", "run_node"]
+
+
+def make_executor(kind: str):
+    """The rclpy executor named by the ``executor`` parameter (see bench/RESULTS.md)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    return rclpy.executors.SingleThreadedExecutor()
 
 
 def run_node(node_cls, prog: str, args=None) -> int:
@@ -38,7 +49,11 @@ def run_node(node_cls, prog: str, args=None) -> int:
     code = 0
     try:
         node = node_cls()
-        rclpy.spin(node)
+        executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
+        executor.add_node(node)
+        if getattr(node, "gc_freeze", False):
+            gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, ParameterException) as err:
