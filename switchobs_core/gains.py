@@ -51,7 +51,7 @@ import hashlib
 import json
 import math
 import os
-import tempfile
+import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +63,7 @@ from ._version import __version__
 from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument, SwitchobsError
 from .kalman import KalmanDesign
+from .loading import parse_json, read_text
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 
 if TYPE_CHECKING:
@@ -359,11 +360,21 @@ class GainTable:
         return json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n"
 
     def save(self, path: str | Path) -> Path:
-        """Write the table atomically (temporary file, fsync, rename)."""
+        """Write the table atomically (temporary file, fsync, rename).
+
+        The file gets the mode a plain ``open(path, "w")`` would give (0666 less the umask,
+        usually 0644), so a service running as another user can read it; ``tempfile`` would
+        make it 0600."""
         path = Path(path)
         text = self.to_json()
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        while True:
+            tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+            try:
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+                break
+            except FileExistsError:  # pragma: no cover - 48 random bits
+                continue
         try:
             with os.fdopen(fd, "w") as fh:
                 fh.write(text)
@@ -371,7 +382,7 @@ class GainTable:
                 os.fsync(fh.fileno())
             os.replace(tmp, path)
         except BaseException:
-            Path(tmp).unlink(missing_ok=True)
+            tmp.unlink(missing_ok=True)
             raise
         return path
 
@@ -379,11 +390,8 @@ class GainTable:
     def from_json(cls, text: str, *, source: str = "<text>", system: LTISystem | None = None) -> GainTable:
         """Parse and check a table (see module docstring); ``system`` adds the fingerprint check."""
 
-        def _reject_constant(name: str) -> float:
-            raise GainTableError(f"{source}: contains a non-finite number ({name})")
-
         try:
-            data = json.loads(text, parse_constant=_reject_constant)
+            data = parse_json(text, exc=GainTableError, source=source)
         except json.JSONDecodeError as err:
             raise GainTableError(
                 f"{source}: not a complete gain table (JSON error at line {err.lineno}: {err.msg}); "
@@ -397,7 +405,10 @@ class GainTable:
                 f"{source}: gain table format version {version} "
                 f"is not supported (this software reads versions {', '.join(map(str, READABLE_VERSIONS))})"
             )
-        digest = data.pop("payload_sha256", None)
+        if "payload_sha256" not in data:
+            raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written by "
+                                 "switchobs or was edited; design it again")
+        digest = data.pop("payload_sha256")
         _check_finite(data, source)
         if digest != cls._digest(data):
             raise GainTableError(
@@ -434,11 +445,9 @@ class GainTable:
         """Read and check a table file; with ``system``, also that it was made for it."""
         path = Path(path)
         try:
-            text = path.read_text()
+            text = read_text(path, exc=GainTableError, what="gain table")
         except FileNotFoundError:
             raise GainTableError(f"gain table {path} does not exist (make one with `switchobs design`)") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise GainTableError(f"cannot read gain table {path}: {err}") from None
         return cls.from_json(text, source=str(path), system=system)
 
     def check_system(self, system: LTISystem, *, source: str = "gain table") -> None:
@@ -485,13 +494,14 @@ def kalman_table(system: LTISystem, designs: Sequence[KalmanDesign]) -> GainTabl
 
 
 def _check_finite(obj: Any, source: str, where: str = "") -> None:
-    """Raise GainTableError at the first non-finite float in a JSON-like tree."""
-    if isinstance(obj, float):
-        if not math.isfinite(obj):
-            raise GainTableError(f"{source}: non-finite number {obj} at {where or 'top level'}")
-    elif isinstance(obj, dict):
-        for k, v in obj.items():
-            _check_finite(v, source, f"{where}.{k}" if where else str(k))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            _check_finite(v, source, f"{where}[{i}]")
+    """Raise GainTableError at the first non-finite float in a JSON-like tree (iterative walk)."""
+    stack = [(obj, where)]
+    while stack:
+        node, at = stack.pop()
+        if isinstance(node, float):
+            if not math.isfinite(node):
+                raise GainTableError(f"{source}: non-finite number {node} at {at or 'top level'}")
+        elif isinstance(node, dict):
+            stack.extend((v, f"{at}.{k}" if at else str(k)) for k, v in reversed(list(node.items())))
+        elif isinstance(node, (list, tuple)):
+            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(node))))

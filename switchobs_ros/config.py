@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 import msg_bridge as mb
+from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
 from switchobs_core.schedule import Cycle
@@ -131,9 +131,9 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
 
     for f in params_files:
         try:
-            doc = yaml.safe_load(Path(f).read_text()) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise ConfigError(f"params file {f}: {err}") from None
+            doc = load_yaml(f, exc=ConfigError, what="params file") or {}
+        except FileNotFoundError:
+            raise ConfigError(f"params file {f} does not exist") from None
         for key in (node_name, "/" + node_name, "/**"):
             sect = doc.get(key) if isinstance(doc, dict) else None
             if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
