@@ -188,9 +188,13 @@ def parse_yaml(text: str, *, exc: type[SwitchobsError], source: str) -> Any:
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        raise exc(f"{source}: not valid YAML{where}: {err.problem or err.context}") from None
+        raise exc(f"{source}: not valid YAML{where}: {' '.join(str(err.problem or err.context).split())}") from None
+    except yaml.reader.ReaderError as err:  # a character YAML does not allow (e.g. NUL)
+        ch = f"#x{err.character:04x}" if isinstance(err.character, int) else repr(err.character)
+        raise exc(f"{source}: not valid YAML: character {ch} at position {err.position} is not allowed in YAML "
+                  "(a binary file?)") from None
     except yaml.YAMLError as err:
-        raise exc(f"{source}: not valid YAML: {err}") from None
+        raise exc(f"{source}: not valid YAML: {' '.join(str(err).split())}") from None
     except (ValueError, OverflowError, RecursionError) as err:  # e.g. an integer of 5000 digits
         raise exc(f"{source}: unreadable YAML value ({' '.join(str(err).split())[:200]})") from None
     finally:
