@@ -402,7 +402,7 @@ class GainTable:
         version = data.get("format_version")
         if isinstance(version, bool) or version not in READABLE_VERSIONS:
             raise GainTableError(
-                f"{source}: gain table format version {version} "
+                f"{source}: gain table format version {version!r} "
                 f"is not supported (this software reads versions {', '.join(map(str, READABLE_VERSIONS))})"
             )
         if "payload_sha256" not in data:

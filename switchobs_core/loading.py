@@ -140,7 +140,7 @@ def _make_loader() -> type:
                         raise _Refused(f"line {key_node.start_mark.line + 1}: a mapping key must be a "
                                        "plain value, not a list or mapping") from None
                     if dup:
-                        raise _Refused(f"line {key_node.start_mark.line + 1}: duplicate key '{key}'")
+                        raise _Refused(f"line {key_node.start_mark.line + 1}: duplicate key {key!r}")
             return super().construct_mapping(node, deep=deep)
 
     if from_c:
