@@ -239,7 +239,7 @@ def test_params_file_alias_bomb_and_garbage(tmp_path):
 
 # --------------------------------------------------------------------------- fuzz
 
-FUZZ = settings(max_examples=int(os.environ.get("FUZZN", 60)), deadline=2000, derandomize=not os.environ.get("FUZZN"),
+FUZZ = settings(max_examples=int(os.environ.get("FUZZN", 200)), deadline=2000, derandomize=not os.environ.get("FUZZN"),
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 _json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-10**30, 10**30), st.floats(allow_nan=False),
