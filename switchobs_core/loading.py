@@ -1,150 +1,303 @@
-"""Reading the files the tools take (system YAML, params YAML, gain-table JSON) with bounded
-resources, and the value checks every file entry passes.
+"""Bounded loading of the files the tools read: system and params YAML, gain-table JSON.
 
-One owner for "a file a user hands us": every loader reads through :func:`read_text`
-(size limit, UTF-8 only), parses YAML with :func:`parse_yaml` (no aliases or anchors, no
-duplicate keys, nesting at most :data:`MAX_DEPTH`) and checks JSON nesting with
-:func:`check_json_depth` before ``json.loads``. Numbers in a file pass :func:`file_number`
-(finite, not a boolean, magnitude at most :data:`MAX_FILE_ENTRY`). Every refusal raises the
-caller's error class with one line naming the file and the place in it.
+Every file goes through this module, which refuses a bad file with the caller's error class
+(a :class:`~switchobs_core.exceptions.SwitchobsError`) and a one-line message naming the file
+and, where it can, the place in it (line, key path) in the file's own words. The limits:
 
-Why: a 1 KB YAML alias bomb expands to gigabytes (50 s, 2.5 GB, then ``MemoryError``);
-``[[[[...]]]]`` nested 100 000 deep ends in ``RecursionError``; binary garbage in
-``UnicodeDecodeError``; ``true`` is a number to numpy.
+* size: at most :data:`MAX_FILE_BYTES` (16 MiB) for a gain table, :data:`MAX_YAML_BYTES`
+  (1 MiB) for a YAML file (hand-written; a 1 MiB YAML file holds a dense ~300 x 300 matrix).
+  Only the limit plus one byte is ever read, so ``/dev/zero`` is refused, not read forever;
+* text: UTF-8 only (the message gives the line and column of the first bad byte);
+* YAML: no anchors (``&name``) and no aliases (``*name``) (a 1 KB "billion laughs" file
+  would otherwise expand to gigabytes), no duplicate mapping keys, at most
+  :data:`MAX_DEPTH` nested lists/mappings; parsed with libyaml when available;
+* JSON: ``NaN``/``Infinity`` refused, at most :data:`MAX_DEPTH` nested arrays/objects (checked
+  without recursion);
+* numbers (:func:`as_number`, :func:`number_matrix`): booleans are not numbers; strings holding
+  a number are (PyYAML reads ``1e-3`` without a dot as a string); finite; system matrix entries
+  at most :data:`~switchobs_core.validation.MAX_ABS_SYSTEM_ENTRY` (1e12) in magnitude.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MAX_FILE_BYTES", "MAX_DEPTH", "MAX_FILE_ENTRY", "read_text", "parse_yaml", "check_json_depth",
-           "file_number", "check_file_matrix"]
+import numpy as np
 
-#: Largest file a tool reads (16 MiB; the largest gain table we write is a few MB).
-MAX_FILE_BYTES = 16 * 2**20
-#: Deepest nesting of lists/mappings in a file (a system file needs 4, a gain table about 8).
-MAX_DEPTH = 64
-#: Largest magnitude of a number in a system file: beyond it products overflow long before a
-#: design could mean anything (an entry of 1e300 made the SDP solver fail on allocation).
-MAX_FILE_ENTRY = 1e12
+from .exceptions import SwitchobsError
+from .validation import MAX_ABS_SYSTEM_ENTRY
+
+__all__ = [
+    "MAX_FILE_BYTES",
+    "MAX_YAML_BYTES",
+    "MAX_DEPTH",
+    "read_text",
+    "parse_yaml",
+    "load_yaml",
+    "parse_json",
+    "check_depth",
+    "as_number",
+    "number_matrix",
+]
+
+#: Largest file read (gain tables): 16 MiB.
+MAX_FILE_BYTES = 16 * 1024 * 1024
+#: Largest YAML file read (system and params files): 1 MiB.
+MAX_YAML_BYTES = 1024 * 1024
+#: Deepest nesting of lists/mappings (arrays/objects) in any file; the deepest real file
+#: (a Kalman gain table) nests 6 levels.
+MAX_DEPTH = 32
 
 
-def read_text(path: str | Path, what: str, error: type[Exception]) -> str:
-    """The text of ``path`` (UTF-8, at most :data:`MAX_FILE_BYTES`), or ``error`` with one line."""
+def _mib(n: int) -> str:
+    return f"{n / 1024 / 1024:g} MiB"
+
+
+def read_text(path: str | Path, *, exc: type[SwitchobsError], what: str,
+              max_bytes: int = MAX_FILE_BYTES) -> str:
+    """The UTF-8 text of ``path``, at most ``max_bytes`` long; else ``exc`` naming ``what path``.
+
+    A missing file raises ``FileNotFoundError`` (callers word that themselves); every other
+    problem raises ``exc``.
+    """
     path = Path(path)
     try:
-        with path.open("rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
+        with open(path, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise
     except OSError as err:
-        raise error(f"cannot read {what} {path}: {err.strerror or err}") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise error(f"{what} {path} is larger than {MAX_FILE_BYTES // 2**20} MiB: not a file this tool reads")
+        raise exc(f"cannot read {what} {path}: {err.strerror or err}") from None
+    if len(data) > max_bytes:
+        raise exc(f"{what} {path} is larger than {_mib(max_bytes)} (the limit for this kind of file)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise error(f"{what} {path} is not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}): "
-                    "is it the right file?") from None
+        line = data.count(b"\n", 0, err.start) + 1
+        col = err.start - (data.rfind(b"\n", 0, err.start) + 1) + 1
+        raise exc(f"{what} {path} is not UTF-8 text (byte 0x{data[err.start]:02x} at line {line}, "
+                  f"column {col}): is it a binary file?") from None
 
 
-_NO_ALIAS = "YAML anchors and aliases (&name, *name) are not accepted: write the values out"
+# ----------------------------------------------------------------------------- YAML
 
 
-def _safe_loader():
-    """A ``yaml.SafeLoader`` that refuses aliases/anchors and duplicate keys, with a depth limit."""
+class _Refused(Exception):
+    """Raised inside the YAML loader; turned into the caller's error class."""
+
+
+def _make_loader() -> type:
     import yaml
-
-    class _Loader(yaml.SafeLoader):
-        depth = 0
-
-        def compose_node(self, parent, index):
-            if self.check_event(yaml.AliasEvent):
-                ev = self.peek_event()
-                raise yaml.composer.ComposerError(None, None, _NO_ALIAS,
-                                                  ev.start_mark)
-            ev = self.peek_event()
-            if getattr(ev, "anchor", None) is not None:
-                raise yaml.composer.ComposerError(None, None, _NO_ALIAS, ev.start_mark)
-            self.depth += 1
-            if self.depth > MAX_DEPTH:
-                raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_DEPTH} levels",
-                                                  ev.start_mark)
-            try:
-                return super().compose_node(parent, index)
-            finally:
-                self.depth -= 1
-
-        def construct_mapping(self, node, deep=False):
-            seen = set()
-            for key_node, _ in node.value:
-                key = self.construct_object(key_node, deep=True)
-                try:
-                    dup = key in seen
-                except TypeError:       # an unhashable key: let the base class say so
-                    break
-                if dup:
-                    raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}",
-                                                            key_node.start_mark)
-                seen.add(key)
-            return super().construct_mapping(node, deep=deep)
-
-    return _Loader
-
-
-def parse_yaml(text: str, where: str, error: type[Exception]) -> Any:
-    """Parse YAML text safely (module docstring); ``where`` names the file in the message."""
-    import yaml
+    from yaml.composer import Composer
+    from yaml.constructor import SafeConstructor
+    from yaml.resolver import Resolver
 
     try:
-        return yaml.load(text, Loader=_safe_loader())   # a SafeLoader subclass
+        from yaml._yaml import CParser as Parser  # libyaml: C scanner and parser
+        from_c = True
+    except ImportError:  # pragma: no cover - PyYAML without libyaml
+        from yaml.parser import Parser
+        from yaml.reader import Reader
+        from yaml.scanner import Scanner
+        from_c = False
+
+    class StrictComposer(Composer):
+        """Composer (the pure-Python one, on top of either parser) that refuses anchors,
+        aliases and nesting deeper than MAX_DEPTH before it recurses."""
+
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            event = self.peek_event()
+            line = event.start_mark.line + 1 if event.start_mark is not None else "?"
+            if isinstance(event, yaml.AliasEvent):
+                raise _Refused(f"line {line}: YAML aliases (*{event.anchor}) are not allowed")
+            if getattr(event, "anchor", None) is not None:
+                raise _Refused(f"line {line}: YAML anchors (&{event.anchor}) are not allowed")
+            if isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+                self._depth = getattr(self, "_depth", 0) + 1
+                try:
+                    if self._depth > MAX_DEPTH:
+                        raise _Refused(f"line {line}: lists/mappings nested deeper than {MAX_DEPTH} levels")
+                    return super().compose_node(parent, index)
+                finally:
+                    self._depth -= 1
+            return super().compose_node(parent, index)
+
+    class StrictConstructor(SafeConstructor):
+        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+            if isinstance(node, yaml.MappingNode):
+                seen: set = set()
+                for key_node, _ in node.value:
+                    if key_node.tag == "tag:yaml.org,2002:merge":
+                        raise _Refused(f"line {key_node.start_mark.line + 1}: YAML merge keys (<<) are not allowed")
+                    key = self.construct_object(key_node, deep=True)
+                    try:
+                        dup = key in seen
+                        seen.add(key)
+                    except TypeError:
+                        raise _Refused(f"line {key_node.start_mark.line + 1}: a mapping key must be a "
+                                       "plain value, not a list or mapping") from None
+                    if dup:
+                        raise _Refused(f"line {key_node.start_mark.line + 1}: duplicate key {key!r}")
+            return super().construct_mapping(node, deep=deep)
+
+    if from_c:
+        class Loader(Parser, StrictComposer, StrictConstructor, Resolver):
+            def __init__(self, stream: str) -> None:
+                Parser.__init__(self, stream)
+                StrictComposer.__init__(self)
+                StrictConstructor.__init__(self)
+                Resolver.__init__(self)
+
+            # CParser has its own (C) composer; use the strict Python one on its events
+            get_single_node = StrictComposer.get_single_node
+            get_node = StrictComposer.get_node
+            check_node = StrictComposer.check_node
+            compose_document = StrictComposer.compose_document
+            compose_node = StrictComposer.compose_node
+    else:  # pragma: no cover
+        class Loader(Reader, Scanner, Parser, StrictComposer, StrictConstructor, Resolver):
+            def __init__(self, stream: str) -> None:
+                Reader.__init__(self, stream)
+                Scanner.__init__(self)
+                Parser.__init__(self)
+                StrictComposer.__init__(self)
+                StrictConstructor.__init__(self)
+                Resolver.__init__(self)
+
+    return Loader
+
+
+_LOADER: type | None = None
+
+
+def parse_yaml(text: str, *, exc: type[SwitchobsError], source: str) -> Any:
+    """Parse one YAML document with the strict loader (module docstring); ``exc`` names ``source``."""
+    import yaml
+
+    global _LOADER
+    if _LOADER is None:
+        _LOADER = _make_loader()
+    loader = _LOADER(text)
+    try:
+        return loader.get_single_data()
+    except _Refused as err:
+        raise exc(f"{source}: {err}") from None
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise exc(f"{source}: not valid YAML{where}: {' '.join(str(err.problem or err.context).split())}") from None
+    except yaml.reader.ReaderError as err:  # a character YAML does not allow (e.g. NUL)
+        ch = f"#x{err.character:04x}" if isinstance(err.character, int) else repr(err.character)
+        raise exc(f"{source}: not valid YAML: character {ch} at position {err.position} is not allowed in YAML "
+                  "(a binary file?)") from None
     except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise error(f"{where}: not valid YAML{at}: {problem}") from None
-    except RecursionError:      # not reached with MAX_DEPTH; kept as the last line of defence
-        raise error(f"{where}: nested too deeply") from None
+        raise exc(f"{source}: not valid YAML: {' '.join(str(err).split())}") from None
+    except (ValueError, OverflowError, RecursionError) as err:  # e.g. an integer of 5000 digits
+        raise exc(f"{source}: unreadable YAML value ({' '.join(str(err).split())[:200]})") from None
+    finally:
+        loader.dispose()
 
 
-def check_json_depth(text: str, where: str, error: type[Exception]) -> None:
-    """Refuse JSON nested deeper than :data:`MAX_DEPTH` before ``json.loads`` recurses into it
-    (one pass over the text, strings skipped)."""
-    depth, in_str, esc = 0, False, False
-    for i, ch in enumerate(text):
-        if in_str:
-            if esc:
-                esc = False
-            elif ch == "\\":
-                esc = True
-            elif ch == '"':
-                in_str = False
-        elif ch == '"':
-            in_str = True
-        elif ch in "[{":
-            depth += 1
-            if depth > MAX_DEPTH:
-                raise error(f"{where}: nested deeper than {MAX_DEPTH} levels (character {i}): not a file this "
-                            "tool wrote")
-        elif ch in "]}":
-            depth -= 1
+def load_yaml(path: str | Path, *, exc: type[SwitchobsError], what: str,
+              max_bytes: int = MAX_YAML_BYTES) -> Any:
+    """Read (:func:`read_text`) and parse (:func:`parse_yaml`) a YAML file."""
+    text = read_text(path, exc=exc, what=what, max_bytes=max_bytes)
+    return parse_yaml(text, exc=exc, source=f"{what} {path}")
 
 
-def file_number(v: Any, where: str, error: type[Exception], limit: float = MAX_FILE_ENTRY) -> float:
-    """``v`` as a float if it is a finite number of magnitude <= ``limit`` (booleans are not)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise error(f"{where} must be a number; got {v!r}")
-    f = float(v)
-    if not (math.isfinite(f) and abs(f) <= limit):
-        raise error(f"{where} must be a finite number of magnitude <= {limit:g}; got {v!r}")
-    return f
+# ----------------------------------------------------------------------------- JSON
 
 
-def check_file_matrix(M: Any, where: str, error: type[Exception], limit: float = MAX_FILE_ENTRY) -> None:
-    """Every entry of a (nested list) matrix from a file passes :func:`file_number`."""
-    rows = M if isinstance(M, list) else [M]
-    for i, row in enumerate(rows):
-        for j, v in enumerate(row if isinstance(row, list) else [row]):
-            if isinstance(v, list):
-                raise error(f"{where}[{i}][{j}] must be a number; got a list")
-            file_number(v, f"{where}[{i}][{j}]", error, limit)
+def parse_json(text: str, *, exc: type[SwitchobsError], source: str) -> Any:
+    """Parse JSON: ``NaN``/``Infinity`` and nesting deeper than :data:`MAX_DEPTH` refused.
+
+    A ``json.JSONDecodeError`` is left to the caller (which knows what a truncated file means).
+    """
+
+    def _constant(name: str) -> float:
+        raise exc(f"{source}: contains a non-finite number ({name})")
+
+    try:
+        data = json.loads(text, parse_constant=_constant)
+    except RecursionError:  # the C decoder stops itself at the interpreter's recursion limit
+        raise exc(f"{source}: arrays/objects nested deeper than {MAX_DEPTH} levels") from None
+    check_depth(data, exc=exc, source=source)
+    return data
+
+
+def check_depth(obj: Any, *, exc: type[SwitchobsError], source: str, limit: int = MAX_DEPTH) -> None:
+    """Raise ``exc`` if lists/dicts in ``obj`` nest deeper than ``limit`` (iterative walk)."""
+    stack = [(obj, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, (list, tuple, dict)):
+            if depth > limit:
+                raise exc(f"{source}: arrays/objects nested deeper than {limit} levels")
+            children = node.values() if isinstance(node, dict) else node
+            stack.extend((c, depth + 1) for c in children if isinstance(c, (list, tuple, dict)))
+
+
+# ----------------------------------------------------------------------------- values
+
+
+def as_number(x: Any, where: str, *, exc: type[SwitchobsError], finite: bool = True,
+              max_abs: float | None = None) -> float:
+    """``x`` as a float: ints, floats and strings holding a number (PyYAML reads ``1e-3`` as a
+    string); booleans refused; finite (with ``finite``); ``|x| <= max_abs`` when given."""
+    if isinstance(x, (bool, np.bool_)):
+        raise exc(f"{where} must be a number; got the boolean {str(x).lower()}")
+    if isinstance(x, str):
+        try:
+            val = float(x)
+        except ValueError:
+            raise exc(f"{where} must be a number; got the string {x[:40]!r}") from None
+    elif isinstance(x, (int, float, np.integer, np.floating)):
+        try:
+            val = float(x)
+        except OverflowError:
+            raise exc(f"{where}: the integer {str(x)[:20]}... is too large") from None
+    else:
+        raise exc(f"{where} must be a number; got {_kind(x)}")
+    if finite and not math.isfinite(val):
+        raise exc(f"{where} must be a finite number; got {val}")
+    if max_abs is not None and abs(val) > max_abs:
+        raise exc(f"{where} = {val:.3g} is beyond the supported magnitude {max_abs:g}")
+    return val
+
+
+def _kind(x: Any) -> str:
+    if x is None:
+        return "nothing (null)"
+    if isinstance(x, dict):
+        return "a mapping"
+    if isinstance(x, (list, tuple)):
+        return "a list"
+    return f"{type(x).__name__} {str(x)[:40]!r}"
+
+
+def number_matrix(x: Any, where: str, *, exc: type[SwitchobsError],
+                  max_abs: float | None = MAX_ABS_SYSTEM_ENTRY) -> Any:
+    """Check a matrix read from a file: a list of rows (or one row) of numbers
+    (:func:`as_number`, so no booleans, finite, ``|entry| <= max_abs``); returns it as nested
+    lists of floats (the shape is checked by :func:`~switchobs_core.validation.as_matrix`)."""
+    if isinstance(x, (dict, type(None))):
+        raise exc(f"{where} must be a matrix (a list of rows of numbers); got {_kind(x)}")
+    if not isinstance(x, (list, tuple)):
+        return as_number(x, where, exc=exc, max_abs=max_abs)   # as_matrix refuses the shape
+    out = []
+    for i, row in enumerate(x):
+        if isinstance(row, (list, tuple)):
+            out.append([_entry(v, f"{where} row {i + 1}, column {j + 1}", exc, max_abs) for j, v in enumerate(row)])
+        else:
+            out.append(_entry(row, f"{where} entry {i + 1}", exc, max_abs))
+    return out
+
+
+def _entry(v: Any, where: str, exc: type[SwitchobsError], max_abs: float | None) -> float:
+    if isinstance(v, (list, tuple, dict)):
+        raise exc(f"{where} must be a number; got {_kind(v)} (a matrix is a list of rows of numbers)")
+    return as_number(v, where, exc=exc, max_abs=max_abs)
+

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidArgument
+from .loading import as_number
 
 __all__ = [
     "NoiseModel",
@@ -79,17 +80,9 @@ MAX_ABS_ENTRY = 1e100
 
 
 def _number(x: Any, where: str) -> float:
-    """``x`` as a float; strings holding a number are accepted, booleans are not."""
-    if isinstance(x, (bool, np.bool_)):
-        raise NoiseModelError(f"{where} must be a number; got the boolean {x!r}")
-    if isinstance(x, str):
-        try:
-            return float(x)
-        except ValueError:
-            raise NoiseModelError(f"{where} must be a number; got the string {x!r}") from None
-    if isinstance(x, (int, float, np.integer, np.floating)):
-        return float(x)
-    raise NoiseModelError(f"{where} must be a number; got {type(x).__name__} {x!r}")
+    """``x`` as a float; strings holding a number are accepted, booleans are not
+    (:func:`switchobs_core.loading.as_number`; finiteness is the caller's check)."""
+    return as_number(x, where, exc=NoiseModelError, finite=False)
 
 
 def _array(x: Any, where: str) -> np.ndarray:

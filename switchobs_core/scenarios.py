@@ -21,11 +21,15 @@ from typing import Any
 import numpy as np
 
 from .exceptions import InvalidSystem
+from .loading import as_number
 from .noise import NoiseModel
 from .system import LTISystem, read_spec
 
 __all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system",
            "load_noise", "PAPER_D"]
+
+#: Most agents :func:`camera_agents` builds (n = 4 (M + 1) states): bounds what a file asks for.
+MAX_AGENTS = 200
 
 #: The paper's velocity matrices (Sec. ``subsec:sim_params``): D_c, D_1, D_2 diagonals.
 PAPER_D: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.2), (0.0, 0.1))
@@ -61,16 +65,24 @@ def camera_agents(
         (0.13, 0.16, 0.19, 0.22, ...), so every agent has an unstable mode and no two
         agents are alike.
     """
-    M = int(agents)
+    if isinstance(agents, (bool, np.bool_)) or not isinstance(agents, (int, np.integer, str)):
+        raise InvalidSystem(f"agents must be a whole number; got {agents!r}")
+    try:
+        M = int(agents)
+    except ValueError:
+        raise InvalidSystem(f"agents must be a whole number; got {agents!r}") from None
     if M < 2:
         raise InvalidSystem(f"camera_agents needs at least 2 agents (one channel each); got {M}")
+    if M > MAX_AGENTS:
+        raise InvalidSystem(f"camera_agents takes at most {MAX_AGENTS} agents; got {M}")
     if D_agents is None:
         D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.03 * (k - 1)) for k in range(M)]
-    try:
-        D_agents = [tuple(float(v) for v in d) for d in D_agents]
-        D_c = tuple(float(v) for v in D_c)
-    except (TypeError, ValueError) as err:
-        raise InvalidSystem(f"D_c and D_agents must hold numbers ({err})") from None
+    if not isinstance(D_c, (Sequence, np.ndarray)) or not isinstance(D_agents, (Sequence, np.ndarray)) \
+            or any(not isinstance(d, (Sequence, np.ndarray)) for d in D_agents):
+        raise InvalidSystem("D_c must be a pair of numbers and D_agents a list of pairs")
+    D_agents = [tuple(as_number(v, f"D_agents[{k}]", exc=InvalidSystem, finite=False) for v in d)
+                for k, d in enumerate(D_agents)]
+    D_c = tuple(as_number(v, "D_c", exc=InvalidSystem, finite=False) for v in D_c)
     if len(D_c) != 2 or not all(math.isfinite(v) for v in D_c):
         raise InvalidSystem(f"D_c must have 2 finite entries; got {D_c}")
     if len(D_agents) != M or any(len(d) != 2 for d in D_agents):
@@ -120,7 +132,7 @@ SCENARIOS: dict[str, Callable[..., LTISystem]] = {
 def build_scenario(name: str, **params: Any) -> LTISystem:
     """Build a built-in scenario by name with its keyword parameters."""
     if name not in SCENARIOS:
-        raise InvalidSystem(f"unknown scenario '{name}'; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
+        raise InvalidSystem(f"unknown scenario {name!r}; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
     try:
         return SCENARIOS[name](**params)
     except TypeError as err:
@@ -134,7 +146,15 @@ def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
         spec = {k: v for k, v in spec.items() if k != "noise"}
     if isinstance(spec, dict) and "scenario" in spec:
         params = {k: v for k, v in spec.items() if k != "scenario"}
-        return build_scenario(str(spec["scenario"]), **params)
+        if any(not isinstance(k, str) for k in params):
+            raise InvalidSystem(f"{source}: scenario parameters must be named by strings; got "
+                                f"{sorted(map(repr, params))}")
+        try:
+            return build_scenario(str(spec["scenario"]), **params)
+        except InvalidSystem as err:
+            if source == "<dict>":
+                raise
+            raise type(err)(f"{source}: {err}") from None
     return LTISystem.from_dict(spec, source=source)
 
 

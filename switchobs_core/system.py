@@ -37,8 +37,8 @@ from numpy.typing import ArrayLike
 
 from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposition
 from .exceptions import InvalidSystem, UnobservableSystem
-from .loading import check_file_matrix, parse_yaml, read_text
-from .validation import as_matrix
+from .loading import load_yaml, number_matrix
+from .validation import MAX_ABS_SYSTEM_ENTRY, as_matrix
 
 __all__ = ["LTISystem", "ChannelInfo", "read_spec"]
 
@@ -107,17 +107,18 @@ class LTISystem:
         output_labels: Sequence[Sequence[str]] | None = None,
         rtol: float = DEFAULT_RTOL,
     ) -> None:
-        A = as_matrix(A, "A", square=True, exc=InvalidSystem)
+        A = as_matrix(A, "A", square=True, exc=InvalidSystem, max_abs=MAX_ABS_SYSTEM_ENTRY)
         n = A.shape[0]
         if n == 0:
             raise InvalidSystem("A must have at least one state")
         if B is None:
             B = np.zeros((n, 0))
         else:
-            B = as_matrix(B, "B", rows=n, exc=InvalidSystem)
+            B = as_matrix(B, "B", rows=n, exc=InvalidSystem, max_abs=MAX_ABS_SYSTEM_ENTRY)
         if isinstance(C, np.ndarray) and C.ndim == 2:
             raise InvalidSystem("C must be a list of channel output matrices [C_1, ..., C_N]")
-        C = tuple(as_matrix(Ci, f"C_{i + 1}", cols=n, exc=InvalidSystem) for i, Ci in enumerate(C))
+        C = tuple(as_matrix(Ci, f"C_{i + 1}", cols=n, exc=InvalidSystem, max_abs=MAX_ABS_SYSTEM_ENTRY)
+                  for i, Ci in enumerate(C))
         if len(C) < 2:
             raise InvalidSystem(f"C: a switched-output system needs N >= 2 channels (C_1..C_N); got {len(C)}")
         for i, Ci in enumerate(C):
@@ -130,6 +131,10 @@ class LTISystem:
         cnames = tuple(channel_names) if channel_names is not None else tuple(f"channel{i + 1}" for i in range(N))
         if len(cnames) != N:
             raise InvalidSystem(f"channel_names has {len(cnames)} entries; expected N = {N}")
+        dup = sorted({c for c in cnames if cnames.count(c) > 1})
+        if dup:
+            raise InvalidSystem(f"channel names must be distinct; {', '.join(map(repr, dup))} names more than one "
+                                "channel")
         if output_labels is None:
             olabels = tuple(tuple(f"y{i + 1}[{k}]" for k in range(Ci.shape[0])) for i, Ci in enumerate(C))
         else:
@@ -266,37 +271,47 @@ class LTISystem:
         for key in ("A", "channels"):
             if key not in spec:
                 raise InvalidSystem(f"{source}: missing required key '{key}'")
-        chans = spec["channels"]
-        if not isinstance(chans, list):
-            raise InvalidSystem(f"{source}: 'channels' must be a list of mappings with a 'C' entry")
-        Cs, names, outs = [], [], []
-        check_file_matrix(spec["A"], f"{source}: A", InvalidSystem)
-        if spec.get("B") is not None:
-            check_file_matrix(spec["B"], f"{source}: B", InvalidSystem)
-        for i, ch in enumerate(chans):
-            if not isinstance(ch, dict) or "C" not in ch:
-                raise InvalidSystem(f"{source}: channels[{i}] must be a mapping with a 'C' entry")
-            check_file_matrix(ch["C"], f"{source}: channels[{i}].C", InvalidSystem)
-            Cs.append(ch["C"])
-            name = str(ch.get("name", f"channel{i + 1}"))
-            if name in names:
-                raise InvalidSystem(f"{source}: channels[{i}]: duplicate channel name '{name}' (names must be unique)")
-            names.append(name)
-            outs.append(ch.get("outputs"))
-        output_labels = None
-        if all(o is not None for o in outs):
-            output_labels = [[str(x) for x in o] for o in outs]
         unknown = set(spec) - {"name", "states", "A", "B", "channels"}
         if unknown:
-            raise InvalidSystem(f"{source}: unknown key(s) {sorted(unknown)}")
+            raise InvalidSystem(f"{source}: unknown key(s) {sorted(map(str, unknown))}")
+        try:
+            return cls._from_checked_dict(spec, source)
+        except InvalidSystem as err:
+            raise type(err)(f"{source}: {err}") from None
+
+    @classmethod
+    def _from_checked_dict(cls, spec: dict[str, Any], source: str) -> LTISystem:
+        """:meth:`from_dict` after its key checks; messages without the ``source`` prefix."""
+        chans = spec["channels"]
+        if not isinstance(chans, list):
+            raise InvalidSystem("'channels' must be a list of mappings with a 'C' entry")
+        A = number_matrix(spec["A"], "A", exc=InvalidSystem)
+        B = None if spec.get("B") is None else number_matrix(spec["B"], "B", exc=InvalidSystem)
+        Cs, names, outs = [], [], []
+        for i, ch in enumerate(chans):
+            if not isinstance(ch, dict) or "C" not in ch:
+                raise InvalidSystem(f"channels[{i}] must be a mapping with a 'C' entry")
+            extra = set(ch) - {"name", "C", "outputs"}
+            if extra:
+                raise InvalidSystem(f"channels[{i}]: unknown key(s) {sorted(map(str, extra))} "
+                                    "(known: name, C, outputs)")
+            Cs.append(number_matrix(ch["C"], f"channels[{i}].C", exc=InvalidSystem))
+            names.append(_label(ch.get("name", f"channel{i + 1}"), f"channels[{i}].name"))
+            o = ch.get("outputs")
+            if o is not None and not isinstance(o, list):
+                raise InvalidSystem(f"channels[{i}].outputs must be a list of labels")
+            outs.append(None if o is None else [_label(x, f"channels[{i}].outputs") for x in o])
+        states = spec.get("states")
+        if "states" in spec and not isinstance(states, list):
+            raise InvalidSystem("'states' must be a list of labels")
         return cls(
-            spec["A"],
-            spec.get("B"),
+            A,
+            B,
             Cs,
-            name=str(spec.get("name", Path(source).stem)),
-            state_labels=[str(s) for s in spec["states"]] if "states" in spec else None,
+            name=_label(spec.get("name", Path(source).stem), "name"),
+            state_labels=[_label(x, "states") for x in states] if states is not None else None,
             channel_names=names,
-            output_labels=output_labels,
+            output_labels=outs if all(o is not None for o in outs) else None,
         )
 
     @classmethod
@@ -319,7 +334,19 @@ class LTISystem:
         }
 
 
+def _label(x: Any, where: str) -> str:
+    """A name or label read from a file: a plain value (string, number), not a list or mapping."""
+    if isinstance(x, (dict, list)) or x is None:
+        kind = "a mapping" if isinstance(x, dict) else "a list" if isinstance(x, list) else "null"
+        raise InvalidSystem(f"{where} must be a name (a string); got {kind}")
+    return str(x)
+
+
 def read_spec(path: str | Path) -> Any:
-    """The parsed YAML mapping of a system file (schema in the module docstring)."""
-    text = read_text(path, "system file", InvalidSystem)
-    return parse_yaml(text, str(path), InvalidSystem)
+    """The parsed YAML mapping of a system file (schema in the module docstring), read with
+    the bounds of :mod:`switchobs_core.loading` (size, UTF-8, no aliases, no duplicate keys,
+    nesting depth)."""
+    try:
+        return load_yaml(path, exc=InvalidSystem, what="system file")
+    except FileNotFoundError:
+        raise InvalidSystem(f"system file {path} does not exist") from None

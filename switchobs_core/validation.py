@@ -15,7 +15,12 @@ from numpy.typing import ArrayLike
 
 from .exceptions import InvalidArgument
 
-__all__ = ["as_matrix", "as_vector", "as_positive", "as_finite"]
+__all__ = ["as_matrix", "as_vector", "as_positive", "as_finite", "MAX_ABS_SYSTEM_ENTRY"]
+
+#: Largest magnitude of an entry of A, B or C_i. Beyond it the design's SDPs are out of the
+#: solvers' range (1e300 made SCS fail to allocate), and no physical model needs it: rescale
+#: the state or the time unit instead.
+MAX_ABS_SYSTEM_ENTRY = 1e12
 
 
 def as_matrix(
@@ -26,8 +31,10 @@ def as_matrix(
     cols: int | None = None,
     square: bool = False,
     exc: type[InvalidArgument] = InvalidArgument,
+    max_abs: float | None = None,
 ) -> np.ndarray:
-    """Return ``M`` as a finite 2-D float64 array, or raise ``exc`` naming ``name``."""
+    """Return ``M`` as a finite 2-D float64 array, or raise ``exc`` naming ``name``
+    (also when an entry exceeds ``max_abs`` in magnitude, if given)."""
     try:
         arr = np.array(M, dtype=float)
     except (TypeError, ValueError) as err:
@@ -46,6 +53,12 @@ def as_matrix(
     if bad.any():
         i, j = np.argwhere(bad)[0]
         raise exc(f"{name} has a non-finite entry ({arr[i, j]}) at row {i}, column {j}")
+    if max_abs is not None:
+        big = np.abs(arr) > max_abs
+        if big.any():
+            i, j = np.argwhere(big)[0]
+            raise exc(f"{name} has an entry of magnitude {abs(arr[i, j]):.3g} at row {i}, column {j}, beyond the "
+                      f"supported {max_abs:g} (rescale the state or the time unit)")
     return arr
 
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 import msg_bridge as mb
-from switchobs_core.loading import parse_yaml, read_text
+from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
 from switchobs_core.schedule import Cycle
@@ -178,7 +178,10 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
         cfg[name] = v
 
     for f in params_files:
-        doc = parse_yaml(read_text(f, "params file", ConfigError), f"params file {f}", ConfigError) or {}
+        try:
+            doc = load_yaml(f, exc=ConfigError, what="params file") or {}
+        except FileNotFoundError:
+            raise ConfigError(f"params file {f} does not exist") from None
         for key in (node_name, "/" + node_name, "/**"):
             sect = doc.get(key) if isinstance(doc, dict) else None
             if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):

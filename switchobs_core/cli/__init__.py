@@ -13,7 +13,7 @@ import importlib
 import sys
 
 from .._version import __version__
-from ..exceptions import SwitchobsError
+from ..exceptions import SwitchobsError, one_line
 from ..threads import single_threaded_blas
 from ._common import OneLineParser
 
@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except SwitchobsError as err:
-        print(f"switchobs {args.command}: error: {err}", file=sys.stderr)
+        print(f"switchobs {args.command}: error: {one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("switchobs: interrupted", file=sys.stderr)

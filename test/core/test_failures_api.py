@@ -126,6 +126,7 @@ CASES = [
     ("RandomSchedule.box", "h_min", lambda s: sch.RandomSchedule(2, 1.0, 0.5)),
     ("RandomSchedule.nan", "h_max", lambda s: sch.RandomSchedule(2, 0.5, NAN)),
     ("parse_schedule", "schedule", lambda s: sch.parse_schedule("weekly:2")),
+    ("check_cycle_horizon.tau", "too long", lambda s: sch.check_cycle_horizon(s[0].A, sch.Cycle.from_ts(1e9, 0.6))),
     # --- scenarios and the paper
     ("camera_agents.agents", "agents", lambda s: scn.camera_agents(0)),
     ("camera_agents.D_c", "D_c", lambda s: scn.camera_agents(2, D_c=(0.0,))),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-import yaml
+from switchobs_core.loading import parse_yaml
 
 from ...config import params_from_file
 from ..estimate import estimate
@@ -37,7 +37,7 @@ def params_of(a: argparse.Namespace) -> dict:
         name, sep, val = item.partition(":=")
         if not sep:
             raise BagError(f"-p {item}: expected NAME:=VALUE")
-        over[name] = yaml.safe_load(val) if val != "" else ""
+        over[name] = parse_yaml(val, exc=BagError, source=f"-p {name}") if val != "" else ""
     if a.gain_table:
         over["gain_table"] = a.gain_table
     return params_from_file(a.params_file, over)
