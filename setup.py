@@ -44,6 +44,7 @@ setup(
     entry_points={
         "console_scripts": [
             "estimator = switchobs_ros.estimator:main",
+            "managed_estimator = switchobs_ros.managed_estimator:main",
             "camera_sim = switchobs_ros.camera_sim:main",
             "switchobs = switchobs_core.cli:main",
             "switchobs_bag = switchobs_ros.bag.cli:main",

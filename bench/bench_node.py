@@ -41,7 +41,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 #: Estimator configurations compared (parameters on top of the gain table).
 CONFIGS = {
     "default": {},
-    "events": {"executor": "events"},
     "no-gc-freeze": {"gc_freeze": False},
     "state-only": {"output.envelope_every": 0, "output.odometry_every": 0, "output.covariance_every": 0},
 }
@@ -53,6 +52,7 @@ def republisher_main() -> None:
     import rclpy
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import ExternalShutdownException
+    from std_msgs.msg import UInt8
 
     from switchobs_ros import qos
 
@@ -61,6 +61,7 @@ def republisher_main() -> None:
     pub = node.create_publisher(PoseStamped, "~/out", qos.OUTPUT)
     node.create_subscription(PoseStamped, "target/pose", pub.publish, qos.SENSOR_SUB)
     node.create_subscription(PoseStamped, "camera/pose", lambda m: None, qos.SENSOR_SUB)
+    node.create_subscription(UInt8, "camera/active_channel", lambda m: None, qos.CHANNEL_SUB)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -152,6 +153,8 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     from tools.launch import NodeProcess, ros_args
 
     ns = "m"
+    for f in ("sent.npy", "recv.npy"):
+        (tmp / f).unlink(missing_ok=True)
     if target == "bare":
         node = NodeProcess("republisher", ["-r", f"__ns:=/{ns}"],
                            cmd=[sys.executable, __file__, "--republisher", "--ros-args"], log=tmp / "rep.log")
@@ -222,7 +225,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--rates", default="100,250,500,1000")
-    ap.add_argument("--configs", default="default,events", help=f"estimator configurations: {', '.join(CONFIGS)}")
+    ap.add_argument("--configs", default="default,no-gc-freeze,state-only",
+                    help=f"estimator configurations: {', '.join(CONFIGS)}")
     ap.add_argument("--soak", type=float, default=0.0, help="seconds of a 500 Hz soak of the default estimator")
     ap.add_argument("--figure", type=Path, default=None)
     a = ap.parse_args(args)

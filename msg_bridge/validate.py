@@ -36,6 +36,7 @@ class Reason(enum.Enum):
     NO_CHANNEL = "no_channel"            # a pose before any active-channel message
     STALE_AFTER_SWITCH = "stale_after_switch"  # target pose taken before the last switch
     INTERNAL_ERROR = "internal_error"    # an exception while handling the message (counted, node runs on)
+    BAD_LAYOUT = "bad_layout"            # a labelled array that is not ours, or names no state entry
 
 
 @dataclass(frozen=True)

@@ -557,6 +557,55 @@ class SwitchedObserver:
             self._correct(t, dt if fuse else 0.0, channel, y, rows)
         return self._x
 
+    def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
+        """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
+
+        The observer first propagates to ``t`` exactly as between samples (the last innovation
+        held), then ``x_hat[i] = values[i]``. Where the family keeps a covariance, ``P`` keeps
+        its other entries and gets row/column ``i`` zeroed with ``P[i, i] = variances[i]`` (the
+        entry's own variance, default the previous ``P[i, i]``); a Kalman table then runs the
+        recursion online from that ``P`` and re-locks as after any departure. The exact bound
+        no longer holds (the set entries' error is unknown): the caller must stop publishing it,
+        as after :meth:`reset`.
+
+        Raises
+        ------
+        InvalidArgument
+            ``t`` before the observer's time or not finite, an index out of range, a value or
+            a variance that is not finite (variances must be >= 0).
+        """
+        dt = float(t) - self._t
+        if not (math.isfinite(dt) and dt >= 0):
+            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
+        for i, v in list(values.items()) + list((variances or {}).items()):
+            if not (isinstance(i, (int, np.integer)) and 0 <= i < self.n):
+                raise InvalidArgument(f"state index {i!r} out of range 0..{self.n - 1}")
+            if not math.isfinite(float(v)) or abs(float(v)) > MAX_ABS_SAMPLE:
+                raise InvalidArgument(f"value {v!r} for state {i} must be finite (|v| <= {MAX_ABS_SAMPLE:g})")
+        if any(float(v) < 0 for v in (variances or {}).values()):
+            raise InvalidArgument("variances must be >= 0")
+        if self.family != "lmi" and not self._online:    # from the table's covariance to the online recursion
+            self._P = self.P
+            self._online = True
+            self.kalman_departures += 1
+            self.kalman_fallback = "the state was set (set_estimate); running the Riccati recursion online"
+        if dt > 0:
+            self._step(dt)
+            self._t = float(t)
+        P = self.P
+        x = self._x.copy()
+        for i, v in values.items():
+            x[i] = float(v)
+        self._x = x
+        if P is not None:
+            P = P.copy()
+            for i in set(values) | set(variances or {}):
+                var = float((variances or {}).get(i, P[i, i]))
+                P[i, :] = 0.0
+                P[:, i] = 0.0
+                P[i, i] = var
+            self._P = P
+
     def _step(self, dt: float, *, covariance: bool = True) -> None:
         """Exact step over ``dt`` with the held innovation/measurement and input (step 1)."""
         e = self._cache.step(self._key, dt)

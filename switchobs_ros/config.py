@@ -90,8 +90,6 @@ PARAMS = [
           "Changeable at run time.", read_only=False),
     Param("output.covariance_every", 1, "Publish ~/covariance for every k-th estimate (0: never; needs "
           "publish_covariance). Changeable at run time.", read_only=False),
-    Param("executor", "single_threaded", "rclpy executor: single_threaded (SingleThreadedExecutor) or events "
-          "(rclpy.experimental.EventsExecutor, see bench/RESULTS.md)."),
     Param("gc_freeze", True, "Call gc.freeze() once the node is built (start-up objects leave the garbage "
           "collector's generations, see bench/RESULTS.md)."),
     Param("autostart", True, "Managed (lifecycle) node only: configure and activate at start-up (today's "
@@ -110,10 +108,6 @@ RUNTIME_PARAMS = {
     "output.odometry_every": (lambda v: v >= 0, "an integer >= 0"),
     "output.covariance_every": (lambda v: v >= 0, "an integer >= 0"),
 }
-
-#: Executors the ``executor`` parameter names.
-EXECUTORS = ("single_threaded", "events")
-
 
 def check_runtime_value(name: str, value: Any) -> str:
     """'' if ``value`` is acceptable for runtime parameter ``name``, else the reason (one line)."""
@@ -268,8 +262,6 @@ class EstimatorConfig:
             why = check_runtime_value(name, values[name])
             if why:
                 raise ConfigError(why)
-        if values["executor"] not in EXECUTORS:
-            raise ConfigError(f"parameter 'executor' must be one of {', '.join(EXECUTORS)}; got {values['executor']!r}")
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
         vmax = float(values["noise.max"])

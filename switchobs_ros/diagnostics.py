@@ -48,6 +48,7 @@ class NodeState:
     sensor_timeout: float
     last_prediction: Any
     predictions: int
+    ignored_inactive: int = 0
 
 
 class EstimatorDiagnostics:
@@ -87,9 +88,11 @@ class EstimatorDiagnostics:
               kv("current design index", obs.design_index),
               kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
               kv("switches", pl.switches), kv("resets", pl.resets),
+              kv("states set (~/set_state)", getattr(pl, "states_set", 0)),
               kv("estimates withheld (non-finite, then reset)", pl.nonfinite), kv("internal errors", pl.errors),
               kv("clock jumps back (resets)", node.clock_jumps_back),
-              kv("clock jumps forward", node.clock_jumps_forward)]
+              kv("clock jumps forward", node.clock_jumps_forward),
+              kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
         if obs.family == "lmi":
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
                    kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]

@@ -94,16 +94,17 @@ class _NodeLog(PipelineLog):
             self._logger.error(text)
 
 
-class EstimatorNode(Node):
-    """Subscribes the camera topics, drives a SwitchedObserver, publishes the estimate."""
+class EstimatorMixin:
+    """The estimator's behaviour on any rclpy node class (plain or lifecycle): configuration
+    (:meth:`_configure`: the pipeline, the observer, the writers), the ROS interfaces
+    (:meth:`_create_interfaces` / :meth:`_destroy_interfaces`), the callbacks. ``answering``
+    gates the measurement callbacks (a deactivated managed node keeps its estimate and ignores
+    measurements, counting them)."""
 
-    def __init__(self, **kwargs):
-        super().__init__("estimator", **kwargs)
-        self.t_start = time.monotonic()
-        cfg = declare_all(self, PARAMS, gated=True)
-        self.cfg = cfg
-        self._configure(cfg)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+    answering = True
+    ignored_inactive = 0
+
+    def _ready_log(self) -> None:
         self.get_logger().info(
             f"estimator ready: system '{self.system.name}' (n={self.system.n}, N={self.system.N}), "
             f"mode {self.mode}, cycles {[c.label() for c in self.cycles]}, table {self.table_path}, "
@@ -132,10 +133,12 @@ class EstimatorNode(Node):
         # output decimation (output.*_every; 0: never) and the runner's choices
         self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance")}
         self.n_published = 0
-        self.executor_kind = cfg["executor"]
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
 
+    def _create_interfaces(self) -> None:
+        """Publishers, subscriptions, the ``~/reset`` service, the clock-jump callback and the timers."""
+        pl, cfg = self.pipeline, self.cfg
         # publishers (reliable), then subscriptions (sensor data; channel reliable). The
         # channel subscription is created first so that, when a channel message and a pose
         # are ready together, the executor takes the channel first.
@@ -159,6 +162,8 @@ class EstimatorNode(Node):
         self.sub_camera = self.create_subscription(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
         self.sub_target = self.create_subscription(PoseStamped, "target/pose", self.target_callback, qos.SENSOR_SUB)
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
+        self.sub_set_state = self.create_subscription(Float64MultiArray, "~/set_state", self.set_state_callback,
+                                                      qos.CHANNEL_SUB)
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -169,17 +174,61 @@ class EstimatorNode(Node):
         self.diag_timer = self.create_timer(cfg["diagnostics_period"], self.diagnostics_callback)
         self.pair_timer = self.create_timer(max(self.pair_timeout / 2, 0.005), self.pairing_callback)
 
+    def _destroy_interfaces(self) -> None:
+        """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
+        for name in ("pub_state", "pub_env", "pub_cov", "pub_diag", "pub_pred", "pub_pred_bound"):
+            pub = getattr(self, name, None)
+            if pub is not None:
+                self.destroy_publisher(pub)
+            setattr(self, name, None)
+        for pub in getattr(self, "pub_odom", []):
+            self.destroy_publisher(pub)
+        self.pub_odom = []
+        for name in ("sub_channel", "sub_camera", "sub_target", "sub_set_state"):
+            sub = getattr(self, name, None)
+            if sub is not None:
+                self.destroy_subscription(sub)
+            setattr(self, name, None)
+        for name in ("diag_timer", "pair_timer"):
+            tm = getattr(self, name, None)
+            if tm is not None:
+                self.destroy_timer(tm)
+            setattr(self, name, None)
+        if getattr(self, "srv_reset", None) is not None:
+            self.destroy_service(self.srv_reset)
+            self.srv_reset = None
+        self._jump_handle = None
+
     # ------------------------------------------------------------------ inputs
     def channel_callback(self, msg: UInt8) -> None:
+        if not self.answering:
+            self.ignored_inactive += 1
+            return
         self.pipeline.on_channel(msg)
 
     def camera_callback(self, msg: PoseStamped) -> None:
+        if not self.answering:
+            self.ignored_inactive += 1
+            return
         self._publish_all(self.pipeline.on_pose("camera", msg, self.get_clock().now().nanoseconds))
 
     def target_callback(self, msg: PoseStamped) -> None:
+        if not self.answering:
+            self.ignored_inactive += 1
+            return
         self._publish_all(self.pipeline.on_pose("target", msg, self.get_clock().now().nanoseconds))
 
+    def set_state_callback(self, msg: Float64MultiArray) -> None:
+        """``~/set_state``: set some or all entries of the estimate at a stamp (the pipeline's
+        :meth:`~switchobs_ros.pipeline.EstimatorPipeline.on_set_state`)."""
+        if not self.answering:
+            self.ignored_inactive += 1
+            return
+        self.pipeline.on_set_state(msg, self.get_clock().now().nanoseconds)
+
     def pairing_callback(self) -> None:
+        if not self.answering:
+            return
         self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
 
     def _publish_all(self, estimates: list[Estimate]) -> None:
@@ -270,7 +319,7 @@ class EstimatorNode(Node):
         """The /diagnostics message now (built by :class:`~switchobs_ros.diagnostics.EstimatorDiagnostics`)."""
         return self.diag.array(self.get_clock().now(), NodeState(
             self.clock_jumps_back, self.clock_jumps_forward, self.last_clock_jump, self.sensor_timeout,
-            self.last_prediction, self.predictions))
+            self.last_prediction, self.predictions, self.ignored_inactive))
 
     def prediction_tick(self, now_ns: int) -> None:
         """During a sensor outage (no accepted measurement for sensor_timeout), publish the
@@ -286,6 +335,20 @@ class EstimatorNode(Node):
         self.pub_pred_bound.publish(self.w_pred_bound.msg(np.array([p.exact_bound, p.age]), p.stamp_ns))
         self.predictions += 1
         self.last_prediction = p
+
+class EstimatorNode(EstimatorMixin, Node):
+    """Subscribes the camera topics, drives a SwitchedObserver, publishes the estimate."""
+
+    def __init__(self, **kwargs):
+        super().__init__("estimator", **kwargs)
+        self.t_start = time.monotonic()
+        cfg = declare_all(self, PARAMS, gated=True)
+        self.cfg = cfg
+        self._configure(cfg)
+        self._create_interfaces()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._ready_log()
+
 
 def main(args=None) -> int:
     return run_node(EstimatorNode, "estimator", args)

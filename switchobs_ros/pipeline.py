@@ -77,6 +77,8 @@ NO_BOUND = -1.0
 #: Input topic of each pose part, and of the channel (relative names, as the node subscribes).
 POSE_TOPICS = {"camera": "camera/pose", "target": "target/pose"}
 CHANNEL_TOPIC = "camera/active_channel"
+#: The set-state input's name in the counters (robot_localization's set_pose analogue).
+SET_STATE_TOPIC = "~/set_state"
 INPUT_TOPICS = (POSE_TOPICS["camera"], POSE_TOPICS["target"], CHANNEL_TOPIC)
 #: Samples kept waiting for their other half (a backlog reorders the two topics a little).
 MAX_PENDING = 8
@@ -185,6 +187,7 @@ class EstimatorPipeline:
         self.partial_updates = 0
         self.switches = 0
         self.resets = 0
+        self.states_set = 0
         self.bound_valid = True     # False after any reset: see NO_BOUND
         self.bound_invalid_why = ""
         self.errors = 0
@@ -248,6 +251,67 @@ class EstimatorPipeline:
                     self.switch_ns = self.last_ns["target"]
         except Exception as err:
             self.internal_error(CHANNEL_TOPIC, err)
+
+    def on_set_state(self, msg: Any, now_ns: int) -> bool:
+        """A ``~/set_state`` message (robot_localization's ``set_pose``): a labelled array (the
+        layout of ``~/state``) naming some state entries (``agent1.p_x``) and optionally their
+        variances (``var:agent1.p_x``), stamped with the time they hold at. The observer
+        propagates to the stamp and takes the values (:meth:`SwitchedObserver.set_estimate`);
+        before the first sample they replace entries of the initial estimate. The exact bound is
+        withdrawn (:data:`NO_BOUND`: the set entries' error is unknown) until the next reset.
+        A bad message is rejected and counted; True when applied."""
+        topic = SET_STATE_TOPIC
+        try:
+            try:
+                arr = mb.unpack_labelled(msg)
+            except mb.BridgeError as err:
+                self.reject(topic, mb.Rejection(mb.Reason.BAD_LAYOUT, "layout", str(err)))
+                return False
+            index = {lab: i for i, lab in enumerate(self.system.state_labels)}
+            values, variances = {}, {}
+            for lab, v in zip(arr.labels, arr.values):
+                name = lab[4:] if lab.startswith("var:") else lab
+                if name not in index:
+                    self.reject(topic, mb.Rejection(mb.Reason.BAD_LAYOUT, lab, "not a state entry (the labels of "
+                                                    f"~/state, or var:<label>): {', '.join(index)}"))
+                    return False
+                if not np.isfinite(v):
+                    self.reject(topic, mb.Rejection(mb.Reason.NON_FINITE, lab, f"{v}"))
+                    return False
+                if abs(v) > self.max_abs or (lab.startswith("var:") and v < 0):
+                    self.reject(topic, mb.Rejection(mb.Reason.TOO_LARGE, lab, f"{v} (|v| <= {self.max_abs:g}, "
+                                                    "variances >= 0)"))
+                    return False
+                (variances if lab.startswith("var:") else values)[index[name]] = float(v)
+            if not values and not variances:
+                self.reject(topic, mb.Rejection(mb.Reason.BAD_LAYOUT, "labels", "names no state entry"))
+                return False
+            if arr.stamp_ns - now_ns > self.future_ns:
+                ahead = (arr.stamp_ns - now_ns) * 1e-9
+                self.reject(topic, mb.Rejection(mb.Reason.FUTURE_STAMP, "stamp",
+                                                f"{ahead:.3g} s ahead of the node clock"))
+                return False
+            if self.origin_ns is None:          # before the first sample: the initial estimate
+                for i, v in values.items():
+                    self.x0[i] = v
+                self.observer.reset(self.x0, 0.0)
+            else:
+                if self.obs_ns is not None and arr.stamp_ns < self.obs_ns:
+                    self.reject(topic, mb.Rejection(mb.Reason.OLD_STAMP, "stamp", "before the last estimate (the "
+                                                    "past cannot be set)"))
+                    return False
+                self.observer.set_estimate((arr.stamp_ns - self.origin_ns) * 1e-9, values, variances)
+                self.obs_ns = arr.stamp_ns
+            self.accepted[topic] += 1
+            self.states_set += 1
+            self.bound_valid = False
+            self.bound_invalid_why = "state set by ~/set_state"
+            self.log.info(f"state set at stamp {arr.stamp_ns} ({', '.join(arr.labels)}); exact_bound is "
+                          f"{NO_BOUND:g} (no bound known) from now on")
+            return True
+        except Exception as err:
+            self.internal_error(topic, err)
+            return False
 
     def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None) -> list[Estimate]:
         """A pose of ``part`` (``"camera"`` or ``"target"``) received at node-clock ``now_ns``.

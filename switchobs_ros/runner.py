@@ -23,16 +23,7 @@ from switchobs_core.threads import single_threaded_blas
 
 from .params import ConfigError
 
-__all__ = ["make_executor", "run_node"]
-
-
-def make_executor(kind: str):
-    """The rclpy executor named by the ``executor`` parameter (see bench/RESULTS.md)."""
-    if kind == "events":
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor()
-    return rclpy.executors.SingleThreadedExecutor()
+__all__ = ["run_node"]
 
 
 def run_node(node_cls, prog: str, args=None) -> int:
@@ -49,7 +40,9 @@ def run_node(node_cls, prog: str, args=None) -> int:
     code = 0
     try:
         node = node_cls()
-        executor = make_executor(getattr(node, "executor_kind", "single_threaded"))
+        # SingleThreadedExecutor: rclpy.experimental.EventsExecutor (rclpy 7.1.6 wheels, Fast DDS) delivers no
+        # subscription callback at all here, even to a one-subscription node (bench/events_executor_check.py)
+        executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
         if getattr(node, "gc_freeze", False):
             gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations

@@ -186,3 +186,40 @@ def test_lmi_covariance_is_consistent(paper):
         nees[r] = e @ np.linalg.solve(obs.P, e)
     lo, hi = chi2.ppf([0.025, 0.975], runs * 12) / runs
     assert lo <= nees.mean() <= hi, (nees.mean(), lo, hi)
+
+
+@pytest.mark.parametrize("family", ["lmi", "kalman"])
+def test_set_estimate_sets_entries_and_covariance(paper, family):
+    """set_estimate (the node's ~/set_state): the entries take the given values at t, the rest is
+    the propagated estimate; P gets the given variance with the entry decoupled; a Kalman table
+    goes online from there and the filter keeps converging."""
+    import switchobs_core as so
+
+    cyc = [so.Cycle.from_ts(2.0, 0.6)]
+    table = (so.design_table(paper, cycles=cyc, delta=0.99, progress=False) if family == "lmi"
+             else so.kalman_table(paper, [so.design_kalman(paper, cyc, 100.0)]))
+    noise = None if family == "kalman" else so.default_noise(paper)
+    obs = so.SwitchedObserver(paper, table, "periodic", cyc, noise=noise)
+    plant = so.Plant(paper, np.array([0, 0, 0.2, 0.1, 3, 1, -0.1, 0, -2, 2, 0.1, 0], float))
+    sched = so.PeriodicSchedule(cyc[0])
+    for k in range(300):
+        t = k / 100
+        c = sched.channel_at(t)
+        plant.advance(t)
+        obs.update(t, c, plant.measure(c))
+    expected = obs.predict(3.005, hold=True)
+    obs.set_estimate(3.005, {4: 7.0}, {4: 0.25})
+    assert obs.t == 3.005 and obs.x_hat[4] == 7.0
+    np.testing.assert_allclose(np.delete(obs.x_hat, 4), np.delete(expected, 4), rtol=1e-12, atol=1e-12)
+    P = obs.P
+    assert P[4, 4] == 0.25 and not np.delete(P[4], 4).any()
+    with pytest.raises(InvalidArgument):
+        obs.set_estimate(1.0, {0: 1.0})          # the past
+    with pytest.raises(InvalidArgument):
+        obs.set_estimate(3.01, {12: 1.0})        # no such state
+    for k in range(301, 1500):                    # the filter pulls the wrong entry back
+        t = k / 100
+        c = sched.channel_at(t)
+        plant.advance(t)
+        obs.update(t, c, plant.measure(c))
+    assert abs(obs.x_hat[4] - plant.x[4]) < 1e-3

@@ -1,0 +1,108 @@
+"""The estimator as a managed (lifecycle) node: ``ros2 run switchobs_ros managed_estimator``.
+
+Same parameters, topics and behaviour as :mod:`switchobs_ros.estimator` (the shared
+:class:`~switchobs_ros.estimator.EstimatorMixin`), driven by the ROS 2 lifecycle
+(``~/change_state``, ``~/get_state``, ... from ``lifecycle_msgs``):
+
+* **configure** loads (or designs and caches) the gain table and builds the observer, then the
+  publishers, subscriptions, timers and ``~/reset``. A failure (a bad parameter value, a table
+  that does not load, a design that fails) leaves the node *unconfigured*: the transition
+  returns FAILURE, the reason is logged as one error line and kept in :attr:`last_failure`.
+* **activate** starts answering measurements.
+* **deactivate** stops answering without losing the estimate: measurements are ignored (and
+  counted); after activate the observer propagates exactly over the gap at the next sample.
+* **cleanup** and **shutdown** release the interfaces and the observer.
+
+``autostart`` (default true) configures and activates at start-up, which is the plain
+estimator's behaviour; a failed autostart configure exits with the one-line error and code 2,
+as the plain estimator does. ``autostart:=false`` waits for the lifecycle services.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from switchobs_core.exceptions import SwitchobsError, one_line
+
+from .config import PARAMS
+from .estimator import EstimatorMixin
+from .params import ConfigError, declare_all
+from .runner import run_node
+
+__all__ = ["ManagedEstimatorNode", "main"]
+
+
+class ManagedEstimatorNode(EstimatorMixin, LifecycleNode):
+    """The estimator under the ROS 2 lifecycle (module docstring)."""
+
+    def __init__(self, **kwargs):
+        super().__init__("estimator", **kwargs)
+        self.t_start = time.monotonic()
+        self.cfg = declare_all(self, PARAMS, gated=True)
+        self.answering = False
+        self.configured = False
+        self.last_failure = ""
+        self.add_on_set_parameters_callback(self._on_set_parameters_if_configured)
+        if self.cfg["autostart"]:
+            self.trigger_configure()
+            if not self.configured:
+                raise ConfigError(self.last_failure)
+            self.trigger_activate()
+
+    def _on_set_parameters_if_configured(self, params: list):
+        from rcl_interfaces.msg import SetParametersResult
+
+        if not self.configured:
+            return SetParametersResult(successful=False, reason="configure the node first (lifecycle)")
+        return self._on_set_parameters(params)
+
+    # ------------------------------------------------------------------ transitions
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self._configure(self.cfg)
+            self._create_interfaces()
+        except (SwitchobsError, ValueError) as err:
+            self.last_failure = one_line(err)
+            self.get_logger().error(f"configure failed: {self.last_failure}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        self.configured = True
+        self.last_failure = ""
+        self._ready_log()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.answering = True
+        self.get_logger().info("activated: answering measurements")
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.answering = False
+        self.get_logger().info("deactivated: measurements are ignored; the estimate is kept")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        self.get_logger().info("cleaned up: observer and interfaces released")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        self.answering = False
+        self.configured = False
+        self._destroy_interfaces()
+        self.pipeline = self.observer = None
+
+
+def main(args=None) -> int:
+    return run_node(ManagedEstimatorNode, "managed_estimator", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
