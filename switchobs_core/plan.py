@@ -99,23 +99,28 @@ def parse_weights(text: str | Sequence[float] | None, system: Any) -> np.ndarray
         try:
             w = np.array([float(t) for t in toks])
         except ValueError:
-            labels = list(getattr(system, "state_labels", ()) or [f"x{j}" for j in range(n)])
-            w = np.zeros(n)
-            for t in toks:
-                pat, eq, val = t.partition("=")
-                try:
-                    v = float(val) if eq else 1.0
-                except ValueError:
-                    raise InvalidArgument(f"--weights: bad weight in {t!r} (use PATTERN=NUMBER)") from None
-                hit = [j for j, lab in enumerate(labels) if fnmatch.fnmatchcase(lab, pat.strip())]
-                if not hit:
-                    raise InvalidArgument(
-                        f"--weights: pattern {pat.strip()!r} matches no state; states: {', '.join(labels)}")
-                w[hit] = v
+            w = _weights_by_label(toks, system, n)
     if w.size != n:
         raise InvalidArgument(f"--weights needs n = {n} numbers (one per state); got {w.size}")
     if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
         raise InvalidArgument(f"--weights must be finite, >= 0 and not all zero; got {w.tolist()}")
+    return w
+
+
+def _weights_by_label(toks: Sequence[str], system: Any, n: int) -> np.ndarray:
+    """Weights from ``PATTERN[=W]`` tokens (fnmatch on the state labels; unmatched states 0)."""
+    labels = list(getattr(system, "state_labels", ()) or [f"x{j}" for j in range(n)])
+    w = np.zeros(n)
+    for t in toks:
+        pat, eq, val = t.partition("=")
+        try:
+            v = float(val) if eq else 1.0
+        except ValueError:
+            raise InvalidArgument(f"--weights: bad weight in {t!r} (use PATTERN=NUMBER)") from None
+        hit = [j for j, lab in enumerate(labels) if fnmatch.fnmatchcase(lab, pat.strip())]
+        if not hit:
+            raise InvalidArgument(f"--weights: pattern {pat.strip()!r} matches no state; states: {', '.join(labels)}")
+        w[hit] = v
     return w
 
 
@@ -320,8 +325,8 @@ def plan(
     kmax_total = math.floor(tau_max * f + 1e-9)
     if N * kmin > kmax_total:
         raise InvalidArgument(
-            f"no schedule fits: {N} channels x h_min {h_min:g} s need tau >= {N * kmin / f:g} s > tau_max {tau_max:g} s "
-            f"at {f:g} Hz; raise --tau-max or lower --h-min")
+            f"no schedule fits: {N} channels x h_min {h_min:g} s need tau >= {N * kmin / f:g} s > "
+            f"tau_max {tau_max:g} s at {f:g} Hz; raise --tau-max or lower --h-min")
     if levels is None:
         levels = {2: 6, 3: 4}.get(N, 3)
     natural = tuple(range(1, N + 1))
