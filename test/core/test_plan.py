@@ -76,7 +76,7 @@ def system():
     return paper_system()
 
 
-WEIGHTS = [None, "agent1.*", "agent2.p_*=3,camera.*"]
+WEIGHTS = [None, "agent1.*", "agent2.p_*=3,camera.*", "agent1.*=10,agent2.*"]  # optima (1,1) (9,1) (1,9) (3,1)
 
 
 @pytest.fixture(scope="module")
