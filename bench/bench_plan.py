@@ -5,7 +5,7 @@
 
 What is measured (median of 3 runs, [min - max]; the machine is shared and noisy):
 
-1. ``plan(paper_system(), 100.0)`` in process with the CLI defaults (h_min 0.5 s, tau_max 4 s,
+1. ``plan_schedule(paper_system(), 100.0)`` in process with the CLI defaults (h_min 0.5 s, tau_max 4 s,
    default noise, W = I), a fresh cost cache per run: the optimisation itself. Goal < 10 s.
 2. ``switchobs plan paper --rate 100 --json`` as a subprocess, end to end: interpreter start,
    imports, the optimisation, the paper's LMI design of the planned cycle (cvxpy), the Kalman
@@ -43,7 +43,7 @@ def _stat(ts: list[float]) -> str:
 
 def main() -> int:
     from switchobs_core.paper import TABLE
-    from switchobs_core.plan import ScheduleCost, cycle_cost, plan
+    from switchobs_core.plan import ScheduleCost, cycle_cost, plan_schedule
     from switchobs_core.scenarios import paper_system
     from switchobs_core.schedule import Cycle
     from switchobs_core.threads import single_threaded_blas
@@ -54,7 +54,7 @@ def main() -> int:
     t_plan, res = [], None
     for _ in range(RUNS):
         t = time.perf_counter()
-        res = plan(system, RATE, progress=False)
+        res = plan_schedule(system, RATE, progress=False)
         t_plan.append(time.perf_counter() - t)
     t_cli, out = [], None
     env = dict(os.environ, PYTHONPATH=str(REPO))
@@ -75,7 +75,8 @@ def main() -> int:
     print()
     print("| what | wall: median [min - max] | goal < 10 s |")
     print("|---|---|---|")
-    print(f"| `plan(paper, {RATE:g} Hz)` in process (h_min 0.5 s, tau_max 4 s; {res.evaluations} cost evaluations) "
+    print(f"| `plan_schedule(paper, {RATE:g} Hz)` in process (h_min 0.5 s, tau_max 4 s; "
+          f"{res.evaluations} cost evaluations) "
           f"| {_stat(t_plan)} | {'**yes**' if statistics.median(t_plan) < 10 else 'no'} |")
     print(f"| `switchobs plan paper --rate {RATE:g} --json` end to end (+ LMI design, Kalman design, paper's cycles) "
           f"| {_stat(t_cli)} | {'**yes**' if statistics.median(t_cli) < 10 else 'no'} |")

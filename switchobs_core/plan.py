@@ -35,7 +35,7 @@ Optimiser (deterministic; no randomness):
    problem (:func:`neighbours` lists the neighbourhood).
 
 For N >= 3 the cyclic visiting order matters. ``schedule.py`` visits channels in the order
-1..N, so the schedule :func:`plan` returns is in that order; with ``orders=True`` (N <= 4) the
+1..N, so the schedule :func:`plan_schedule` returns is in that order; with ``orders=True`` (N <= 4) the
 other cyclic orders (channel 1 first) are optimised as well and reported for information (a
 better order is used by renumbering the channels in the system file).
 
@@ -56,6 +56,8 @@ from typing import Any
 
 import numpy as np
 
+from .certificate import certify_cycle
+from .design import Designer
 from .exceptions import DesignError, InvalidArgument
 from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
 from .noise import NoiseModel, default_noise
@@ -65,8 +67,10 @@ from .schedule import Cycle
 __all__ = [
     "ScheduleCost",
     "PlanResult",
-    "plan",
+    "plan_schedule",
     "neighbours",
+    "cycle_cost",
+    "gain_reports",
     "parse_weights",
     "counts_to_cycle",
     "cost_map",
@@ -207,7 +211,7 @@ class ScheduleCost:
 
 @dataclass
 class PlanResult:
-    """Outcome of :func:`plan`: the schedule ``counts`` (samples per channel), its cycle and cost.
+    """Outcome of :func:`plan_schedule`: the schedule ``counts`` (samples per channel), its cycle and cost.
 
     ``alternatives`` lists other cyclic visiting orders (N >= 3 with ``orders=True``):
     ``{"order": (...), "counts": (...), "cost": J}``.
@@ -289,7 +293,7 @@ def _search(J: ScheduleCost, N: int, kmin: int, kmax_total: int, levels: int, or
     return tuple(best), best_J, local
 
 
-def plan(
+def plan_schedule(
     system: Any,
     rate: float,
     noise: NoiseModel | None = None,
@@ -304,7 +308,7 @@ def plan(
 ) -> PlanResult:
     """The periodic schedule of least weighted mean prior covariance trace (module docstring).
 
-    ``res = plan(paper_system(), 100.0, h_min=0.5, tau_max=4.0)``; ``res.cycle``, ``res.cost``.
+    ``res = plan_schedule(paper_system(), 100.0, h_min=0.5, tau_max=4.0)``; ``res.cycle``, ``res.cost``.
 
     Raises
     ------
@@ -394,9 +398,6 @@ def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, d
       (e:error_dynamics sampled), T the period; plus whether its sample pattern equals the
       plan's (no tie at a switching instant resolved differently in floating point).
     """
-    from .certificate import certify_cycle
-    from .design import Designer
-
     out: dict[str, Any] = {}
     try:
         d = Designer(system, delta=delta).design(cycle)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..exceptions import DesignError
 from ..paper import TABLE
-from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan
+from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
 from ..scenarios import load_noise, load_system
 from ..schedule import Cycle
 from ._common import fmt_table, print_json
@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
     progress = False if args.json else args.progress
     J = ScheduleCost(system, args.rate, noise, args.weights)
-    res = plan(system, args.rate, noise, h_min=args.h_min, tau_max=args.tau_max, progress=progress, cost=J)
+    res = plan_schedule(system, args.rate, noise, h_min=args.h_min, tau_max=args.tau_max, progress=progress, cost=J)
     cmd, read = design_command(args.config, res.cycle, rate=J.rate, meas_noise=args.meas_noise,
                                process_noise=args.process_noise)
     cmd_lmi, _ = design_command(args.config, res.cycle)

@@ -20,7 +20,7 @@ from scipy.linalg import expm
 from switchobs_core.cli import build_parser, main
 from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.noise import NoiseModel
-from switchobs_core.plan import ScheduleCost, neighbours, parse_weights, plan
+from switchobs_core.plan import ScheduleCost, neighbours, parse_weights, plan_schedule
 from switchobs_core.scenarios import camera_agents, paper_system
 from switchobs_core.schedule import Cycle
 
@@ -91,7 +91,7 @@ def brute(system):
 
 @pytest.mark.parametrize("wt", WEIGHTS)
 def test_plan_beats_every_grid_point(system, brute, wt):
-    res = plan(system, RATE, h_min=H_MIN, tau_max=TAU_MAX, weights=wt, progress=False)
+    res = plan_schedule(system, RATE, h_min=H_MIN, tau_max=TAU_MAX, weights=wt, progress=False)
     costs = brute[wt]
     best = min(costs.values())
     assert res.counts in costs
@@ -131,12 +131,12 @@ def test_neighbourhood():
 
 def test_no_schedule_fits(system):
     with pytest.raises(InvalidArgument, match="no schedule fits"):
-        plan(system, RATE, h_min=1.0, tau_max=1.5, progress=False)
+        plan_schedule(system, RATE, h_min=1.0, tau_max=1.5, progress=False)
 
 
 def test_three_channels_orders():
     sys3 = camera_agents(3)
-    res = plan(sys3, 4.0, h_min=0.25, tau_max=1.5, progress=False)
+    res = plan_schedule(sys3, 4.0, h_min=0.25, tau_max=1.5, progress=False)
     assert len(res.counts) == 3 and res.local_minimum
     assert [a["order"] for a in res.alternatives] == [(1, 3, 2)]
     ref = {k: oracle_cost(sys3, 4.0, k) for k in grid(4.0, 0.25, 1.5, N=3)}
@@ -186,7 +186,7 @@ def test_cli_text_and_error(capsys):
 )
 def test_optimum_is_local_minimum(system, w, meas):
     nz = NoiseModel.for_system(system, measurement_std=meas)
-    res = plan(system, RATE, nz, weights=w, h_min=H_MIN, tau_max=1.6, progress=False)
+    res = plan_schedule(system, RATE, nz, weights=w, h_min=H_MIN, tau_max=1.6, progress=False)
     kmax = int(1.6 * RATE + 1e-9)
     best = oracle_cost(system, RATE, res.counts, meas_std=meas, w=w)
     assert res.cost == pytest.approx(best, rel=1e-6)
