@@ -416,7 +416,6 @@ def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, d
             "spectral_radius": kd.rho, "norm": kd.norm, "period": kd.pattern.period,
             "certified_rate": _rate(kd.rho, kd.pattern.period), "channels": kd.pattern.channels,
             "ties": list(kd.pattern.ties),
-            "cost_as_designed_trace": float(np.mean([np.trace(p.P_prior) for p in kd.periodic])),
         }
     except DesignError as err:
         out["kalman"] = {"feasible": False, "reason": str(err)}

@@ -171,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         "design_command": cmd,
         "design_command_lmi": cmd_lmi,
         "design_pattern_matches": matches,
+        "cost_as_designed": res.cost if matches or "channels" not in kal else J.of_channels(kal["channels"]),
         "lmi": extras["lmi"],
         "kalman": {k: v for k, v in kal.items() if k != "channels"},
         "paper_cycles": paper,
@@ -232,8 +233,8 @@ def _print_text(out: dict, res: Any, system: Any) -> None:
         print(f"kalman gains at {out['rate']:g} Hz: certified decay rate {k['certified_rate']:.4g} 1/s (period "
               f"error map rho {k['spectral_radius']:.4g} over {k['period']:g} s)")
     if not out["design_pattern_matches"]:
-        print("note: `switchobs design` assigns a sample at a switching instant differently in floating point "
-              "(ties); its Kalman cost differs slightly")
+        print("note: `switchobs design` assigns a sample at a switching instant to the other channel in floating "
+              f"point (a tie); the cost of its sample pattern is {out['cost_as_designed']:.4e}")
     print(f"design: {out['design_command']}")
     print(f"        {out['design_command_lmi']}")
     if N == 2:

@@ -150,7 +150,7 @@ def test_cli_json_and_design_command(system, capsys, tmp_path):
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("tau", "h", "cost", "s", "counts", "design_command", "lmi", "kalman", "paper_cycles",
-                "local_minimum", "design_pattern_matches"):
+                "local_minimum", "design_pattern_matches", "cost_as_designed"):
         assert key in out
     assert png.stat().st_size > 1000
     assert out["tau"] == pytest.approx(sum(out["h"]))
