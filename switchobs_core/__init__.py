@@ -34,6 +34,7 @@ from . import (
     noise,
     observer,
     paper,  # noqa: F401  (the paper's numbers: so.paper.TABLE)
+    plan,
     plant,
     propagation,
     riccati,
@@ -57,6 +58,7 @@ from .kalman import *  # noqa: F403
 from .kalman_online import *  # noqa: F403
 from .noise import *  # noqa: F403
 from .observer import *  # noqa: F403
+from .plan import *  # noqa: F403
 from .plant import *  # noqa: F403
 from .propagation import *  # noqa: F403
 from .riccati import *  # noqa: F403
@@ -74,7 +76,7 @@ simulate = _sys.modules[f"{__name__}.simulate"]  # noqa: F811
 
 #: Every module whose ``__all__`` is re-exported here.
 MODULES = (certificate, cycles, decomposition, design, envelope, exceptions, gains, kalman, kalman_online, noise,
-           observer, plant, propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads,
+           observer, plan, plant, propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads,
            validation)
 
 __all__ = ["__version__", *(name for m in MODULES for name in m.__all__ if name not in ("simulate",))]

@@ -1,6 +1,6 @@
 """The ``switchobs`` command: offline design, inspection, reproduction, simulation, certificates.
 
-``switchobs design | show | reproduce | simulate | certify`` (``switchobs CMD --help``).
+``switchobs design | show | reproduce | simulate | certify | plan`` (``switchobs CMD --help``).
 Each subcommand lives in its own module exposing ``register(subparsers)``, which adds
 the subparser and sets ``func(args) -> exit code``. Errors of the project's own type are
 printed as one line and exit with code 2; nothing else is caught.
@@ -19,7 +19,7 @@ from ._common import OneLineParser
 
 __all__ = ["main", "SUBCOMMANDS"]
 
-SUBCOMMANDS = ("design", "show", "reproduce", "simulate", "certify")
+SUBCOMMANDS = ("design", "show", "reproduce", "simulate", "certify", "plan")
 
 
 def build_parser() -> argparse.ArgumentParser:

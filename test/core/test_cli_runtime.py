@@ -149,7 +149,7 @@ def test_messages_speak_flags_not_api_or_latex(capsys, tmp_path, table_path):
     schedule names the flags; `show` prints the margin in words, not a Python dict."""
     import re
 
-    for cmd in ("design", "show", "reproduce", "simulate", "certify"):
+    for cmd in ("design", "show", "reproduce", "simulate", "certify", "plan"):
         with pytest.raises(SystemExit):
             main([cmd, "--help"])
         out = capsys.readouterr().out

@@ -1,0 +1,427 @@
+"""Schedule planning: the periodic schedule with the smallest steady Kalman covariance (beyond the paper).
+
+The paper takes the cycle (tau, s) (e:tau_k, e:s_k) as given and designs gains for it. Here the
+cycle itself is chosen. For a periodic schedule sampled at ``rate`` f, channel i active for
+``h_i`` seconds per cycle in the visiting order 1..N (e:switching_instants), the cost is
+
+.. math::
+
+    J(h) = \\frac{1}{K} \\sum_{k=0}^{K-1} \\operatorname{tr}(W P^-_k)
+
+the time average over the K samples of one period of the weighted trace of the *a-priori*
+covariance ``P^-_k`` of the periodic steady state of the Kalman filter (the prior just before
+the correction at sample k, the worst point of each sample interval; the periodic Riccati
+solution of :func:`~switchobs_core.riccati.periodic_riccati`, the recursion the ``kalman``
+gain family uses). ``W = diag(w)`` weights the states (default ``I``: the plain trace).
+
+Integer sample counts. Active times are chosen on the sample grid, ``h_i = k_i / f`` with
+integers ``k_i >= ceil(h_min f)`` and ``tau = sum h_i <= tau_max``, so every candidate has a
+whole number ``K = sum k_i`` of samples per period and the cost is exact (no rounding of a
+continuous schedule to samples). Samples are at ``t_k = k / f``; the sample at a switching
+instant belongs to the channel that starts there (the rule of ``Schedule.channel_at``), so
+channel 1 takes samples ``0..k_1-1``, channel 2 the next ``k_2``, and so on.
+
+Undetectable schedules (an unstable mode never observed by the sampled periodic pair, the
+test of :func:`~switchobs_core.kalman.check_detectable`) cost ``inf``.
+
+Optimiser (deterministic; no randomness):
+
+1. a coarse grid of ``levels`` values per ``k_i`` between ``k_min`` and the largest count the
+   ``tau_max`` budget allows (points beyond the budget skipped);
+2. from the best grid point, a pattern search on the integer lattice: moves ``+-d e_i``
+   (lengthen or shorten one channel) and ``+-d (e_i - e_j)`` (shift time from one channel to
+   another, tau fixed), the best improving move taken; when none improves, ``d`` halves, down
+   to 1. It stops at a point no unit neighbour improves: a local minimum of the integer
+   problem (:func:`neighbours` lists the neighbourhood).
+
+For N >= 3 the cyclic visiting order matters. ``schedule.py`` visits channels in the order
+1..N, so the schedule :func:`plan_schedule` returns is in that order; with ``orders=True`` (N <= 4) the
+other cyclic orders (channel 1 first) are optimised as well and reported for information (a
+better order is used by renumbering the channels in the system file).
+
+Cost evaluations are cached; each one warm-starts the Riccati iteration from the phase-0
+prior of the previous evaluation (the periodic solution does not depend on the start, only the
+number of periods to reach it does).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import itertools
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .certificate import certify_cycle
+from .design import Designer
+from .exceptions import DesignError, InvalidArgument
+from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
+from .noise import NoiseModel, default_noise
+from .riccati import Step, discretize, periodic_riccati
+from .schedule import Cycle
+
+__all__ = [
+    "ScheduleCost",
+    "PlanResult",
+    "plan_schedule",
+    "neighbours",
+    "cycle_cost",
+    "gain_reports",
+    "parse_weights",
+    "counts_to_cycle",
+    "cost_map",
+    "PLAN_RTOL",
+]
+
+#: Relative convergence tolerance of the periodic Riccati iteration for a cost evaluation.
+PLAN_RTOL = 1e-11
+#: Samples the Riccati iteration may run per evaluation (max_periods = this / K, at least 500).
+_MAX_SAMPLES = 200_000
+
+
+def parse_weights(text: str | Sequence[float] | None, system: Any) -> np.ndarray:
+    """Diagonal state weights ``w`` (length n, >= 0, not all 0) from a comma list.
+
+    Either n numbers (``1,1,0,0,...``), or state-label patterns (fnmatch globs on
+    ``system.state_labels``), each optionally ``=weight`` (default 1); states no pattern
+    matches get weight 0, e.g. ``agent*.p_*`` (agent positions only) or
+    ``agent1.*=2,agent2.*``. ``None`` gives all ones (the plain trace).
+    """
+    n = int(system.n)
+    if text is None:
+        return np.ones(n)
+    if not isinstance(text, str):
+        w = np.asarray(text, dtype=float).reshape(-1)
+    else:
+        toks = [t.strip() for t in text.split(",") if t.strip()]
+        if not toks:
+            raise InvalidArgument("--weights is empty; give n numbers or state-label patterns")
+        try:
+            w = np.array([float(t) for t in toks])
+        except ValueError:
+            w = _weights_by_label(toks, system, n)
+    if w.size != n:
+        raise InvalidArgument(f"--weights needs n = {n} numbers (one per state); got {w.size}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise InvalidArgument(f"--weights must be finite, >= 0 and not all zero; got {w.tolist()}")
+    return w
+
+
+def _weights_by_label(toks: Sequence[str], system: Any, n: int) -> np.ndarray:
+    """Weights from ``PATTERN[=W]`` tokens (fnmatch on the state labels; unmatched states 0)."""
+    labels = list(getattr(system, "state_labels", ()) or [f"x{j}" for j in range(n)])
+    w = np.zeros(n)
+    for t in toks:
+        pat, eq, val = t.partition("=")
+        try:
+            v = float(val) if eq else 1.0
+        except ValueError:
+            raise InvalidArgument(f"--weights: bad weight in {t!r} (use PATTERN=NUMBER)") from None
+        hit = [j for j, lab in enumerate(labels) if fnmatch.fnmatchcase(lab, pat.strip())]
+        if not hit:
+            raise InvalidArgument(f"--weights: pattern {pat.strip()!r} matches no state; states: {', '.join(labels)}")
+        w[hit] = v
+    return w
+
+
+def counts_to_cycle(counts: Sequence[int], rate: float) -> Cycle:
+    """The cycle ``h_i = k_i / rate``."""
+    return Cycle([int(k) / rate for k in counts])
+
+
+def neighbours(counts: Sequence[int], step: int = 1) -> list[tuple[int, ...]]:
+    """Lattice neighbours of ``counts``: ``+-step e_i`` and ``step (e_i - e_j)``, i != j (no bounds)."""
+    k = tuple(int(v) for v in counts)
+    N = len(k)
+    out = []
+    for i in range(N):
+        for sgn in (1, -1):
+            out.append(tuple(v + sgn * step if j == i else v for j, v in enumerate(k)))
+    for i in range(N):
+        for j in range(N):
+            if i != j:
+                out.append(tuple(v + step if m == i else v - step if m == j else v for m, v in enumerate(k)))
+    return out
+
+
+class ScheduleCost:
+    """Cost of periodic schedules of one system, noise model, rate and weights (module docstring).
+
+    ``J = ScheduleCost(system, rate, noise, weights); J(counts)`` (cached), or
+    ``J.of_channels(channels)`` for any sample pattern (channel of each sample of one period).
+    """
+
+    def __init__(self, system: Any, rate: float, noise: NoiseModel | None = None,
+                 weights: Any = None, *, rtol: float = PLAN_RTOL) -> None:
+        if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(rate) and rate > 0):
+            raise InvalidArgument(f"rate must be a finite number > 0 (Hz); got {rate!r}")
+        self.system = system
+        self.rate = float(rate)
+        self.noise = default_noise(system) if noise is None else noise
+        if not isinstance(self.noise, NoiseModel):
+            raise InvalidArgument(f"noise must be a NoiseModel; got {type(self.noise).__name__}")
+        self.noise.check_system(system)
+        self.w = parse_weights(weights, system)
+        self.rtol = float(rtol)
+        A = np.asarray(system.A, dtype=float)
+        self.Phi, _, self.Qd = discretize(A, np.asarray(system.B, dtype=float), self.noise.Q_c, 1.0 / self.rate)
+        self._H = [np.asarray(C, dtype=float) for C in system.C]
+        self._R = [self.noise.R(i + 1) for i in range(system.N)]
+        self._P0 = np.asarray(self.noise.P0, dtype=float)
+        self._warm: np.ndarray | None = None
+        self.cache: dict[tuple[int, ...], float] = {}
+        self.evaluations = 0
+
+    def channels(self, counts: Sequence[int], order: Sequence[int] | None = None) -> tuple[int, ...]:
+        """Channel of every sample of one period: ``k_i`` samples of each channel, in ``order``."""
+        order = tuple(range(1, len(counts) + 1)) if order is None else tuple(order)
+        return tuple(c for c in order for _ in range(int(counts[c - 1])))
+
+    def of_channels(self, channels: Sequence[int], cycles: Sequence[Cycle] = ()) -> float:
+        """Cost of the periodic sample pattern ``channels`` (inf if undetectable)."""
+        K = len(channels)
+        pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
+                                tuple(int(c) for c in channels), ())
+        try:
+            check_detectable(self.system, pattern)
+        except UndetectableSchedule:
+            return math.inf
+        steps = [Step(self.Phi, self.Qd, self._H[c - 1], self._R[c - 1]) for c in channels]
+        P0 = self._P0 if self._warm is None else self._warm
+        sol = periodic_riccati(steps, P0, rtol=self.rtol, startup_rtol=0.0,
+                               max_periods=max(500, _MAX_SAMPLES // K))
+        self.evaluations += 1
+        self._warm = sol.P_prior[0]
+        # J = (1/K) sum_k tr(W P^-_k), W = diag(w)
+        return float(np.mean([self.w @ np.diagonal(P) for P in sol.P_prior]))
+
+    def __call__(self, counts: Sequence[int], order: Sequence[int] | None = None) -> float:
+        key = tuple(int(k) for k in counts) + (() if order is None else tuple(order))
+        J = self.cache.get(key)
+        if J is None:
+            J = self.cache[key] = self.of_channels(self.channels(counts, order),
+                                                   (counts_to_cycle(counts, self.rate),))
+        return J
+
+
+@dataclass
+class PlanResult:
+    """Outcome of :func:`plan_schedule`: the schedule ``counts`` (samples per channel), its cycle and cost.
+
+    ``alternatives`` lists other cyclic visiting orders (N >= 3 with ``orders=True``):
+    ``{"order": (...), "counts": (...), "cost": J}``.
+    """
+
+    rate: float
+    counts: tuple[int, ...]
+    cost: float
+    k_min: int
+    k_total_max: int
+    evaluations: int
+    local_minimum: bool
+    weights: np.ndarray
+    alternatives: list[dict] = field(default_factory=list)
+
+    @property
+    def cycle(self) -> Cycle:
+        return counts_to_cycle(self.counts, self.rate)
+
+    @property
+    def h(self) -> tuple[float, ...]:
+        return self.cycle.h
+
+    @property
+    def tau(self) -> float:
+        return sum(self.counts) / self.rate
+
+
+def _grid_levels(lo: int, hi: int, levels: int) -> list[int]:
+    if hi <= lo:
+        return [lo]
+    return sorted({int(round(v)) for v in np.linspace(lo, hi, max(2, levels))})
+
+
+def _bar(progress: bool | None, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=None, desc=desc, unit="eval", leave=False, file=sys.stderr,
+                disable=(None if progress is None else not progress))
+
+
+def _search(J: ScheduleCost, N: int, kmin: int, kmax_total: int, levels: int, order, bar) -> tuple:
+    """Coarse grid then pattern search (module docstring); returns (counts, cost, local_min)."""
+    def ok(k):
+        return all(v >= kmin for v in k) and sum(k) <= kmax_total
+
+    def f(k):
+        before = J.evaluations
+        val = J(k, order)
+        if J.evaluations != before:
+            bar.update(1)
+        return val
+
+    top = kmax_total - (N - 1) * kmin
+    lv = _grid_levels(kmin, top, levels)
+    best, best_J = None, math.inf
+    for k in itertools.product(lv, repeat=N):
+        if ok(k):
+            val = f(k)
+            if val < best_J or best is None:
+                best, best_J = k, val
+    d = max(1, (lv[1] - lv[0]) // 2 if len(lv) > 1 else 1)
+    while True:
+        moved = True
+        while moved:
+            moved = False
+            cand = [k for k in neighbours(best, d) if ok(k)]
+            if not cand:
+                break
+            vals = [f(k) for k in cand]
+            i = int(np.argmin(vals))
+            if vals[i] < best_J:
+                best, best_J, moved = cand[i], vals[i], True
+                bar.set_postfix_str(f"best {best} cost {best_J:.4g}")
+        if d == 1:
+            break
+        d //= 2
+    local = all(not ok(k) or J(k, order) >= best_J for k in neighbours(best, 1))
+    return tuple(best), best_J, local
+
+
+def plan_schedule(
+    system: Any,
+    rate: float,
+    noise: NoiseModel | None = None,
+    *,
+    weights: Any = None,
+    h_min: float = 0.5,
+    tau_max: float = 4.0,
+    levels: int | None = None,
+    orders: bool = True,
+    progress: bool | None = None,
+    cost: ScheduleCost | None = None,
+) -> PlanResult:
+    """The periodic schedule of least weighted mean prior covariance trace (module docstring).
+
+    ``res = plan_schedule(paper_system(), 100.0, h_min=0.5, tau_max=4.0)``; ``res.cycle``, ``res.cost``.
+
+    Raises
+    ------
+    InvalidArgument
+        Bad rate, ``h_min`` or ``tau_max``, or no schedule fits (``N ceil(h_min f) > tau_max f``).
+    DesignError
+        Every candidate is undetectable (cost inf everywhere).
+    """
+    for name, v in (("h_min", h_min), ("tau_max", tau_max)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+            raise InvalidArgument(f"{name} must be a finite number of seconds; got {v!r}")
+    if h_min < 0 or tau_max <= 0:
+        raise InvalidArgument(f"need h_min >= 0 and tau_max > 0; got h_min = {h_min}, tau_max = {tau_max}")
+    J = cost if cost is not None else ScheduleCost(system, rate, noise, weights)
+    f = J.rate
+    N = int(system.N)
+    kmin = max(1, math.ceil(h_min * f - 1e-9))
+    kmax_total = math.floor(tau_max * f + 1e-9)
+    if N * kmin > kmax_total:
+        raise InvalidArgument(
+            f"no schedule fits: {N} channels x h_min {h_min:g} s need tau >= {N * kmin / f:g} s > "
+            f"tau_max {tau_max:g} s at {f:g} Hz; raise --tau-max or lower --h-min")
+    if levels is None:
+        levels = {2: 6, 3: 4}.get(N, 3)
+    natural = tuple(range(1, N + 1))
+    all_orders = [natural]
+    if orders and 3 <= N <= 4:
+        all_orders += [(1,) + p for p in itertools.permutations(range(2, N + 1)) if (1,) + p != natural]
+    bar = _bar(progress, "plan")
+    try:
+        results = []
+        for order in all_orders:
+            counts, val, local = _search(J, N, kmin, kmax_total, levels, None if order == natural else order, bar)
+            results.append((order, counts, val, local))
+    finally:
+        bar.close()
+    order, counts, val, local = results[0]
+    if not math.isfinite(val):
+        raise DesignError(
+            f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable "
+            "(some unstable mode is never observed); lengthen tau_max")
+    alts = [{"order": o, "counts": c, "cost": v, "local_minimum": lm} for o, c, v, lm in results[1:]]
+    return PlanResult(f, counts, val, kmin, kmax_total, J.evaluations, local, J.w, alts)
+
+
+def cost_map(J: ScheduleCost, taus: Sequence[float], s_values: Sequence[float], kmin: int = 1,
+             progress: bool | None = None) -> np.ndarray:
+    """Cost over a (tau, s) grid of a two-channel system (counts rounded to the sample grid).
+
+    NaN where a rounded active time is below ``kmin`` samples. Array (len(taus), len(s_values)).
+    """
+    if J.system.N != 2:
+        raise InvalidArgument("the (tau, s) cost map is defined for two channels")
+    out = np.full((len(taus), len(s_values)), np.nan)
+    bar = _bar(progress, "map")
+    try:
+        for a, tau in enumerate(taus):
+            K = int(round(tau * J.rate))
+            for b, s in enumerate(s_values):
+                k1 = int(round(s * K))
+                if k1 >= kmin and K - k1 >= kmin:
+                    out[a, b] = J((k1, K - k1))
+                bar.update(1)
+    finally:
+        bar.close()
+    return out
+
+
+def cycle_cost(J: ScheduleCost, cycle: Cycle) -> float:
+    """Cost of an arbitrary cycle at ``J.rate`` through the sample pattern the ``kalman`` design uses
+    (:func:`~switchobs_core.kalman.sample_pattern`, which may take several cycles per period)."""
+    pat = sample_pattern(cycle, J.rate)
+    return J.of_channels(pat.channels, pat.cycles)
+
+
+def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, delta: float = 0.99) -> dict:
+    """For the planned cycle: the paper's LMI design (eta_min, feasibility) and the certified decay
+    rates of both gain families.
+
+    * ``lmi``: :meth:`Designer.design` (Theorem t:main conditions e:eta1_bound, e:eta2_bound,
+      eta_min from e:eta1_fixed); certified rate ``-ln(rho)/tau`` of the exact cycle transition
+      ``Phi = prod expm((A - L_i C_i) h_i)`` (e:xtilde_dyn_piecewise; the paper's
+      continuous-output setting, :func:`~switchobs_core.certificate.certify_cycle`).
+      ``{"feasible": False, "reason": ...}`` when the design fails.
+    * ``kalman``: :func:`~switchobs_core.kalman.design_kalman` at ``rate``; certified rate
+      ``-ln(rho)/T`` of the period's noise-free error map ``prod (I - K_k H_k) Phi``
+      (e:error_dynamics sampled), T the period; plus whether its sample pattern equals the
+      plan's (no tie at a switching instant resolved differently in floating point).
+    """
+    out: dict[str, Any] = {}
+    try:
+        d = Designer(system, delta=delta).design(cycle)
+        cert = certify_cycle(system, d)
+        rho = cert.spectral_radius
+        out["lmi"] = {
+            "feasible": True, "eta_min": list(d.eta_min), "eta": list(d.eta), "f": list(d.f),
+            "paper_condition_holds": bool(d.certified), "spectral_radius": rho,
+            "certified_rate": _rate(rho, cycle.tau),
+        }
+    except DesignError as err:
+        out["lmi"] = {"feasible": False, "reason": str(err)}
+    try:
+        kd = design_kalman(system, cycle, rate, noise)
+        out["kalman"] = {
+            "spectral_radius": kd.rho, "norm": kd.norm, "period": kd.pattern.period,
+            "certified_rate": _rate(kd.rho, kd.pattern.period), "channels": kd.pattern.channels,
+            "ties": list(kd.pattern.ties),
+        }
+    except DesignError as err:
+        out["kalman"] = {"feasible": False, "reason": str(err)}
+    return out
+
+
+def _rate(rho: float, T: float) -> float:
+    """Certified exponential decay rate ``-ln(rho) / T`` (inf for rho = 0)."""
+    return math.inf if rho <= 0 else -math.log(rho) / T
