@@ -37,8 +37,12 @@ SCHEDULES = {
 
 def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 2.0, rate: float = 100.0,
         init: str = "paper", seed: int = 0, out: Path | None = None, gain_table: str = "",
-        quiet: bool = False, extra_estimator: dict | None = None, noise_std: float = 0.0) -> dict:
-    """Run the demo; return the collected series (stamps in s from the first tick)."""
+        quiet: bool = False, extra_estimator: dict | None = None, noise_std: float = 0.0,
+        schedule_params: dict | None = None, process_noise: float = 0.0) -> dict:
+    """Run the demo; return the collected series (stamps in s from the first tick).
+
+    ``schedule_params`` (``schedule.mode/tau/s``) replaces the named ``schedule``;
+    ``process_noise`` is camera_sim's plant noise q (Qc = q^2 I)."""
     import os
 
     lease = None
@@ -59,12 +63,13 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
     else:
         xhat0 = np.zeros_like(x0)
     e0 = float(np.linalg.norm(xhat0 - x0))
-    sched = SCHEDULES[schedule]
+    sched = dict(schedule_params) if schedule_params else SCHEDULES[schedule]
     est_params = dict(sched, initial_estimate=list(map(float, xhat0)), e0=e0, use_sim_time=True,
                       gain_table=gain_table)
     est_params.update(extra_estimator or {})
     cam_params = dict(sched, rate=rate, duration=duration, publish_clock=True, time_scale=time_scale,
-                      wait_for_subscribers=1, wait_for_truth_subscribers=1, seed=seed, noise_std=float(noise_std))
+                      wait_for_subscribers=1, wait_for_truth_subscribers=1, seed=seed, noise_std=float(noise_std),
+                      process_noise=float(process_noise))
     rclpy.init()
     node = Collector(["/estimator/state", "/estimator/envelope", "/sim/truth"], name="switchobs_demo")
     est = cam = None
