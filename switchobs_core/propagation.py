@@ -54,7 +54,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .exceptions import InvalidArgument
-from .rounding import expm_error
+from .rounding import expm_error, gamma
 from .validation import as_matrix
 
 __all__ = [
@@ -69,6 +69,13 @@ __all__ = [
 
 #: Default step quantum in seconds (ROS stamps are integer nanoseconds).
 DEFAULT_DT_RESOLUTION = 1e-9
+
+#: Grid of the composed steps: a step ``dt`` that misses the cache is ``e^{M a} e^{M r}`` with ``a``
+#: on this grid (cached; a sensor's jittered periods fall on a few grid points) and the remainder
+#: ``r < COMPOSE_GRID`` by a degree-:data:`COMPOSE_DEGREE` Taylor sum whose truncation and
+#: rounding enter the entry's ``eps`` (:meth:`ZOHCache.step`). Measured: 296 -> see bench/RESULTS.md.
+COMPOSE_GRID = 1e-4
+COMPOSE_DEGREE = 6
 
 
 def quantize_dt(dt: float, resolution: float | None) -> float:
@@ -164,6 +171,35 @@ class ZOHEntry:
         self.E = Phi if E is None else E
 
 
+def split_step(dtq: float, dt_resolution: float | None) -> tuple[int, float]:
+    """``dtq = qc COMPOSE_GRID + r`` with ``0 <= r < COMPOSE_GRID``, counted in whole quanta of
+    ``dt_resolution`` when there is one (no float residue decides the grid point)."""
+    if dt_resolution:
+        g = round(COMPOSE_GRID / dt_resolution)
+        if g >= 1 and abs(g * dt_resolution - COMPOSE_GRID) < 1e-3 * COMPOSE_GRID:
+            qc, rq = divmod(round(dtq / dt_resolution), g)
+            return qc, rq * dt_resolution
+    qc = int(dtq // COMPOSE_GRID)
+    return qc, max(dtq - qc * COMPOSE_GRID, 0.0)
+
+
+def taylor_pair(M: np.ndarray, r: float, m: int = COMPOSE_DEGREE) -> tuple[np.ndarray, np.ndarray]:
+    """``(sum_{k<=m} (M r)^k / k!, r sum_{k<=m} (M r)^k / (k+1)!)``: ``e^{M r}`` and ``Gamma(r)``
+    for a short step ``r`` (the composed steps of :class:`ZOHCache` and of
+    :class:`~switchobs_core.riccati.DiscretizationCache`; the truncation is bounded there)."""
+    n = M.shape[0]
+    X = M * r
+    term = np.eye(n)
+    Ps = np.eye(n)
+    Gs = np.eye(n)
+    for k in range(1, m + 1):
+        term = term @ X
+        term /= k
+        Ps += term
+        Gs += term / (k + 1)
+    return Ps, Gs * r
+
+
 class ZOHCache:
     """LRU cache of exact ZOH steps keyed by (gain key, quantised dt).
 
@@ -236,6 +272,60 @@ class ZOHCache:
         except KeyError:
             raise InvalidArgument(f"key {key!r} was never registered (call register first)") from None
         dtq = dt if self._inv_res is None else q * self.dt_resolution
+        qc, r = self._split(q, dtq)
+        if qc > 0 and r > 0:
+            entry = self._compose(self._base(key, qc), M, L, B, C, r, dtq)
+        else:
+            entry = self._exact(key, M, L, B, C, dtq)
+        lru[lk] = entry
+        while len(lru) > self.maxsize:
+            lru.popitem(last=False)
+        return entry
+
+    def _split(self, q, dtq: float) -> tuple[int, float]:
+        return split_step(dtq, self.dt_resolution)
+
+    def _base(self, key: Hashable, qc: int) -> ZOHEntry:
+        """The exact step of ``key`` over ``qc`` grid units (cached with the other entries)."""
+        lk = (key, "grid", qc)
+        entry = self._lru.get(lk)
+        if entry is None:
+            M, L, B, C = self._gains[key]
+            entry = self._lru[lk] = self._exact(key, M, L, B, C, qc * COMPOSE_GRID)
+            while len(self._lru) > self.maxsize:
+                self._lru.popitem(last=False)
+        else:
+            self._lru.move_to_end(lk)
+        return entry
+
+    def _compose(self, base: ZOHEntry, M, L, B, C, r: float, dtq: float) -> ZOHEntry:
+        """``e^{M dtq} = e^{M a} e^{M r}`` (``a = dtq - r`` the base's step), ``Gamma(dtq) = e^{M a}
+        Gamma(r) + Gamma(a)``, with ``e^{M r} = sum_k (M r)^k / k!`` and ``Gamma(r) = r sum_k (M r)^k /
+        (k+1)!`` to degree ``m``. The entry's ``eps`` bounds ``||Phi - e^{M dtq}||_F``: the base's own
+        ``eps``, the Taylor tail ``x^{m+1}/(m+1)! / (1 - x/(m+2))`` (``x = ||M||_F r``), the sum's
+        rounding ``gamma_{m(n+2)+2} (sqrt(n) + e^x)`` and the product's ``gamma_{n+1} ||.||_F ||.||_F``."""
+        n = M.shape[0]
+        m = COMPOSE_DEGREE
+        Ps, Gs = taylor_pair(M, r)
+        x = float(np.linalg.norm(M)) * r
+        tail = x ** (m + 1) / math.factorial(m + 1) / (1.0 - x / (m + 2))
+        rnd = gamma(m * (n + 2) + 2) * (math.sqrt(n) + math.exp(x))
+        nPs, nPb = float(np.linalg.norm(Ps)), float(np.linalg.norm(base.Phi))
+        Phi = base.Phi @ Ps
+        # (a + r) is dtq up to the rounding of the two floats: that step difference, too
+        nM = float(np.linalg.norm(M))
+        split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)
+        eps = (base.eps * (nPs + tail + rnd) + nPb * (tail + rnd) + gamma(n + 1) * nPb * nPs
+               + split * nM * nPb * nPs * math.exp(nM * split)) * (1 + gamma(4))
+        Gamma = None
+        if base.Gamma is not None:
+            Gamma = base.Phi @ Gs + base.Gamma
+        GL = None if L is None else Gamma @ L
+        E = None if C is None or GL is None else Phi - GL @ C
+        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
+
+    def _exact(self, key: Hashable, M, L, B, C, dtq: float) -> ZOHEntry:
+        """The step over ``dtq`` by ``scipy.linalg.expm`` (the joint pair for a gain key)."""
         if L is None and B is None:      # open loop, no input: Phi alone (half the expm size)
             Phi, Gamma = expm(M * dtq), None
         else:
@@ -247,11 +337,7 @@ class ZOHCache:
         first = key not in self._checked
         self._checked.add(key)
         eps = expm_error(M, dtq, Phi, check=first)
-        entry = ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
-        lru[lk] = entry
-        if len(lru) > self.maxsize:
-            lru.popitem(last=False)
-        return entry
+        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
 
     def clear(self) -> None:
         """Drop every cached step (registered gains are kept)."""
