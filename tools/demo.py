@@ -293,6 +293,9 @@ def main(argv=None) -> int:
     except RuntimeError as err:
         print(f"demo: error: {err}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:      # run()'s finally has stopped the nodes
+        print("demo: interrupted; the nodes are stopped", file=sys.stderr)
+        return 130
     print(f"wrote {Path(a.out) / 'error.png'} and {Path(a.out) / 'error.csv'}")
     return 0
 

@@ -53,6 +53,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("switchobs: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (`switchobs show T | head`): not an error of ours; silence the
+        # interpreter's flush of the closed stdout at exit (Python docs, "Note on SIGPIPE")
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -160,3 +160,17 @@ def test_messages_speak_flags_not_api_or_latex(capsys, tmp_path, table_path):
     assert main(["show", str(table_path)]) == 0
     out = capsys.readouterr().out
     assert "{" not in out and "eta margin 5 %" in out
+
+
+def test_show_into_a_closed_pipe_is_quiet(table_path):
+    """`switchobs show T | head -1`: the reader went away; no BrokenPipeError traceback, exit 0.
+    (The read end is closed before the command writes, so the broken pipe is certain.)"""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "switchobs_core.cli", "show", str(table_path), "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 0, err
+    assert "Traceback" not in err and "BrokenPipe" not in err, err

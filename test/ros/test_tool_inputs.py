@@ -67,3 +67,32 @@ def test_negative_values_after_an_option():
         ["design", "paper", "--cycle=-2,0.6", "-o", "x"]
     assert join_negative_values(["--cycle", "2,0.6", "--json"]) == ["--cycle", "2,0.6", "--json"]
     assert join_negative_values(["--eta", "-.5,1"]) == ["--eta=-.5,1"]
+
+
+def test_demo_interrupted_exits_quietly(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the demo runs: one line,
+    exit 130, the nodes stopped (no traceback, no 'context is not valid')."""
+    import os
+    import signal
+    import time
+
+    p = subprocess.Popen([sys.executable, "-m", "tools.demo", "--duration", "120", "--out", str(tmp_path)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        line = ""
+        while "cycle" not in line and time.monotonic() < deadline:     # the per-cycle table has begun
+            line = p.stdout.readline()
+            if not line and p.poll() is not None:
+                break
+        assert "cycle" in line, p.stderr.read()
+        os.killpg(p.pid, signal.SIGINT)
+        rc = p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    err = p.stderr.read()
+    assert rc == 130, err
+    assert "demo: interrupted; the nodes are stopped" in err
+    assert "Traceback" not in err and "context is not valid" not in err, err
