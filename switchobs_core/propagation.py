@@ -307,13 +307,13 @@ class ZOHCache:
         n = M.shape[0]
         m = COMPOSE_DEGREE
         Ps, Gs = taylor_pair(M, r)
-        x = float(np.linalg.norm(M)) * r
+        nM = float(np.linalg.norm(M))
+        x = nM * r
         tail = x ** (m + 1) / math.factorial(m + 1) / (1.0 - x / (m + 2))
         rnd = gamma(m * (n + 2) + 2) * (math.sqrt(n) + math.exp(x))
         nPs, nPb = float(np.linalg.norm(Ps)), float(np.linalg.norm(base.Phi))
         Phi = base.Phi @ Ps
         # (a + r) is dtq up to the rounding of the two floats: that step difference, too
-        nM = float(np.linalg.norm(M))
         split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)
         eps = (base.eps * (nPs + tail + rnd) + nPb * (tail + rnd) + gamma(n + 1) * nPb * nPs
                + split * nM * nPb * nPs * math.exp(nM * split)) * (1 + gamma(4))

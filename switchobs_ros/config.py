@@ -75,21 +75,20 @@ PARAMS = [
           "camera, agent1, ...).", str),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
-          "Changeable at run time.", read_only=False),
+          "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
-          "Changeable at run time.", read_only=False),
+          "Changeable at run time."),
     Param("max_abs_value", 1.0e6, "Largest accepted |coordinate| of an input pose (m). At most 1e150 (the observer "
-          "refuses larger samples: the next exact step could overflow). Changeable at run time.", read_only=False),
+          "refuses larger samples: the next exact step could overflow). Changeable at run time."),
     Param("pairing_timeout", 0.2, "Seconds (wall) to wait for the other half of a camera/target pair before "
-          "using one half alone. Changeable at run time.", read_only=False),
-    Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock). Changeable at run time.",
-          read_only=False),
+          "using one half alone. Changeable at run time."),
+    Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock). Changeable at run time."),
     Param("output.envelope_every", 1, "Publish ~/envelope for every k-th estimate (0: never; ~/state is always "
-          "published). Changeable at run time.", read_only=False),
+          "published). Changeable at run time."),
     Param("output.odometry_every", 1, "Publish the bodies' odometry for every k-th estimate (0: never). "
-          "Changeable at run time.", read_only=False),
+          "Changeable at run time."),
     Param("output.covariance_every", 1, "Publish ~/covariance for every k-th estimate (0: never; needs "
-          "publish_covariance). Changeable at run time.", read_only=False),
+          "publish_covariance). Changeable at run time."),
     Param("gc_freeze", True, "Call gc.freeze() once the node is built (start-up objects leave the garbage "
           "collector's generations, see bench/RESULTS.md)."),
     Param("autostart", True, "Managed (lifecycle) node only: configure and activate at start-up (today's "
@@ -97,7 +96,8 @@ PARAMS = [
 ]
 
 #: Parameters that can change while the node runs (the others need a restart: they shape the
-#: observer, its gain table or the topics), and the check of a new value: (ok, what it must be).
+#: observer, its gain table or the topics), and the check of a value: (ok, what it must be). The
+#: one owner of both: the start-up check and the on-set-parameters callback use it.
 RUNTIME_PARAMS = {
     "sensor_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
     "future_tolerance": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
@@ -236,8 +236,7 @@ class EstimatorConfig:
         else:
             cycles = cycles_from_params(mode, values["schedule.tau"], values["schedule.s"], values["schedule.h"],
                                         sys_.N)
-        for name in ("delta", "e0", "sensor_timeout", "future_tolerance", "max_abs_value",
-                     "pairing_timeout", "diagnostics_period"):
+        for name in ("delta", "e0"):      # the runtime parameters: check_runtime_value below
             v = values[name]
             if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
                 raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
