@@ -137,11 +137,19 @@ def test_negative_cycle_is_checked_not_taken_for_an_option(capsys, tmp_path):
     assert "tau must be > 0" in err and "--cycle" in err
 
 
-def test_cycle_too_long_to_represent_is_refused(capsys, tmp_path):
-    """`--cycle 1e9,0.6` designed and said "converges" (f = 0): e^(A tau) leaves double precision."""
+def test_cycle_too_long_to_represent_is_refused(paper, capsys, tmp_path):
+    """`--cycle 1e9,0.6` designed and said "converges" (f = 0): e^(A tau) leaves double precision.
+    The longest tau offered is where ||A||_2 tau reaches 600 (e^600 is still a double, e^710 not)."""
+    import math
+
+    import numpy as np
+
+    longest = 600.0 / float(np.linalg.norm(paper.A, 2))
+    assert math.isfinite(math.exp(np.linalg.norm(paper.A, 2) * longest))
     assert main(["design", "paper", "--cycle", "1e9,0.6", "-o", str(tmp_path / "x.json")]) == 2
     err = capsys.readouterr().err
-    assert "too long for this system" in err and "use tau <= 588" in err and len(err.strip().splitlines()) == 1
+    assert "too long for this system" in err and f"use tau <= {longest:.4g} s" in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_messages_speak_flags_not_api_or_latex(capsys, tmp_path, table_path):
