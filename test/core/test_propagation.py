@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
@@ -79,6 +79,7 @@ def test_cache_bad_arguments(kw, match):
 
 @settings(max_examples=40, deadline=None)
 @given(dt=st.floats(1e-4, 0.5), seed=st.integers(0, 1000))
+@example(dt=0.4453125, seed=829)     # scipy's expm beyond the model there: the base's eps is measured
 def test_composed_steps_are_exact_within_their_eps(dt, seed):
     """A step off the composition grid (a jittered sensor period) is e^{M a} e^{M r} with the short
     factor by Taylor: within its certified eps of the extended-precision exponential, and that eps
@@ -95,9 +96,9 @@ def test_composed_steps_are_exact_within_their_eps(dt, seed):
     ref = np.asarray(expm_extended(M, e.dt), dtype=float)
     diff = float(np.linalg.norm(e.Phi - ref))
     assert diff <= e.eps
-    M_, L_, B_, C_ = c._gains["g"]
-    exact = c._exact("g", M_, L_, B_, C_, e.dt)
-    assert e.eps <= 10 * exact.eps + 1e-12 * float(np.linalg.norm(ref))    # still the rounding level
+    if qc > 0 and r > 0:        # composing adds only the short step's rounding to the grid step's error
+        base = c._lru[("g", "grid", qc)]
+        assert e.eps <= 3 * base.eps + 1e-12 * float(np.linalg.norm(ref))
     if qc > 0 and r > 0:
         Phi, Gamma = zoh_pair(M, e.dt)
         np.testing.assert_allclose(e.GL, Gamma @ c._gains["g"][1], rtol=1e-10, atol=1e-13)
