@@ -13,20 +13,36 @@ Initialisation as in the paper: ``x_hat(0) = x(0) + 0.1 randn`` (seeded), ``e0 =
 
 from __future__ import annotations
 
-import argparse
-import math
+import os
+import signal
 import sys
-import tempfile
-import time
-from pathlib import Path
 
-import numpy as np
-import rclpy
 
-from switchobs_core.cli._common import OneLineParser
-from switchobs_ros.core_config import DEFAULT_X0
-from tools.domain import claim_domain
-from tools.launch import Collector, NodeProcess, ros_args
+def _interrupted_early(signum, frame) -> None:
+    """Ctrl-C before any node runs (while the heavy imports load): one line, exit 130. os._exit,
+    because an exception raised in the middle of an import prints the import's traceback."""
+    print("demo: interrupted", file=sys.stderr, flush=True)
+    os._exit(130)
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, _interrupted_early)
+
+import argparse  # noqa: E402
+import math  # noqa: E402
+import tempfile  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+
+from switchobs_core.cli._common import OneLineParser  # noqa: E402
+from switchobs_ros.core_config import DEFAULT_X0  # noqa: E402
+from tools.domain import claim_domain  # noqa: E402
+from tools.launch import Collector, NodeProcess, ros_args  # noqa: E402
 
 SCHEDULES = {
     "periodic": {"schedule.mode": "periodic", "schedule.tau": [2.0], "schedule.s": [0.6]},
@@ -43,8 +59,17 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
 
     ``schedule_params`` (``schedule.mode/tau/s``) replaces the named ``schedule``;
     ``process_noise`` is camera_sim's plant noise q (Qc = q^2 I)."""
-    import os
+    stop = _InterruptFlag()
+    try:
+        return _run(stop, schedule, duration, time_scale, rate, init, seed, out, gain_table, quiet,
+                    extra_estimator, noise_std, schedule_params, process_noise)
+    finally:
+        stop.restore()
 
+
+def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float, rate: float, init: str,
+         seed: int, out: Path | None, gain_table: str, quiet: bool, extra_estimator: dict | None,
+         noise_std: float, schedule_params: dict | None, process_noise: float) -> dict:
     lease = None
     if "ROS_DOMAIN_ID" not in os.environ or os.environ.get("SWITCHOBS_CLAIM_DOMAIN", "1") == "1":
         lease = claim_domain()
@@ -70,7 +95,7 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
     cam_params = dict(sched, rate=rate, duration=duration, publish_clock=True, time_scale=time_scale,
                       wait_for_subscribers=1, wait_for_truth_subscribers=1, seed=seed, noise_std=float(noise_std),
                       process_noise=float(process_noise))
-    rclpy.init()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Collector(["/estimator/state", "/estimator/envelope", "/sim/truth"], name="switchobs_demo")
     est = cam = None
     logs = out or Path(tempfile.mkdtemp(prefix="switchobs_demo_"))
@@ -78,6 +103,7 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
         est = NodeProcess("estimator", ros_args(params=est_params), log=logs / "estimator.log")
         deadline = time.monotonic() + 120
         while not node.matched(["/estimator/state"]):       # the estimator is up (design at start-up may take a while)
+            stop.check()
             rclpy.spin_once(node, timeout_sec=0.1)
             if not est.alive():
                 raise RuntimeError(f"estimator exited with {est.proc.returncode}:\n{est.output()}")
@@ -87,15 +113,21 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
         t_wall = time.monotonic()
         live = _LiveRows(sched, e0, quiet, noise_std)
         while cam.alive():
+            stop.check()
             rclpy.spin_once(node, timeout_sec=0.05)
             live.update(node)
         t_end = time.monotonic() + 1.0
         while time.monotonic() < t_end:  # the last answers
+            stop.check()
             rclpy.spin_once(node, timeout_sec=0.05)
         live.update(node, final=True)
         wall = time.monotonic() - t_wall
         if cam.proc.returncode != 0:
             raise RuntimeError(f"camera_sim exited with {cam.proc.returncode}:\n{cam.output()}")
+    except RuntimeError:
+        if stop.hit:        # a node that died of the same Ctrl-C (e.g. mid-import) is the interrupt, not a failure
+            raise KeyboardInterrupt from None
+        raise
     finally:
         for p in (cam, est):
             if p is not None:
@@ -112,6 +144,31 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
     if out:
         _write(res, out, sched)
     return res
+
+
+class _InterruptFlag:
+    """SIGINT (Ctrl-C) sets a flag that the demo's loops check, so the interrupt surfaces as one
+    KeyboardInterrupt at a known place. With rclpy's own handler (or Python's default) the exception
+    is raised wherever the main thread happens to be, e.g. inside an rclpy ``Future.__del__``, where
+    Python swallows it ("Exception ignored in ...") while the context is already shut down: the demo
+    then failed with "failed to create timer: context is not valid" instead of stopping."""
+
+    def __init__(self) -> None:
+        self.hit = False
+        self._old = None
+        if threading.current_thread() is threading.main_thread():   # signal handlers live in the main thread
+            self._old = signal.signal(signal.SIGINT, self._set)
+
+    def _set(self, signum, frame) -> None:
+        self.hit = True
+
+    def check(self) -> None:
+        if self.hit:
+            raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
 
 
 def _series(node: Collector, e0: float) -> dict:
