@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .certificate.paper import cycle_factor, paper_factors
+from .certificate.paper import paper_factors
 from .exceptions import SwitchobsError
 
 __all__ = ["CycleRecord", "Residence", "CycleTracker", "residence_limits", "residence_text"]
@@ -242,8 +242,7 @@ class CycleTracker:
         else:
             matched = order_ok and self.matches(h, promised)
             resync = not matched and order_ok and sequence
-        f = () if design.kappa is None else tuple(   # Kalman gains: no paper factors
-            cycle_factor(kk, m, e, hi, tau - hi) for kk, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
+        f = () if design.kappa is None else paper_factors(design, h)    # Kalman gains: no paper factors
         rec = CycleRecord(k=k, t_start=self.cycle_start, t_end=t, tau=tau, h=h,
                           s=h[0] / tau if tau > 0 else float("nan"), f=f, order=order, promised=promised,
                           matched=bool(matched), a2_ok=a2_ok, design_index=design_index)

@@ -213,15 +213,14 @@ class Designer:
         """(eta_min_1, ..., eta_min_N) of a cycle (e:eta1_fixed, e:eta2_fixed)."""
         self._check_cycle(cycle)
         return tuple(
-            ch.eta_min(
-                cycle.h[i], cycle.inactive(i + 1), self.delta[i], what=f"cycle {cycle.label()}, channel {i + 1}: "
-            )
+            ch.eta_min(cycle.active(i + 1), cycle.inactive(i + 1), self.delta[i],
+                       what=f"cycle {cycle.label()}, channel {i + 1}: ")
             for i, ch in enumerate(self.channels)
         )
 
     def _eta_min_or_none(self, cycle: Cycle, i: int) -> float | None:
         try:
-            return self.channels[i].eta_min(cycle.h[i], cycle.inactive(i + 1), self.delta[i])
+            return self.channels[i].eta_min(cycle.active(i + 1), cycle.inactive(i + 1), self.delta[i])
         except InfeasibleDesign:
             return None
 
@@ -284,7 +283,7 @@ class Designer:
         gains = []
         for i in range(self.system.N):
             try:
-                gains.append(self._channel_gain(i, etas[i], emin[i], cycle.h[i], cycle.inactive(i + 1)))
+                gains.append(self._channel_gain(i, etas[i], emin[i], cycle.active(i + 1), cycle.inactive(i + 1)))
             except DesignError as err:   # name the cycle and channel whose SDP failed
                 raise type(err)(f"{what}, channel {i + 1}: {err}") from None
         return self._finish("cycle", cycle, None, gains, eta is not None, what)

@@ -102,13 +102,16 @@ class Segment:
     """One interval ``[t0, t1)`` on which ``channel`` (1-based) is active with ``design``.
 
     ``design`` is any object with per-channel sequences ``L`` (n x p_i gains), ``kappa``,
-    ``eta`` and ``mu`` (a :class:`switchobs_core.gains.CycleDesign`).
+    ``eta`` and ``mu`` (a :class:`switchobs_core.gains.CycleDesign`). ``part`` is ``"blind"``
+    for the dead time after a switching instant (the LMI observer applies no gain: ``L = 0``),
+    ``"seeing"`` for the rest of that residence, ``""`` for a residence without a dead time.
     """
 
     t0: float
     t1: float
     channel: int
     design: Any
+    part: str = ""
 
     def __post_init__(self) -> None:
         t0 = as_finite(self.t0, "t0")
@@ -122,8 +125,14 @@ class Segment:
 
     @property
     def L(self) -> np.ndarray:
-        """The gain ``L_i`` of the active channel."""
-        return np.asarray(self.design.L[self.channel - 1], dtype=float)
+        """The gain ``L_i`` of the active channel (zero in a blind part)."""
+        L = np.asarray(self.design.L[self.channel - 1], dtype=float)
+        return np.zeros_like(L) if self.part == "blind" else L
+
+    @property
+    def starts_residence(self) -> bool:
+        """Whether ``t0`` is a switching instant (not the end of a dead time)."""
+        return self.part != "seeing"
 
 
 def alpha(T_o: Sequence[np.ndarray]) -> float:
@@ -208,13 +217,25 @@ class EnvelopeTracker:
         self.rate = self.mu.copy()
         self.active = 0  # 1-based; 0 = none yet
 
+    _pending: tuple | None = None
+
     def z(self, t: float) -> np.ndarray:
         """``z_1(t)..z_N(t)`` (t at or after the last switching instant)."""
+        if self._pending is not None and t >= self._pending[0]:
+            t_on, j, kappa, eta = self._pending
+            self._pending = None
+            self.z_a = self.z_a * np.exp(self.rate * (t_on - self.t_a))
+            self.t_a[:] = t_on
+            self._activate(j, kappa, eta)
         return self.z_a * np.exp(self.rate * (t - self.t_a))
 
     def switch(self, t: float, channel: int, kappa: Sequence[float], eta: Sequence[float],
-               mu: Sequence[float] | None = None) -> None:
-        """Channel ``channel`` (1-based) becomes active at ``t`` with the design's ``kappa``, ``eta``."""
+               mu: Sequence[float] | None = None, dead_time: float = 0.0) -> None:
+        """Channel ``channel`` (1-based) becomes active at ``t`` with the design's ``kappa``, ``eta``.
+
+        With a ``dead_time`` d > 0 the channel is blind until ``t + d`` (every ``z_i`` grows at
+        ``mu_i``, the extra inactive interval of :mod:`switchobs_core.schedule`) and becomes
+        active then (evaluated lazily by :meth:`z`, whose times never go back)."""
         if not isinstance(channel, (int, np.integer)) or not 1 <= channel <= self.N:
             raise InvalidArgument(f"channel must be in 1..{self.N}; got {channel!r}")
         zt = self.z(t)
@@ -223,10 +244,16 @@ class EnvelopeTracker:
         self.t_a[:] = t
         self.z_a = zt
         self.rate = self.mu.copy()
-        j = channel - 1
-        self.rate[j] = -float(eta[j])
-        self.z_a[j] = float(kappa[j]) * zt[j]
         self.active = channel
+        self._pending = None
+        if dead_time > 0:
+            self._pending = (t + float(dead_time), channel - 1, float(kappa[channel - 1]), float(eta[channel - 1]))
+            return
+        self._activate(channel - 1, float(kappa[channel - 1]), float(eta[channel - 1]))
+
+    def _activate(self, j: int, kappa: float, eta: float) -> None:
+        self.rate[j] = -eta
+        self.z_a[j] = kappa * self.z_a[j]
 
 
 def envelope_z(t: np.ndarray, segments: Sequence[Segment], z0: float) -> np.ndarray:
@@ -256,7 +283,11 @@ def envelope_z(t: np.ndarray, segments: Sequence[Segment], z0: float) -> np.ndar
     out = np.empty((len(d0.mu), t.size))
     k = 0
     for idx, seg in enumerate(segments):
-        tracker.switch(seg.t0, seg.channel, seg.design.kappa, seg.design.eta, seg.design.mu)
+        if seg.part == "blind":         # active from its seeing part on
+            tracker.switch(seg.t0, seg.channel, seg.design.kappa, seg.design.eta, seg.design.mu,
+                           dead_time=seg.t1 - seg.t0)
+        elif seg.part == "":
+            tracker.switch(seg.t0, seg.channel, seg.design.kappa, seg.design.eta, seg.design.mu)
         last = idx == len(segments) - 1
         while k < t.size and (t[k] < seg.t1 or last):
             out[:, k] = tracker.z(t[k])
@@ -310,7 +341,7 @@ def error_transitions(A: np.ndarray, C: Sequence[np.ndarray], t: np.ndarray,
     for seg, ta, tb, k in _grid_with_breaks(t, segments):
         dt = tb - ta
         if dt > 0:
-            key = (id(seg.design), seg.channel, dt)
+            key = (id(seg.design), seg.channel, seg.part, dt)
             E = cache.get(key)
             if E is None:
                 M = A - seg.L @ np.asarray(C[seg.channel - 1], dtype=float)

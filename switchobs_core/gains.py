@@ -220,7 +220,7 @@ class CycleDesign:
             raise InvalidArgument(f"observed cycle has {observed.N} channels; the design has {self.N}")
         fs, dom = [], True
         for i, c in enumerate(self.channels):
-            act, ina = observed.h[i], observed.inactive(i + 1)
+            act, ina = observed.active(i + 1), observed.inactive(i + 1)
             fs.append(c.factor(act, ina))
             ok_in = ina <= c.inactive * (1 + 1e-12) if c.mu >= 0 else ina >= c.inactive * (1 - 1e-12)
             dom &= act >= c.active * (1 - 1e-12) and ok_in
@@ -240,7 +240,7 @@ class CycleDesign:
     def from_dict(cls, d: dict[str, Any]) -> CycleDesign:
         return cls(
             kind=str(d["kind"]),
-            cycle=None if d["cycle"] is None else Cycle(d["cycle"]["h"]),
+            cycle=None if d["cycle"] is None else Cycle(d["cycle"]["h"], d["cycle"].get("dead_time", 0.0)),
             h_bounds=None if d["h_bounds"] is None else (float(d["h_bounds"][0]), float(d["h_bounds"][1])),
             delta=tuple(float(x) for x in d["delta"]),
             channels=tuple(ChannelGain.from_dict(c) for c in d["channels"]),
@@ -288,7 +288,7 @@ class GainTable:
         """
         cycles = [cycles] if isinstance(cycles, Cycle) else list(cycles)
         for d in self.kalman:
-            stored = [Cycle(h) for h in d.get("cycles", [])]
+            stored = [Cycle(h, d.get("dead_time", 0.0)) for h in d.get("cycles", [])]
             if len(stored) == len(cycles) and all(a.matches(b, rtol=rtol, atol=atol) for a, b in zip(stored, cycles)):
                 key = id(d)
                 kd = self._kalman_cache.get(key)
@@ -298,7 +298,8 @@ class GainTable:
                     except SwitchobsError as err:
                         raise GainTableError(f"gain table: stored Kalman design unusable: {err}") from None
                 return kd
-        have = "; ".join(", ".join(Cycle(h).label() for h in d.get("cycles", [])) for d in self.kalman) or "none"
+        have = "; ".join(", ".join(Cycle(h, d.get("dead_time", 0.0)).label() for h in d.get("cycles", []))
+                         for d in self.kalman) or "none"
         want = ", ".join(c.label() for c in cycles)
         raise GainTableError(f"no Kalman design for the cycle sequence {want} in the table (designed: {have}); "
                              "design it with `switchobs design ... --gains kalman`")
@@ -611,6 +612,8 @@ def _check_layout(data: dict[str, Any], source: str) -> None:
             raise c.fail(f"{w}.cycles", "a list of cycles")
         for j, h in enumerate(cycles):
             c.numbers(h, f"{w}.cycles[{j}]", N)
+        if "dead_time" in d:
+            c.number(d["dead_time"], f"{w}.dead_time")
         for key in ("rate", "rho", "norm"):
             c.number(c.get(d, key, w), f"{w}.{key}")
         c.integer(c.get(d, "periods", w), f"{w}.periods")
@@ -627,6 +630,8 @@ def _check_design(c: _Layout, d: Any, w: str, n: int, p: list[int], rs: list[int
     cyc = c.get(d, "cycle", w)
     if cyc is not None:
         c.numbers(c.get(c.mapping(cyc, f"{w}.cycle"), "h", f"{w}.cycle"), f"{w}.cycle.h", len(p))
+        if "dead_time" in cyc:
+            c.number(cyc["dead_time"], f"{w}.cycle.dead_time")
     hb = c.get(d, "h_bounds", w)
     if hb is not None:
         c.numbers(hb, f"{w}.h_bounds", 2)

@@ -16,6 +16,11 @@ denominator). A sample within 1 ns of a switching instant is a *tie*: in floatin
 channel of the first period and lists the tie phases, and :meth:`KalmanDesign.gain` serves a
 sample whose channel differs from its phase's with a gain from the stored prior.
 
+Dead time. A cycle with a dead time ``d`` (:mod:`.schedule`) makes the samples in the first
+``d`` seconds of every residence *blind*: they measure only the rows every channel shares
+(:func:`~switchobs_core.schedule.common_rows`: the camera's own pose), and their stored step
+uses ``H = C_rho[common rows]`` (``KalmanPhase.rows``). ``pattern.blind[k]`` says which.
+
 Detectability. Before iterating, the period pair is checked: with ``Phi = e^{A/f}``, the
 monodromy ``Phi^K`` and the stacked observations ``O = [H_0; H_1 Phi; ...; H_{K-1} Phi^{K-1}]``
 of the period's full-row samples, every eigenvalue of ``Phi^K`` with ``|lambda| >= 1`` must
@@ -54,7 +59,7 @@ from .riccati import (
     joseph,
     periodic_riccati,
 )
-from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon
+from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon, common_rows
 
 __all__ = [
     "KalmanDesignError",
@@ -86,13 +91,28 @@ class UndetectableSchedule(KalmanDesignError):
 
 @dataclass(frozen=True)
 class SamplePattern:
-    """One period of samples: ``channel[k]`` of sample ``k`` at ``t_k = k / rate``, ``k < K``."""
+    """One period of samples: ``channel[k]`` of sample ``k`` at ``t_k = k / rate``, ``k < K``;
+    ``blind[k]`` when it falls in a dead time (module docstring; empty: none is)."""
 
     rate: float
     cycles: tuple[Cycle, ...]
     repeat: int
     channels: tuple[int, ...]
     ties: tuple[int, ...]
+    blind: tuple[bool, ...] = ()
+
+    def is_blind(self, k: int) -> bool:
+        """Whether sample ``k`` of the period is blind."""
+        return bool(self.blind) and self.blind[k]
+
+    def rows(self, k: int, system: Any) -> tuple[int, ...] | None:
+        """Rows of ``C_channel`` measured at sample ``k``: None (all) or the common rows when blind."""
+        return common_rows(system.C) if self.is_blind(k) else None
+
+    @property
+    def dead_time(self) -> float:
+        """The dead time of the cycles (0 without one)."""
+        return max(c.dead_time for c in self.cycles)
 
     @property
     def K(self) -> int:
@@ -154,7 +174,8 @@ def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: 
     channels = tuple(int(sch.channel_at(float(t))) for t in ts)
     sw = sch.switching_instants(m * T + TIE_TOL)
     ties = tuple(k for k, t in enumerate(ts) if np.min(np.abs(sw - t)) <= TIE_TOL and k > 0)
-    return SamplePattern(rate, cyc, m, channels, ties)
+    blind = tuple(bool(sch.blind_at(float(t))) for t in ts) if any(c.dead_time for c in cyc) else ()
+    return SamplePattern(rate, cyc, m, channels, ties, blind)
 
 
 def check_detectable(system: Any, pattern: SamplePattern) -> None:
@@ -164,7 +185,9 @@ def check_detectable(system: Any, pattern: SamplePattern) -> None:
     Phi = discretize(A, np.zeros((n, 0)), np.zeros((n, n)), 1.0 / pattern.rate)[0]
     rows, Pk = [], np.eye(n)
     for k in range(K):
-        rows.append(system.C[pattern.channels[k] - 1] @ Pk)
+        H = system.C[pattern.channels[k] - 1]
+        r = pattern.rows(k, system)
+        rows.append((H if r is None else H[list(r)]) @ Pk)
         Pk = Phi @ Pk
     O = np.vstack(rows)
     d = observability_decomposition(Pk, O / max(1.0, np.linalg.norm(O, 2)))
@@ -179,8 +202,10 @@ def check_detectable(system: Any, pattern: SamplePattern) -> None:
     for j in range(d.T_u.shape[1]):
         v = d.T_u[:, j]
         dirs.append(" ".join(f"{v[i]:+.3g}*{labels[i]}" for i in np.argsort(-np.abs(v))[:4] if abs(v[i]) > 1e-6))
-    unseen = sorted(set(range(1, system.N + 1)) - set(pattern.channels))
-    hint = f" Channel(s) {unseen} get no sample in the period." if unseen else ""
+    seen = {pattern.channels[k] for k in range(K) if not pattern.is_blind(k)}
+    unseen = sorted(set(range(1, system.N + 1)) - seen)
+    hint = f" Channel(s) {unseen} get no sample in the period" + (" outside the dead time." if pattern.blind else
+                                                                   ".") if unseen else ""
     rates = ", ".join(f"{math.log(abs(z)) / pattern.period:.4g}" for z in bad)
     raise UndetectableSchedule(
         f"schedule {', '.join(c.label() for c in pattern.cycles)} at {pattern.rate:g} Hz is not detectable: "
@@ -192,12 +217,20 @@ def check_detectable(system: Any, pattern: SamplePattern) -> None:
 
 @dataclass(frozen=True, eq=False)
 class KalmanPhase:
-    """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain ``K``."""
+    """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain
+    ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind)."""
 
     channel: int
     dt: float
     P_prior: np.ndarray
     K: np.ndarray
+    rows: tuple[int, ...] | None = None
+
+    def has_rows(self, rows: Sequence[int] | None) -> bool:
+        """Whether a sample with ``rows`` (None: all) measures exactly this phase's rows."""
+        if self.rows is None:
+            return rows is None or (len(rows) == self.K.shape[1] and list(rows) == list(range(self.K.shape[1])))
+        return rows is not None and tuple(rows) == self.rows
 
 
 @dataclass(frozen=True)
@@ -212,19 +245,24 @@ class Phase:
 
 
 def _phases_to_dict(ph: Sequence[KalmanPhase]) -> dict[str, list]:
-    return {
+    out = {
         "channel": [p.channel for p in ph],
         "dt": [p.dt for p in ph],
         "P_prior": [p.P_prior.tolist() for p in ph],
         "K": [p.K.tolist() for p in ph],
     }
+    if any(p.rows is not None for p in ph):     # only with a dead time: tables without one keep their bytes
+        out["rows"] = [None if p.rows is None else list(p.rows) for p in ph]
+    return out
 
 
 def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
     try:
+        rows = d.get("rows") or [None] * len(d["channel"])
         return [
-            KalmanPhase(int(c), float(dt), np.array(P, dtype=float), np.array(K, dtype=float))
-            for c, dt, P, K in zip(d["channel"], d["dt"], d["P_prior"], d["K"], strict=True)
+            KalmanPhase(int(c), float(dt), np.array(P, dtype=float), np.array(K, dtype=float).reshape(len(P), -1),
+                        None if r is None else tuple(int(i) for i in r))
+            for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True)
         ]
     except (KeyError, TypeError, ValueError) as err:
         raise KalmanDesignError(f"stored Kalman phases are malformed ({err})") from None
@@ -315,7 +353,9 @@ class KalmanDesign:
         """
         e = self.entry(phase)
         ch = e.channel if channel is None else int(channel)
-        if ch == e.channel and (rows is None or len(rows) == e.K.shape[1] and list(rows) == list(range(e.K.shape[1]))):
+        if channel is None and rows is None:
+            rows = e.rows
+        if e.has_rows(rows) and (ch == e.channel or e.rows is not None and self._same_H(ch, e.channel, e.rows)):
             return e.K
         key = (phase.startup, phase.index, ch, None if rows is None else tuple(rows))
         K = self._cache.get(key)
@@ -323,10 +363,16 @@ class KalmanDesign:
             K = self._cache[key] = gain(e.P_prior, self.H(ch, rows), self.noise.R(ch, rows))
         return K
 
+    def _same_H(self, a: int, b: int, rows: Sequence[int]) -> bool:
+        """Whether channels ``a`` and ``b`` measure the same ``rows`` (the common rows of a blind sample)."""
+        return np.array_equal(self.H(a, rows), self.H(b, rows))
+
     def posterior(self, phase: Phase, channel: int | None = None, rows: Sequence[int] | None = None) -> np.ndarray:
         """Covariance after the correction at ``phase`` (Joseph form from the stored prior)."""
         e = self.entry(phase)
         ch = e.channel if channel is None else int(channel)
+        if channel is None and rows is None:
+            rows = e.rows
         return joseph(e.P_prior, self.gain(phase, ch, rows), self.H(ch, rows), self.noise.R(ch, rows))
 
     # ------------------------------------------------------------ persistence
@@ -338,6 +384,7 @@ class KalmanDesign:
             "noise": self.noise.to_dict(),
             "rate": self.pattern.rate,
             "cycles": [list(c.h) for c in self.pattern.cycles],
+            **({"dead_time": self.pattern.dead_time} if self.pattern.dead_time else {}),
             "repeat": self.pattern.repeat,
             "ties": list(self.pattern.ties),
             "periodic": _phases_to_dict(self.periodic),
@@ -358,8 +405,10 @@ class KalmanDesign:
             if d["system_fingerprint"] != system.fingerprint():
                 raise KalmanDesignError("the stored Kalman design was made for another system (fingerprint differs)")
             periodic = _phases_from_dict(d["periodic"])
-            pattern = SamplePattern(float(d["rate"]), tuple(Cycle(h) for h in d["cycles"]), int(d["repeat"]),
-                                    tuple(p.channel for p in periodic), tuple(int(k) for k in d["ties"]))
+            dead = float(d.get("dead_time", 0.0))
+            pattern = SamplePattern(float(d["rate"]), tuple(Cycle(h, dead) for h in d["cycles"]), int(d["repeat"]),
+                                    tuple(p.channel for p in periodic), tuple(int(k) for k in d["ties"]),
+                                    tuple(p.rows is not None for p in periodic) if dead else ())
             return cls(system, NoiseModel.from_dict(d["noise"]), pattern, periodic, _phases_from_dict(d["startup"]),
                        int(d["periods"]), float(d["change"]), np.array(d["error_transition"], dtype=float),
                        float(d["rho"]), float(d["norm"]))
@@ -418,11 +467,13 @@ def design_kalman(
     A = np.asarray(system.A, dtype=float)
     dt = 1.0 / pattern.rate
     Phi, _, Qd = discretize(A, np.asarray(system.B, dtype=float), noise.Q_c, dt)
-    steps = [Step(Phi, Qd, system.C[c - 1], noise.R(c)) for c in pattern.channels]
-    sol = periodic_riccati(steps, noise.P0, rtol=rtol, startup_rtol=startup_rtol, max_periods=max_periods)
     K = pattern.K
-    periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k]) for k in range(K)]
-    startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk)
+    rows = [pattern.rows(k, system) for k in range(K)]
+    steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
+             for c, r in zip(pattern.channels, rows)]
+    sol = periodic_riccati(steps, noise.P0, rtol=rtol, startup_rtol=startup_rtol, max_periods=max_periods)
+    periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
+    startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
                for k, (P, Kk) in enumerate(zip(sol.startup_P, sol.startup_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
     n = A.shape[0]

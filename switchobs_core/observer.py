@@ -22,6 +22,12 @@ exactly (augmented matrix exponentials of :mod:`switchobs_core.propagation`, cac
     the paper's model at 100 Hz the error grows with the unstable agents (33x in 40 s),
     which is why it is not the default.
 
+Dead time (:mod:`switchobs_core.schedule`). With LMI gains designed for a cycle with a dead
+time ``d``, a sample less than ``d`` after its switching instant gets no gain (the design's
+extra inactive interval: ``x_hat`` is propagated open loop, ``L = 0``), whatever rows it holds.
+The Kalman families correct with the rows the sample holds (the shared rows while blind), with
+the stored gain of that blind phase.
+
 Both coincide with the continuous-output observer as the sample rate grows (first order
 in the step). A change of channel is a switching instant (e:switching_instants);
 two consecutive starts of channel 1 bound a switching cycle (e:tau_k, e:s_k), written for N
@@ -59,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from .certificate.paper import design_dead_time
 from .cycles import CycleRecord, CycleTracker, Residence
 from .decomposition import observability_decomposition
 from .envelope import Envelope, EnvelopeTracker
@@ -70,6 +77,7 @@ from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
 from .riccati import DiscretizationCache, joseph, symmetrize
 from .riccati import gain as riccati_gain
 from .rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
+from .schedule import BLIND_TOL
 
 __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
 
@@ -355,6 +363,7 @@ class SwitchedObserver:
         self._t = t0
         self.t0 = t0
         self._channel = 0
+        self._blind_until = -math.inf     # LMI gains: no correction before this time (dead time)
         self._y = np.zeros(0)
         self._u = np.zeros(self.m)
         self._u_zero = True
@@ -542,6 +551,8 @@ class SwitchedObserver:
             self._u = u
             self._u_zero = not u.any()
         if self.family == "lmi":
+            if t < self._blind_until:     # dead time after the switch: no gain (module docstring)
+                rows, y, p = (), y[:0], 0
             self._key = self._gain_key(channel, rows)
             self._y = y - self._Crows[self._key] @ self._x if self.hold == "innovation" else y
             if self._ell is not None:    # rounding of nu = y - C x_hat, and of the data y itself
@@ -766,7 +777,7 @@ class SwitchedObserver:
             try:
                 ph = kd.phase_at(t - self._origin)
                 ent = kd.entry(ph)
-                if ent.channel != channel:
+                if ent.channel != channel and not (ent.rows is not None and rows == ent.rows):
                     why = (f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman table's "
                            f"schedule has channel {ent.channel}")
             except InvalidArgument as err:
@@ -879,7 +890,9 @@ class SwitchedObserver:
         d = self.current_design
         cyc.begin(t, channel, cyc.limits_for(d, channel))
         if self._tracker is not None:
-            self._tracker.switch(t, channel, d.kappa, d.eta, d.mu)
+            dead = design_dead_time(d)
+            self._blind_until = t + dead - BLIND_TOL if dead else -math.inf
+            self._tracker.switch(t, channel, d.kappa, d.eta, d.mu, dead_time=dead)
 
     def _close_cycle(self, t: float) -> None:
         di = self.design_index

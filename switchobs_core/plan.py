@@ -21,6 +21,12 @@ continuous schedule to samples). Samples are at ``t_k = k / f``; the sample at a
 instant belongs to the channel that starts there (the rule of ``Schedule.channel_at``), so
 channel 1 takes samples ``0..k_1-1``, channel 2 the next ``k_2``, and so on.
 
+Dead time (``dead_time`` d > 0, :mod:`.schedule`): the first ``k_d`` samples of every
+residence (those less than ``d`` after its switch, the rule of ``Schedule.blind_at``) measure
+only the rows every channel shares, so ``k_i > k_d``. Without a dead time the optimum is the
+fastest switching allowed; with one every switch costs ``k_d`` blind samples and the optimum
+moves inside the box.
+
 Undetectable schedules (an unstable mode never observed by the sampled periodic pair, the
 test of :func:`~switchobs_core.kalman.check_detectable`) cost ``inf``.
 
@@ -62,7 +68,7 @@ from .exceptions import DesignError, InvalidArgument
 from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
 from .noise import NoiseModel, default_noise
 from .riccati import Step, discretize, periodic_riccati
-from .schedule import Cycle
+from .schedule import BLIND_TOL, Cycle, common_rows
 
 __all__ = [
     "ScheduleCost",
@@ -128,9 +134,17 @@ def _weights_by_label(toks: Sequence[str], system: Any, n: int) -> np.ndarray:
     return w
 
 
-def counts_to_cycle(counts: Sequence[int], rate: float) -> Cycle:
-    """The cycle ``h_i = k_i / rate``."""
-    return Cycle([int(k) / rate for k in counts])
+def counts_to_cycle(counts: Sequence[int], rate: float, dead_time: float = 0.0) -> Cycle:
+    """The cycle ``h_i = k_i / rate`` (with blind intervals of ``dead_time`` s after each switch)."""
+    return Cycle([int(k) / rate for k in counts], dead_time)
+
+
+def blind_samples(dead_time: float, rate: float) -> int:
+    """``k_d``: samples at ``j / rate`` (j = 0, 1, ...) into a residence that are blind, i.e.
+    ``j / rate < d - BLIND_TOL`` (the rule of ``Schedule.blind_at``)."""
+    if not dead_time:
+        return 0
+    return max(0, math.ceil((dead_time - BLIND_TOL) * rate - 1e-9))
 
 
 def neighbours(counts: Sequence[int], step: int = 1) -> list[tuple[int, ...]]:
@@ -156,7 +170,7 @@ class ScheduleCost:
     """
 
     def __init__(self, system: Any, rate: float, noise: NoiseModel | None = None,
-                 weights: Any = None, *, rtol: float = PLAN_RTOL) -> None:
+                 weights: Any = None, *, rtol: float = PLAN_RTOL, dead_time: float = 0.0) -> None:
         if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)) or not (
                 math.isfinite(rate) and rate > 0):
             raise InvalidArgument(f"rate must be a finite number > 0 (Hz); got {rate!r}")
@@ -172,6 +186,14 @@ class ScheduleCost:
         self.Phi, _, self.Qd = discretize(A, np.asarray(system.B, dtype=float), self.noise.Q_c, 1.0 / self.rate)
         self._H = [np.asarray(C, dtype=float) for C in system.C]
         self._R = [self.noise.R(i + 1) for i in range(system.N)]
+        d = float(dead_time)
+        if not (math.isfinite(d) and d >= 0):
+            raise InvalidArgument(f"dead_time must be a finite number of seconds >= 0; got {dead_time!r}")
+        self.dead_time = d
+        self.k_dead = blind_samples(d, self.rate)
+        rows = list(common_rows(system.C))
+        self._Hb = [H[rows] for H in self._H]
+        self._Rb = [self.noise.R(i + 1, rows) for i in range(system.N)]
         self._P0 = np.asarray(self.noise.P0, dtype=float)
         self._warm: np.ndarray | None = None
         self.cache: dict[tuple[int, ...], float] = {}
@@ -182,16 +204,25 @@ class ScheduleCost:
         order = tuple(range(1, len(counts) + 1)) if order is None else tuple(order)
         return tuple(c for c in order for _ in range(int(counts[c - 1])))
 
-    def of_channels(self, channels: Sequence[int], cycles: Sequence[Cycle] = ()) -> float:
-        """Cost of the periodic sample pattern ``channels`` (inf if undetectable)."""
+    def blind(self, counts: Sequence[int], order: Sequence[int] | None = None) -> tuple[bool, ...]:
+        """Whether each sample of :meth:`channels` is blind (the first ``k_d`` of every residence)."""
+        order = tuple(range(1, len(counts) + 1)) if order is None else tuple(order)
+        return tuple(j < self.k_dead for c in order for j in range(int(counts[c - 1])))
+
+    def of_channels(self, channels: Sequence[int], cycles: Sequence[Cycle] = (),
+                    blind: Sequence[bool] = ()) -> float:
+        """Cost of the periodic sample pattern ``channels`` (``blind[k]``: sample k measures only the
+        shared rows; inf if undetectable)."""
         K = len(channels)
+        blind = tuple(bool(b) for b in blind) if any(blind) else ()
         pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
-                                tuple(int(c) for c in channels), ())
+                                tuple(int(c) for c in channels), (), blind)
         try:
             check_detectable(self.system, pattern)
         except UndetectableSchedule:
             return math.inf
-        steps = [Step(self.Phi, self.Qd, self._H[c - 1], self._R[c - 1]) for c in channels]
+        steps = [Step(self.Phi, self.Qd, self._Hb[c - 1], self._Rb[c - 1]) if blind and blind[k] else
+                 Step(self.Phi, self.Qd, self._H[c - 1], self._R[c - 1]) for k, c in enumerate(channels)]
         P0 = self._P0 if self._warm is None else self._warm
         sol = periodic_riccati(steps, P0, rtol=self.rtol, startup_rtol=0.0,
                                max_periods=max(500, _MAX_SAMPLES // K))
@@ -204,8 +235,12 @@ class ScheduleCost:
         key = tuple(int(k) for k in counts) + (() if order is None else tuple(order))
         J = self.cache.get(key)
         if J is None:
+            if min(int(k) for k in counts) <= self.k_dead:      # a residence no longer than the dead time
+                J = self.cache[key] = math.inf
+                return J
             J = self.cache[key] = self.of_channels(self.channels(counts, order),
-                                                   (counts_to_cycle(counts, self.rate),))
+                                                   (counts_to_cycle(counts, self.rate, self.dead_time),),
+                                                   self.blind(counts, order))
         return J
 
 
@@ -226,10 +261,11 @@ class PlanResult:
     local_minimum: bool
     weights: np.ndarray
     alternatives: list[dict] = field(default_factory=list)
+    dead_time: float = 0.0
 
     @property
     def cycle(self) -> Cycle:
-        return counts_to_cycle(self.counts, self.rate)
+        return counts_to_cycle(self.counts, self.rate, self.dead_time)
 
     @property
     def h(self) -> tuple[float, ...]:
@@ -325,7 +361,7 @@ def plan_schedule(
     J = cost if cost is not None else ScheduleCost(system, rate, noise, weights)
     f = J.rate
     N = int(system.N)
-    kmin = max(1, math.ceil(h_min * f - 1e-9))
+    kmin = max(1, math.ceil(h_min * f - 1e-9), J.k_dead + 1)
     kmax_total = math.floor(tau_max * f + 1e-9)
     if N * kmin > kmax_total:
         raise InvalidArgument(
@@ -351,7 +387,7 @@ def plan_schedule(
             f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable "
             "(some unstable mode is never observed); lengthen tau_max")
     alts = [{"order": o, "counts": c, "cost": v, "local_minimum": lm} for o, c, v, lm in results[1:]]
-    return PlanResult(f, counts, val, kmin, kmax_total, J.evaluations, local, J.w, alts)
+    return PlanResult(f, counts, val, kmin, kmax_total, J.evaluations, local, J.w, alts, J.dead_time)
 
 
 def cost_map(J: ScheduleCost, taus: Sequence[float], s_values: Sequence[float], kmin: int = 1,
@@ -381,7 +417,7 @@ def cycle_cost(J: ScheduleCost, cycle: Cycle) -> float:
     """Cost of an arbitrary cycle at ``J.rate`` through the sample pattern the ``kalman`` design uses
     (:func:`~switchobs_core.kalman.sample_pattern`, which may take several cycles per period)."""
     pat = sample_pattern(cycle, J.rate)
-    return J.of_channels(pat.channels, pat.cycles)
+    return J.of_channels(pat.channels, pat.cycles, pat.blind)
 
 
 def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, delta: float = 0.99) -> dict:

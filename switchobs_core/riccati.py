@@ -160,6 +160,8 @@ def gain(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
     RiccatiError
         ``S = H P H' + R`` is not positive definite.
     """
+    if H.shape[0] == 0:          # no rows (a fully blind sample): no correction
+        return np.zeros((P.shape[0], 0))
     PHt = P @ H.T
     # S = H P H' + R
     S = symmetrize(H @ PHt + R)

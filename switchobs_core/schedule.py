@@ -5,6 +5,14 @@ from one channel-1 start to the next; channel i is active for h_i seconds in it,
 tau = h_1 + ... + h_N. For two channels the paper writes (tau, s) with h_1 = s tau and
 h_2 = (1 - s) tau.
 
+Dead time (beyond the paper). A camera needs time to turn: for the first ``d`` seconds of
+every residence (a *blind* interval after each switching instant) only the rows that every
+channel shares are measured (the camera's own pose; :func:`common_rows`). ``Cycle(h,
+dead_time=d)`` keeps ``h_i`` as channel i's whole residence (switch to switch), so ``tau`` and
+``s`` mean what they meant; channel i *sees* its target for ``h_i - d`` seconds (:meth:`Cycle.active`)
+and is blind to it for ``tau - h_i + d`` (:meth:`Cycle.inactive`): for the paper's LMI gains the
+blind interval is an extra inactive interval of every channel.
+
 Schedules say which channel is active when:
 
 * :class:`PeriodicSchedule` -- one cycle repeated (the paper's periodic case);
@@ -39,7 +47,14 @@ __all__ = [
     "CYCLE_ATOL",
     "MAX_NORM_TAU",
     "check_cycle_horizon",
+    "common_rows",
+    "BLIND_TOL",
 ]
+
+#: A time within this many seconds before the end of a blind interval counts as seeing (the
+#: tie rule of :meth:`Schedule.blind_at`, shared by the simulators, the Kalman sample pattern
+#: and the observer: a sample at exactly ``switch + d`` in floating point is not blind).
+BLIND_TOL = 1e-9
 
 #: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the open-loop transition over one
 #: cycle) leaves double precision (``e^709`` overflows), and designs and certificates computed
@@ -61,21 +76,38 @@ CYCLE_RTOL = 1e-6
 CYCLE_ATOL = 1e-9
 
 
+def common_rows(C: Sequence[Any]) -> tuple[int, ...]:
+    """The rows every channel measures: positions r where row r of every ``C_i`` is the same
+    (bit for bit). For the camera model the camera's own position, rows 0 and 1. These rows are
+    what a blind interval measures (module docstring); none (``()``) means fully blind."""
+    try:
+        mats = [np.asarray(Ci, dtype=float) for Ci in C]
+    except (TypeError, ValueError):
+        raise ScheduleError(f"C must be a sequence of output matrices C_1..C_N; got {C!r}") from None
+    if not mats or any(m.ndim != 2 or m.shape[1] != mats[0].shape[1] for m in mats):
+        raise ScheduleError("C must hold one or more output matrices (p_i x n), all with the same n columns")
+    p = min(m.shape[0] for m in mats)
+    return tuple(r for r in range(p) if all(np.array_equal(m[r], mats[0][r]) for m in mats[1:]))
+
+
 @dataclass(frozen=True)
 class Cycle:
     """One switching cycle: channel i active for h[i - 1] seconds, in order 1..N.
 
-    ``Cycle((h_1, ..., h_N))`` or ``Cycle.from_ts(tau, s)`` for two channels.
+    ``Cycle((h_1, ..., h_N))`` or ``Cycle.from_ts(tau, s)`` for two channels; with
+    ``dead_time=d`` the first ``d`` seconds of every residence are blind (module docstring).
 
     Raises
     ------
     ScheduleError
-        Fewer than two channels, a non-finite or non-positive active time.
+        Fewer than two channels, a non-finite or non-positive active time, a dead time < 0 or
+        not shorter than every residence.
     """
 
     h: tuple[float, ...]
+    dead_time: float = 0.0
 
-    def __init__(self, h: Sequence[float]) -> None:
+    def __init__(self, h: Sequence[float], dead_time: float = 0.0) -> None:
         try:
             hs = tuple(as_finite(x, f"h_{i + 1}") for i, x in enumerate(h))
         except Exception as err:
@@ -85,10 +117,25 @@ class Cycle:
         for i, x in enumerate(hs):
             if x <= 0:
                 raise ScheduleError(f"active time h_{i + 1} must be > 0; got {x}")
+        try:
+            d = as_finite(dead_time, "dead_time")
+        except Exception as err:
+            raise ScheduleError(f"bad dead time: {err}") from None
+        if d < 0:
+            raise ScheduleError(f"dead time must be >= 0 s; got {d:g}")
+        if d >= min(hs):
+            i = int(np.argmin(hs))
+            raise ScheduleError(f"dead time {d:g} s leaves channel {i + 1} nothing to see: its residence h_{i + 1} = "
+                                f"{hs[i]:g} s must be longer than the dead time")
         object.__setattr__(self, "h", hs)
+        object.__setattr__(self, "dead_time", float(d))
+
+    def with_dead_time(self, dead_time: float) -> Cycle:
+        """The same residences with blind intervals of ``dead_time`` seconds after each switch."""
+        return Cycle(self.h, dead_time)
 
     @classmethod
-    def from_ts(cls, tau: float, s: float) -> Cycle:
+    def from_ts(cls, tau: float, s: float, dead_time: float = 0.0) -> Cycle:
         """Two-channel cycle of length tau > 0 with duty fraction s in (0, 1) (e:s_k)."""
         tau = as_finite(tau, "tau")
         s = as_finite(s, "s")
@@ -96,7 +143,7 @@ class Cycle:
             raise ScheduleError(f"cycle length tau must be > 0; got {tau}")
         if not 0 < s < 1:
             raise ScheduleError(f"duty fraction s must lie in (0, 1); got {s}")
-        return cls((s * tau, (1 - s) * tau))
+        return cls((s * tau, (1 - s) * tau), dead_time)
 
     @property
     def N(self) -> int:
@@ -113,26 +160,35 @@ class Cycle:
         """Duty fraction of channel 1, h_1 / tau (e:s_k)."""
         return self.h[0] / self.tau
 
+    def active(self, channel: int) -> float:
+        """h_channel - d: how long channel ``channel`` (1-based) sees its target in this cycle."""
+        return self.h[channel - 1] - self.dead_time
+
     def inactive(self, channel: int) -> float:
-        """tau - h_channel: how long channel ``channel`` (1-based) is off in this cycle."""
-        return self.tau - self.h[channel - 1]
+        """tau - h_channel + d: how long channel ``channel`` (1-based) is off (or blind) in this cycle."""
+        return self.tau - self.h[channel - 1] + self.dead_time
 
     def matches(self, other: Cycle, *, rtol: float = CYCLE_RTOL, atol: float = CYCLE_ATOL) -> bool:
-        """Whether every active time agrees within ``atol + rtol * tau``."""
+        """Whether every active time and the dead time agree within ``atol + rtol * tau``."""
         if other.N != self.N:
             return False
         tol = atol + rtol * max(self.tau, other.tau)
-        return all(abs(a - b) <= tol for a, b in zip(self.h, other.h))
+        return all(abs(a - b) <= tol for a, b in zip(self.h, other.h)) and \
+            abs(self.dead_time - other.dead_time) <= tol
 
     def label(self) -> str:
-        """``(tau, s)`` for two channels, ``h=(h_1, ..., h_N)`` otherwise."""
+        """``(tau, s)`` for two channels, ``h=(h_1, ..., h_N)`` otherwise; ``dead d s`` appended."""
+        dead = f", dead {self.dead_time:g} s" if self.dead_time else ""
         if self.N == 2:
-            return f"({self.tau:g} s, {self.s:g})"
-        return "h=(" + ", ".join(f"{x:g}" for x in self.h) + ")"
+            return f"({self.tau:g} s, {self.s:g}{dead})"
+        return "h=(" + ", ".join(f"{x:g}" for x in self.h) + dead + ")"
 
     def to_dict(self) -> dict:
-        """JSON-ready form."""
-        return {"tau": self.tau, "h": list(self.h)}
+        """JSON-ready form (``dead_time`` only when > 0, so tables without one keep their bytes)."""
+        out: dict = {"tau": self.tau, "h": list(self.h)}
+        if self.dead_time:
+            out["dead_time"] = self.dead_time
+        return out
 
 
 class Schedule:
@@ -161,6 +217,44 @@ class Schedule:
                 t += h
             k += 1
         return np.asarray(out)
+
+    def slot_at(self, t: float) -> tuple[int, float]:
+        """``(channel, time since its switching instant)`` at ``t`` (channel 1 before t0)."""
+        t = as_finite(t, "t")
+        if t < self.t0:
+            return 1, 0.0
+        tt, k = self.t0, 0
+        while True:
+            c = self.cycle(k)
+            if t < tt + c.tau:
+                start = tt
+                for i, h in enumerate(c.h):
+                    if t < start + h or i == c.N - 1:
+                        return i + 1, t - start
+                    start += h
+            tt += c.tau
+            k += 1
+
+    def dead_time_at(self, t: float) -> float:
+        """The dead time of the cycle that contains ``t``."""
+        t = as_finite(t, "t")
+        if t < self.t0:
+            return self.cycle(0).dead_time
+        tt, k = self.t0, 0
+        while True:
+            c = self.cycle(k)
+            if t < tt + c.tau:
+                return c.dead_time
+            tt += c.tau
+            k += 1
+
+    def blind_at(self, t: float) -> bool:
+        """Whether ``t`` lies in the blind interval after a switching instant (module
+        docstring): less than ``d - BLIND_TOL`` seconds into its residence."""
+        d = self.dead_time_at(t)
+        if not d:
+            return False
+        return self.slot_at(t)[1] < d - BLIND_TOL
 
     def channel_at(self, t: float) -> int:
         """The active channel rho(t) in 1..N (channel 1 before t0)."""
@@ -209,6 +303,14 @@ class PeriodicSchedule(Schedule):
         i = bisect.bisect_right(self._starts, off) - 1
         return min(max(i, 0), self._cycle.N - 1) + 1
 
+    def blind_at(self, t: float) -> bool:
+        d = self._cycle.dead_time
+        if not d or not math.isfinite(t) or t < self.t0:
+            return False
+        off = (t - self.t0) % self._cycle.tau
+        i = min(max(bisect.bisect_right(self._starts, off) - 1, 0), self._cycle.N - 1)
+        return off - self._starts[i] < d - BLIND_TOL
+
 
 class SequenceSchedule(Schedule):
     """A list of cycles, repeated (the paper's nonperiodic case)."""
@@ -255,10 +357,22 @@ class RandomSchedule(Schedule):
         return self._drawn[k]
 
 
-def parse_schedule(text: str, *, N: int = 2) -> Schedule:
+def parse_schedule(text: str, *, N: int = 2, dead_time: float = 0.0) -> Schedule:
     """Parse ``periodic:TAU,S``, ``periodic-h:H1,...,HN``, ``sequence:T,S;T,S;...`` or
-    ``random:HMIN,HMAX[,SEED]``.
+    ``random:HMIN,HMAX[,SEED]``; ``dead_time`` (s) is given to every cycle (module docstring).
     """
+    sch = _parse_schedule(text, N=N)
+    if dead_time:
+        if isinstance(sch, PeriodicSchedule):
+            return PeriodicSchedule(sch.cycle(0).with_dead_time(dead_time))
+        if isinstance(sch, SequenceSchedule):
+            return SequenceSchedule([c.with_dead_time(dead_time) for c in sch.cycles])
+        raise ScheduleError("a dead time needs a periodic or sequence schedule (random residences are not "
+                            "supported with a dead time)")
+    return sch
+
+
+def _parse_schedule(text: str, *, N: int = 2) -> Schedule:
     kind, _, rest = text.partition(":")
     try:
         if kind == "periodic":

@@ -67,7 +67,7 @@ from .observer import SwitchedObserver
 from .plant import Plant
 from .propagation import van_loan, zoh_pair
 from .rounding import EXPM_ULPS, UNIT_ROUNDOFF, ErrorEllipsoid, expm_error, gamma
-from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
+from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule, common_rows
 from .validation import as_finite, as_matrix
 
 __all__ = [
@@ -116,10 +116,15 @@ def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> li
     while t < t_end:
         c = schedule.cycle(k)
         d = designs[k % len(designs)]
+        dead = c.dead_time
         for i, h in enumerate(c.h):
             if t >= t_end:
                 break
-            segs.append(Segment(t, t + h, i + 1, d))
+            if dead:        # the blind interval after the switch (L = 0), then the rest
+                segs.append(Segment(t, t + dead, i + 1, d, "blind"))
+                segs.append(Segment(t + dead, t + h, i + 1, d, "seeing"))
+            else:
+                segs.append(Segment(t, t + h, i + 1, d))
             t += h
         k += 1
     return segs
@@ -435,8 +440,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     err = Xh - X
     z = envelope_z(t, eff_segments, e0)
     xo = np.stack([np.linalg.norm(err @ Ti, axis=1) for Ti in T_o])
-    sw = np.array([s.t0 for s in eff_segments])
-    ends = np.array([s.t0 for s in eff_segments if s.channel == 1 and s.t0 > eff_segments[0].t0])
+    sw = np.array([s.t0 for s in eff_segments if s.starts_residence])
+    ends = np.array([s.t0 for s in eff_segments if s.channel == 1 and s.starts_residence and s.t0 > eff_segments[0].t0])
     return SimulationResult(t=t, x=X, x_hat=Xh, error=err, channel=ch, z=z,
                             paper_bound=alpha_ * z.sum(axis=0), exact_bound=exact, xo_norms=xo,
                             switching_times=sw, cycle_ends=ends, alpha=alpha_, e0=e0,
@@ -472,13 +477,22 @@ def _simulate_observer(system, table, schedule, x0, xhat0, t0, t_end, rate, nois
     noise_b = None if noise_max is None else np.empty(K + 1)
     z, paper = np.empty((N, K + 1)), np.empty(K + 1)
     ys = []
+    blind_rows = None
+    if any(c.dead_time for c in getattr(schedule, "cycles", [])):
+        blind_rows = common_rows(system.C)
+        if not blind_rows:
+            raise InvalidArgument("a dead time with channels that share no output row: nothing is measured while "
+                                  "blind, which simulate does not model; use channels with common rows")
     for k, tk in enumerate(t):
         uk = _u_at(u, tk, plant.B.shape[1])
         X[k] = plant.advance(tk, uk)
         ch[k] = c = schedule.channel_at(tk)
         y = plant.measure(c, noise_std, noise_max=None if vmax is None else float(vmax[c - 1]))
+        rows = blind_rows if blind_rows is not None and schedule.blind_at(tk) else None
+        if rows is not None:            # the dead time after a switch: only the shared rows
+            y = y[list(rows)]
         ys.append(y)
-        Xh[k] = xh = obs.update(tk, c, y, u=uk)
+        Xh[k] = xh = obs.update(tk, c, y, u=uk, rows=rows)
         err[k] = np.asarray(xh - plant.x_extended, dtype=float)
         env = obs.envelope()
         exact[k], z[:, k], paper[k] = env.exact_bound, env.z, env.paper_bound
@@ -533,7 +547,7 @@ def _simulate_continuous(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, pro
             ta = grid[k - 1]
             seg = segments[si]
             dt = tk - ta
-            key = (id(seg.design), seg.channel, dt)
+            key = (id(seg.design), seg.channel, seg.part, dt)
             step = cache.get(key)
             if step is None:
                 Ci = C[seg.channel - 1]
@@ -604,7 +618,7 @@ def _simulate_sampled(A, B, C, segments, x0, xhat0, t0, t_end, rate, u, process_
         if k > 0:
             dt = tk - ts[k - 1]
             seg, y, uh = held
-            key = (id(seg.design), seg.channel, dt)
+            key = (id(seg.design), seg.channel, seg.part, dt)
             step = cache.get(key)
             if step is None:
                 Ci = C[seg.channel - 1]
@@ -628,15 +642,15 @@ def _simulate_sampled(A, B, C, segments, x0, xhat0, t0, t_end, rate, u, process_
         while si + 1 < len(segments) and segments[si + 1].t0 <= tk:
             si += 1
         seg = segments[si]
-        if not eff or eff[-1].channel != seg.channel or eff[-1].design is not seg.design:
+        if not eff or eff[-1].channel != seg.channel or eff[-1].design is not seg.design or eff[-1].part != seg.part:
             if eff:
-                eff[-1] = Segment(eff[-1].t0, tk, eff[-1].channel, eff[-1].design)
-            eff.append(Segment(tk, math.inf, seg.channel, seg.design))
+                eff[-1] = Segment(eff[-1].t0, tk, eff[-1].channel, eff[-1].design, eff[-1].part)
+            eff.append(Segment(tk, math.inf, seg.channel, seg.design, seg.part))
         y = plant.measure(seg.channel, noise_std)
         ys.append(y)
         held = (seg, y - C[seg.channel - 1] @ xh if hold_mode == "innovation" else y, uk)
         X[k], Xh[k], ch[k] = x, xh, seg.channel
         exact[k] = np.linalg.norm(Pee, 2) * e0
         hold[k] = exact[k] + np.linalg.norm(Pex, 2) * x0n
-    eff[-1] = Segment(eff[-1].t0, math.inf, eff[-1].channel, eff[-1].design)
+    eff[-1] = Segment(eff[-1].t0, math.inf, eff[-1].channel, eff[-1].design, eff[-1].part)
     return ts, X, Xh, ch, exact, hold, eff, ys

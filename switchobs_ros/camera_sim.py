@@ -10,7 +10,8 @@ box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
 
 1. ``/clock`` (only with ``publish_clock``),
 2. ``camera/active_channel`` (std_msgs/UInt8, the channel rho(t_k); reliable, transient local),
-3. ``camera/pose`` and ``target/pose`` (PoseStamped, same stamp ``t_k``, sensor-data QoS),
+3. ``camera/pose`` and ``target/pose`` (PoseStamped, same stamp ``t_k``, sensor-data QoS; no
+   ``target/pose`` in the first ``schedule.dead_time`` seconds after a switch, while the camera turns),
 4. ``sim/truth`` (the true state x(t_k), a labelled Float64MultiArray stamped t_k; reliable).
 
 Time: tick k is at plant time ``k / rate`` and stamp ``epoch + k / rate``. Without
@@ -55,6 +56,8 @@ PARAMS = [
     Param("schedule.tau", (2.0,), "Cycle lengths tau_k in seconds (two-channel systems).", float),
     Param("schedule.s", (0.6,), "Duty fractions s_k, one per schedule.tau entry.", float),
     Param("schedule.h", (), "N-channel cycles: N active times per cycle, concatenated (overrides tau/s).", float),
+    Param("schedule.dead_time", 0.0, "Seconds after each switch while the camera turns: camera/pose only, no "
+          "target/pose (periodic and sequence modes)."),
     Param("schedule.h_min", 0.0, "random mode: shortest residence time (s)."),
     Param("schedule.h_max", 0.0, "random mode: longest residence time (s)."),
     Param("initial_state", (), "True initial state x(0), n values (empty: the default scene for the paper "
@@ -86,9 +89,12 @@ class CameraSimNode(Node):
         mode = cfg["schedule.mode"]
         try:
             if mode == "random":
+                if cfg["schedule.dead_time"]:
+                    raise ConfigError("parameter 'schedule.dead_time' is for periodic and sequence modes")
                 self.schedule = RandomSchedule(sys_.N, cfg["schedule.h_min"], cfg["schedule.h_max"], seed=cfg["seed"])
             elif mode in ("periodic", "sequence"):
-                cycles = cycles_from_params(mode, cfg["schedule.tau"], cfg["schedule.s"], cfg["schedule.h"], sys_.N)
+                cycles = cycles_from_params(mode, cfg["schedule.tau"], cfg["schedule.s"], cfg["schedule.h"], sys_.N,
+                                            cfg["schedule.dead_time"])
                 self.schedule = PeriodicSchedule(cycles[0]) if mode == "periodic" else SequenceSchedule(cycles)
             else:
                 raise ConfigError(f"parameter 'schedule.mode' must be periodic, sequence or random; got '{mode}'")
@@ -187,7 +193,8 @@ class CameraSimNode(Node):
         (cx, cy), (tx, ty) = self.rows[rho - 1]
         self.pub_channel.publish(UInt8(data=rho))
         self.pub_camera.publish(mb.xy_to_pose((y[cx], y[cy]), stamp_ns, self.frame))
-        self.pub_target.publish(mb.xy_to_pose((y[tx], y[ty]), stamp_ns, self.frame))
+        if not self.schedule.blind_at(t):       # while the camera turns it sees no target
+            self.pub_target.publish(mb.xy_to_pose((y[tx], y[ty]), stamp_ns, self.frame))
         self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))
 
 

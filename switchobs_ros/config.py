@@ -65,6 +65,8 @@ PARAMS = [
     Param("schedule.s", (0.6,), "Duty fractions s_k = h_1/tau_k, one per schedule.tau entry.", float),
     Param("schedule.h", (), "N-channel cycles: N active times per cycle, cycles concatenated "
           "(overrides schedule.tau/s when set).", float),
+    Param("schedule.dead_time", 0.0, "Seconds after each switch while the camera turns (only camera/pose "
+          "arrives): the gains are designed with these blind intervals; camera poses in them are used at once."),
     Param("schedule.h_min", 0.0, "Robust mode: shortest residence time h_min of assumption A2 (s)."),
     Param("schedule.h_max", 0.0, "Robust mode: longest residence time h_max of assumption A2 (s)."),
     Param("initial_estimate", (), "Initial estimate x_hat(t0), n values in state order (empty: zeros).", float),
@@ -233,9 +235,12 @@ class EstimatorConfig:
                 raise ConfigError(f"robust mode needs 0 < schedule.h_min <= schedule.h_max; got {hmin}, {hmax}")
             robust = (hmin, hmax)
             cycles = []
+            if values["schedule.dead_time"]:
+                raise ConfigError("parameter 'schedule.dead_time' needs a known schedule (periodic or sequence): "
+                                  "the robust design has no cycles to place the blind intervals in")
         else:
             cycles = cycles_from_params(mode, values["schedule.tau"], values["schedule.s"], values["schedule.h"],
-                                        sys_.N)
+                                        sys_.N, values["schedule.dead_time"])
         for name in ("delta", "e0"):      # the runtime parameters: check_runtime_value below
             v = values[name]
             if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):

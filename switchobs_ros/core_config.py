@@ -67,16 +67,17 @@ def load_system_param(spec: str) -> LTISystem:
         raise ConfigError(f"parameter 'system': cannot load '{spec}': {type(err).__name__}: {err}") from None
 
 
-def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int) -> list[Cycle]:
+def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int, dead_time: float = 0.0) -> list[Cycle]:
     """The cycle list of a schedule given by ``schedule.tau``/``schedule.s`` (two channels)
-    or ``schedule.h`` (N channels: N active times per cycle, cycles concatenated).
+    or ``schedule.h`` (N channels: N active times per cycle, cycles concatenated), every cycle
+    with the blind interval ``schedule.dead_time`` after each switch.
     """
     try:
         if h:
             if len(h) % N:
                 raise ConfigError(f"parameter 'schedule.h' has {len(h)} values; expected a multiple of N = {N} "
                                   "(N active times per cycle)")
-            cycles = [Cycle(h[k:k + N]) for k in range(0, len(h), N)]
+            cycles = [Cycle(h[k:k + N], dead_time) for k in range(0, len(h), N)]
         else:
             if N != 2:
                 raise ConfigError(f"the system has N = {N} channels: give 'schedule.h' (N active times per "
@@ -84,7 +85,7 @@ def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int) -> lis
             if len(tau) != len(s) or not tau:
                 raise ConfigError(f"parameters 'schedule.tau' ({len(tau)} values) and 'schedule.s' "
                                   f"({len(s)} values) must have the same, non-zero length")
-            cycles = [Cycle.from_ts(t, si) for t, si in zip(tau, s)]
+            cycles = [Cycle.from_ts(t, si, dead_time) for t, si in zip(tau, s)]
     except SwitchobsError as err:
         raise ConfigError(f"schedule: {err}") from None
     if mode == "periodic" and len(cycles) != 1:
@@ -99,6 +100,8 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
     spec = {"fingerprint": system.fingerprint(), "mode": mode,
             "cycles": [list(c.h) for c in cycles], "robust": robust, "delta": delta,
             "version": __version__}
+    if any(c.dead_time for c in cycles):        # (tables without one keep their cache key)
+        spec["dead_time"] = max(c.dead_time for c in cycles)
     if family != "lmi":
         spec.update(family=family, rate=rate, noise=None if noise is None else noise.fingerprint())
     key = json.dumps(spec, sort_keys=True)

@@ -17,6 +17,12 @@ through the observer's partial-rows input (``rows=``). The target pose is attrib
 latest channel received on ``camera/active_channel`` (UInt8 has no stamp): a publisher must
 send the new channel before the first target pose of that channel.
 
+Dead time (``schedule.dead_time`` d > 0): after a switch the camera turns and only camera
+poses come. From the first camera pose after a channel change (stamp ``s_0``) until the first
+target pose of the new channel, a camera pose stamped before ``s_0 + d - (camera period)`` is
+certainly blind (``s_0`` is at most one period after the switching instant) and is used alone
+at once instead of waiting for a partner; one near the end of the dead time waits as usual.
+
 Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every estimate carries the stamp of the sample it answers.
@@ -180,6 +186,10 @@ class EstimatorPipeline:
         self.obs_ns: int | None = None           # stamp of the last observer update
         self.last_accept_clock_ns: int | None = None
         self.switch_ns: int | None = None        # newest pose stamp before the latest channel change
+        self.dead_ns = int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9))
+        self.blind_first_ns: int | None = None  # first camera stamp after a channel change (dead time)
+        self.target_since_switch = False
+        self.cam_period_ns = 0                   # the latest gap between accepted camera stamps
         # counters (never cleared)
         self.accepted: Counter = Counter()
         self.rejected: Counter = Counter()
@@ -249,6 +259,8 @@ class EstimatorPipeline:
                 # were taken while the previous channel was active
                 if self.last_ns["target"] is not None:
                     self.switch_ns = self.last_ns["target"]
+                self.blind_first_ns = None
+                self.target_since_switch = False
         except Exception as err:
             self.internal_error(CHANNEL_TOPIC, err)
 
@@ -336,6 +348,10 @@ class EstimatorPipeline:
                 self.reject(topic, rej)
                 return out
             self.accepted[topic] += 1
+            if part == "camera" and self.last_ns["camera"] is not None:
+                self.cam_period_ns = stamp_ns - self.last_ns["camera"]
+            elif part == "target":
+                self.target_since_switch = True
             self.last_ns[part] = stamp_ns
             self.last_accept_clock_ns = now_ns
             pend = self.pending.get(stamp_ns)
@@ -346,7 +362,7 @@ class EstimatorPipeline:
             pend.xy[part] = mb.pose_to_xy(msg)
             if part == "target" or not pend.channel:
                 pend.channel = self.channel
-            if len(pend.xy) == 2:
+            if len(pend.xy) == 2 or (part == "camera" and self._certainly_blind(stamp_ns)):
                 # older samples will not be completed now: use their halves alone, in order
                 for s_old in sorted(s for s in self.pending if s < stamp_ns):
                     self._flush(s_old, out)
@@ -354,6 +370,14 @@ class EstimatorPipeline:
         except Exception as err:
             self.internal_error(topic, err)
         return out
+
+    def _certainly_blind(self, stamp_ns: int) -> bool:
+        """Whether a camera pose at ``stamp_ns`` lies in the dead time for sure (module docstring)."""
+        if not self.dead_ns or self.target_since_switch:
+            return False
+        if self.blind_first_ns is None:
+            self.blind_first_ns = stamp_ns
+        return stamp_ns - self.blind_first_ns < self.dead_ns - self.cam_period_ns
 
     def flush_overdue(self, now_mono: float, timeout: float) -> list[Estimate]:
         """Use alone the pending halves that waited longer than ``timeout`` (s, monotonic clock)."""
@@ -457,6 +481,8 @@ class EstimatorPipeline:
         self.obs_ns = None
         self.last_ns = {p: None for p in PARTS}
         self.switch_ns = None
+        self.blind_first_ns = None
+        self.target_since_switch = False
         self.observer.reset(self.x0, 0.0)
         self.resets += 1
         self.bound_valid = False

@@ -17,15 +17,18 @@ from scipy.linalg import expm
 
 from ..exceptions import InvalidArgument
 from ..validation import as_matrix
-from .paper import _residences, paper_factors
+from .paper import _residences, design_dead_time, paper_factors
 
 __all__ = ["cycle_transition", "CycleCertificate", "certify_cycle"]
 
 
-def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[float]) -> np.ndarray:
+def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[float],
+                     dead_time: float = 0.0) -> np.ndarray:
     """Exact error transition over one cycle (e:xtilde_dyn_piecewise).
 
-    ``Phi = expm((A - L_N C_N) h_N) @ ... @ expm((A - L_1 C_1) h_1)``.
+    ``Phi = expm((A - L_N C_N) h_N) @ ... @ expm((A - L_1 C_1) h_1)``; with a dead time ``d``
+    every residence starts blind, where the LMI observer applies no gain:
+    ``expm((A - L_i C_i) (h_i - d)) expm(A d)`` (:mod:`switchobs_core.schedule`).
 
     Parameters
     ----------
@@ -47,9 +50,15 @@ def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[flo
     h = _residences(h, len(C))
     C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]
     L = [as_matrix(Li, f"L_{i + 1}", rows=n, cols=Ci.shape[0]) for i, (Li, Ci) in enumerate(zip(L, C))]
+    d = float(dead_time)
+    if not (d >= 0 and d < min(h)):
+        raise InvalidArgument(f"dead_time must be >= 0 and shorter than every residence; got {dead_time!r}")
+    blind = expm(A * d) if d else None
     Phi = np.eye(n)
     for Ci, Li, hi in zip(C, L, h):
-        Phi = expm((A - Li @ Ci) * hi) @ Phi
+        if blind is not None:
+            Phi = blind @ Phi
+        Phi = expm((A - Li @ Ci) * (hi - d)) @ Phi
     return Phi
 
 
@@ -93,7 +102,7 @@ def certify_cycle(system: Any, design: Any, h: Sequence[float] | None = None) ->
         h = design.cycle.h
     h = _residences(h, len(system.C))
     f = paper_factors(design, h)
-    Phi = cycle_transition(system.A, system.C, design.L, h)
+    Phi = cycle_transition(system.A, system.C, design.L, h, design_dead_time(design))
     return CycleCertificate(h=h, f=f, paper_ok=max(f) < 1, Phi=Phi,
                             spectral_radius=float(np.max(np.abs(np.linalg.eigvals(Phi)))),
                             norm=float(np.linalg.norm(Phi, 2)))

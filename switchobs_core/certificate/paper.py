@@ -18,7 +18,7 @@ from ..envelope import Segment, envelope_z, error_transitions
 from ..exceptions import InvalidArgument
 from ..validation import as_finite
 
-__all__ = ["cycle_factor", "paper_factors", "EnvelopeRatio", "envelope_ratio"]
+__all__ = ["cycle_factor", "paper_factors", "design_dead_time", "EnvelopeRatio", "envelope_ratio"]
 
 
 def cycle_factor(kappa: float, mu: float, eta: float, active: float, inactive: float) -> float:
@@ -59,7 +59,9 @@ def cycle_factor(kappa: float, mu: float, eta: float, active: float, inactive: f
 def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float, ...]:
     """The paper's cycle factors ``f_ii`` (e:Fk, e:f11_le_delta_main), N channels.
 
-    ``f_i = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` with ``tau = sum h``.
+    ``f_i = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` with ``tau = sum h``; with the design
+    cycle's dead time ``d`` (blind after each switch, :mod:`switchobs_core.schedule`) channel i
+    sees for ``h_i - d`` and is off for ``tau - h_i + d``.
 
     Parameters
     ----------
@@ -79,8 +81,15 @@ def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float,
         h = design.cycle.h
     h = _residences(h, len(design.kappa), allow_zero=True)
     tau = float(sum(h))
-    return tuple(cycle_factor(k, m, e, hi, tau - hi)
+    d = design_dead_time(design)
+    return tuple(cycle_factor(k, m, e, max(hi - d, 0.0), tau - max(hi - d, 0.0))
                  for k, m, e, hi in zip(design.kappa, design.mu, design.eta, h))
+
+
+def design_dead_time(design: Any) -> float:
+    """The dead time of the cycle a design was made for (0 for a robust design or none)."""
+    cyc = getattr(design, "cycle", None)
+    return float(getattr(cyc, "dead_time", 0.0) or 0.0)
 
 
 def _residences(h: Any, N: int, *, allow_zero: bool = False) -> tuple[float, ...]:

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import InvalidArgument
+from ..exceptions import InvalidArgument, ScheduleError
 from ..schedule import Cycle
 
 __all__ = ["parse_ts", "parse_pair", "parse_floats", "print_json", "fmt_table", "OneLineParser",
@@ -41,6 +41,24 @@ def parse_h(text: str) -> Cycle:
         return Cycle(parse_floats(text, "--cycle-h"))
     except InvalidArgument as err:
         raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def add_dead_time(p: argparse.ArgumentParser) -> None:
+    """The ``--dead-time S`` flag (blind intervals after each switch, :mod:`switchobs_core.schedule`)."""
+    p.add_argument("--dead-time", type=float, default=0.0, metavar="S",
+                   help="seconds after each switch while the camera turns: only the rows every channel shares "
+                        "(the camera's own pose) are measured (default 0)")
+
+
+def with_dead_time(cycles: list[Cycle], dead_time: float) -> list[Cycle]:
+    """``cycles`` with the ``--dead-time`` given (refused, in one line, when not >= 0 and finite
+    or not shorter than every residence)."""
+    if not dead_time:
+        return list(cycles)
+    try:
+        return [c.with_dead_time(dead_time) for c in cycles]
+    except ScheduleError as err:
+        raise InvalidArgument(f"--dead-time {dead_time:g}: {err}") from None
 
 
 def parse_pair(text: str) -> tuple[float, float]:

@@ -12,7 +12,7 @@ from ..kalman import design_kalman
 from ..scenarios import load_noise, load_system
 from ..schedule import Cycle
 from ..system import LTISystem
-from ._common import fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json
+from ._common import add_dead_time, fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json, with_dead_time
 
 __all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]
 
@@ -50,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="HMIN,HMAX",
         help="also design one gain set for every schedule with residence times in [HMIN, HMAX]",
     )
+    add_dead_time(p)
     p.add_argument("--delta", type=float, default=0.99, help="cycle contraction target delta in (0, 1) (default 0.99)")
     p.add_argument(
         "--margin",
@@ -160,7 +161,7 @@ def kalman_summary(table: GainTable, system: LTISystem) -> dict:
     """JSON summary of a kalman table: per design the rate, cycles, noise, period and certificate."""
     out = []
     for d in table.kalman:
-        kd = table.kalman_design([Cycle(h) for h in d["cycles"]], system)
+        kd = table.kalman_design([Cycle(h, d.get("dead_time", 0.0)) for h in d["cycles"]], system)
         out.append({
             "cycles": [c.to_dict() for c in kd.cycles],
             "rate_hz": kd.rate,
@@ -204,7 +205,10 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
 
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
-    cycles = list(args.cycle) + list(args.cycle_h)
+    cycles = with_dead_time(list(args.cycle) + list(args.cycle_h), args.dead_time)
+    if args.dead_time and args.robust is not None:
+        raise InvalidArgument("--dead-time with --robust is not supported: a robust design has no schedule to "
+                              "place the blind intervals in; design the cycles you run with --cycle")
     if args.gains == "kalman":
         return run_kalman(args, system, cycles)
     if args.rate is not None or args.meas_noise is not None or args.process_noise is not None:

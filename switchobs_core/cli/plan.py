@@ -10,12 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import DesignError
+from ..exceptions import DesignError, InvalidArgument, ScheduleError
+from ..kalman import sample_pattern
 from ..paper import TABLE
 from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
 from ..scenarios import load_noise, load_system
 from ..schedule import Cycle
-from ._common import fmt_table, print_json
+from ._common import add_dead_time, fmt_table, print_json
 
 __all__ = ["register", "run", "design_command", "fmt_num"]
 
@@ -45,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="shortest active time of a channel in seconds (default 0.5)")
     p.add_argument("--tau-max", type=float, default=4.0, metavar="S",
                    help="longest cycle in seconds (default 4, the paper's longest cycle)")
+    add_dead_time(p)
     p.add_argument("--weights", metavar="W",
                    help="diagonal state weights of the cost: n comma-separated numbers, or state-label patterns "
                    "(fnmatch, optionally =weight; other states 0), e.g. 'agent*.p_*' (agent positions only)")
@@ -67,11 +69,12 @@ def fmt_num(x: float) -> str:
 
 def _cycle_args(cycle: Cycle) -> tuple[list[str], Cycle]:
     """The ``--cycle``/``--cycle-h`` arguments for ``cycle`` and the cycle ``switchobs design`` reads from them."""
+    dead = ["--dead-time", fmt_num(cycle.dead_time)] if cycle.dead_time else []
     if cycle.N == 2:
         tau, s = fmt_num(cycle.tau), fmt_num(cycle.h[0] / cycle.tau)
-        return ["--cycle", f"{tau},{s}"], Cycle.from_ts(float(tau), float(s))
+        return ["--cycle", f"{tau},{s}", *dead], Cycle.from_ts(float(tau), float(s), cycle.dead_time)
     hs = [fmt_num(h) for h in cycle.h]
-    return ["--cycle-h", ",".join(hs)], Cycle([float(h) for h in hs])
+    return ["--cycle-h", ",".join(hs), *dead], Cycle([float(h) for h in hs], cycle.dead_time)
 
 
 def design_command(config: str, cycle: Cycle, *, rate: float | None = None, meas_noise: float | None = None,
@@ -95,8 +98,8 @@ def _paper_rows(J: ScheduleCost) -> list[dict]:
     for (tau, s), _, _ in TABLE:
         c = Cycle.from_ts(tau, s)
         try:
-            val = cycle_cost(J, c)
-        except DesignError as err:
+            val = cycle_cost(J, c.with_dead_time(J.dead_time))
+        except (DesignError, ScheduleError) as err:
             val, why = None, str(err)
         else:
             why = None
@@ -139,7 +142,9 @@ def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
     progress = False if args.json else args.progress
-    J = ScheduleCost(system, args.rate, noise, args.weights)
+    if not (math.isfinite(args.dead_time) and args.dead_time >= 0):
+        raise InvalidArgument(f"--dead-time must be a finite number of seconds >= 0; got {args.dead_time:g}")
+    J = ScheduleCost(system, args.rate, noise, args.weights, dead_time=args.dead_time)
     res = plan_schedule(system, args.rate, noise, h_min=args.h_min, tau_max=args.tau_max, progress=progress, cost=J)
     cmd, read = design_command(args.config, res.cycle, rate=J.rate, meas_noise=args.meas_noise,
                                process_noise=args.process_noise)
@@ -164,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         "cost": res.cost,
         "cost_kind": COST_KIND,
         "weights": res.weights.tolist(),
+        "dead_time": args.dead_time,
         "h_min": args.h_min,
         "tau_max": args.tau_max,
         "evaluations": res.evaluations,
@@ -171,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
         "design_command": cmd,
         "design_command_lmi": cmd_lmi,
         "design_pattern_matches": matches,
-        "cost_as_designed": res.cost if matches or "channels" not in kal else J.of_channels(kal["channels"]),
+        "cost_as_designed": res.cost if matches or "channels" not in kal else
+        J.of_channels(kal["channels"], (read,), sample_pattern(read, J.rate).blind),
         "lmi": extras["lmi"],
         "kalman": {k: v for k, v in kal.items() if k != "channels"},
         "paper_cycles": paper,
@@ -212,7 +219,8 @@ def _print_text(out: dict, res: Any, system: Any) -> None:
         rows.append([f"order {a['order']}", fmt_num(sum(a["counts"]) / out["rate"]), "-",
                      ", ".join(f"{k / out['rate']:g}" for k in a["counts"]), f"{a['cost']:.4e}",
                      f"{a['cost'] / best:.3f}"])
-    print(f"plan for '{system.name}' at {out['rate']:g} Hz, h >= {out['h_min']:g} s, tau <= {out['tau_max']:g} s")
+    print(f"plan for '{system.name}' at {out['rate']:g} Hz, h >= {out['h_min']:g} s, tau <= {out['tau_max']:g} s"
+          + (f", dead time {out['dead_time']:g} s after each switch" if out["dead_time"] else ""))
     print(fmt_table(["schedule", "tau [s]", "s", "h [s]", "cost", "cost / planned"], rows))
     w = np.asarray(out["weights"])
     wtxt = "W = I" if np.all(w == 1) else "W = diag(" + ", ".join(f"{v:g}" for v in w) + ")"
@@ -237,10 +245,11 @@ def _print_text(out: dict, res: Any, system: Any) -> None:
               f"point (a tie); the cost of its sample pattern is {out['cost_as_designed']:.4e}")
     print(f"design: {out['design_command']}")
     print(f"        {out['design_command_lmi']}")
+    dead = f", schedule.dead_time: {fmt_num(out['dead_time'])}" if out["dead_time"] else ""
     if N == 2:
-        print(f"ROS parameters: schedule.tau: [{fmt_num(out['tau'])}], schedule.s: [{fmt_num(out['s'])}]")
+        print(f"ROS parameters: schedule.tau: [{fmt_num(out['tau'])}], schedule.s: [{fmt_num(out['s'])}]{dead}")
     else:
-        print(f"ROS parameters: schedule.h: [{', '.join(fmt_num(h) for h in out['h'])}]")
+        print(f"ROS parameters: schedule.h: [{', '.join(fmt_num(h) for h in out['h'])}]{dead}")
     if "plot" in out:
         print(f"wrote {out['plot']}")
 

@@ -67,7 +67,7 @@ def _kalman_rows(table: GainTable) -> list[dict]:
     """What a kalman table holds, read from the stored designs (no system needed)."""
     return [
         {
-            "cycles": [Cycle(h).label() for h in d["cycles"]],
+            "cycles": [Cycle(h, d.get("dead_time", 0.0)).label() for h in d["cycles"]],
             "rate_hz": d["rate"],
             "period_samples": len(d["periodic"]["channel"]),
             "startup_samples": len(d["startup"]["channel"]),

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errorfigs import plot_result
-from ..exceptions import InvalidArgument
+from ..exceptions import InvalidArgument, ScheduleError
 from ..gains import GainTable
 from ..scenarios import load_system
 from ..schedule import RandomSchedule, parse_schedule
 from ..simulate import simulate
-from ._common import fmt_table, print_json
+from ._common import add_dead_time, fmt_table, print_json
 
 __all__ = ["register", "run", "warn_a2"]
 
@@ -38,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--schedule", default="periodic:2,0.6",
                    help="periodic:TAU,S | periodic-h:H1,..,HN | sequence:T,S;T,S;... | random:HMIN,HMAX[,SEED] "
                         "(random uses the table's robust design)")
+    add_dead_time(p)
     p.add_argument("--t-end", type=float, default=60.0, help="end time in seconds (default 60)")
     p.add_argument("--rate", type=float, default=None, help="sample rate in Hz (default: continuous outputs)")
     p.add_argument("--noise", type=float, default=0.0, help="measurement noise std (needs --rate)")
@@ -72,7 +73,11 @@ def warn_a2(schedule, table) -> None:
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     table = GainTable.load(args.table, system=system)
-    schedule = parse_schedule(args.schedule, N=system.N)
+    try:
+        schedule = parse_schedule(args.schedule, N=system.N, dead_time=args.dead_time)
+    except ScheduleError as err:
+        raise InvalidArgument(f"--schedule {args.schedule}" + (f" with --dead-time {args.dead_time:g}"
+                              if args.dead_time else "") + f": {err}") from None
     if not args.t_end > 0:
         raise InvalidArgument(f"--t-end must be > 0; got {args.t_end}")
     if args.plot is not None and args.plot.suffix.lower() not in PLOT_SUFFIXES:

@@ -57,6 +57,8 @@ class GenerateConfig:
     #: generator only: the plant in extended precision (``Plant(extended=True)``), so that
     #: ``/sim/truth`` is the exact state rounded once: the reference for long checks of the bounds
     extended: bool = False
+    #: camera_sim's ``schedule.dead_time``: no target pose in the first seconds after a switch
+    dead_time: float = 0.0
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -64,9 +66,11 @@ def _schedule(cfg: GenerateConfig, N: int):
                                                                                              cfg.schedule)
     kind, _, rest = spec.partition(":")
     if kind == "random" and len(rest.split(",")) == 2:   # camera_sim: random residence times seeded by `seed`
+        if cfg.dead_time:
+            raise BagError("--dead-time is for periodic and sequence schedules")
         hmin, hmax = (float(x) for x in rest.split(","))
         return RandomSchedule(N, hmin, hmax, seed=cfg.seed)
-    return parse_schedule(spec, N=N)
+    return parse_schedule(spec, N=N, dead_time=cfg.dead_time)
 
 
 def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, object]]]]:
@@ -101,13 +105,16 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
             v = cfg.noise_std * rng.standard_normal(y.shape)
             y = y + (np.clip(v, -cfg.noise_max, cfg.noise_max) if cfg.noise_max >= 0 else v)
         (cx, cy), (tx, ty) = rows[rho - 1]
-        yield stamp_ns, [
+        msgs = [
             ("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns))),
             ("/camera/active_channel", UInt8(data=rho)),
             ("/camera/pose", mb.xy_to_pose((y[cx], y[cy]), stamp_ns, cfg.world_frame)),
             ("/target/pose", mb.xy_to_pose((y[tx], y[ty]), stamp_ns, cfg.world_frame)),
             ("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)),
         ]
+        if schedule.blind_at(t):        # the camera turns: no target pose
+            del msgs[3]
+        yield stamp_ns, msgs
 
 
 def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap") -> dict:

@@ -18,6 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "sequence:T,S;T,S;... | random:HMIN,HMAX[,SEED] (default: periodic)")
     p.add_argument("--rate", type=float, default=100.0, help="measurement rate in Hz (default 100)")
     p.add_argument("--duration", type=float, default=30.0, help="simulated seconds (default 30)")
+    p.add_argument("--dead-time", type=float, default=0.0, metavar="S",
+                   help="seconds after each switch without a target pose, while the camera turns (default 0)")
     p.add_argument("--noise", type=float, default=0.0, help="measurement noise std (m)")
     p.add_argument("--process-noise", type=float, default=0.0)
     p.add_argument("--noise-max", type=float, default=-1.0,
@@ -38,7 +40,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     cfg = GenerateConfig(schedule=a.schedule, rate=a.rate, duration=a.duration, noise_std=a.noise,
                          process_noise=a.process_noise, seed=a.seed, noise_max=a.noise_max,
                          extended=a.extended_truth, initial_state=x0, system=a.system,
-                         clock_start=a.clock_start)
+                         clock_start=a.clock_start, dead_time=a.dead_time)
     res = generate(a.out, cfg, a.storage)
     print(f"wrote {res['path']} ({res['storage']}): {res['ticks']} ticks, {res['messages']} messages, "
           f"{(res['end_ns'] - res['start_ns']) * 1e-9:.2f} s")
