@@ -155,6 +155,9 @@ def print_designs(table: GainTable) -> None:
         f"delta = {', '.join(f'{x:g}' for x in table.delta)}; f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i) "
         "is the paper's cycle factor (its envelope is not a guarantee: run `switchobs certify` for the sound one)"
     )
+    if any(d.cycle is not None and d.cycle.dead_time for d in designs):
+        print("with a dead time d the blind interval is inactive time: f_ii = kappa_i exp(mu_i (tau - h_i + d) - "
+              "eta_i (h_i - d)), and the gains are not applied while blind")
 
 
 def kalman_summary(table: GainTable, system: LTISystem) -> dict:
