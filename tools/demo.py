@@ -249,9 +249,10 @@ def _report(res: dict, sched: dict) -> None:
 def _schedule_text(name: str, sched: dict) -> str:
     """``periodic (tau 2 s, s 0.6)`` / ``sequence ((4 s, 0.5), (3 s, 0.6), ...)``."""
     pairs = list(zip(sched["schedule.tau"], sched["schedule.s"]))
+    dead = f", dead time {sched['schedule.dead_time']:g} s" if sched.get("schedule.dead_time") else ""
     if len(pairs) == 1:
-        return f"{name} (tau {pairs[0][0]:g} s, s {pairs[0][1]:g})"
-    return f"{name} (" + ", ".join(f"({t:g} s, {s:g})" for t, s in pairs) + ")"
+        return f"{name} (tau {pairs[0][0]:g} s, s {pairs[0][1]:g}{dead})"
+    return f"{name} (" + ", ".join(f"({t:g} s, {s:g})" for t, s in pairs) + f"{dead})"
 
 
 def _write(res: dict, out: Path, sched: dict) -> None:
@@ -337,6 +338,9 @@ def main(argv=None) -> int:
                     help="gain family the estimator designs at start-up: the paper's LMI gains (default) or "
                          "offline Kalman gains at --rate (with --noise as the declared measurement noise)")
     ap.add_argument("--noise", type=_nonnegative, default=0.0, help="camera_sim's measurement noise std (m, >= 0)")
+    ap.add_argument("--dead-time", type=_nonnegative, default=0.0,
+                    help="seconds after each switch without a target pose while the camera turns (both nodes' "
+                         "schedule.dead_time; default 0)")
     ap.add_argument("--out", default="out/demo", help="folder for error.png, error.csv and the node logs")
     a = ap.parse_args(argv)
     try:
@@ -345,8 +349,9 @@ def main(argv=None) -> int:
             extra = {"gain_family": "kalman", "rate": float(a.rate)}
         if a.noise > 0:
             extra["noise.measurement_std"] = float(a.noise)
+        sched = dict(SCHEDULES[a.schedule], **({"schedule.dead_time": float(a.dead_time)} if a.dead_time else {}))
         run(a.schedule, a.duration, a.time_scale, a.rate, a.init, a.seed, Path(a.out), a.gain_table,
-            extra_estimator=extra, noise_std=a.noise)
+            extra_estimator=extra, noise_std=a.noise, schedule_params=sched)
     except RuntimeError as err:
         print(f"demo: error: {err}", file=sys.stderr)
         return 1
