@@ -148,8 +148,19 @@ def _proc(name: str, args: list[str], tmp: Path):
     return NodeProcess(name, cmd=[sys.executable, __file__, *args], log=tmp / f"{name}.log")
 
 
-def measure(target: str, params: dict, rate: float, seconds: float, table: str, tmp: Path) -> dict:
-    """One run: start the node under test, the receiver and the sender; latency statistics."""
+def _cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far (s), from /proc (nan where there is none)."""
+    try:
+        f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def measure(target: str, params: dict, rate: float, seconds: float, table: str, tmp: Path,
+            env: dict | None = None) -> dict:
+    """One run: start the node under test, the receiver and the sender; latency statistics and the
+    node's CPU share while the sender sends (``cpu``: CPU seconds per wall second, 1.0 = one core)."""
     from tools.launch import NodeProcess, ros_args
 
     ns = "m"
@@ -161,13 +172,15 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
         topic, kind = f"/{ns}/bare_republisher/out", "pose"
     else:
         node = NodeProcess("estimator", ros_args(params={"gain_table": table, **params}) + ["-r", f"__ns:=/{ns}"],
-                           log=tmp / "estimator.log")
+                           log=tmp / "estimator.log", env=None if env is None else {**os.environ, **env})
         topic, kind = f"/{ns}/estimator/state", "array"
     recv = _proc("receiver", ["--receiver", topic, kind, str(tmp / "recv.npy")], tmp)
     try:
         time.sleep(2.0)         # start-up and discovery (the sender waits for the node's subscriptions)
         send = _proc("sender", ["--sender", ns, str(rate), str(seconds), str(tmp / "sent.npy")], tmp)
+        c0, w0 = _cpu_s(node.pid), time.monotonic()
         send.wait(timeout=seconds + 120)
+        c1, w1 = _cpu_s(node.pid), time.monotonic()
         time.sleep(1.0)         # the last answers
     finally:
         recv.stop()
@@ -178,6 +191,7 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     lat = np.array([(arrival[s] - s) * 1e-6 for s in sent.tolist() if s in arrival])
     achieved = (len(sent) - 1) / ((sent[-1] - sent[0]) * 1e-9) if len(sent) > 1 else 0.0
     return {"rate": rate, "achieved": achieved, "sent": len(sent), "answered": len(lat), "lat": lat,
+            "cpu": (c1 - c0) / (w1 - w0),
             "p50": float(np.median(lat)) if lat.size else np.nan,
             "p99": float(np.percentile(lat, 99)) if lat.size else np.nan,
             "max": float(lat.max()) if lat.size else np.nan}
@@ -227,13 +241,18 @@ def main(argv=None) -> int:
     ap.add_argument("--rates", default="100,250,500,1000")
     ap.add_argument("--configs", default="default,no-gc-freeze,state-only",
                     help=f"estimator configurations: {', '.join(CONFIGS)}")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per rate and node, interleaved; the table gives medians over the runs (the ratio: "
+                         "the median of each run's p99 over the republisher's p99 of the same round)")
     ap.add_argument("--soak", type=float, default=0.0, help="seconds of a 500 Hz soak of the default estimator")
+    ap.add_argument("--soak-repeat", type=int, default=1, help="number of soaks")
+    ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID to use (default: claim a free one)")
     ap.add_argument("--figure", type=Path, default=None)
     a = ap.parse_args(args)
     from tools.domain import claim_domain, localhost_env
 
     lease = claim_domain()
-    os.environ.update(localhost_env(lease.domain_id))
+    os.environ.update(localhost_env(lease.domain_id if a.domain is None else a.domain))
     from switchobs_core.design import design_table
     from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle
@@ -242,36 +261,57 @@ def main(argv=None) -> int:
     table = str(design_table(load_system("paper"), [Cycle.from_ts(2.0, 0.6)], progress=False).save(tmp / "p.json"))
     rates = [float(r) for r in a.rates.split(",")]
     configs = [c for c in a.configs.split(",") if c]
-    results: dict[str, list[dict]] = {f"estimator ({c})": [] for c in configs}
-    results["bare republisher"] = []
-    for rate in rates:
-        for c in configs:
-            results[f"estimator ({c})"].append(measure("estimator", CONFIGS[c], rate, a.seconds, table, tmp))
-        results["bare republisher"].append(measure("bare", {}, rate, a.seconds, table, tmp))
-    soak = measure("estimator", CONFIGS["default"], 500.0, a.soak, table, tmp) if a.soak > 0 else None
+
+    def run(c: str, rate: float, seconds: float) -> dict:
+        if c == "bare":
+            return measure("bare", {}, rate, seconds, table, tmp)
+        params = dict(CONFIGS[c])
+        env = params.pop("_env", None)
+        return measure("estimator", params, rate, seconds, table, tmp, env=env)
+
+    names = {c: f"estimator ({c})" for c in configs}
+    names["bare"] = "bare republisher"
+    runs: dict[str, list[list[dict]]] = {n: [[] for _ in rates] for n in names.values()}
+    for i, rate in enumerate(rates):
+        for _ in range(a.repeat):
+            for c in [*configs, "bare"]:
+                runs[names[c]][i].append(run(c, rate, a.seconds))
+                sys.stderr.write(f"{rate:g} Hz {names[c]}: p99 {runs[names[c]][i][-1]['p99']:.3f} ms, "
+                                 f"cpu {runs[names[c]][i][-1]['cpu']:.2f}\n")
+    soaks = [run("default", 500.0, a.soak) for _ in range(a.soak_repeat)] if a.soak > 0 else []
     lease.release()
 
+    def med(rs: list[dict], k: str) -> float:
+        return float(np.median([r[k] for r in rs]))
+
+    results = {n: [{"rate": rate, "lat": np.concatenate([r["lat"] for r in rs[i]]), "p99": med(rs[i], "p99"),
+                    "answered": sum(r["answered"] for r in rs[i]), "sent": sum(r["sent"] for r in rs[i])}
+                   for i, rate in enumerate(rates)] for n, rs in runs.items()}
     print(f"### Estimator node over DDS (bench/bench_node.py)\n\n"
           f"{time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores, Python "
           f"{platform.python_version()}, ROS 2 Jazzy wheels (rmw_fastrtps_cpp), localhost only; {a.seconds:g} s "
           "per rate and node; sender, receiver and node in separate processes; each measurement is a "
-          "camera/pose + target/pose pair.\n")
-    print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | p99 / republisher's |")
-    print("|---:|---|---:|---:|---:|---:|---:|")
+          f"camera/pose + target/pose pair; {a.repeat} run(s) per rate and node, interleaved"
+          + (" (medians over the runs; answered: summed)" if a.repeat > 1 else "") + ". Node CPU: CPU seconds "
+          "of the node's process per second while the sender sends (1.00 = one core).\n")
+    print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | node CPU | p99 / republisher's |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|")
     for i, rate in enumerate(rates):
-        bare = results["bare republisher"][i]
-        for name, rs in results.items():
+        bare = runs["bare republisher"][i]
+        for name, rs in runs.items():
             r = rs[i]
-            print(f"| {rate:g} | {name} | {r['answered']}/{r['sent']} | {r['p50']:.3f} | {r['p99']:.3f} "
-                  f"| {r['max']:.2f} | {r['p99'] / bare['p99']:.2f} |")
-    full = {name: max([r["rate"] for r in rs if r["answered"] == r["sent"]], default=0.0)
-            for name, rs in results.items()}
+            ratio = float(np.median([x["p99"] / b["p99"] for x, b in zip(r, bare)]))
+            print(f"| {rate:g} | {name} | {sum(x['answered'] for x in r)}/{sum(x['sent'] for x in r)} "
+                  f"| {med(r, 'p50'):.3f} | {med(r, 'p99'):.3f} | {med(r, 'max'):.2f} | {med(r, 'cpu'):.2f} "
+                  f"| {ratio:.2f} |")
+    full = {name: max([rate for i, rate in enumerate(rates) if all(x["answered"] == x["sent"] for x in rs[i])],
+                      default=0.0) for name, rs in runs.items()}
     print("\nHighest rate answered in full: " + ", ".join(f"{k} {v:g} Hz" for k, v in full.items()) + ".")
-    if soak is not None:
+    for soak in soaks:
         late = int(np.sum(soak["lat"] > 20.0))
         print(f"\nSoak: default estimator at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} answered, "
               f"p50 {soak['p50']:.3f} ms, p99 {soak['p99']:.3f} ms, max {soak['max']:.2f} ms, "
-              f"{late} answers later than 20 ms.")
+              f"{late} answers later than 20 ms, node CPU {soak['cpu']:.2f}.")
     if a.figure:
         figure(results, rates, a.figure)
         rel = os.path.relpath(a.figure.resolve(), Path(__file__).resolve().parent)
