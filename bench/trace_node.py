@@ -4,9 +4,10 @@ went (not a test; started by ``bench/bench_node.py --configs traced``).
 ``python bench/trace_node.py OUT.npz --ros-args ...``: spins the node with rclpy's
 SingleThreadedExecutor after ``gc.freeze()``, as the runner does, and records
 
-* ``inp``: per camera pose handled, its stamp and the wall time (``time.time_ns``) its handling
+* ``inp``: per camera pose handled, its stamp, the wall time (``time.time_ns``) its handling
   began (so ``inp - stamp`` is the time from the sender to the node's callback: DDS and the
-  node's queue);
+  node's queue) and the CPU time of the node's thread then (``time.thread_time_ns``: across a
+  stall, whether the thread ran or was blocked or descheduled);
 * ``pub``: per estimate published, its stamp and the wall time just after ``~/state`` went out;
 * ``gc``: start and end (wall ns) of every garbage collection;
 
@@ -38,13 +39,13 @@ def main(out: str, args: list[str]) -> None:
     single_threaded_blas()
     rclpy.init(args=args)
     node = EstimatorNode()
-    inp: list[tuple[int, int]] = []
+    inp: list[tuple[int, int, int]] = []
     pub: list[tuple[int, int]] = []
     gcs: list[list[int]] = []
     on_camera, publish_all = node._on_camera, node._publish_all
 
     def traced_camera(msg):
-        inp.append((mb.stamp_to_ns(msg.header.stamp), time.time_ns()))
+        inp.append((mb.stamp_to_ns(msg.header.stamp), time.time_ns(), time.thread_time_ns()))
         on_camera(msg)
 
     def traced_publish(estimates):
@@ -70,8 +71,8 @@ def main(out: str, args: list[str]) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        np.savez(out, **{k: np.array(v, dtype=np.int64).reshape(-1, 2)
-                         for k, v in (("inp", inp), ("pub", pub), ("gc", gcs))})
+        np.savez(out, **{k: np.array(v, dtype=np.int64).reshape(-1, w)
+                         for k, v, w in (("inp", inp, 3), ("pub", pub, 2), ("gc", gcs, 2))})
         node.destroy_node()
         rclpy.try_shutdown()
 
@@ -101,8 +102,15 @@ def split(trace: Path, sent: np.ndarray, arrival: dict, late_ms: float) -> str:
         after += k == 2
     g = t["gc"]
     gmax = float((g[:, 1] - g[:, 0]).max()) * 1e-6 if len(g) else 0.0
+    gap = ""
+    i = t["inp"]
+    if len(i) > 1:
+        k = int(np.argmax(np.diff(i[:, 1])))
+        gap = (f"; longest gap between camera poses handled {(i[k + 1, 1] - i[k, 1]) * 1e-6:.1f} ms, "
+               f"the node thread's CPU in it {(i[k + 1, 2] - i[k, 2]) * 1e-6:.1f} ms")
     return (f"late answers mostly before the node {before}, inside it {inside}, after it {after}; "
-            f"lost before publishing {lost_in}, after {lost_after}; {len(g)} garbage collections (max {gmax:.2f} ms)")
+            f"lost before publishing {lost_in}, after {lost_after}; {len(g)} garbage collections "
+            f"(max {gmax:.2f} ms){gap}")
 
 
 if __name__ == "__main__":

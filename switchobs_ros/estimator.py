@@ -21,6 +21,12 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every output carries the stamp of the sample it answers.
 
+Executor cost (issue 13): each input callback also takes the input messages already waiting
+(:meth:`EstimatorMixin._drain_inputs`), so a camera/target pair costs one wait of the executor,
+not two, and a backlog none; publishers and subscriptions carry no default middleware event
+handlers (each one a waitable that rclpy's executor re-adds on every wait), the subscriptions
+keep the incompatible-QoS warning.
+
 Clock jumps: a jump of the node clock backwards (with ``use_sim_time``, a looped bag restarting
 its ``/clock``) resets the estimator, so the replay's samples are accepted again and the
 estimate converges again; a jump forwards by more than ``sensor_timeout`` is counted. Both are
