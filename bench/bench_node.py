@@ -43,7 +43,11 @@ CONFIGS = {
     "default": {},
     "no-gc-freeze": {"gc_freeze": False},
     "state-only": {"output.envelope_every": 0, "output.odometry_every": 0, "output.covariance_every": 0},
+    "lean-loop": {"_lean": True},
+    "traced": {"_trace": True},
 }
+#: The soak's goal: no answer later than this (ms).
+LATE_MS = 20.0
 
 
 # ----------------------------------------------------------------------------- roles
@@ -65,6 +69,60 @@ def republisher_main() -> None:
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def lean_estimator_main(args: list[str]) -> None:
+    """The estimator node spun by a lean loop instead of ``rclpy.spin`` (an experiment for issue 13,
+    the shipped node keeps ``switchobs_ros.runner``): one wait set holding only the three input
+    subscriptions and the executor's SIGINT guard, built once and waited on again and again;
+    what it finds is handled by the node's own :meth:`_drain_inputs`; the executor's full
+    ``spin_once(0)`` (timers, services, parameter events) runs after every 10 ms of this."""
+    import gc
+    from contextlib import ExitStack
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    from switchobs_core.threads import single_threaded_blas
+    from switchobs_ros.estimator import EstimatorNode
+
+    single_threaded_blas()
+    rclpy.init(args=args)
+    node = EstimatorNode()
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    gc.freeze()
+    ctx = node.context
+    subs = [sub for sub, _ in node._hot_inputs]
+    sigint = ex._sigint_gc
+    period_ns = 10_000_000
+    try:
+        with ExitStack() as stack:
+            for sub in subs:
+                stack.enter_context(sub.handle)
+            stack.enter_context(sigint.handle)
+            stack.enter_context(ctx.handle)
+            ws = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, ctx.handle)
+            next_full = time.monotonic_ns()
+            while ctx.ok():
+                ws.clear_entities()
+                for sub in subs:
+                    ws.add_subscription(sub.handle)
+                ws.add_guard_condition(sigint.handle)
+                ws.wait(max(next_full - time.monotonic_ns(), 0))
+                if ws.get_ready_entities("subscription"):
+                    node._drain_inputs()
+                now = time.monotonic_ns()
+                if now >= next_full:
+                    for _ in range(4):
+                        ex.spin_once(timeout_sec=0)
+                    next_full = now + period_ns
+    except KeyboardInterrupt:
         pass
     finally:
         node.destroy_node()
@@ -148,8 +206,19 @@ def _proc(name: str, args: list[str], tmp: Path):
     return NodeProcess(name, cmd=[sys.executable, __file__, *args], log=tmp / f"{name}.log")
 
 
-def measure(target: str, params: dict, rate: float, seconds: float, table: str, tmp: Path) -> dict:
-    """One run: start the node under test, the receiver and the sender; latency statistics."""
+def _cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far (s), from /proc (nan where there is none)."""
+    try:
+        f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def measure(target: str, params: dict, rate: float, seconds: float, table: str, tmp: Path,
+            env: dict | None = None) -> dict:
+    """One run: start the node under test, the receiver and the sender; latency statistics and the
+    node's CPU share while the sender sends (``cpu``: CPU seconds per wall second, 1.0 = one core)."""
     from tools.launch import NodeProcess, ros_args
 
     ns = "m"
@@ -160,14 +229,22 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
                            cmd=[sys.executable, __file__, "--republisher", "--ros-args"], log=tmp / "rep.log")
         topic, kind = f"/{ns}/bare_republisher/out", "pose"
     else:
+        lean = params.pop("_lean", False)
+        traced = params.pop("_trace", False)
+        (tmp / "trace.npz").unlink(missing_ok=True)
+        cmd = ([sys.executable, __file__, "--lean-estimator"] if lean else
+               [sys.executable, str(Path(__file__).with_name("trace_node.py")), str(tmp / "trace.npz")] if traced
+               else None)
         node = NodeProcess("estimator", ros_args(params={"gain_table": table, **params}) + ["-r", f"__ns:=/{ns}"],
-                           log=tmp / "estimator.log")
+                           cmd=cmd, log=tmp / "estimator.log", env=None if env is None else {**os.environ, **env})
         topic, kind = f"/{ns}/estimator/state", "array"
     recv = _proc("receiver", ["--receiver", topic, kind, str(tmp / "recv.npy")], tmp)
     try:
         time.sleep(2.0)         # start-up and discovery (the sender waits for the node's subscriptions)
         send = _proc("sender", ["--sender", ns, str(rate), str(seconds), str(tmp / "sent.npy")], tmp)
+        c0, w0 = _cpu_s(node.pid), time.monotonic()
         send.wait(timeout=seconds + 120)
+        c1, w1 = _cpu_s(node.pid), time.monotonic()
         time.sleep(1.0)         # the last answers
     finally:
         recv.stop()
@@ -177,7 +254,12 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     arrival = dict(zip(rec[:, 0].tolist(), rec[:, 1].tolist()))
     lat = np.array([(arrival[s] - s) * 1e-6 for s in sent.tolist() if s in arrival])
     achieved = (len(sent) - 1) / ((sent[-1] - sent[0]) * 1e-9) if len(sent) > 1 else 0.0
+    trace = ""
+    if target != "bare" and (tmp / "trace.npz").exists():
+        from trace_node import split
+        trace = split(tmp / "trace.npz", sent, arrival, LATE_MS if rate <= 500 else 5.0)
     return {"rate": rate, "achieved": achieved, "sent": len(sent), "answered": len(lat), "lat": lat,
+            "cpu": (c1 - c0) / (w1 - w0), "trace": trace,
             "p50": float(np.median(lat)) if lat.size else np.nan,
             "p99": float(np.percentile(lat, 99)) if lat.size else np.nan,
             "max": float(lat.max()) if lat.size else np.nan}
@@ -216,6 +298,9 @@ def main(argv=None) -> int:
     if args[:1] == ["--republisher"]:
         republisher_main()
         return 0
+    if args[:1] == ["--lean-estimator"]:
+        lean_estimator_main(args[1:])
+        return 0
     if args[:1] == ["--sender"]:
         sender_main(args[1], float(args[2]), float(args[3]), args[4])
         return 0
@@ -227,13 +312,24 @@ def main(argv=None) -> int:
     ap.add_argument("--rates", default="100,250,500,1000")
     ap.add_argument("--configs", default="default,no-gc-freeze,state-only",
                     help=f"estimator configurations: {', '.join(CONFIGS)}")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per rate and node, interleaved; the table gives medians over the runs (the ratio: "
+                         "the median of each run's p99 over the republisher's p99 of the same round)")
     ap.add_argument("--soak", type=float, default=0.0, help="seconds of a 500 Hz soak of the default estimator")
+    ap.add_argument("--soak-repeat", type=int, default=1, help="number of soaks")
+    ap.add_argument("--soak-config", default="default", help="estimator configuration of the soak (traced: with "
+                    "a trace of where the late answers' time went, bench/trace_node.py)")
+    ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID to use (default: claim a free one)")
+    ap.add_argument("--base", default=None, metavar="DIR",
+                    help="also run, as configuration 'base', the default estimator of the source tree DIR (e.g. "
+                         "`git archive <commit> | tar -x -C DIR`; run the bench from another directory, so that "
+                         "`python -m` does not import the current directory's package)")
     ap.add_argument("--figure", type=Path, default=None)
     a = ap.parse_args(args)
     from tools.domain import claim_domain, localhost_env
 
     lease = claim_domain()
-    os.environ.update(localhost_env(lease.domain_id))
+    os.environ.update(localhost_env(lease.domain_id if a.domain is None else a.domain))
     from switchobs_core.design import design_table
     from switchobs_core.scenarios import load_system
     from switchobs_core.schedule import Cycle
@@ -241,37 +337,62 @@ def main(argv=None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="bench_node_"))
     table = str(design_table(load_system("paper"), [Cycle.from_ts(2.0, 0.6)], progress=False).save(tmp / "p.json"))
     rates = [float(r) for r in a.rates.split(",")]
-    configs = [c for c in a.configs.split(",") if c]
-    results: dict[str, list[dict]] = {f"estimator ({c})": [] for c in configs}
-    results["bare republisher"] = []
-    for rate in rates:
-        for c in configs:
-            results[f"estimator ({c})"].append(measure("estimator", CONFIGS[c], rate, a.seconds, table, tmp))
-        results["bare republisher"].append(measure("bare", {}, rate, a.seconds, table, tmp))
-    soak = measure("estimator", CONFIGS["default"], 500.0, a.soak, table, tmp) if a.soak > 0 else None
+    configs = [c for c in a.configs.split(",") if c] + (["base"] if a.base else [])
+
+    def run(c: str, rate: float, seconds: float) -> dict:
+        if c == "bare":
+            return measure("bare", {}, rate, seconds, table, tmp)
+        if c == "base":
+            return measure("estimator", {}, rate, seconds, table, tmp, env={"PYTHONPATH": str(Path(a.base).resolve())})
+        params = dict(CONFIGS[c])
+        env = params.pop("_env", None)
+        return measure("estimator", params, rate, seconds, table, tmp, env=env)
+
+    names = {c: f"estimator ({c})" for c in configs}
+    names["bare"] = "bare republisher"
+    runs: dict[str, list[list[dict]]] = {n: [[] for _ in rates] for n in names.values()}
+    for i, rate in enumerate(rates):
+        for _ in range(a.repeat):
+            for c in [*configs, "bare"]:
+                runs[names[c]][i].append(run(c, rate, a.seconds))
+                r = runs[names[c]][i][-1]
+                sys.stderr.write(f"{rate:g} Hz {names[c]}: {r['answered']}/{r['sent']}, p99 {r['p99']:.3f} ms, "
+                                 f"max {r['max']:.2f} ms, cpu {r['cpu']:.2f} {r['trace']}\n")
+    soaks = [run(a.soak_config, 500.0, a.soak) for _ in range(a.soak_repeat)] if a.soak > 0 else []
     lease.release()
 
+    def med(rs: list[dict], k: str) -> float:
+        return float(np.median([r[k] for r in rs]))
+
+    results = {n: [{"rate": rate, "lat": np.concatenate([r["lat"] for r in rs[i]]), "p99": med(rs[i], "p99"),
+                    "answered": sum(r["answered"] for r in rs[i]), "sent": sum(r["sent"] for r in rs[i])}
+                   for i, rate in enumerate(rates)] for n, rs in runs.items()}
     print(f"### Estimator node over DDS (bench/bench_node.py)\n\n"
           f"{time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores, Python "
           f"{platform.python_version()}, ROS 2 Jazzy wheels (rmw_fastrtps_cpp), localhost only; {a.seconds:g} s "
           "per rate and node; sender, receiver and node in separate processes; each measurement is a "
-          "camera/pose + target/pose pair.\n")
-    print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | p99 / republisher's |")
-    print("|---:|---|---:|---:|---:|---:|---:|")
+          f"camera/pose + target/pose pair; {a.repeat} run(s) per rate and node, interleaved"
+          + (" (medians over the runs; answered: summed)" if a.repeat > 1 else "") + ". Node CPU: CPU seconds "
+          "of the node's process per second while the sender sends (1.00 = one core).\n")
+    print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | node CPU | p99 / republisher's |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|")
     for i, rate in enumerate(rates):
-        bare = results["bare republisher"][i]
-        for name, rs in results.items():
+        bare = runs["bare republisher"][i]
+        for name, rs in runs.items():
             r = rs[i]
-            print(f"| {rate:g} | {name} | {r['answered']}/{r['sent']} | {r['p50']:.3f} | {r['p99']:.3f} "
-                  f"| {r['max']:.2f} | {r['p99'] / bare['p99']:.2f} |")
-    full = {name: max([r["rate"] for r in rs if r["answered"] == r["sent"]], default=0.0)
-            for name, rs in results.items()}
+            ratio = float(np.median([x["p99"] / b["p99"] for x, b in zip(r, bare)]))
+            print(f"| {rate:g} | {name} | {sum(x['answered'] for x in r)}/{sum(x['sent'] for x in r)} "
+                  f"| {med(r, 'p50'):.3f} | {med(r, 'p99'):.3f} | {med(r, 'max'):.2f} | {med(r, 'cpu'):.2f} "
+                  f"| {ratio:.2f} |")
+    full = {name: max([rate for i, rate in enumerate(rates) if all(x["answered"] == x["sent"] for x in rs[i])],
+                      default=0.0) for name, rs in runs.items()}
     print("\nHighest rate answered in full: " + ", ".join(f"{k} {v:g} Hz" for k, v in full.items()) + ".")
-    if soak is not None:
-        late = int(np.sum(soak["lat"] > 20.0))
-        print(f"\nSoak: default estimator at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} answered, "
-              f"p50 {soak['p50']:.3f} ms, p99 {soak['p99']:.3f} ms, max {soak['max']:.2f} ms, "
-              f"{late} answers later than 20 ms.")
+    for soak in soaks:
+        late = int(np.sum(soak["lat"] > LATE_MS))
+        print(f"\nSoak: {a.soak_config} estimator at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} "
+              f"answered, p50 {soak['p50']:.3f} ms, p99 {soak['p99']:.3f} ms, max {soak['max']:.2f} ms, "
+              f"{late} answers later than {LATE_MS:g} ms, node CPU {soak['cpu']:.2f}"
+              + (f"; {soak['trace']}" if soak["trace"] else "") + ".")
     if a.figure:
         figure(results, rates, a.figure)
         rel = os.path.relpath(a.figure.resolve(), Path(__file__).resolve().parent)

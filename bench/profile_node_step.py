@@ -1,10 +1,12 @@
 """Per-measurement cost of the estimator node in process, with jittered stamps (not a test).
 
-``python bench/profile_node_step.py [--jitter-us 50] [--n 30000]``: feeds camera/target pairs
-every 2 ms +- jitter straight into the node's callbacks' code (pipeline + publishing, no DDS
-receive), switching channel every second, and prints the median, p99 and maximum time per
+``python bench/profile_node_step.py [--jitter-us 50] [--n 30000] [--cprofile K] [--domain D]``:
+feeds camera/target pairs every 2 ms +- jitter straight into the node's callbacks' code (pipeline
++ publishing, no DDS receive; the pose messages are built outside the timed part), switching
+channel every second, and prints the median (and its publishing part), p99 and maximum time per
 measurement, the garbage collections seen after ``gc.freeze()`` and the exact-step cache's hits
-and misses (bench/RESULTS.md, "Estimator node over DDS").
+and misses (bench/RESULTS.md, "Estimator node over DDS"). ``--cprofile K`` prints the K functions
+with the most own time.
 """
 
 from __future__ import annotations
@@ -25,12 +27,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jitter-us", type=float, default=50.0)
     ap.add_argument("--n", type=int, default=30000)
+    ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID to use (default: claim a free one)")
+    ap.add_argument("--cprofile", type=int, default=0, metavar="K", help="print the K costliest functions (cProfile)")
     a = ap.parse_args()
     from tools.domain import claim_domain, localhost_env
 
     lease = claim_domain()
     import os
-    os.environ.update(localhost_env(lease.domain_id))
+    os.environ.update(localhost_env(lease.domain_id if a.domain is None else a.domain))
     import rclpy
     from rclpy.parameter import Parameter
     from std_msgs.msg import UInt8
@@ -63,16 +67,32 @@ def main() -> int:
     j = int(a.jitter_us * 1000)
     stamps = time.time_ns() + np.cumsum(2_000_000 + (rng.integers(-j, j + 1, a.n) if j else np.zeros(a.n, int)))
     dur = np.zeros(a.n)
+    pub = np.zeros(a.n)
+    prof = None
+    if a.cprofile:
+        import cProfile
+        prof = cProfile.Profile()
+        prof.enable()
     for k in range(a.n):
         s = int(stamps[k])
-        t = time.perf_counter()
+        cam, tgt = mb.xy_to_pose((0.001 * k, 0.0), s, "map"), mb.xy_to_pose((3.0, 1.0), s, "map")   # the sensor's
         if k % 500 == 250:
             pl.on_channel(UInt8(data=2 if (k // 500) % 2 == 0 else 1))
-        node._publish_all(pl.on_pose("camera", mb.xy_to_pose((0.001 * k, 0.0), s, "map"), s))
-        node._publish_all(pl.on_pose("target", mb.xy_to_pose((3.0, 1.0), s, "map"), s))
-        dur[k] = time.perf_counter() - t
+        t = time.perf_counter()
+        node._publish_all(pl.on_pose("camera", cam, s))
+        est = pl.on_pose("target", tgt, s)
+        t1 = time.perf_counter()
+        node._publish_all(est)
+        t2 = time.perf_counter()
+        dur[k] = t2 - t
+        pub[k] = t2 - t1
+    if prof is not None:
+        import pstats
+        prof.disable()
+        pstats.Stats(prof).sort_stats("tottime").print_stats(a.cprofile)
     c = pl.observer.cache
-    print(f"jitter +-{a.jitter_us:g} us, {a.n} measurements: median {np.median(dur) * 1e6:.0f} us, "
+    print(f"jitter +-{a.jitter_us:g} us, {a.n} measurements: median {np.median(dur) * 1e6:.0f} us "
+          f"(publishing {np.median(pub) * 1e6:.0f} us), "
           f"p99 {np.percentile(dur, 99) * 1e6:.0f} us, max {dur.max() * 1e3:.2f} ms; "
           f"garbage collections {len(pauses)} (max {max(pauses, default=0) * 1e3:.2f} ms); "
           f"exact-step cache hits {c.hits}, misses {c.misses}")

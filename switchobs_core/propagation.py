@@ -54,7 +54,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .exceptions import InvalidArgument
-from .rounding import expm_error, gamma
+from .rounding import _fro, expm_error, gamma
 from .validation import as_matrix
 
 __all__ = [
@@ -161,8 +161,8 @@ class ZOHEntry:
 
     def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0):
         self.eps = eps           # bound on ||Phi - e^{M dt}||_F (rounding.expm_error)
-        self.fPhi = float(np.linalg.norm(Phi))                          # Frobenius norms for the
-        self.fGL = 0.0 if GL is None else float(np.linalg.norm(GL))    # rounding bound
+        self.fPhi = _fro(Phi)                           # Frobenius norms for the
+        self.fGL = 0.0 if GL is None else _fro(GL)     # rounding bound
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
@@ -186,18 +186,42 @@ def split_step(dtq: float, dt_resolution: float | None) -> tuple[int, float]:
 def taylor_pair(M: np.ndarray, r: float, m: int = COMPOSE_DEGREE) -> tuple[np.ndarray, np.ndarray]:
     """``(sum_{k<=m} (M r)^k / k!, r sum_{k<=m} (M r)^k / (k+1)!)``: ``e^{M r}`` and ``Gamma(r)``
     for a short step ``r`` (the composed steps of :class:`ZOHCache` and of
-    :class:`~switchobs_core.riccati.DiscretizationCache`; the truncation is bounded there)."""
+    :class:`~switchobs_core.riccati.DiscretizationCache`; the truncation is bounded there).
+
+    The terms ``T_k = T_{k-1} (M r) / k`` are summed in order, ``((I + T_1) + T_2) + ...``, and
+    ``Gamma``'s ``I + T_1 / 2 + T_2 / 3 + ...`` likewise (the arithmetic of the term-by-term loop,
+    with the terms stacked so that each sum is one reduction). The last result is kept: the
+    observer's step and the covariance's Van Loan step of one sample ask for the same pair
+    (``M = A``, the same remainder ``r``). The arrays returned are read-only.
+    """
+    global _taylor_last
+    key = (r, m, M.shape, M.tobytes())
+    last = _taylor_last
+    if last is not None and last[0] == key:
+        return last[1], last[2]
     n = M.shape[0]
-    X = M * r
-    term = np.eye(n)
-    Ps = np.eye(n)
-    Gs = np.eye(n)
-    for k in range(1, m + 1):
-        term = term @ X
-        term /= k
-        Ps += term
-        Gs += term / (k + 1)
-    return Ps, Gs * r
+    T = np.empty((m + 1, n, n))
+    T[0] = 0.0
+    T[0].flat[:: n + 1] = 1.0
+    if m >= 1:
+        X = np.multiply(M, r, out=T[1])      # T_1 = I (M r) / 1 = M r exactly (M r is finite)
+        for k in range(2, m + 1):
+            np.matmul(T[k - 1], X, out=T[k])
+            T[k] /= k
+    div = _TAYLOR_DIV.get(m)
+    if div is None:
+        div = _TAYLOR_DIV[m] = np.arange(1.0, m + 2.0).reshape(-1, 1, 1)
+    Ps = np.add.reduce(T, axis=0)           # over the outer axis: term by term, in order
+    Gs = np.add.reduce(T / div, axis=0)
+    Gs *= r
+    Ps.flags.writeable = False
+    Gs.flags.writeable = False
+    _taylor_last = (key, Ps, Gs)
+    return Ps, Gs
+
+
+_TAYLOR_DIV: dict = {}
+_taylor_last: tuple | None = None
 
 
 class ZOHCache:
@@ -226,6 +250,7 @@ class ZOHCache:
         self._inv_res = None if dt_resolution is None else 1.0 / dt_resolution
         self._gains: dict[Hashable, tuple] = {}
         self._checked: set = set()
+        self._consts: dict = {}
         self._lru: OrderedDict = OrderedDict()
         self.hits = 0
         self.misses = 0
@@ -307,16 +332,20 @@ class ZOHCache:
         n = M.shape[0]
         m = COMPOSE_DEGREE
         Ps, Gs = taylor_pair(M, r)
-        nM = float(np.linalg.norm(M))
+        consts = self._consts.get(id(M))
+        if consts is None or consts[0] is not M:     # ||M||_F and the gammas, per registered M
+            consts = self._consts[id(M)] = (M, _fro(M), math.factorial(m + 1), gamma(m * (n + 2) + 2),
+                                            gamma(n + 1), gamma(4))
+        _, nM, fact, g_sum, g_n1, g_4 = consts
         x = nM * r
-        tail = x ** (m + 1) / math.factorial(m + 1) / (1.0 - x / (m + 2))
-        rnd = gamma(m * (n + 2) + 2) * (math.sqrt(n) + math.exp(x))
-        nPs, nPb = float(np.linalg.norm(Ps)), float(np.linalg.norm(base.Phi))
+        tail = x ** (m + 1) / fact / (1.0 - x / (m + 2))
+        rnd = g_sum * (math.sqrt(n) + math.exp(x))
+        nPs, nPb = _fro(Ps), base.fPhi          # fPhi is ||base.Phi||_F, computed the same way
         Phi = base.Phi @ Ps
         # (a + r) is dtq up to the rounding of the two floats: that step difference, too
         split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)
-        eps = (base.eps * (nPs + tail + rnd) + nPb * (tail + rnd) + gamma(n + 1) * nPb * nPs
-               + split * nM * nPb * nPs * math.exp(nM * split)) * (1 + gamma(4))
+        eps = (base.eps * (nPs + tail + rnd) + nPb * (tail + rnd) + g_n1 * nPb * nPs
+               + split * nM * nPb * nPs * math.exp(nM * split)) * (1 + g_4)
         Gamma = None
         if base.Gamma is not None:
             Gamma = base.Phi @ Gs + base.Gamma

@@ -54,6 +54,11 @@ import math
 
 import numpy as np
 
+try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without its wrapper's 3 us)
+    from numpy.linalg._umath_linalg import eigvalsh_lo as _eigvalsh_lo
+except ImportError:     # pragma: no cover - another numpy layout: the public function
+    _eigvalsh_lo = None
+
 __all__ = ["UNIT_ROUNDOFF", "EXPM_ULPS", "gamma", "expm_error", "expm_extended", "ErrorEllipsoid",
            "verify_against_extended"]
 
@@ -131,6 +136,7 @@ class ErrorEllipsoid:
         self.tr = float(np.trace(self.S))          # trace S >= ||S||_F >= lambda_max (S is PSD)
         self._g = gamma(2 * self.n + 2) * self.n
         self._diag = np.arange(self.n) * (self.n + 1)
+        self._dstep = self.n + 1        # S.reshape(-1)[::n + 1] is S's diagonal (a view)
 
     def propagate(self, M: np.ndarray, rho: float, fM2: float | None = None) -> tuple[np.ndarray, float]:
         """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it. ``fM2`` is
@@ -154,7 +160,7 @@ class ErrorEllipsoid:
         # the rounding of the scaling and the sums: entrywise relative 4u, dominated on the diagonal
         eta += 4.0 * UNIT_ROUNDOFF * lam
         eta *= 1.0 + 4.0 * UNIT_ROUNDOFF
-        S.flat[self._diag] += eta
+        S.reshape(-1)[:: self._dstep] += eta      # S is a fresh C-contiguous product: a view
         return S, (lam + self.n * eta) * (1.0 + 4.0 * self.n * UNIT_ROUNDOFF)
 
     def step(self, M: np.ndarray, rho: float, fM2: float | None = None) -> None:
@@ -217,10 +223,25 @@ class ErrorEllipsoid:
         """``sqrt(lambda_max(S)) >= ||e||`` (of ``S``, default the current one), inflated for the
         eigenvalue solver's own error (relative ``n u``)."""
         S = self.S if S is None else S
-        S = 0.5 * (S + S.T)
-        lam = float(np.linalg.eigvalsh(S)[-1]) if self.n else 0.0
-        lam = max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * float(np.linalg.norm(S))
+        S = S + S.T
+        S *= 0.5
+        if not self.n:
+            return 0.0
+        nS = _fro(S)
+        lam = math.nan
+        if _eigvalsh_lo is not None and math.isfinite(nS):
+            lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
+        if not math.isfinite(lam):      # a non-finite S, or no convergence: np.linalg's handling (raises)
+            lam = float(np.linalg.eigvalsh(S)[-1])
+        lam = max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
         return math.sqrt(lam)
+
+
+def _fro(X: np.ndarray) -> float:
+    """``np.linalg.norm(X)`` (Frobenius) with the same arithmetic (``sqrt`` of the dot product of
+    ``X.ravel(order="K")`` with itself), without the wrapper's checks."""
+    v = X.ravel(order="K")
+    return math.sqrt(float(v.dot(v)))
 
 
 def verify_against_extended(system, observer, schedule, rate: float, seconds: float, x0,

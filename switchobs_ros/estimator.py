@@ -21,6 +21,12 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every output carries the stamp of the sample it answers.
 
+Executor cost (issue 13): each input callback also takes the input messages already waiting
+(:meth:`EstimatorMixin._drain_inputs`), so a camera/target pair costs one wait of the executor,
+not two, and a backlog none; publishers and subscriptions carry no default middleware event
+handlers (each one a waitable that rclpy's executor re-adds on every wait), the subscriptions
+keep the incompatible-QoS warning.
+
 Clock jumps: a jump of the node clock backwards (with ``use_sim_time``, a looped bag restarting
 its ``/clock``) resets the estimator, so the replay's samples are accepted again and the
 estimate converges again; a jump forwards by more than ``sensor_timeout`` is counted. Both are
@@ -40,7 +46,10 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold, TimeJump
 from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
+from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64MultiArray, UInt8
 from std_srvs.srv import Trigger
 
@@ -94,6 +103,28 @@ class _NodeLog(PipelineLog):
             self._logger.error(text)
 
 
+class _ArrayWriter:
+    """A labelled array (:func:`msg_bridge.labelled_array`) reused for every publish, its values
+    written into the message's own ``data`` array through a numpy view.
+
+    :class:`msg_bridge.LabelledArrayWriter` assigns a numpy array to ``data``, which the
+    generated message converts element by element to an ``array.array`` on every publish (9.7
+    us for the 146 values of ``~/covariance``, measured); writing into the view costs 0.3 us. The
+    message and the values published are the same.
+    """
+
+    def __init__(self, labels):
+        labels = tuple(labels)
+        self._msg = mb.labelled_array(np.zeros(len(labels)), labels, 0)
+        self._view = np.frombuffer(self._msg.data, dtype=float)     # the message's array.array
+
+    def msg(self, values: np.ndarray, stamp_ns: int) -> Float64MultiArray:
+        v = self._view
+        v[0], v[1] = divmod(int(stamp_ns), 1_000_000_000)
+        v[mb.STAMP_PAD:] = values
+        return self._msg
+
+
 class EstimatorMixin:
     """The estimator's behaviour on any rclpy node class (plain or lifecycle): configuration
     (:meth:`_configure`: the pipeline, the observer, the writers), the ROS interfaces
@@ -103,6 +134,7 @@ class EstimatorMixin:
 
     answering = True
     ignored_inactive = 0
+    _hot_inputs: tuple = ()
 
     def _ready_log(self) -> None:
         self.get_logger().info(
@@ -125,8 +157,8 @@ class EstimatorMixin:
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
         self.frame = cfg["world_frame"]
-        self.w_state = mb.LabelledArrayWriter(self.state_labels)
-        self.w_env = mb.LabelledArrayWriter(self.env_labels)
+        self.w_state = _ArrayWriter(self.state_labels)
+        self.w_env = _ArrayWriter(self.env_labels)
         self.w_odom = [mb.OdometryWriter(b, self.frame, c) for b, c in zip(self.bodies, self.child_frames)]
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
@@ -139,31 +171,52 @@ class EstimatorMixin:
     def _create_interfaces(self) -> None:
         """Publishers, subscriptions, the ``~/reset`` service, the clock-jump callback and the timers."""
         pl, cfg = self.pipeline, self.cfg
+
+        # Middleware events: rclpy gives every publisher and subscription two event handlers
+        # by default (incompatible QoS, incompatible type), each a waitable that its
+        # SingleThreadedExecutor adds to the wait set it rebuilds on every wait: 28 of them
+        # here took the idle wait from 127 to 218 us (measured, bench/RESULTS.md, issue 13). The
+        # subscriptions keep the incompatible-QoS warning (a sensor or channel publisher whose
+        # QoS does not match gets its messages silently dropped); a subscriber of our outputs
+        # with incompatible QoS is warned on its own side.
+        def pub(msg_type, topic, profile):
+            return self.create_publisher(msg_type, topic, profile,
+                                         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+
+        def sub(msg_type, topic, callback, profile):
+            warn = self.get_logger().warn
+
+            def incompatible(event, topic=topic):
+                warn(f"a publisher on '{topic}' offers incompatible QoS (policy "
+                     f"{qos_policy_name_from_kind(event.last_policy_kind)}): its messages are not received")
+            events = SubscriptionEventCallbacks(incompatible_qos=incompatible, use_default_callbacks=False)
+            return self.create_subscription(msg_type, topic, callback, profile, event_callbacks=events)
+
         # publishers (reliable), then subscriptions (sensor data; channel reliable). The
         # channel subscription is created first so that, when a channel message and a pose
         # are ready together, the executor takes the channel first.
-        self.pub_state = self.create_publisher(Float64MultiArray, "~/state", qos.OUTPUT)
-        self.pub_env = self.create_publisher(Float64MultiArray, "~/envelope", qos.OUTPUT)
+        self.pub_state = pub(Float64MultiArray, "~/state", qos.OUTPUT)
+        self.pub_env = pub(Float64MultiArray, "~/envelope", qos.OUTPUT)
         self.pub_cov = None
         if pl.publish_covariance:
-            self.w_cov = mb.LabelledArrayWriter(mb.covariance_labels(self.state_labels))
-            self.pub_cov = self.create_publisher(Float64MultiArray, "~/covariance", qos.OUTPUT)
-        self.pub_odom = [self.create_publisher(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.OUTPUT)
+            self.w_cov = _ArrayWriter(mb.covariance_labels(self.state_labels))
+            self.pub_cov = pub(Float64MultiArray, "~/covariance", qos.OUTPUT)
+        self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
+        self.pub_diag = pub(DiagnosticArray, "/diagnostics", qos.OUTPUT)
         # sensor outage: the prediction and its exact bound, once per diagnostics period, on
         # topics of their own (~/state stays one answer per measurement)
-        self.pub_pred = self.create_publisher(Float64MultiArray, "~/prediction", qos.OUTPUT)
-        self.pub_pred_bound = self.create_publisher(Float64MultiArray, "~/prediction/bound", qos.OUTPUT)
+        self.pub_pred = pub(Float64MultiArray, "~/prediction", qos.OUTPUT)
+        self.pub_pred_bound = pub(Float64MultiArray, "~/prediction/bound", qos.OUTPUT)
         self.w_pred_bound = mb.LabelledArrayWriter(PREDICTION_BOUND_LABELS)
         self.predictions = 0
         self.last_prediction = None
-        self.sub_channel = self.create_subscription(UInt8, "camera/active_channel", self.channel_callback,
-                                                    qos.CHANNEL_SUB)
-        self.sub_camera = self.create_subscription(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
-        self.sub_target = self.create_subscription(PoseStamped, "target/pose", self.target_callback, qos.SENSOR_SUB)
+        self.sub_channel = sub(UInt8, "camera/active_channel", self.channel_callback, qos.CHANNEL_SUB)
+        self.sub_camera = sub(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
+        self.sub_target = sub(PoseStamped, "target/pose", self.target_callback, qos.SENSOR_SUB)
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
-        self.sub_set_state = self.create_subscription(Float64MultiArray, "~/set_state", self.set_state_callback,
-                                                      qos.CHANNEL_SUB)
+        self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
+        self._hot_inputs = ((self.sub_channel, self._on_channel), (self.sub_camera, self._on_camera),
+                            (self.sub_target, self._on_target))
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -184,6 +237,7 @@ class EstimatorMixin:
         for pub in getattr(self, "pub_odom", []):
             self.destroy_publisher(pub)
         self.pub_odom = []
+        self._hot_inputs = ()
         for name in ("sub_channel", "sub_camera", "sub_target", "sub_set_state"):
             sub = getattr(self, name, None)
             if sub is not None:
@@ -200,23 +254,69 @@ class EstimatorMixin:
         self._jump_handle = None
 
     # ------------------------------------------------------------------ inputs
+    #: Input messages one callback takes from the input subscriptions (its own message not
+    #: counted) before it returns to the executor (:meth:`_drain_inputs`).
+    DRAIN_MAX = 32
+
     def channel_callback(self, msg: UInt8) -> None:
+        self._on_channel(msg)
+        self._drain_inputs()
+
+    def camera_callback(self, msg: PoseStamped) -> None:
+        self._on_camera(msg)
+        self._drain_inputs()
+
+    def target_callback(self, msg: PoseStamped) -> None:
+        self._on_target(msg)
+        self._drain_inputs()
+
+    def _on_channel(self, msg: UInt8) -> None:
         if not self.answering:
             self.ignored_inactive += 1
             return
         self.pipeline.on_channel(msg)
 
-    def camera_callback(self, msg: PoseStamped) -> None:
+    def _on_camera(self, msg: PoseStamped) -> None:
         if not self.answering:
             self.ignored_inactive += 1
             return
         self._publish_all(self.pipeline.on_pose("camera", msg, self.get_clock().now().nanoseconds))
 
-    def target_callback(self, msg: PoseStamped) -> None:
+    def _on_target(self, msg: PoseStamped) -> None:
         if not self.answering:
             self.ignored_inactive += 1
             return
         self._publish_all(self.pipeline.on_pose("target", msg, self.get_clock().now().nanoseconds))
+
+    def _drain_inputs(self) -> None:
+        """Take the input messages already waiting (channel, camera, target: one of each per
+        round, the channel first, as the executor orders them after one wait) and handle them,
+        up to :attr:`DRAIN_MAX`.
+
+        rclpy's SingleThreadedExecutor rebuilds its wait set and waits again for every
+        callback it runs (about 150 us of Python and middleware per wait for this node,
+        measured; bench/RESULTS.md, issue 13): the target pose that arrives while the camera
+        pose is handled would cost one more wait, and a backlog one wait per message. Taking
+        them here costs a few microseconds each. The bound keeps timers and services served.
+        """
+        hot = self._hot_inputs
+        n = 0
+        try:
+            while n < self.DRAIN_MAX:
+                took = n
+                for sub, handle in hot:
+                    try:
+                        with sub.handle:
+                            got = sub.handle.take_message(sub.msg_type, sub.raw)
+                    except InvalidHandle:       # destroyed (managed node cleanup)
+                        return
+                    if got is not None:
+                        handle(got[0])
+                        n += 1
+                if n == took:
+                    return
+        except Exception as err:
+            self.pipeline.internal_error("input", err)
 
     def set_state_callback(self, msg: Float64MultiArray) -> None:
         """``~/set_state``: set some or all entries of the estimate at a stamp (the pipeline's

@@ -1,0 +1,63 @@
+"""The estimator node's own glue, in process: the reused output messages and the input drain
+(``EstimatorMixin._drain_inputs``: messages already waiting are taken without another wait)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from rclpy.parameter import Parameter
+from ros_harness import EstimatorIO, spin_until
+from std_msgs.msg import UInt8
+
+import msg_bridge as mb
+from switchobs_ros.estimator import EstimatorNode, _ArrayWriter
+
+
+def test_array_writer_gives_the_labelled_array_and_reuses_it():
+    labels = ("a", "b", "c")
+    w = _ArrayWriter(labels)
+    first = w.msg(np.array([1.5, -2.0, 3.25]), 12_345_678_901)
+    ref = mb.labelled_array([1.5, -2.0, 3.25], labels, 12_345_678_901)
+    assert first.layout == ref.layout
+    assert list(first.data) == list(ref.data)
+    again = w.msg(np.array([0.0, 1e300, -0.5]), 7)
+    assert again is first                                 # one message, rewritten
+    arr = mb.unpack_labelled(again)
+    assert (arr.stamp_ns, arr.labels, arr.values.tolist()) == (7, labels, [0.0, 1e300, -0.5])
+
+
+def _drain_until(node: EstimatorNode, cond, timeout: float = 10.0) -> bool:
+    """Call the drain (the node is not spun) until ``cond`` holds; messages arrive asynchronously."""
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        node._drain_inputs()
+        time.sleep(0.01)
+    return cond()
+
+
+def test_drain_takes_waiting_inputs_channel_first(paper_tables, ros_node):
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"])])
+    try:
+        io = EstimatorIO(ros_node)
+        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
+                                                for p in (io.pub_channel, io.pub_camera, io.pub_target)), 20.0)
+        pl = est.pipeline
+        io.pub_channel.publish(UInt8(data=1))
+        assert _drain_until(est, lambda: pl.channel == 1)
+        base = time.time_ns()
+        stamps = [base + k * 10_000_000 for k in range(1, 6)]
+        for s in stamps:
+            io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), s, "map"))
+            io.pub_target.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
+        assert _drain_until(est, lambda: pl.updates == len(stamps))
+        assert pl.accepted["camera/pose"] == pl.accepted["target/pose"] == len(stamps)
+        assert pl.partial_updates == 0 and not pl.rejected
+        assert pl.obs_ns == stamps[-1]
+        # a deactivated node counts what it drains and ignores it
+        est.answering = False
+        io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), base + 10**9, "map"))
+        assert _drain_until(est, lambda: est.ignored_inactive == 1)
+        assert pl.updates == len(stamps)
+    finally:
+        est.destroy_node()
