@@ -136,7 +136,7 @@ class ErrorEllipsoid:
         self.tr = float(np.trace(self.S))          # trace S >= ||S||_F >= lambda_max (S is PSD)
         self._g = gamma(2 * self.n + 2) * self.n
         self._diag = np.arange(self.n) * (self.n + 1)
-        self._dstep = self.n + 1        # S.reshape(-1)[::n + 1] is S's diagonal (a view)
+        self._ii = np.arange(self.n)
 
     def propagate(self, M: np.ndarray, rho: float, fM2: float | None = None) -> tuple[np.ndarray, float]:
         """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it. ``fM2`` is
@@ -160,7 +160,7 @@ class ErrorEllipsoid:
         # the rounding of the scaling and the sums: entrywise relative 4u, dominated on the diagonal
         eta += 4.0 * UNIT_ROUNDOFF * lam
         eta *= 1.0 + 4.0 * UNIT_ROUNDOFF
-        S.reshape(-1)[:: self._dstep] += eta      # S is a fresh C-contiguous product: a view
+        S[self._ii, self._ii] += eta      # in place whatever S's layout (a reshape could copy)
         return S, (lam + self.n * eta) * (1.0 + 4.0 * self.n * UNIT_ROUNDOFF)
 
     def step(self, M: np.ndarray, rho: float, fM2: float | None = None) -> None:
