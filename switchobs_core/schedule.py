@@ -218,43 +218,36 @@ class Schedule:
             k += 1
         return np.asarray(out)
 
-    def slot_at(self, t: float) -> tuple[int, float]:
-        """``(channel, time since its switching instant)`` at ``t`` (channel 1 before t0)."""
+    def _locate(self, t: float) -> tuple[Cycle | None, int, float]:
+        """``(cycle, channel, time since the channel's switching instant)`` at ``t``; before t0
+        ``(None, 1, 0.0)``. The one walk over the cycles that :meth:`slot_at` and
+        :meth:`blind_at` share."""
         t = as_finite(t, "t")
         if t < self.t0:
-            return 1, 0.0
+            return None, 1, 0.0
         tt, k = self.t0, 0
-        while True:
+        while True:         # the arithmetic of channel_at, so that both agree at ties
             c = self.cycle(k)
             if t < tt + c.tau:
-                start = tt
+                off = t - tt
+                acc = 0.0
                 for i, h in enumerate(c.h):
-                    if t < start + h or i == c.N - 1:
-                        return i + 1, t - start
-                    start += h
+                    if off < acc + h or i == c.N - 1:
+                        return c, i + 1, off - acc
+                    acc += h
             tt += c.tau
             k += 1
 
-    def dead_time_at(self, t: float) -> float:
-        """The dead time of the cycle that contains ``t``."""
-        t = as_finite(t, "t")
-        if t < self.t0:
-            return self.cycle(0).dead_time
-        tt, k = self.t0, 0
-        while True:
-            c = self.cycle(k)
-            if t < tt + c.tau:
-                return c.dead_time
-            tt += c.tau
-            k += 1
+    def slot_at(self, t: float) -> tuple[int, float]:
+        """``(channel, time since its switching instant)`` at ``t`` (channel 1 before t0)."""
+        _, ch, off = self._locate(t)
+        return ch, off
 
     def blind_at(self, t: float) -> bool:
         """Whether ``t`` lies in the blind interval after a switching instant (module
-        docstring): less than ``d - BLIND_TOL`` seconds into its residence."""
-        d = self.dead_time_at(t)
-        if not d:
-            return False
-        return self.slot_at(t)[1] < d - BLIND_TOL
+        docstring): less than ``d - BLIND_TOL`` seconds into its residence (never before t0)."""
+        c, _, off = self._locate(t)
+        return c is not None and bool(c.dead_time) and off < c.dead_time - BLIND_TOL
 
     def channel_at(self, t: float) -> int:
         """The active channel rho(t) in 1..N (channel 1 before t0)."""
