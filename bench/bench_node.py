@@ -12,13 +12,21 @@ Four processes per run, one role each, so that the measurement is the node's and
   time; it paces with ``time.sleep`` only (no spinning: the previous driver spun its last
   millisecond before each send in the process that also received the answers, and inflated the
   latency it measured);
-* a *receiver* that only subscribes to the answers and records their arrival time;
+* a *receiver* that subscribes to the answers and records their arrival time, and, as a
+  *witness*, also subscribes the sender's ``target/pose`` (the node's QoS): a late answer whose
+  measurement also reached the witness late was delayed before any node (sender, middleware,
+  machine), one whose measurement reached it in time was delayed at the node;
 * this process, which starts them in turn (estimator configurations and the republisher
   alternate at each rate, in one run) and reads the two files.
 
 Latency = arrival - the measurement's header stamp (both this machine's system clock). A rate is
 "answered in full" when every measurement gets its answer. ``--soak S`` runs the estimator at
 500 Hz for S seconds and reports the largest latency.
+
+Configurations (``--configs``, ``--soak-config``): the estimator's ``default``, ``no-gc-freeze``,
+``state-only``, ``lean-loop``, ``traced``, ``rt`` (its process under ``chrt -f 40``), ``udp``
+(``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``), and ``bare`` (the republisher) for soaks. ``--load K``
+runs K busy loops throughout: a busy machine.
 
 Writes a Markdown section to stdout (recorded in bench/RESULTS.md) and, with ``--figure``, a
 latency histogram per rate.
@@ -29,6 +37,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -45,6 +54,8 @@ CONFIGS = {
     "state-only": {"output.envelope_every": 0, "output.odometry_every": 0, "output.covariance_every": 0},
     "lean-loop": {"_lean": True},
     "traced": {"_trace": True},
+    "rt": {"_chrt": 40},        # the node's process under SCHED_FIFO 40 (`chrt -f 40`, every thread)
+    "udp": {"_env": {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}},       # no shared-memory transport
 }
 #: The soak's goal: no answer later than this (ms).
 LATE_MS = 20.0
@@ -169,8 +180,12 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
     rclpy.try_shutdown()
 
 
-def receiver_main(topic: str, kind: str, out: str) -> None:
-    """Record ``(stamp, arrival)`` of every answer on ``topic`` until SIGINT; save them."""
+def receiver_main(topic: str, kind: str, out: str, witness: str = "") -> None:
+    """Record ``(stamp, arrival)`` of every answer on ``topic`` until SIGINT; save them. With
+    ``witness`` (a topic of the sender's), record its messages' ``(stamp, arrival)`` as well, in
+    ``out`` + ``.witness.npy``: a second subscriber of the node's input, in another process, that
+    tells whether a late answer's measurement was late everywhere (sender, middleware, machine) or
+    only at the node."""
     import rclpy
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import ExternalShutdownException
@@ -189,12 +204,18 @@ def receiver_main(topic: str, kind: str, out: str) -> None:
         def cb(m):
             rec.append((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns()))
         node.create_subscription(PoseStamped, topic, cb, qos.TRUTH)
+    wit: list[tuple[int, int]] = []
+    if witness:
+        node.create_subscription(PoseStamped, witness, lambda m: wit.append(
+            (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, time.time_ns())), qos.SENSOR_SUB)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         np.save(out, np.array(rec, dtype=np.int64).reshape(-1, 2))
+        if witness:
+            np.save(out + ".witness.npy", np.array(wit, dtype=np.int64).reshape(-1, 2))
         node.destroy_node()
         rclpy.try_shutdown()
 
@@ -231,14 +252,18 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     else:
         lean = params.pop("_lean", False)
         traced = params.pop("_trace", False)
+        chrt = params.pop("_chrt", 0)
         (tmp / "trace.npz").unlink(missing_ok=True)
         cmd = ([sys.executable, __file__, "--lean-estimator"] if lean else
                [sys.executable, str(Path(__file__).with_name("trace_node.py")), str(tmp / "trace.npz")] if traced
-               else None)
+               else [sys.executable, "-m", "switchobs_ros.estimator"])
+        if chrt:
+            cmd = ["chrt", "-f", str(chrt), *cmd]
         node = NodeProcess("estimator", ros_args(params={"gain_table": table, **params}) + ["-r", f"__ns:=/{ns}"],
                            cmd=cmd, log=tmp / "estimator.log", env=None if env is None else {**os.environ, **env})
         topic, kind = f"/{ns}/estimator/state", "array"
-    recv = _proc("receiver", ["--receiver", topic, kind, str(tmp / "recv.npy")], tmp)
+    (tmp / "recv.npy.witness.npy").unlink(missing_ok=True)
+    recv = _proc("receiver", ["--receiver", topic, kind, str(tmp / "recv.npy"), f"/{ns}/target/pose"], tmp)
     try:
         time.sleep(2.0)         # start-up and discovery (the sender waits for the node's subscriptions)
         send = _proc("sender", ["--sender", ns, str(rate), str(seconds), str(tmp / "sent.npy")], tmp)
@@ -254,10 +279,11 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     arrival = dict(zip(rec[:, 0].tolist(), rec[:, 1].tolist()))
     lat = np.array([(arrival[s] - s) * 1e-6 for s in sent.tolist() if s in arrival])
     achieved = (len(sent) - 1) / ((sent[-1] - sent[0]) * 1e-9) if len(sent) > 1 else 0.0
-    trace = ""
+    late_ms = LATE_MS if rate <= 500 else 5.0
+    trace = witness_split(np.load(tmp / "recv.npy.witness.npy"), sent, arrival, late_ms)
     if target != "bare" and (tmp / "trace.npz").exists():
         from trace_node import split
-        trace = split(tmp / "trace.npz", sent, arrival, LATE_MS if rate <= 500 else 5.0)
+        trace += "; " + split(tmp / "trace.npz", sent, arrival, late_ms)
     return {"rate": rate, "achieved": achieved, "sent": len(sent), "answered": len(lat), "lat": lat,
             "cpu": (c1 - c0) / (w1 - w0), "trace": trace,
             "p50": float(np.median(lat)) if lat.size else np.nan,
@@ -265,10 +291,29 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
             "max": float(lat.max()) if lat.size else np.nan}
 
 
+def witness_split(wit: np.ndarray, sent: np.ndarray, arrival: dict, late_ms: float) -> str:
+    """The answers later than ``late_ms`` and the lost ones, against the witness (a second
+    subscriber of target/pose in the receiver's process): how many of their measurements also
+    reached the witness later than ``late_ms / 2``, or never."""
+    w = dict(zip(wit[:, 0].tolist(), wit[:, 1].tolist()))
+    late = [s for s in sent.tolist() if s in arrival and (arrival[s] - s) * 1e-6 > late_ms]
+    lost = [s for s in sent.tolist() if s not in arrival]
+    if not late and not lost:
+        return ""
+
+    def slow(s: int) -> bool:
+        return s not in w or (w[s] - s) * 1e-6 > late_ms / 2
+
+    return (f"witness: {sum(map(slow, late))} of the {len(late)} late answers' measurements and "
+            f"{sum(map(slow, lost))} of the {len(lost)} lost ones were also late (> {late_ms / 2:g} ms) or missing "
+            f"at the witness; the witness missed {sum(s not in w for s in sent.tolist())} of {len(sent)}")
+
+
 def figure(results: dict, rates: list[float], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     fig, axes = plt.subplots(1, len(rates), figsize=(3.6 * len(rates), 3.4), constrained_layout=True, sharey=True)
     axes = np.atleast_1d(axes)
@@ -282,6 +327,9 @@ def figure(results: dict, rates: list[float], path: Path) -> None:
                 ax.hist(r["lat"], bins=bins, histtype="step", lw=1.4, density=True,
                         label=f"{name}: p99 {r['p99']:.2f} ms ({r['answered']}/{r['sent']})")
         ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(f"{rate:g} Hz", fontsize=10)
         ax.set_xlabel("latency [ms]")
         ax.legend(fontsize=6.5, loc="upper right")
@@ -305,7 +353,7 @@ def main(argv=None) -> int:
         sender_main(args[1], float(args[2]), float(args[3]), args[4])
         return 0
     if args[:1] == ["--receiver"]:
-        receiver_main(args[1], args[2], args[3])
+        receiver_main(*args[1:5])
         return 0
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=5.0)
@@ -317,13 +365,17 @@ def main(argv=None) -> int:
                          "the median of each run's p99 over the republisher's p99 of the same round)")
     ap.add_argument("--soak", type=float, default=0.0, help="seconds of a 500 Hz soak of the default estimator")
     ap.add_argument("--soak-repeat", type=int, default=1, help="number of soaks")
-    ap.add_argument("--soak-config", default="default", help="estimator configuration of the soak (traced: with "
-                    "a trace of where the late answers' time went, bench/trace_node.py)")
+    ap.add_argument("--soak-config", default="default", help="configurations of the soaks, comma-separated, "
+                    "interleaved --soak-repeat times (traced: with a trace of where the late answers' time went, "
+                    "bench/trace_node.py; bare: the republisher under the same soak)")
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID to use (default: claim a free one)")
     ap.add_argument("--base", default=None, metavar="DIR",
                     help="also run, as configuration 'base', the default estimator of the source tree DIR (e.g. "
                          "`git archive <commit> | tar -x -C DIR`; run the bench from another directory, so that "
                          "`python -m` does not import the current directory's package)")
+    ap.add_argument("--load", type=int, default=0, metavar="K",
+                    help="K busy-looping processes (ordinary priority) run through every measurement: a busy "
+                         "machine, the case thread_priority is for")
     ap.add_argument("--figure", type=Path, default=None)
     a = ap.parse_args(args)
     from tools.domain import claim_domain, localhost_env
@@ -348,17 +400,31 @@ def main(argv=None) -> int:
         env = params.pop("_env", None)
         return measure("estimator", params, rate, seconds, table, tmp, env=env)
 
+
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(a.load)]
     names = {c: f"estimator ({c})" for c in configs}
     names["bare"] = "bare republisher"
     runs: dict[str, list[list[dict]]] = {n: [[] for _ in rates] for n in names.values()}
-    for i, rate in enumerate(rates):
-        for _ in range(a.repeat):
-            for c in [*configs, "bare"]:
-                runs[names[c]][i].append(run(c, rate, a.seconds))
-                r = runs[names[c]][i][-1]
-                sys.stderr.write(f"{rate:g} Hz {names[c]}: {r['answered']}/{r['sent']}, p99 {r['p99']:.3f} ms, "
-                                 f"max {r['max']:.2f} ms, cpu {r['cpu']:.2f} {r['trace']}\n")
-    soaks = [run(a.soak_config, 500.0, a.soak) for _ in range(a.soak_repeat)] if a.soak > 0 else []
+    try:
+        for i, rate in enumerate(rates):
+            for _ in range(a.repeat):
+                for c in [*configs, "bare"]:
+                    runs[names[c]][i].append(run(c, rate, a.seconds))
+                    r = runs[names[c]][i][-1]
+                    sys.stderr.write(f"{rate:g} Hz {names[c]}: {r['answered']}/{r['sent']}, p99 {r['p99']:.3f} ms, "
+                                     f"max {r['max']:.2f} ms, cpu {r['cpu']:.2f} {r['trace']}\n")
+        soak_configs = [c for c in a.soak_config.split(",") if c]
+        soaks = []
+        for _ in range(a.soak_repeat if a.soak > 0 else 0):
+            for c in soak_configs:
+                soaks.append((c, run(c, 500.0, a.soak)))
+                r = soaks[-1][1]
+                sys.stderr.write(f"soak {c}: {r['answered']}/{r['sent']}, max {r['max']:.2f} ms, "
+                                 f"{int(np.sum(r['lat'] > LATE_MS))} late\n")
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
     lease.release()
 
     def med(rs: list[dict], k: str) -> float:
@@ -372,6 +438,7 @@ def main(argv=None) -> int:
           f"{platform.python_version()}, ROS 2 Jazzy wheels (rmw_fastrtps_cpp), localhost only; {a.seconds:g} s "
           "per rate and node; sender, receiver and node in separate processes; each measurement is a "
           f"camera/pose + target/pose pair; {a.repeat} run(s) per rate and node, interleaved"
+          + (f"; **{a.load} busy-looping processes** running throughout" if a.load else "")
           + (" (medians over the runs; answered: summed)" if a.repeat > 1 else "") + ". Node CPU: CPU seconds "
           "of the node's process per second while the sender sends (1.00 = one core).\n")
     print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | node CPU | p99 / republisher's |")
@@ -387,9 +454,10 @@ def main(argv=None) -> int:
     full = {name: max([rate for i, rate in enumerate(rates) if all(x["answered"] == x["sent"] for x in rs[i])],
                       default=0.0) for name, rs in runs.items()}
     print("\nHighest rate answered in full: " + ", ".join(f"{k} {v:g} Hz" for k, v in full.items()) + ".")
-    for soak in soaks:
+    for c, soak in soaks:
         late = int(np.sum(soak["lat"] > LATE_MS))
-        print(f"\nSoak: {a.soak_config} estimator at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} "
+        name = "bare republisher" if c == "bare" else f"estimator ({c})"
+        print(f"\n- Soak: {name} at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} "
               f"answered, p50 {soak['p50']:.3f} ms, p99 {soak['p99']:.3f} ms, max {soak['max']:.2f} ms, "
               f"{late} answers later than {LATE_MS:g} ms, node CPU {soak['cpu']:.2f}"
               + (f"; {soak['trace']}" if soak["trace"] else "") + ".")

@@ -104,8 +104,19 @@ class DiscretizationCache:
         self.maxsize = max(1, int(maxsize))
         self.dt_resolution = dt_resolution
         self._lru: OrderedDict = OrderedDict()
+        self._q23: tuple[np.ndarray, np.ndarray] | None = None
         self.hits = 0
         self.misses = 0
+
+    def _short_step_terms(self) -> tuple[np.ndarray, np.ndarray]:
+        """The constant matrices of the short step's third-order ``Q_d(r)``: ``A Q + (A Q)'`` (of
+        ``r^2/2``) and ``A A Q + 2 A Q A' + (A A Q)'`` (of ``r^3/6``), computed once (``A`` and ``Q_c``
+        do not change after construction); the same doubles as computing them for every step."""
+        if self._q23 is None:
+            A, Qc = self.A, self.Q_c
+            AQ = A @ Qc
+            self._q23 = (AQ + AQ.T, A @ AQ + 2 * AQ @ A.T + (A @ AQ).T)
+        return self._q23
 
     def get(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(Phi, Gamma B, Q_d)`` of the step ``dt`` (rounded)."""
@@ -128,9 +139,8 @@ class DiscretizationCache:
                 base = self._lru[bk] = discretize(self.A, self.B, self.Q_c, qc * COMPOSE_GRID)
             Phi_a, GB_a, Qd_a = base
             Ps, Gs = taylor_pair(self.A, r)
-            A, Qc = self.A, self.Q_c
-            AQ = A @ Qc
-            Qd_r = Qc * r + (AQ + AQ.T) * (r * r / 2) + (A @ AQ + 2 * AQ @ A.T + (A @ AQ).T) * (r ** 3 / 6)
+            q2, q3 = self._short_step_terms()
+            Qd_r = self.Q_c * r + q2 * (r * r / 2) + q3 * (r ** 3 / 6)
             Qd = Ps @ Qd_a @ Ps.T + Qd_r
             e = (Ps @ Phi_a, Ps @ GB_a + Gs @ self.B, 0.5 * (Qd + Qd.T))
         else:
