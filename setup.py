@@ -43,9 +43,9 @@ setup(
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            "estimator = switchobs_ros.estimator:main",
-            "managed_estimator = switchobs_ros.managed_estimator:main",
-            "camera_sim = switchobs_ros.camera_sim:main",
+            "estimator = switchobs_ros.entry:estimator",
+            "managed_estimator = switchobs_ros.entry:managed_estimator",
+            "camera_sim = switchobs_ros.entry:camera_sim",
             "switchobs = switchobs_core.cli:main",
             "switchobs_bag = switchobs_ros.bag.cli:main",
         ],

@@ -98,3 +98,30 @@ def test_demo_interrupted_exits_quietly(tmp_path, when):
     assert rc == 130, err
     assert "demo: interrupted; the nodes are stopped" in err
     assert "Traceback" not in err and "context is not valid" not in err and "exited with" not in err, err
+
+
+@pytest.mark.parametrize("node", ["estimator", "managed_estimator", "camera_sim"])
+@pytest.mark.parametrize("delay", [0.15, 0.5])
+def test_node_interrupted_during_its_imports_stops_quietly(node, delay):
+    """Ctrl-C while the node's console script still imports rclpy, numpy and the rest (about a
+    second): exit 0 and no traceback (switchobs_ros.entry); before it, the interrupted import's
+    traceback and exit 130."""
+    import os
+    import signal
+    import time
+    from pathlib import Path
+
+    exe = Path(sys.executable).parent / node
+    assert exe.exists(), f"{exe}: the package's console scripts are not installed (scripts/bootstrap.sh)"
+    p = subprocess.Popen([str(exe)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    try:
+        time.sleep(delay)
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 0, err
+    assert "Traceback" not in out + err, err
