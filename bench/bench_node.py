@@ -407,7 +407,7 @@ def main(argv=None) -> int:
     ap.add_argument("--perf", type=Path, default=None, metavar="DIR",
                     help="record the machine's context switches with perf (sched:sched_switch) and keep "
                          "them in DIR for the runs with late or lost answers (under perf the receiver exited "
-                         "without saving in 2 of 11 runs on 2026-11-23: the run then stops with that message)")
+                         "without saving in 2 of about 30 runs on 2026-11-23: the run then stops with that message)")
     ap.add_argument("--figure", type=Path, default=None)
     a = ap.parse_args(args)
     global PERF_DIR
