@@ -26,9 +26,26 @@ from .params import ConfigError
 __all__ = ["run_node"]
 
 
+def _quiet_interrupt_in_finalizers(hook=sys.unraisablehook):
+    """An ``sys.unraisablehook`` that drops a KeyboardInterrupt raised inside a finalizer.
+
+    rclpy's SIGINT handler raises KeyboardInterrupt wherever the main thread is; when that is a
+    ``__del__`` (e.g. rclpy's ``RcutilsLogger.__del__`` while the node is being built), Python
+    cannot raise it and prints "Exception ignored in ... Traceback ... KeyboardInterrupt". The
+    same signal has already shut the context down, so the node stops anyway (exit 0): the
+    printout is noise. Every other unraisable exception goes to ``hook``.
+    """
+    def unraisable(u) -> None:
+        if isinstance(u.exc_value, KeyboardInterrupt):
+            return
+        hook(u)
+    return unraisable
+
+
 def run_node(node_cls, prog: str, args=None) -> int:
     """Run ``node_cls()`` until shutdown; the process's exit code (see the module docstring)."""
     single_threaded_blas()  # small matrices; see switchobs_core.threads
+    sys.unraisablehook = _quiet_interrupt_in_finalizers()
     try:
         rclpy.init(args=args)
     except KeyboardInterrupt:
