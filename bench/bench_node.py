@@ -219,6 +219,7 @@ def receiver_main(topic: str, kind: str, out: str, witness: str = "") -> None:
         pass
     finally:
         node.destroy_node()
+        rclpy.try_shutdown()
 
         def stamp(b: bytes, t: type) -> int:
             m = deserialize_message(b, t)
@@ -277,10 +278,10 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
         topic, kind = f"/{ns}/estimator/state", "array"
     (tmp / "recv.npy.witness.npy").unlink(missing_ok=True)
     recv = _proc("receiver", ["--receiver", topic, kind, str(tmp / "recv.npy"), f"/{ns}/target/pose"], tmp)
+    perf = None
     try:
         time.sleep(2.0)         # start-up and discovery (the sender waits for the node's subscriptions)
         send = _proc("sender", ["--sender", ns, str(rate), str(seconds), str(tmp / "sent.npy")], tmp)
-        perf = None
         if PERF_DIR is not None:    # the whole machine (the sender starts sending after 0.2 s)
             perf = subprocess.Popen(["perf", "record", "-q", "-k", "CLOCK_MONOTONIC", "-e", "sched:sched_switch",
                                      "-a", "-o", str(tmp / "perf.data")],      # -a: switches in, too
@@ -289,10 +290,10 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
         send.wait(timeout=seconds + 120)
         c1, r1, w1 = _cpu_s(node.pid), _cpu_s(recv.pid), time.monotonic()
         time.sleep(1.0)         # the last answers
+    finally:
         if perf is not None:
             perf.send_signal(signal.SIGINT)
             perf.wait(timeout=60)
-    finally:
         recv.stop(timeout=60)    # it deserializes what it received before saving
         node.stop()
     sent = np.load(tmp / "sent.npy")
@@ -403,7 +404,7 @@ def main(argv=None) -> int:
                          "`python -m` does not import the current directory's package)")
     ap.add_argument("--load", type=int, default=0, metavar="K",
                     help="K busy-looping processes (ordinary priority) run through every measurement: a busy "
-                         "machine, the case thread_priority is for")
+                         "machine")
     ap.add_argument("--perf", type=Path, default=None, metavar="DIR",
                     help="record the machine's context switches with perf (sched:sched_switch) and keep "
                          "them in DIR for the runs with late or lost answers (under perf the receiver exited "
@@ -435,7 +436,6 @@ def main(argv=None) -> int:
         params = dict(CONFIGS[c])
         env = params.pop("_env", None)
         return measure("estimator", params, rate, seconds, table, tmp, env=env)
-
 
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(a.load)]
     names = {c: f"estimator ({c})" for c in configs}
@@ -493,8 +493,8 @@ def main(argv=None) -> int:
     print("\nHighest rate answered in full: " + ", ".join(f"{k} {v:g} Hz" for k, v in full.items()) + ".")
     for c, soak in soaks:
         late = int(np.sum(soak["lat"] > LATE_MS))
-        name = "bare republisher" if c == "bare" else f"estimator ({c})"
-        print(f"\n- Soak: {name} at 500 Hz for {a.soak:g} s: {soak['answered']}/{soak['sent']} "
+        print(f"\n- Soak: {names.get(c, f'estimator ({c})')} at 500 Hz for {a.soak:g} s: "
+              f"{soak['answered']}/{soak['sent']} "
               f"answered, p50 {soak['p50']:.3f} ms, p99 {soak['p99']:.3f} ms, max {soak['max']:.2f} ms, "
               f"{late} answers later than {LATE_MS:g} ms, node CPU {soak['cpu']:.2f}"
               + (f"; {soak['trace']}" if soak["trace"] else "") + ".")

@@ -26,7 +26,7 @@ from .params import ConfigError
 __all__ = ["run_node"]
 
 
-def _quiet_interrupt_in_finalizers(hook=sys.unraisablehook):
+def _quiet_interrupt_in_finalizers(hook):
     """An ``sys.unraisablehook`` that drops a KeyboardInterrupt raised inside a finalizer.
 
     rclpy's SIGINT handler raises KeyboardInterrupt wherever the main thread is; when that is a
@@ -45,7 +45,7 @@ def _quiet_interrupt_in_finalizers(hook=sys.unraisablehook):
 def run_node(node_cls, prog: str, args=None) -> int:
     """Run ``node_cls()`` until shutdown; the process's exit code (see the module docstring)."""
     single_threaded_blas()  # small matrices; see switchobs_core.threads
-    sys.unraisablehook = _quiet_interrupt_in_finalizers()
+    sys.unraisablehook = _quiet_interrupt_in_finalizers(sys.unraisablehook)
     try:
         rclpy.init(args=args)
     except KeyboardInterrupt:

@@ -22,7 +22,14 @@ from switchobs_core.kalman import (
 )
 from switchobs_core.kalman_online import OnlineKalman
 from switchobs_core.noise import NoiseModel, default_noise
-from switchobs_core.propagation import COMPOSE_GRID, DEFAULT_DT_RESOLUTION, split_step, taylor_pair, van_loan
+from switchobs_core.propagation import (
+    COMPOSE_GRID,
+    DEFAULT_DT_RESOLUTION,
+    quantize_dt,
+    split_step,
+    taylor_pair,
+    van_loan,
+)
 from switchobs_core.riccati import (
     DiscretizationCache,
     RiccatiError,
@@ -294,8 +301,8 @@ def test_jittered_discretization_keeps_its_doubles(dts, seed):
     Qc = np.diag(np.random.default_rng(seed).uniform(1e-6, 1e-2, A.shape[0]))
     cache = DiscretizationCache(A, np.zeros((A.shape[0], 0)), Qc)
     for dt in dts:
-        Phi, _, Qd = cache.get(dt)
-        dtq = round(dt * 1e9) * 1e-9
+        _, _, Qd = cache.get(dt)
+        dtq = quantize_dt(dt, DEFAULT_DT_RESOLUTION)
         qc, r = split_step(dtq, DEFAULT_DT_RESOLUTION)
         if qc > 0 and r > 0:
             Phi_a, _, Qd_a = discretize(A, np.zeros((A.shape[0], 0)), Qc, qc * COMPOSE_GRID)
