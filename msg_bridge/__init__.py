@@ -31,6 +31,7 @@ from .convert import (
     unpack_labelled,
     xy_to_pose,
 )
+from .inputs import message_class
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
 from .validate import (
     BridgeError,
@@ -40,6 +41,7 @@ from .validate import (
     check_channel,
     check_pose,
     check_stamp,
+    check_values,
 )
 
 __all__ = [
@@ -60,8 +62,10 @@ __all__ = [
     "check_channel",
     "check_pose",
     "check_stamp",
+    "check_values",
     "envelope_labels",
     "labelled_array",
+    "message_class",
     "ns_to_stamp",
     "pose_to_xy",
     "stamp_to_ns",

@@ -18,7 +18,8 @@ from switchobs_core.exceptions import SwitchobsError
 
 from .stamps import stamp_to_ns
 
-__all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp"]
+__all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp",
+           "check_values"]
 
 
 class Reason(enum.Enum):
@@ -37,6 +38,8 @@ class Reason(enum.Enum):
     STALE_AFTER_SWITCH = "stale_after_switch"  # target pose taken before the last switch
     INTERNAL_ERROR = "internal_error"    # an exception while handling the message (counted, node runs on)
     BAD_LAYOUT = "bad_layout"            # a labelled array that is not ours, or names no state entry
+    AMBIGUOUS_CHANNEL = "ambiguous_channel"  # the sample's channel was not certain (never guessed)
+    INCONSISTENT = "inconsistent"        # the innovation exceeds what the published bound allows
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,17 @@ def check_pose(
                          f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
     return check_stamp(stamp_to_ns(st), last_ns=last_ns, now_ns=now_ns,
                        future_tolerance_ns=future_tolerance_ns)
+
+
+def check_values(values, fields=None, *, max_abs: float = 1e6) -> Rejection | None:
+    """Every value read from a message finite and within ``max_abs`` (``fields`` names them)."""
+    for k, v in enumerate(values):
+        name = fields[k] if fields is not None and k < len(fields) else f"value {k}"
+        if not math.isfinite(v):
+            return Rejection(Reason.NON_FINITE, name, f"{v}")
+        if abs(v) > max_abs:
+            return Rejection(Reason.TOO_LARGE, name, f"|{v:g}| > {max_abs:g}")
+    return None
 
 
 def check_after_switch(stamp_ns: int, switch_ns: int | None, field: str = "header.stamp") -> Rejection | None:

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
-# All tests: ruff check, then pytest over test/ (core and ros). Extra arguments go to pytest
-# (e.g. `scripts/test.sh -m "not slow"`). The ROS tests claim their own ROS_DOMAIN_ID.
+# All tests: ruff check, then pytest. Arguments go to pytest: with none naming a test path
+# (a file, a folder or a node id such as test/ros/test_x.py::test_y) pytest runs all of test/
+# (core and ros); with one or more it runs just those (`scripts/test.sh test/core/test_plan.py`).
+# `scripts/test.sh -m "not slow"` skips the DDS convergence runs and the colcon build.
+# The ROS tests claim their own ROS_DOMAIN_ID.
 set -euo pipefail
 "$(dirname "$0")/bootstrap.sh"
 . "$(dirname "$0")/lib.sh"
@@ -9,4 +12,17 @@ cd "$REPO"
 echo "== ruff check"
 "$VENV/bin/ruff" check .
 echo "== pytest"
+paths=()
+skip_next=0
+for a in "$@"; do
+    if [ "$skip_next" = 1 ]; then skip_next=0; continue; fi
+    case "$a" in
+        -m|-k|-p|-c|-o|--rootdir|--deselect|--ignore|--junitxml|--maxfail|-W) skip_next=1 ;;  # takes a value
+        -*) ;;
+        *) if [ -e "${a%%::*}" ]; then paths+=("$a"); fi ;;
+    esac
+done
+if [ "${#paths[@]}" -gt 0 ]; then
+    exec "$VENV/bin/python" -m pytest "$@"
+fi
 exec "$VENV/bin/python" -m pytest test "$@"

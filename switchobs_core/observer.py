@@ -959,6 +959,34 @@ class SwitchedObserver:
             x += e.GB @ self._u
         return x
 
+    def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
+        """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample
+        held) and the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape
+        matrix ``S`` of an ellipsoid ``{S^(1/2) u : ||u|| <= 1}`` holding the error
+        (:class:`~switchobs_core.rounding.ErrorEllipsoid`, rounding included), or a float norm
+        bound where no ellipsoid is kept; ``noise`` is None without a declared ``noise_max``. The
+        state is unchanged.
+
+        The innovation test of :mod:`switchobs_core.consistency` takes these: a sample at ``t``
+        whose innovation exceeds what they allow proves the model broken for that sample.
+        """
+        x = self.predict(t, hold=True)
+        dt = float(t) - self._t
+        if self._ell is None:
+            env = self.envelope(t)
+            return x, env.exact_bound, env.noise_bound
+        if dt <= 0:
+            return x, self._ell.S.copy(), None if self._ellv is None else self._ellv.S.copy()
+        step = self._cache.step(self._key, dt)
+        xn = math.sqrt(float(self._x @ self._x))
+        xpn = math.sqrt(float(x @ x))
+        S, _ = self._ell.propagate(step.E, self._rho_step(step, dt, xn, xpn, self._ell))
+        Sv = None
+        if self._ellv is not None:
+            Sv, _ = self._noise_step(self._ellv, step.E, self._rho_step(step, dt, xn, xpn, self._ellv), step.GL,
+                                     keep=False)
+        return x, S, Sv
+
     def envelope(self, t: float | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
 

@@ -129,7 +129,7 @@ SCENARIOS: dict[str, Callable[..., LTISystem]] = {
 }
 
 
-def build_scenario(name: str, **params: Any) -> LTISystem:
+def build_scenario(name: str, /, **params: Any) -> LTISystem:
     """Build a built-in scenario by name with its keyword parameters."""
     if name not in SCENARIOS:
         raise InvalidSystem(f"unknown scenario {name!r}; built-in scenarios: {', '.join(sorted(SCENARIOS))}")

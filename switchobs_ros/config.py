@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 import msg_bridge as mb
+from msg_bridge.inputs import InputSpecs, SpecError, load_inputs
 from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
@@ -29,14 +30,18 @@ from switchobs_core.system import LTISystem
 
 from .core_config import (
     GAIN_FAMILY_PARAM,
-    camera_target_rows,
     cycles_from_params,
     load_system_param,
     noise_from_params,
 )
 from .params import ConfigError, Param
 
-__all__ = ["PARAMS", "EstimatorConfig", "params_from_file"]
+__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
+
+#: Values of the ``consistency.check`` parameter (switchobs_ros.pipeline).
+CONSISTENCY = ("auto", "on", "off")
+#: Longest reorder window: a sample waits at most this long for its channel (1 s).
+MAX_REORDER_WINDOW_MS = 1000.0
 
 #: The estimator node's parameters (the README's parameter table is checked against it).
 PARAMS = [
@@ -76,6 +81,16 @@ PARAMS = [
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
+    Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
+          "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
+          "or the paper interface (camera/pose, target/pose, camera/active_channel) for camera/target systems."),
+    Param("reorder_window_ms", 50.0, "Milliseconds a sample of a topic shared by several channels waits for its "
+          "channel to be certain (a channel message sent after it) before the latest channel sent before it is "
+          "taken; DDS reorders topics under load. 0: the latest channel received (arrival order)."),
+    Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
+          "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
+          "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
+          "noise-free samples), on (also without noise.max: noise-free samples against exact_bound), off."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
@@ -199,7 +214,7 @@ class EstimatorConfig:
     cycles: tuple[Cycle, ...]
     robust: tuple[float, float] | None
     x0: np.ndarray
-    rows: tuple
+    inputs: InputSpecs
     family: str
     noise: NoiseModel
     noise_max: float | None
@@ -253,7 +268,16 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
                               f"states ({', '.join(sys_.state_labels)})")
         x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
-        rows = camera_target_rows(sys_, values["camera_body"])
+        try:
+            inputs = load_inputs(values["system"], sys_, camera_body=values["camera_body"], override=values["inputs"])
+        except (mb.BridgeError, SpecError) as err:
+            raise ConfigError(f"input specification: {err}") from None
+        if values["consistency.check"] not in CONSISTENCY:
+            raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "
+                              f"got {values['consistency.check']!r}")
+        win = values["reorder_window_ms"]
+        if not (math.isfinite(win) and 0 <= win <= MAX_REORDER_WINDOW_MS):
+            raise ConfigError(f"parameter 'reorder_window_ms' must be in [0, {MAX_REORDER_WINDOW_MS:g}] ms; got {win}")
         family = values["gain_family"]
         if family not in GAIN_FAMILY_PARAM:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
@@ -277,6 +301,6 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
         return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
-                   rows=tuple(rows), family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
+                   inputs=inputs, family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
                    child_frames=tuple(frames) if frames else tuple(bodies))

@@ -36,12 +36,12 @@ that go back without the clock going back are rejected as ``old_stamp``, never s
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold, TimeJump
@@ -210,13 +210,23 @@ class EstimatorMixin:
         self.w_pred_bound = mb.LabelledArrayWriter(PREDICTION_BOUND_LABELS)
         self.predictions = 0
         self.last_prediction = None
-        self.sub_channel = sub(UInt8, "camera/active_channel", self.channel_callback, qos.CHANNEL_SUB)
-        self.sub_camera = sub(PoseStamped, "camera/pose", self.camera_callback, qos.SENSOR_SUB)
-        self.sub_target = sub(PoseStamped, "target/pose", self.target_callback, qos.SENSOR_SUB)
+        # inputs (the system's input specification): the channel topic first, so that, when a
+        # channel message and a pose are ready together, the executor takes the channel first
+        # (attribution does not depend on it: source timestamps, see the pipeline)
+        self._input_subs = []
+        hot = []
+        if pl.channel_topic:
+            handle = self._input_handler(None)
+            self.sub_channel = sub(UInt8, pl.channel_topic, self._with_drain(handle), qos.CHANNEL_SUB)
+            hot.append((self.sub_channel, handle))
+        for src in pl.sources:
+            handle = self._input_handler(src.index)
+            s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB)
+            self._input_subs.append(s)
+            hot.append((s, handle))
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
         self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
-        self._hot_inputs = ((self.sub_channel, self._on_channel), (self.sub_camera, self._on_camera),
-                            (self.sub_target, self._on_target))
+        self._hot_inputs = tuple(hot)
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -225,7 +235,7 @@ class EstimatorMixin:
                           min_backward=Duration(nanoseconds=-1), on_clock_change=False),
             post_callback=self.clock_jump_callback)
         self.diag_timer = self.create_timer(cfg["diagnostics_period"], self.diagnostics_callback)
-        self.pair_timer = self.create_timer(max(self.pair_timeout / 2, 0.005), self.pairing_callback)
+        self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback)
 
     def _destroy_interfaces(self) -> None:
         """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
@@ -238,7 +248,10 @@ class EstimatorMixin:
             self.destroy_publisher(pub)
         self.pub_odom = []
         self._hot_inputs = ()
-        for name in ("sub_channel", "sub_camera", "sub_target", "sub_set_state"):
+        for sub in getattr(self, "_input_subs", []):
+            self.destroy_subscription(sub)
+        self._input_subs = []
+        for name in ("sub_channel", "sub_set_state"):
             sub = getattr(self, name, None)
             if sub is not None:
                 self.destroy_subscription(sub)
@@ -258,35 +271,30 @@ class EstimatorMixin:
     #: counted) before it returns to the executor (:meth:`_drain_inputs`).
     DRAIN_MAX = 32
 
-    def channel_callback(self, msg: UInt8) -> None:
-        self._on_channel(msg)
-        self._drain_inputs()
+    def _input_handler(self, index: int | None):
+        """The handler of one input: ``handle(msg, info)`` with rclpy's MessageInfo ``info`` (its
+        ``source_timestamp``, the publisher's clock, attributes samples to channels); ``index``
+        None is the channel topic."""
+        pipeline, clock = self.pipeline, self.get_clock()
 
-    def camera_callback(self, msg: PoseStamped) -> None:
-        self._on_camera(msg)
-        self._drain_inputs()
+        def handle(msg, info) -> None:
+            if not self.answering:
+                self.ignored_inactive += 1
+                return
+            src_ns = info.get("source_timestamp") if info else None
+            src_ns = int(src_ns) if src_ns else None
+            if index is None:
+                self._publish_all(pipeline.on_channel(msg, src_ns=src_ns))
+            else:
+                self._publish_all(pipeline.on_input(index, msg, clock.now().nanoseconds, None, src_ns))
+        return handle
 
-    def target_callback(self, msg: PoseStamped) -> None:
-        self._on_target(msg)
-        self._drain_inputs()
-
-    def _on_channel(self, msg: UInt8) -> None:
-        if not self.answering:
-            self.ignored_inactive += 1
-            return
-        self.pipeline.on_channel(msg)
-
-    def _on_camera(self, msg: PoseStamped) -> None:
-        if not self.answering:
-            self.ignored_inactive += 1
-            return
-        self._publish_all(self.pipeline.on_pose("camera", msg, self.get_clock().now().nanoseconds))
-
-    def _on_target(self, msg: PoseStamped) -> None:
-        if not self.answering:
-            self.ignored_inactive += 1
-            return
-        self._publish_all(self.pipeline.on_pose("target", msg, self.get_clock().now().nanoseconds))
+    def _with_drain(self, handle):
+        """The subscription callback: the handler, then the inputs already waiting."""
+        def callback(msg, info) -> None:
+            handle(msg, info)
+            self._drain_inputs()
+        return callback
 
     def _drain_inputs(self) -> None:
         """Take the input messages already waiting (channel, camera, target: one of each per
@@ -311,7 +319,7 @@ class EstimatorMixin:
                     except InvalidHandle:       # destroyed (managed node cleanup)
                         return
                     if got is not None:
-                        handle(got[0])
+                        handle(got[0], got[1])
                         n += 1
                 if n == took:
                     return
@@ -325,6 +333,11 @@ class EstimatorMixin:
             self.ignored_inactive += 1
             return
         self.pipeline.on_set_state(msg, self.get_clock().now().nanoseconds)
+
+    def _pairing_period(self) -> float:
+        """Period of the pairing timer: half the pairing timeout or of the reorder window (>= 5 ms)."""
+        window = self.pipeline.window_ns * 1e-9 if self.pipeline.channel_topic else math.inf
+        return max(min(self.pair_timeout, window) / 2, 0.005)
 
     def pairing_callback(self) -> None:
         if not self.answering:
@@ -369,7 +382,7 @@ class EstimatorMixin:
             elif p.name == "pairing_timeout":
                 self.pair_timeout = float(p.value)
                 self.destroy_timer(self.pair_timer)
-                self.pair_timer = self.create_timer(max(self.pair_timeout / 2, 0.005), self.pairing_callback)
+                self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback)
             elif p.name == "diagnostics_period":
                 self.destroy_timer(self.diag_timer)
                 self.diag_timer = self.create_timer(float(p.value), self.diagnostics_callback)

@@ -1,27 +1,60 @@
-"""The estimator's input handling, without a node: validation, pairing, the observer, counters.
+"""The estimator's input handling, without a node: validation, attribution, pairing, the
+consistency test, the observer, counters.
 
 :class:`EstimatorPipeline` is what the estimator node runs on every message, and what the bag
 tools run over a bag without DDS (``switchobs_bag estimate``), so the live node and the
 offline run compute the same estimates from the same messages. It holds no rclpy node,
 executor or publisher: the caller passes each incoming message with the node clock (``now_ns``)
-and publishes (or writes) the :class:`Estimate` objects it gets back.
+and, when the middleware gives it, the publisher's source timestamp (``src_ns``), and publishes
+(or writes) the :class:`Estimate` objects it gets back.
 
-Measurement pairing
--------------------
-Channel rho's output is ``y = [p_camera; p_target]``. ``camera/pose`` and ``target/pose``
-arrive separately with (normally) the same header stamp: the pipeline keeps the pending samples
-by stamp (up to :data:`MAX_PENDING`) and calls ``observer.update(t, rho, y)`` when both halves
-are there. A half whose partner does not come (a newer pair completes, or the caller's
-:meth:`EstimatorPipeline.flush_overdue` finds it older than ``pairing_timeout``) is used alone
-through the observer's partial-rows input (``rows=``). The target pose is attributed to the
-latest channel received on ``camera/active_channel`` (UInt8 has no stamp): a publisher must
-send the new channel before the first target pose of that channel.
+Measurements
+------------
+The observer sees only measurements ``(stamp_ns, channel, rows, y)``
+(:class:`switchobs_core.measurement.Measurement`). Where they come from is the system's input
+specification (:mod:`msg_bridge.inputs`): sources (topic, message type, fields -> output rows),
+each belonging to one channel or shared by all, and optionally a channel topic
+(``std_msgs/UInt8``, 1..N) for sources shared by several channels. The paper's interface is
+one such specification and the default: ``camera/pose`` (shared rows: the camera sees itself
+whatever the channel), ``target/pose`` (the agent now in view: its channel comes from the
+channel topic) and ``camera/active_channel``.
 
-Dead time (``schedule.dead_time`` d > 0): after a switch the camera turns and only camera
-poses come. From the first camera pose after a channel change (stamp ``s_0``) until the first
-target pose of the new channel, a camera pose stamped before ``s_0 + d - (camera period)`` is
-certainly blind (``s_0`` is at most one period after the switching instant) and is used alone
-at once instead of waiting for a partner; one near the end of the dead time waits as usual.
+Pairing: the sources' messages with the same header stamp form one sample. The pipeline keeps
+the pending samples by stamp (up to :data:`MAX_PENDING`) and runs the observer on a sample
+when every source of its channel has arrived. A part whose partners do not come (a newer
+sample completes, or the caller's :meth:`EstimatorPipeline.flush_overdue` finds it older than
+``pairing_timeout``) is used alone through the observer's partial-rows input (``rows=``).
+
+Attribution (never by arrival order)
+------------------------------------
+A source of one channel names its channel. A source shared by several channels takes the
+channel that was active when its message was *sent*: the latest channel message whose source
+timestamp (the publisher's clock, which rclpy passes in ``MessageInfo``) is not after the
+sample's. DDS and the executor reorder messages of different topics under load, so a sample
+waits, in a bounded reorder window (``reorder_window_ms``), until its channel is certain: a channel
+message sent after it has arrived (the channel topic is reliable and keeps its order), or the
+window has passed. A sample that is still ambiguous then (its source timestamp is older than
+the channel history kept) is dropped and counted (``ambiguous_channel``), never guessed. A channel
+message that arrives after samples it governs were answered (a window too short for the load)
+withdraws the bounds: an answered sample may have had the wrong channel. Without source
+timestamps (offline: a bag's messages are in the order the recorder wrote them) the latest
+channel received is the channel, as the order is the publishing order.
+
+Consistency (the model against the data)
+----------------------------------------
+With ``consistency.check`` on (``auto``: when a noise bound ``noise.max`` is declared, 0 for
+noise-free samples) every sample is tested before it is used
+(:mod:`switchobs_core.consistency`): its innovation cannot exceed what the published bound
+allows if the model holds. A sample that does proves the model broken for it: when exactly one
+other channel explains it, it is re-attributed (``reattributed``); else it is rejected
+(``inconsistent``), and every bound is withdrawn (:data:`NO_BOUND`) until a reset, with the
+reason in diagnostics. A published guarantee is never silently false.
+
+Dead time (``schedule.dead_time`` d > 0): after a switch the camera turns and only the shared
+rows come. From the first shared-rows sample after a channel change (stamp ``s_0``) until the
+first channel-specific part of the new channel, a shared-rows sample stamped before
+``s_0 + d - (its period)`` is certainly blind (``s_0`` is at most one period after the switching
+instant) and is used alone at once instead of waiting for a partner.
 
 Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
@@ -30,25 +63,20 @@ Every estimate carries the stamp of the sample it answers.
 Failure behaviour (the table is in README.md, "Failure behaviour")
 -------------------------------------------------------------------
 * Every message is validated (:mod:`msg_bridge.validate`); a rejected one is counted under
-  ``(topic, reason)`` and changes nothing else. A target pose stamped at or before the newest
-  target pose received before the latest channel change is ``stale_after_switch``: it was taken
-  while the previous channel was active (the channel message has no stamp, so this is all the
-  node knows of the switching instant; camera poses do not depend on the channel, so a camera
-  pose that DDS delivers before the channel message of the same tick changes nothing).
+  ``(topic, reason)`` and changes nothing else. Without source timestamps, a part of a channel
+  topic sample stamped at or before the newest such part received before the latest channel
+  change is ``stale_after_switch``: it was taken while the previous channel was active.
 * Any exception while handling a message is caught, counted (``internal_error``) and logged;
   an estimate that is not finite is never returned (the estimator resets instead).
 * Residence times are measured from the sample stamps at every switch and compared with
-  what the gains were designed for: ``[h_min, h_max]`` (assumption A2) in robust mode, the
-  scheduled ``h_i +- match_tol`` otherwise (:meth:`EstimatorPipeline.residence`). A channel that
-  stays longer, or a switch that comes sooner, is reported with the measured time and the
-  paper's factors of the cycle so far; the estimate keeps going with the gains it has.
+  what the gains were designed for (:meth:`EstimatorPipeline.residence`).
 * Without samples, :meth:`EstimatorPipeline.predict` gives the observer's prediction at a
-  later time (what the next update will propagate: the last innovation held) and its exact
-  bound ``||Phi(t, t0)|| e0``, which grows honestly with the outage.
+  later time and its exact bound ``||Phi(t, t0)|| e0``, which grows honestly with the outage.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 import traceback
@@ -62,6 +90,7 @@ from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from switchobs_core.consistency import Consistency, check_innovation, spectral_norm
 from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.observer import SwitchedObserver
@@ -70,24 +99,25 @@ from .config import EstimatorConfig
 from .core_config import load_or_design_table
 from .params import ConfigError
 
-__all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate", "EstimatorPipeline",
-           "PipelineLog", "Prediction", "Residence"]
+__all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate",
+           "EstimatorPipeline", "PipelineLog", "Prediction", "Residence"]
 
-PARTS = ("camera", "target")
 #: ``exact_bound`` published after a reset: no bound is known any more. ``||Phi(t, t0)|| e0`` holds
 #: only if ``||x_hat(t0) - x(t0)|| <= e0`` at the time origin; the configured ``e0`` is the user's
 #: claim for the start, but after a reset (``~/reset``, a clock jump back, a non-finite estimate)
 #: the plant has moved on and nothing bounds the new initial error. -1 is finite (the node never
 #: publishes non-finite values) and cannot be a norm bound.
 NO_BOUND = -1.0
-#: Input topic of each pose part, and of the channel (relative names, as the node subscribes).
+#: The paper interface's topics (the default input specification; relative names).
 POSE_TOPICS = {"camera": "camera/pose", "target": "target/pose"}
 CHANNEL_TOPIC = "camera/active_channel"
 #: The set-state input's name in the counters (robot_localization's set_pose analogue).
 SET_STATE_TOPIC = "~/set_state"
 INPUT_TOPICS = (POSE_TOPICS["camera"], POSE_TOPICS["target"], CHANNEL_TOPIC)
-#: Samples kept waiting for their other half (a backlog reorders the two topics a little).
-MAX_PENDING = 8
+#: Samples kept waiting for their partners or for their channel (a backlog, the reorder window).
+MAX_PENDING = 64
+#: Channel messages remembered for attribution by source timestamp.
+CHANNEL_HISTORY = 256
 
 
 @dataclass(frozen=True)
@@ -137,34 +167,67 @@ class PipelineLog:
         pass
 
 
-class _Pending:
-    """One sample being assembled: the halves that have arrived for one stamp."""
+@dataclass(frozen=True)
+class Source:
+    """One input source as the pipeline uses it (built from a :class:`msg_bridge.InputSource`).
 
-    __slots__ = ("channel", "since", "stamp_ns", "xy")
+    ``rows[c - 1]`` are the rows of channel ``c``'s output that the source's fields feed;
+    ``channel`` is None for a source shared by several channels; ``shared`` is True when its
+    rows are the same quantities in every channel (the camera's own pose), so its samples need
+    no channel to be read; ``pose`` selects the PoseStamped checks of :func:`msg_bridge.check_pose`.
+    """
+
+    index: int
+    topic: str
+    type: str
+    channel: int | None
+    rows: tuple[tuple[int, ...], ...]
+    shared: bool
+    read: Any
+    pose: bool
+
+
+class _Part:
+    """One source's message in a pending sample."""
+
+    __slots__ = ("arrival_channel", "src_ns", "values")
+
+    def __init__(self, values: np.ndarray, src_ns: int | None, arrival_channel: int):
+        self.values = values
+        self.src_ns = src_ns
+        self.arrival_channel = arrival_channel
+
+
+class _Pending:
+    """One sample being assembled: the parts that have arrived for one stamp."""
+
+    __slots__ = ("parts", "since", "stamp_ns")
 
     def __init__(self, stamp_ns: int, since: float):
         self.stamp_ns = stamp_ns
-        self.xy: dict[str, np.ndarray] = {}
-        self.channel = 0
+        self.parts: dict[int, _Part] = {}
         self.since = since
 
 
 class EstimatorPipeline:
-    """Validation, pairing and the switched observer for the estimator's three input topics.
+    """Validation, attribution, pairing, the consistency test and the switched observer for the
+    estimator's inputs (module docstring).
 
     Build it with :meth:`from_params` (the estimator's parameter values). Feed it with
-    :meth:`on_channel` and :meth:`on_pose`; both return the estimates they produced (possibly
-    none), in stamp order.
+    :meth:`on_message` (any input topic), or :meth:`on_channel` / :meth:`on_input`; each returns
+    the estimates it produced (possibly none), in stamp order.
 
     Counters (never cleared, reported in diagnostics): ``accepted`` (per input topic),
     ``rejected`` (per ``(topic, reason)``), ``updates``, ``partial_updates``, ``switches``,
-    ``resets``, ``errors``; ``last_rejection`` is the latest rejection's text.
+    ``resets``, ``errors``, ``inconsistent``, ``reattributed``, ``late_channel``;
+    ``last_rejection`` is the latest rejection's text.
     """
 
-    def __init__(self, system, table, observer, *, x0: np.ndarray, rows, input_frame_id: str = "map",
-                 max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000,
-                 log: PipelineLog | None = None, table_path: Any = None, mode: str = "periodic",
-                 cycles: list | None = None):
+    def __init__(self, system, table, observer, *, x0: np.ndarray, sources: list[Source] | None = None,
+                 channel_topic: str | None = CHANNEL_TOPIC, rows=None, input_frame_id: str = "map",
+                 max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
+                 table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
+                 reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = ""):
         self.system = system
         self.table = table
         self.table_path = table_path
@@ -172,24 +235,45 @@ class EstimatorPipeline:
         self.cycles = list(cycles or [])
         self.observer = observer
         self.x0 = np.array(x0, dtype=float)
-        self.rows = rows
+        if sources is None:        # the paper's interface from camera/target rows (tests, old callers)
+            sources = paper_sources(rows)
+        self.sources = tuple(sources)
+        self.by_topic = {s.topic: s for s in self.sources}
+        self.channel_topic = channel_topic if any(s.channel is None and not s.shared for s in self.sources) \
+            or channel_topic == CHANNEL_TOPIC else channel_topic
+        self.specs_text = specs_text
         self.in_frame = input_frame_id
         self.max_abs = max_abs
         self.future_ns = int(future_tolerance_ns)
+        self.window_ns = int(reorder_window_ns)
+        self.check = bool(check)
         self.log = log or PipelineLog()
         self.N = system.N
+        self._p = tuple(int(p) for p in system.p)
+        self._C = tuple(np.asarray(C, dtype=float) for C in system.C)
+        self._norms: dict = {}                   # (channel, rows) -> (C_rows, ||C_rows||_2 bound)
+        # the sources every sample of channel c needs (its own and the shared ones)
+        self._required = tuple(tuple(s.index for s in self.sources if s.channel in (None, c))
+                               for c in range(1, self.N + 1))
+        self._shared0 = next((s.index for s in self.sources if s.shared), None)
         # run-time state (cleared by reset)
-        self.channel = 0
-        self.last_ns: dict[str, int | None] = {p: None for p in PARTS}
+        self.channel = 0                          # the latest channel received (arrival order)
+        self.last_ns: dict[str, int | None] = {s.topic: None for s in self.sources}
         self.pending: dict[int, _Pending] = {}   # by stamp (ns)
         self.origin_ns: int | None = None
         self.obs_ns: int | None = None           # stamp of the last observer update
         self.last_accept_clock_ns: int | None = None
-        self.switch_ns: int | None = None        # newest pose stamp before the latest channel change
+        self.switch_ns: int | None = None        # newest channel-topic part stamp before the latest change
         self.dead_ns = int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9))
-        self.blind_first_ns: int | None = None  # first camera stamp after a channel change (dead time)
+        self.blind_first_ns: int | None = None  # first shared-rows stamp after a channel change (dead time)
         self.target_since_switch = False
-        self.cam_period_ns = 0                   # the latest gap between accepted camera stamps
+        self.cam_period_ns = 0                   # the latest gap between accepted shared-rows stamps
+        self._upto = -1                          # newest stamp of a complete sample: older ones go alone
+        self._ch_src: list[int] = []             # channel history by source timestamp (sorted)
+        self._ch_val: list[int] = []
+        self._ch_dropped = False                 # history truncated (CHANNEL_HISTORY)
+        self._answered_src = -1                  # newest source timestamp of an answered sample
+        self._last_fixed = 0                     # channel of the latest sample from a one-channel source
         # counters (never cleared)
         self.accepted: Counter = Counter()
         self.rejected: Counter = Counter()
@@ -198,7 +282,11 @@ class EstimatorPipeline:
         self.switches = 0
         self.resets = 0
         self.states_set = 0
-        self.bound_valid = True     # False after any reset: see NO_BOUND
+        self.inconsistent = 0
+        self.reattributed = 0
+        self.late_channel = 0
+        self.last_inconsistency = ""
+        self.bound_valid = True     # False after any reset, an inconsistent sample: see NO_BOUND
         self.bound_invalid_why = ""
         self.errors = 0
         self.nonfinite = 0          # estimates withheld because not finite (each followed by a reset)
@@ -234,35 +322,80 @@ class EstimatorPipeline:
                                         noise_max=conf.noise_max)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
-        pipe = cls(sys_, table, observer, x0=conf.x0, rows=list(conf.rows), input_frame_id=conf["input_frame_id"],
+        mode_check = conf["consistency.check"]
+        check = mode_check == "on" or (mode_check == "auto" and conf.noise_max is not None)
+        pipe = cls(sys_, table, observer, x0=conf.x0, sources=sources_from_specs(conf.inputs, sys_),
+                   channel_topic=conf.inputs.channel_topic, input_frame_id=conf["input_frame_id"],
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
-                   log=log, table_path=table_path, mode=mode, cycles=cycles)
+                   log=log, table_path=table_path, mode=mode, cycles=cycles,
+                   reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
+                   specs_text=conf.inputs.describe())
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
         return pipe
 
     # ------------------------------------------------------------------ inputs
-    def on_channel(self, msg: UInt8) -> None:
-        """A ``camera/active_channel`` message: validate, count, remember the channel."""
+    @property
+    def input_topics(self) -> tuple[str, ...]:
+        """Every input topic (sources, then the channel topic), relative names."""
+        return tuple(s.topic for s in self.sources) + ((self.channel_topic,) if self.channel_topic else ())
+
+    def on_message(self, topic: str, msg: Any, now_ns: int, now_mono: float | None = None,
+                   src_ns: int | None = None) -> list[Estimate]:
+        """A message on input ``topic`` (a source or the channel topic; relative name)."""
+        if topic == self.channel_topic:
+            return self.on_channel(msg, src_ns=src_ns, now_mono=now_mono)
+        return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns)
+
+    def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None) -> list[Estimate]:
+        """A channel-topic message: validate, count, remember the channel (by its source timestamp
+        ``src_ns`` when given); returns the pending samples it makes certain, answered."""
+        out: list[Estimate] = []
+        topic = self.channel_topic or CHANNEL_TOPIC
         try:
             rej = mb.check_channel(msg, self.N)
             if rej is not None:
-                self.reject(CHANNEL_TOPIC, rej)
-                return
-            self.accepted[CHANNEL_TOPIC] += 1
+                self.reject(topic, rej)
+                return out
+            self.accepted[topic] += 1
             c = int(msg.data)
             if c != self.channel:
                 if self.channel:
                     self.switches += 1
                 self.channel = c
-                # camera poses do not depend on the channel; target poses up to this stamp
-                # were taken while the previous channel was active
-                if self.last_ns["target"] is not None:
-                    self.switch_ns = self.last_ns["target"]
+                # (no source timestamps) parts up to this stamp were taken while the previous
+                # channel was active
+                if self._dep_last_ns() is not None:
+                    self.switch_ns = self._dep_last_ns()
                 self.blind_first_ns = None
                 self.target_since_switch = False
+            if src_ns is not None:
+                self._remember_channel(int(src_ns), c)
+            self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
-            self.internal_error(CHANNEL_TOPIC, err)
+            self.internal_error(topic, err)
+        return out
+
+    def _remember_channel(self, src: int, c: int) -> None:
+        """Insert a channel message into the history by source timestamp; a late one that changes
+        the channel of samples already answered withdraws the bounds (module docstring)."""
+        k = bisect.bisect_right(self._ch_src, src)
+        if src <= self._answered_src:
+            before = self._ch_val[k - 1] if k else 0
+            if before != c:
+                self.late_channel += 1
+                self._withdraw(f"a channel message (channel {c}) arrived after samples it governs were answered "
+                               "(raise reorder_window_ms)")
+        self._ch_src.insert(k, src)
+        self._ch_val.insert(k, c)
+        if len(self._ch_src) > CHANNEL_HISTORY:
+            del self._ch_src[0], self._ch_val[0]
+            self._ch_dropped = True
+
+    def _dep_last_ns(self) -> int | None:
+        stamps = [self.last_ns[s.topic] for s in self.sources if s.channel is None and not s.shared
+                  and self.last_ns[s.topic] is not None]
+        return max(stamps) if stamps else None
 
     def on_set_state(self, msg: Any, now_ns: int) -> bool:
         """A ``~/set_state`` message (robot_localization's ``set_pose``): a labelled array (the
@@ -325,21 +458,31 @@ class EstimatorPipeline:
             self.internal_error(topic, err)
             return False
 
-    def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None) -> list[Estimate]:
-        """A pose of ``part`` (``"camera"`` or ``"target"``) received at node-clock ``now_ns``.
+    def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None,
+                src_ns: int | None = None) -> list[Estimate]:
+        """A pose of the paper interface's ``part`` (``"camera"`` or ``"target"``); see :meth:`on_input`."""
+        return self.on_input(self.by_topic[POSE_TOPICS[part]].index, msg, now_ns, now_mono, src_ns)
 
-        ``now_mono`` (default ``time.monotonic()``) starts the pairing timeout of a new
-        pending sample. Returns the estimates produced (none while waiting for the other half).
+    def on_input(self, index: int, msg: Any, now_ns: int, now_mono: float | None = None,
+                 src_ns: int | None = None) -> list[Estimate]:
+        """A message of source ``index`` received at node-clock ``now_ns`` (sent at ``src_ns`` on
+        the publisher's clock, when known).
+
+        ``now_mono`` (default ``time.monotonic()``) starts the pairing timeout and the reorder
+        window of a new pending sample. Returns the estimates produced (none while waiting).
         """
-        topic = POSE_TOPICS[part]
+        src = self.sources[index]
+        topic = src.topic
         out: list[Estimate] = []
+        now_mono = time.monotonic() if now_mono is None else now_mono
         try:
-            rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=self.last_ns[part],
-                                now_ns=now_ns, future_tolerance_ns=self.future_ns)
-            stamp_ns = mb.stamp_to_ns(msg.header.stamp)
-            if rej is None and not self.channel:
-                rej = Rejection(Reason.NO_CHANNEL, CHANNEL_TOPIC, "no active channel received yet")
-            if part == "target" and (rej is None or rej.reason in (Reason.OLD_STAMP, Reason.DUPLICATE_STAMP)):
+            stamp_ns, values, rej = self._validate(src, msg, now_ns)
+            legacy = src_ns is None or not self._ch_src
+            if rej is None and src.channel is None and self.channel_topic and legacy and not self.channel \
+                    and (src_ns is None or not self.window_ns):
+                rej = Rejection(Reason.NO_CHANNEL, self.channel_topic, "no active channel received yet")
+            if not src.shared and src.channel is None and src_ns is None \
+                    and (rej is None or rej.reason in (Reason.OLD_STAMP, Reason.DUPLICATE_STAMP)):
                 rej = mb.check_after_switch(stamp_ns, self.switch_ns) or rej   # the more specific reason
             if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
                 rej = Rejection(Reason.OLD_STAMP, "header.stamp",
@@ -348,31 +491,99 @@ class EstimatorPipeline:
                 self.reject(topic, rej)
                 return out
             self.accepted[topic] += 1
-            if part == "camera" and self.last_ns["camera"] is not None:
-                self.cam_period_ns = stamp_ns - self.last_ns["camera"]
-            elif part == "target":
+            if src.index == self._shared0 and self.last_ns[topic] is not None:
+                self.cam_period_ns = stamp_ns - self.last_ns[topic]
+            elif not src.shared:
                 self.target_since_switch = True
-            self.last_ns[part] = stamp_ns
+            self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
             pend = self.pending.get(stamp_ns)
             if pend is None:
-                pend = self.pending[stamp_ns] = _Pending(stamp_ns, time.monotonic() if now_mono is None else now_mono)
-                if len(self.pending) > MAX_PENDING:      # the oldest half's partner is overdue
-                    self._flush(min(self.pending), out)
-            pend.xy[part] = mb.pose_to_xy(msg)
-            if part == "target" or not pend.channel:
-                pend.channel = self.channel
-            if len(pend.xy) == 2 or (part == "camera" and self._certainly_blind(stamp_ns)):
-                # older samples will not be completed now: use their halves alone, in order
-                for s_old in sorted(s for s in self.pending if s < stamp_ns):
-                    self._flush(s_old, out)
-                self._flush(stamp_ns, out)
+                pend = self.pending[stamp_ns] = _Pending(stamp_ns, now_mono)
+            pend.parts[index] = _Part(values, None if src_ns is None else int(src_ns), self.channel)
+            ch, _ = self._resolve(pend, now_mono)
+            if self._complete(pend, ch) or (src.shared and len(pend.parts) == 1 and self._certainly_blind(stamp_ns)):
+                self._upto = max(self._upto, stamp_ns)      # older samples will not be completed now
+            while len(self.pending) > MAX_PENDING:          # the oldest one's partners are overdue
+                self._flush(min(self.pending), out, now_mono, forced=True)
+            self._advance(out, now_mono)
         except Exception as err:
             self.internal_error(topic, err)
         return out
 
+    def _validate(self, src: Source, msg: Any, now_ns: int) -> tuple[int, np.ndarray, Rejection | None]:
+        """The message's stamp and values, and why it is rejected (None: valid)."""
+        last = self.last_ns[src.topic]
+        if src.pose:
+            rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=last, now_ns=now_ns,
+                                future_tolerance_ns=self.future_ns)
+            stamp_ns = mb.stamp_to_ns(msg.header.stamp)
+            return stamp_ns, np.array(src.read(msg)[2], dtype=float), rej
+        try:
+            stamp_ns, frame, values = src.read(msg)
+        except mb.BridgeError as err:
+            return 0, np.empty(0), Rejection(Reason.BAD_LAYOUT, "layout", str(err))
+        values = np.asarray(values, dtype=float)
+        rej = mb.check_values(values, src.read.fields if hasattr(src.read, "fields") else None,
+                              max_abs=self.max_abs)
+        if rej is None and self.in_frame and frame != self.in_frame:
+            rej = Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{self.in_frame}')")
+        if rej is None:
+            st = msg.header.stamp
+            if st.sec < 0 or st.nanosec >= 1_000_000_000:
+                rej = Rejection(Reason.BAD_STAMP, "header.stamp",
+                                f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
+        if rej is None:
+            rej = mb.check_stamp(stamp_ns, last_ns=last, now_ns=now_ns, future_tolerance_ns=self.future_ns)
+        return stamp_ns, values, rej
+
+    # ------------------------------------------------------------------ attribution and pairing
+    def _resolve(self, pend: _Pending, now_mono: float, force: bool = False) -> tuple[int, bool]:
+        """The channel of a pending sample and whether it is certain (module docstring).
+
+        Channel 0: none was active when the sample was sent; -1: two one-channel sources disagree;
+        -2: ambiguous (older than the channel history kept).
+        """
+        srcs = self.sources
+        fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
+        if fixed:
+            return (fixed.pop(), True) if len(fixed) == 1 else (-1, True)
+        dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
+        if not self.channel_topic:          # shared rows only, one-channel sources elsewhere
+            return self._last_fixed, True
+        stamps = [p.src_ns for p in dep]
+        if any(s is None for s in stamps) or not self._ch_src:
+            if self._ch_src or not self.window_ns or any(s is None for s in stamps) or force:
+                return dep[0].arrival_channel if dep[0].arrival_channel else self.channel, True
+            # source timestamps but no channel message yet: wait for one (the window)
+            return 0, now_mono - pend.since >= self.window_ns * 1e-9
+        s = max(stamps)
+        k = bisect.bisect_right(self._ch_src, s) - 1
+        certain = force or self._ch_src[-1] > s or now_mono - pend.since >= self.window_ns * 1e-9
+        if k < 0:
+            return (-2 if self._ch_dropped else 0), certain
+        return self._ch_val[k], certain
+
+    def _complete(self, pend: _Pending, ch: int) -> bool:
+        return ch > 0 and all(i in pend.parts for i in self._required[ch - 1])
+
+    def _advance(self, out: list[Estimate], now_mono: float, *, timeout: float | None = None,
+                 force: bool = False) -> None:
+        """Answer the pending samples, oldest first, while each is ready: its channel certain and
+        it complete, superseded by a newer complete one, overdue (``timeout``) or ``force``."""
+        while self.pending:
+            s = min(self.pending)
+            pend = self.pending[s]
+            ch, certain = self._resolve(pend, now_mono, force)
+            if not certain:
+                return
+            if not (ch <= 0 or force or s <= self._upto or self._complete(pend, ch)
+                    or (timeout is not None and now_mono - pend.since > timeout)):
+                return
+            self._flush(s, out, now_mono, channel=ch)
+
     def _certainly_blind(self, stamp_ns: int) -> bool:
-        """Whether a camera pose at ``stamp_ns`` lies in the dead time for sure (module docstring)."""
+        """Whether a shared-rows sample at ``stamp_ns`` lies in the dead time for sure (module docstring)."""
         if not self.dead_ns or self.target_since_switch:
             return False
         if self.blind_first_ns is None:
@@ -380,51 +591,74 @@ class EstimatorPipeline:
         return stamp_ns - self.blind_first_ns < self.dead_ns - self.cam_period_ns
 
     def flush_overdue(self, now_mono: float, timeout: float) -> list[Estimate]:
-        """Use alone the pending halves that waited longer than ``timeout`` (s, monotonic clock)."""
+        """Answer the pending samples whose reorder window has passed and that waited longer than
+        ``timeout`` (s, monotonic clock) for their partners (the parts alone)."""
         out: list[Estimate] = []
         try:
-            for s in sorted(self.pending):
-                if now_mono - self.pending[s].since <= timeout:
-                    break
-                self._flush(s, out)
+            self._advance(out, now_mono, timeout=timeout)
         except Exception as err:
             self.internal_error("pairing", err)
         return out
 
     def flush_all(self) -> list[Estimate]:
-        """Use every pending half now, in stamp order (end of a bag)."""
+        """Answer every pending sample now, in stamp order (end of a bag)."""
         out: list[Estimate] = []
         try:
-            for s in sorted(self.pending):
-                self._flush(s, out)
+            self._advance(out, math.inf, force=True)
         except Exception as err:
             self.internal_error("pairing", err)
         return out
 
-    def _flush(self, stamp_ns: int, out: list[Estimate]) -> None:
-        """Run the observer on a pending sample (both halves, or one alone); append the estimate."""
+    def _sample(self, pend: _Pending, ch: int) -> tuple[np.ndarray, tuple[int, ...] | None]:
+        """``(y, rows)`` of a pending sample read as channel ``ch`` (rows None: all of them)."""
+        rows: list[int] = []
+        vals: list[float] = []
+        for i, part in pend.parts.items():
+            rows.extend(self.sources[i].rows[ch - 1])
+            vals.extend(part.values.tolist())
+        order = sorted(range(len(rows)), key=rows.__getitem__)
+        r = tuple(rows[k] for k in order)
+        y = np.array([vals[k] for k in order], dtype=float)
+        return (y, None) if r == tuple(range(self._p[ch - 1])) else (y, r)
+
+    def _flush(self, stamp_ns: int, out: list[Estimate], now_mono: float, *, channel: int | None = None,
+               forced: bool = False) -> None:
+        """Run the observer on a pending sample (every part, or those that came); append the estimate."""
         pend = self.pending.pop(stamp_ns, None)
         if pend is None or (self.obs_ns is not None and stamp_ns <= self.obs_ns):
             return
-        c = pend.channel
-        (cx, cy), (tx, ty) = self.rows[c - 1]
-        cam, tgt = pend.xy.get("camera"), pend.xy.get("target")
-        if cam is not None and tgt is not None:
-            y = np.empty(4)
-            y[cx], y[cy], y[tx], y[ty] = cam[0], cam[1], tgt[0], tgt[1]
-            rows = None
-        elif cam is not None:
-            y, rows = cam, (cx, cy)
-        else:
-            y, rows = tgt, (tx, ty)
+        if channel is None:
+            channel, certain = self._resolve(pend, now_mono)
+            if not certain:          # pushed out of the window before its channel was certain
+                channel = -2
+        topics = [self.sources[i].topic for i in pend.parts]
+        if channel <= 0:
+            reason, detail = {
+                0: (Reason.NO_CHANNEL, "no active channel when it was sent"),
+                -1: (Reason.AMBIGUOUS_CHANNEL, "parts from sources of different channels share one stamp"),
+                -2: (Reason.AMBIGUOUS_CHANNEL, "its channel was not certain within the reorder window"),
+            }[channel]
+            for t in topics:
+                self.reject(t, Rejection(reason, self.channel_topic or "channel", detail))
+            return
+        if self.sources[next(iter(pend.parts))].channel is not None:
+            self._last_fixed = channel
+        y, rows = self._sample(pend, channel)
         if self.origin_ns is None:
             self.origin_ns = pend.stamp_ns
             self.observer.reset(self.x0, 0.0)
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         dt = t - self.observer.t
+        srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
+        if self.check and self.bound_valid:
+            channel, y, rows = self._consistent(pend, t, channel, y, rows)
+            if channel == 0:
+                return
+        if srcs:
+            self._answered_src = max(self._answered_src, max(srcs))
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
-            x_hat = self.observer.update(t, c, y, rows=rows)
+            x_hat = self.observer.update(t, channel, y, rows=rows)
             self.obs_ns = pend.stamp_ns
             self.updates += 1
             if rows is not None:
@@ -454,6 +688,61 @@ class EstimatorPipeline:
             P = None
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P))
 
+    # ------------------------------------------------------------------ consistency
+    def _consistent(self, pend: _Pending, t: float, channel: int, y: np.ndarray,
+                    rows: tuple[int, ...] | None) -> tuple[int, np.ndarray, tuple[int, ...] | None]:
+        """The innovation test of :mod:`switchobs_core.consistency` before the sample is used.
+
+        Returns the channel to use (re-attributed when exactly one other channel explains the
+        sample) with its ``(y, rows)``, or channel 0 when the sample is rejected (the bounds are
+        then withdrawn)."""
+        obs = self.observer
+        with np.errstate(all="ignore"):
+            x_p, exact, noisy = obs.prior(t)
+        vmax = obs.noise_max
+
+        def test(c: int, y_c: np.ndarray, rows_c: tuple[int, ...] | None) -> Consistency:
+            key = (c, rows_c)
+            if key not in self._norms:
+                C = self._C[c - 1] if rows_c is None else self._C[c - 1][list(rows_c)]
+                self._norms[key] = (C, spectral_norm(C))
+            C, nC = self._norms[key]
+            b = exact if vmax is None else noisy
+            return check_innovation(C, c, b, 0.0 if vmax is None else vmax[c - 1], x_p, y_c, nC)
+
+        first = test(channel, y, rows)
+        if first.ok:
+            return channel, y, rows
+        # re-attribution: only a sample whose channel came from the channel topic can have another
+        if any(self.sources[i].channel is None and not self.sources[i].shared for i in pend.parts):
+            fits = []
+            for c in range(1, self.N + 1):
+                if c != channel:
+                    y_c, rows_c = self._sample(pend, c)
+                    if test(c, y_c, rows_c).ok:
+                        fits.append((c, y_c, rows_c))
+            if len(fits) == 1:
+                self.reattributed += 1
+                self.log.warn(f"sample at stamp {pend.stamp_ns} re-attributed from channel {channel} to "
+                              f"{fits[0][0]}, the only channel consistent with it ({first.describe()})", throttle=True)
+                return fits[0]
+        self.inconsistent += 1
+        self.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
+        topic = next((self.sources[i].topic for i in pend.parts if not self.sources[i].shared),
+                     self.sources[next(iter(pend.parts))].topic)
+        self.reject(topic, Rejection(Reason.INCONSISTENT, "innovation", first.describe()))
+        self._withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): the model does not "
+                       "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
+                       "beyond noise.max)")
+        return 0, y, rows
+
+    def _withdraw(self, why: str) -> None:
+        """No bound can be guaranteed any more: publish :data:`NO_BOUND` until a reset."""
+        if self.bound_valid:
+            self.log.error(f"bounds withdrawn: {why}")
+        self.bound_valid = False
+        self.bound_invalid_why = why
+
     # ------------------------------------------------------------------ bookkeeping
     def reject(self, topic: str, rej: Rejection) -> None:
         """Count a rejected message under ``(topic, reason)``."""
@@ -479,7 +768,8 @@ class EstimatorPipeline:
         self.pending = {}
         self.origin_ns = None
         self.obs_ns = None
-        self.last_ns = {p: None for p in PARTS}
+        self._upto = -1
+        self.last_ns = {s.topic: None for s in self.sources}
         self.switch_ns = None
         self.blind_first_ns = None
         self.target_since_switch = False
@@ -527,3 +817,38 @@ class EstimatorPipeline:
         if not (np.isfinite(x).all() and math.isfinite(bound)):
             return None
         return Prediction(int(stamp), x, float(bound) if self.bound_valid else NO_BOUND, elapsed * 1e-9)
+
+
+def _read_pose(msg: PoseStamped) -> tuple[int, str, np.ndarray]:
+    """``(stamp_ns, frame_id, [p_x, p_y])`` of a PoseStamped (the paper interface's reader)."""
+    return mb.stamp_to_ns(msg.header.stamp), msg.header.frame_id, mb.pose_to_xy(msg)
+
+
+_POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+
+
+def paper_sources(rows) -> list[Source]:
+    """The paper interface's sources from per-channel ``((cam_x, cam_y), (tgt_x, tgt_y))`` rows
+    (:func:`~switchobs_ros.core_config.camera_target_rows`)."""
+    return [Source(0, POSE_TOPICS["camera"], _POSE_TYPE, None, tuple(tuple(r[0]) for r in rows), True, _read_pose,
+                   True),
+            Source(1, POSE_TOPICS["target"], _POSE_TYPE, None, tuple(tuple(r[1]) for r in rows), False, _read_pose,
+                   True)]
+
+
+def sources_from_specs(specs: Any, system: Any) -> list[Source]:
+    """The pipeline's sources of an input specification (:class:`msg_bridge.InputSpecs`).
+
+    A source is *shared* when it serves every channel and its rows are the same output labels
+    in each (the camera's own pose): its samples need no channel to be read.
+    """
+    out = []
+    for k, spec in enumerate(specs.sources):
+        rows = tuple(tuple(spec.rows_for(c)) if hasattr(spec, "rows_for") else tuple(spec.rows)
+                     for c in range(1, system.N + 1))
+        labels = {tuple(system.output_labels[c][r] for r in rows[c]) for c in range(system.N)}
+        shared = spec.channel is None and len(labels) == 1
+        pose = spec.type == _POSE_TYPE and tuple(spec.fields) == ("pose.position.x", "pose.position.y")
+        out.append(Source(k, spec.topic, spec.type, spec.channel, rows, shared,
+                          _read_pose if pose else spec.reader.read, pose))
+    return out

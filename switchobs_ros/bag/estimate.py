@@ -62,6 +62,10 @@ class EstimateResult:
     updates: int = 0
     partial_updates: int = 0
     switches: int = 0
+    inconsistent: int = 0              # samples the innovation test refused (switchobs_core.consistency)
+    reattributed: int = 0              # samples it moved to the only channel that explains them
+    bound_valid: bool = True           # False: the bounds were withdrawn (bound_invalid_why says why)
+    bound_invalid_why: str = ""
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     out: str | None = None
     csv: str | None = None
@@ -182,7 +186,9 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         P=np.array(covs).reshape(-1, n, n) if w_cov is not None else None,
         envelope_labels=env_labels, messages_in=len(msgs), inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
-        partial_updates=pl.partial_updates, switches=pl.switches, seconds=seconds,
+        partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
+        reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
+        seconds=seconds,
         out=str(out) if out is not None else None)
     if csv is not None:
         write_csv(csv, res)
