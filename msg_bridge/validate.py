@@ -18,7 +18,8 @@ from switchobs_core.exceptions import SwitchobsError
 
 from .stamps import stamp_to_ns
 
-__all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp"]
+__all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose",
+           "check_stamp"]
 
 
 class Reason(enum.Enum):
@@ -142,3 +143,8 @@ def check_channel(msg: UInt8, N: int) -> Rejection | None:
     if not 1 <= int(msg.data) <= N:
         return Rejection(Reason.BAD_CHANNEL, "data", f"channel {int(msg.data)} is not in 1..{N}")
     return None
+
+
+class SpecError(SwitchobsError, ValueError):
+    """An input specification (topic, message type, fields, rows, channel) that cannot work:
+    a configuration error, refused at start-up with one line (what, where, what to do)."""
