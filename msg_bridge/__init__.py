@@ -1,6 +1,7 @@
 """msg_bridge: ROS 2 messages <-> numpy, and validation of what arrives.
 
-Imports message types only: no node, no executor, no numerics beyond reshaping
+Imports message types (and from the core: its exception base, and for ``inputs`` the system
+and the bounded YAML loader) only: no node, no executor, no numerics beyond reshaping
 (docs/architecture.md). Channel numbers are the paper's 1-based numbers
 everywhere here, as on the ``camera/active_channel`` topic.
 
@@ -66,6 +67,7 @@ from .validate import (
     check_channel,
     check_pose,
     check_stamp,
+    check_values,
 )
 
 __all__ = [
@@ -101,6 +103,7 @@ __all__ = [
     "check_channel",
     "check_pose",
     "check_stamp",
+    "check_values",
     "envelope_labels",
     "labelled_array",
     "ns_to_stamp",

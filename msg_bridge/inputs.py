@@ -88,6 +88,8 @@ class InputSource:
     and :meth:`rows_for` gives it per channel (output labels may sit at different rows in
     different channels). ``shared`` says the rows measure the same thing in every channel
     (equal rows of every ``C_c``), so the sample does not need the channel to be known.
+    :func:`parse_inputs` and :func:`default_inputs` fill ``channel_rows`` and ``shared``; a
+    source built by hand without ``channel_rows`` feeds ``rows`` in every channel it serves.
     """
 
     topic: str
@@ -105,7 +107,9 @@ class InputSource:
 
     def rows_for(self, channel: int) -> tuple[int, ...]:
         """The rows of channel ``channel`` (1-based) that the fields feed; () if it does not serve it."""
-        return self.channel_rows[channel - 1] if self.serves(channel) else ()
+        if not self.serves(channel):
+            return ()
+        return self.channel_rows[channel - 1] if self.channel_rows else self.rows
 
     def describe(self) -> str:
         """One line: topic, type, fields -> rows, and how the channel is known."""
@@ -125,8 +129,9 @@ class InputSource:
 class InputSpecs:
     """The inputs of a system: sources, the channel topic and the channels no source feeds.
 
-    Each source turns a message into measurements ``(stamp_ns, channel, rows, y)`` (DESIGN of
-    the measurement seam: README "Input specifications").
+    Each source turns a message into (part of) the measurement ``(stamp_ns, channel, rows, y)``:
+    its reader gives ``stamp_ns`` and ``y``, :meth:`InputSource.rows_for` the rows, and the channel
+    is the source's own, or the active one at ``stamp_ns`` (README "Input specifications").
     """
 
     sources: tuple[InputSource, ...]
@@ -210,8 +215,14 @@ def _parse_source(i: int, spec: Any, system: LTISystem, source: str) -> InputSou
             raise SpecError(f"{where}: channel {channel!r} is not one of the system's channels 1..{N} "
                             "(omit it for a source of every channel)")
         channel = int(channel)
-    crs = [_resolve_rows(rows, c, system, where) if channel is None or c == channel else ()
-           for c in range(1, N + 1)]
+    try:
+        crs = [_resolve_rows(rows, c, system, where) if channel is None or c == channel else ()
+               for c in range(1, N + 1)]
+    except SpecError as err:
+        if channel is None:         # a source of every channel: say how to narrow it
+            raise SpecError(f"{err}; a source without 'channel' feeds every channel, so its rows must exist in "
+                            "each (or give it a 'channel')") from None
+        raise
     for c, r in enumerate(crs, start=1):
         dup = sorted({k for k in r if r.count(k) > 1})
         if dup:

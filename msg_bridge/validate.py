@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped
 from std_msgs.msg import UInt8
 
@@ -19,7 +21,7 @@ from switchobs_core.exceptions import SwitchobsError
 from .stamps import stamp_to_ns
 
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose",
-           "check_stamp"]
+           "check_stamp", "check_values"]
 
 
 class Reason(enum.Enum):
@@ -121,6 +123,19 @@ def check_pose(
                          f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
     return check_stamp(stamp_to_ns(st), last_ns=last_ns, now_ns=now_ns,
                        future_tolerance_ns=future_tolerance_ns)
+
+
+def check_values(y: np.ndarray, fields: Sequence[str], *, max_abs: float = 1e6) -> Rejection | None:
+    """Every value of a sample (:meth:`msg_bridge.fields.FieldReader.read`) finite and within
+    ``max_abs``; the rejection names the first offending field."""
+    a = np.abs(y)
+    if a.max(initial=0.0) <= max_abs:         # False for a NaN too
+        return None
+    k = int(np.argmax(~np.isfinite(y) | (a > max_abs)))
+    v = float(y[k])
+    if not math.isfinite(v):
+        return Rejection(Reason.NON_FINITE, fields[k], f"{v}")
+    return Rejection(Reason.TOO_LARGE, fields[k], f"|{v:g}| > {max_abs:g}")
 
 
 def check_after_switch(stamp_ns: int, switch_ns: int | None, field: str = "header.stamp") -> Rejection | None:

@@ -163,6 +163,25 @@ def test_reader_is_duck_typed():
                                   [-2.0, 1.5])
 
 
+def test_reader_refuses_a_header_stamp_that_is_no_time():
+    r = mb.FieldReader("geometry_msgs/PointStamped", ["point.x"])
+    for sec, nsec in ((0, 1_000_000_000), (-1, 0)):
+        msg = SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=""),
+                              point=SimpleNamespace(x=1.0))
+        with pytest.raises(mb.BridgeError, match=rf"header.stamp: sec {sec}, nanosec {nsec} is not a valid") as err:
+            r.read(msg)
+        assert err.value.rejection.reason is mb.Reason.BAD_STAMP
+
+
+def test_check_values_names_the_first_bad_field():
+    f = ["point.x", "point.y", "point.z"]
+    assert mb.check_values(np.array([1.0, -1e6, 0.0]), f) is None
+    rej = mb.check_values(np.array([1.0, np.nan, np.inf]), f)
+    assert (rej.reason, rej.field) == (mb.Reason.NON_FINITE, "point.y")
+    rej = mb.check_values(np.array([2e6, 0.0, -np.inf]), f, max_abs=1e6)
+    assert (rej.reason, rej.field, rej.detail) == (mb.Reason.TOO_LARGE, "point.x", "|2e+06| > 1e+06")
+
+
 def test_labelled_reader_follows_a_layout_change_and_refuses_other_layouts():
     from std_msgs.msg import Float64MultiArray
     r = mb.FieldReader("std_msgs/Float64MultiArray", ["b", "a"])
