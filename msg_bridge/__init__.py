@@ -1,6 +1,7 @@
 """msg_bridge: ROS 2 messages <-> numpy, and validation of what arrives.
 
-Imports message types only: no node, no executor, no numerics beyond reshaping
+Imports message types (and from the core: its exception base, and for ``inputs`` the system
+and the bounded YAML loader) only: no node, no executor, no numerics beyond reshaping
 (docs/architecture.md). Channel numbers are the paper's 1-based numbers
 everywhere here, as on the ``camera/active_channel`` topic.
 
@@ -10,7 +11,14 @@ stamps    header stamps <-> integer nanoseconds
 convert   PoseStamped <-> planar position, labelled Float64MultiArray (state, envelope,
           truth), per-body nav_msgs/Odometry
 validate  checks of incoming messages returning a :class:`Rejection` with a
-          :class:`Reason` code
+          :class:`Reason` code; the error types :class:`BridgeError`, :class:`SpecError`
+fields    one converter per sensor message type: :class:`FieldReader` (message ->
+          ``(stamp_ns, frame_id, y)``) and :class:`FieldWriter` (values -> message)
+inputs    input specifications: topic, type, fields -> output rows, and how the channel is
+          known (:class:`InputSpecs`, :func:`load_inputs`)
+
+Together, ``fields`` and ``inputs`` give the observer its measurement
+``(stamp_ns, channel, rows, y)`` from any supported topic.
 """
 
 from .convert import (
@@ -31,12 +39,30 @@ from .convert import (
     unpack_labelled,
     xy_to_pose,
 )
-from .inputs import message_class
+from .fields import (
+    LABELLED_ARRAY,
+    SUPPORTED_TYPES,
+    FieldReader,
+    FieldWriter,
+    canonical_type,
+    float64_fields,
+    message_class,
+)
+from .inputs import (
+    CHANNEL_TOPIC,
+    InputSource,
+    InputSpecs,
+    check_topic,
+    default_inputs,
+    load_inputs,
+    parse_inputs,
+)
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
 from .validate import (
     BridgeError,
     Reason,
     Rejection,
+    SpecError,
     check_after_switch,
     check_channel,
     check_pose,
@@ -45,6 +71,21 @@ from .validate import (
 )
 
 __all__ = [
+    "CHANNEL_TOPIC",
+    "LABELLED_ARRAY",
+    "SUPPORTED_TYPES",
+    "FieldReader",
+    "FieldWriter",
+    "InputSource",
+    "InputSpecs",
+    "SpecError",
+    "canonical_type",
+    "check_topic",
+    "default_inputs",
+    "float64_fields",
+    "load_inputs",
+    "message_class",
+    "parse_inputs",
     "STAMP_PAD",
     "Body",
     "BridgeError",
@@ -65,7 +106,6 @@ __all__ = [
     "check_values",
     "envelope_labels",
     "labelled_array",
-    "message_class",
     "ns_to_stamp",
     "pose_to_xy",
     "stamp_to_ns",

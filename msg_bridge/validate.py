@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped
 from std_msgs.msg import UInt8
 
@@ -18,8 +20,8 @@ from switchobs_core.exceptions import SwitchobsError
 
 from .stamps import stamp_to_ns
 
-__all__ = ["BridgeError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose", "check_stamp",
-           "check_values"]
+__all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose",
+           "check_stamp", "check_values"]
 
 
 class Reason(enum.Enum):
@@ -125,15 +127,17 @@ def check_pose(
                        future_tolerance_ns=future_tolerance_ns)
 
 
-def check_values(values, fields=None, *, max_abs: float = 1e6) -> Rejection | None:
-    """Every value read from a message finite and within ``max_abs`` (``fields`` names them)."""
-    for k, v in enumerate(values):
-        name = fields[k] if fields is not None and k < len(fields) else f"value {k}"
-        if not math.isfinite(v):
-            return Rejection(Reason.NON_FINITE, name, f"{v}")
-        if abs(v) > max_abs:
-            return Rejection(Reason.TOO_LARGE, name, f"|{v:g}| > {max_abs:g}")
-    return None
+def check_values(y: np.ndarray, fields: Sequence[str], *, max_abs: float = 1e6) -> Rejection | None:
+    """Every value of a sample (:meth:`msg_bridge.fields.FieldReader.read`) finite and within
+    ``max_abs``; the rejection names the first offending field."""
+    a = np.abs(y)
+    if a.max(initial=0.0) <= max_abs:         # False for a NaN too
+        return None
+    k = int(np.argmax(~np.isfinite(y) | (a > max_abs)))
+    v = float(y[k])
+    if not math.isfinite(v):
+        return Rejection(Reason.NON_FINITE, fields[k], f"{v}")
+    return Rejection(Reason.TOO_LARGE, fields[k], f"|{v:g}| > {max_abs:g}")
 
 
 def check_after_switch(stamp_ns: int, switch_ns: int | None, field: str = "header.stamp") -> Rejection | None:
@@ -156,3 +160,8 @@ def check_channel(msg: UInt8, N: int) -> Rejection | None:
     if not 1 <= int(msg.data) <= N:
         return Rejection(Reason.BAD_CHANNEL, "data", f"channel {int(msg.data)} is not in 1..{N}")
     return None
+
+
+class SpecError(SwitchobsError, ValueError):
+    """An input specification (topic, message type, fields, rows, channel) that cannot work:
+    a configuration error, refused at start-up with one line (what, where, what to do)."""

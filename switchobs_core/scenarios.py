@@ -142,8 +142,9 @@ def build_scenario(name: str, /, **params: Any) -> LTISystem:
 def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
     """A system from a parsed YAML mapping: ``scenario: name`` with the scenario's
     parameters, or the explicit schema of :meth:`LTISystem.from_dict`."""
-    if isinstance(spec, dict) and "noise" in spec:     # the noise model is read by load_noise
-        spec = {k: v for k, v in spec.items() if k != "noise"}
+    if isinstance(spec, dict) and ("noise" in spec or "inputs" in spec):
+        # the noise model is read by load_noise, the input specifications by msg_bridge.inputs
+        spec = {k: v for k, v in spec.items() if k not in ("noise", "inputs")}
     if isinstance(spec, dict) and "scenario" in spec:
         params = {k: v for k, v in spec.items() if k != "scenario"}
         if any(not isinstance(k, str) for k in params):

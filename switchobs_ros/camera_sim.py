@@ -28,7 +28,6 @@ import sys
 import time
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -40,7 +39,7 @@ from switchobs_core.plant import Plant
 from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 
 from . import qos
-from .core_config import DEFAULT_X0, camera_target_rows, cycles_from_params, load_system_param
+from .core_config import DEFAULT_X0, SensorOutputs, cycles_from_params, load_system_param
 from .params import ConfigError, Param, declare_all
 from .runner import run_node
 
@@ -48,8 +47,8 @@ __all__ = ["CameraSimNode", "PARAMS", "DEFAULT_X0", "main"]
 
 
 PARAMS = [
-    Param("system", "paper", "The simulated system: a built-in scenario name or a system YAML path (its "
-          "channels must fit the camera/target topics)."),
+    Param("system", "paper", "The simulated system: a built-in scenario name or a system YAML path (published "
+          "by its input specification, the `inputs:` section; the paper interface for camera/target systems)."),
     Param("rate", 100.0, "Measurement rate in Hz (ticks of plant time)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or random "
           "(residence times uniform in [schedule.h_min, schedule.h_max], seeded)."),
@@ -67,6 +66,8 @@ PARAMS = [
     Param("seed", 0, "Seed of all noise draws."),
     Param("world_frame", "map", "header.frame_id of the published poses."),
     Param("camera_body", "camera", "Name of the camera body in the system's output labels."),
+    Param("inputs", "", "Path of a YAML file with an `inputs:` section overriding the system's (as the "
+          "estimator's parameter): the topics, types and fields camera_sim publishes."),
     Param("duration", 0.0, "Simulated seconds to run, then exit 0 (> 0; 0, the default, explicitly means: until "
           "stopped; negative values are refused)."),
     Param("publish_clock", False, "Publish /clock and run on that simulated clock (see time_scale)."),
@@ -118,7 +119,11 @@ class CameraSimNode(Node):
             self.plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg["seed"], process_noise=cfg["process_noise"])
         except SwitchobsError as err:
             raise ConfigError(f"plant: {err}") from None
-        self.rows = camera_target_rows(sys_, cfg["camera_body"])
+        try:
+            self.specs = mb.load_inputs(cfg["system"], sys_, camera_body=cfg["camera_body"], override=cfg["inputs"])
+        except mb.SpecError as err:
+            raise ConfigError(f"input specification: {err}") from None
+        self.outputs = SensorOutputs(self.specs)
         self.rng = np.random.default_rng(cfg["seed"] + 1)
         self.labels = tuple(sys_.state_labels)
         self.frame = cfg["world_frame"]
@@ -130,9 +135,16 @@ class CameraSimNode(Node):
         self.k_end = round(cfg["duration"] * cfg["rate"]) if cfg["duration"] > 0 else None
 
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos.CLOCK) if cfg["publish_clock"] else None
-        self.pub_channel = self.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
-        self.pub_camera = self.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
-        self.pub_target = self.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        # one publisher per input topic of the system's specification (the paper's: the channel,
+        # camera/pose, target/pose); the channel first
+        self.pubs = {}
+        if self.specs.channel_topic:
+            self.pubs[self.specs.channel_topic] = self.create_publisher(UInt8, self.specs.channel_topic,
+                                                                        qos.CHANNEL_PUB)
+        for src in self.specs.sources:
+            self.pubs[src.topic] = self.create_publisher(mb.message_class(src.type), src.topic, qos.SENSOR)
+        self.pub_target = self.pubs[next((s.topic for s in self.specs.sources if not s.shared),
+                                         self.specs.sources[0].topic)]
         self.pub_truth = self.create_publisher(Float64MultiArray, "sim/truth", qos.TRUTH)
         if cfg["publish_clock"]:
             if not cfg["time_scale"] > 0 or not cfg["clock_start"] > 0:
@@ -190,11 +202,9 @@ class CameraSimNode(Node):
         y = self.plant.measure(rho, noise_std=0.0)
         if self.cfg["noise_std"] > 0:
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
-        (cx, cy), (tx, ty) = self.rows[rho - 1]
-        self.pub_channel.publish(UInt8(data=rho))
-        self.pub_camera.publish(mb.xy_to_pose((y[cx], y[cy]), stamp_ns, self.frame))
-        if not self.schedule.blind_at(t):       # while the camera turns it sees no target
-            self.pub_target.publish(mb.xy_to_pose((y[tx], y[ty]), stamp_ns, self.frame))
+        # while the camera turns (dead time) only the shared sources (its own pose) publish
+        for topic, msg in self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t)):
+            self.pubs[topic].publish(msg)
         self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))
 
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 import msg_bridge as mb
-from msg_bridge.inputs import InputSpecs, SpecError, load_inputs
+from msg_bridge import InputSpecs, SpecError, load_inputs
 from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
@@ -270,7 +270,7 @@ class EstimatorConfig:
         x0 = np.array(x0, dtype=float) if x0 else np.zeros(sys_.n)
         try:
             inputs = load_inputs(values["system"], sys_, camera_body=values["camera_body"], override=values["inputs"])
-        except (mb.BridgeError, SpecError) as err:
+        except SpecError as err:
             raise ConfigError(f"input specification: {err}") from None
         if values["consistency.check"] not in CONSISTENCY:
             raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "

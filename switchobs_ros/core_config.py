@@ -26,6 +26,7 @@ from .params import ConfigError
 
 __all__ = [
     "DEFAULT_X0",
+    "SensorOutputs",
     "GAIN_FAMILY_PARAM",
     "noise_from_params",
     "camera_target_rows",
@@ -157,6 +158,31 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
     except OSError as err:
         log(f"could not cache the gain table at {cache}: {err}")
     return table, cache
+
+
+class SensorOutputs:
+    """What a simulated system publishes per tick, by its input specification (camera_sim and
+    ``switchobs_bag generate``): the channel message (when the specification has a channel
+    topic), then one message per source serving the active channel with the rows of
+    ``y = C_c x`` that its fields carry (only the shared sources while the camera turns)."""
+
+    def __init__(self, specs):
+        import msg_bridge as mb
+
+        self.specs = specs
+        self.writers = [mb.FieldWriter(s.type, s.fields) for s in specs.sources]
+
+    def messages(self, channel: int, y, stamp_ns: int, frame_id: str, blind: bool = False) -> list[tuple[str, object]]:
+        """``[(topic, message), ...]`` of one tick on ``channel`` with output ``y`` (relative topics)."""
+        from std_msgs.msg import UInt8
+
+        out: list[tuple[str, object]] = []
+        if self.specs.channel_topic:
+            out.append((self.specs.channel_topic, UInt8(data=int(channel))))
+        for src, w in zip(self.specs.sources, self.writers):
+            if src.serves(channel) and (src.shared or not blind):
+                out.append((src.topic, w.msg([y[r] for r in src.rows_for(channel)], stamp_ns, frame_id)))
+        return out
 
 
 def camera_target_rows(system: LTISystem, camera_body: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:

@@ -180,6 +180,7 @@ class Source:
     index: int
     topic: str
     type: str
+    fields: tuple[str, ...]
     channel: int | None
     rows: tuple[tuple[int, ...], ...]
     shared: bool
@@ -521,18 +522,12 @@ class EstimatorPipeline:
             return stamp_ns, np.array(src.read(msg)[2], dtype=float), rej
         try:
             stamp_ns, frame, values = src.read(msg)
-        except mb.BridgeError as err:
-            return 0, np.empty(0), Rejection(Reason.BAD_LAYOUT, "layout", str(err))
+        except mb.BridgeError as err:       # a bad stamp, or a labelled array of another layout
+            return 0, np.empty(0), err.rejection or Rejection(Reason.BAD_LAYOUT, "layout", str(err))
         values = np.asarray(values, dtype=float)
-        rej = mb.check_values(values, src.read.fields if hasattr(src.read, "fields") else None,
-                              max_abs=self.max_abs)
-        if rej is None and self.in_frame and frame != self.in_frame:
+        rej = mb.check_values(values, src.fields, max_abs=self.max_abs)
+        if rej is None and self.in_frame and src.type != mb.LABELLED_ARRAY and frame != self.in_frame:
             rej = Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{self.in_frame}')")
-        if rej is None:
-            st = msg.header.stamp
-            if st.sec < 0 or st.nanosec >= 1_000_000_000:
-                rej = Rejection(Reason.BAD_STAMP, "header.stamp",
-                                f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
         if rej is None:
             rej = mb.check_stamp(stamp_ns, last_ns=last, now_ns=now_ns, future_tolerance_ns=self.future_ns)
         return stamp_ns, values, rej
@@ -825,30 +820,29 @@ def _read_pose(msg: PoseStamped) -> tuple[int, str, np.ndarray]:
 
 
 _POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+_POSE_FIELDS = ("pose.position.x", "pose.position.y")
 
 
 def paper_sources(rows) -> list[Source]:
     """The paper interface's sources from per-channel ``((cam_x, cam_y), (tgt_x, tgt_y))`` rows
     (:func:`~switchobs_ros.core_config.camera_target_rows`)."""
-    return [Source(0, POSE_TOPICS["camera"], _POSE_TYPE, None, tuple(tuple(r[0]) for r in rows), True, _read_pose,
-                   True),
-            Source(1, POSE_TOPICS["target"], _POSE_TYPE, None, tuple(tuple(r[1]) for r in rows), False, _read_pose,
-                   True)]
+    f = _POSE_FIELDS
+    return [Source(0, POSE_TOPICS["camera"], _POSE_TYPE, f, None, tuple(tuple(r[0]) for r in rows), True,
+                   _read_pose, True),
+            Source(1, POSE_TOPICS["target"], _POSE_TYPE, f, None, tuple(tuple(r[1]) for r in rows), False,
+                   _read_pose, True)]
 
 
 def sources_from_specs(specs: Any, system: Any) -> list[Source]:
     """The pipeline's sources of an input specification (:class:`msg_bridge.InputSpecs`).
 
-    A source is *shared* when it serves every channel and its rows are the same output labels
-    in each (the camera's own pose): its samples need no channel to be read.
+    A source is *shared* when it serves every channel and feeds the same rows of ``C`` in each
+    (the camera's own pose; :class:`msg_bridge.InputSource`): its samples need no channel to be read.
     """
     out = []
     for k, spec in enumerate(specs.sources):
-        rows = tuple(tuple(spec.rows_for(c)) if hasattr(spec, "rows_for") else tuple(spec.rows)
-                     for c in range(1, system.N + 1))
-        labels = {tuple(system.output_labels[c][r] for r in rows[c]) for c in range(system.N)}
-        shared = spec.channel is None and len(labels) == 1
-        pose = spec.type == _POSE_TYPE and tuple(spec.fields) == ("pose.position.x", "pose.position.y")
-        out.append(Source(k, spec.topic, spec.type, spec.channel, rows, shared,
+        rows = tuple(tuple(spec.rows_for(c)) for c in range(1, system.N + 1))
+        pose = spec.type == _POSE_TYPE and tuple(spec.fields) == _POSE_FIELDS
+        out.append(Source(k, spec.topic, spec.type, tuple(spec.fields), spec.channel, rows, bool(spec.shared),
                           _read_pose if pose else spec.reader.read, pose))
     return out

@@ -34,15 +34,13 @@ import msg_bridge as mb
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
 from .cdr import Template, decode_pose, decode_uint8
-from .io import CONTRACT_TYPES, BagError, BagIn, BagOut, deserialize, type_name
+from .io import BagError, BagIn, BagOut, deserialize, type_name
 
 __all__ = ["EstimateResult", "estimate", "estimator_params"]
 
 #: The estimator's parameter values from params files (owned by switchobs_ros.config).
 estimator_params = params_from_file
 
-INPUTS = {t: CONTRACT_TYPES[t] for t in ("/camera/active_channel", "/camera/pose", "/target/pose")}
-_PART = {"/camera/pose": "camera", "/target/pose": "target"}
 
 
 @dataclass
@@ -75,8 +73,11 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
              storage: str | None = None, inputs: bool = True, node: str = "/estimator") -> EstimateResult:
     """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring)."""
     with BagIn(bag_path) as bag:
-        bag.require(INPUTS, " (the estimator's inputs)")
         pl = EstimatorPipeline.from_params(cfg)
+        needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
+        if pl.channel_topic:
+            needed["/" + pl.channel_topic] = "std_msgs/msg/UInt8"
+        bag.require(needed, " (the estimator's inputs)")
         msgs = bag.messages()
         in_topics = dict(bag.topics)
         storage = storage or bag.storage or "mcap"
@@ -139,36 +140,41 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     for t, (w, idx) in zip(t_odom, w_odom):
                         writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
 
-        def pose_of(m):
-            return decode_pose(m.data, lambda d: deserialize(m, PoseStamped))
+        sources = {"/" + s.topic: s for s in pl.sources}
+        channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
 
-        def channel_of(m):
-            return decode_uint8(m.data, lambda d: deserialize(m, UInt8))
+        def decoded(m, src):
+            if src.pose:          # the CDR fast path of the paper interface
+                return decode_pose(m.data, lambda d, m=m: deserialize(m, PoseStamped))
+            return deserialize(m, mb.message_class(src.type))
 
         n_inputs = 0
         last_ns = 0
         t0 = time.perf_counter()
         for m in msgs:
             last_ns = m.log_ns
-            part = _PART.get(m.topic)
-            if part is not None:
+            src = sources.get(m.topic)
+            if src is not None:
                 n_inputs += 1
-                emit(pl.on_pose(part, pose_of(m), m.log_ns, 0.0), m.log_ns)
-            elif m.topic == "/camera/active_channel":
+                emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
+            elif m.topic == channel_topic:
                 n_inputs += 1
-                pl.on_channel(channel_of(m))
+                emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
             if writer is not None and inputs and m.topic not in outputs and m.topic != "/diagnostics":
                 writer.write(m.topic, m.log_ns, m.data)
         emit(pl.flush_all(), last_ns)
         seconds = time.perf_counter() - t0
         if writer is not None:
-            vals = [KeyValue(key=f"{t} accepted", value=str(pl.accepted[t[1:]]))
-                    for t in ("/camera/pose", "/target/pose", "/camera/active_channel")]
+            vals = [KeyValue(key=f"/{t} accepted", value=str(pl.accepted[t])) for t in pl.input_topics]
             vals += [KeyValue(key=f"rejected {t} {r}", value=str(n)) for (t, r), n in sorted(pl.rejected.items())]
             vals += [KeyValue(key="rejected total", value=str(sum(pl.rejected.values()))),
                      KeyValue(key="updates", value=str(pl.updates)),
                      KeyValue(key="partial updates", value=str(pl.partial_updates)),
-                     KeyValue(key="switches", value=str(pl.switches))]
+                     KeyValue(key="switches", value=str(pl.switches)),
+                     KeyValue(key="inconsistent samples", value=str(pl.inconsistent)),
+                     KeyValue(key="re-attributed samples", value=str(pl.reattributed)),
+                     KeyValue(key="bounds valid", value=str(pl.bound_valid).lower()
+                              + ("" if pl.bound_valid else f" ({pl.bound_invalid_why})"))]
             arr = DiagnosticArray()
             arr.header.stamp = mb.ns_to_stamp(last_ns)
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",

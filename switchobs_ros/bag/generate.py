@@ -19,20 +19,20 @@ from pathlib import Path
 
 import numpy as np
 from rosgraph_msgs.msg import Clock as ClockMsg
-from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.plant import Plant
 from switchobs_core.schedule import RandomSchedule, parse_schedule
 
-from ..core_config import DEFAULT_X0, camera_target_rows, load_system_param
+from ..core_config import DEFAULT_X0, SensorOutputs, load_system_param
 from ..params import ConfigError
-from .io import CONTRACT_TYPES, BagError, BagOut
+from .io import BagError, BagOut, type_name
 
 __all__ = ["GenerateConfig", "generate", "scenario_ticks"]
 
-#: Topics a generated bag holds, in the per-tick publishing order of camera_sim.
+#: Topics a generated bag of the paper's system holds, in the per-tick publishing order of
+#: camera_sim (another system: ``/clock``, its input topics, ``/sim/truth``).
 TOPICS = ("/clock", "/camera/active_channel", "/camera/pose", "/target/pose", "/sim/truth")
 
 
@@ -59,6 +59,8 @@ class GenerateConfig:
     extended: bool = False
     #: camera_sim's ``schedule.dead_time``: no target pose in the first seconds after a switch
     dead_time: float = 0.0
+    #: camera_sim's ``inputs``: a YAML file whose ``inputs:`` section overrides the system's
+    inputs: str = ""
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -78,7 +80,11 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
     try:
         sys_ = load_system_param(cfg.system)
         schedule = _schedule(cfg, sys_.N)
-        rows = camera_target_rows(sys_, cfg.camera_body)
+        try:
+            specs = mb.load_inputs(cfg.system, sys_, camera_body=cfg.camera_body, override=cfg.inputs)
+        except mb.SpecError as err:
+            raise BagError(f"input specification: {err}") from None
+        outputs = SensorOutputs(specs)
         if not cfg.rate > 0 or not cfg.duration >= 0 or not cfg.clock_start > 0:
             raise BagError(f"need rate > 0, duration >= 0, clock_start > 0; got {cfg.rate}, {cfg.duration}, "
                            f"{cfg.clock_start}")
@@ -104,16 +110,11 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         if cfg.noise_std > 0:
             v = cfg.noise_std * rng.standard_normal(y.shape)
             y = y + (np.clip(v, -cfg.noise_max, cfg.noise_max) if cfg.noise_max >= 0 else v)
-        (cx, cy), (tx, ty) = rows[rho - 1]
-        msgs = [
-            ("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns))),
-            ("/camera/active_channel", UInt8(data=rho)),
-            ("/camera/pose", mb.xy_to_pose((y[cx], y[cy]), stamp_ns, cfg.world_frame)),
-            ("/target/pose", mb.xy_to_pose((y[tx], y[ty]), stamp_ns, cfg.world_frame)),
-            ("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)),
-        ]
-        if schedule.blind_at(t):        # the camera turns: no target pose
-            del msgs[3]
+        # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
+        msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
+        msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
+                                                                  schedule.blind_at(t))]
+        msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 
 
@@ -123,11 +124,13 @@ def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap") -> dic
 
     ticks = 0
     first = last = None
+    added: set[str] = set()
     with BagOut(out, storage) as bag:
-        for topic in TOPICS:
-            bag.add(topic, CONTRACT_TYPES[topic])
         for stamp_ns, msgs in scenario_ticks(cfg):
             for topic, msg in msgs:
+                if topic not in added:          # the system's topics, each with its message type
+                    bag.add(topic, type_name(type(msg)))
+                    added.add(topic)
                 bag.write(topic, stamp_ns, serialize_message(msg))
             ticks += 1
             first = stamp_ns if first is None else first

@@ -24,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params-file", action="append", default=[], help="estimator params file (ROS 2 YAML)")
     p.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE")
     p.add_argument("--gain-table", help="shortcut for -p gain_table:=FILE")
+    p.add_argument("--system", help="shortcut for -p system:=NAME_OR_FILE (a built-in scenario or a system YAML, "
+                                    "whose inputs: section names the topics to read)")
     p.add_argument("--node", default="/estimator", help="namespace of the output topics (default /estimator)")
     p.add_argument("--json", action="store_true")
 
@@ -40,6 +42,8 @@ def params_of(a: argparse.Namespace) -> dict:
         over[name] = parse_yaml(val, exc=BagError, source=f"-p {name}") if val != "" else ""
     if a.gain_table:
         over["gain_table"] = a.gain_table
+    if a.system:
+        over["system"] = a.system
     return params_from_file(a.params_file, over)
 
 
@@ -51,13 +55,16 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
     info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
-            "partial_updates": res.partial_updates, "rejected": res.rejected, "out": res.out, "csv": res.csv}
+            "partial_updates": res.partial_updates, "rejected": res.rejected, "inconsistent": res.inconsistent,
+            "reattributed": res.reattributed, "bounds_valid": res.bound_valid, "out": res.out, "csv": res.csv}
     if a.json:
         print(json.dumps(info))
         return 0
     print(f"{res.stamps.size} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
           f"({rate:,.0f} messages/s); partial updates {res.partial_updates}; rejected "
           f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
+    if not res.bound_valid:
+        print(f"bounds withdrawn: {res.bound_invalid_why}")
     for what in ("out", "csv"):
         if info[what]:
             print(f"wrote {info[what]}")
