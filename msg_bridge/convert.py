@@ -234,19 +234,25 @@ def state_odometries(
 # on the reference machine, most of the node's time per measurement).
 
 class LabelledArrayWriter:
-    """``labelled_array`` with a reused message: ``w.msg(values, stamp_ns)``."""
+    """``labelled_array`` with a reused message: ``w.msg(values, stamp_ns)``, the values written
+    into the message's own ``data`` array through a numpy view.
+
+    Assigning a numpy array to ``data`` makes the generated message convert it element by
+    element to an ``array.array`` on every publish (9.7 us for the 146 values of
+    ``~/covariance``, measured); writing into the view costs 0.3 us. The message and the values
+    published are the same. The one labelled-array writer of the package (the node's outputs).
+    """
 
     def __init__(self, labels: Sequence[str]):
         labels = tuple(labels)
         self.n = len(labels)
         self._msg = labelled_array(np.zeros(self.n), labels, 0)
-        self._buf = np.zeros(STAMP_PAD + self.n)
+        self._view = np.frombuffer(self._msg.data, dtype=float)     # the message's array.array
 
     def msg(self, values: np.ndarray, stamp_ns: int) -> Float64MultiArray:
-        b = self._buf
-        b[0], b[1] = divmod(int(stamp_ns), 1_000_000_000)
-        b[STAMP_PAD:] = values
-        self._msg.data = b
+        v = self._view
+        v[0], v[1] = divmod(int(stamp_ns), 1_000_000_000)
+        v[STAMP_PAD:] = values
         return self._msg
 
 

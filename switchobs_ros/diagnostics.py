@@ -70,7 +70,10 @@ class EstimatorDiagnostics:
         conf = [kv("system", self.pipeline.system.name), kv("fingerprint", self.pipeline.system.fingerprint()[:16]),
                 kv("gain_table", str(self.pipeline.table_path)), kv("mode", self.pipeline.mode),
                 kv("cycles", " ".join(c.label() for c in self.pipeline.cycles) or "robust"),
-                kv("e0", obs.e0), kv("gain family", obs.family)]
+                kv("e0", obs.e0), kv("gain family", obs.family),
+                kv("inputs", pl.specs_text or "paper interface"),
+                kv("consistency check", "on" if pl.check else "off"),
+                kv("reorder window (ms)", pl.window_ns * 1e-6)]
         if obs.noise is not None:
             conf.append(kv("noise model", obs.noise.describe()))
         if obs.kalman is not None:
@@ -128,11 +131,17 @@ class EstimatorDiagnostics:
             pl = self.pipeline
             ob += [kv("paper bound", env.paper_bound),
                    kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
-                      env.exact_bound if pl.bound_valid else "none (after a reset)"),
+                      env.exact_bound if pl.bound_valid else "none (withdrawn)"),
                    kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
             if env.noise_bound is not None:
                 ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
-                             env.noise_bound if pl.bound_valid else "none (after a reset)"))
+                             env.noise_bound if pl.bound_valid else "none (withdrawn)"))
+        # the model against the data (switchobs_core.consistency) and the attribution by source time
+        ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
+               kv("re-attributed samples", pl.reattributed),
+               kv("late channel messages", pl.late_channel)]
+        if pl.last_inconsistency:
+            ob.append(kv("last inconsistency", pl.last_inconsistency))
         level, msg = DiagnosticStatus.OK, "estimating"
         if pl.last_accept_clock_ns is None:
             level, msg = DiagnosticStatus.WARN, "waiting for measurements"
@@ -146,6 +155,9 @@ class EstimatorDiagnostics:
                     and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel):
+            level = max(level, DiagnosticStatus.WARN)
+            msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         if recs and not recs[-1].matched:
             level = max(level, DiagnosticStatus.WARN)
             msg += "; last cycle did not match the schedule"
@@ -157,7 +169,8 @@ class EstimatorDiagnostics:
         dt = (now_ns - t0_ns) * 1e-9
         inp = []
         rates = {}
-        for topic in ("camera/pose", "target/pose", "camera/active_channel"):
+        topics = pl.input_topics
+        for topic in topics:
             rates[topic] = rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
             inp.append(kv(f"{topic} rate (Hz)", rate))
             inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
@@ -169,7 +182,9 @@ class EstimatorDiagnostics:
         freq_problem = ""
         if expected > 0 and t0_ns > self._t_first_ns:
             lo, hi = FREQUENCY_TOLERANCE
-            for what, r in (("target/pose", rates["target/pose"]), ("estimates", out_rate)):
+            # the channel-specific topics together carry one message per tick (the shared ones too)
+            own = [s.topic for s in pl.sources if not s.shared] or [pl.sources[0].topic]
+            for what, r in ((" + ".join(own), sum(rates[t] for t in own)), ("estimates", out_rate)):
                 if not lo * expected <= r <= hi * expected:
                     freq_problem = (f"{what} at {r:.1f} Hz, outside [{lo * expected:.1f}, {hi * expected:.1f}] Hz "
                                     f"(expected {expected:g} Hz)")

@@ -93,6 +93,7 @@ from msg_bridge import Reason, Rejection
 from switchobs_core.consistency import Consistency, check_innovation, spectral_norm
 from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.measurement import Measurement
 from switchobs_core.observer import SwitchedObserver
 
 from .config import EstimatorConfig
@@ -174,7 +175,8 @@ class Source:
     ``rows[c - 1]`` are the rows of channel ``c``'s output that the source's fields feed;
     ``channel`` is None for a source shared by several channels; ``shared`` is True when its
     rows are the same quantities in every channel (the camera's own pose), so its samples need
-    no channel to be read; ``pose`` selects the PoseStamped checks of :func:`msg_bridge.check_pose`.
+    no channel to be read; ``read`` is the type's :class:`msg_bridge.FieldReader` ``read``;
+    ``pose`` selects the PoseStamped checks of :func:`msg_bridge.check_pose`.
     """
 
     index: int
@@ -224,8 +226,8 @@ class EstimatorPipeline:
     ``last_rejection`` is the latest rejection's text.
     """
 
-    def __init__(self, system, table, observer, *, x0: np.ndarray, sources: list[Source] | None = None,
-                 channel_topic: str | None = CHANNEL_TOPIC, rows=None, input_frame_id: str = "map",
+    def __init__(self, system, table, observer, *, x0: np.ndarray, sources: list[Source],
+                 channel_topic: str | None = CHANNEL_TOPIC, input_frame_id: str = "map",
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
                  reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = ""):
@@ -236,12 +238,9 @@ class EstimatorPipeline:
         self.cycles = list(cycles or [])
         self.observer = observer
         self.x0 = np.array(x0, dtype=float)
-        if sources is None:        # the paper's interface from camera/target rows (tests, old callers)
-            sources = paper_sources(rows)
         self.sources = tuple(sources)
         self.by_topic = {s.topic: s for s in self.sources}
-        self.channel_topic = channel_topic if any(s.channel is None and not s.shared for s in self.sources) \
-            or channel_topic == CHANNEL_TOPIC else channel_topic
+        self.channel_topic = channel_topic
         self.specs_text = specs_text
         self.in_frame = input_frame_id
         self.max_abs = max_abs
@@ -515,11 +514,13 @@ class EstimatorPipeline:
     def _validate(self, src: Source, msg: Any, now_ns: int) -> tuple[int, np.ndarray, Rejection | None]:
         """The message's stamp and values, and why it is rejected (None: valid)."""
         last = self.last_ns[src.topic]
-        if src.pose:
+        if src.pose:      # every field of a pose checked, as before input specifications
             rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=last, now_ns=now_ns,
                                 future_tolerance_ns=self.future_ns)
-            stamp_ns = mb.stamp_to_ns(msg.header.stamp)
-            return stamp_ns, np.array(src.read(msg)[2], dtype=float), rej
+            if rej is not None and rej.reason is Reason.BAD_STAMP:
+                return 0, np.empty(0), rej
+            stamp_ns, _, values = src.read(msg)
+            return stamp_ns, values, rej
         try:
             stamp_ns, frame, values = src.read(msg)
         except mb.BridgeError as err:       # a bad stamp, or a labelled array of another layout
@@ -604,8 +605,8 @@ class EstimatorPipeline:
             self.internal_error("pairing", err)
         return out
 
-    def _sample(self, pend: _Pending, ch: int) -> tuple[np.ndarray, tuple[int, ...] | None]:
-        """``(y, rows)`` of a pending sample read as channel ``ch`` (rows None: all of them)."""
+    def _sample(self, pend: _Pending, ch: int) -> Measurement:
+        """The measurement of a pending sample read as channel ``ch`` (rows None: all of them)."""
         rows: list[int] = []
         vals: list[float] = []
         for i, part in pend.parts.items():
@@ -614,7 +615,7 @@ class EstimatorPipeline:
         order = sorted(range(len(rows)), key=rows.__getitem__)
         r = tuple(rows[k] for k in order)
         y = np.array([vals[k] for k in order], dtype=float)
-        return (y, None) if r == tuple(range(self._p[ch - 1])) else (y, r)
+        return Measurement(pend.stamp_ns, ch, None if r == tuple(range(self._p[ch - 1])) else r, y)
 
     def _flush(self, stamp_ns: int, out: list[Estimate], now_mono: float, *, channel: int | None = None,
                forced: bool = False) -> None:
@@ -638,7 +639,7 @@ class EstimatorPipeline:
             return
         if self.sources[next(iter(pend.parts))].channel is not None:
             self._last_fixed = channel
-        y, rows = self._sample(pend, channel)
+        m = self._sample(pend, channel)
         if self.origin_ns is None:
             self.origin_ns = pend.stamp_ns
             self.observer.reset(self.x0, 0.0)
@@ -646,17 +647,17 @@ class EstimatorPipeline:
         dt = t - self.observer.t
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
         if self.check and self.bound_valid:
-            channel, y, rows = self._consistent(pend, t, channel, y, rows)
-            if channel == 0:
+            m = self._consistent(pend, t, m)
+            if m is None:
                 return
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
-            x_hat = self.observer.update(t, channel, y, rows=rows)
+            x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
             self.obs_ns = pend.stamp_ns
             self.updates += 1
-            if rows is not None:
+            if m.partial:
                 self.partial_updates += 1
             try:
                 env = self.observer.envelope()
@@ -684,42 +685,38 @@ class EstimatorPipeline:
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P))
 
     # ------------------------------------------------------------------ consistency
-    def _consistent(self, pend: _Pending, t: float, channel: int, y: np.ndarray,
-                    rows: tuple[int, ...] | None) -> tuple[int, np.ndarray, tuple[int, ...] | None]:
+    def _consistent(self, pend: _Pending, t: float, m: Measurement) -> Measurement | None:
         """The innovation test of :mod:`switchobs_core.consistency` before the sample is used.
 
-        Returns the channel to use (re-attributed when exactly one other channel explains the
-        sample) with its ``(y, rows)``, or channel 0 when the sample is rejected (the bounds are
-        then withdrawn)."""
+        Returns the measurement to use (re-attributed when exactly one other channel explains
+        the sample), or None when the sample is rejected (the bounds are then withdrawn)."""
         obs = self.observer
         with np.errstate(all="ignore"):
             x_p, exact, noisy = obs.prior(t)
         vmax = obs.noise_max
 
-        def test(c: int, y_c: np.ndarray, rows_c: tuple[int, ...] | None) -> Consistency:
-            key = (c, rows_c)
+        def test(mc: Measurement) -> Consistency:
+            key = (mc.channel, mc.rows)
             if key not in self._norms:
-                C = self._C[c - 1] if rows_c is None else self._C[c - 1][list(rows_c)]
+                C = self._C[mc.channel - 1]
+                C = C if mc.rows is None else C[list(mc.rows)]
                 self._norms[key] = (C, spectral_norm(C))
             C, nC = self._norms[key]
             b = exact if vmax is None else noisy
-            return check_innovation(C, c, b, 0.0 if vmax is None else vmax[c - 1], x_p, y_c, nC)
+            return check_innovation(C, mc.channel, b, 0.0 if vmax is None else vmax[mc.channel - 1], x_p, mc.y, nC)
 
-        first = test(channel, y, rows)
+        first = test(m)
         if first.ok:
-            return channel, y, rows
+            return m
         # re-attribution: only a sample whose channel came from the channel topic can have another
         if any(self.sources[i].channel is None and not self.sources[i].shared for i in pend.parts):
-            fits = []
-            for c in range(1, self.N + 1):
-                if c != channel:
-                    y_c, rows_c = self._sample(pend, c)
-                    if test(c, y_c, rows_c).ok:
-                        fits.append((c, y_c, rows_c))
+            fits = [mc for mc in (self._sample(pend, c) for c in range(1, self.N + 1) if c != m.channel)
+                    if test(mc).ok]
             if len(fits) == 1:
                 self.reattributed += 1
-                self.log.warn(f"sample at stamp {pend.stamp_ns} re-attributed from channel {channel} to "
-                              f"{fits[0][0]}, the only channel consistent with it ({first.describe()})", throttle=True)
+                self.log.warn(f"sample at stamp {pend.stamp_ns} re-attributed from channel {m.channel} to "
+                              f"{fits[0].channel}, the only channel consistent with it ({first.describe()})",
+                              throttle=True)
                 return fits[0]
         self.inconsistent += 1
         self.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
@@ -729,7 +726,7 @@ class EstimatorPipeline:
         self._withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): the model does not "
                        "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
                        "beyond noise.max)")
-        return 0, y, rows
+        return None
 
     def _withdraw(self, why: str) -> None:
         """No bound can be guaranteed any more: publish :data:`NO_BOUND` until a reset."""
@@ -814,23 +811,7 @@ class EstimatorPipeline:
         return Prediction(int(stamp), x, float(bound) if self.bound_valid else NO_BOUND, elapsed * 1e-9)
 
 
-def _read_pose(msg: PoseStamped) -> tuple[int, str, np.ndarray]:
-    """``(stamp_ns, frame_id, [p_x, p_y])`` of a PoseStamped (the paper interface's reader)."""
-    return mb.stamp_to_ns(msg.header.stamp), msg.header.frame_id, mb.pose_to_xy(msg)
-
-
 _POSE_TYPE = "geometry_msgs/msg/PoseStamped"
-_POSE_FIELDS = ("pose.position.x", "pose.position.y")
-
-
-def paper_sources(rows) -> list[Source]:
-    """The paper interface's sources from per-channel ``((cam_x, cam_y), (tgt_x, tgt_y))`` rows
-    (:func:`~switchobs_ros.core_config.camera_target_rows`)."""
-    f = _POSE_FIELDS
-    return [Source(0, POSE_TOPICS["camera"], _POSE_TYPE, f, None, tuple(tuple(r[0]) for r in rows), True,
-                   _read_pose, True),
-            Source(1, POSE_TOPICS["target"], _POSE_TYPE, f, None, tuple(tuple(r[1]) for r in rows), False,
-                   _read_pose, True)]
 
 
 def sources_from_specs(specs: Any, system: Any) -> list[Source]:
@@ -842,7 +823,6 @@ def sources_from_specs(specs: Any, system: Any) -> list[Source]:
     out = []
     for k, spec in enumerate(specs.sources):
         rows = tuple(tuple(spec.rows_for(c)) for c in range(1, system.N + 1))
-        pose = spec.type == _POSE_TYPE and tuple(spec.fields) == _POSE_FIELDS
         out.append(Source(k, spec.topic, spec.type, tuple(spec.fields), spec.channel, rows, bool(spec.shared),
-                          _read_pose if pose else spec.reader.read, pose))
+                          spec.reader.read, spec.type == _POSE_TYPE))
     return out

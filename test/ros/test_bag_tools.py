@@ -55,8 +55,7 @@ def test_generate_is_camera_sims_model(ros_node):
             Parameter("seed", value=7), Parameter("rate", value=50.0)]
     node = CameraSimNode(parameter_overrides=over)
     got = []
-    for name in ("pub_channel", "pub_camera", "pub_target", "pub_truth"):
-        pub = getattr(node, name)
+    for pub in [*node.pubs.values(), node.pub_truth]:      # the input topics of its specification, the truth
         pub.publish = (lambda topic: lambda m: got.append((topic, m)))(pub.topic_name)
     node.epoch_ns = 1_000_000_000     # publish_clock's epoch (clock_start 1.0)
     for k in range(0, 700):

@@ -11,12 +11,12 @@ from ros_harness import EstimatorIO, spin_until
 from std_msgs.msg import UInt8
 
 import msg_bridge as mb
-from switchobs_ros.estimator import EstimatorNode, _ArrayWriter
+from switchobs_ros.estimator import EstimatorNode
 
 
 def test_array_writer_gives_the_labelled_array_and_reuses_it():
     labels = ("a", "b", "c")
-    w = _ArrayWriter(labels)
+    w = mb.LabelledArrayWriter(labels)
     first = w.msg(np.array([1.5, -2.0, 3.25]), 12_345_678_901)
     ref = mb.labelled_array([1.5, -2.0, 3.25], labels, 12_345_678_901)
     assert first.layout == ref.layout
@@ -37,7 +37,10 @@ def _drain_until(node: EstimatorNode, cond, timeout: float = 10.0) -> bool:
 
 
 def test_drain_takes_waiting_inputs_channel_first(paper_tables, ros_node):
-    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"])])
+    # the drain alone (no timer runs here): arrival order decides the channel (reorder window 0),
+    # else the last sample would wait for the window's timer (test_attribution.py)
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
+                                             Parameter("reorder_window_ms", value=0.0)])
     try:
         io = EstimatorIO(ros_node)
         assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
