@@ -39,7 +39,7 @@ from .params import ConfigError, Param
 __all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
 
 #: Values of the ``consistency.check`` parameter (switchobs_ros.pipeline).
-CONSISTENCY = ("auto", "on", "off")
+CONSISTENCY = ("auto", "always", "never")
 #: Longest reorder window: a sample waits at most this long for its channel (1 s).
 MAX_REORDER_WINDOW_MS = 1000.0
 
@@ -90,7 +90,7 @@ PARAMS = [
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
           "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
-          "noise-free samples), on (also without noise.max: noise-free samples against exact_bound), off."),
+          "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "

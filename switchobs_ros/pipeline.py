@@ -42,8 +42,8 @@ channel received is the channel, as the order is the publishing order.
 
 Consistency (the model against the data)
 ----------------------------------------
-With ``consistency.check`` on (``auto``: when a noise bound ``noise.max`` is declared, 0 for
-noise-free samples) every sample is tested before it is used
+With ``consistency.check`` ``always``, or ``auto`` (the default) when a noise bound
+``noise.max`` is declared (0 for noise-free samples), every sample is tested before it is used
 (:mod:`switchobs_core.consistency`): its innovation cannot exceed what the published bound
 allows if the model holds. A sample that does proves the model broken for it: when exactly one
 other channel explains it, it is re-attributed (``reattributed``); else it is rejected
@@ -323,7 +323,7 @@ class EstimatorPipeline:
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         mode_check = conf["consistency.check"]
-        check = mode_check == "on" or (mode_check == "auto" and conf.noise_max is not None)
+        check = mode_check == "always" or (mode_check == "auto" and conf.noise_max is not None)
         pipe = cls(sys_, table, observer, x0=conf.x0, sources=sources_from_specs(conf.inputs, sys_),
                    channel_topic=conf.inputs.channel_topic, input_frame_id=conf["input_frame_id"],
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),

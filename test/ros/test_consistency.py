@@ -63,7 +63,7 @@ def _estimate(tmp_path, bag, paper_tables, **over):
 
 
 @pytest.mark.parametrize("gen,over", [
-    ({"noise_std": 0.0}, {"consistency.check": "on"}),                       # noise-free: the exact bound
+    ({"noise_std": 0.0}, {"consistency.check": "always"}),                       # noise-free: the exact bound
     ({"noise_std": 2e-3, "noise_max": 1e-3}, {"noise.max": 1e-3}),           # noise at the box's corners
 ])
 def test_no_false_alarm_when_the_model_holds(tmp_path, paper_tables, gen, over):
@@ -102,7 +102,7 @@ def test_a_target_given_to_the_wrong_channel_is_reattributed(paper_tables):
     from switchobs_core.schedule import Cycle, PeriodicSchedule
 
     params = estimator_params(overrides={"gain_table": paper_tables["periodic"], "e0": E0,
-                                         "consistency.check": "on"})
+                                         "consistency.check": "always"})
     pl = EstimatorPipeline.from_params(params)
     plant = Plant(pl.system, np.array(DEFAULT_X0), extended=True)
     sched = PeriodicSchedule(Cycle.from_ts(2.0, 0.6))

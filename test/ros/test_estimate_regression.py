@@ -9,7 +9,7 @@ gain tables (format version 1) that code wrote. The data: test/ros/data/regressi
 says how each bag and estimate were made). Bit equality is checked only between two computations
 in one process (:func:`test_estimates_repeat_bit_for_bit`).
 
-The innovation consistency check is off here (``consistency.check: off``): the recorded bags hold
+The innovation consistency check is off here (``consistency.check: never``): the recorded bags hold
 Gaussian measurement noise with no declared bound, which the check (for noise-free or bounded
 noise) rightly refuses; it is tested in test_consistency.py."""
 
@@ -37,7 +37,7 @@ def _run(name):
     params = dict(CASES[name]["params"])
     params["gain_table"] = str(DATA / params["gain_table"])
     params["e0"] = 5.0
-    params["consistency.check"] = "off"
+    params["consistency.check"] = "never"
     return estimate(DATA / name, estimator_params(overrides=params))
 
 
