@@ -11,11 +11,11 @@ Input handling (validation, measurement pairing, the observer, the counters) is
 subscriptions, publishing each estimate, the pairing timer (``pairing_timeout``, wall clock),
 the clock-jump callback, ``~/reset`` and ``/diagnostics``.
 
-Measurement pairing (see the pipeline): channel rho's output is ``y = [p_camera; p_target]``;
-``camera/pose`` and ``target/pose`` are paired by header stamp, a half whose partner does not
-come is used alone. The target pose is attributed to the latest channel received on
-``camera/active_channel`` (UInt8 has no stamp): a publisher must send the new channel before
-the first target pose of that channel (camera_sim does).
+Inputs (see the pipeline): one subscription per source of the system's input specification
+(:mod:`msg_bridge.inputs`; the paper interface ``camera/pose``, ``target/pose`` and
+``camera/active_channel`` by default), each callback taking rclpy's ``MessageInfo``: the
+publisher's source timestamp attributes a sample to the channel that was active when it was
+sent, never the order in which the executor happened to serve the topics.
 
 Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).

@@ -22,8 +22,9 @@ def _run(tmp_path, paper_tables, schedule, duration, **gen):
     mode, tau, s = SCHEDULES[schedule]
     generate(tmp_path / "in", GenerateConfig(schedule=schedule, duration=duration, extended=True, **gen), "mcap")
     e0 = float(np.linalg.norm(DEFAULT_X0)) * 1.01        # the estimate starts at 0
+    # every sample tested against the published bound (switchobs_core.consistency): no false alarm
     over = {"gain_table": paper_tables[schedule], "e0": e0, "schedule.mode": mode, "schedule.tau": tau,
-            "schedule.s": s}
+            "schedule.s": s, "consistency.check": "always" if "noise_max" not in gen else "auto"}
     if "noise_max" in gen:
         over["noise.max"] = gen["noise_max"]
     res = estimate(tmp_path / "in", estimator_params(overrides=over), out=tmp_path / "est")
@@ -36,6 +37,7 @@ def test_ten_minutes_published_exact_bound_never_below_the_error(tmp_path, paper
     res, rep = _run(tmp_path, paper_tables, schedule, 600.0)
     (p,) = rep.passes
     assert len(p.t) == 60_001 and res.updates == 60_001
+    assert res.inconsistent == 0 and res.reattributed == 0 and res.bound_valid
     assert p.violations(p.exact) == 0
     # the old exact-arithmetic bound ||Phi|| e0 (about 0.49x per 2 s cycle) would be ~1e-90 by now;
     # the published one sits above the rounding floor of the estimate, and informative
@@ -46,6 +48,7 @@ def test_ten_minutes_published_exact_bound_never_below_the_error(tmp_path, paper
 def test_declared_noise_bound_published_and_never_below_the_error(tmp_path, paper_tables):
     res, rep = _run(tmp_path, paper_tables, "periodic", 120.0, noise_std=2e-3, noise_max=1e-3)
     (p,) = rep.passes
+    assert res.inconsistent == 0 and res.bound_valid
     assert p.noise is not None and p.violations(p.noise) == 0
     assert p.violations(p.exact) > 1000          # the noise-free bound is no guarantee with noise
     assert res.envelope.shape[1] == 2 + 3        # z_1, z_2, paper, exact, noise
