@@ -42,11 +42,13 @@ def main(out: str, args: list[str]) -> None:
     inp: list[tuple[int, int, int]] = []
     pub: list[tuple[int, int]] = []
     gcs: list[list[int]] = []
-    on_camera, publish_all = node._on_camera, node._publish_all
+    publish_all = node._publish_all
+    # the camera/pose input: its subscription and its handler (msg, MessageInfo)
+    sub_cam, on_camera = next((s, h) for s, h in node._hot_inputs if s.topic_name.endswith("camera/pose"))
 
-    def traced_camera(msg):
+    def traced_camera(msg, info):
         inp.append((mb.stamp_to_ns(msg.header.stamp), time.time_ns(), time.thread_time_ns()))
-        on_camera(msg)
+        on_camera(msg, info)
 
     def traced_publish(estimates):
         publish_all(estimates)
@@ -59,9 +61,9 @@ def main(out: str, args: list[str]) -> None:
         elif gcs:
             gcs[-1][1] = time.time_ns()
 
-    node._on_camera = traced_camera
+    sub_cam.callback = node._with_drain(traced_camera)
     node._publish_all = traced_publish
-    node._hot_inputs = tuple((s, traced_camera if h == on_camera else h) for s, h in node._hot_inputs)
+    node._hot_inputs = tuple((s, traced_camera if s is sub_cam else h) for s, h in node._hot_inputs)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     gc.freeze()

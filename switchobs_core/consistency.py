@@ -1,7 +1,7 @@
 """The innovation consistency test: a sample that the published bound cannot explain.
 
 A sample of channel ``c`` holding the output rows ``r`` at time ``t`` is
-``y = C_r x(t) + v`` with ``C_r`` those rows of ``C_c`` (e:output_switching) and ``v`` the
+``y = C_r x(t) + v`` with ``C_r`` those rows of ``C_c`` (e:system) and ``v`` the
 measurement noise. Before the sample is used, the observer's prior estimate ``x_hat(t)`` has
 the error ``e = x(t) - x_hat(t)``, and the observer keeps a rigorous bound ``||e|| <= b(t)``:
 the exact bound (noise-free samples) or, with a declared ``|v_j| <= v_max``, the noise bound

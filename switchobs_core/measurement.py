@@ -1,7 +1,7 @@
 """A measurement: all the observer and the estimator's pipeline see of a sensor.
 
 ``Measurement(stamp_ns, channel, rows, y)``: at the time ``stamp_ns`` (integer nanoseconds of the
-sensor's clock) channel ``channel`` (1-based, e:output_switching) measured
+sensor's clock) channel ``channel`` (1-based, e:system) measured
 
 .. math::
 

@@ -84,9 +84,11 @@ PARAMS = [
     Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
           "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
           "or the paper interface (camera/pose, target/pose, camera/active_channel) for camera/target systems."),
-    Param("reorder_window_ms", 50.0, "Milliseconds a sample of a topic shared by several channels waits for its "
+    Param("reorder_window_ms", 300.0, "Milliseconds a sample of a topic shared by several channels waits for its "
           "channel to be certain (a channel message sent after it) before the latest channel sent before it is "
-          "taken; DDS reorders topics under load. 0: the latest channel received (arrival order)."),
+          "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
+          "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "
+          "sends it only on change makes them wait the whole window. 0: the latest channel received (arrival order)."),
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
           "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "

@@ -44,7 +44,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import JumpThreshold, TimeJump
+from rclpy.clock import Clock, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidHandle
@@ -213,7 +213,10 @@ class EstimatorMixin:
                           min_backward=Duration(nanoseconds=-1), on_clock_change=False),
             post_callback=self.clock_jump_callback)
         self.diag_timer = self.create_timer(cfg["diagnostics_period"], self.diagnostics_callback)
-        self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback)
+        # wall (steady) time: the pairing timeout and the reorder window count real waiting, and a
+        # sim clock that stops (a replay's end) must not hold the last samples back
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback, clock=self._steady)
 
     def _destroy_interfaces(self) -> None:
         """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
@@ -360,7 +363,8 @@ class EstimatorMixin:
             elif p.name == "pairing_timeout":
                 self.pair_timeout = float(p.value)
                 self.destroy_timer(self.pair_timer)
-                self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback)
+                self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback,
+                                                    clock=self._steady)
             elif p.name == "diagnostics_period":
                 self.destroy_timer(self.diag_timer)
                 self.diag_timer = self.create_timer(float(p.value), self.diagnostics_callback)

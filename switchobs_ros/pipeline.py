@@ -115,8 +115,9 @@ CHANNEL_TOPIC = "camera/active_channel"
 #: The set-state input's name in the counters (robot_localization's set_pose analogue).
 SET_STATE_TOPIC = "~/set_state"
 INPUT_TOPICS = (POSE_TOPICS["camera"], POSE_TOPICS["target"], CHANNEL_TOPIC)
-#: Samples kept waiting for their partners or for their channel (a backlog, the reorder window).
-MAX_PENDING = 64
+#: Samples kept waiting for their partners or for their channel (a backlog, the reorder window:
+#: 300 ms at 1 kHz is 300 samples).
+MAX_PENDING = 1024
 #: Channel messages remembered for attribution by source timestamp.
 CHANNEL_HISTORY = 256
 
@@ -230,7 +231,7 @@ class EstimatorPipeline:
                  channel_topic: str | None = CHANNEL_TOPIC, input_frame_id: str = "map",
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
-                 reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = ""):
+                 reorder_window_ns: int = 300_000_000, check: bool = False, specs_text: str = ""):
         self.system = system
         self.table = table
         self.table_path = table_path
@@ -477,8 +478,9 @@ class EstimatorPipeline:
         now_mono = time.monotonic() if now_mono is None else now_mono
         try:
             stamp_ns, values, rej = self._validate(src, msg, now_ns)
-            legacy = src_ns is None or not self._ch_src
-            if rej is None and src.channel is None and self.channel_topic and legacy and not self.channel \
+            # no channel yet: rejected at once when arrival order decides (no source timestamp or no
+            # window); else the sample waits: its channel message may still be in flight
+            if rej is None and src.channel is None and self.channel_topic and not self.channel \
                     and (src_ns is None or not self.window_ns):
                 rej = Rejection(Reason.NO_CHANNEL, self.channel_topic, "no active channel received yet")
             if not src.shared and src.channel is None and src_ns is None \

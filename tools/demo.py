@@ -324,7 +324,10 @@ def _write(res: dict, out: Path, sched: dict) -> None:
                     color="tab:blue")
     ax.set_xlabel("simulated time [s]")
     ax.set_ylabel("estimation error norm")
-    lo = max(min(np.nanmin(res["err"]), np.nanmin(res["exact"])) / 3, 1e-8)
+    # down to the smallest positive error or bound (a Kalman table reaches the rounding floor, 1e-15)
+    pos = np.concatenate([res["err"], res["exact"]])
+    pos = pos[np.isfinite(pos) & (pos > 0)]
+    lo = max(float(pos.min()) / 3 if pos.size else 1e-8, 1e-17)
     ax.set_ylim(lo, max(np.nanmax(res["paper"]), np.nanmax(res["err"])) * 3)
     ax.set_xlim(0, t[-1])
     ax.grid(True, which="major", alpha=0.4)
