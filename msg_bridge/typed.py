@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import switchobs_msgs
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 from .stamps import stamp_to_ns
@@ -193,8 +194,6 @@ def read_error_bounds(msg: ErrorBounds) -> BoundsReading:
 def msg_dir() -> Path:
     """The folder of the installed ``.msg`` files: ``<prefix>/share/switchobs_msgs/msg``, found
     from the imported package (``<prefix>/lib/pythonX.Y/site-packages/switchobs_msgs``)."""
-    import switchobs_msgs
-
     prefix = Path(switchobs_msgs.__file__).resolve().parents[4]
     d = prefix / "share" / "switchobs_msgs" / "msg"
     if not d.is_dir():

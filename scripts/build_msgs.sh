@@ -26,8 +26,9 @@ py_include="$("$PYBIN" -c 'import sysconfig; print(sysconfig.get_paths()["includ
 if ! command -v cmake >/dev/null || ! command -v g++ >/dev/null || ! command -v make >/dev/null \
         || [ ! -f "$py_include/Python.h" ]; then
     echo "bootstrap: installing cmake g++ make python3-dev with apt-get"
-    { apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y cmake g++ make python3-dev; } \
-        >> "$LOG" 2>&1 || fail "apt-get install cmake g++ make python3-dev"
+    apt-get update >> "$LOG" 2>&1 || true     # a stale list may still serve; the install decides
+    DEBIAN_FRONTEND=noninteractive apt-get install -y cmake g++ make python3-dev >> "$LOG" 2>&1 \
+        || fail "apt-get install cmake g++ make python3-dev"
     [ -f "$py_include/Python.h" ] || fail "the Python headers ($py_include/Python.h missing)"
 fi
 

@@ -5,6 +5,7 @@ cross DDS between two processes; rosbags writes and reads both types in an mcap 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
+from typed_talker import LABELS, NS, content
 
 import msg_bridge as mb
 from msg_bridge.typed import (
@@ -29,8 +31,6 @@ from msg_bridge.typed import (
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
-sys.path.insert(0, str(HERE))
-from typed_talker import LABELS, NS, content  # noqa: E402
 
 S = 1_700_000_000_123_456_789
 
@@ -168,7 +168,6 @@ def test_error_bounds_without_declared_noise_and_wrong_layout():
 
 # --- DDS between two processes --------------------------------------------------------------------
 
-@pytest.mark.slow
 def test_typed_messages_and_markers_cross_dds(ros_node, tmp_path):
     from ros_harness import spin_until
     from visualization_msgs.msg import MarkerArray
@@ -277,3 +276,10 @@ def test_register_rosbags_types_needs_the_installed_definitions(monkeypatch, tmp
     monkeypatch.setattr(switchobs_msgs, "__file__", str(fake))
     with pytest.raises(mb.BridgeError, match="switchobs_msgs has no message definitions at .*rebuild it"):
         register_rosbags_types(get_typestore(Stores.ROS2_JAZZY))
+
+
+def test_the_code_blocks_of_docs_typed_outputs_run():
+    blocks = re.findall(r"```python\n(.*?)```", (REPO / "docs" / "typed-outputs.md").read_text(), re.S)
+    assert len(blocks) == 3
+    for code in blocks:
+        exec(compile(code, "docs/typed-outputs.md", "exec"), {})
