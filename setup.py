@@ -21,7 +21,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", sorted(glob("config/*.yaml"))),
+        ("share/" + package_name + "/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.rviz"))),
     ],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
     # scripts/bootstrap.sh installs the pinned set from requirements.txt first.
@@ -30,7 +30,7 @@ setup(
         "ros": [
             "ros-jazzy-rclpy[fastrtps]", "ros-jazzy-std-msgs", "ros-jazzy-geometry-msgs",
             "ros-jazzy-nav-msgs", "ros-jazzy-diagnostic-msgs", "ros-jazzy-std-srvs",
-            "ros-jazzy-rosgraph-msgs",
+            "ros-jazzy-rosgraph-msgs", "ros-jazzy-visualization-msgs",
         ],
         "demo": ["matplotlib", "tqdm"],
         "test": ["pytest", "hypothesis", "ruff"],

@@ -16,6 +16,12 @@ fields    one converter per sensor message type: :class:`FieldReader` (message -
           ``(stamp_ns, frame_id, y)``) and :class:`FieldWriter` (values -> message)
 inputs    input specifications: topic, type, fields -> output rows, and how the channel is
           known (:class:`InputSpecs`, :func:`load_inputs`)
+markers   ``~/markers`` for RViz (:class:`MarkersWriter`): per body its position, 2-sigma
+          ellipse, the guaranteed bound's circle, the body in view highlighted
+typed     the typed outputs ``switchobs_msgs/StateEstimate`` and ``ErrorBounds``: writers,
+          readers, and their registration in a rosbags type store. Not imported here (it needs
+          the interface package that scripts/bootstrap.sh builds): ``from msg_bridge.typed
+          import ...``
 
 Together, ``fields`` and ``inputs`` give the observer its measurement
 ``(stamp_ns, channel, rows, y)`` from any supported topic.
@@ -57,6 +63,7 @@ from .inputs import (
     load_inputs,
     parse_inputs,
 )
+from .markers import MarkersWriter
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
 from .validate import (
     BridgeError,
@@ -91,6 +98,7 @@ __all__ = [
     "BridgeError",
     "LabelledArray",
     "LabelledArrayWriter",
+    "MarkersWriter",
     "OdometryWriter",
     "Reason",
     "Rejection",

@@ -41,6 +41,7 @@ def test_colcon_build_and_ament_index_run(tmp_path, paper_tables):
     for exe in ("camera_sim", "switchobs", "switchobs_bag"):
         assert (install / "switchobs_ros" / "lib" / "switchobs_ros" / exe).exists(), exe
     assert (install / "switchobs_ros" / "share" / "switchobs_ros" / "config" / "estimator.yaml").exists()
+    assert (install / "switchobs_ros" / "share" / "switchobs_ros" / "config" / "switchobs.rviz").exists()
 
     # what `ros2 run switchobs_ros estimator` does, after `source install/setup.bash`
     probe = ("from ament_index_python.packages import get_package_prefix, get_package_share_directory;"

@@ -1,0 +1,142 @@
+"""RViz markers of the estimate: ``visualization_msgs/MarkerArray`` for ``~/markers``.
+
+Per planar body (:func:`~msg_bridge.convert.bodies`), four markers with fixed namespaces and
+ids (the body's position ``k`` in ``bodies``), so RViz replaces them at every message:
+
+* ``switchobs/position``, SPHERE: the estimated position (p_x, p_y), coloured :data:`HIGHLIGHT`
+  for the body in view and :data:`BODY` for the others;
+* ``switchobs/label``, TEXT_VIEW_FACING: the body's name, above the sphere;
+* ``switchobs/covariance``, CYLINDER (flat): the 2-sigma ellipse of the (p_x, p_y) block of P;
+* ``switchobs/bound``, LINE_STRIP: a circle of radius ``bound`` around the estimated position
+  (the guaranteed bound on ``||x - x_hat||``, hence on each body's position error).
+
+The covariance ellipse is a flat CYLINDER (a translucent disc, one marker and no points): with
+the eigen-decomposition ``P_pp = V diag(l_1, l_2) V'`` (``l_1 >= l_2``), its semi-axes are
+``2 sqrt(l_i)`` (2 sigma), so ``scale.x = 4 sqrt(l_1)`` and ``scale.y = 4 sqrt(l_2)`` (RViz's
+cylinder scales are diameters), turned by the yaw ``atan2(v_1y, v_1x)`` of the major axis. The
+2x2 eigen-decomposition is presentation, not estimation.
+
+A marker that has nothing to show (no covariance, no valid bound: None, negative, i.e. withdrawn,
+or not finite) is sent with action DELETE, so RViz removes what it drew before; the list of
+markers is the same at every call (4 per body, in body order).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from .convert import Body
+from .validate import BridgeError
+
+__all__ = [
+    "BODY",
+    "BOUND",
+    "CIRCLE_POINTS",
+    "HIGHLIGHT",
+    "NAMESPACES",
+    "MarkersWriter",
+]
+
+#: Marker namespaces, in the order of each body's markers.
+NAMESPACES = ("switchobs/position", "switchobs/label", "switchobs/covariance", "switchobs/bound")
+#: Colours (r, g, b, a): a body, the body in view, the bound circle.
+BODY = (0.2, 0.45, 1.0, 1.0)
+HIGHLIGHT = (1.0, 0.55, 0.0, 1.0)
+BOUND = (0.1, 0.8, 0.2, 1.0)
+#: Points of the bound circle (the last repeats the first: a closed LINE_STRIP).
+CIRCLE_POINTS = 73
+_ELLIPSE_ALPHA = 0.35
+_THIN = 0.01        # m: height of the flat ellipse disc, width of the bound line
+
+
+def _color(rgba: Sequence[float], alpha: float | None = None) -> ColorRGBA:
+    r, g, b, a = rgba
+    return ColorRGBA(r=r, g=g, b=b, a=a if alpha is None else alpha)
+
+
+class MarkersWriter:
+    """The ``~/markers`` MarkerArray, reused: ``w.msg(x, stamp_ns, P=None, bound=None, active_body=None)``.
+
+    ``bodies`` come from :func:`msg_bridge.bodies` of the state labels; ``frame_id`` is the frame
+    of the positions (``map``); ``size`` the sphere diameter (m). In ``msg``: ``x`` the state,
+    ``P`` its covariance (n x n) or None, ``bound`` a valid guaranteed bound on ``||x - x_hat||``
+    or None, ``active_body`` the name of the body in view or None. Raises
+    :class:`~msg_bridge.validate.BridgeError` for a body name it does not know.
+    """
+
+    def __init__(self, bodies: Sequence[Body], frame_id: str, size: float = 0.25):
+        self.bodies = tuple(bodies)
+        self._names = {b.name: k for k, b in enumerate(self.bodies)}
+        self._unit = np.exp(1j * np.linspace(0.0, 2.0 * math.pi, CIRCLE_POINTS))
+        self._body, self._highlight = _color(BODY), _color(HIGHLIGHT)
+        self._msg = MarkerArray()
+        self._sets: list[tuple[Marker, Marker, Marker, Marker]] = []
+        for k, b in enumerate(self.bodies):
+            ms = tuple(self._marker(ns, k, frame_id) for ns in NAMESPACES)
+            pos, lab, cov, bnd = ms
+            pos.type, pos.color = Marker.SPHERE, _color(BODY)
+            pos.scale.x = pos.scale.y = pos.scale.z = size
+            lab.type, lab.text, lab.color = Marker.TEXT_VIEW_FACING, b.name, _color((1.0, 1.0, 1.0, 1.0))
+            lab.scale.z = 0.8 * size
+            lab.pose.position.z = 1.2 * size
+            cov.type, cov.color = Marker.CYLINDER, _color(BODY, _ELLIPSE_ALPHA)
+            cov.scale.z = _THIN
+            bnd.type, bnd.color = Marker.LINE_STRIP, _color(BOUND)
+            bnd.scale.x = _THIN * 2
+            bnd.points = [Point() for _ in range(CIRCLE_POINTS)]
+            bnd.pose.orientation.w = 1.0
+            self._sets.append(ms)
+            self._msg.markers.extend(ms)
+
+    @staticmethod
+    def _marker(ns: str, k: int, frame_id: str) -> Marker:
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.ns, m.id = ns, k
+        m.pose.orientation.w = 1.0
+        return m
+
+    def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None, bound: float | None = None,
+            active_body: str | None = None) -> MarkerArray:
+        if active_body is not None and active_body not in self._names:
+            raise BridgeError(f"active body '{active_body}' is not one of {', '.join(self._names)}")
+        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        draw_bound = bound is not None and math.isfinite(bound) and bound >= 0.0
+        for b, (pos, lab, cov, bnd) in zip(self.bodies, self._sets):
+            for m in (pos, lab, cov, bnd):
+                m.header.stamp.sec, m.header.stamp.nanosec = sec, nsec
+            px, py = float(x[b.p_x]), float(x[b.p_y])
+            pos.pose.position.x = lab.pose.position.x = cov.pose.position.x = px
+            pos.pose.position.y = lab.pose.position.y = cov.pose.position.y = py
+            pos.color = self._highlight if b.name == active_body else self._body
+            pos.action = lab.action = Marker.ADD
+            cov.action = self._ellipse(cov, P, b)
+            bnd.action = Marker.DELETE
+            if draw_bound:
+                bnd.action = Marker.ADD
+                for p, u in zip(bnd.points, self._unit):
+                    p.x, p.y = px + bound * u.real, py + bound * u.imag
+        return self._msg
+
+    @staticmethod
+    def _ellipse(cov: Marker, P: np.ndarray | None, b: Body) -> int:
+        """Fill the 2-sigma ellipse of body ``b``; return its action (DELETE: nothing to show)."""
+        if P is None:
+            return Marker.DELETE
+        ip = [b.p_x, b.p_y]
+        Ppp = np.asarray(P, dtype=float)[np.ix_(ip, ip)]
+        if not np.isfinite(Ppp).all():
+            return Marker.DELETE
+        # P_pp = V diag(l) V' (ascending l): semi-axes 2 sqrt(l), the major axis along V[:, 1]
+        l, V = np.linalg.eigh(0.5 * (Ppp + Ppp.T))
+        l = np.clip(l, 0.0, None)
+        cov.scale.x, cov.scale.y = 4.0 * math.sqrt(l[1]), 4.0 * math.sqrt(l[0])
+        yaw = math.atan2(V[1, 1], V[0, 1])
+        cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+        return Marker.ADD
