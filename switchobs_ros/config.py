@@ -108,6 +108,11 @@ PARAMS = [
           "Changeable at run time."),
     Param("output.covariance_every", 1, "Publish ~/covariance for every k-th estimate (0: never; needs "
           "publish_covariance). Changeable at run time."),
+    Param("output.typed_every", 1, "Publish the typed ~/state_estimate (switchobs_msgs/StateEstimate) and "
+          "~/error_bounds (ErrorBounds) for every k-th estimate (0: never). Changeable at run time."),
+    Param("output.markers_every", 10, "Publish ~/markers (visualization_msgs/MarkerArray for RViz: each body's "
+          "position, 2-sigma ellipse, the guaranteed bound, the body in view) for every k-th estimate (0: never). "
+          "Changeable at run time."),
     Param("gc_freeze", True, "Call gc.freeze() once the node is built (start-up objects leave the garbage "
           "collector's generations, see bench/RESULTS.md)."),
     Param("autostart", True, "Managed (lifecycle) node only: configure and activate at start-up (today's "
@@ -126,6 +131,8 @@ RUNTIME_PARAMS = {
     "output.envelope_every": (lambda v: v >= 0, "an integer >= 0"),
     "output.odometry_every": (lambda v: v >= 0, "an integer >= 0"),
     "output.covariance_every": (lambda v: v >= 0, "an integer >= 0"),
+    "output.typed_every": (lambda v: v >= 0, "an integer >= 0"),
+    "output.markers_every": (lambda v: v >= 0, "an integer >= 0"),
 }
 
 def check_runtime_value(name: str, value: Any) -> str:

@@ -52,14 +52,17 @@ from rclpy.node import Node
 from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64MultiArray, UInt8
 from std_srvs.srv import Trigger
+from switchobs_msgs.msg import ErrorBounds, StateEstimate
+from visualization_msgs.msg import MarkerArray
 
 import msg_bridge as mb
+from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from . import qos
 from .config import PARAMS, EstimatorConfig, check_runtime_value
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import declare_all
-from .pipeline import Estimate, EstimatorPipeline, PipelineLog
+from .pipeline import Estimate, EstimatorPipeline, PipelineLog, channel_bodies
 from .runner import run_node
 
 __all__ = ["PARAMS", "PREDICTION_BOUND_LABELS", "EstimatorNode", "main"]
@@ -138,10 +141,17 @@ class EstimatorMixin:
         self.w_state = mb.LabelledArrayWriter(self.state_labels)
         self.w_env = mb.LabelledArrayWriter(self.env_labels)
         self.w_odom = [mb.OdometryWriter(b, self.frame, c) for b, c in zip(self.bodies, self.child_frames)]
+        # typed outputs (switchobs_msgs) and RViz markers
+        noise = pl.observer.noise_max is not None
+        self.w_typed = (StateEstimateWriter(self.state_labels, self.frame),
+                        ErrorBoundsWriter(sys_.N, self.frame, noise))
+        self.w_markers = mb.MarkersWriter(self.bodies, self.frame) if self.bodies else None
+        self.body_in_view = channel_bodies(sys_, self.bodies)
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
         # output decimation (output.*_every; 0: never) and the runner's choices
-        self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance")}
+        self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance", "typed",
+                                                                  "markers")}
         self.n_published = 0
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
@@ -180,6 +190,9 @@ class EstimatorMixin:
             self.w_cov = mb.LabelledArrayWriter(mb.covariance_labels(self.state_labels))
             self.pub_cov = pub(Float64MultiArray, "~/covariance", qos.OUTPUT)
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
+        self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),
+                          pub(ErrorBounds, "~/error_bounds", qos.OUTPUT))
+        self.pub_markers = pub(MarkerArray, "~/markers", qos.OUTPUT) if self.w_markers is not None else None
         self.pub_diag = pub(DiagnosticArray, "/diagnostics", qos.OUTPUT)
         # sensor outage: the prediction and its exact bound, once per diagnostics period, on
         # topics of their own (~/state stays one answer per measurement)
@@ -220,14 +233,15 @@ class EstimatorMixin:
 
     def _destroy_interfaces(self) -> None:
         """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
-        for name in ("pub_state", "pub_env", "pub_cov", "pub_diag", "pub_pred", "pub_pred_bound"):
+        for name in ("pub_state", "pub_env", "pub_cov", "pub_diag", "pub_pred", "pub_pred_bound", "pub_markers"):
             pub = getattr(self, name, None)
             if pub is not None:
                 self.destroy_publisher(pub)
             setattr(self, name, None)
-        for pub in getattr(self, "pub_odom", []):
+        for pub in [*getattr(self, "pub_odom", []), *getattr(self, "pub_typed", ())]:
             self.destroy_publisher(pub)
         self.pub_odom = []
+        self.pub_typed = ()
         self._hot_inputs = ()
         for sub in getattr(self, "_input_subs", []):
             self.destroy_subscription(sub)
@@ -339,6 +353,15 @@ class EstimatorMixin:
                 if ev["odometry"] and k % ev["odometry"] == 0:
                     for pub, w in zip(self.pub_odom, self.w_odom):
                         pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                if ev["typed"] and k % ev["typed"] == 0:
+                    pl = self.pipeline
+                    self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                    self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                  pl.bound_invalid_why))
+                if self.pub_markers is not None and ev["markers"] and k % ev["markers"] == 0:
+                    g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
+                    self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
+                                                                self.body_in_view.get(e.channel)))
         except Exception as err:
             self.pipeline.internal_error("publish", err)
 

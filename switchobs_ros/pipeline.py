@@ -140,16 +140,18 @@ class Prediction:
 
 @dataclass(frozen=True)
 class Estimate:
-    """One observer update: the stamp it answers, ``x_hat``, the envelope values and the
-    error covariance ``P`` (None when not published).
+    """One observer update: the stamp it answers, ``x_hat``, the envelope values, the error
+    covariance ``P`` (None when not published) and the channel the sample was used on.
 
-    ``envelope`` is ``[z_1..z_N, paper_bound, exact_bound]`` (the ``~/envelope`` layout).
+    ``envelope`` is ``[z_1..z_N, paper_bound, exact_bound(, noise_bound)]`` (the ``~/envelope``
+    layout; the bounds -1 when withdrawn).
     """
 
     stamp_ns: int
     x_hat: np.ndarray
     envelope: np.ndarray
     P: np.ndarray | None = None
+    channel: int = 0
 
 
 class PipelineLog:
@@ -684,7 +686,7 @@ class EstimatorPipeline:
         P = self.observer.P if self.publish_covariance else None
         if P is not None and not np.isfinite(P).all():
             P = None
-        out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P))
+        out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P, m.channel))
 
     # ------------------------------------------------------------------ consistency
     def _consistent(self, pend: _Pending, t: float, m: Measurement) -> Measurement | None:
@@ -827,4 +829,18 @@ def sources_from_specs(specs: Any, system: Any) -> list[Source]:
         rows = tuple(tuple(spec.rows_for(c)) for c in range(1, system.N + 1))
         out.append(Source(k, spec.topic, spec.type, tuple(spec.fields), spec.channel, rows, bool(spec.shared),
                           spec.reader.read, spec.type == _POSE_TYPE))
+    return out
+
+
+def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
+    """The body each channel sees (the one whose outputs belong to that channel alone, as
+    ``agent2`` for channel 2 of the camera scenarios): ``{channel: body name}``, channels whose
+    outputs name no such body left out (the markers then highlight none)."""
+    names = {b.name for b in bodies}
+    common = set.intersection(*(set(o) for o in system.output_labels)) if system.N else set()
+    out = {}
+    for c, labels in enumerate(system.output_labels, start=1):
+        own = {lab.rpartition(".")[0] for lab in labels if lab not in common} & names
+        if len(own) == 1:
+            out[c] = own.pop()
     return out

@@ -10,7 +10,8 @@ no offline meaning). So a live replay and the offline run answer the same sample
 same estimates (tested to 1e-9).
 
 Writes a new bag with the estimator's output topics (``<node>/state``, ``<node>/envelope``,
-``<node>/<body>/odom``: the same types and layouts the node publishes; log time = the log time of
+``<node>/<body>/odom``, the typed ``<node>/state_estimate`` and ``<node>/error_bounds``: the same
+types and layouts the node publishes; log time = the log time of
 the input that produced the estimate), the input bag's other topics copied (unless
 ``inputs=False``), and one ``/diagnostics`` message at the end in the node's shape (accepted and
 rejected inputs). Optionally a CSV: ``stamp_ns``, the state labels, the envelope labels.
@@ -28,8 +29,10 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, UInt8
+from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
+from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
@@ -99,7 +102,11 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
-    outputs = {t_state, t_env, t_cov, *t_odom}
+    # the typed outputs (switchobs_msgs), as the node publishes them
+    t_se, t_eb = f"{node}/state_estimate", f"{node}/error_bounds"
+    w_se = StateEstimateWriter(state_labels, cfg["world_frame"])
+    w_eb = ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None)
+    outputs = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
         if pl.publish_covariance else None
 
@@ -112,6 +119,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                 writer.add(t_cov, type_name(Float64MultiArray))
             for t in t_odom:
                 writer.add(t, type_name(Odometry))
+            writer.add(t_se, type_name(StateEstimate))
+            writer.add(t_eb, type_name(ErrorBounds))
             writer.add("/diagnostics", type_name(DiagnosticArray))
             if inputs:
                 for t, ty in in_topics.items():
@@ -139,6 +148,9 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     writer.write(t_env, log_ns, w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
                     for t, (w, idx) in zip(t_odom, w_odom):
                         writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
+                    writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
+                    writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                          pl.bound_invalid_why)))
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None

@@ -22,6 +22,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from msg_bridge.typed import register_rosbags_types
 from switchobs_core.exceptions import SwitchobsError, one_line
 
 from .. import qos
@@ -272,6 +273,7 @@ class BagOut:
             raise BagError(f"bag {self.path} exists already; choose a new folder (bags are never overwritten)")
         self.storage = storage
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
+        register_rosbags_types(self._typestore)     # switchobs_msgs: the estimator's typed outputs
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
         self._w = Writer(self.path, version=9, storage_plugin=plugin)
         try:
