@@ -84,7 +84,7 @@ PARAMS = [
     Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
           "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
           "or the paper interface (camera/pose, target/pose, camera/active_channel) for camera/target systems."),
-    Param("reorder_window_ms", 300.0, "Milliseconds a sample of a topic shared by several channels waits for its "
+    Param("reorder_window_ms", 50.0, "Milliseconds a sample of a topic shared by several channels waits for its "
           "channel to be certain (a channel message sent after it) before the latest channel sent before it is "
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
           "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "

@@ -397,7 +397,7 @@ class EstimatorMixin:
     # ------------------------------------------------------------------ reset
     def reset_estimator(self, why: str) -> None:
         """Back to the initial estimate (see :meth:`EstimatorPipeline.reset`)."""
-        self.pipeline.reset(why)
+        self._publish_all(self.pipeline.reset(why))
 
     def clock_jump_callback(self, jump: TimeJump) -> None:
         """A jump of the node clock: backwards resets the estimator (a looped replay), forwards is counted."""

@@ -233,7 +233,7 @@ class EstimatorPipeline:
                  channel_topic: str | None = CHANNEL_TOPIC, input_frame_id: str = "map",
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
-                 reorder_window_ns: int = 300_000_000, check: bool = False, specs_text: str = ""):
+                 reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = ""):
         self.system = system
         self.table = table
         self.table_path = table_path
@@ -755,12 +755,20 @@ class EstimatorPipeline:
         at = f" (at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
         self.log.error(f"{where}: {type(err).__name__}: {err}{at}", throttle=True)
 
-    def reset(self, why: str) -> None:
+    def reset(self, why: str) -> list[Estimate]:
         """Back to the initial estimate; the next accepted sample becomes the new time origin.
 
-        Clears the pending samples and the per-topic stamp history (so a replay that starts
-        over is accepted); keeps the active channel and all counters.
+        The samples still waiting (for partners or for their channel) belong to what came before
+        the reset: they are answered first, and returned. Then the pending samples and the
+        per-topic stamp history are cleared (so a replay that starts over is accepted); the
+        active channel and all counters are kept.
         """
+        out: list[Estimate] = []
+        if self.pending and self.origin_ns is not None:
+            try:
+                self._advance(out, math.inf, force=True)
+            except Exception as err:
+                self.internal_error("reset", err)
         self.pending = {}
         self.origin_ns = None
         self.obs_ns = None
@@ -774,6 +782,7 @@ class EstimatorPipeline:
         self.bound_valid = False
         self.bound_invalid_why = why
         self.log.info(f"estimator reset ({why}); exact_bound is {NO_BOUND:g} (no bound known) from now on")
+        return out
 
 
     # ------------------------------------------------------------------ residence times (A2)
