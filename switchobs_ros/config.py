@@ -24,6 +24,7 @@ import msg_bridge as mb
 from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
 from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
+from switchobs_core.ranges import RANGES, check_range
 from switchobs_core.schedule import Cycle
 from switchobs_core.system import LTISystem
 
@@ -97,19 +98,29 @@ PARAMS = [
           "behaviour); false waits for the lifecycle services."),
 ]
 
+#: Largest output decimation ``output.*_every`` (an int64 parameter; beyond it nothing is ever published).
+MAX_EVERY = 1_000_000_000
+
 #: Parameters that can change while the node runs (the others need a restart: they shape the
 #: observer, its gain table or the topics), and the check of a value: (ok, what it must be). The
 #: one owner of both: the start-up check and the on-set-parameters callback use it.
+def _duration(name: str):
+    """A duration's check: the range of :data:`switchobs_core.ranges.RANGES` (an int64 of ns)."""
+    lo, hi, _, why = RANGES[name]
+    return (lambda v: math.isfinite(v) and lo < v <= hi, f"in (0, {hi:g}] s ({why})")
+
+
 RUNTIME_PARAMS = {
-    "sensor_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "future_tolerance": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+    "sensor_timeout": _duration("sensor_timeout"),
+    "future_tolerance": _duration("future_tolerance"),
     "max_abs_value": (lambda v: math.isfinite(v) and 0 < v <= MAX_ABS_SAMPLE, f"in (0, {MAX_ABS_SAMPLE:g}]"),
-    "pairing_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "diagnostics_period": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "output.envelope_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.odometry_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.covariance_every": (lambda v: v >= 0, "an integer >= 0"),
+    "pairing_timeout": _duration("pairing_timeout"),
+    "diagnostics_period": _duration("diagnostics_period"),
+    "output.envelope_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.odometry_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.covariance_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
 }
+
 
 def check_runtime_value(name: str, value: Any) -> str:
     """'' if ``value`` is acceptable for runtime parameter ``name``, else the reason (one line)."""
@@ -241,10 +252,12 @@ class EstimatorConfig:
         else:
             cycles = cycles_from_params(mode, values["schedule.tau"], values["schedule.s"], values["schedule.h"],
                                         sys_.N, values["schedule.dead_time"])
-        for name in ("delta", "e0"):      # the runtime parameters: check_runtime_value below
-            v = values[name]
-            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
-                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
+        v = values["delta"]             # the runtime parameters: check_runtime_value below
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"parameter 'delta' must be a finite number > 0; got {v}")
+        check_range(values["e0"], "e0", exc=ConfigError)
+        for v in values["initial_estimate"]:
+            check_range(v, "initial_estimate", exc=ConfigError)
         if values["max_abs_value"] > MAX_ABS_SAMPLE:
             raise ConfigError(f"parameter 'max_abs_value' must be <= {MAX_ABS_SAMPLE:g} (larger samples could "
                               f"overflow the observer's exact step); got {values['max_abs_value']:g}")
@@ -258,9 +271,7 @@ class EstimatorConfig:
         if family not in GAIN_FAMILY_PARAM:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
                               f"got {family!r}")
-        rate = float(values["rate"])
-        if not (math.isfinite(rate) and rate >= 0):
-            raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
+        rate = check_range(values["rate"], "rate", exc=ConfigError)
         noise = noise_from_params(values, sys_)
         for name in RUNTIME_PARAMS:
             why = check_runtime_value(name, values[name])
@@ -268,9 +279,7 @@ class EstimatorConfig:
                 raise ConfigError(why)
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
-        vmax = float(values["noise.max"])
-        if not math.isfinite(vmax) or vmax > MAX_ABS_SAMPLE:
-            raise ConfigError(f"parameter 'noise.max' must be a finite number (< 0: no declared bound); got {vmax}")
+        vmax = check_range(values["noise.max"], "noise.max", exc=ConfigError)
         bodies = [b.name for b in mb.bodies(sys_.state_labels)]
         frames = values["body_frames"]
         if frames and len(frames) != len(bodies):

@@ -18,6 +18,7 @@ from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.gains import GainTable, kalman_table
 from switchobs_core.kalman import design_kalman
 from switchobs_core.noise import NoiseModel
+from switchobs_core.ranges import MAX_CYCLES
 from switchobs_core.scenarios import load_noise, load_system
 from switchobs_core.schedule import Cycle
 from switchobs_core.system import LTISystem
@@ -72,6 +73,10 @@ def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int, dead_t
     or ``schedule.h`` (N channels: N active times per cycle, cycles concatenated), every cycle
     with the blind interval ``schedule.dead_time`` after each switch.
     """
+    n_cycles = len(h) // max(N, 1) if h else len(tau)
+    if n_cycles > MAX_CYCLES:
+        raise ConfigError(f"schedule: {n_cycles} cycles given, at most {MAX_CYCLES} supported (a schedule repeats its "
+                          "cycles: give one period)")
     try:
         if h:
             if len(h) % N:

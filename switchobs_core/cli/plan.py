@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import DesignError, InvalidArgument, ScheduleError
+from ..files import check_output, write_with
 from ..kalman import sample_pattern
 from ..paper import TABLE
 from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
@@ -133,15 +134,18 @@ def _plot(path: Path, J: ScheduleCost, res: Any, paper: list[dict], h_min: float
     ax.set_title(f"Periodic Kalman cost at {J.rate:g} Hz, h >= {h_min:g} s (grey: excluded)", fontsize=10)
     ax.set_facecolor("0.85")
     ax.legend(loc="upper right", fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        write_with(path, "--plot", lambda p: fig.savefig(p, dpi=110))
+    finally:
+        plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
     progress = False if args.json else args.progress
+    if args.plot is not None:
+        check_output(args.plot, "--plot")     # before the search, not after it
     if not (math.isfinite(args.dead_time) and args.dead_time >= 0):
         raise InvalidArgument(f"--dead-time must be a finite number of seconds >= 0; got {args.dead_time:g}")
     J = ScheduleCost(system, args.rate, noise, args.weights, dead_time=args.dead_time)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errorfigs import plot_result
 from ..exceptions import InvalidArgument, ScheduleError
+from ..files import check_output
 from ..gains import GainTable
 from ..scenarios import load_system
 from ..schedule import RandomSchedule, parse_schedule
@@ -80,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
                               if args.dead_time else "") + f": {err}") from None
     if not args.t_end > 0:
         raise InvalidArgument(f"--t-end must be > 0; got {args.t_end}")
+    if args.plot is not None:
+        check_output(args.plot, "--plot")     # before the simulation, not after it
     if args.plot is not None and args.plot.suffix.lower() not in PLOT_SUFFIXES:
         raise InvalidArgument(f"--plot {args.plot}: the figure's file name must end in one of "
                               f"{', '.join(PLOT_SUFFIXES)}")
