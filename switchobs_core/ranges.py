@@ -74,7 +74,7 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "diagnostics_period": (0.0, MAX_DURATION_S, True, "seconds; an rclpy timer period"),
     "e0": (0.0, MAX_MAGNITUDE, False, "squared in the exact bound's ellipsoid"),
     "initial_estimate": (-MAX_MAGNITUDE, MAX_MAGNITUDE, False, "each entry; squared in the rounding bound"),
-    "noise.max": (-math.inf, MAX_MAGNITUDE, False, "squared in the noise bound's ellipsoid (< 0: none)"),
+    "noise.max": (-math.inf, MAX_MAGNITUDE, False, "< 0: none; squared in the noise bound's ellipsoid"),
     "rate": (0.0, MAX_RATE_HZ, False, "Hz (0: not set); samples per period also bounded by memory"),
 }
 
