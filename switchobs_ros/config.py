@@ -30,6 +30,7 @@ from switchobs_core.system import LTISystem
 
 from .core_config import (
     GAIN_FAMILY_PARAM,
+    cache_dir_param,
     camera_target_rows,
     cycles_from_params,
     load_system_param,
@@ -45,7 +46,12 @@ PARAMS = [
           "system YAML file."),
     Param("gain_table", "", "Path of the gain table (JSON, from `switchobs design`). Empty: use a cached "
           "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
-    Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up."),
+    Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up. A cached "
+          "table is used only if the folder and the file are private (owned by this user, not writable by group or "
+          "others), and after its gains are re-verified."),
+    Param("gain_table_cache_trusted", "", "The cache folder to trust even when it is not private (e.g. a folder "
+          "shared by a group): the same path as gain_table_cache_dir ('' trusts none). The gains are re-verified "
+          "all the same."),
     Param("delta", 0.99, "Contraction target delta of the design (used only when designing at start-up)."),
     Param("gain_family", "", "Gain family: '' (the table's: lmi or kalman), 'kalman-online' (the Riccati recursion "
           "online, any schedule), or, when designing at start-up, 'lmi' (the paper's gains) or 'kalman' (offline "
@@ -235,6 +241,8 @@ class EstimatorConfig:
         """
         values = {p.name: p.default for p in PARAMS}
         values.update(cfg)
+        values["gain_table_cache_dir"] = cache_dir_param(values["gain_table_cache_dir"],
+                                                         values["gain_table_cache_trusted"])
         sys_ = load_system_param(values["system"])
         mode = values["schedule.mode"]
         if mode not in MODES:
