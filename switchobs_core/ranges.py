@@ -9,6 +9,7 @@ it is:
   stamp arithmetic ``stamp + timeout``). 1e6 s is 1e15 ns: any stamp before the year 2262
   plus such a duration still fits an int64, and no timeout of a sensor pipeline needs more.
   A float such as 1e10 s (1e19 ns) overflows the int64 and raised ``OverflowError`` at start-up.
+  A node's own timer period is at least :data:`MIN_TIMER_PERIOD_S` (10 ms).
 * **Magnitudes** of what enters the observer's state (:data:`MAX_MAGNITUDE`, 1e50): the
   initial estimate, the initial error bound ``e0`` and the declared noise bound ``noise.max``.
   The exact bound and the rounding bound keep *squared* sizes (ellipsoid shape matrices hold
@@ -39,6 +40,7 @@ from .exceptions import InvalidArgument, SwitchobsError
 
 __all__ = [
     "MAX_DURATION_S",
+    "MIN_TIMER_PERIOD_S",
     "MAX_MAGNITUDE",
     "MAX_RATE_HZ",
     "MAX_CYCLES",
@@ -53,6 +55,9 @@ __all__ = [
 
 #: Longest duration (s) a user gives: timeouts, periods (module docstring).
 MAX_DURATION_S = 1.0e6
+#: Shortest period of a node's own timer (s): building and publishing /diagnostics takes about a
+#: millisecond; a shorter period would take the CPU that the measurements need.
+MIN_TIMER_PERIOD_S = 0.01
 #: Largest magnitude of the initial estimate, ``e0`` and ``noise.max`` (module docstring).
 MAX_MAGNITUDE = 1.0e50
 #: Highest sample rate (Hz).
@@ -71,7 +76,7 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "sensor_timeout": (0.0, MAX_DURATION_S, True, "seconds; an int64 of nanoseconds (clock-jump threshold)"),
     "future_tolerance": (0.0, MAX_DURATION_S, True, "seconds; an int64 of nanoseconds added to the node clock"),
     "pairing_timeout": (0.0, MAX_DURATION_S, True, "seconds; an rclpy timer period"),
-    "diagnostics_period": (0.0, MAX_DURATION_S, True, "seconds; an rclpy timer period"),
+    "diagnostics_period": (MIN_TIMER_PERIOD_S, MAX_DURATION_S, False, "seconds; an rclpy timer period"),
     "e0": (0.0, MAX_MAGNITUDE, False, "squared in the exact bound's ellipsoid"),
     "initial_estimate": (-MAX_MAGNITUDE, MAX_MAGNITUDE, False, "each entry; squared in the rounding bound"),
     "noise.max": (-math.inf, MAX_MAGNITUDE, False, "< 0: none; squared in the noise bound's ellipsoid"),

@@ -112,8 +112,9 @@ MAX_EVERY = 1_000_000_000
 #: one owner of both: the start-up check and the on-set-parameters callback use it.
 def _duration(name: str):
     """A duration's check: the range of :data:`switchobs_core.ranges.RANGES` (an int64 of ns)."""
-    lo, hi, _, why = RANGES[name]
-    return (lambda v: math.isfinite(v) and lo < v <= hi, f"in (0, {hi:g}] s ({why})")
+    lo, hi, lo_open, why = RANGES[name]
+    return (lambda v: math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi,
+            f"in {'(' if lo_open else '['}{lo:g}, {hi:g}] s ({why})")
 
 
 RUNTIME_PARAMS = {
