@@ -44,6 +44,7 @@ __all__ = [
     "MAX_MAGNITUDE",
     "MAX_RATE_HZ",
     "MAX_CYCLES",
+    "MAX_STAMP_S",
     "MEMORY_BUDGET_BYTES",
     "OUTPUT_BUDGET_BYTES",
     "RANGES",
@@ -62,6 +63,8 @@ MIN_TIMER_PERIOD_S = 0.01
 MAX_MAGNITUDE = 1.0e50
 #: Highest sample rate (Hz).
 MAX_RATE_HZ = 1.0e6
+#: Latest stamp (s) a message carries: ``builtin_interfaces/Time.sec`` is an int32.
+MAX_STAMP_S = 2**31 - 1
 #: Most cycles in a schedule (``schedule.h`` / ``schedule.tau``, ``--cycle``).
 MAX_CYCLES = 1000
 #: Memory a computation sized by the user's numbers may take (bytes).

@@ -25,7 +25,7 @@ from std_msgs.msg import UInt8
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.plant import Plant
-from switchobs_core.ranges import MAX_RATE_HZ, OUTPUT_BUDGET_BYTES, check_size
+from switchobs_core.ranges import MAX_RATE_HZ, MAX_STAMP_S, OUTPUT_BUDGET_BYTES, check_size
 from switchobs_core.schedule import RandomSchedule, parse_schedule
 
 from ..core_config import DEFAULT_X0, camera_target_rows, load_system_param
@@ -77,8 +77,6 @@ def _schedule(cfg: GenerateConfig, N: int):
 
 #: Bytes a tick takes in a generated bag (five messages and their index; measured on mcap: 720).
 BYTES_PER_TICK = 720
-#: Latest stamp (s) a message can carry: ``builtin_interfaces/Time.sec`` is an int32.
-MAX_STAMP_S = 2**31 - 1
 
 
 def check_bag_size(cfg: GenerateConfig) -> None:

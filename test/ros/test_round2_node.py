@@ -60,6 +60,17 @@ def test_start_up_values_out_of_range_are_one_line(params, needles, paper_tables
     assert_refused(res, "estimator: error:", *needles, code=2)
 
 
+@pytest.mark.parametrize("params, needles", [
+    ({"rate": 1.0e-12}, ("'rate' x 'time_scale'", "tick timer")),
+    ({"rate": 1.0e9}, ("1e+09 Hz",)),
+    ({"publish_clock": True, "time_scale": 1.0e300}, ("time_scale",)),
+    ({"clock_start": 1.0e300}, ("clock_start", "int32")),
+])
+def test_camera_sim_numbers_out_of_range_are_one_line(params, needles):
+    res = run("switchobs_ros.camera_sim", *ros_args(params=params))
+    assert_refused(res, "camera_sim: error:", *needles, code=2)
+
+
 def test_planted_table_is_refused_explicit_or_cached(paper_tables, tmp_path):
     """Zero gains, checksum recomputed: loaded without a word before (open loop, off by 4.8)."""
     planted = _planted(paper_tables["periodic"], tmp_path / "planted.json")
