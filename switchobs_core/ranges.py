@@ -49,6 +49,7 @@ __all__ = [
     "OUTPUT_BUDGET_BYTES",
     "RANGES",
     "check_range",
+    "check_seconds",
     "check_size",
     "check_count",
     "fmt_bytes",
@@ -104,6 +105,19 @@ def check_range(value: Any, name: str, *, exc: type[SwitchobsError] = InvalidArg
         left = "(" if lo_open else "["
         lo_s = "-inf" if lo == -math.inf else _fmt(lo)
         raise exc(f"parameter '{name}' must be in {left}{lo_s}, {_fmt(hi)}] ({why}); got {value!r}")
+    return v
+
+
+def check_seconds(value: Any, name: str, *, positive: bool = False,
+                  exc: type[SwitchobsError] = InvalidArgument) -> float:
+    """``value`` as a duration in [0, MAX_DURATION_S] s (``positive``: > 0), else ``exc`` naming ``name``
+    (a tool's waits and sleeps: ``time.sleep`` and the int64 of nanoseconds take no more)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise exc(f"{name} must be a number of seconds; got {value!r}") from None
+    if not (math.isfinite(v) and (v > 0 if positive else v >= 0) and v <= MAX_DURATION_S):
+        raise exc(f"{name} must be in {'(' if positive else '['}0, {MAX_DURATION_S:g}] s; got {value!r}")
     return v
 
 

@@ -82,6 +82,7 @@ CASES = [
     ("check_range.e0", "e0", lambda s: rng.check_range(1e308, "e0")),
     ("check_range.nan", "sensor_timeout", lambda s: rng.check_range(NAN, "sensor_timeout")),
     ("check_size.samples", "samples", lambda s: rng.check_size(1e12, 8, "samples", "lower the rate")),
+    ("check_seconds.settle", "--settle", lambda s: rng.check_seconds(1e300, "--settle")),
     ("check_count.cycles", "cycles", lambda s: rng.check_count(30_000, "cycles", rng.MAX_CYCLES)),
     ("check_input.dir", "table", lambda s: fil.check_input("/", "table")),
     ("open_input.dir", "table", lambda s: fil.open_input("/", "table")),

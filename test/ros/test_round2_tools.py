@@ -89,6 +89,19 @@ def test_bag_generate_size_refused_before_the_folder_is_made(tmp_path):
     assert not (tmp_path / "g").exists()
 
 
+@pytest.mark.parametrize("args, needles", [
+    (("play", "{bag}", "--settle", "1e300"), ("--settle", "[0, 1e+06] s")),     # time.sleep OverflowError
+    (("play", "{bag}", "--rate", "1e-300"), ("speed factor",)),
+    (("play", "{bag}", "--wait-timeout", "nan"), ("--wait-timeout",)),
+    (("record", "{tmp}/r", "--duration", "1e300"), ("--duration",)),
+    (("record", "{tmp}/r", "--count", "-1"), ("--count",)),
+])
+def test_play_and_record_waits_within_range(args, needles, bag, tmp_path):
+    res = switchobs_bag(*(a.format(bag=bag, tmp=tmp_path) for a in args))
+    assert_refused(res, *needles, code=2)
+    assert not (tmp_path / "r").exists()
+
+
 # ------------------------------------------------------------------ input files
 def test_a_fifo_where_a_file_is_read_never_blocks(fifo, bag, tmp_path):
     """--table, a params file, a system YAML, a bag's data file and its metadata.yaml: a FIFO
