@@ -84,6 +84,7 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "e0": (0.0, MAX_MAGNITUDE, False, "squared in the exact bound's ellipsoid"),
     "initial_estimate": (-MAX_MAGNITUDE, MAX_MAGNITUDE, False, "each entry; squared in the rounding bound"),
     "noise.max": (-math.inf, MAX_MAGNITUDE, False, "< 0: none; squared in the noise bound's ellipsoid"),
+    "noise std": (0.0, MAX_MAGNITUDE, False, "a standard deviation, squared into a covariance"),
     "rate": (0.0, MAX_RATE_HZ, False, "Hz (0: not set); samples per period also bounded by memory"),
 }
 
@@ -92,19 +93,21 @@ def _fmt(x: float) -> str:
     return f"{x:g}"
 
 
-def check_range(value: Any, name: str, *, exc: type[SwitchobsError] = InvalidArgument) -> float:
+def check_range(value: Any, name: str, *, exc: type[SwitchobsError] = InvalidArgument,
+                flag: str | None = None) -> float:
     """``value`` as a float inside the documented range of ``name`` (:data:`RANGES`), else ``exc``
-    with one line: the name, the range, the reason."""
+    with one line: the name (or the command-line ``flag`` that gave it), the range, the reason."""
     lo, hi, lo_open, why = RANGES[name]
+    what = flag or f"parameter '{name}'"
     try:
         v = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise exc(f"parameter '{name}' must be a number; got {value!r}") from None
+        raise exc(f"{what} must be a number; got {value!r}") from None
     low_ok = v > lo if lo_open else v >= lo
     if not (math.isfinite(v) and low_ok and v <= hi):
         left = "(" if lo_open else "["
         lo_s = "-inf" if lo == -math.inf else _fmt(lo)
-        raise exc(f"parameter '{name}' must be in {left}{lo_s}, {_fmt(hi)}] ({why}); got {value!r}")
+        raise exc(f"{what} must be in {left}{lo_s}, {_fmt(hi)}] ({why}); got {value!r}")
     return v
 
 

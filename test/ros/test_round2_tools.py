@@ -69,6 +69,16 @@ def test_plot_onto_a_device_or_a_full_disk_is_one_line(paper_tables, device, tmp
     assert code == 2 and len(err) == 1 and "No space left on device" in err[0] and "e.png" in err[0], err
 
 
+@pytest.mark.parametrize("flag, value, needles", [
+    ("--e0", "1e308", ("--e0 must be in [0, 1e+50]",)),                      # RuntimeWarnings, then refused
+    ("--process-noise", "1e200", ("--process-noise", "standard deviation")),  # OverflowError traceback
+    ("--seed", "-1", ("--seed must be an integer",)),                         # ValueError traceback
+])
+def test_simulate_numbers_within_range(flag, value, needles, paper_tables):
+    res = switchobs("simulate", "paper", "--table", paper_tables["periodic"], "--t-end", "4", flag, value)
+    assert_refused(res, *needles, code=2)
+
+
 # ------------------------------------------------------------------ sizes
 @pytest.mark.parametrize("args, needles", [
     (("design", "paper", "--gains", "kalman", "--cycle", "2,0.6", "--rate", "1e9", "-o", "{tmp}/k.json"),
