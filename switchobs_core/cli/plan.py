@@ -25,6 +25,9 @@ COST_KIND = ("mean over the samples of one period of tr(W P^-_k), P^- the a-prio
              "Kalman filter")
 
 
+#: Largest ``--map-size`` M: the (tau, s) map costs M^2 periodic Riccati solves (64: about 4000).
+MAX_MAP_SIZE = 64
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "plan",
@@ -146,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
     progress = False if args.json else args.progress
     if args.plot is not None:
         check_output(args.plot, "--plot")     # before the search, not after it
+    if not 3 <= args.map_size <= MAX_MAP_SIZE:
+        raise InvalidArgument(f"--map-size must be in [3, {MAX_MAP_SIZE}] (the map costs M^2 Riccati solves); "
+                              f"got {args.map_size}")
     if not (math.isfinite(args.dead_time) and args.dead_time >= 0):
         raise InvalidArgument(f"--dead-time must be a finite number of seconds >= 0; got {args.dead_time:g}")
     J = ScheduleCost(system, args.rate, noise, args.weights, dead_time=args.dead_time)

@@ -85,10 +85,12 @@ def test_simulate_numbers_within_range(flag, value, needles, paper_tables):
      ("2e+09 samples per period", "TiB", "beyond the budget of 1 GiB")),
     (("plan", "paper", "--rate", "1e9"), ("4e+09 samples", "beyond the budget of 1 GiB", "--rate")),
     (("plan", "paper", "--rate", "50", "--tau-max", "1e9"), ("tau_max 1e+09 s", "beyond the budget")),
+    (("plan", "paper", "--rate", "20", "--plot", "{tmp}/m.png", "--map-size", "100000"), ("--map-size", "[3, 64]")),
+    (("certify", "{table}", "--ratio-cycles", "1000000000"), ("--ratio-cycles", "[1, 1000]")),
 ])
-def test_sizes_are_refused_up_front_with_the_amount(args, needles, tmp_path):
+def test_sizes_are_refused_up_front_with_the_amount(args, needles, tmp_path, paper_tables):
     t0 = time.monotonic()
-    res = switchobs(*(a.format(tmp=tmp_path) for a in args))
+    res = switchobs(*(a.format(tmp=tmp_path, table=paper_tables["periodic"]) for a in args))
     assert_refused(res, *needles, code=2)
     assert time.monotonic() - t0 < 15
 
