@@ -11,12 +11,14 @@ it is:
   A float such as 1e10 s (1e19 ns) overflows the int64 and raised ``OverflowError`` at start-up.
   A node's own timer period is at least :data:`MIN_TIMER_PERIOD_S` (10 ms).
 * **Magnitudes** of what enters the observer's state (:data:`MAX_MAGNITUDE`, 1e50): the
-  initial estimate, the initial error bound ``e0`` and the declared noise bound ``noise.max``.
+  initial estimate, the initial error bound ``e0``, the declared noise bound ``noise.max``, noise
+  standard deviations and the largest accepted sample (``max_abs_value``).
   The exact bound and the rounding bound keep *squared* sizes (ellipsoid shape matrices hold
   ``e0^2``, ``|v|^2`` and ``|x_hat|^2 eps^2``) and multiply them by the step's squared error
   map; 1e50 squared is 1e100, leaving 1e200 for those factors before a double overflows.
   Measured on the paper's model: 1e75 still answered every sample, 1e100 made the first exact
-  step overflow (every second measurement went unanswered, with exit 0).
+  step overflow (every second measurement went unanswered, with exit 0), for an initial estimate
+  and for samples alike (the observer itself refuses samples above 1e150 only).
 * **Rates** (:data:`MAX_RATE_HZ`, 1e6 Hz): one sample per microsecond; a node handles a few
   thousand messages per second. Above the rate, the *sizes* below decide.
 * **Sizes** (:func:`check_size`): whatever grows with a number the user gives (samples per
@@ -84,6 +86,7 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "e0": (0.0, MAX_MAGNITUDE, False, "squared in the exact bound's ellipsoid"),
     "initial_estimate": (-MAX_MAGNITUDE, MAX_MAGNITUDE, False, "each entry; squared in the rounding bound"),
     "noise.max": (-math.inf, MAX_MAGNITUDE, False, "< 0: none; squared in the noise bound's ellipsoid"),
+    "max_abs_value": (0.0, MAX_MAGNITUDE, True, "m; a sample enters the state, whose bounds square it"),
     "noise std": (0.0, MAX_MAGNITUDE, False, "a standard deviation, squared into a covariance"),
     "rate": (0.0, MAX_RATE_HZ, False, "Hz (0: not set); samples per period also bounded by memory"),
 }

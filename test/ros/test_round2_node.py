@@ -118,7 +118,8 @@ _VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_f
 @given(values=st.dictionaries(st.sampled_from(_NUMERIC + ["initial_estimate"]), _VALUES, min_size=1, max_size=4))
 def test_params_files_accepted_values_answer_every_valid_measurement(values, paper_tables):
     """Any numbers in a params file: refused with one ConfigError line, or accepted, and then every
-    valid measurement is answered with a finite estimate (nothing accepted silently)."""
+    valid measurement (small, or as large as max_abs_value accepts) is answered with a finite
+    estimate (nothing accepted silently)."""
     cfg = {"gain_table": paper_tables["periodic"]}
     for k, v in values.items():
         cfg[k] = (v,) * 12 if k == "initial_estimate" else v
@@ -132,7 +133,8 @@ def test_params_files_accepted_values_answer_every_valid_measurement(values, pap
     answered = []
     for k in range(20):
         ns = now - 10 * S + k * 50_000_000
-        for part, xy in (("camera", (0.1 * k, 0.2)), ("target", (3.0, 1.0 + 0.01 * k))):
+        big = 0.5 * pl.max_abs if k % 2 else 1.0         # samples up to the accepted magnitude too
+        for part, xy in (("camera", (0.1 * k * big, 0.2)), ("target", (3.0, (1.0 + 0.01 * k) * big))):
             answered += pl.on_pose(part, mb.xy_to_pose(xy, ns, "map"), now)
     answered += pl.flush_all()
     # every pose accepted (valid for this configuration: max_abs_value may reject some) is answered
