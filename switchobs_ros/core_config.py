@@ -145,8 +145,8 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
             raise ConfigError("gain_family 'kalman' with no gain_table designs the table at start-up: set 'rate' "
                               "(the nominal sample rate in Hz)")
     cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta, family=family, rate=rate, noise=noise)
+    check_cache_private(cache, getattr(cache_dir, "trusted", False))
     if cache.exists():
-        check_cache_private(cache, getattr(cache_dir, "trusted", False))
         try:
             table = GainTable.load(cache, system=system)
             verify_table(table, system, source=f"cached gain table {cache}")
@@ -193,15 +193,18 @@ def cache_dir_param(cache_dir: str, trusted: str) -> CacheDir:
 
 
 def check_cache_private(table: Path, trusted: bool) -> None:
-    """Refuse a cached table whose folder or file another user owns or group/others may write
-    (ssh's rule for its keys): anyone who can write there can plant a table with a valid checksum.
-    ``trusted`` (the folder named by ``gain_table_cache_trusted``) skips the check."""
+    """Refuse a cache folder (if it exists) or cached table (if it exists) that another user owns
+    or group/others may write (ssh's rule for its keys): anyone who can write there can plant a
+    table with a valid checksum. Checked before the cache is read or written, so a shared folder is
+    refused at the first start, not only at the second. ``trusted`` (the folder named by
+    ``gain_table_cache_trusted``) skips the check."""
     if trusted:
         return
     hint = (f"; or set gain_table_cache_trusted:={table.parent} to trust it, or gain_table to a table of "
             "your own")
     for path, what in ((table.parent, "gain_table_cache_dir"), (table, "cached gain table")):
-        check_private(path, what, exc=ConfigError, hint=hint)
+        if path.exists():
+            check_private(path, what, exc=ConfigError, hint=hint)
 
 
 def camera_target_rows(system: LTISystem, camera_body: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:
