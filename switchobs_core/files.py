@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from .exceptions import InvalidArgument, SwitchobsError
-from .ranges import fmt_bytes
+from .ranges import OUTPUT_BUDGET_BYTES, fmt_bytes
 
 __all__ = [
     "MAX_BAG_BYTES",
@@ -42,8 +42,8 @@ __all__ = [
 ]
 
 #: Largest bag data file read (``.mcap`` / ``.db3``): the offline tools hold its messages in memory
-#: (about three times the file's bytes), within the memory budget of :mod:`switchobs_core.ranges`.
-MAX_BAG_BYTES = 256 << 20
+#: (several times the file's bytes). A 10-minute 100 Hz estimate bag with covariances is 450 MiB.
+MAX_BAG_BYTES = OUTPUT_BUDGET_BYTES
 #: Largest ``metadata.yaml`` of a bag read (a real one is a few kB).
 MAX_METADATA_BYTES = 1 << 20
 

@@ -1,4 +1,4 @@
-"""The range of every number a user gives, derived from what the code does with it (issue 22).
+"""The range of every number a user gives, derived from what the code does with it.
 
 One owner for the limits that the start-up checks, the params files, the runtime
 ``set_parameters`` callback and the command-line tools apply. Each limit says why it is what
@@ -73,8 +73,8 @@ MAX_CYCLES = 1000
 #: Memory a computation sized by the user's numbers may take (bytes).
 MEMORY_BUDGET_BYTES = 1 << 30
 #: Size of a file a tool writes from the user's numbers (bytes): a generated bag. The bag
-#: readers refuse larger data files (:data:`switchobs_core.files.MAX_BAG_BYTES`), so it is that.
-OUTPUT_BUDGET_BYTES = 256 << 20
+#: readers refuse larger data files (:data:`switchobs_core.files.MAX_BAG_BYTES` is this).
+OUTPUT_BUDGET_BYTES = 1 << 30
 
 #: The documented ranges, by the name a user gives (params file, ``-p``, CLI flag):
 #: ``(low, high, low_open, why)``. README.md, "Ranges of values", lists them.

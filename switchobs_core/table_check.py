@@ -1,4 +1,4 @@
-"""Re-verification of a loaded gain table before an observer answers with it (issue 22).
+"""Re-verification of a loaded gain table before an observer answers with it.
 
 A table's checksum (``payload_sha256``) catches corruption, not tampering: anyone who can write
 the file can recompute it. So every table the estimator loads, from a file or from its cache,

@@ -13,8 +13,8 @@ active channel, then the poses) and then by the order in the file. The player pu
 this order and the offline estimator processes in it, so both see the same sequence.
 
 Every failure is a :class:`BagError` with one line naming the file or the topic. Before anything
-is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 256 MiB: the offline
-tools hold the messages in memory) must be regular files (:mod:`switchobs_core.files`).
+is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: the offline tools
+hold the messages in memory) must be regular files (:mod:`switchobs_core.files`).
 """
 
 from __future__ import annotations

@@ -97,7 +97,7 @@ def test_sizes_are_refused_up_front_with_the_amount(args, needles, tmp_path, pap
 
 def test_bag_generate_size_refused_before_the_folder_is_made(tmp_path):
     res = switchobs_bag("generate", tmp_path / "g", "--duration", "1e9", "--rate", "1e6")
-    assert_refused(res, "1e+15 ticks", "beyond the budget of 256 MiB", code=2)
+    assert_refused(res, "1e+15 ticks", "beyond the budget of 1 GiB", code=2)
     assert not (tmp_path / "g").exists()
 
 
