@@ -23,6 +23,7 @@ import numpy as np
 
 from .design import design_cycle
 from .exceptions import InvalidArgument
+from .files import write_with
 from .schedule import Cycle, PeriodicSchedule, SequenceSchedule
 from .simulate import simulate
 
@@ -129,9 +130,10 @@ def plot_result(res: Any, path: str | Path, title: str = "") -> Path:
     if title:
         ax[0].set_title(title, fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    try:
+        write_with(path, "figure", lambda p: fig.savefig(p, dpi=130))
+    finally:
+        plt.close(fig)
     return path
 
 

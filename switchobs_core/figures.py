@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .design import Designer
+from .files import write_with
 
 __all__ = ["eta_min_figures", "kappa_figure", "TAUS", "S_VALUES"]
 
@@ -59,7 +60,7 @@ def eta_min_figures(
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
         p = outdir / f"eta_min{i + 1}.png"
-        fig.savefig(p, dpi=120)
+        write_with(p, "figure", lambda q, fig=fig: fig.savefig(q, dpi=120))
         plt.close(fig)
         paths.append(p)
     return paths
@@ -88,6 +89,6 @@ def kappa_figure(designer: Designer, outdir: Path, *, etas: Sequence[float] | No
     ax.grid(True, alpha=0.3)
     ax.legend()
     p = outdir / "kappa_LMI.png"
-    fig.savefig(p, dpi=120)
+    write_with(p, "figure", lambda q: fig.savefig(q, dpi=120))
     plt.close(fig)
     return p

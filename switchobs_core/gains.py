@@ -62,6 +62,7 @@ import numpy as np
 from ._version import __version__
 from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument, SwitchobsError
+from .files import check_output
 from .kalman import KalmanDesign
 from .loading import parse_json, read_text
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
@@ -366,7 +367,7 @@ class GainTable:
         The file gets the mode a plain ``open(path, "w")`` would give (0666 less the umask,
         usually 0644), so a service running as another user can read it; ``tempfile`` would
         make it 0600."""
-        path = Path(path)
+        path = check_output(path, "gain table", exc=GainTableError)   # never replace a directory or device
         text = self.to_json()
         path.parent.mkdir(parents=True, exist_ok=True)
         while True:

@@ -50,6 +50,7 @@ import numpy as np
 from .decomposition import observability_decomposition
 from .exceptions import DesignError, InvalidArgument
 from .noise import NoiseModel, default_noise
+from .ranges import check_size
 from .riccati import (
     DiscretizationCache,
     Step,
@@ -143,13 +144,20 @@ def _as_cycles(cycles: Cycle | Sequence[Cycle]) -> tuple[Cycle, ...]:
     return out
 
 
-def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: int = 64) -> SamplePattern:
+def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: int = 64,
+                   bytes_per_sample: int = 64) -> SamplePattern:
     """The channel of every sample over one period (module docstring).
+
+    ``bytes_per_sample``: memory the caller will spend per sample of the period; the period's
+    size is checked against :data:`~switchobs_core.ranges.MEMORY_BUDGET_BYTES` before anything
+    is allocated.
 
     Raises
     ------
     KalmanDesignError
         ``m T f`` is not an integer for any ``m <= max_repeat``.
+    InvalidArgument
+        The period holds more samples than the memory budget allows.
     """
     cyc = _as_cycles(cycles)
     if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)) or not (
@@ -169,6 +177,8 @@ def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: 
             f"number even over {max_repeat} repetitions; choose a rate with T f an integer "
             f"(e.g. {max(1, round(T * rate))}/T Hz)"
         )
+    check_size(K, bytes_per_sample, f"{K:.3g} samples per period ({T * m:g} s at {rate:g} Hz)",
+               "lower the rate or shorten the cycles")
     sch = _schedule(cyc)
     ts = np.arange(K) / rate
     channels = tuple(int(sch.channel_at(float(t))) for t in ts)
@@ -460,7 +470,9 @@ def design_kalman(
     for c in [cycles] if isinstance(cycles, Cycle) else list(cycles):
         if isinstance(c, Cycle):
             check_cycle_horizon(system.A, c)
-    pattern = sample_pattern(cycles, rate, max_repeat=max_repeat)
+    # per sample: the step (Phi, Qd, H, R), the priors and posteriors, the gain, Python's objects
+    n, p = system.n, max(system.p)
+    pattern = sample_pattern(cycles, rate, max_repeat=max_repeat, bytes_per_sample=8 * (5 * n * n + 2 * n * p) + 1024)
     # 2. detectability
     check_detectable(system, pattern)
     # 3. periodic Riccati solution and start-up

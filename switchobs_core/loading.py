@@ -4,6 +4,8 @@ Every file goes through this module, which refuses a bad file with the caller's 
 (a :class:`~switchobs_core.exceptions.SwitchobsError`) and a one-line message naming the file
 and, where it can, the place in it (line, key path) in the file's own words. The limits:
 
+* kind: a regular file only (:mod:`switchobs_core.files`: a FIFO, a device or a directory is
+  refused before it is read);
 * size: at most :data:`MAX_FILE_BYTES` (16 MiB) for a gain table, :data:`MAX_YAML_BYTES`
   (1 MiB) for a YAML file (hand-written; a 1 MiB YAML file holds a dense ~300 x 300 matrix).
   Only the limit plus one byte is ever read, so ``/dev/zero`` is refused, not read forever;
@@ -28,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import SwitchobsError
+from .files import open_input
 from .validation import MAX_ABS_SYSTEM_ENTRY
 
 __all__ = [
@@ -65,7 +68,7 @@ def read_text(path: str | Path, *, exc: type[SwitchobsError], what: str,
     """
     path = Path(path)
     try:
-        with open(path, "rb") as fh:
+        with open_input(path, what, exc=exc, max_bytes=max_bytes) as fh:   # regular files only
             data = fh.read(max_bytes + 1)
     except FileNotFoundError:
         raise

@@ -67,6 +67,7 @@ from .design import Designer
 from .exceptions import DesignError, InvalidArgument
 from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
 from .noise import NoiseModel, default_noise
+from .ranges import check_size
 from .riccati import Step, discretize, periodic_riccati
 from .schedule import BLIND_TOL, Cycle, common_rows
 
@@ -363,6 +364,10 @@ def plan_schedule(
     N = int(system.N)
     kmin = max(1, math.ceil(h_min * f - 1e-9), J.k_dead + 1)
     kmax_total = math.floor(tau_max * f + 1e-9)
+    n = int(system.n)
+    check_size(kmax_total, 8 * (5 * n * n + 2 * n * n) + 1024,
+               f"periods of up to {kmax_total:.3g} samples (tau_max {tau_max:g} s at {f:g} Hz)",
+               "lower --rate or --tau-max")
     if N * kmin > kmax_total:
         raise InvalidArgument(
             f"no schedule fits: {N} channels x h_min {h_min:g} s need tau >= {N * kmin / f:g} s > "

@@ -66,6 +66,7 @@ from .exceptions import InvalidArgument
 from .observer import SwitchedObserver
 from .plant import Plant
 from .propagation import van_loan, zoh_pair
+from .ranges import fmt_bytes
 from .rounding import EXPM_ULPS, UNIT_ROUNDOFF, ErrorEllipsoid, expm_error, gamma
 from .schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule, common_rows
 from .validation import as_finite, as_matrix
@@ -411,8 +412,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     pts = (t_end - t0) * (rate if rate is not None else 1.0 / dt_out) + 1
     need = pts * 8.0 * (4 * n + len(C) + 8)  # x, x_hat, error, y, xo_norms, bounds, channel
     if need > MAX_RESULT_BYTES:
-        raise InvalidArgument(f"simulate would hold {need / 2**30:.2f} GiB of results for t_end - t0 = "
-                              f"{t_end - t0:g} s ({pts:.0f} output points; limit {MAX_RESULT_BYTES / 2**30:.0f} GiB): "
+        raise InvalidArgument(f"simulate would hold {fmt_bytes(need)} of results for t_end - t0 = "
+                              f"{t_end - t0:g} s ({pts:.3g} output points; limit {MAX_RESULT_BYTES / 2**30:.0f} GiB): "
                               "shorten the run (--t-end) or lower the rate (--rate); from Python also raise dt_out")
     # e0: the computed ||xhat0 - x0|| inflated by its own rounding, so that it bounds the true one
     e0 = float(np.linalg.norm(xhat0 - x0)) * (1.0 + gamma(n + 3)) if e0 is None else float(e0)

@@ -36,6 +36,7 @@ from std_msgs.msg import Float64MultiArray, UInt8
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.plant import Plant
+from switchobs_core.ranges import MAX_DURATION_S, MAX_RATE_HZ, MAX_STAMP_S
 from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 
 from . import qos
@@ -78,6 +79,20 @@ PARAMS = [
 ]
 
 
+def _check_ranges(cfg: dict) -> None:
+    """The range policy (:mod:`switchobs_core.ranges`) for camera_sim's numbers: the tick period
+    ``1 / (rate x time_scale)`` is an rclpy timer (at least 1 us, at most MAX_DURATION_S), the
+    stamps (``clock_start`` + simulated time) fit ``builtin_interfaces/Time.sec`` (an int32)."""
+    rate = cfg["rate"] * (cfg["time_scale"] if cfg["publish_clock"] else 1.0)
+    if not 1.0 / MAX_DURATION_S <= rate <= MAX_RATE_HZ:
+        raise ConfigError(f"parameters 'rate' x 'time_scale' = {rate:g} Hz must be in [{1 / MAX_DURATION_S:g}, "
+                          f"{MAX_RATE_HZ:g}] (the tick timer's period)")
+    for name in ("clock_start", "duration", "time_scale"):
+        if cfg[name] > MAX_STAMP_S:
+            raise ConfigError(f"parameter '{name}' = {cfg[name]:g} is beyond {MAX_STAMP_S} (stamps carry an int32 of "
+                              "seconds)")
+
+
 class CameraSimNode(Node):
     """Publishes the simulated camera measurements and the truth."""
 
@@ -108,6 +123,7 @@ class CameraSimNode(Node):
             if not ok:
                 raise ConfigError(f"parameter '{name}' must be a finite number {lo}; got {v}"
                                   + (" (0 runs until stopped)" if name == "duration" else ""))
+        _check_ranges(cfg)
         if not cfg["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty")
         x0 = cfg["initial_state"]

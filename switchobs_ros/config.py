@@ -24,12 +24,14 @@ import msg_bridge as mb
 from msg_bridge import InputSpecs, SpecError, load_inputs
 from switchobs_core.loading import load_yaml
 from switchobs_core.noise import NoiseModel
-from switchobs_core.observer import MAX_ABS_SAMPLE, MODES
+from switchobs_core.observer import MODES
+from switchobs_core.ranges import RANGES, check_range
 from switchobs_core.schedule import Cycle
 from switchobs_core.system import LTISystem
 
 from .core_config import (
     GAIN_FAMILY_PARAM,
+    cache_dir_param,
     cycles_from_params,
     load_system_param,
     noise_from_params,
@@ -40,8 +42,6 @@ __all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
 
 #: Values of the ``consistency.check`` parameter (switchobs_ros.pipeline).
 CONSISTENCY = ("auto", "always", "never")
-#: Longest reorder window: a sample waits at most this long for its channel (1 s).
-MAX_REORDER_WINDOW_MS = 1000.0
 
 #: The estimator node's parameters (the README's parameter table is checked against it).
 PARAMS = [
@@ -49,7 +49,12 @@ PARAMS = [
           "system YAML file."),
     Param("gain_table", "", "Path of the gain table (JSON, from `switchobs design`). Empty: use a cached "
           "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
-    Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up."),
+    Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up. A cached "
+          "table is used only if the folder and the file are private (owned by this user, not writable by group or "
+          "others), and after its gains are re-verified."),
+    Param("gain_table_cache_trusted", "", "The cache folder to trust even when it is not private (e.g. a folder "
+          "shared by a group): the same path as gain_table_cache_dir ('' trusts none). The gains are re-verified "
+          "all the same."),
     Param("delta", 0.99, "Contraction target delta of the design (used only when designing at start-up)."),
     Param("gain_family", "", "Gain family: '' (the table's: lmi or kalman), 'kalman-online' (the Riccati recursion "
           "online, any schedule), or, when designing at start-up, 'lmi' (the paper's gains) or 'kalman' (offline "
@@ -97,8 +102,8 @@ PARAMS = [
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
           "Changeable at run time."),
-    Param("max_abs_value", 1.0e6, "Largest accepted |coordinate| of an input pose (m). At most 1e150 (the observer "
-          "refuses larger samples: the next exact step could overflow). Changeable at run time."),
+    Param("max_abs_value", 1.0e6, "Largest accepted |coordinate| of an input pose (m). At most 1e50 (a sample enters "
+          "the state, whose bounds square it: larger ones could overflow the exact step). Changeable at run time."),
     Param("pairing_timeout", 0.2, "Seconds (wall) to wait for the other half of a camera/target pair before "
           "using one half alone. Changeable at run time."),
     Param("diagnostics_period", 1.0, "Period of /diagnostics in seconds (node clock). Changeable at run time."),
@@ -119,21 +124,32 @@ PARAMS = [
           "behaviour); false waits for the lifecycle services."),
 ]
 
+#: Largest output decimation ``output.*_every`` (an int64 parameter; beyond it nothing is ever published).
+MAX_EVERY = 1_000_000_000
+
 #: Parameters that can change while the node runs (the others need a restart: they shape the
 #: observer, its gain table or the topics), and the check of a value: (ok, what it must be). The
 #: one owner of both: the start-up check and the on-set-parameters callback use it.
+def _ranged(name: str, unit: str = " s"):
+    """A runtime parameter's check: its range in :data:`switchobs_core.ranges.RANGES`."""
+    lo, hi, lo_open, why = RANGES[name]
+    return (lambda v: math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi,
+            f"in {'(' if lo_open else '['}{lo:g}, {hi:g}]{unit} ({why})")
+
+
 RUNTIME_PARAMS = {
-    "sensor_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "future_tolerance": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "max_abs_value": (lambda v: math.isfinite(v) and 0 < v <= MAX_ABS_SAMPLE, f"in (0, {MAX_ABS_SAMPLE:g}]"),
-    "pairing_timeout": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "diagnostics_period": (lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
-    "output.envelope_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.odometry_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.covariance_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.typed_every": (lambda v: v >= 0, "an integer >= 0"),
-    "output.markers_every": (lambda v: v >= 0, "an integer >= 0"),
+    "sensor_timeout": _ranged("sensor_timeout"),
+    "future_tolerance": _ranged("future_tolerance"),
+    "max_abs_value": _ranged("max_abs_value", ""),
+    "pairing_timeout": _ranged("pairing_timeout"),
+    "diagnostics_period": _ranged("diagnostics_period"),
+    "output.envelope_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.odometry_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.covariance_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.typed_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
+    "output.markers_every": (lambda v: 0 <= v <= MAX_EVERY, f"an integer in [0, {MAX_EVERY}]"),
 }
+
 
 def check_runtime_value(name: str, value: Any) -> str:
     """'' if ``value`` is acceptable for runtime parameter ``name``, else the reason (one line)."""
@@ -248,6 +264,8 @@ class EstimatorConfig:
         """
         values = {p.name: p.default for p in PARAMS}
         values.update(cfg)
+        values["gain_table_cache_dir"] = cache_dir_param(values["gain_table_cache_dir"],
+                                                         values["gain_table_cache_trusted"])
         sys_ = load_system_param(values["system"])
         mode = values["schedule.mode"]
         if mode not in MODES:
@@ -265,13 +283,12 @@ class EstimatorConfig:
         else:
             cycles = cycles_from_params(mode, values["schedule.tau"], values["schedule.s"], values["schedule.h"],
                                         sys_.N, values["schedule.dead_time"])
-        for name in ("delta", "e0"):      # the runtime parameters: check_runtime_value below
-            v = values[name]
-            if not (math.isfinite(v) and v > 0) and not (name == "e0" and v == 0):
-                raise ConfigError(f"parameter '{name}' must be a finite number > 0; got {v}")
-        if values["max_abs_value"] > MAX_ABS_SAMPLE:
-            raise ConfigError(f"parameter 'max_abs_value' must be <= {MAX_ABS_SAMPLE:g} (larger samples could "
-                              f"overflow the observer's exact step); got {values['max_abs_value']:g}")
+        v = values["delta"]             # the runtime parameters: check_runtime_value below
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"parameter 'delta' must be a finite number > 0; got {v}")
+        check_range(values["e0"], "e0", exc=ConfigError)
+        for v in values["initial_estimate"]:
+            check_range(v, "initial_estimate", exc=ConfigError)
         x0 = values["initial_estimate"]
         if x0 and len(x0) != sys_.n:
             raise ConfigError(f"parameter 'initial_estimate' has {len(x0)} values; the system has n = {sys_.n} "
@@ -284,16 +301,12 @@ class EstimatorConfig:
         if values["consistency.check"] not in CONSISTENCY:
             raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "
                               f"got {values['consistency.check']!r}")
-        win = values["reorder_window_ms"]
-        if not (math.isfinite(win) and 0 <= win <= MAX_REORDER_WINDOW_MS):
-            raise ConfigError(f"parameter 'reorder_window_ms' must be in [0, {MAX_REORDER_WINDOW_MS:g}] ms; got {win}")
+        check_range(values["reorder_window_ms"], "reorder_window_ms", exc=ConfigError)
         family = values["gain_family"]
         if family not in GAIN_FAMILY_PARAM:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
                               f"got {family!r}")
-        rate = float(values["rate"])
-        if not (math.isfinite(rate) and rate >= 0):
-            raise ConfigError(f"parameter 'rate' must be a finite number >= 0 (Hz); got {rate}")
+        rate = check_range(values["rate"], "rate", exc=ConfigError)
         noise = noise_from_params(values, sys_)
         for name in RUNTIME_PARAMS:
             why = check_runtime_value(name, values[name])
@@ -301,9 +314,7 @@ class EstimatorConfig:
                 raise ConfigError(why)
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
-        vmax = float(values["noise.max"])
-        if not math.isfinite(vmax) or vmax > MAX_ABS_SAMPLE:
-            raise ConfigError(f"parameter 'noise.max' must be a finite number (< 0: no declared bound); got {vmax}")
+        vmax = check_range(values["noise.max"], "noise.max", exc=ConfigError)
         bodies = [b.name for b in mb.bodies(sys_.state_labels)]
         frames = values["body_frames"]
         if frames and len(frames) != len(bodies):

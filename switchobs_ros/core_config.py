@@ -15,12 +15,15 @@ from pathlib import Path
 from switchobs_core import __version__
 from switchobs_core.design import design_table
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.files import check_private
 from switchobs_core.gains import GainTable, kalman_table
 from switchobs_core.kalman import design_kalman
 from switchobs_core.noise import NoiseModel
+from switchobs_core.ranges import MAX_CYCLES
 from switchobs_core.scenarios import load_noise, load_system
 from switchobs_core.schedule import Cycle
 from switchobs_core.system import LTISystem
+from switchobs_core.table_check import verify_table
 
 from .params import ConfigError
 
@@ -34,6 +37,9 @@ __all__ = [
     "load_or_design_table",
     "load_system_param",
     "table_cache_path",
+    "CacheDir",
+    "cache_dir_param",
+    "check_cache_private",
 ]
 
 
@@ -73,6 +79,10 @@ def cycles_from_params(mode: str, tau: tuple, s: tuple, h: tuple, N: int, dead_t
     or ``schedule.h`` (N channels: N active times per cycle, cycles concatenated), every cycle
     with the blind interval ``schedule.dead_time`` after each switch.
     """
+    n_cycles = len(h) // max(N, 1) if h else len(tau)
+    if n_cycles > MAX_CYCLES:
+        raise ConfigError(f"schedule: {n_cycles} cycles given, at most {MAX_CYCLES} supported (a schedule repeats its "
+                          "cycles: give one period)")
     try:
         if h:
             if len(h) % N:
@@ -124,6 +134,7 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
     if path:
         try:
             table = GainTable.load(os.path.expanduser(path), system=system)
+            verify_table(table, system, source=f"gain table {path}")
         except SwitchobsError as err:
             raise ConfigError(f"parameter 'gain_table': {err}") from None
         return table, Path(path)
@@ -135,9 +146,11 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
             raise ConfigError("gain_family 'kalman' with no gain_table designs the table at start-up: set 'rate' "
                               "(the nominal sample rate in Hz)")
     cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta, family=family, rate=rate, noise=noise)
+    check_cache_private(cache, getattr(cache_dir, "trusted", False))
     if cache.exists():
         try:
             table = GainTable.load(cache, system=system)
+            verify_table(table, system, source=f"cached gain table {cache}")
             log(f"gain_table not set: using the cached table {cache}")
             return table, cache
         except SwitchobsError as err:
@@ -153,6 +166,7 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
     except SwitchobsError as err:
         raise ConfigError(f"gain design failed: {err}") from None
     try:
+        cache.parent.mkdir(mode=0o700, parents=True, exist_ok=True)    # private: see check_cache_private
         table.save(cache)
         log(f"wrote the designed gain table to {cache} (set gain_table to it to skip the design)")
     except OSError as err:
@@ -183,6 +197,40 @@ class SensorOutputs:
             if src.serves(channel) and (src.shared or not blind):
                 out.append((src.topic, w.msg([y[r] for r in src.rows_for(channel)], stamp_ns, frame_id)))
         return out
+
+
+class CacheDir(str):
+    """The ``gain_table_cache_dir`` value, carrying whether ``gain_table_cache_trusted`` names it
+    (:func:`cache_dir_param`): a ``str`` everywhere else."""
+
+    trusted: bool = False
+
+
+def cache_dir_param(cache_dir: str, trusted: str) -> CacheDir:
+    """``gain_table_cache_dir``, trusted when ``gain_table_cache_trusted`` names the same folder."""
+    out = CacheDir(cache_dir)
+    if trusted:
+        real = os.path.realpath(os.path.expanduser(cache_dir))
+        out.trusted = os.path.realpath(os.path.expanduser(trusted)) == real
+        if not out.trusted:
+            raise ConfigError(f"parameter 'gain_table_cache_trusted' names {trusted}, which is not "
+                              f"gain_table_cache_dir ({cache_dir}): name the cache folder itself, or leave it empty")
+    return out
+
+
+def check_cache_private(table: Path, trusted: bool) -> None:
+    """Refuse a cache folder (if it exists) or cached table (if it exists) that another user owns
+    or group/others may write (ssh's rule for its keys): anyone who can write there can plant a
+    table with a valid checksum. Checked before the cache is read or written, so a shared folder is
+    refused at the first start, not only at the second. ``trusted`` (the folder named by
+    ``gain_table_cache_trusted``) skips the check."""
+    if trusted:
+        return
+    hint = (f"; or set gain_table_cache_trusted:={table.parent} to trust it, or gain_table to a table of "
+            "your own")
+    for path, what in ((table.parent, "gain_table_cache_dir"), (table, "cached gain table")):
+        if path.exists():
+            check_private(path, what, exc=ConfigError, hint=hint)
 
 
 def camera_target_rows(system: LTISystem, camera_body: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:

@@ -13,6 +13,12 @@ Same parameters, topics and behaviour as :mod:`switchobs_ros.estimator` (the sha
   counted); after activate the observer propagates exactly over the gap at the next sample.
 * **cleanup** and **shutdown** release the interfaces and the observer.
 
+A transition that is not valid in the current state (``activate`` while unconfigured, the second
+of two requests that arrive together) returns FAILURE, logs the reason as one error line (kept in
+:attr:`last_failure`) and leaves the node in its state; rclpy raised an ``RCLError`` ("Transition
+is not registered") that killed the node with a traceback. Transitions run one at a time (a lock:
+the service and the ``trigger_*`` methods share it, whatever the executor).
+
 ``autostart`` (default true) configures and activates at start-up, which is the plain
 estimator's behaviour; a failed autostart configure exits with the one-line error and code 2,
 as the plain estimator does. ``autostart:=false`` waits for the lifecycle services.
@@ -21,9 +27,12 @@ as the plain estimator does. ``autostart:=false`` waits for the lifecycle servic
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
 
 from switchobs_core.exceptions import SwitchobsError, one_line
 
@@ -39,6 +48,7 @@ class ManagedEstimatorNode(EstimatorMixin, LifecycleNode):
     """The estimator under the ROS 2 lifecycle (module docstring)."""
 
     def __init__(self, **kwargs):
+        self._transition_lock = threading.RLock()
         super().__init__("estimator", **kwargs)
         self.t_start = time.monotonic()
         self.cfg = declare_all(self, PARAMS, gated=True)
@@ -60,6 +70,28 @@ class ManagedEstimatorNode(EstimatorMixin, LifecycleNode):
         return self._on_set_parameters(params)
 
     # ------------------------------------------------------------------ transitions
+    def _LifecycleNodeMixin__change_state(self, transition_id: int) -> TransitionCallbackReturn:
+        """Every transition (``~/change_state`` and ``trigger_*``) comes here: serialised, and
+        checked against the transitions valid in the current state (module docstring)."""
+        with self._transition_lock:
+            sm = self._state_machine
+            state = sm.current_state[1]
+            valid = {t[0] for t in sm.available_transitions}
+            if transition_id not in valid:
+                names = {t[0]: t[1] for t in sm.transition_graph}
+                return self._refuse(f"transition '{names.get(transition_id, transition_id)}' is not valid in state "
+                                    f"'{state}' (valid: {', '.join(sorted({names[t] for t in valid})) or 'none'}); "
+                                    f"the node stays {state}")
+            try:
+                return LifecycleNodeMixin._LifecycleNodeMixin__change_state(self, transition_id)
+            except _rclpy.RCLError as err:      # the state machine refused after all
+                return self._refuse(f"transition {transition_id} from state '{state}' failed: {one_line(err)}")
+
+    def _refuse(self, why: str) -> TransitionCallbackReturn:
+        self.last_failure = why
+        self.get_logger().error(why)
+        return TransitionCallbackReturn.FAILURE
+
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self._configure(self.cfg)

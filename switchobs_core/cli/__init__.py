@@ -51,15 +51,18 @@ def main(argv: list[str] | None = None) -> int:
     except SwitchobsError as err:
         print(f"switchobs {args.command}: error: {one_line(err)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("switchobs: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         # the reader went away (`switchobs show T | head`): not an error of ours; silence the
         # interpreter's flush of the closed stdout at exit (Python docs, "Note on SIGPIPE")
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as err:     # a file the command writes: a full disk, a read-only folder
+        print(f"switchobs {args.command}: error: {one_line(err)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("switchobs: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -14,6 +14,9 @@ from ._common import parse_ts, print_json
 __all__ = ["register", "run"]
 
 
+#: Most cycles ``--ratio-cycles`` samples (at 2 ms each, 1000 cycles of 2 s are 1e6 samples).
+MAX_RATIO_CYCLES = 1000
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "certify",
@@ -48,8 +51,9 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidArgument(
                 f"cannot load the table's system '{table0.system_name}'; pass --system CONFIG") from None
     table = GainTable.load(args.table, system=system)
-    if args.ratio_cycles < 1:
-        raise InvalidArgument(f"--ratio-cycles must be >= 1; got {args.ratio_cycles}")
+    if not 1 <= args.ratio_cycles <= MAX_RATIO_CYCLES:
+        raise InvalidArgument(f"--ratio-cycles must be in [1, {MAX_RATIO_CYCLES}] (a sampled run over that many "
+                              f"cycles); got {args.ratio_cycles}")
     rep = certify_table(system, table, sequence=args.sequence, ratio_cycles=args.ratio_cycles,
                         box=not args.no_box)
     if args.json:

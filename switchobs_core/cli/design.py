@@ -7,8 +7,10 @@ from pathlib import Path
 
 from ..design import Designer, Margin
 from ..exceptions import InvalidArgument
+from ..files import check_output
 from ..gains import CycleDesign, GainTable, kalman_table
 from ..kalman import design_kalman
+from ..ranges import MAX_CYCLES, check_count
 from ..scenarios import load_noise, load_system
 from ..schedule import Cycle
 from ..system import LTISystem
@@ -207,6 +209,8 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.output, "-o")           # before the design, not after it
+    check_count(len(args.cycle) + len(args.cycle_h), "--cycle/--cycle-h", MAX_CYCLES)
     system = load_system(args.config)
     cycles = with_dead_time(list(args.cycle) + list(args.cycle_h), args.dead_time)
     if args.dead_time and args.robust is not None:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import DesignError, InvalidArgument, ScheduleError
+from ..files import check_output, write_with
 from ..kalman import sample_pattern
 from ..paper import TABLE
 from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
@@ -23,6 +24,9 @@ __all__ = ["register", "run", "design_command", "fmt_num"]
 COST_KIND = ("mean over the samples of one period of tr(W P^-_k), P^- the a-priori covariance of the periodic "
              "Kalman filter")
 
+
+#: Largest ``--map-size`` M: the (tau, s) map costs M^2 periodic Riccati solves (64: about 4000).
+MAX_MAP_SIZE = 64
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -133,15 +137,21 @@ def _plot(path: Path, J: ScheduleCost, res: Any, paper: list[dict], h_min: float
     ax.set_title(f"Periodic Kalman cost at {J.rate:g} Hz, h >= {h_min:g} s (grey: excluded)", fontsize=10)
     ax.set_facecolor("0.85")
     ax.legend(loc="upper right", fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        write_with(path, "--plot", lambda p: fig.savefig(p, dpi=110))
+    finally:
+        plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
     system = load_system(args.config)
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
     progress = False if args.json else args.progress
+    if args.plot is not None:
+        check_output(args.plot, "--plot")     # before the search, not after it
+    if not 3 <= args.map_size <= MAX_MAP_SIZE:
+        raise InvalidArgument(f"--map-size must be in [3, {MAX_MAP_SIZE}] (the map costs M^2 Riccati solves); "
+                              f"got {args.map_size}")
     if not (math.isfinite(args.dead_time) and args.dead_time >= 0):
         raise InvalidArgument(f"--dead-time must be a finite number of seconds >= 0; got {args.dead_time:g}")
     J = ScheduleCost(system, args.rate, noise, args.weights, dead_time=args.dead_time)

@@ -10,7 +10,9 @@ import numpy as np
 
 from ..errorfigs import plot_result
 from ..exceptions import InvalidArgument, ScheduleError
+from ..files import check_output
 from ..gains import GainTable
+from ..ranges import check_range
 from ..scenarios import load_system
 from ..schedule import RandomSchedule, parse_schedule
 from ..simulate import simulate
@@ -80,6 +82,16 @@ def run(args: argparse.Namespace) -> int:
                               if args.dead_time else "") + f": {err}") from None
     if not args.t_end > 0:
         raise InvalidArgument(f"--t-end must be > 0; got {args.t_end}")
+    # the range policy (switchobs_core.ranges): magnitudes that the bounds square, a seed numpy takes
+    check_range(args.e0, "e0", exc=InvalidArgument, flag="--e0")
+    for flag, v, name in (("--noise", args.noise, "noise std"), ("--process-noise", args.process_noise, "noise std"),
+                          ("--noise-max", args.noise_max, "noise.max")):
+        if v is not None:
+            check_range(v, name, exc=InvalidArgument, flag=flag)
+    if not 0 <= args.seed < 2**63:
+        raise InvalidArgument(f"--seed must be an integer in [0, 2^63); got {args.seed}")
+    if args.plot is not None:
+        check_output(args.plot, "--plot")     # before the simulation, not after it
     if args.plot is not None and args.plot.suffix.lower() not in PLOT_SUFFIXES:
         raise InvalidArgument(f"--plot {args.plot}: the figure's file name must end in one of "
                               f"{', '.join(PLOT_SUFFIXES)}")

@@ -68,6 +68,7 @@ class EstimateResult:
     bound_valid: bool = True           # False: the bounds were withdrawn (bound_invalid_why says why)
     bound_invalid_why: str = ""
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
+    unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
     out: str | None = None
     csv: str | None = None
 
@@ -206,12 +207,26 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
-        seconds=seconds,
-        out=str(out) if out is not None else None)
+        seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl))
     if csv is not None:
         write_csv(csv, res)
         res.csv = str(csv)
     return res
+
+
+def unanswered(pl: EstimatorPipeline) -> dict[str, int]:
+    """Accepted (valid) pose messages that got no estimate, by named reason (only reasons > 0).
+
+    ``non_finite_estimate``: the observer's update was not finite (withheld, the estimator
+    reset); ``never_used``: accepted poses that no update consumed (a full update uses two, a
+    partial one one); ``internal_error``: exceptions caught while handling an input.
+    """
+    accepted = sum(pl.accepted.get(t, 0) for t in ("camera/pose", "target/pose"))
+    consumed = 2 * pl.updates - pl.partial_updates
+    out = {"non_finite_estimate": getattr(pl, "nonfinite", 0),
+           "never_used": max(0, accepted - consumed),
+           "internal_error": sum(c for (_, r), c in pl.rejected.items() if r == "internal_error")}
+    return {k: int(v) for k, v in out.items() if v}
 
 
 def write_csv(path: str | Path, res: EstimateResult) -> None:

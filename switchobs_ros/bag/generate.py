@@ -13,6 +13,7 @@ all with log time = the stamp (what a recorder on the simulated clock would writ
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.plant import Plant
+from switchobs_core.ranges import MAX_RATE_HZ, MAX_STAMP_S, OUTPUT_BUDGET_BYTES, check_size
 from switchobs_core.schedule import RandomSchedule, parse_schedule
 
 from ..core_config import DEFAULT_X0, SensorOutputs, load_system_param
@@ -75,6 +77,23 @@ def _schedule(cfg: GenerateConfig, N: int):
     return parse_schedule(spec, N=N, dead_time=cfg.dead_time)
 
 
+#: Bytes a tick takes in a generated bag (five messages and their index; measured on mcap: 720).
+BYTES_PER_TICK = 720
+
+
+def check_bag_size(cfg: GenerateConfig) -> None:
+    """Refuse, before writing, a bag beyond :data:`~switchobs_core.ranges.OUTPUT_BUDGET_BYTES` (what
+    the offline tools read) or stamps beyond an int32 of seconds."""
+    if not (cfg.rate <= MAX_RATE_HZ):
+        raise BagError(f"--rate {cfg.rate:g} Hz is beyond the supported {MAX_RATE_HZ:g} Hz")
+    if not (cfg.clock_start + cfg.duration <= MAX_STAMP_S):
+        raise BagError(f"--clock-start + --duration = {cfg.clock_start + cfg.duration:g} s is beyond the latest stamp "
+                       f"a message carries ({MAX_STAMP_S} s: builtin_interfaces/Time.sec is an int32)")
+    ticks = cfg.duration * cfg.rate + 1
+    check_size(ticks, BYTES_PER_TICK, f"a bag of {ticks:.3g} ticks ({cfg.duration:g} s at {cfg.rate:g} Hz)",
+               "lower --duration or --rate", budget=OUTPUT_BUDGET_BYTES, exc=BagError)
+
+
 def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, object]]]]:
     """Yield ``(stamp_ns, [(topic, rclpy message), ...])`` per tick, as camera_sim publishes them."""
     try:
@@ -88,6 +107,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         if not cfg.rate > 0 or not cfg.duration >= 0 or not cfg.clock_start > 0:
             raise BagError(f"need rate > 0, duration >= 0, clock_start > 0; got {cfg.rate}, {cfg.duration}, "
                            f"{cfg.clock_start}")
+        check_bag_size(cfg)
         x0 = cfg.initial_state or (DEFAULT_X0 if sys_.n == len(DEFAULT_X0) else (0.0,) * sys_.n)
         if len(x0) != sys_.n:
             raise BagError(f"initial state has {len(x0)} values; the system has n = {sys_.n}")
@@ -124,9 +144,11 @@ def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap") -> dic
 
     ticks = 0
     first = last = None
+    it = scenario_ticks(cfg)
+    head = next(it, None)       # every check of cfg runs here, before the bag folder is created
     added: set[str] = set()
     with BagOut(out, storage) as bag:
-        for stamp_ns, msgs in scenario_ticks(cfg):
+        for stamp_ns, msgs in itertools.chain([head] if head is not None else [], it):
             for topic, msg in msgs:
                 if topic not in added:          # the system's topics, each with its message type
                     bag.add(topic, type_name(type(msg)))

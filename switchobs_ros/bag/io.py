@@ -12,7 +12,9 @@ receive time on the recorder's clock), ties broken by :data:`TOPIC_RANK` (``/clo
 active channel, then the poses) and then by the order in the file. The player publishes in
 this order and the offline estimator processes in it, so both see the same sequence.
 
-Every failure is a :class:`BagError` with one line naming the file or the topic.
+Every failure is a :class:`BagError` with one line naming the file or the topic. Before anything
+is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: the offline tools
+hold the messages in memory) must be regular files (:mod:`switchobs_core.files`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from pathlib import Path
 
 from msg_bridge.typed import register_rosbags_types
 from switchobs_core.exceptions import SwitchobsError, one_line
+from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
+from switchobs_core.loading import load_yaml
 
 from .. import qos
 
@@ -134,6 +138,26 @@ class BagMessage:
     data: bytes
 
 
+def _check_bag_files(path: Path) -> None:
+    """Before rosbags opens anything: ``metadata.yaml`` and every data file (those it lists, and
+    every ``.mcap``/``.db3`` in the folder) are regular files within their size limits
+    (:mod:`switchobs_core.files`): a FIFO blocks the reader forever, a huge file exhausts memory."""
+    meta = path / "metadata.yaml"
+    doc = load_yaml(meta, exc=BagError, what="bag metadata", max_bytes=MAX_METADATA_BYTES)
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    listed = info.get("relative_file_paths") if isinstance(info, dict) else None
+    names = {str(x) for x in listed if isinstance(x, str)} if isinstance(listed, list) else set()
+    names |= {p.name for p in path.iterdir() if p.suffix in (".mcap", ".db3")}
+    for name in sorted(names):
+        f = path / name
+        if f.resolve().parent != path.resolve():
+            raise BagError(f"bag {path}: metadata.yaml lists a data file outside the bag folder ({name})")
+        try:
+            check_input(f, "bag data file", exc=BagError, max_bytes=MAX_BAG_BYTES)
+        except FileNotFoundError:
+            raise BagError(f"bag {path}: data file {name} listed in metadata.yaml is missing") from None
+
+
 class BagIn:
     """A rosbag2 bag opened for reading (``with BagIn(path) as bag:``).
 
@@ -149,6 +173,7 @@ class BagIn:
             raise BagError(f"bag {self.path}: no such file or folder")
         if not (self.path / "metadata.yaml").exists():
             raise BagError(f"bag {self.path}: not a rosbag2 bag folder (no metadata.yaml)")
+        _check_bag_files(self.path)
         try:
             self._reader = Reader(self.path)
             self._reader.open()

@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass
 
 import msg_bridge as mb
+from switchobs_core.ranges import check_seconds
 
 from .io import TOPIC_RANK, BagError, BagIn, msg_class, qos_for
 
@@ -66,8 +67,10 @@ def play(bag_path, cfg: PlayConfig, *, node=None, log=print, should_stop=lambda:
     import rclpy
     from rosgraph_msgs.msg import Clock
 
-    if not cfg.rate > 0:
-        raise BagError(f"--rate must be > 0; got {cfg.rate}")
+    if not 1e-6 <= cfg.rate <= 1e6:
+        raise BagError(f"--rate (a speed factor) must be in [1e-06, 1e+06]; got {cfg.rate}")
+    for name in ("wait_timeout", "settle", "channel_lead", "loop_pause"):
+        check_seconds(getattr(cfg, name), "--" + name.replace("_", "-"), exc=BagError)
     with BagIn(bag_path) as bag:
         topics = dict(bag.topics)
         if cfg.topics:

@@ -20,6 +20,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from switchobs_core.ranges import check_seconds
+
 from .io import CONTRACT_TYPES, BagError, BagOut, msg_class, qos_kind
 
 __all__ = ["RecordConfig", "default_topics", "record"]
@@ -69,6 +71,10 @@ def record(out_path, cfg: RecordConfig, *, node, log=print, should_stop=lambda: 
     """Record on ``node`` (an rclpy node; its clock gives the log times) into a new bag."""
     import rclpy
 
+    for name in ("duration", "wait_timeout", "discover_timeout"):
+        check_seconds(getattr(cfg, name), "--" + name.replace("_", "-"), exc=BagError)
+    if cfg.count < 0:
+        raise BagError(f"--count must be >= 0 (0: no limit); got {cfg.count}")
     wanted = default_topics() if not cfg.topics else {t: None for t in cfg.topics}
     known = default_topics()
     known.update(CONTRACT_TYPES)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import msg_bridge as mb
+from switchobs_core.files import write_with
 
 from .io import BagError, BagIn, deserialize
 
@@ -249,8 +250,9 @@ def plot_report(rep: Report, png: str | Path, title: str = "") -> None:
         axc.set_xlabel("time since the first estimate [s]")
         vals = [v for v in (p.paper, p.exact, p.err, p.noise) if v is not None]
         finite = np.concatenate([v[np.isfinite(v) & (v > 0)] for v in vals])
-        if finite.size:
-            ax.set_ylim(max(finite.min() / 3, 1e-12), finite.max() * 3)
+        if finite.size:     # (a bound near the largest double: no room above it)
+            ax.set_ylim(max(finite.min() / 3, 1e-12), min(finite.max() * 3, 1e300) if finite.max() < 1e300
+                        else finite.max())
         ax.set_xlim(p.t[0], p.t[-1])
         ax.grid(True, which="major", alpha=0.4)
         ax.grid(True, which="minor", alpha=0.12)
@@ -264,5 +266,7 @@ def plot_report(rep: Report, png: str | Path, title: str = "") -> None:
         if k == 0:
             ax.legend(loc="lower left", fontsize=8.5, framealpha=0.95)
     fig.suptitle(title or f"switchobs: {Path(rep.bag).name} (agent 2 in view shaded)", fontsize=11)
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    try:
+        write_with(png, "report", lambda q: fig.savefig(q, dpi=120), exc=BagError)
+    finally:
+        plt.close(fig)

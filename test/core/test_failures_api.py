@@ -20,14 +20,17 @@ from switchobs_core import certificate as cert
 from switchobs_core import decomposition as dec
 from switchobs_core import design as des
 from switchobs_core import envelope as env
+from switchobs_core import files as fil
 from switchobs_core import paper as pap
 from switchobs_core import plant as pla
 from switchobs_core import propagation as prop
+from switchobs_core import ranges as rng
 from switchobs_core import scenarios as scn
 from switchobs_core import schedule as sch
 from switchobs_core import simulate as sim
 from switchobs_core import synthesis as syn
 from switchobs_core import system as sy
+from switchobs_core import table_check as tck
 from switchobs_core import validation as val
 from switchobs_core.exceptions import GainTableError, SwitchobsError
 from switchobs_core.gains import GainTable, kalman_table
@@ -60,8 +63,33 @@ def _bad(M, i=0, j=0, v=NAN):
     return M
 
 
+def _zeroed(table):
+    """``table`` with every gain zero and its checksum recomputed (a planted table)."""
+    import json
+
+    data = json.loads(table.to_json())
+    data.pop("payload_sha256")
+    for d in data["designs"]:
+        for ch in d["channels"]:
+            ch["L"] = [[0.0] * len(r) for r in ch["L"]]
+    data["payload_sha256"] = GainTable._digest(data)
+    return GainTable.from_json(json.dumps(data))
+
+
 # (id, argument name the message must contain, call(small) -> raises)
 CASES = [
+    # --- ranges, files, table checks (issue 22)
+    ("check_range.e0", "e0", lambda s: rng.check_range(1e308, "e0")),
+    ("check_range.nan", "sensor_timeout", lambda s: rng.check_range(NAN, "sensor_timeout")),
+    ("check_size.samples", "samples", lambda s: rng.check_size(1e12, 8, "samples", "lower the rate")),
+    ("check_seconds.settle", "--settle", lambda s: rng.check_seconds(1e300, "--settle")),
+    ("check_count.cycles", "cycles", lambda s: rng.check_count(30_000, "cycles", rng.MAX_CYCLES)),
+    ("check_input.dir", "table", lambda s: fil.check_input("/", "table")),
+    ("open_input.dir", "table", lambda s: fil.open_input("/", "table")),
+    ("check_output.dir", "output", lambda s: fil.check_output("/", "output")),
+    ("write_with.dir", "output", lambda s: fil.write_with("/", "output", lambda p: None)),
+    ("check_private.tmp", "cache", lambda s: fil.check_private("/tmp", "cache")),
+    ("verify_table.zeroed", "table", lambda s: tck.verify_table(_zeroed(s[1]), s[0])),
     # --- validation helpers
     ("cycle_factor.kappa", "kappa", lambda s: cert.cycle_factor(NAN, 0.5, 1.0, 1.0, 1.0)),
     ("cycle_factor.active", "active", lambda s: cert.cycle_factor(2.0, 0.5, 1.0, -1.0, 1.0)),
@@ -300,11 +328,12 @@ def test_every_public_callable_has_a_case():
         "Decomposition", "GainSynthesis", "KappaCurve", "ChannelDesigner", "Envelope", "ChannelGain",
         "CycleDesign", "CertifyCheck", "FORMAT", "FORMAT_VERSION", "CycleRecord", "ZOHEntry", "Schedule",
         "SimulationResult", "ChannelInfo", "single_threaded_blas", "GainTable", "paper_system",
-        "ScheduledCycle",
+        "ScheduledCycle", "fmt_bytes", "kind_of",
     }
     missing = []
     for mod in ("certificate", "decomposition", "design", "envelope", "gains", "observer", "paper",
-                "plant", "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation"):
+                "plant", "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation",
+                "ranges", "files", "table_check"):
         m = importlib.import_module(f"switchobs_core.{mod}")
         for n in m.__all__:
             obj = getattr(m, n)

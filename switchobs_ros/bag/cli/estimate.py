@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
+from switchobs_core.files import check_output
 from switchobs_core.loading import parse_yaml
 
 from ...config import params_from_file
 from ..estimate import estimate
-from ..io import BagError
+from ..io import BagError, BagIn
 
-__all__ = ["register", "run", "params_of"]
+__all__ = ["STRICT_EXIT", "register", "run", "params_of"]
+
+#: Exit code of ``--strict`` when valid measurements went unanswered.
+STRICT_EXIT = 4
+_POSES = ("/camera/pose", "/target/pose")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "whose inputs: section names the topics to read)")
     p.add_argument("--node", default="/estimator", help="namespace of the output topics (default /estimator)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--strict", action="store_true",
+                   help=f"exit {STRICT_EXIT} when any valid (accepted) measurement got no estimate (the summary "
+                        "names the reasons)")
 
     p.set_defaults(func=run)
 
@@ -50,22 +59,34 @@ def params_of(a: argparse.Namespace) -> dict:
 def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     if not a.out and not a.csv:
         raise BagError("give -o OUT (a new bag) and/or --csv FILE")
+    if a.csv:
+        check_output(a.csv, "--csv", exc=BagError)       # before the run, not after it
+    with BagIn(a.bag) as bag:
+        if all(t in bag.topics for t in _POSES) and not any(bag.counts.get(t, 0) for t in _POSES):
+            raise BagError(f"bag {a.bag}: topics {' and '.join(_POSES)} hold no messages: nothing to estimate")
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
                    node=a.node)
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
     info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
-            "partial_updates": res.partial_updates, "rejected": res.rejected, "inconsistent": res.inconsistent,
-            "reattributed": res.reattributed, "bounds_valid": res.bound_valid, "out": res.out, "csv": res.csv}
+            "partial_updates": res.partial_updates, "rejected": res.rejected, "unanswered": res.unanswered,
+            "inconsistent": res.inconsistent, "reattributed": res.reattributed, "bounds_valid": res.bound_valid,
+            "out": res.out, "csv": res.csv}
+    code = STRICT_EXIT if a.strict and res.unanswered else 0
     if a.json:
         print(json.dumps(info))
-        return 0
-    print(f"{res.stamps.size} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
-          f"({rate:,.0f} messages/s); partial updates {res.partial_updates}; rejected "
-          f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
-    if not res.bound_valid:
-        print(f"bounds withdrawn: {res.bound_invalid_why}")
-    for what in ("out", "csv"):
-        if info[what]:
-            print(f"wrote {info[what]}")
-    return 0
+    else:
+        print(f"{res.stamps.size} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
+              f"({rate:,.0f} messages/s); partial updates {res.partial_updates}; rejected "
+              f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
+        if res.unanswered:
+            print(f"valid measurements without an estimate: {sum(res.unanswered.values())} {res.unanswered}")
+        if not res.bound_valid:
+            print(f"bounds withdrawn: {res.bound_invalid_why}")
+        for what in ("out", "csv"):
+            if info[what]:
+                print(f"wrote {info[what]}")
+    if code:
+        print(f"switchobs_bag: error: --strict: {sum(res.unanswered.values())} valid measurements got no estimate "
+              f"({', '.join(f'{k} {v}' for k, v in res.unanswered.items())})", file=sys.stderr)
+    return code

@@ -8,6 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from switchobs_core.files import check_output, write_with
+
+from ..io import BagError
 from ..report import load_report, plot_report, summary_table
 
 __all__ = ["register", "run"]
@@ -25,25 +28,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def fin(v: float) -> float | None:
+    """A number for ``--json``: JSON has no NaN or Infinity, so a non-finite value (no truth, an
+    envelope that overflowed) is ``null``; the output is always valid JSON (``allow_nan=False``)."""
+    return float(v) if np.isfinite(v) else None
+
+
 def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
+    check_output(a.out, "-o", exc=BagError)          # before reading the bag
+    if a.summary:
+        check_output(a.summary, "--summary", exc=BagError)
     rep = load_report(a.bag, a.node)
     plot_report(rep, a.out, a.title)
     text = summary_table(rep)
     if a.summary:
-        Path(a.summary).write_text(text + "\n")
+        write_with(a.summary, "--summary", lambda q: Path(q).write_text(text + "\n"), exc=BagError)
     if a.json:
-        def fin(v: float) -> float | None:     # JSON has no NaN: no truth, no number
-            return float(v) if np.isfinite(v) else None
-
         print(json.dumps({"passes": [{"estimates": len(p.t), "initial_error": fin(p.e_first),
                                       "final_error": fin(p.e_final),
-                                      "final_exact_bound": float(p.exact[-1]),
+                                      "final_exact_bound": fin(p.exact[-1]),
                                       "exact_bound_violations": p.violations(p.exact),
                                       "final_noise_bound": None if p.noise is None else fin(p.noise[-1]),
                                       "noise_bound_violations": p.violations(p.noise),
-                                      "final_paper_bound": float(p.paper[-1]),
+                                      "final_paper_bound": fin(p.paper[-1]),
                                       "contraction": [fin(c) for c in p.contraction]} for p in rep.passes],
-                          "rejected": rep.rejected, "png": a.out}))
+                          "rejected": rep.rejected, "png": a.out}, allow_nan=False))
     else:
         print(text)
         print(f"wrote {a.out}" + (f" and {a.summary}" if a.summary else ""))

@@ -1,0 +1,77 @@
+"""The range policy (switchobs_core.ranges, issue 22): every number a user gives has a documented
+range; sizes that grow with a user's numbers are refused up front, with the amount."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from switchobs_core import ranges
+from switchobs_core.exceptions import InvalidArgument
+from switchobs_core.kalman import design_kalman, sample_pattern
+from switchobs_core.plan import plan_schedule
+from switchobs_core.scenarios import paper_system
+from switchobs_core.schedule import Cycle
+
+
+@pytest.mark.parametrize("name, value", [
+    ("sensor_timeout", 1.0e10), ("future_tolerance", 1.0e300), ("diagnostics_period", 1.0e12),
+    ("pairing_timeout", 0.0), ("e0", 1.0e308), ("e0", -1.0), ("initial_estimate", 1.0e300),
+    ("noise.max", 1.0e150), ("rate", 1.0e9), ("rate", math.nan), ("sensor_timeout", math.inf),
+])
+def test_out_of_range_is_refused_with_the_range_and_why(name, value):
+    with pytest.raises(InvalidArgument) as info:
+        ranges.check_range(value, name)
+    msg = str(info.value)
+    assert f"'{name}'" in msg and "must be in" in msg and "\n" not in msg, msg
+
+
+@pytest.mark.parametrize("name, value", [
+    ("sensor_timeout", 0.5), ("sensor_timeout", ranges.MAX_DURATION_S), ("e0", 0.0), ("e0", 1.0e50),
+    ("initial_estimate", -1.0e50), ("noise.max", -1.0), ("rate", 0.0), ("rate", 1.0e6),
+])
+def test_in_range_is_accepted(name, value):
+    assert ranges.check_range(value, name) == value
+
+
+def test_durations_fit_an_int64_of_nanoseconds_after_any_stamp_before_2262():
+    assert ranges.MAX_DURATION_S * 1e9 + 4e18 < 2**63
+
+
+def test_check_size_names_the_amount_and_the_budget():
+    with pytest.raises(InvalidArgument, match=r"2e\+09 samples would need 14.9 GiB, beyond the budget of 1 GiB: "
+                                              r"lower it"):
+        ranges.check_size(2e9, 8, "2e+09 samples", "lower it")
+    assert ranges.check_size(1000, 8, "x", "y") == 1000
+    with pytest.raises(InvalidArgument, match="unbounded"):
+        ranges.check_size(math.inf, 8, "x", "y")
+
+
+def test_check_count():
+    with pytest.raises(InvalidArgument, match="cycles: 30000 given, at most 1000"):
+        ranges.check_count(30000, "cycles", ranges.MAX_CYCLES)
+
+
+def test_kalman_design_at_1e9_hz_is_refused_at_once():
+    """`design --gains kalman --rate 1e9` tried to allocate 15 GiB (MemoryError traceback)."""
+    t0 = time.monotonic()
+    with pytest.raises(InvalidArgument, match=r"samples per period .* would need .*TiB, beyond the budget"):
+        design_kalman(paper_system(), [Cycle.from_ts(2.0, 0.6)], 1e9)
+    with pytest.raises(InvalidArgument, match="beyond the budget"):
+        sample_pattern([Cycle.from_ts(2.0, 0.6)], 1e9)
+    assert time.monotonic() - t0 < 5
+
+
+@pytest.mark.parametrize("rate, tau_max", [(1e9, 4.0), (50.0, 1e9)])
+def test_plan_sizes_are_refused_at_once(rate, tau_max):
+    t0 = time.monotonic()
+    with pytest.raises(InvalidArgument, match=r"periods of up to .* samples .* beyond the budget"):
+        plan_schedule(paper_system(), rate, tau_max=tau_max, progress=False)
+    assert time.monotonic() - t0 < 5
+
+
+def test_fmt_bytes():
+    assert ranges.fmt_bytes(512) == "512 bytes"
+    assert ranges.fmt_bytes(3 << 30) == "3 GiB"

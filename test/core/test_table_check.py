@@ -1,0 +1,76 @@
+"""Re-verification of loaded gain tables (switchobs_core.table_check, issue 22): a table whose
+gains were zeroed and whose checksum was recomputed loads (the checksum is not a signature) but is
+refused before use; real tables of every family pass, cheaply."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from switchobs_core.exceptions import GainTableError
+from switchobs_core.gains import GainTable, kalman_table
+from switchobs_core.kalman import design_kalman
+from switchobs_core.schedule import Cycle
+from switchobs_core.table_check import verify_table
+
+
+def _replant(table: GainTable, edit) -> GainTable:
+    """``table`` through its file text with ``edit(data)`` applied and the checksum recomputed."""
+    data = json.loads(table.to_json())
+    data.pop("payload_sha256")
+    edit(data)
+    data["payload_sha256"] = GainTable._digest(data)
+    return GainTable.from_json(json.dumps(data), source="planted.json")
+
+
+def _zero_lmi(data):
+    for d in data["designs"]:
+        for ch in d["channels"]:
+            ch["L"] = [[0.0] * len(r) for r in ch["L"]]
+            ch["L_o"] = [[0.0] * len(r) for r in ch["L_o"]]
+
+
+@pytest.fixture(scope="module")
+def kalman(paper):
+    return kalman_table(paper, [design_kalman(paper, [Cycle.from_ts(2.0, 0.6)], 20.0)])
+
+
+def test_real_tables_pass_quickly(paper, paper_table, paper_designer, kalman):
+    robust = paper_designer.table([], robust=(0.8, 1.6), progress=False)
+    t0 = time.monotonic()
+    for t in (paper_table, robust, kalman):
+        verify_table(t, paper)
+    assert time.monotonic() - t0 < 2
+
+
+def test_zeroed_lmi_gains_with_a_recomputed_checksum_are_refused(paper, paper_table):
+    planted = _replant(paper_table, _zero_lmi)         # loads: the checksum matches
+    with pytest.raises(GainTableError, match=r"planted.json: design \(2 s, 0.6\): the error map over the cycle "
+                                             r"\(2 s, 0.6\) has spectral radius 1.49\d* >= 1"):
+        verify_table(planted, paper, source="planted.json")
+
+
+def test_zeroed_kalman_gains_are_refused(paper, kalman):
+    def zero(data):
+        for k in data["kalman"]:
+            for part in ("periodic", "startup"):
+                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+    planted = _replant(kalman, zero)
+    with pytest.raises(GainTableError, match=r"Kalman design at 20 Hz: the error map over one period has spectral "
+                                             r"radius .* >= 1"):
+        verify_table(planted, paper, source="planted.json")
+
+
+def test_gain_of_the_wrong_shape_or_not_finite_is_refused(paper, paper_table):
+    """(A file with either is refused by the loader's layout check already; a table built in memory
+    is checked here.)"""
+    d = paper_table.designs[0]
+    for L, needle in ((np.zeros((12, 3)), r"gain L_1 has shape \(12, 3\); expected \(12, 4\)"),
+                      (np.full((12, 4), np.nan), "gain L_1 has a non-finite entry")):
+        bad = replace(d, channels=(replace(d.channels[0], L=L),) + d.channels[1:])
+        with pytest.raises(GainTableError, match=needle):
+            verify_table(replace(paper_table, designs=[bad]), paper)
