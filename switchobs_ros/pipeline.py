@@ -289,6 +289,8 @@ class EstimatorPipeline:
         self.reattributed = 0
         self.late_channel = 0
         self.last_inconsistency = ""
+        self.parts_used = 0         # accepted messages an observer update consumed
+        self.dropped: Counter = Counter()   # accepted messages no update used, by reason (never silent)
         self.bound_valid = True     # False after any reset, an inconsistent sample: see NO_BOUND
         self.bound_invalid_why = ""
         self.errors = 0
@@ -625,7 +627,10 @@ class EstimatorPipeline:
                forced: bool = False) -> None:
         """Run the observer on a pending sample (every part, or those that came); append the estimate."""
         pend = self.pending.pop(stamp_ns, None)
-        if pend is None or (self.obs_ns is not None and stamp_ns <= self.obs_ns):
+        if pend is None:
+            return
+        if self.obs_ns is not None and stamp_ns <= self.obs_ns:     # overtaken (a set_state at a later stamp)
+            self.dropped[Reason.OLD_STAMP.value] += len(pend.parts)
             return
         if channel is None:
             channel, certain = self._resolve(pend, now_mono)
@@ -640,6 +645,7 @@ class EstimatorPipeline:
             }[channel]
             for t in topics:
                 self.reject(t, Rejection(reason, self.channel_topic or "channel", detail))
+            self.dropped[reason.value] += len(pend.parts)
             return
         if self.sources[next(iter(pend.parts))].channel is not None:
             self._last_fixed = channel
@@ -653,6 +659,7 @@ class EstimatorPipeline:
         if self.check and self.bound_valid:
             m = self._consistent(pend, t, m)
             if m is None:
+                self.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
                 return
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))
@@ -661,6 +668,7 @@ class EstimatorPipeline:
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
             self.obs_ns = pend.stamp_ns
             self.updates += 1
+            self.parts_used += len(pend.parts)
             if m.partial:
                 self.partial_updates += 1
             try:
@@ -769,6 +777,7 @@ class EstimatorPipeline:
                 self._advance(out, math.inf, force=True)
             except Exception as err:
                 self.internal_error("reset", err)
+        self.dropped["reset"] += sum(len(p.parts) for p in self.pending.values())
         self.pending = {}
         self.origin_ns = None
         self.obs_ns = None

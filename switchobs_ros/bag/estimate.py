@@ -215,16 +215,20 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
 
 
 def unanswered(pl: EstimatorPipeline) -> dict[str, int]:
-    """Accepted (valid) pose messages that got no estimate, by named reason (only reasons > 0).
+    """Accepted (valid) input messages that got no estimate, by named reason (only reasons > 0).
 
-    ``non_finite_estimate``: the observer's update was not finite (withheld, the estimator
-    reset); ``never_used``: accepted poses that no update consumed (a full update uses two, a
-    partial one one); ``internal_error``: exceptions caught while handling an input.
+    The pipeline's own reasons (``inconsistent``: the consistency test refused the sample;
+    ``no_channel``/``ambiguous_channel``: its channel was never certain; ``old_stamp``: overtaken;
+    ``reset``: waiting when the estimator reset); ``non_finite_estimate``: the observer's update
+    was not finite (withheld, the estimator reset); ``never_used``: accepted messages that no
+    update consumed for another reason; ``internal_error``: exceptions caught while handling an
+    input.
     """
-    accepted = sum(pl.accepted.get(t, 0) for t in ("camera/pose", "target/pose"))
-    consumed = 2 * pl.updates - pl.partial_updates
-    out = {"non_finite_estimate": getattr(pl, "nonfinite", 0),
-           "never_used": max(0, accepted - consumed),
+    accepted = sum(pl.accepted.get(s.topic, 0) for s in pl.sources)
+    dropped = dict(pl.dropped)
+    out = {**dropped, "non_finite_estimate": pl.nonfinite,
+           "never_used": max(0, accepted - pl.parts_used - sum(dropped.values())
+                             - sum(len(p.parts) for p in pl.pending.values())),
            "internal_error": sum(c for (_, r), c in pl.rejected.items() if r == "internal_error")}
     return {k: int(v) for k, v in out.items() if v}
 
