@@ -21,13 +21,12 @@ Dead time. A cycle with a dead time ``d`` (:mod:`.schedule`) makes the samples i
 (:func:`~switchobs_core.schedule.common_rows`: the camera's own pose), and their stored step
 uses ``H = C_rho[common rows]`` (``KalmanPhase.rows``). ``pattern.blind[k]`` says which.
 
-Detectability. Before iterating, the period pair is checked: with ``Phi = e^{A/f}``, the
-monodromy ``Phi^K`` and the stacked observations ``O = [H_0; H_1 Phi; ...; H_{K-1} Phi^{K-1}]``
-of the period's full-row samples, every eigenvalue of ``Phi^K`` with ``|lambda| >= 1`` must
-be observable from ``O`` (PBH; computed as the unobservable subspace of ``(Phi^K, O)`` with
-:func:`~switchobs_core.decomposition.observability_decomposition`, which is ``Phi^K``-invariant,
-so the test is on the eigenvalues of ``Phi^K`` restricted to it; d:obs_detect,
-e:detectability_condition in discrete time).
+Detectability. Before solving, the period pair is checked: with ``Phi = e^{A/f}``, every
+eigenvalue of the monodromy ``Phi^K`` with ``|lambda| >= 1`` must be seen by some sample of the
+period (PBH on the eigenvectors, with the growth over the period factored out so that the test
+stays right for large n: :mod:`.detectability`; d:obs_detect, e:detectability_condition in
+discrete time). The Riccati solver checks it once more on its result: the closed-loop error map
+of the period must be a contraction (:func:`~switchobs_core.doubling.solve_periodic_riccati`).
 
 Lookup. :meth:`KalmanDesign.phase_at` maps the time since the sequence start to the nearest
 sample (stamp jitter), start-up first (the recursion from ``P0`` until it meets the periodic
@@ -47,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from .decomposition import observability_decomposition
+from .detectability import undetectable_modes
+from .doubling import solve_periodic_riccati, startup_run
 from .exceptions import DesignError, InvalidArgument
 from .noise import NoiseModel, default_noise
 from .riccati import (
@@ -57,7 +57,6 @@ from .riccati import (
     discretize,
     gain,
     joseph,
-    periodic_riccati,
 )
 from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon, common_rows
 
@@ -78,7 +77,6 @@ __all__ = [
 #: A sample closer than this (s) to a switching instant is a tie (module docstring).
 TIE_TOL = 1e-9
 _PERIOD_TOL = 1e-9
-_UNIT_CIRCLE_TOL = 1e-9
 
 
 class KalmanDesignError(DesignError):
@@ -179,34 +177,30 @@ def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: 
 
 
 def check_detectable(system: Any, pattern: SamplePattern) -> None:
-    """Raise :class:`UndetectableSchedule` unless the sampled periodic pair is detectable (module docstring)."""
+    """Raise :class:`UndetectableSchedule` unless the sampled periodic pair is detectable (module docstring).
+
+    The message names every undetectable mode: its growth rate and its direction in the state labels.
+    """
     A = np.asarray(system.A, dtype=float)
     n, K = A.shape[0], pattern.K
-    Phi = discretize(A, np.zeros((n, 0)), np.zeros((n, n)), 1.0 / pattern.rate)[0]
-    rows, Pk = [], np.eye(n)
+    H = []
     for k in range(K):
-        H = system.C[pattern.channels[k] - 1]
+        C = system.C[pattern.channels[k] - 1]
         r = pattern.rows(k, system)
-        rows.append((H if r is None else H[list(r)]) @ Pk)
-        Pk = Phi @ Pk
-    O = np.vstack(rows)
-    d = observability_decomposition(Pk, O / max(1.0, np.linalg.norm(O, 2)))
-    if d.r == n:
-        return
-    ev = np.linalg.eigvals(d.A_u)
-    bad = [z for z in ev if abs(z) >= 1 - _UNIT_CIRCLE_TOL]
+        H.append(C if r is None else C[list(r)])
+    bad = undetectable_modes(A, H, 1.0 / pattern.rate)
     if not bad:
         return
     labels = getattr(system, "state_labels", tuple(f"x{j}" for j in range(n)))
     dirs = []
-    for j in range(d.T_u.shape[1]):
-        v = d.T_u[:, j]
+    for m in bad:
+        v = m.v
         dirs.append(" ".join(f"{v[i]:+.3g}*{labels[i]}" for i in np.argsort(-np.abs(v))[:4] if abs(v[i]) > 1e-6))
     seen = {pattern.channels[k] for k in range(K) if not pattern.is_blind(k)}
     unseen = sorted(set(range(1, system.N + 1)) - seen)
     hint = f" Channel(s) {unseen} get no sample in the period" + (" outside the dead time." if pattern.blind else
                                                                    ".") if unseen else ""
-    rates = ", ".join(f"{math.log(abs(z)) / pattern.period:.4g}" for z in bad)
+    rates = ", ".join(f"{m.lam.real:.4g}" for m in bad)
     raise UndetectableSchedule(
         f"schedule {', '.join(c.label() for c in pattern.cycles)} at {pattern.rate:g} Hz is not detectable: "
         f"{len(bad)} mode(s) of the period transition with |lambda| >= 1 (growth rates {rates} 1/s) are never "
@@ -283,9 +277,9 @@ class KalmanDesign:
     startup : list of KalmanPhase
         Samples 0..S-1 of the recursion from P0, before it meets the periodic solution.
     periods : int
-        Whole periods iterated until the priors repeated within ``rtol``.
+        Doublings of the period map plus sweeps (:func:`~switchobs_core.doubling.solve_periodic_riccati`).
     change : float
-        Relative change of the priors over the last period.
+        Relative change of the prior of phase 0 over the last sweep (the residual).
     error_transition : (n, n) ndarray
         ``prod_k (I - K_k H_k) Phi`` over one period, from the posterior of phase 0 to that of
         the next period's phase 0 (noise-free error map, e:error_dynamics sampled).
@@ -419,8 +413,8 @@ class KalmanDesign:
         """One line: rate, cycles, period, start-up length, convergence, rho and norm."""
         return (
             f"kalman: {self.rate:g} Hz, {', '.join(c.label() for c in self.cycles)}, period {self.pattern.K} samples, "
-            f"start-up {len(self.startup)} samples, converged in {self.periods} periods, period error transition "
-            f"rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
+            f"start-up {len(self.startup)} samples, solved in {self.periods} doublings and sweeps, period error "
+            f"transition rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
         )
 
 
@@ -432,7 +426,7 @@ def design_kalman(
     *,
     rtol: float = 1e-12,
     startup_rtol: float = 1e-11,
-    max_periods: int = 500,
+    max_startup: int | None = None,
     max_repeat: int = 64,
 ) -> KalmanDesign:
     """Offline periodic Kalman gains for ``cycles`` (one cycle, or a sequence repeated) at ``rate`` Hz.
@@ -440,8 +434,10 @@ def design_kalman(
     ``design = design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0, default_noise(system))``
 
     Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair;
-    3. periodic Riccati solution by whole-period iteration from ``P0`` (relative change
-    ``<= rtol``), and the start-up segment (``startup_rtol``); 4. the period's error transition.
+    3. periodic Riccati solution by doubling (:func:`~switchobs_core.doubling.solve_periodic_riccati`,
+    residual ``<= rtol``), and the start-up segment from ``P0`` (``startup_rtol``, at most
+    ``max_startup`` samples, default 64 periods: :func:`~switchobs_core.doubling.startup_run`);
+    4. the period's error transition.
 
     Raises
     ------
@@ -450,7 +446,7 @@ def design_kalman(
     UndetectableSchedule
         Some unstable mode is never observed by the sampled schedule.
     RiccatiError
-        No convergence within ``max_periods``.
+        The doubling does not settle, or its solution is not stabilising.
     """
     noise = default_noise(system) if noise is None else noise
     if not isinstance(noise, NoiseModel):
@@ -471,17 +467,15 @@ def design_kalman(
     rows = [pattern.rows(k, system) for k in range(K)]
     steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
              for c, r in zip(pattern.channels, rows)]
-    sol = periodic_riccati(steps, noise.P0, rtol=rtol, startup_rtol=startup_rtol, max_periods=max_periods)
+    sol = solve_periodic_riccati(steps, rtol=rtol)
+    su_P, su_K, _ = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
     periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
     startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
-               for k, (P, Kk) in enumerate(zip(sol.startup_P, sol.startup_K))]
+               for k, (P, Kk) in enumerate(zip(su_P, su_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
-    n = A.shape[0]
-    M = np.eye(n)
-    for k in list(range(1, K)) + [0]:
-        M = (np.eye(n) - sol.K[k] @ steps[k].H) @ Phi @ M
-    return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M,
-                        float(np.max(np.abs(np.linalg.eigvals(M)))), float(np.linalg.norm(M, 2)))
+    M = sol.transition
+    return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M, sol.rho,
+                        float(np.linalg.norm(M, 2)))
 
 
 class TableKalman:
