@@ -238,12 +238,12 @@ class Phase:
     offset: float
 
 
-def _phases_to_dict(ph: Sequence[KalmanPhase]) -> dict[str, list]:
+def _phases_to_dict(ph: Sequence[KalmanPhase], arrays: bool = False) -> dict[str, list]:
     out = {
         "channel": [p.channel for p in ph],
         "dt": [p.dt for p in ph],
-        "P_prior": [p.P_prior.tolist() for p in ph],
-        "K": [p.K.tolist() for p in ph],
+        "P_prior": [p.P_prior if arrays else p.P_prior.tolist() for p in ph],
+        "K": [p.K if arrays else p.K.tolist() for p in ph],
     }
     if any(p.rows is not None for p in ph):     # only with a dead time: tables without one keep their bytes
         out["rows"] = [None if p.rows is None else list(p.rows) for p in ph]
@@ -254,7 +254,7 @@ def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
     try:
         rows = d.get("rows") or [None] * len(d["channel"])
         return [
-            KalmanPhase(int(c), float(dt), np.array(P, dtype=float), np.array(K, dtype=float).reshape(len(P), -1),
+            KalmanPhase(int(c), float(dt), np.asarray(P, dtype=float), np.asarray(K, dtype=float).reshape(len(P), -1),
                         None if r is None else tuple(int(i) for i in r))
             for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True)
         ]
@@ -370,8 +370,9 @@ class KalmanDesign:
         return joseph(e.P_prior, self.gain(phase, ch, rows), self.H(ch, rows), self.noise.R(ch, rows))
 
     # ------------------------------------------------------------ persistence
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (plain lists of floats; :meth:`from_dict` restores it exactly)."""
+    def to_dict(self, *, arrays: bool = False) -> dict[str, Any]:
+        """JSON-ready form (plain lists of floats; :meth:`from_dict` restores it exactly); with
+        ``arrays`` the matrices stay numpy arrays (no copy: what a gain table holds in memory)."""
         return {
             "family": "kalman",
             "system_fingerprint": self.system.fingerprint(),
@@ -381,11 +382,11 @@ class KalmanDesign:
             **({"dead_time": self.pattern.dead_time} if self.pattern.dead_time else {}),
             "repeat": self.pattern.repeat,
             "ties": list(self.pattern.ties),
-            "periodic": _phases_to_dict(self.periodic),
-            "startup": _phases_to_dict(self.startup),
+            "periodic": _phases_to_dict(self.periodic, arrays),
+            "startup": _phases_to_dict(self.startup, arrays),
             "periods": self.periods,
             "change": self.change,
-            "error_transition": self.error_transition.tolist(),
+            "error_transition": self.error_transition if arrays else self.error_transition.tolist(),
             "rho": self.rho,
             "norm": self.norm,
         }
@@ -404,7 +405,7 @@ class KalmanDesign:
                                     tuple(p.channel for p in periodic), tuple(int(k) for k in d["ties"]),
                                     tuple(p.rows is not None for p in periodic) if dead else ())
             return cls(system, NoiseModel.from_dict(d["noise"]), pattern, periodic, _phases_from_dict(d["startup"]),
-                       int(d["periods"]), float(d["change"]), np.array(d["error_transition"], dtype=float),
+                       int(d["periods"]), float(d["change"]), np.asarray(d["error_transition"], dtype=float),
                        float(d["rho"]), float(d["norm"]))
         except (KeyError, TypeError, AttributeError) as err:
             raise KalmanDesignError(f"stored Kalman design is malformed (missing or bad {err})") from None
