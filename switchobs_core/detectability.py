@@ -37,7 +37,8 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["MARGINAL_RTOL", "CLUSTER_RTOL", "EIGVEC_RTOL", "NULL_RTOL", "UndetectableMode", "undetectable_modes"]
+__all__ = ["MARGINAL_RTOL", "CLUSTER_RTOL", "EIGVEC_RTOL", "NULL_RTOL", "UndetectableMode", "undetectable_modes",
+           "aliasing_free"]
 
 MARGINAL_RTOL = 1e-7
 CLUSTER_RTOL = 1e-5
@@ -93,6 +94,13 @@ def _eigen_groups(A_bytes: bytes, n: int, T: float) -> tuple:
         else:
             groups.append([(lb, V)])
     return tuple(tuple(g) for g in groups)
+
+
+def aliasing_free(A: np.ndarray, T: float) -> bool:
+    """Whether no two not-stable eigenvalues of A alias over the period ``T`` (every group one
+    eigenvalue): then detectability depends only on which row sets are measured, not when."""
+    A = np.ascontiguousarray(A, dtype=float)
+    return all(len(g) == 1 for g in _eigen_groups(A.tobytes(), A.shape[0], float(T)))
 
 
 def undetectable_modes(A: np.ndarray, H: Sequence[np.ndarray], dt: float) -> list[UndetectableMode]:

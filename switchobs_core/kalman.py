@@ -72,11 +72,15 @@ __all__ = [
     "design_kalman",
     "TableKalman",
     "TIE_TOL",
+    "STARTUP_BUDGET_BYTES",
 ]
 
 #: A sample closer than this (s) to a switching instant is a tie (module docstring).
 TIE_TOL = 1e-9
 _PERIOD_TOL = 1e-9
+#: Memory the stored start-up priors may take by default (bytes): 256 MiB, 1.2 periods of the
+#: 32-agent camera model at 50 Hz (its periodic priors alone take 223 MB).
+STARTUP_BUDGET_BYTES = 256 * 1024 * 1024
 
 
 class KalmanDesignError(DesignError):
@@ -285,6 +289,10 @@ class KalmanDesign:
         the next period's phase 0 (noise-free error map, e:error_dynamics sampled).
     rho, norm : float
         Its spectral radius and 2-norm.
+    startup_change : float
+        Distance (:func:`~switchobs_core.riccati.rel_change`) of the last stored start-up period
+        from the periodic solution: ``<= startup_rtol`` unless the start-up was capped
+        (``max_startup``; the periodic gains serve from there).
     """
 
     system: Any
@@ -297,6 +305,7 @@ class KalmanDesign:
     error_transition: np.ndarray
     rho: float
     norm: float
+    startup_change: float = 0.0
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -389,6 +398,7 @@ class KalmanDesign:
             "error_transition": self.error_transition if arrays else self.error_transition.tolist(),
             "rho": self.rho,
             "norm": self.norm,
+            "startup_change": self.startup_change,
         }
 
     @classmethod
@@ -406,16 +416,18 @@ class KalmanDesign:
                                     tuple(p.rows is not None for p in periodic) if dead else ())
             return cls(system, NoiseModel.from_dict(d["noise"]), pattern, periodic, _phases_from_dict(d["startup"]),
                        int(d["periods"]), float(d["change"]), np.asarray(d["error_transition"], dtype=float),
-                       float(d["rho"]), float(d["norm"]))
+                       float(d["rho"]), float(d["norm"]), float(d.get("startup_change", 0.0)))
         except (KeyError, TypeError, AttributeError) as err:
             raise KalmanDesignError(f"stored Kalman design is malformed (missing or bad {err})") from None
 
     def describe(self) -> str:
         """One line: rate, cycles, period, start-up length, convergence, rho and norm."""
+        capped = (f" (capped {self.startup_change:.2g} from the periodic solution)"
+                  if self.startup_change > 1e-9 else "")
         return (
             f"kalman: {self.rate:g} Hz, {', '.join(c.label() for c in self.cycles)}, period {self.pattern.K} samples, "
-            f"start-up {len(self.startup)} samples, solved in {self.periods} doublings and sweeps, period error "
-            f"transition rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
+            f"start-up {len(self.startup)} samples{capped}, solved in {self.periods} doublings and sweeps, "
+            f"period error transition rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
         )
 
 
@@ -437,7 +449,8 @@ def design_kalman(
     Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair;
     3. periodic Riccati solution by doubling (:func:`~switchobs_core.doubling.solve_periodic_riccati`,
     residual ``<= rtol``), and the start-up segment from ``P0`` (``startup_rtol``, at most
-    ``max_startup`` samples, default 64 periods: :func:`~switchobs_core.doubling.startup_run`);
+    ``max_startup`` samples: default 64 periods, at most what :data:`STARTUP_BUDGET_BYTES` of
+    priors hold but at least one period: :func:`~switchobs_core.doubling.startup_run`);
     4. the period's error transition.
 
     Raises
@@ -469,14 +482,16 @@ def design_kalman(
     steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
              for c, r in zip(pattern.channels, rows)]
     sol = solve_periodic_riccati(steps, rtol=rtol)
-    su_P, su_K, _ = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
+    if max_startup is None:
+        max_startup = min(64 * K, max(K, STARTUP_BUDGET_BYTES // (8 * A.shape[0] ** 2)))
+    su_P, su_K, su_change = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
     periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
     startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
                for k, (P, Kk) in enumerate(zip(su_P, su_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
     M = sol.transition
     return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M, sol.rho,
-                        float(np.linalg.norm(M, 2)))
+                        float(np.linalg.norm(M, 2)), su_change)
 
 
 class TableKalman:
