@@ -52,10 +52,10 @@ import json
 import math
 import os
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
@@ -362,13 +362,15 @@ class GainTable:
         payload["payload_sha256"] = self._digest(payload)
         return json.dumps(payload, indent=1, sort_keys=True, allow_nan=False, default=jsonable) + "\n"
 
-    def to_bytes(self, *, binary: bool = False) -> bytes:
-        """The file's bytes: the JSON text, or (``binary``) the ``.npz`` container of :mod:`.tablefile`."""
+    def _writer(self, *, binary: bool = False) -> Callable[[BinaryIO], Any]:
+        """What writes the file to a binary handle: the JSON text, or (``binary``) the ``.npz``
+        container of :mod:`.tablefile` (streamed: no copy of the file in memory)."""
         if not binary:
-            return self.to_json().encode()
+            text = self.to_json().encode()
+            return lambda fh: fh.write(text)
         payload = self._payload()
         _check_finite(payload, "gain table")
-        return encode(payload)
+        return lambda fh: encode(payload, fh)
 
     def save(self, path: str | Path) -> Path:
         """Write the table atomically (temporary file, fsync, rename): JSON, or the binary
@@ -378,7 +380,7 @@ class GainTable:
         usually 0644), so a service running as another user can read it; ``tempfile`` would
         make it 0600."""
         path = Path(path)
-        text = self.to_bytes(binary=path.suffix.lower() == ".npz")
+        write = self._writer(binary=path.suffix.lower() == ".npz")
         path.parent.mkdir(parents=True, exist_ok=True)
         while True:
             tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
@@ -389,7 +391,7 @@ class GainTable:
                 continue
         try:
             with os.fdopen(fd, "wb") as fh:
-                fh.write(text)
+                write(fh)
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, path)

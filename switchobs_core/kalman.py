@@ -59,6 +59,7 @@ from .riccati import (
     joseph,
 )
 from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon, common_rows
+from .tablefile import packed_size, unpack_symmetric
 
 __all__ = [
     "KalmanDesignError",
@@ -216,13 +217,26 @@ def check_detectable(system: Any, pattern: SamplePattern) -> None:
 @dataclass(frozen=True, eq=False)
 class KalmanPhase:
     """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain
-    ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind)."""
+    ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind).
+
+    The prior is given (``P_stored``) either as the (n, n) matrix or as its packed upper triangle
+    (what a binary table file holds, :mod:`.tablefile`); :attr:`P_prior` is the matrix, unpacked
+    on first use (the same doubles), so loading a large table does not unpack every phase."""
 
     channel: int
     dt: float
-    P_prior: np.ndarray
+    P_stored: np.ndarray
     K: np.ndarray
     rows: tuple[int, ...] | None = None
+
+    @property
+    def P_prior(self) -> np.ndarray:
+        """The prior covariance ``P^-`` of this sample (n x n)."""
+        P = self.P_stored
+        if P.ndim == 1:
+            P = unpack_symmetric(P, self.K.shape[0])
+            object.__setattr__(self, "P_stored", P)
+        return P
 
     def has_rows(self, rows: Sequence[int] | None) -> bool:
         """Whether a sample with ``rows`` (None: all) measures exactly this phase's rows."""
@@ -257,11 +271,13 @@ def _phases_to_dict(ph: Sequence[KalmanPhase], arrays: bool = False) -> dict[str
 def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
     try:
         rows = d.get("rows") or [None] * len(d["channel"])
-        return [
-            KalmanPhase(int(c), float(dt), np.asarray(P, dtype=float), np.asarray(K, dtype=float).reshape(len(P), -1),
-                        None if r is None else tuple(int(i) for i in r))
-            for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True)
-        ]
+        out = []
+        for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True):
+            P = np.asarray(P, dtype=float)
+            n = P.shape[0] if P.ndim == 2 else packed_size(P.size)
+            out.append(KalmanPhase(int(c), float(dt), P, np.asarray(K, dtype=float).reshape(n, -1),
+                                   None if r is None else tuple(int(i) for i in r)))
+        return out
     except (KeyError, TypeError, ValueError) as err:
         raise KalmanDesignError(f"stored Kalman phases are malformed ({err})") from None
 

@@ -31,16 +31,19 @@ import hashlib
 import io
 import json
 import os
+import struct
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from .exceptions import GainTableError
 from .loading import MAX_FILE_BYTES, parse_json
 
-__all__ = ["MAGIC", "BINARY_VERSION", "MAX_BINARY_BYTES", "is_binary", "size_limit", "encode", "decode", "jsonable"]
+__all__ = ["MAGIC", "BINARY_VERSION", "MAX_BINARY_BYTES", "is_binary", "size_limit", "encode", "decode", "jsonable",
+           "packed_size", "unpack_symmetric", "PackedRows"]
 
 #: The first bytes of a zip archive (an ``.npz`` file).
 MAGIC = b"PK\x03\x04"
@@ -51,10 +54,26 @@ MAX_BINARY_BYTES = 4 * 1024 ** 3
 _SEGMENTS = ("periodic", "startup")
 
 
+class PackedRows(Sequence):
+    """The priors of a segment as read: a sequence of packed upper triangles (rows of one array),
+    which a JSON table writes as full matrices again."""
+
+    def __init__(self, packed: np.ndarray, n: int) -> None:
+        self.packed, self.n = packed, n
+
+    def __len__(self) -> int:
+        return self.packed.shape[0]
+
+    def __getitem__(self, k):  # type: ignore[override]
+        return self.packed[k]
+
+
 def jsonable(obj: Any) -> Any:
-    """``json.dumps`` hook: an array as nested lists (the same doubles)."""
+    """``json.dumps`` hook: an array as nested lists (the same doubles); packed priors unpacked."""
     if isinstance(obj, np.ndarray):
         return obj.tolist()
+    if isinstance(obj, PackedRows):
+        return [unpack_symmetric(row, obj.n).tolist() for row in obj.packed]
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
@@ -73,6 +92,23 @@ def size_limit(n: int, p_max: int, phases: int, designs: int) -> int:
     return min(MAX_BINARY_BYTES, MAX_FILE_BYTES + phases * per_phase + designs * 8 * n * n)
 
 
+def packed_size(m: int) -> int:
+    """``n`` of a packed upper triangle of ``m = n (n + 1) / 2`` entries (ValueError otherwise)."""
+    n = int((np.sqrt(8 * m + 1) - 1) / 2 + 0.5)
+    if n * (n + 1) // 2 != m:
+        raise ValueError(f"{m} entries are not the upper triangle of a square matrix")
+    return n
+
+
+def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
+    """The symmetric (n, n) matrix of a packed upper triangle (row-major, ``np.triu_indices`` order)."""
+    P = np.empty((n, n))
+    iu = np.triu_indices(n)
+    P[iu] = packed
+    P.T[iu] = packed
+    return P
+
+
 def _digest(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     h = hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False).encode())
     for name in sorted(arrays):
@@ -82,8 +118,9 @@ def _digest(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def encode(payload: dict[str, Any]) -> bytes:
-    """The ``.npz`` bytes of a table payload (module docstring); ``payload`` is not modified."""
+def encode(payload: dict[str, Any], fh: BinaryIO) -> None:
+    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring); ``payload`` is
+    not modified."""
     header = dict(payload, format_version=BINARY_VERSION, container="npz")
     arrays: dict[str, np.ndarray] = {}
     n = int(payload["system"]["n"])
@@ -95,9 +132,12 @@ def encode(payload: dict[str, Any]) -> bytes:
             ph = dict(d[seg])
             Ps = ph.pop("P_prior")
             Ks = [np.asarray(K, dtype=float).reshape(n, -1) for K in ph.pop("K")]
-            packed = np.empty((len(Ps), iu[0].size))
-            for k, P in enumerate(Ps):
-                packed[k] = np.asarray(P, dtype=float)[iu]
+            if isinstance(Ps, PackedRows):
+                packed = Ps.packed
+            else:
+                packed = np.empty((len(Ps), iu[0].size))
+                for k, P in enumerate(Ps):
+                    packed[k] = np.asarray(P, dtype=float)[iu]
             arrays[f"k{i}_{seg}_P"] = packed
             arrays[f"k{i}_{seg}_K"] = np.concatenate([K.ravel() for K in Ks]) if Ks else np.zeros(0)
             ph.update(P_prior={"$array": f"k{i}_{seg}_P"}, K={"$array": f"k{i}_{seg}_K"},
@@ -111,10 +151,8 @@ def encode(payload: dict[str, Any]) -> bytes:
         if not np.all(np.isfinite(a)):
             raise GainTableError(f"gain table: non-finite number in {name}")
     header["payload_sha256"] = _digest(header, arrays)
-    buf = io.BytesIO()
     text = json.dumps(header, sort_keys=True, allow_nan=False).encode()
-    np.savez(buf, header=np.frombuffer(text, dtype=np.uint8), **arrays)
-    return buf.getvalue()
+    np.savez(fh, header=np.frombuffer(text, dtype=np.uint8), **arrays)
 
 
 def _refused(source: str, why: str) -> GainTableError:
@@ -124,7 +162,7 @@ def _refused(source: str, why: str) -> GainTableError:
 
 def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
     """The checked payload of a binary table (the JSON format's dict, with arrays where it has
-    matrices: lists of (n, n) priors and of gains, and the error transition).
+    matrices: the priors as packed upper triangles, the gains, the error transition).
 
     Raises
     ------
@@ -167,8 +205,8 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
             if zi is None or zi.file_size > want + 4096:
                 raise _refused(source, f"array {name} missing or larger than its {want} bytes")
             try:
-                a = np.load(io.BytesIO(zf.read(zi)), allow_pickle=False)
-            except (zipfile.BadZipFile, OSError, ValueError, EOFError) as err:
+                a = _read_member(zf, zi)
+            except (zipfile.BadZipFile, OSError, ValueError, EOFError, struct.error) as err:
                 raise _refused(source, f"array {name}: {err}") from None
             if a.dtype != np.dtype("<f8") or a.shape != shape:
                 raise _refused(source, f"array {name} is {a.dtype} {a.shape}, not float64 {shape}")
@@ -183,6 +221,33 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
         if not np.all(np.isfinite(a)):
             raise GainTableError(f"{source}: non-finite number in {name}")
     return _inflate(header, arrays, n)
+
+
+def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
+    """The array of one ``.npy`` member: read in place with one ``fromfile`` when it is stored
+    uncompressed (what :func:`encode` writes; integrity is the SHA-256's job), else through zipfile."""
+    if zi.compress_type != zipfile.ZIP_STORED or zf.fp is None:
+        return np.lib.format.read_array(zf.open(zi), allow_pickle=False)
+    fh = zf.fp
+    fh.seek(zi.header_offset)
+    head = fh.read(30)
+    if len(head) != 30 or head[:4] != b"PK\x03\x04":
+        raise ValueError("bad local header")
+    name_len, extra_len = struct.unpack("<HH", head[26:30])
+    start = zi.header_offset + 30 + name_len + extra_len
+    fh.seek(start)
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+    else:
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+    count = int(np.prod(shape))
+    if dtype.hasobject or fortran or fh.tell() + count * dtype.itemsize > start + zi.file_size:
+        raise ValueError("array header does not fit the member")
+    a = np.fromfile(fh, dtype=dtype, count=count)
+    if a.size != count:
+        raise ValueError("member shorter than its header says")
+    return a.reshape(shape)
 
 
 def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
@@ -211,8 +276,7 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
 
 
 def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> dict[str, Any]:
-    """The payload with the references replaced by the matrices (priors unpacked, gains split)."""
-    iu0, iu1 = np.triu_indices(n)
+    """The payload with the references replaced by the matrices (priors as packed rows, gains split)."""
     payload = dict(header, format_version=2)
     payload.pop("container", None)
     kalman = []
@@ -220,16 +284,13 @@ def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> d
         d = dict(d)
         for seg in _SEGMENTS:
             ph = dict(d[seg])
-            packed = arrays[f"k{i}_{seg}_P"]
-            full = np.empty((packed.shape[0], n, n))
-            full[:, iu0, iu1] = packed
-            full[:, iu1, iu0] = packed
+            packed = arrays[f"k{i}_{seg}_P"]      # rows stay packed: KalmanPhase unpacks on use
             flat = arrays[f"k{i}_{seg}_K"]
             Ks, off = [], 0
             for c in ph.pop("K_cols"):
                 Ks.append(flat[off:off + n * c].reshape(n, c))
                 off += n * c
-            ph.update(P_prior=list(full), K=Ks)
+            ph.update(P_prior=PackedRows(packed, n), K=Ks)
             d[seg] = ph
         d["error_transition"] = arrays[f"k{i}_E"]
         kalman.append(d)
