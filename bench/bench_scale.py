@@ -119,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--agents", type=int, nargs="+", default=[2, 4, 8, 16, 32])
     ap.add_argument("--families", nargs="+", default=["lmi", "kalman"], choices=["lmi", "kalman"])
     ap.add_argument("--no-plan", action="store_true")
+    ap.add_argument("--no-design", action="store_true", help="only the plans")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
@@ -127,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_scale_") as td:
         tmp = Path(td)
-        for M in sorted(a.agents):
+        for M in [] if a.no_design else sorted(a.agents):
             for fam in a.families:
                 r = bench_design(tmp, M, fam)
                 rows.append((M, fam, r))

@@ -57,6 +57,7 @@ from .riccati import (
     discretize,
     gain,
     joseph,
+    rel_change,
 )
 from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon, common_rows
 from .tablefile import packed_size, unpack_symmetric
@@ -500,7 +501,10 @@ def design_kalman(
     sol = solve_periodic_riccati(steps, rtol=rtol)
     if max_startup is None:
         max_startup = min(64 * K, max(K, STARTUP_BUDGET_BYTES // (8 * A.shape[0] ** 2)))
-    su_P, su_K, su_change = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
+    # max_startup = 0: no start-up segment (its distance: P0 from the periodic prior of phase 0)
+    su_P, su_K, su_change = [], [], rel_change(noise.P0, sol.P_prior[0])
+    if max_startup > 0:
+        su_P, su_K, su_change = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
     periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
     startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
                for k, (P, Kk) in enumerate(zip(su_P, su_K))]

@@ -535,7 +535,7 @@ def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, d
     except DesignError as err:
         out["lmi"] = {"feasible": False, "reason": str(err)}
     try:
-        kd = design_kalman(system, cycle, rate, noise)
+        kd = design_kalman(system, cycle, rate, noise, max_startup=0)      # the period's map only
         out["kalman"] = {
             "spectral_radius": kd.rho, "norm": kd.norm, "period": kd.pattern.period,
             "certified_rate": _rate(kd.rho, kd.pattern.period), "channels": kd.pattern.channels,
