@@ -57,7 +57,8 @@ class UndetectableMode:
 
 @lru_cache(maxsize=8)
 def _eigen_groups(A_bytes: bytes, n: int, T: float) -> tuple:
-    """Groups of not-stable eigenvalues of A aliased by the period T: ``((lams, Vs), ...)``."""
+    """The not-stable eigenvalues of A, grouped when the period T aliases them: a tuple of groups,
+    each a tuple of ``(lambda, V)`` with V an orthonormal basis of lambda's eigenvectors."""
     A = np.frombuffer(A_bytes, dtype=float).reshape(n, n)
     scale = max(1.0, float(np.linalg.norm(A, 2)))
     lam, X = np.linalg.eig(A)

@@ -179,6 +179,7 @@ class _Run:
         self.A = [np.eye(n)]
         self.G = [np.zeros((n, n))]
         self.Q = [np.zeros((n, n))]
+        self._tQ = np.zeros(0)
 
     def grow(self, m: int) -> None:
         """Make ``f^j`` available for j <= m (``f^{j+1} = f o f^j``)."""
@@ -187,7 +188,7 @@ class _Run:
             self.A.append(g.A)
             self.G.append(g.G)
             self.Q.append(g.Q)
-        if not hasattr(self, "_tQ") or len(self._tQ) < len(self.A):
+        if len(self._tQ) < len(self.A):
             W = self.w
             self._tQ = np.array([W @ np.diagonal(Q) for Q in self.Q])
             self._B = np.stack([(A.T * W) @ A for A in self.A])

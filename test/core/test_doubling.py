@@ -8,6 +8,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
+from switchobs_core.detectability import undetectable_modes
 from switchobs_core.doubling import (
     RiccatiMap,
     closed_loop_transition,
@@ -174,3 +175,17 @@ def test_camera_states_of_32_agents_are_detectable():
     with pytest.raises(UndetectableSchedule, match=want) as err:
         check_detectable(system, pat)
     assert "agent31" not in str(err.value) and "camera" not in str(err.value)
+
+
+def test_aliased_oscillator_is_undetectable():
+    """An undamped oscillator sampled once per period with w T = 2 pi aliases both modes onto
+    mu = 1: the velocity direction is never seen (grouped PBH test); with w T = pi / 2 it is seen."""
+    w = 3.0
+    A = np.array([[0.0, w], [-w, 0.0]])
+    H = [np.array([[1.0, 0.0]])]
+    bad = undetectable_modes(A, H, 2 * np.pi / w)
+    assert len(bad) == 1 and abs(bad[0].lam.real) < 1e-12
+    assert np.allclose(np.abs(bad[0].v), [0.0, 1.0], atol=1e-9)
+    assert undetectable_modes(A, H, 0.5 * np.pi / w) == []
+    # a stable mode is never reported, seen or not
+    assert undetectable_modes(np.diag([-1.0, -2.0]), [np.zeros((1, 2))], 0.1) == []
