@@ -31,6 +31,7 @@ import hashlib
 import io
 import json
 import os
+import stat
 import struct
 import zipfile
 from collections.abc import Sequence
@@ -78,8 +79,11 @@ def jsonable(obj: Any) -> Any:
 
 
 def is_binary(path: str | Path) -> bool:
-    """Whether ``path`` starts like a zip archive (the binary container)."""
+    """Whether ``path`` is a regular file that starts like a zip archive (the binary container);
+    anything else (a FIFO or device too: never opened here) is left to the text reader's checks."""
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return False
         with open(path, "rb") as fh:
             return fh.read(4) == MAGIC
     except OSError:
