@@ -177,6 +177,9 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
     source = str(path) if source is None else source
     try:
         size = os.stat(path).st_size
+        if size > MAX_BINARY_BYTES:
+            raise GainTableError(f"gain table {source} is {size / 2**20:.1f} MiB, larger than "
+                                 f"{MAX_BINARY_BYTES / 2**20:.0f} MiB, the limit for any binary table")
         zf = zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as err:
         raise _refused(source, str(err) or type(err).__name__) from None
