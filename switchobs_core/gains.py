@@ -52,10 +52,10 @@ import json
 import math
 import os
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
@@ -66,6 +66,7 @@ from .files import check_output
 from .kalman import KalmanDesign
 from .loading import parse_json, read_text
 from .schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
+from .tablefile import decode, encode, is_binary, jsonable
 
 if TYPE_CHECKING:
     from .system import LTISystem
@@ -352,23 +353,35 @@ class GainTable:
 
     @staticmethod
     def _digest(payload: dict[str, Any]) -> str:
-        return hashlib.sha256(json.dumps(payload, sort_keys=True, allow_nan=True).encode()).hexdigest()
+        text = json.dumps(payload, sort_keys=True, allow_nan=True, default=jsonable)
+        return hashlib.sha256(text.encode()).hexdigest()
 
     def to_json(self) -> str:
         """The file's text."""
         payload = self._payload()
         _check_finite(payload, "gain table")
         payload["payload_sha256"] = self._digest(payload)
-        return json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n"
+        return json.dumps(payload, indent=1, sort_keys=True, allow_nan=False, default=jsonable) + "\n"
+
+    def _writer(self, *, binary: bool = False) -> Callable[[BinaryIO], Any]:
+        """What writes the file to a binary handle: the JSON text, or (``binary``) the ``.npz``
+        container of :mod:`.tablefile` (streamed: no copy of the file in memory)."""
+        if not binary:
+            text = self.to_json().encode()
+            return lambda fh: fh.write(text)
+        payload = self._payload()
+        _check_finite(payload, "gain table")
+        return lambda fh: encode(payload, fh)
 
     def save(self, path: str | Path) -> Path:
-        """Write the table atomically (temporary file, fsync, rename).
+        """Write the table atomically (temporary file, fsync, rename): JSON, or the binary
+        container of :mod:`.tablefile` when the name ends in ``.npz``.
 
         The file gets the mode a plain ``open(path, "w")`` would give (0666 less the umask,
         usually 0644), so a service running as another user can read it; ``tempfile`` would
         make it 0600."""
         path = check_output(path, "gain table", exc=GainTableError)   # never replace a directory or device
-        text = self.to_json()
+        write = self._writer(binary=path.suffix.lower() == ".npz")
         path.parent.mkdir(parents=True, exist_ok=True)
         while True:
             tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
@@ -378,8 +391,8 @@ class GainTable:
             except FileExistsError:  # pragma: no cover - 48 random bits
                 continue
         try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(text)
+            with os.fdopen(fd, "wb") as fh:
+                write(fh)
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, path)
@@ -416,6 +429,11 @@ class GainTable:
             raise GainTableError(
                 f"{source}: checksum mismatch: the file was modified or corrupted after it was written"
             )
+        return cls._from_payload(data, source=source, system=system)
+
+    @classmethod
+    def _from_payload(cls, data: dict[str, Any], *, source: str, system: LTISystem | None) -> GainTable:
+        """The table of a checked payload (format, version and checksum already checked)."""
         _check_layout(data, source)
         try:
             sysd = data["system"]
@@ -447,6 +465,8 @@ class GainTable:
     def load(cls, path: str | Path, *, system: LTISystem | None = None) -> GainTable:
         """Read and check a table file; with ``system``, also that it was made for it."""
         path = Path(path)
+        if is_binary(path):
+            return cls._from_payload(decode(path), source=str(path), system=system)
         try:
             text = read_text(path, exc=GainTableError, what="gain table")
         except FileNotFoundError:
@@ -492,7 +512,7 @@ def kalman_table(system: LTISystem, designs: Sequence[KalmanDesign]) -> GainTabl
         settings={"family": "kalman", "rank_rtol": system.rtol},
         channels=[{"r": dc.r, "T_o": dc.T_o.tolist()} for dc in system.decompositions],
         family="kalman",
-        kalman=[d.to_dict() for d in designs],
+        kalman=[d.to_dict(arrays=True) for d in designs],
     )
 
 
@@ -501,7 +521,10 @@ def _check_finite(obj: Any, source: str, where: str = "") -> None:
     stack = [(obj, where)]
     while stack:
         node, at = stack.pop()
-        if isinstance(node, float):
+        if isinstance(node, np.ndarray):
+            if not np.all(np.isfinite(node)):
+                raise GainTableError(f"{source}: non-finite number in {at or 'top level'}")
+        elif isinstance(node, float):
             if not math.isfinite(node):
                 raise GainTableError(f"{source}: non-finite number {node} at {at or 'top level'}")
         elif isinstance(node, dict):

@@ -21,13 +21,12 @@ Dead time. A cycle with a dead time ``d`` (:mod:`.schedule`) makes the samples i
 (:func:`~switchobs_core.schedule.common_rows`: the camera's own pose), and their stored step
 uses ``H = C_rho[common rows]`` (``KalmanPhase.rows``). ``pattern.blind[k]`` says which.
 
-Detectability. Before iterating, the period pair is checked: with ``Phi = e^{A/f}``, the
-monodromy ``Phi^K`` and the stacked observations ``O = [H_0; H_1 Phi; ...; H_{K-1} Phi^{K-1}]``
-of the period's full-row samples, every eigenvalue of ``Phi^K`` with ``|lambda| >= 1`` must
-be observable from ``O`` (PBH; computed as the unobservable subspace of ``(Phi^K, O)`` with
-:func:`~switchobs_core.decomposition.observability_decomposition`, which is ``Phi^K``-invariant,
-so the test is on the eigenvalues of ``Phi^K`` restricted to it; d:obs_detect,
-e:detectability_condition in discrete time).
+Detectability. Before solving, the period pair is checked: with ``Phi = e^{A/f}``, every
+eigenvalue of the monodromy ``Phi^K`` with ``|lambda| >= 1`` must be seen by some sample of the
+period (PBH on the eigenvectors, with the growth over the period factored out so that the test
+stays right for large n: :mod:`.detectability`; d:obs_detect, e:detectability_condition in
+discrete time). The Riccati solver checks it once more on its result: the closed-loop error map
+of the period must be a contraction (:func:`~switchobs_core.doubling.solve_periodic_riccati`).
 
 Lookup. :meth:`KalmanDesign.phase_at` maps the time since the sequence start to the nearest
 sample (stamp jitter), start-up first (the recursion from ``P0`` until it meets the periodic
@@ -47,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from .decomposition import observability_decomposition
+from .detectability import undetectable_modes
+from .doubling import solve_periodic_riccati, startup_run
 from .exceptions import DesignError, InvalidArgument
 from .noise import NoiseModel, default_noise
 from .ranges import check_size
@@ -58,9 +58,10 @@ from .riccati import (
     discretize,
     gain,
     joseph,
-    periodic_riccati,
+    rel_change,
 )
 from .schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule, check_cycle_horizon, common_rows
+from .tablefile import packed_size, unpack_symmetric
 
 __all__ = [
     "KalmanDesignError",
@@ -74,12 +75,15 @@ __all__ = [
     "design_kalman",
     "TableKalman",
     "TIE_TOL",
+    "STARTUP_BUDGET_BYTES",
 ]
 
 #: A sample closer than this (s) to a switching instant is a tie (module docstring).
 TIE_TOL = 1e-9
 _PERIOD_TOL = 1e-9
-_UNIT_CIRCLE_TOL = 1e-9
+#: Memory the stored start-up priors may take by default (bytes): 256 MiB, 1.2 periods of the
+#: 32-agent camera model at 50 Hz (its periodic priors alone take 223 MB).
+STARTUP_BUDGET_BYTES = 256 * 1024 * 1024
 
 
 class KalmanDesignError(DesignError):
@@ -189,34 +193,30 @@ def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: 
 
 
 def check_detectable(system: Any, pattern: SamplePattern) -> None:
-    """Raise :class:`UndetectableSchedule` unless the sampled periodic pair is detectable (module docstring)."""
+    """Raise :class:`UndetectableSchedule` unless the sampled periodic pair is detectable (module docstring).
+
+    The message names every undetectable mode: its growth rate and its direction in the state labels.
+    """
     A = np.asarray(system.A, dtype=float)
     n, K = A.shape[0], pattern.K
-    Phi = discretize(A, np.zeros((n, 0)), np.zeros((n, n)), 1.0 / pattern.rate)[0]
-    rows, Pk = [], np.eye(n)
+    H = []
     for k in range(K):
-        H = system.C[pattern.channels[k] - 1]
+        C = system.C[pattern.channels[k] - 1]
         r = pattern.rows(k, system)
-        rows.append((H if r is None else H[list(r)]) @ Pk)
-        Pk = Phi @ Pk
-    O = np.vstack(rows)
-    d = observability_decomposition(Pk, O / max(1.0, np.linalg.norm(O, 2)))
-    if d.r == n:
-        return
-    ev = np.linalg.eigvals(d.A_u)
-    bad = [z for z in ev if abs(z) >= 1 - _UNIT_CIRCLE_TOL]
+        H.append(C if r is None else C[list(r)])
+    bad = undetectable_modes(A, H, 1.0 / pattern.rate)
     if not bad:
         return
     labels = getattr(system, "state_labels", tuple(f"x{j}" for j in range(n)))
     dirs = []
-    for j in range(d.T_u.shape[1]):
-        v = d.T_u[:, j]
+    for m in bad:
+        v = m.v
         dirs.append(" ".join(f"{v[i]:+.3g}*{labels[i]}" for i in np.argsort(-np.abs(v))[:4] if abs(v[i]) > 1e-6))
     seen = {pattern.channels[k] for k in range(K) if not pattern.is_blind(k)}
     unseen = sorted(set(range(1, system.N + 1)) - seen)
     hint = f" Channel(s) {unseen} get no sample in the period" + (" outside the dead time." if pattern.blind else
                                                                    ".") if unseen else ""
-    rates = ", ".join(f"{math.log(abs(z)) / pattern.period:.4g}" for z in bad)
+    rates = ", ".join(f"{m.lam.real:.4g}" for m in bad)
     raise UndetectableSchedule(
         f"schedule {', '.join(c.label() for c in pattern.cycles)} at {pattern.rate:g} Hz is not detectable: "
         f"{len(bad)} mode(s) of the period transition with |lambda| >= 1 (growth rates {rates} 1/s) are never "
@@ -228,13 +228,26 @@ def check_detectable(system: Any, pattern: SamplePattern) -> None:
 @dataclass(frozen=True, eq=False)
 class KalmanPhase:
     """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain
-    ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind)."""
+    ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind).
+
+    The prior is given (``P_stored``) either as the (n, n) matrix or as its packed upper triangle
+    (what a binary table file holds, :mod:`.tablefile`); :attr:`P_prior` is the matrix, unpacked
+    on first use (the same doubles), so loading a large table does not unpack every phase."""
 
     channel: int
     dt: float
-    P_prior: np.ndarray
+    P_stored: np.ndarray
     K: np.ndarray
     rows: tuple[int, ...] | None = None
+
+    @property
+    def P_prior(self) -> np.ndarray:
+        """The prior covariance ``P^-`` of this sample (n x n)."""
+        P = self.P_stored
+        if P.ndim == 1:
+            P = unpack_symmetric(P, self.K.shape[0])
+            object.__setattr__(self, "P_stored", P)
+        return P
 
     def has_rows(self, rows: Sequence[int] | None) -> bool:
         """Whether a sample with ``rows`` (None: all) measures exactly this phase's rows."""
@@ -254,12 +267,12 @@ class Phase:
     offset: float
 
 
-def _phases_to_dict(ph: Sequence[KalmanPhase]) -> dict[str, list]:
+def _phases_to_dict(ph: Sequence[KalmanPhase], arrays: bool = False) -> dict[str, list]:
     out = {
         "channel": [p.channel for p in ph],
         "dt": [p.dt for p in ph],
-        "P_prior": [p.P_prior.tolist() for p in ph],
-        "K": [p.K.tolist() for p in ph],
+        "P_prior": [p.P_prior if arrays else p.P_prior.tolist() for p in ph],
+        "K": [p.K if arrays else p.K.tolist() for p in ph],
     }
     if any(p.rows is not None for p in ph):     # only with a dead time: tables without one keep their bytes
         out["rows"] = [None if p.rows is None else list(p.rows) for p in ph]
@@ -269,11 +282,13 @@ def _phases_to_dict(ph: Sequence[KalmanPhase]) -> dict[str, list]:
 def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
     try:
         rows = d.get("rows") or [None] * len(d["channel"])
-        return [
-            KalmanPhase(int(c), float(dt), np.array(P, dtype=float), np.array(K, dtype=float).reshape(len(P), -1),
-                        None if r is None else tuple(int(i) for i in r))
-            for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True)
-        ]
+        out = []
+        for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True):
+            P = np.asarray(P, dtype=float)
+            n = P.shape[0] if P.ndim == 2 else packed_size(P.size)
+            out.append(KalmanPhase(int(c), float(dt), P, np.asarray(K, dtype=float).reshape(n, -1),
+                                   None if r is None else tuple(int(i) for i in r)))
+        return out
     except (KeyError, TypeError, ValueError) as err:
         raise KalmanDesignError(f"stored Kalman phases are malformed ({err})") from None
 
@@ -293,14 +308,18 @@ class KalmanDesign:
     startup : list of KalmanPhase
         Samples 0..S-1 of the recursion from P0, before it meets the periodic solution.
     periods : int
-        Whole periods iterated until the priors repeated within ``rtol``.
+        Doublings of the period map plus sweeps (:func:`~switchobs_core.doubling.solve_periodic_riccati`).
     change : float
-        Relative change of the priors over the last period.
+        Relative change of the prior of phase 0 over the last sweep (the residual).
     error_transition : (n, n) ndarray
         ``prod_k (I - K_k H_k) Phi`` over one period, from the posterior of phase 0 to that of
         the next period's phase 0 (noise-free error map, e:error_dynamics sampled).
     rho, norm : float
         Its spectral radius and 2-norm.
+    startup_change : float
+        Distance (:func:`~switchobs_core.riccati.rel_change`) of the last stored start-up period
+        from the periodic solution: ``<= startup_rtol`` unless the start-up was capped
+        (``max_startup``; the periodic gains serve from there).
     """
 
     system: Any
@@ -313,6 +332,7 @@ class KalmanDesign:
     error_transition: np.ndarray
     rho: float
     norm: float
+    startup_change: float = 0.0
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -386,8 +406,9 @@ class KalmanDesign:
         return joseph(e.P_prior, self.gain(phase, ch, rows), self.H(ch, rows), self.noise.R(ch, rows))
 
     # ------------------------------------------------------------ persistence
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (plain lists of floats; :meth:`from_dict` restores it exactly)."""
+    def to_dict(self, *, arrays: bool = False) -> dict[str, Any]:
+        """JSON-ready form (plain lists of floats; :meth:`from_dict` restores it exactly); with
+        ``arrays`` the matrices stay numpy arrays (no copy: what a gain table holds in memory)."""
         return {
             "family": "kalman",
             "system_fingerprint": self.system.fingerprint(),
@@ -397,13 +418,14 @@ class KalmanDesign:
             **({"dead_time": self.pattern.dead_time} if self.pattern.dead_time else {}),
             "repeat": self.pattern.repeat,
             "ties": list(self.pattern.ties),
-            "periodic": _phases_to_dict(self.periodic),
-            "startup": _phases_to_dict(self.startup),
+            "periodic": _phases_to_dict(self.periodic, arrays),
+            "startup": _phases_to_dict(self.startup, arrays),
             "periods": self.periods,
             "change": self.change,
-            "error_transition": self.error_transition.tolist(),
+            "error_transition": self.error_transition if arrays else self.error_transition.tolist(),
             "rho": self.rho,
             "norm": self.norm,
+            "startup_change": self.startup_change,
         }
 
     @classmethod
@@ -420,17 +442,19 @@ class KalmanDesign:
                                     tuple(p.channel for p in periodic), tuple(int(k) for k in d["ties"]),
                                     tuple(p.rows is not None for p in periodic) if dead else ())
             return cls(system, NoiseModel.from_dict(d["noise"]), pattern, periodic, _phases_from_dict(d["startup"]),
-                       int(d["periods"]), float(d["change"]), np.array(d["error_transition"], dtype=float),
-                       float(d["rho"]), float(d["norm"]))
+                       int(d["periods"]), float(d["change"]), np.asarray(d["error_transition"], dtype=float),
+                       float(d["rho"]), float(d["norm"]), float(d.get("startup_change", 0.0)))
         except (KeyError, TypeError, AttributeError) as err:
             raise KalmanDesignError(f"stored Kalman design is malformed (missing or bad {err})") from None
 
     def describe(self) -> str:
         """One line: rate, cycles, period, start-up length, convergence, rho and norm."""
+        capped = (f" (capped {self.startup_change:.2g} from the periodic solution)"
+                  if self.startup_change > 1e-9 else "")
         return (
             f"kalman: {self.rate:g} Hz, {', '.join(c.label() for c in self.cycles)}, period {self.pattern.K} samples, "
-            f"start-up {len(self.startup)} samples, converged in {self.periods} periods, period error transition "
-            f"rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
+            f"start-up {len(self.startup)} samples{capped}, solved in {self.periods} doublings and sweeps, "
+            f"period error transition rho = {self.rho:.4g}, ||.|| = {self.norm:.4g}"
         )
 
 
@@ -442,7 +466,7 @@ def design_kalman(
     *,
     rtol: float = 1e-12,
     startup_rtol: float = 1e-11,
-    max_periods: int = 500,
+    max_startup: int | None = None,
     max_repeat: int = 64,
 ) -> KalmanDesign:
     """Offline periodic Kalman gains for ``cycles`` (one cycle, or a sequence repeated) at ``rate`` Hz.
@@ -450,8 +474,11 @@ def design_kalman(
     ``design = design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0, default_noise(system))``
 
     Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair;
-    3. periodic Riccati solution by whole-period iteration from ``P0`` (relative change
-    ``<= rtol``), and the start-up segment (``startup_rtol``); 4. the period's error transition.
+    3. periodic Riccati solution by doubling (:func:`~switchobs_core.doubling.solve_periodic_riccati`,
+    residual ``<= rtol``), and the start-up segment from ``P0`` (``startup_rtol``, at most
+    ``max_startup`` samples: default 64 periods, at most what :data:`STARTUP_BUDGET_BYTES` of
+    priors hold but at least one period: :func:`~switchobs_core.doubling.startup_run`);
+    4. the period's error transition.
 
     Raises
     ------
@@ -460,7 +487,7 @@ def design_kalman(
     UndetectableSchedule
         Some unstable mode is never observed by the sampled schedule.
     RiccatiError
-        No convergence within ``max_periods``.
+        The doubling does not settle, or its solution is not stabilising.
     """
     noise = default_noise(system) if noise is None else noise
     if not isinstance(noise, NoiseModel):
@@ -483,17 +510,20 @@ def design_kalman(
     rows = [pattern.rows(k, system) for k in range(K)]
     steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
              for c, r in zip(pattern.channels, rows)]
-    sol = periodic_riccati(steps, noise.P0, rtol=rtol, startup_rtol=startup_rtol, max_periods=max_periods)
+    sol = solve_periodic_riccati(steps, rtol=rtol)
+    if max_startup is None:
+        max_startup = min(64 * K, max(K, STARTUP_BUDGET_BYTES // (8 * A.shape[0] ** 2)))
+    # max_startup = 0: no start-up segment (its distance: P0 from the periodic prior of phase 0)
+    su_P, su_K, su_change = [], [], rel_change(noise.P0, sol.P_prior[0])
+    if max_startup > 0:
+        su_P, su_K, su_change = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
     periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
     startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
-               for k, (P, Kk) in enumerate(zip(sol.startup_P, sol.startup_K))]
+               for k, (P, Kk) in enumerate(zip(su_P, su_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
-    n = A.shape[0]
-    M = np.eye(n)
-    for k in list(range(1, K)) + [0]:
-        M = (np.eye(n) - sol.K[k] @ steps[k].H) @ Phi @ M
-    return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M,
-                        float(np.max(np.abs(np.linalg.eigvals(M)))), float(np.linalg.norm(M, 2)))
+    M = sol.transition
+    return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M, sol.rho,
+                        float(np.linalg.norm(M, 2)), su_change)
 
 
 class TableKalman:

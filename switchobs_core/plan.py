@@ -45,9 +45,11 @@ For N >= 3 the cyclic visiting order matters. ``schedule.py`` visits channels in
 other cyclic orders (channel 1 first) are optimised as well and reported for information (a
 better order is used by renumbering the channels in the system file).
 
-Cost evaluations are cached; each one warm-starts the Riccati iteration from the phase-0
-prior of the previous evaluation (the periodic solution does not depend on the start, only the
-number of periods to reach it does).
+Cost evaluations are cached, and so is what candidate schedules share: the Riccati map of a run
+of m samples of one channel, ``f^m`` (a triple of :mod:`.doubling`), for every m met so far. A
+candidate's period map is its N runs' maps composed, its periodic prior of phase 0 the fixed
+point by doubling, and its cost one pass over the runs with all priors of a run evaluated at
+once: no sample-by-sample iteration over periods.
 """
 
 from __future__ import annotations
@@ -64,11 +66,13 @@ import numpy as np
 
 from .certificate import certify_cycle
 from .design import Designer
+from .detectability import aliasing_free
+from .doubling import RiccatiMap, fixed_point
 from .exceptions import DesignError, InvalidArgument
 from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
 from .noise import NoiseModel, default_noise
 from .ranges import check_size
-from .riccati import Step, discretize, periodic_riccati
+from .riccati import discretize, rel_change, symmetrize
 from .schedule import BLIND_TOL, Cycle, common_rows
 
 __all__ = [
@@ -84,10 +88,10 @@ __all__ = [
     "PLAN_RTOL",
 ]
 
-#: Relative convergence tolerance of the periodic Riccati iteration for a cost evaluation.
+#: Relative convergence tolerance of the periodic Riccati doubling for a cost evaluation.
 PLAN_RTOL = 1e-11
-#: Samples the Riccati iteration may run per evaluation (max_periods = this / K, at least 500).
-_MAX_SAMPLES = 200_000
+#: Largest relative change of the prior of phase 0 over the pass that sums the cost.
+PLAN_FLOOR = 1e-9
 
 
 def parse_weights(text: str | Sequence[float] | None, system: Any) -> np.ndarray:
@@ -163,6 +167,48 @@ def neighbours(counts: Sequence[int], step: int = 1) -> list[tuple[int, ...]]:
     return out
 
 
+class _Run:
+    """Powers ``f^j`` (j = 0, 1, ...) of the one-sample Riccati map ``f = (Phi, H' R^{-1} H, Q_d)`` of
+    one channel (blind or not), grown on demand and kept across candidate schedules, with what the
+    cost needs of each: ``tr(W Q_j)`` and ``B_j = A_j' W A_j``, so that
+    ``tr(W f^j(X)) = tr(W Q_j) + sum(B_j * (X (I + G_j X)^{-1}))`` for many j at once."""
+
+    def __init__(self, Phi: np.ndarray, H: np.ndarray, R: np.ndarray, Qd: np.ndarray, w: np.ndarray) -> None:
+        n = Phi.shape[0]
+        self.f = RiccatiMap(Phi, symmetrize(H.T @ np.linalg.solve(R, H)), Qd)
+        self.w = w
+        self.A = [np.eye(n)]
+        self.G = [np.zeros((n, n))]
+        self.Q = [np.zeros((n, n))]
+        self._tQ = np.zeros(0)
+
+    def grow(self, m: int) -> None:
+        """Make ``f^j`` available for j <= m (``f^{j+1} = f o f^j``)."""
+        while len(self.A) <= m:
+            g = RiccatiMap(self.A[-1], self.G[-1], self.Q[-1]).then(self.f)
+            self.A.append(g.A)
+            self.G.append(g.G)
+            self.Q.append(g.Q)
+        if len(self._tQ) < len(self.A):
+            W = self.w
+            self._tQ = np.array([W @ np.diagonal(Q) for Q in self.Q])
+            self._B = np.stack([(A.T * W) @ A for A in self.A])
+            self._Gs = np.stack(self.G)
+
+    def power(self, m: int) -> RiccatiMap:
+        """``f^m``."""
+        self.grow(m)
+        return RiccatiMap(self.A[m], self.G[m], self.Q[m])
+
+    def trace_sum(self, X: np.ndarray, m: int) -> float:
+        """``sum_{j < m} tr(W f^j(X))``: the weighted traces of the m priors of a run from prior X."""
+        self.grow(m)
+        n = X.shape[0]
+        # f^j(X) = Q_j + A_j Y_j A_j' with Y_j = (I + X G_j)^{-1} X
+        Y = np.linalg.solve(np.eye(n) + X @ self._Gs[:m], np.broadcast_to(X, (m, n, n)))
+        return float(self._tQ[:m].sum() + np.einsum("jab,jba->", self._B[:m], Y))
+
+
 class ScheduleCost:
     """Cost of periodic schedules of one system, noise model, rate and weights (module docstring).
 
@@ -195,8 +241,8 @@ class ScheduleCost:
         rows = list(common_rows(system.C))
         self._Hb = [H[rows] for H in self._H]
         self._Rb = [self.noise.R(i + 1, rows) for i in range(system.N)]
-        self._P0 = np.asarray(self.noise.P0, dtype=float)
-        self._warm: np.ndarray | None = None
+        self._runs: dict[tuple[int, bool], _Run] = {}
+        self._detect: dict[frozenset, bool] = {}
         self.cache: dict[tuple[int, ...], float] = {}
         self.evaluations = 0
 
@@ -210,27 +256,70 @@ class ScheduleCost:
         order = tuple(range(1, len(counts) + 1)) if order is None else tuple(order)
         return tuple(j < self.k_dead for c in order for j in range(int(counts[c - 1])))
 
+    def _run(self, c: int, b: bool) -> _Run:
+        r = self._runs.get((c, b))
+        if r is None:
+            H, R = (self._Hb[c - 1], self._Rb[c - 1]) if b else (self._H[c - 1], self._R[c - 1])
+            r = self._runs[(c, b)] = _Run(self.Phi, H, R, self.Qd, self.w)
+        return r
+
+    def _detectable(self, pattern: SamplePattern) -> bool:
+        """:func:`~switchobs_core.kalman.check_detectable`, cached by the set of (channel, blind) pairs
+        measured when the period aliases no two modes (:func:`~switchobs_core.detectability.aliasing_free`)."""
+        key = None
+        if aliasing_free(self.system.A, pattern.K / self.rate):
+            key = frozenset(zip(pattern.channels, pattern.blind or (False,) * pattern.K))
+            ok = self._detect.get(key)
+            if ok is not None:
+                return ok
+        try:
+            check_detectable(self.system, pattern)
+            ok = True
+        except UndetectableSchedule:
+            ok = False
+        if key is not None:
+            self._detect[key] = ok
+        return ok
+
     def of_channels(self, channels: Sequence[int], cycles: Sequence[Cycle] = (),
                     blind: Sequence[bool] = ()) -> float:
         """Cost of the periodic sample pattern ``channels`` (``blind[k]``: sample k measures only the
-        shared rows; inf if undetectable)."""
+        shared rows; inf if undetectable).
+
+        The period's samples form runs of one channel (blind or not); the map of a run of m
+        samples is ``f^m``, kept across candidates (:class:`_Run`). 1. the period map, the runs'
+        maps composed; 2. its fixed point by doubling (:func:`~switchobs_core.doubling.fixed_point`):
+        the prior of phase 0; 3. the mean weighted trace over the runs from there, all priors of a
+        run at once; the prior of phase 0 must come back within ``PLAN_FLOOR`` (else the pass
+        repeats from where it ended)."""
         K = len(channels)
         blind = tuple(bool(b) for b in blind) if any(blind) else ()
         pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
                                 tuple(int(c) for c in channels), (), blind)
-        try:
-            check_detectable(self.system, pattern)
-        except UndetectableSchedule:
+        if not self._detectable(pattern):
             return math.inf
-        steps = [Step(self.Phi, self.Qd, self._Hb[c - 1], self._Rb[c - 1]) if blind and blind[k] else
-                 Step(self.Phi, self.Qd, self._H[c - 1], self._R[c - 1]) for k, c in enumerate(channels)]
-        P0 = self._P0 if self._warm is None else self._warm
-        sol = periodic_riccati(steps, P0, rtol=self.rtol, startup_rtol=0.0,
-                               max_periods=max(500, _MAX_SAMPLES // K))
+        # runs of equal (channel, blind)
+        runs: list[tuple[_Run, int]] = []
+        for key, grp in itertools.groupby(zip(channels, blind or (False,) * K)):
+            runs.append((self._run(int(key[0]), bool(key[1])), sum(1 for _ in grp)))
+        # 1. period map; 2. fixed point
+        F = runs[0][0].power(runs[0][1])
+        for r, m in runs[1:]:
+            F = F.then(r.power(m))
+        X, _, _ = fixed_point(F, rtol=self.rtol)
         self.evaluations += 1
-        self._warm = sol.P_prior[0]
-        # J = (1/K) sum_k tr(W P^-_k), W = diag(w)
-        return float(np.mean([self.w @ np.diagonal(P) for P in sol.P_prior]))
+        # 3. J = (1/K) sum_k tr(W P^-_k), W = diag(w), run by run
+        for _ in range(4):
+            total, Y = 0.0, X
+            for r, m in runs:
+                total += r.trace_sum(Y, m)
+                Y = r.power(m)(Y)
+            if rel_change(Y, X) <= PLAN_FLOOR:
+                break
+            X = Y
+        else:
+            raise DesignError(f"schedule cost: the periodic Riccati solution did not come back within {PLAN_FLOOR:g}")
+        return total / K
 
     def __call__(self, counts: Sequence[int], order: Sequence[int] | None = None) -> float:
         key = tuple(int(k) for k in counts) + (() if order is None else tuple(order))
@@ -452,7 +541,7 @@ def gain_reports(system: Any, cycle: Cycle, rate: float, noise: NoiseModel, *, d
     except DesignError as err:
         out["lmi"] = {"feasible": False, "reason": str(err)}
     try:
-        kd = design_kalman(system, cycle, rate, noise)
+        kd = design_kalman(system, cycle, rate, noise, max_startup=0)      # the period's map only
         out["kalman"] = {
             "spectral_radius": kd.rho, "norm": kd.norm, "period": kd.pattern.period,
             "certified_rate": _rate(kd.rho, kd.pattern.period), "channels": kd.pattern.channels,

@@ -25,14 +25,15 @@ periods at 20 Hz in a check of ours. The noise-free error of one step is
 ``e^+_{k+1} = (I - K H) Phi e^+_k``, the sampled form of the error dynamics (e:error_dynamics).
 
 :func:`periodic_riccati` iterates the covariance recursion over whole periods of a
-K-periodic sequence of steps until the priors repeat; :func:`lifted_dare` solves the same
+K-periodic sequence of steps until the priors repeat (the slow path and the cross-check of the
+doubling solver of :mod:`.doubling`, which the designs use); :func:`lifted_dare` solves the same
 problem through the cyclic lifting to one time-invariant DARE, a cross-check for small cases.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,9 @@ __all__ = [
     "correct_state",
     "riccati_step",
     "PeriodicSolution",
+    "rel_change",
+    "covariance_run",
+    "meet_periodic",
     "periodic_riccati",
     "lifted_dare",
 ]
@@ -205,7 +209,8 @@ def riccati_step(P_prior: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.
 
 @dataclass(frozen=True, eq=False)
 class PeriodicSolution:
-    """Result of :func:`periodic_riccati`.
+    """Result of :func:`periodic_riccati` and of the doubling solver
+    (:func:`~switchobs_core.doubling.solve_periodic_riccati`).
 
     Attributes
     ----------
@@ -214,12 +219,17 @@ class PeriodicSolution:
     K : list of (n, p_k) ndarray
         The gains ``K_k`` at each phase (full rows of its step).
     periods : int
-        Number of whole periods iterated (the last one is the stored solution).
+        Whole periods iterated (doubling: doublings plus sweeps).
     change : float
-        Largest relative change of a prior between the last two periods.
+        Relative change of the prior of a phase over the last period (the residual of the
+        periodic Riccati equation).
     startup_P, startup_K : list of ndarray
         Priors and gains of the run from ``P0`` at samples 0..S-1, before it meets the
-        periodic solution (relative tolerance ``startup_rtol``).
+        periodic solution (relative tolerance ``startup_rtol``; empty from the doubling solver).
+    doublings : int
+        Doublings of the period map (0 for the plain iteration).
+    transition, rho : ndarray or None, float
+        The period's closed-loop error map and its spectral radius (doubling solver only).
     """
 
     P_prior: list[np.ndarray]
@@ -228,10 +238,59 @@ class PeriodicSolution:
     change: float
     startup_P: list[np.ndarray]
     startup_K: list[np.ndarray]
+    doublings: int = 0
+    transition: np.ndarray | None = None
+    rho: float = float("nan")
 
 
-def _rel(P: np.ndarray, Q: np.ndarray) -> float:
-    return float(np.linalg.norm(P - Q, 2) / max(np.linalg.norm(Q, 2), np.finfo(float).tiny))
+def rel_change(P: np.ndarray, Q: np.ndarray) -> float:
+    """``max |P - Q| / max |Q|`` (entrywise): the relative distance of two covariances, O(n^2) (the
+    measure the observer's re-lock uses; within a factor n of the 2-norm ratio)."""
+    return float(np.abs(P - Q).max() / max(np.abs(Q).max(), np.finfo(float).tiny))
+
+
+def covariance_run(steps: Sequence[Step], P0: np.ndarray, *, first_predict: bool = False) -> Iterator[tuple]:
+    """The recursion from ``P^-_0 = P0`` (``first_predict``: ``Phi_0 P0 Phi_0' + Q_d,0``), Joseph form,
+    endless: ``(P^-_k, K_k)`` for k = 0, 1, ..."""
+    K = len(steps)
+    P = symmetrize(np.asarray(P0, dtype=float))
+    if first_predict:
+        P = predict_cov(P, steps[0].Phi, steps[0].Q_d)
+    k = 0
+    while True:
+        Kk, Pp = riccati_step(P, steps[k % K].H, steps[k % K].R)
+        yield P, Kk
+        k += 1
+        P = predict_cov(Pp, steps[k % K].Phi, steps[k % K].Q_d)
+
+
+def meet_periodic(run: Iterator[tuple], periodic: Sequence[np.ndarray], *, rtol: float,
+                  max_samples: int | None = None) -> tuple[list[np.ndarray], list[np.ndarray], float]:
+    """The prefix of ``run`` before it meets the periodic solution: ``(priors, gains, change)``.
+
+    ``run`` yields ``(P^-_k, K_k)`` from sample 0. It meets the periodic solution when the priors
+    of one whole period (K consecutive samples) each agree with the periodic prior of their phase
+    within ``rtol`` (:func:`rel_change`); the start-up ends where that period begins. At most
+    ``max_samples`` (default 64 periods) are kept; ``change`` is the largest distance over the
+    last K samples run (<= rtol when it met).
+    """
+    K = len(periodic)
+    cap = 64 * K if max_samples is None else max(0, int(max_samples))
+    Ps: list[np.ndarray] = []
+    Ks: list[np.ndarray] = []
+    dist: list[float] = []
+    good = 0
+    for k, (P, Kk) in enumerate(run):
+        d = rel_change(P, periodic[k % K])
+        good = good + 1 if d <= rtol else 0
+        dist.append(d)
+        if good >= K or k + 1 >= cap + K:
+            break
+        if k < cap:
+            Ps.append(P)
+            Ks.append(Kk)
+    S = len(dist) - K if good >= K else min(len(Ps), cap)
+    return Ps[:S], Ks[:S], float(max(dist[-K:]))
 
 
 def periodic_riccati(
@@ -242,16 +301,21 @@ def periodic_riccati(
     startup_rtol: float = 1e-11,
     max_periods: int = 500,
     first_predict: bool = False,
+    floor_rtol: float = 1e-8,
+    max_startup: int | None = None,
 ) -> PeriodicSolution:
-    """Periodic solution of the Riccati recursion of a K-periodic step sequence, and its start-up.
+    """Periodic solution of the Riccati recursion of a K-periodic step sequence, and its start-up:
+    the plain iteration, period by period (the cross-check of the doubling solver).
 
     ``sol = periodic_riccati(steps, P0)``
 
     The recursion runs from ``P^-_0 = P0`` (or ``Phi_0 P0 Phi_0' + Q_d,0`` with
     ``first_predict``) through whole periods ``steps[0], ..., steps[K-1]`` until the prior
-    covariance of every phase changes by at most ``rtol`` (relative, 2-norm) from one period to
-    the next. Then the start-up is the run's prefix up to the first sample from which every
-    later prior agrees with the periodic one of its phase within ``startup_rtol``.
+    covariance of every phase changes by at most ``rtol`` (relative) from one period to
+    the next (:func:`rel_change`), or the change stops falling (the rounding floor of a large system) below
+    ``floor_rtol``. Only the last two periods are kept. Then the start-up is the run from ``P0``
+    again, up to where it meets the periodic solution (:func:`meet_periodic`, ``startup_rtol``,
+    at most ``max_startup`` samples; ``startup_rtol = 0`` skips it).
 
     Raises
     ------
@@ -261,41 +325,36 @@ def periodic_riccati(
     K = len(steps)
     if K == 0:
         raise RiccatiError("periodic_riccati needs at least one step")
-    # 1. run from P0 and keep every prior and gain
-    run_P: list[np.ndarray] = []
-    run_K: list[np.ndarray] = []
-    P = symmetrize(np.asarray(P0, dtype=float))
-    if first_predict:
-        P = predict_cov(P, steps[0].Phi, steps[0].Q_d)
-    change = np.inf
+    run = covariance_run(steps, P0, first_predict=first_predict)
+    prev: list[np.ndarray] = []
+    change, last = np.inf, np.inf
     periods = 0
     while periods < max_periods:
-        for k, st in enumerate(steps):
-            if k > 0 or run_P:
-                P = predict_cov(P, st.Phi, st.Q_d)
-            Kk, Pp = riccati_step(P, st.H, st.R)
-            run_P.append(P)
-            run_K.append(Kk)
-            P = Pp
+        # 1. one period; only this one and the previous one are kept
+        cur = [next(run) for _ in range(K)]
         periods += 1
-        if periods >= 2:
+        if prev:
             # 2. relative change of every phase's prior between the last two periods
-            change = max(_rel(run_P[-K + k], run_P[-2 * K + k]) for k in range(K))
-            if change <= rtol:
+            change = max(rel_change(cur[k][0], prev[k][0]) for k in range(K))
+            if change <= rtol or (change <= floor_rtol and change >= 0.5 * last):
                 break
+            last = change
+        prev = cur
     else:
         raise RiccatiError(
             f"periodic Riccati recursion did not converge in {max_periods} periods (last relative change "
             f"{change:.3g} > {rtol:g}); a process intensity that does not excite every marginal or unstable mode "
             "makes the covariance decay like 1/t instead of converging: increase Q_c, or raise max_periods"
         )
-    per_P = run_P[-K:]
-    per_K = run_K[-K:]
-    # 3. start-up: first sample after which the run stays on the periodic solution
-    S = len(run_P) - K
-    while S > 0 and _rel(run_P[S - 1], per_P[(S - 1) % K]) <= startup_rtol:
-        S -= 1
-    return PeriodicSolution(per_P, per_K, periods, float(change), run_P[:S], run_K[:S])
+    per_P = [P for P, _ in cur]
+    per_K = [Kk for _, Kk in cur]
+    # 3. start-up: the run from P0 until it meets the periodic solution
+    su_P: list[np.ndarray] = []
+    su_K: list[np.ndarray] = []
+    if startup_rtol > 0:
+        su_P, su_K, _ = meet_periodic(covariance_run(steps, P0, first_predict=first_predict), per_P,
+                                      rtol=startup_rtol, max_samples=max_startup)
+    return PeriodicSolution(per_P, per_K, periods, float(change), su_P, su_K)
 
 
 def lifted_dare(steps: Sequence[Step]) -> list[np.ndarray]:

@@ -118,7 +118,7 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
     key = json.dumps(spec, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in system.name)
-    return Path(os.path.expanduser(cache_dir)) / f"{safe}-{digest}.json"
+    return Path(os.path.expanduser(cache_dir)) / f"{safe}-{digest}.npz"   # the compact container (any size loads)
 
 
 def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str,

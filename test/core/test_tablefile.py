@@ -1,0 +1,141 @@
+"""The binary gain-table container (.npz): bit-for-bit round trip, old JSON tables still load, edited
+and truncated files refused in one line, the size limit derived from n and the stored phases."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from switchobs_core.exceptions import GainTableError
+from switchobs_core.gains import GainTable, kalman_table
+from switchobs_core.kalman import design_kalman
+from switchobs_core.scenarios import paper_system
+from switchobs_core.schedule import Cycle
+from switchobs_core.tablefile import MAX_BINARY_BYTES, is_binary, size_limit
+
+PAPER = paper_system()
+CYCLES = [Cycle.from_ts(2.0, 0.6), Cycle((0.5, 0.5), 0.1)]
+
+
+@pytest.fixture(scope="module")
+def table():
+    return kalman_table(PAPER, [design_kalman(PAPER, c, 50.0) for c in CYCLES])
+
+
+@pytest.fixture()
+def saved(table, tmp_path):
+    return table.save(tmp_path / "k.npz")
+
+
+def _phases(kd):
+    return kd.periodic + kd.startup
+
+
+def test_round_trip_bit_for_bit(table, saved, tmp_path):
+    """Every stored double (priors, gains, error transition) and every header value comes back
+    unchanged; the JSON text of the loaded table equals the original's; and a JSON table saved as
+    .npz and loaded again is the same table."""
+    assert is_binary(saved)
+    loaded = GainTable.load(saved, system=PAPER)
+    for c in CYCLES:
+        a, b = table.kalman_design([c], PAPER), loaded.kalman_design([c], PAPER)
+        assert len(_phases(a)) == len(_phases(b)) and len(a.startup) > 0
+        for x, y in zip(_phases(a), _phases(b), strict=True):
+            assert (x.channel, x.dt, x.rows) == (y.channel, y.dt, y.rows)
+            assert x.P_prior.tobytes() == y.P_prior.tobytes() and x.K.tobytes() == y.K.tobytes()
+        assert a.error_transition.tobytes() == b.error_transition.tobytes()
+        assert (a.rho, a.norm, a.periods, a.change) == (b.rho, b.norm, b.periods, b.change)
+    assert loaded.to_json() == table.to_json()
+    js = table.save(tmp_path / "k.json")
+    again = GainTable.load(GainTable.load(js).save(tmp_path / "k2.npz"))
+    assert again.to_json() == table.to_json()
+    # the binary file is smaller than the JSON text (packed triangles, 8 bytes a double)
+    assert saved.stat().st_size < 0.5 * js.stat().st_size
+
+
+def test_old_json_table_loads_bit_for_bit(table, tmp_path):
+    """A JSON table written before the binary container (the same text) loads with the same doubles."""
+    path = tmp_path / "old.json"
+    path.write_text(table.to_json())
+    loaded = GainTable.load(path, system=PAPER)
+    assert loaded.to_json() == path.read_text()
+    a, b = table.kalman_design(CYCLES[:1], PAPER), loaded.kalman_design(CYCLES[:1], PAPER)
+    assert all(x.P_prior.tobytes() == y.P_prior.tobytes() for x, y in zip(_phases(a), _phases(b), strict=True))
+
+
+def _rewrite(path, edit):
+    """A copy of the archive with ``edit(name, bytes) -> bytes`` applied to its members (valid zip)."""
+    src = zipfile.ZipFile(path)
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w") as z:
+        for info in src.infolist():
+            z.writestr(info, edit(info.filename, src.read(info)))
+    return out.getvalue()
+
+
+def _flip_last_double(name, b):
+    if name != "k0_periodic_K.npy":
+        return b
+    return b[:-1] + bytes([b[-1] ^ 1])
+
+
+@pytest.mark.parametrize("how, match", [
+    ("half", r"not a complete binary gain table \(File is not a zip file\)"),
+    ("tail", r"not a complete binary gain table"),
+    ("byte", r"checksum mismatch: the file was modified"),
+    ("gain", r"checksum mismatch: the file was modified"),
+    ("rate", r"checksum mismatch: the file was modified"),
+    ("shape", r"array k0_periodic_P is float64 \(\d+, 77\), not float64 \(\d+, 78\)"),
+])
+def test_edited_or_truncated_refused_in_one_line(saved, tmp_path, how, match):
+    data = saved.read_bytes()
+    if how == "half":
+        bad = data[: len(data) // 2]
+    elif how == "tail":
+        bad = data[:-7]
+    elif how == "byte":     # a byte of a member changed in place (arrays are read past zip's CRC: the SHA-256)
+        i = data.index(b"k0_periodic_P.npy") + 4096
+        bad = data[:i] + bytes([data[i] ^ 0x10]) + data[i + 1:]
+    elif how == "gain":     # a valid archive with one gain's last bit flipped
+        bad = _rewrite(saved, _flip_last_double)
+    elif how == "rate":     # a valid archive with an edited header value
+        bad = _rewrite(saved, lambda n, b: b.replace(b'"rate": 50.0', b'"rate": 51.0') if n == "header.npy" else b)
+    else:                   # an array of another shape
+        def edit(n, b):
+            if n != "k0_periodic_P.npy":
+                return b
+            a = np.load(io.BytesIO(b))
+            buf = io.BytesIO()
+            np.save(buf, a[:, :-1])
+            return buf.getvalue()
+        bad = _rewrite(saved, edit)
+    p = tmp_path / "bad.npz"
+    p.write_bytes(bad)
+    with pytest.raises(GainTableError, match=match) as err:
+        GainTable.load(p)
+    assert "\n" not in str(err.value)
+
+
+def test_size_limit_from_n_and_phases(saved, tmp_path):
+    """The limit is 16 MiB plus 8 (n(n+1)/2 + n p_max) bytes per stored phase (plus 8 n^2 per design);
+    a file larger than its header allows is refused naming n and the phase count."""
+    assert size_limit(12, 4, 0, 0) == 16 * 2**20
+    assert size_limit(132, 4, 1000, 1) == 16 * 2**20 + 1000 * 8 * (132 * 133 // 2 + 132 * 4) + 8 * 132**2
+    assert size_limit(10**5, 4, 10**9, 1) == MAX_BINARY_BYTES
+    header = json.loads(np.load(io.BytesIO(zipfile.ZipFile(saved).read("header.npy"))).tobytes())
+    phases = sum(len(d[s]["channel"]) for d in header["kalman"] for s in ("periodic", "startup"))
+    limit = size_limit(12, 4, phases, len(CYCLES))
+    data = saved.read_bytes()
+    big = tmp_path / "big.npz"
+    with zipfile.ZipFile(big, "w") as z:       # the same members and a padding member past the limit
+        src = zipfile.ZipFile(io.BytesIO(data))
+        for info in src.infolist():
+            z.writestr(info, src.read(info))
+        z.writestr("pad.bin", b"\0" * (limit - len(data) + 1024))
+    with pytest.raises(GainTableError, match=rf"larger than {limit / 2**20:.1f} MiB, the limit for a table of "
+                                             rf"n = 12 states and {phases} stored phases"):
+        GainTable.load(big)
