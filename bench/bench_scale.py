@@ -37,6 +37,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_design import machine_info  # the one machine description of the benchmarks
+
 REPO = Path(__file__).resolve().parents[1]
 PY = sys.executable
 ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1")
@@ -121,15 +123,8 @@ def bench_plan(tmp: Path, which: str) -> dict:
 
 
 def _machine() -> str:
-    cpu = "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.node()}: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    info = machine_info()          # bench_design's: the CPU, cores and versions of this machine
+    return f"{platform.node()}: {info['cpu']}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,23 +16,6 @@ from switchobs_core.gains import GainTable
 from switchobs_core.loading import load_yaml, read_text
 
 
-@pytest.fixture
-def fifo(tmp_path):
-    p = tmp_path / "fifo"
-    os.mkfifo(p)
-    return p
-
-
-@pytest.fixture
-def device(tmp_path):
-    """A character device node of our own (a copy of /dev/null's numbers), never the real one."""
-    if os.geteuid() != 0:
-        pytest.skip("mknod needs root")
-    p = tmp_path / "null"
-    os.mknod(p, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
-    return p
-
-
 def test_reading_a_fifo_is_refused_without_blocking(fifo):
     t0 = time.monotonic()
     with pytest.raises(GainTableError, match=r"gain table .*fifo is a FIFO \(named pipe\), not a regular file"):

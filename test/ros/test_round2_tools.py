@@ -17,23 +17,6 @@ from round2 import assert_refused, switchobs, switchobs_bag
 from switchobs_core.cli import main as switchobs_main
 
 
-@pytest.fixture
-def fifo(tmp_path):
-    p = tmp_path / "fifo"
-    os.mkfifo(p)
-    return p
-
-
-@pytest.fixture
-def device(tmp_path):
-    """A character device node of our own (/dev/null's numbers) in tmp: never a real device."""
-    if os.geteuid() != 0:
-        pytest.skip("mknod needs root")
-    p = tmp_path / "dev"
-    os.mknod(p, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
-    return p
-
-
 @pytest.fixture(scope="module")
 def bag(tmp_path_factory):
     """A small input bag (2 s at 20 Hz)."""
