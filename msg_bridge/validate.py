@@ -42,6 +42,7 @@ class Reason(enum.Enum):
     BAD_LAYOUT = "bad_layout"            # a labelled array that is not ours, or names no state entry
     AMBIGUOUS_CHANNEL = "ambiguous_channel"  # the sample's channel was not certain (never guessed)
     INCONSISTENT = "inconsistent"        # the innovation exceeds what the published bound allows
+    OUTLIER = "outlier"                  # the normalised innovation exceeds the chi-square gate
 
 
 @dataclass(frozen=True)

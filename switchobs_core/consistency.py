@@ -43,8 +43,8 @@ import numpy as np
 
 from .rounding import UNIT_ROUNDOFF, gamma
 
-__all__ = ["NORM_SLACK", "Consistency", "check_innovation", "consistent_channels", "innovation_allowance",
-           "projected_bound", "spectral_norm"]
+__all__ = ["NORM_SLACK", "Consistency", "check_innovation", "chi2_gate", "consistent_channels",
+           "innovation_allowance", "nis", "projected_bound", "spectral_norm"]
 
 #: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
 #: products and sums of non-negative numbers: far below 1e-12 relative).
@@ -154,3 +154,26 @@ def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: floa
 def consistent_channels(tests: list[Consistency]) -> list[int]:
     """The channels whose test passed, in order."""
     return [t.channel for t in tests if t.ok]
+
+
+# ------------------------------------------------------------------ the chi-square gate (noise, no bound)
+
+def nis(C_rows: np.ndarray, P_prior: np.ndarray, R: np.ndarray, x_hat: np.ndarray, y: np.ndarray) -> float:
+    """The normalised innovation squared ``nu' S^-1 nu`` with ``S = C_r P^- C_r' + R``.
+
+    With Gaussian noise of covariance ``R``, process noise as modelled, and ``P^-`` the true
+    covariance of the prior error (a Kalman filter's, or the LMI observer's propagated one), it is
+    chi-square distributed with ``p = len(y)`` degrees of freedom.
+    """
+    nu = y - C_rows @ x_hat
+    S = C_rows @ P_prior @ C_rows.T + R
+    S = 0.5 * (S + S.T)
+    return float(nu @ np.linalg.solve(S, nu))
+
+
+def chi2_gate(p: int, alpha: float) -> float:
+    """The threshold ``chi2.ppf(1 - alpha, p)``: a sample of a model that holds exceeds it with
+    probability ``alpha`` (the gate's false-alarm rate per sample)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1.0 - alpha, p))

@@ -959,6 +959,25 @@ class SwitchedObserver:
             x += e.GB @ self._u
         return x
 
+    def prior_covariance(self, t: float) -> np.ndarray | None:
+        """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no
+        covariance is kept): the last sample's ``P`` through the step's error map,
+        ``E P E' + Q_d(dt)`` (plus the held measurement noise ``(Gamma L) R (Gamma L)'`` for LMI
+        gains), as :meth:`_propagate_covariance` does; the state is unchanged. For the
+        chi-square gate of :mod:`switchobs_core.consistency`."""
+        P = self.P
+        dt = float(t) - self._t
+        if P is None or not (math.isfinite(dt) and dt >= 0):
+            return None
+        if dt == 0:
+            return P
+        e = self._cache.step(self._key, dt)
+        _, _, Q_d = self._dcache.get(dt)
+        P = e.E @ P @ e.E.T + Q_d
+        if self.family == "lmi" and self._entry_L and self._R_held is not None:
+            P += e.GL @ self._R_held @ e.GL.T
+        return symmetrize(P)
+
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample
         held) and the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape

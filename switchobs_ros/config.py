@@ -94,6 +94,10 @@ PARAMS = [
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
           "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "
           "sends it only on change makes them wait the whole window. 0: the latest channel received (arrival order)."),
+    Param("consistency.chi2_alpha", 0.0, "With noise and no declared bound: a chi-square gate on each sample's "
+          "normalised innovation nu' (C P C' + R)^-1 nu; a sample above chi2.ppf(1 - alpha, rows) is rejected "
+          "(outlier) and counted. alpha is the gate's false-alarm rate per sample when the noise model holds "
+          "(0: off; in [0, 0.5]). Needs a covariance (publish_covariance, or the Kalman families)."),
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
           "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
@@ -302,6 +306,7 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "
                               f"got {values['consistency.check']!r}")
         check_range(values["reorder_window_ms"], "reorder_window_ms", exc=ConfigError)
+        check_range(values["consistency.chi2_alpha"], "consistency.chi2_alpha", exc=ConfigError)
         family = values["gain_family"]
         if family not in GAIN_FAMILY_PARAM:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "

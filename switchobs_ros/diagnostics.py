@@ -139,7 +139,8 @@ class EstimatorDiagnostics:
         # the model against the data (switchobs_core.consistency) and the attribution by source time
         ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
                kv("re-attributed samples", pl.reattributed),
-               kv("late channel messages", pl.late_channel)]
+               kv("late channel messages", pl.late_channel),
+               kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
         level, msg = DiagnosticStatus.OK, "estimating"

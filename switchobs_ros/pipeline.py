@@ -90,7 +90,7 @@ from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
-from switchobs_core.consistency import Consistency, check_innovation, spectral_norm
+from switchobs_core.consistency import Consistency, check_innovation, chi2_gate, nis, spectral_norm
 from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.measurement import Measurement
@@ -233,7 +233,8 @@ class EstimatorPipeline:
                  channel_topic: str | None = CHANNEL_TOPIC, input_frame_id: str = "map",
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
-                 reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = ""):
+                 reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = "",
+                 chi2_alpha: float = 0.0):
         self.system = system
         self.table = table
         self.table_path = table_path
@@ -250,6 +251,9 @@ class EstimatorPipeline:
         self.future_ns = int(future_tolerance_ns)
         self.window_ns = int(reorder_window_ns)
         self.check = bool(check)
+        self.chi2_alpha = float(chi2_alpha)
+        self._gates: dict[int, float] = {}       # rows -> chi2.ppf(1 - alpha, rows)
+        self.outliers = 0
         self.log = log or PipelineLog()
         self.N = system.N
         self._p = tuple(int(p) for p in system.p)
@@ -334,7 +338,7 @@ class EstimatorPipeline:
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
                    log=log, table_path=table_path, mode=mode, cycles=cycles,
                    reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
-                   specs_text=conf.inputs.describe())
+                   specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"])
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
         return pipe
@@ -661,6 +665,9 @@ class EstimatorPipeline:
             if m is None:
                 self.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
                 return
+        elif self.chi2_alpha > 0 and not self._gate(pend, t, m):
+            self.dropped[Reason.OUTLIER.value] += len(pend.parts)
+            return
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
@@ -739,6 +746,31 @@ class EstimatorPipeline:
                        "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
                        "beyond noise.max)")
         return None
+
+    def _gate(self, pend: _Pending, t: float, m: Measurement) -> bool:
+        """The chi-square gate (``consistency.chi2_alpha``): False, counted and rejected, when the
+        sample's normalised innovation exceeds the gate (a false alarm with probability alpha
+        when the noise model holds). No bound is involved: none is claimed under such noise."""
+        obs = self.observer
+        with np.errstate(all="ignore"):
+            P = obs.prior_covariance(t)
+            if P is None or obs.noise is None:
+                return True
+            x_p = obs.predict(t, hold=True)
+        C = self._C[m.channel - 1] if m.rows is None else self._C[m.channel - 1][list(m.rows)]
+        p = C.shape[0]
+        if p not in self._gates:
+            self._gates[p] = chi2_gate(p, self.chi2_alpha)
+        v = nis(C, P, obs.noise.R(m.channel, m.rows), x_p, m.y)
+        if v <= self._gates[p]:
+            return True
+        self.outliers += 1
+        topic = next((self.sources[i].topic for i in pend.parts if not self.sources[i].shared),
+                     self.sources[next(iter(pend.parts))].topic)
+        self.reject(topic, Rejection(Reason.OUTLIER, "innovation",
+                                     f"NIS {v:.3g} > {self._gates[p]:.3g} (chi-square, {p} rows, alpha "
+                                     f"{self.chi2_alpha:g})"))
+        return False
 
     def _withdraw(self, why: str) -> None:
         """No bound can be guaranteed any more: publish :data:`NO_BOUND` until a reset."""

@@ -173,7 +173,7 @@ def summary_table(rep: Report) -> str:
     lines = [f"Bag `{rep.bag}`: {rep.n_estimates} estimates in {len(rep.passes)} pass(es); "
              f"truth {'present' if rep.has_truth else 'absent (no error, bounds only)'}.", "",
              "| pass | estimates | span [s] | initial error | final error | final exact bound (noise-free) "
-             "| exceeded at | final noise bound | exceeded at | final paper bound "
+             "| samples above it | final noise bound | samples above it | final paper bound (claim) "
              "| cycles | median contraction/cycle | worst contraction/cycle |",
              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
 
@@ -187,9 +187,10 @@ def summary_table(rep: Report) -> str:
         c = np.array([v for v in p.contraction if np.isfinite(v)])
         exact = f"{p.exact[-1]:.3e}" if p.exact[-1] > 0 else "none (after a reset)"
         noise = "not declared" if p.noise is None else (f"{p.noise[-1]:.3e}" if p.noise[-1] > 0 else "none")
+        paper = f"{p.paper[-1]:.3e}" if p.paper[-1] >= 0 else "n/a"     # -1: not applicable (Kalman gains)
         lines.append(f"| {k} | {len(p.t)} | {p.t[-1]:.2f} | {num(p.e_first)} | {num(p.e_final)} | {exact} "
                      f"| {count(p.violations(p.exact))} | {noise} | {count(p.violations(p.noise))} "
-                     f"| {p.paper[-1]:.3e} | {len(p.cycle_ends)} | {num(np.median(c), '.3g') if c.size else 'n/a'} "
+                     f"| {paper} | {len(p.cycle_ends)} | {num(np.median(c), '.3g') if c.size else 'n/a'} "
                      f"| {num(np.max(c), '.3g') if c.size else 'n/a'} |")
     lines += ["", "The exact bound holds for noise-free measurements (it counts the estimator's rounding); with "
               "noisy measurements it is exceeded and only a declared noise bound (parameter noise.max) is a "

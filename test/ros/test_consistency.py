@@ -92,6 +92,15 @@ def test_model_off_the_recording_withdraws_the_bounds(tmp_path, paper_tables):
     assert (p.noise[~valid] == NO_BOUND).all() and not valid[p.t > t_withdrawn].any()
     false = p.t[valid & (p.err > p.noise)]
     assert false.size == 0 or t_withdrawn - false[0] <= 2.0, (false[:3], t_withdrawn)
+    # the report says so too: exit 3, one line, when a published guaranteed bound was false
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "switchobs_ros.bag", "report", str(tmp_path / "off-est"),
+                        "-o", str(tmp_path / "r.png")], capture_output=True, text=True, timeout=300)
+    if false.size:
+        assert r.returncode == 3 and f"{false.size} published estimates are above" in r.stderr, r.stderr
+    else:
+        assert r.returncode == 0, r.stderr
 
 
 def test_a_target_given_to_the_wrong_channel_is_reattributed(paper_tables):
@@ -130,3 +139,45 @@ def test_a_target_given_to_the_wrong_channel_is_reattributed(paper_tables):
     err = float(np.linalg.norm(e.x_hat - plant.x))
     assert 0 <= err <= e.envelope[3]
     assert math.isfinite(e.envelope[3])
+
+
+def test_chi2_gate_false_alarm_rate_and_an_outlier(tmp_path, paper_tables):
+    """Gaussian noise and no declared bound: the chi-square gate with alpha = 0.01 on the Kalman
+    table's innovations rejects about 1 % of a recording that follows the noise model (its
+    documented false-alarm rate), and a sample 1 m off is rejected as an outlier."""
+    from switchobs_core.gains import kalman_table
+    from switchobs_core.kalman import design_kalman
+    from switchobs_core.noise import NoiseModel
+    from switchobs_core.scenarios import load_system
+    from switchobs_core.schedule import Cycle
+
+    system = load_system("paper")
+    noise = NoiseModel.from_mapping({"measurement_std": 0.01, "process_std": 1e-9}, system)
+    table = tmp_path / "k.npz"
+    kalman_table(system, [design_kalman(system, [Cycle.from_ts(2.0, 0.6)], 100.0, noise)]).save(table)
+    bag = _bag(tmp_path, "gauss", duration=60.0, noise_std=0.01, seed=3)
+    over = {"gain_table": str(table), "noise.measurement_std": 0.01, "noise.process_std": 1e-9,
+            "consistency.chi2_alpha": 0.01}
+    res, _ = _estimate(tmp_path, bag, paper_tables, **over)
+    n = res.updates + res.rejected.get("target/pose outlier", 0)
+    rate = res.rejected.get("target/pose outlier", 0) / n
+    assert 6001 == n and 0.004 < rate < 0.02, rate                # 1 % +- 4 sigma (sigma = 0.13 %)
+    # one target pose 1 m off, in the middle of the recording: the gate rejects it
+    from geometry_msgs.msg import PoseStamped
+
+    from switchobs_ros.bag.io import BagIn, deserialize
+
+    pl = EstimatorPipeline.from_params(estimator_params(overrides={**over, "e0": E0}))
+    with BagIn(bag) as b:
+        msgs = b.messages(["/camera/active_channel", "/camera/pose", "/target/pose"])
+    middle = len(msgs) // 2
+    for k, m in enumerate(msgs):
+        msg = deserialize(m, UInt8 if m.topic.endswith("channel") else PoseStamped)
+        planted = m.topic == "/target/pose" and middle <= k < middle + 3
+        if planted:
+            msg.pose.position.x += 1.0
+            before = pl.outliers
+        pl.on_message(m.topic[1:], msg, m.log_ns)
+        if planted:
+            assert pl.outliers == before + 1
+            break
