@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import chdtri
 
 from .rounding import UNIT_ROUNDOFF, gamma
 
@@ -174,6 +175,4 @@ def nis(C_rows: np.ndarray, P_prior: np.ndarray, R: np.ndarray, x_hat: np.ndarra
 def chi2_gate(p: int, alpha: float) -> float:
     """The threshold ``chi2.ppf(1 - alpha, p)``: a sample of a model that holds exceeds it with
     probability ``alpha`` (the gate's false-alarm rate per sample)."""
-    from scipy.stats import chi2
-
-    return float(chi2.ppf(1.0 - alpha, p))
+    return float(chdtri(p, alpha))      # the upper-tail inverse of the chi-square distribution
