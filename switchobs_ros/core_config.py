@@ -32,7 +32,6 @@ __all__ = [
     "SensorOutputs",
     "GAIN_FAMILY_PARAM",
     "noise_from_params",
-    "camera_target_rows",
     "cycles_from_params",
     "load_or_design_table",
     "load_system_param",
@@ -231,24 +230,3 @@ def check_cache_private(table: Path, trusted: bool) -> None:
     for path, what in ((table.parent, "gain_table_cache_dir"), (table, "cached gain table")):
         if path.exists():
             check_private(path, what, exc=ConfigError, hint=hint)
-
-
-def camera_target_rows(system: LTISystem, camera_body: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:
-    """Per channel, the output rows (p_x, p_y) of the camera and of the target.
-
-    The topic contract: channel rho's output is ``[p_camera; p_target]``, rows labelled
-    ``<camera>.p_x``, ``<camera>.p_y``, ``<target>.p_x``, ``<target>.p_y`` in any order
-    (system.output_labels). Returns ``[((cam_x, cam_y), (tgt_x, tgt_y)), ...]`` (0-based rows).
-    """
-    out = []
-    for i, labels in enumerate(system.output_labels, start=1):
-        cam = {lab.rpartition(".")[2]: k for k, lab in enumerate(labels) if lab.rpartition(".")[0] == camera_body}
-        tgt = {lab.rpartition(".")[2]: k for k, lab in enumerate(labels) if lab.rpartition(".")[0] != camera_body}
-        bodies = {lab.rpartition(".")[0] for lab in labels} - {camera_body}
-        if len(labels) != 4 or set(cam) != {"p_x", "p_y"} or set(tgt) != {"p_x", "p_y"} or len(bodies) != 1:
-            raise ConfigError(
-                f"system '{system.name}' does not fit the camera/target topics: channel {i} outputs {list(labels)}; "
-                f"expected {camera_body}.p_x, {camera_body}.p_y and <target>.p_x, <target>.p_y"
-            )
-        out.append(((cam["p_x"], cam["p_y"]), (tgt["p_x"], tgt["p_y"])))
-    return out

@@ -235,7 +235,7 @@ def test_default_inputs_of_paper_and_camera_agents_are_the_paper_interface(paper
 
 
 def test_default_inputs_with_labels_in_another_order(paper):
-    """camera_target_rows accepted outputs in any order; so does the default (rows per channel)."""
+    """The camera/target interface accepts outputs in any order (rows per channel)."""
     C2 = paper.C[1][[3, 2, 1, 0]]
     labels2 = tuple(reversed(paper.output_labels[1]))
     sys_ = LTISystem(paper.A, None, [paper.C[0], C2], name="swapped", state_labels=paper.state_labels,
