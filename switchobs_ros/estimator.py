@@ -61,7 +61,7 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 from . import qos
 from .config import PARAMS, EstimatorConfig, check_runtime_value
 from .diagnostics import EstimatorDiagnostics, NodeState
-from .params import declare_all
+from .params import declare_all, unknown_parameters
 from .pipeline import Estimate, EstimatorPipeline, PipelineLog, channel_bodies
 from .runner import run_node
 
@@ -366,6 +366,22 @@ class EstimatorMixin:
             self.pipeline.internal_error("publish", err)
 
     # ------------------------------------------------------------------ runtime parameters
+    def set_parameters_atomically(self, parameter_list: list) -> SetParametersResult:
+        """rclpy's, with the node's own line for a name it does not declare (the ``set_parameters``
+        and ``set_parameters_atomically`` services come here; rclpy would answer ``Invalid access
+        to undeclared parameter(s): []``)."""
+        why = unknown_parameters([p.name for p in parameter_list], PARAMS, self.get_name())
+        if why:
+            return SetParametersResult(successful=False, reason=why)
+        return super().set_parameters_atomically(parameter_list)
+
+    def set_parameters(self, parameter_list: list) -> list:
+        """rclpy's, one result per parameter; a name the node does not declare gets the node's own
+        line instead of rclpy's exception (see :meth:`set_parameters_atomically`)."""
+        if not unknown_parameters([p.name for p in parameter_list], PARAMS, self.get_name()):
+            return super().set_parameters(parameter_list)
+        return [self.set_parameters_atomically([p]) for p in parameter_list]
+
     def _on_set_parameters(self, params: list) -> SetParametersResult:
         """Accept the runtime parameters (``config.RUNTIME_PARAMS``) with valid values, refuse the
         rest with the reason; all or nothing."""

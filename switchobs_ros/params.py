@@ -1,14 +1,16 @@
 """Declared parameters: one table per node, declared with descriptions, read and checked once.
 
 A node's parameters are listed as :class:`Param` entries (name, default, description). The
-table is the single source of the parameter reference in README.md (a test checks that
-every parameter is documented there). :func:`declare_all` declares them on a node with a
+table is the single source of the parameter reference of the documentation site
+(``tools/docs_gen.py`` renders it). :func:`declare_all` declares them on a node with a
 ``ParameterDescriptor`` and returns their values; a wrong type or a parameter in the params
 file that the node does not know raises :class:`ConfigError` (the node refuses to start).
 """
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +24,7 @@ from rclpy.parameter import Parameter
 
 from switchobs_core.exceptions import SwitchobsError
 
-__all__ = ["ConfigError", "Param", "declare_all"]
+__all__ = ["ConfigError", "Param", "declare_all", "unknown_parameters"]
 
 
 class ConfigError(SwitchobsError, ValueError):
@@ -137,9 +139,33 @@ def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict
         if isinstance(p.default, tuple):
             v = tuple(v)
         values[p.name] = v
-    declared = {p.name for p in params} | {"use_sim_time", "start_type_description_service"}
-    unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides."))
-    if unknown:
-        raise ConfigError(f"unknown parameter(s) {', '.join(unknown)} for node '{node.get_name()}' "
-                          f"(known: {', '.join(sorted(p.name for p in params))})")
+    why = unknown_parameters(overrides, params, node.get_name())
+    if why:
+        raise ConfigError(why)
     return values
+
+
+#: Parameters every rclpy node declares itself.
+_RCLPY_OWN = ("use_sim_time", "start_type_description_service")
+
+
+def unknown_parameters(names: Iterable[str], params: list[Param], node_name: str) -> str:
+    """'' when every name in ``names`` is a declared parameter, else one line naming the unknown
+    ones, the closest known name for each, and the known ones.
+
+    One message for a misspelled parameter at start-up (a params file, ``-p``) and at run time
+    (``ros2 param set``, the ``set_parameters`` services), where rclpy's own is
+    ``Invalid access to undeclared parameter(s): []``.
+    """
+    known = sorted(p.name for p in params)
+    declared = set(known) | set(_RCLPY_OWN)
+    unknown = sorted({n for n in names if n not in declared and not n.startswith("qos_overrides.")})
+    if not unknown:
+        return ""
+    hints = []
+    for n in unknown:
+        close = difflib.get_close_matches(n, known, n=1, cutoff=0.75)
+        if close:
+            hints.append(f"'{n}': did you mean '{close[0]}'?")
+    return (f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} for node '{node_name}'"
+            + (f" ({'; '.join(hints)})" if hints else "") + f" (known: {', '.join(known)})")

@@ -96,7 +96,8 @@ def cli_reference() -> str:
                             "Offline design, inspection, the paper's reproduction, simulation, certificates and "
                             "schedule planning (`switchobs_core`, no ROS).")
     out += _command_section("switchobs_bag", bag_parser(),
-                            "rosbag2 bags through the estimator, live and offline ([Bags](../tutorials/node-and-bags.md)). "
+                            "rosbag2 bags through the estimator, live and offline "
+                            "([Bags](../tutorials/node-and-bags.md)). "
                             "Arguments after `--ros-args` go to the node of `record` and `play`.")
     return "\n".join(out) + "\n"
 

@@ -52,7 +52,8 @@ def test_malformed_params_file(tmp_path):
 @pytest.mark.parametrize("params,needle", [
     ({"schedule.tau": 2}, "schedule.tau"),                          # an integer where a double array goes
     ({"schedule.mode": "weekly"}, "schedule.mode"),
-    ({"schedule.tua": [2.0]}, "unknown parameter(s) schedule.tua"),
+    ({"schedule.tua": [2.0]},
+     "unknown parameter schedule.tua for node 'estimator' ('schedule.tua': did you mean 'schedule.tau'?)"),
     ({"initial_estimate": [1.0, 2.0]}, "initial_estimate"),
     ({"schedule.tau": [2.0, 3.0]}, "same, non-zero length"),         # tau and s disagree
     ({"schedule.tau": [2.0, 3.0], "schedule.s": [0.6, 0.5]}, "periodic' takes one cycle"),

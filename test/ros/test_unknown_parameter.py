@@ -1,0 +1,45 @@
+"""A misspelled parameter gets the node's own line, naming it, the closest known name and the
+known ones: at start-up (test_startup_failures.py) and at run time over DDS, through the
+``set_parameters`` and ``set_parameters_atomically`` services (rclpy's own answer was
+``Invalid access to undeclared parameter(s): []``)."""
+
+from __future__ import annotations
+
+from rcl_interfaces.msg import Parameter as ParamMsg
+from rcl_interfaces.srv import GetParameters, SetParametersAtomically
+from test_lifecycle import _call, _set
+from test_round2_node import _answers_next, _pv, live  # noqa: F401  (live: the fixture)
+
+from switchobs_ros.config import PARAMS
+from switchobs_ros.params import unknown_parameters
+
+KNOWN = ", ".join(sorted(p.name for p in PARAMS))
+
+
+def test_unknown_parameters_message():
+    assert unknown_parameters(["sensor_timeout", "use_sim_time", "qos_overrides./x.depth"], PARAMS, "estimator") == ""
+    assert unknown_parameters(["sensor_timeot"], PARAMS, "estimator") == (
+        "unknown parameter sensor_timeot for node 'estimator' ('sensor_timeot': did you mean 'sensor_timeout'?) "
+        f"(known: {KNOWN})")
+    # no close name: no guess; several: all named, sorted, once
+    assert unknown_parameters(["zzz", "abc", "zzz"], PARAMS, "n") == (
+        f"unknown parameters abc, zzz for node 'n' (known: {KNOWN})")
+
+
+def test_runtime_misspelled_parameter_gets_the_nodes_line(live):  # noqa: F811
+    proc, node, io, client, log = live
+    r = _set(node, client, "sensor_timeot", _pv(1.0))
+    assert not r.successful
+    assert r.reason.startswith("unknown parameter sensor_timeot for node 'estimator' "
+                               "('sensor_timeot': did you mean 'sensor_timeout'?) (known: "), r.reason
+    assert "Invalid access" not in r.reason
+    atomic = node.create_client(SetParametersAtomically, "/estimator/set_parameters_atomically")
+    res = _call(node, atomic, SetParametersAtomically.Request(parameters=[
+        ParamMsg(name="sensor_timeout", value=_pv(2.0)), ParamMsg(name="output.envelope_evry", value=_pv(2))]))
+    assert not res.result.successful and "unknown parameter output.envelope_evry" in res.result.reason
+    assert "did you mean 'output.envelope_every'" in res.result.reason
+    # all or nothing: sensor_timeout kept its value; a known name still works; the node answers
+    get = node.create_client(GetParameters, "/estimator/get_parameters")
+    assert _call(node, get, GetParameters.Request(names=["sensor_timeout"])).values[0].double_value == 0.5
+    assert _set(node, client, "sensor_timeout", _pv(0.7)).successful
+    assert proc.alive() and _answers_next(node, io)
