@@ -16,6 +16,7 @@ Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,8 @@ from .files import write_with
 from .schedule import Cycle, PeriodicSchedule, SequenceSchedule
 from .simulate import simulate
 
-__all__ = ["write_error_figures", "plot_result", "PERIODIC", "NONPERIODIC", "paper_cases"]
+__all__ = ["write_error_figures", "error_figure", "figure_curves", "plot_result", "PERIODIC", "NONPERIODIC",
+           "paper_cases"]
 
 #: (tau, s) and (eta_1, eta_2) of the paper's periodic case.
 PERIODIC = (((2.0, 0.6),), ((1.6, 3.5),))
@@ -78,49 +80,86 @@ class _Table:
         raise InvalidArgument(f"no design for cycle {c.label()}")
 
 
-def plot_result(res: Any, path: str | Path, title: str = "") -> Path:
-    """Three-panel figure of a :class:`~switchobs_core.simulate.SimulationResult`."""
+def figure_curves(res: Any) -> dict:
+    """What the figure of ``res`` draws, decided once: ``{"top": [...], "middle": [...], "note": str}``
+    with each curve ``(label, values, style)``.
+
+    Only what applies is drawn and named in a legend:
+
+    - the paper's envelopes ``z_i`` and its bound ``alpha sum z_i`` only for the paper's LMI gains
+      (for the Kalman families they are not defined);
+    - one bound in the middle panel, the one :meth:`SimulationResult.guarantee` names: the
+      exact bound for noise-free outputs, the bounded-noise bound with a declared noise bound,
+      the measurement-hold bound with measurement hold. With noise and no declared bound no
+      bound is drawn (the noise-free bound lies decades under the noisy error and is no
+      guarantee); ``note`` says so.
+    """
+    paper = res.family == "lmi"
+    N = res.z.shape[0]
+    top = [(rf"$\|\tilde x_o^{{({i + 1})}}(t)\|$", res.xo_norms[i], ("solid", i)) for i in range(N)]
+    if paper:
+        top += [(rf"$z_{i + 1}(t)$" + "\n(paper's envelope)", res.z[i], ("dashed", i)) for i in range(N)]
+    middle = [(r"$\|\tilde x(t)\|$", res.error_norm, ("error", 0))]
+    if paper:
+        middle.append((r"paper's bound $\alpha \sum_i z_i$" + "\n(its claim)", res.paper_bound, ("paper", 0)))
+    bound, label, status = res.guarantee()
+    verdict = "NOT verified" if "NOT verified" in status else "verified at\nevery output"
+    note = ""
+    if label == "noise-free bound":
+        note = ("no bound drawn: the outputs are noisy and no noise bound is declared (--noise-max), so there is "
+                "no guarantee; the noise-free bound ||Phi|| e0 would lie far under the error")
+    elif bound is res.noise_bound:
+        middle.append(("guaranteed bound under the\n" + r"declared noise $|v| \leq v_{max}$" + f"\n({verdict})", bound,
+                       ("bound", 0)))
+    elif bound is res.exact_bound:
+        middle.append((r"guaranteed bound $\|\Phi(t,0)\|\,e_0$," + f"\nrounding included\n({verdict})", bound,
+                       ("bound", 0)))
+    else:
+        middle.append((f"{label},\nmeasurement hold\n({verdict})", bound, ("bound", 0)))
+    if not paper:
+        note = (note + "; " if note else "") + (f"{res.family} gains: the paper's envelopes z_i and its bound "
+                                                "apply to its LMI gains only and are not drawn")
+    return {"top": top, "middle": middle, "note": note}
+
+
+def _positive_range(curves: list) -> tuple[float, float]:
+    vals = np.concatenate([np.asarray(v, dtype=float).ravel() for _, v, _ in curves])
+    vals = vals[np.isfinite(vals) & (vals > 0)]
+    if not vals.size:
+        return 1e-12, 1.0
+    return max(vals.min() / 3, 1e-14), vals.max() * 3
+
+
+def error_figure(res: Any, title: str = "") -> Any:
+    """The three-panel matplotlib figure of a :class:`~switchobs_core.simulate.SimulationResult`
+    (:func:`figure_curves` decides what is drawn); legends sit beside the panels, never on the
+    curves."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    path = Path(path)
     N = res.z.shape[0]
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig, ax = plt.subplots(3, 1, figsize=(9, 8.2), sharex=True,
+    spec = figure_curves(res)
+    fig, ax = plt.subplots(3, 1, figsize=(11, 8.2), sharex=True, layout="constrained",
                            gridspec_kw={"height_ratios": [3, 3, 1.2]})
-    for i in range(N):
-        ax[0].plot(res.t, res.xo_norms[i], color=colors[i], lw=1.4,
-                   label=rf"$\|\tilde x_o^{{({i + 1})}}(t)\|$")
-        ax[0].plot(res.t, res.z[i], color=colors[i], lw=1.0, ls="--",
-                   label=rf"$z_{i + 1}(t)$ (paper's envelope)")
-    ax[0].set_yscale("log")
-    ax[0].set_ylabel("observable error")
-    ax[0].legend(ncol=2, fontsize=8, loc="lower left", framealpha=0.9)
-    ax[0].grid(True, which="major", alpha=0.3)
-    en = res.error_norm
-    ax[1].plot(res.t, en, color="k", lw=1.5, label=r"$\|\tilde x(t)\|$")
-    ax[1].plot(res.t, res.paper_bound, color=colors[3], lw=1.0, ls="--",
-               label=r"paper's bound $\alpha \sum_i z_i$ (claim)")
-    bound, label, status = res.guarantee()
-    verdict = ("not a guarantee with noise" if label == "noise-free bound" else
-               "NOT verified" if "NOT verified" in status else "verified at every output")
-    ax[1].plot(res.t, res.exact_bound, color=colors[2], lw=1.2,
-               label=r"exact bound $\|\Phi(t,0)\|\,e_0$, rounding included"
-               + (f" (noise-free: {verdict})" if label == "noise-free bound" else
-                  "" if bound is not res.exact_bound else f" ({verdict})"))
-    if bound is not None and bound is not res.exact_bound:
-        ax[1].plot(res.t, bound, color=colors[4], lw=1.2, ls="-.", label=f"{label} ({verdict})")
-    ax[1].set_yscale("log")
-    ax[1].set_ylabel("estimation error")
-    ax[1].legend(fontsize=8, loc="lower left", framealpha=0.9)
-    ax[1].grid(True, which="major", alpha=0.3)
-    lo = max(min(en[en > 0].min() if np.any(en > 0) else 1e-12, res.exact_bound.min()) / 3, 1e-14)
-    ax[1].set_ylim(lo, max(res.paper_bound.max(), res.exact_bound.max()) * 3)
-    xo = res.xo_norms[res.xo_norms > 0]
-    lo0 = max(xo.min() / 3, 1e-12) if xo.size else 1e-12
-    ax[0].set_ylim(lo0, max(res.z.max(), res.xo_norms.max()) * 3)
+    for label, values, (style, i) in spec["top"]:
+        ax[0].plot(res.t, values, color=colors[i % len(colors)], lw=1.4 if style == "solid" else 1.0,
+                   ls="-" if style == "solid" else "--", label=label)
+    styles = {"error": dict(color="k", lw=1.5), "paper": dict(color=colors[3], lw=1.0, ls="--"),
+              "bound": dict(color=colors[2], lw=1.4)}
+    for label, values, (style, _) in spec["middle"]:
+        ax[1].plot(res.t, values, label=label, **styles[style])
+    for a, key, ylabel in ((ax[0], "top", "observable error"), (ax[1], "middle", "estimation error")):
+        a.set_yscale("log")
+        a.set_ylabel(ylabel)
+        a.set_ylim(*_positive_range(spec[key]))
+        a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        a.grid(True, which="major", alpha=0.3)
+    if spec["note"]:
+        ax[1].text(0.01, 0.02, "\n".join(textwrap.wrap(spec["note"], 110)), transform=ax[1].transAxes, fontsize=7.5,
+                   va="bottom", ha="left", bbox=dict(facecolor="white", alpha=0.85, lw=0))
     ax[2].step(res.t, res.channel, where="post", color="k", lw=1.2)
     ax[2].set_yticks(range(1, N + 1))
     ax[2].set_ylim(0.5, N + 0.5)
@@ -129,7 +168,15 @@ def plot_result(res: Any, path: str | Path, title: str = "") -> Path:
     ax[2].grid(True, alpha=0.3)
     if title:
         ax[0].set_title(title, fontsize=10)
-    fig.tight_layout()
+    return fig
+
+
+def plot_result(res: Any, path: str | Path, title: str = "") -> Path:
+    """Write :func:`error_figure` of ``res`` to ``path`` (format from its suffix)."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fig = error_figure(res, title)
     try:
         write_with(path, "figure", lambda p: fig.savefig(p, dpi=130))
     finally:

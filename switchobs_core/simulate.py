@@ -131,6 +131,16 @@ def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> li
     return segs
 
 
+def _cycle_end_at(segments: Sequence[Segment], N: int, t_end: float) -> list[float]:
+    """``[t_end]`` when the last cycle ends exactly at ``t_end`` (its last channel's residence
+    ends there, so the next cycle's channel 1 would start at ``t_end``, outside the run), else
+    ``[]``: a run of whole cycles reports every one of them (tolerance 1e-9 relative)."""
+    last = segments[-1] if segments else None
+    if last is not None and last.channel == N and abs(last.t1 - t_end) <= 1e-9 * max(1.0, abs(t_end)):
+        return [float(t_end)]
+    return []
+
+
 def sampled_error_transition(A: np.ndarray, C: Sequence[np.ndarray],
                              steps: Sequence[tuple[float, int, np.ndarray]]
                              ) -> tuple[np.ndarray, np.ndarray]:
@@ -442,7 +452,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     z = envelope_z(t, eff_segments, e0)
     xo = np.stack([np.linalg.norm(err @ Ti, axis=1) for Ti in T_o])
     sw = np.array([s.t0 for s in eff_segments if s.starts_residence])
-    ends = np.array([s.t0 for s in eff_segments if s.channel == 1 and s.starts_residence and s.t0 > eff_segments[0].t0])
+    ends = np.array([s.t0 for s in eff_segments if s.channel == 1 and s.starts_residence and s.t0 > eff_segments[0].t0]
+                    + _cycle_end_at(eff_segments, N, t_end))
     return SimulationResult(t=t, x=X, x_hat=Xh, error=err, channel=ch, z=z,
                             paper_bound=alpha_ * z.sum(axis=0), exact_bound=exact, xo_norms=xo,
                             switching_times=sw, cycle_ends=ends, alpha=alpha_, e0=e0,

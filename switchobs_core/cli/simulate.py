@@ -128,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
     if len(rows) > 12:
         rows = rows[:6] + [["...", "", "", "", ""]] + rows[-5:]
     print(fmt_table(["cycle end", "t [s]", "||x_tilde||", label, "paper bound (claim)"], rows))
+    if res.family == "lmi" and len(res.cycle_ends) and res.at(res.cycle_ends[-1]) == len(res.t) - 1:
+        print(f"(cycle {len(res.cycle_ends)} ends with the run: its paper bound is the value before the jump "
+              "of the envelopes at a switch; the other rows show it after)")
     print(f"{label}: {status}")
     print(f"final ||x_tilde|| = {summ['final_error']:.3e} at t = {summ['t_end']:g} s "
           f"(||x_tilde(0)|| = {res.e0:.3e})")
