@@ -1,8 +1,15 @@
 """``switchobs_bag report``: error against the truth, the bounds and the channel, from a bag.
 
 Input: a bag with the estimator's outputs (``<node>/state``, ``<node>/envelope``), recorded live
-or written by ``switchobs_bag estimate``; with ``/sim/truth`` if present, and
-``/camera/active_channel`` and ``/diagnostics`` if present.
+or written by ``switchobs_bag estimate``; with ``/sim/truth`` if present, and the channel signal
+and ``/diagnostics`` if present.
+
+The channel signal (for the shading and the cycles) comes from the system's input
+specification (``inputs``: :class:`msg_bridge.InputSpecs`): its channel topic, or, for a system
+with one topic per channel and no channel topic, the samples of those topics (each sample says
+its topic's channel is active). Without a specification the paper interface's
+``/camera/active_channel`` is used if the bag has it; with no channel signal at all the number of
+cycles is unknown (``None``, "n/a"), never 0.
 
 Estimates and truth are matched by stamp (the stamp every labelled array carries). Messages
 are read in the order written (receive order). A bag of a looped replay holds several passes
@@ -41,7 +48,7 @@ class PassSummary:
     exact: np.ndarray
     channel_t: np.ndarray              # channel signal (s since the pass start)
     channel: np.ndarray
-    cycle_ends: list = field(default_factory=list)     # s
+    cycle_ends: list | None = field(default_factory=list)     # s; None: no channel signal in the bag
     cycle_err: list = field(default_factory=list)      # error at each cycle end
     contraction: list = field(default_factory=list)    # ratio to the previous cycle end
     noise: np.ndarray | None = None    # noise_bound (a declared noise bound), else None
@@ -104,8 +111,22 @@ def _split_passes(series, indices: bool = False):
     return [{series[i][1]: series[i][2] for i in idx} for idx in passes if idx]
 
 
-def load_report(bag_path, node: str = "/estimator") -> Report:
-    """Read the bag and compute the per-pass series and summary."""
+def _channel_sources(inputs) -> tuple[str | None, dict[str, int]]:
+    """``(channel topic, {per-channel topic: channel})``, absolute names, of an input specification
+    (None: the paper interface's ``/camera/active_channel``, no per-channel topics)."""
+    if inputs is None:
+        return "/camera/active_channel", {}
+    absolute = lambda topic: "/" + topic.strip("/")
+    per_channel = {absolute(s.topic): s.channel for s in inputs.sources if s.channel is not None}
+    return (absolute(inputs.channel_topic) if inputs.channel_topic else None), per_channel
+
+
+def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
+    """Read the bag and compute the per-pass series and summary.
+
+    ``inputs``: the system's :class:`msg_bridge.InputSpecs` (where the channel signal comes from,
+    module docstring); None: the paper interface's channel topic.
+    """
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64MultiArray, UInt8
 
@@ -114,15 +135,20 @@ def load_report(bag_path, node: str = "/estimator") -> Report:
     with BagIn(bag_path) as bag:
         bag.require({t_state: "std_msgs/msg/Float64MultiArray", t_env: "std_msgs/msg/Float64MultiArray"},
                     " (the estimator's outputs: record them, or run `switchobs_bag estimate`)")
-        opt = {"/sim/truth": "std_msgs/msg/Float64MultiArray", "/camera/active_channel": "std_msgs/msg/UInt8",
-               "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+        t_chan, per_channel = _channel_sources(inputs)
+        opt = {"/sim/truth": "std_msgs/msg/Float64MultiArray", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+        if t_chan:
+            opt[t_chan] = "std_msgs/msg/UInt8"
         present = [t for t in opt if t in bag.topics]
         bag.require({t: opt[t] for t in present})
-        msgs = bag.messages([t_state, t_env, *present], order="file")
+        per_channel = {t: c for t, c in per_channel.items() if t in bag.topics}
+        msgs = bag.messages([t_state, t_env, *present, *per_channel], order="file")
     states = _labelled(msgs, t_state, Float64MultiArray)
     env_passes = _split_passes(_labelled(msgs, t_env, Float64MultiArray, ("paper_bound", "exact_bound", "noise_bound")))
     truth = {s: v for _, s, v in _labelled(msgs, "/sim/truth", Float64MultiArray)}
-    chan = [(m.log_ns, int(deserialize(m, UInt8).data)) for m in msgs if m.topic == "/camera/active_channel"]
+    has_channel = t_chan in present or bool(per_channel)
+    chan = [(m.log_ns, int(deserialize(m, UInt8).data) if m.topic == t_chan else per_channel[m.topic])
+            for m in msgs if m.topic == t_chan or m.topic in per_channel]
     if not states:
         raise BagError(f"bag {bag_path}: topic {t_state} has no messages")
     rejected: dict[str, int] = {}
@@ -154,10 +180,12 @@ def load_report(bag_path, node: str = "/estimator") -> Report:
         p = PassSummary(t=t, stamps=stamps, err=err, paper=env[:, 0], exact=env[:, 1], channel_t=ct, channel=cv,
                         noise=env[:, 2] if np.isfinite(env[:, 2]).any() else None)
         # cycle ends: the channel goes back to 1
+        if not has_channel:
+            p.cycle_ends = None
         for k in range(1, len(cv)):
             if cv[k] == 1 and cv[k - 1] != 1:
                 p.cycle_ends.append(float(ct[k]))
-        if err is not None:
+        if err is not None and p.cycle_ends is not None:
             for te in p.cycle_ends:
                 j = int(np.searchsorted(t, te - 1e-9))
                 j = min(max(j - 1, 0), len(t) - 1)      # the last estimate of the ending cycle
@@ -190,11 +218,15 @@ def summary_table(rep: Report) -> str:
         paper = f"{p.paper[-1]:.3e}" if p.paper[-1] >= 0 else "n/a"     # -1: not applicable (Kalman gains)
         lines.append(f"| {k} | {len(p.t)} | {p.t[-1]:.2f} | {num(p.e_first)} | {num(p.e_final)} | {exact} "
                      f"| {count(p.violations(p.exact))} | {noise} | {count(p.violations(p.noise))} "
-                     f"| {paper} | {len(p.cycle_ends)} | {num(np.median(c), '.3g') if c.size else 'n/a'} "
+                     f"| {paper} | {'n/a' if p.cycle_ends is None else len(p.cycle_ends)} "
+                     f"| {num(np.median(c), '.3g') if c.size else 'n/a'} "
                      f"| {num(np.max(c), '.3g') if c.size else 'n/a'} |")
     lines += ["", "The exact bound holds for noise-free measurements (it counts the estimator's rounding); with "
               "noisy measurements it is exceeded and only a declared noise bound (parameter noise.max) is a "
               "guarantee. The paper's bound is the paper's claim."]
+    if any(p.cycle_ends is None for p in rep.passes):
+        lines += ["", "Cycles: n/a: the bag holds no channel signal (no channel topic, no per-channel topic of the "
+                  "system's inputs); pass --system (and --inputs) of the estimated system."]
     lines += ["", "Rejected inputs (estimator diagnostics): " +
               (", ".join(f"{k}: {v}" for k, v in sorted(rep.rejected.items())) if rep.rejected else "none")]
     if rep.passes and rep.passes[0].cycle_err:

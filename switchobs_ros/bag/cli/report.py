@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+import msg_bridge as mb
 from switchobs_core.files import check_output, write_with
+from switchobs_ros.core_config import load_system_param
 
 from ..io import BagError
 from ..report import load_report, plot_report, summary_table
@@ -26,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--out", default="report.png", help="PNG file (default report.png)")
     p.add_argument("--summary", help="also write the summary (Markdown) to this file")
     p.add_argument("--node", default="/estimator")
+    p.add_argument("--system", help="the estimated system (scenario name or YAML, as the node's parameter): its "
+                   "input specification says where the channel signal is (default: /camera/active_channel)")
+    p.add_argument("--inputs", default="", help="a YAML file with an inputs: section overriding the system's")
     p.add_argument("--title", default="")
     p.add_argument("--json", action="store_true")
 
@@ -42,7 +47,13 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     check_output(a.out, "-o", exc=BagError)          # before reading the bag
     if a.summary:
         check_output(a.summary, "--summary", exc=BagError)
-    rep = load_report(a.bag, a.node)
+    inputs = None
+    if a.system:
+        system = load_system_param(a.system)
+        inputs = mb.load_inputs(a.system, system, override=a.inputs)
+    elif a.inputs:
+        raise BagError("--inputs needs --system (the specification is checked against the system)")
+    rep = load_report(a.bag, a.node, inputs)
     plot_report(rep, a.out, a.title)
     text = summary_table(rep)
     if a.summary:
@@ -55,6 +66,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
                                       "final_noise_bound": None if p.noise is None else fin(p.noise[-1]),
                                       "noise_bound_violations": p.violations(p.noise),
                                       "final_paper_bound": fin(p.paper[-1]),
+                                      "cycles": None if p.cycle_ends is None else len(p.cycle_ends),
                                       "contraction": [fin(c) for c in p.contraction]} for p in rep.passes],
                           "rejected": rep.rejected, "png": a.out}, allow_nan=False))
     else:
