@@ -363,7 +363,8 @@ def _nonnegative(text: str) -> float:
     return _number(text, False)
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The demo's options (``bash scripts/demo.sh --help``; the documentation's command reference)."""
     ap = OneLineParser(prog="switchobs-demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--schedule", choices=sorted(SCHEDULES), default="periodic")
     ap.add_argument("--duration", type=_positive, default=30.0, help="simulated seconds (> 0, default 30)")
@@ -387,7 +388,11 @@ def main(argv=None) -> int:
                     help="camera_sim's true x(0), comma-separated (default: the paper's scene; needed for another "
                          "system)")
     ap.add_argument("--out", default="out/demo", help="folder for error.png, error.csv and the node logs")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     try:
         extra = {}
         if a.gains == "kalman":

@@ -3,9 +3,10 @@ to the build, the tests read them from here).
 
 Each page is rendered from the one owner of what it documents, never copied:
 
-- :func:`cli_reference`: the ``switchobs`` and ``switchobs_bag`` argparse parsers
-  (``switchobs_core.cli.build_parser``, ``switchobs_ros.bag.cli.build_parser``), one section per
-  subcommand with its usage and a table of its arguments;
+- :func:`cli_reference`: the ``switchobs``, ``switchobs_bag`` and demo argparse parsers
+  (``switchobs_core.cli.build_parser``, ``switchobs_ros.bag.cli.build_parser``,
+  ``tools.demo.build_parser``), one section per subcommand with its usage and a table of its
+  arguments;
 - :func:`parameters_reference`: the nodes' parameter tables (``switchobs_ros.config.PARAMS``,
   ``switchobs_ros.camera_sim.PARAMS``) and which of them may change while the node runs
   (``switchobs_ros.config.RUNTIME_PARAMS``);
@@ -58,8 +59,9 @@ def _arguments_table(parser: argparse.ArgumentParser) -> list[str]:
         else:
             name = f"`{a.metavar or a.dest}`" + (" (one of " + ", ".join(f"`{c}`" for c in a.choices) + ")"
                                                  if a.choices else "")
-        default = "" if a.default in (None, argparse.SUPPRESS, False) or a.nargs == 0 or a.required \
-            or not a.option_strings else f"`{a.default}`"
+        hidden = a.default is None or a.default is False or a.default is argparse.SUPPRESS or a.nargs == 0 \
+            or a.required or not a.option_strings
+        default = "" if hidden else '`""`' if a.default == "" else f"`{a.default}`"
         if a.required and a.option_strings:
             default = "required"
         rows.append(f"| {name} | {default} | {_cell(_help(a))} |")
@@ -99,6 +101,13 @@ def cli_reference() -> str:
                             "rosbag2 bags through the estimator, live and offline "
                             "([Bags](../tutorials/node-and-bags.md)). "
                             "Arguments after `--ros-args` go to the node of `record` and `play`.")
+    from tools.demo import build_parser as demo_parser
+
+    demo = demo_parser()
+    out += ["## `bash scripts/demo.sh`", "",
+            "The demo ([Getting started](../getting-started.md)): " + _cell(demo.description or ""), "",
+            "```text", demo.format_usage().strip().removeprefix("usage: "), "```", ""]
+    out += _arguments_table(demo) + [""]
     return "\n".join(out) + "\n"
 
 
