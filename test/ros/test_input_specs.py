@@ -409,9 +409,9 @@ def test_labelled_array_and_odometry_sources(paper):
     np.testing.assert_array_equal(arr.reader.read(msg)[2], [3.0, 4.0])
 
 
-def test_cart_pair_file_is_the_readme_system_and_the_readme_inputs():
+def test_cart_pair_file_is_the_tutorial_system_and_its_inputs():
     import yaml
-    blocks = re.findall(r"```yaml\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    blocks = re.findall(r"```yaml\n(.*?)```", (ROOT / "docs" / "tutorials" / "own-system.md").read_text(), re.S)
     system = next(yaml.safe_load(b) for b in blocks if "name: cart_pair" in b)
     inputs = next(yaml.safe_load(b) for b in blocks if b.startswith("inputs:"))
     assert yaml.safe_load(CART.read_text()) == {**system, **inputs}

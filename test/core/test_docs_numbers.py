@@ -1,6 +1,7 @@
-"""Every ``<!-- readme-check ... -->`` block of the README: its ``switchobs`` commands run
-in-process, the last one with ``--json``, and each ``expect PATH = VALUE`` holds to the
-precision the README prints VALUE with (and VALUE is printed in the README's text)."""
+"""Every ``<!-- docs-check ... -->`` block of the documentation pages (docs/**/*.md): its
+``switchobs`` commands run in-process, the last one with ``--json``, and each
+``expect PATH = VALUE`` holds to the precision the page prints VALUE with (and VALUE is printed
+in that page's text)."""
 
 from __future__ import annotations
 
@@ -13,12 +14,12 @@ import pytest
 
 from switchobs_core.cli import main
 
-README = Path(__file__).resolve().parents[2] / "README.md"
-_BLOCK = re.compile(r"<!-- readme-check\n(.*?)-->", re.S)
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+_BLOCK = re.compile(r"<!-- docs-check\n(.*?)-->", re.S)
 
 
-def _blocks() -> list[str]:
-    return _BLOCK.findall(README.read_text())
+def _blocks() -> list[tuple[Path, str]]:
+    return [(p, b) for p in sorted(DOCS.rglob("*.md")) for b in _BLOCK.findall(p.read_text())]
 
 
 def _lookup(obj, path: str):
@@ -27,14 +28,15 @@ def _lookup(obj, path: str):
     return obj
 
 
-def test_readme_has_check_blocks():
-    assert len(_blocks()) >= 2
+def test_docs_have_check_blocks():
+    pages = {p.name for p, _ in _blocks()}
+    assert len(_blocks()) >= 6 and {"paper.md", "plan.md"} <= pages
 
 
-@pytest.mark.parametrize("block", _blocks(), ids=lambda b: b.split("\n")[0].strip()[:60])
-def test_readme_block(block, tmp_path, capsys):
-    text = README.read_text()
-    prose = _BLOCK.sub("", text)
+@pytest.mark.parametrize("page,block", _blocks(),
+                         ids=lambda x: x.name if isinstance(x, Path) else x.strip().split("\n")[0][:60])
+def test_docs_block(page, block, tmp_path, capsys):
+    prose = _BLOCK.sub("", page.read_text())
     lines = [ln.strip() for ln in block.strip().splitlines() if ln.strip()]
     cmds = [ln for ln in lines if ln.startswith("switchobs ")]
     expects = [ln[len("expect "):] for ln in lines if ln.startswith("expect ")]
@@ -51,4 +53,4 @@ def test_readme_block(block, tmp_path, capsys):
         decimals = len(value.split(".")[1]) if "." in value else 0
         got = float(_lookup(out, path))
         assert abs(got - float(value)) <= 0.5 * 10.0**-decimals + 1e-12, (path, got, value)
-        assert re.search(rf"(?<![\d.]){re.escape(value)}(?![\d])", prose), f"{value} is not printed in the README"
+        assert re.search(rf"(?<![\d.]){re.escape(value)}(?![\d])", prose), f"{value} is not printed in {page.name}"
