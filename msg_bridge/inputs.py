@@ -131,7 +131,7 @@ class InputSpecs:
 
     Each source turns a message into (part of) the measurement ``(stamp_ns, channel, rows, y)``:
     its reader gives ``stamp_ns`` and ``y``, :meth:`InputSource.rows_for` the rows, and the channel
-    is the source's own, or the active one at ``stamp_ns`` (README "Input specifications").
+    is the source's own, or the active one at ``stamp_ns`` (docs/tutorials/own-system.md, "Input specifications").
     """
 
     sources: tuple[InputSource, ...]

@@ -1,7 +1,7 @@
 """Validation of incoming messages: a :class:`Rejection` with a :class:`Reason` code, or None.
 
-The node counts rejections by reason (diagnostics) and keeps running; see README.md,
-"Failure behaviour". The checks are pure functions of the message and what the caller knows (the
+The node counts rejections by reason (diagnostics) and keeps running; see the failure
+catalogue, docs/failures.md. The checks are pure functions of the message and what the caller knows (the
 last accepted stamp on the same topic, the node's clock).
 """
 

@@ -77,7 +77,7 @@ MEMORY_BUDGET_BYTES = 1 << 30
 OUTPUT_BUDGET_BYTES = 1 << 30
 
 #: The documented ranges, by the name a user gives (params file, ``-p``, CLI flag):
-#: ``(low, high, low_open, why)``. README.md, "Ranges of values", lists them.
+#: ``(low, high, low_open, why)``. docs/failures.md, "Ranges of values", lists them.
 RANGES: dict[str, tuple[float, float, bool, str]] = {
     "sensor_timeout": (0.0, MAX_DURATION_S, True, "seconds; an int64 of nanoseconds (clock-jump threshold)"),
     "future_tolerance": (0.0, MAX_DURATION_S, True, "seconds; an int64 of nanoseconds added to the node clock"),

@@ -43,7 +43,7 @@ __all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
 #: Values of the ``consistency.check`` parameter (switchobs_ros.pipeline).
 CONSISTENCY = ("auto", "always", "never")
 
-#: The estimator node's parameters (the README's parameter table is checked against it).
+#: The estimator node's parameters (the documentation's parameter reference is generated from it: tools/docs_gen.py).
 PARAMS = [
     Param("system", "paper", "The system: a built-in scenario name (paper, camera_agents) or a path to a "
           "system YAML file."),

@@ -60,7 +60,7 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every estimate carries the stamp of the sample it answers.
 
-Failure behaviour (the table is in README.md, "Failure behaviour")
+Failure behaviour (the table is in docs/failures.md)
 -------------------------------------------------------------------
 * Every message is validated (:mod:`msg_bridge.validate`); a rejected one is counted under
   ``(topic, reason)`` and changes nothing else. Without source timestamps, a part of a channel

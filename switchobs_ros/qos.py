@@ -1,4 +1,4 @@
-"""QoS profiles of the switchobs topics (README.md, "Reference: topics").
+"""QoS profiles of the switchobs topics (docs/reference/topics.md).
 
 * Sensor inputs (``camera/pose``, ``target/pose``): ``qos_profile_sensor_data`` (best effort,
   volatile; a best-effort subscriber also accepts reliable publishers). Publishers keep the

@@ -1,7 +1,7 @@
 """Bag tools: rosbag2 bags (mcap or sqlite3, metadata version 9) through the estimator.
 
 ``switchobs_bag {generate,record,play,estimate,report,info}`` (see :mod:`.cli` and
-README.md, "Bags").
+docs/tutorials/node-and-bags.md).
 
 Modules
 -------

@@ -94,7 +94,8 @@ def test_cli_reference_lists_every_command_and_option():
                     if opt not in ("-h", "--help"):
                         assert f"`{opt}" in section, (prog, name, opt)
     demo_section = page.split("## `bash scripts/demo.sh`", 1)[1]
-    assert all(f"`{o}" in demo_section for a in demo()._actions for o in a.option_strings if o != "-h" and o != "--help")
+    assert all(f"`{o}" in demo_section for a in demo()._actions for o in a.option_strings
+               if o not in ("-h", "--help"))
 
 
 def test_api_pages_come_from_the_files_so_new_modules_appear(tmp_path, monkeypatch):
