@@ -1,6 +1,6 @@
 """Every bad file a tool reads gives one line on stderr and exit code 2: no traceback, no hang.
 
-The cases of the failure catalogue (docs/failures.md) "Tools: bad files", through ``switchobs`` in process, plus hypothesis fuzz
+The cases of docs/failures.md, "Tools: bad files", through ``switchobs`` in process, plus hypothesis fuzz
 of the system-YAML and gain-table loaders (random bytes and mutations of a valid file).
 """
 
