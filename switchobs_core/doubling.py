@@ -45,7 +45,8 @@ Algorithm of :func:`solve_periodic_riccati`:
    have spectral radius < 1 (else the solution is not the stabilising one: a marginal mode the
    process noise never excites).
 
-Memory: the K priors (O(K n^2), the result) and O(n^2) work space; nothing per iteration. Time:
+Memory: the K priors (O(K n^2), the result; one period's at a time, a sweep drops the last
+sweep's before it starts) and O(n^2) work space; nothing per iteration. Time:
 about three periods of Kalman steps, against ``log(rtol) / log(rho^2)`` periods for the plain
 iteration :func:`~switchobs_core.riccati.periodic_riccati` (kept as the cross-check).
 
@@ -283,6 +284,7 @@ def solve_periodic_riccati(
     # 3. sweeps from P^-_0 until phase 0 comes back (or the change settles at the rounding floor)
     sweeps = 0
     for sweeps in range(1, int(max_sweeps) + 1):  # noqa: B007 (counted after the loop)
+        Ps = Ks = []                          # the last sweep's priors go before the next are made
         nxt, Ps, Ks = _sweep(steps, P0)
         change = rel_change(nxt, P0)
         if change <= max(rtol, floor_rtol):

@@ -40,7 +40,7 @@ covariance is a little larger; the loss is measured in the tests).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,6 +76,9 @@ __all__ = [
     "TableKalman",
     "TIE_TOL",
     "STARTUP_BUDGET_BYTES",
+    "startup_cap",
+    "design_bytes",
+    "design_pattern",
 ]
 
 #: A sample closer than this (s) to a switching instant is a tie (module docstring).
@@ -84,6 +87,33 @@ _PERIOD_TOL = 1e-9
 #: Memory the stored start-up priors may take by default (bytes): 256 MiB, 1.2 periods of the
 #: 32-agent camera model at 50 Hz (its periodic priors alone take 223 MB).
 STARTUP_BUDGET_BYTES = 256 * 1024 * 1024
+
+
+def startup_cap(K: int, n: int) -> int:
+    """Most start-up samples :func:`design_kalman` stores by default for a period of ``K`` samples
+    of an n-state system: 64 periods, at most what :data:`STARTUP_BUDGET_BYTES` of priors hold,
+    but at least one period."""
+    return min(64 * K, max(K, STARTUP_BUDGET_BYTES // (8 * n * n)))
+
+
+def design_bytes(n: int, p: int, K: int, startup: int) -> int:
+    """Memory (bytes) a Kalman design of a ``K``-sample period and ``startup`` stored start-up samples
+    allocates, with the table written from it (n states, at most p rows per sample).
+
+    Per stored sample (``K + startup`` of them): the prior and the gain (``8 (n^2 + n p)``,
+    :class:`KalmanPhase`), their copy in the binary table (``8 (n (n + 1) / 2 + 2 n p)``: the
+    packed prior, the gain flattened and concatenated, :func:`~switchobs_core.tablefile.encode`)
+    and 1 KiB of Python objects (step, phase, rows). Fixed: the doubling's work space, O(n^2) and
+    nothing per iteration or per sample beyond the priors it returns (:mod:`.doubling`; 64 n x n
+    matrices are counted), and numpy's write buffer of the table file (the largest array, at most
+    16 MiB).
+    For the 32-agent camera model at 50 Hz (n = 132, K = 1600, a start-up of 1925 samples capped
+    by :data:`STARTUP_BUDGET_BYTES`): 0.75 GiB, under the 1 GiB budget (measured peak RSS of
+    ``switchobs design``: 0.95 GiB, with the interpreter, numpy, scipy and cvxpy).
+    """
+    per_sample = 8 * (n * n + n * p) + 8 * (n * (n + 1) // 2 + 2 * n * p) + 1024
+    write_buffer = min(16 * 2**20, 8 * max(K, startup) * (n * (n + 1) // 2))
+    return (K + startup) * per_sample + 64 * 8 * n * n + write_buffer
 
 
 class KalmanDesignError(DesignError):
@@ -149,12 +179,12 @@ def _as_cycles(cycles: Cycle | Sequence[Cycle]) -> tuple[Cycle, ...]:
 
 
 def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: int = 64,
-                   bytes_per_sample: int = 64) -> SamplePattern:
+                   memory: Callable[[int], int] | None = None) -> SamplePattern:
     """The channel of every sample over one period (module docstring).
 
-    ``bytes_per_sample``: memory the caller will spend per sample of the period; the period's
-    size is checked against :data:`~switchobs_core.ranges.MEMORY_BUDGET_BYTES` before anything
-    is allocated.
+    ``memory(K)``: bytes the caller will allocate for a period of K samples (default: 64 per
+    sample, the pattern itself); checked against :data:`~switchobs_core.ranges.MEMORY_BUDGET_BYTES`
+    before anything is allocated.
 
     Raises
     ------
@@ -181,7 +211,7 @@ def sample_pattern(cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: 
             f"number even over {max_repeat} repetitions; choose a rate with T f an integer "
             f"(e.g. {max(1, round(T * rate))}/T Hz)"
         )
-    check_size(K, bytes_per_sample, f"{K:.3g} samples per period ({T * m:g} s at {rate:g} Hz)",
+    check_size(K, 64 if memory is None else memory(K) / K, f"{K:.3g} samples per period ({T * m:g} s at {rate:g} Hz)",
                "lower the rate or shorten the cycles")
     sch = _schedule(cyc)
     ts = np.arange(K) / rate
@@ -458,6 +488,19 @@ class KalmanDesign:
         )
 
 
+def design_pattern(system: Any, cycles: Cycle | Sequence[Cycle], rate: float, *, max_repeat: int = 64,
+                   max_startup: int | None = None) -> SamplePattern:
+    """The sample pattern of a Kalman design (step 1 of :func:`design_kalman`), refused with one line
+    (:class:`~switchobs_core.exceptions.InvalidArgument`) when the design would need more than the
+    memory budget (:func:`design_bytes`, start-up :func:`startup_cap` or ``max_startup`` samples)."""
+    n, p = int(system.n), max(system.p)
+
+    def memory(K: int) -> int:
+        return design_bytes(n, p, K, startup_cap(K, n) if max_startup is None else max(0, int(max_startup)))
+
+    return sample_pattern(cycles, rate, max_repeat=max_repeat, memory=memory)
+
+
 def design_kalman(
     system: Any,
     cycles: Cycle | Sequence[Cycle],
@@ -497,9 +540,7 @@ def design_kalman(
     for c in [cycles] if isinstance(cycles, Cycle) else list(cycles):
         if isinstance(c, Cycle):
             check_cycle_horizon(system.A, c)
-    # per sample: the step (Phi, Qd, H, R), the priors and posteriors, the gain, Python's objects
-    n, p = system.n, max(system.p)
-    pattern = sample_pattern(cycles, rate, max_repeat=max_repeat, bytes_per_sample=8 * (5 * n * n + 2 * n * p) + 1024)
+    pattern = design_pattern(system, cycles, rate, max_repeat=max_repeat, max_startup=max_startup)
     # 2. detectability
     check_detectable(system, pattern)
     # 3. periodic Riccati solution and start-up
@@ -512,7 +553,7 @@ def design_kalman(
              for c, r in zip(pattern.channels, rows)]
     sol = solve_periodic_riccati(steps, rtol=rtol)
     if max_startup is None:
-        max_startup = min(64 * K, max(K, STARTUP_BUDGET_BYTES // (8 * A.shape[0] ** 2)))
+        max_startup = startup_cap(K, A.shape[0])
     # max_startup = 0: no start-up segment (its distance: P0 from the periodic prior of phase 0)
     su_P, su_K, su_change = [], [], rel_change(noise.P0, sol.P_prior[0])
     if max_startup > 0:

@@ -11,7 +11,8 @@ same estimates (tested to 1e-9).
 
 Writes a new bag with the estimator's output topics (``<node>/state``, ``<node>/envelope``,
 ``<node>/<body>/odom``, the typed ``<node>/state_estimate`` and ``<node>/error_bounds``: the same
-types and layouts the node publishes; log time = the log time of
+types and layouts the node publishes, decimated as the node decimates them (``output.*_every``:
+every k-th estimate, 0 never; ``~/state`` always); log time = the log time of
 the input that produced the estimate), the input bag's other topics copied (unless
 ``inputs=False``), and one ``/diagnostics`` message at the end in the node's shape (accepted and
 rejected inputs). Optionally a CSV: ``stamp_ns``, the state labels, the envelope labels.
@@ -131,27 +132,36 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         xs: list[np.ndarray] = []
         envs: list[np.ndarray] = []
         covs: list[np.ndarray] = []
+        # the node's output decimation (EstimatorNode._publish_all): the k-th estimate (from 0) goes out
+        # on an output with output.<name>_every = m > 0 when k % m == 0; the result keeps every estimate
+        every = {k: int(cfg.get(f"output.{k}_every", 1)) for k in ("envelope", "odometry", "covariance", "typed")}
+
+        def due(name: str, k: int) -> bool:
+            return bool(every[name]) and k % every[name] == 0
 
         def emit(ests, log_ns):
             for e in ests:
+                k = len(stamps)
                 stamps.append(e.stamp_ns)
                 xs.append(e.x_hat)
                 envs.append(e.envelope)
+                sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
                 if w_cov is not None:
                     covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
-                    if writer is not None and e.P is not None:
-                        sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
+                    if writer is not None and e.P is not None and due("covariance", k):
                         writer.write(t_cov, log_ns, w_cov.bytes(array=[sec, nsec, *e.P.ravel().tolist()]))
                 if writer is not None:
-                    sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
                     x = e.x_hat.tolist()
                     writer.write(t_state, log_ns, w_state.bytes(array=[sec, nsec, *x]))
-                    writer.write(t_env, log_ns, w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
-                    for t, (w, idx) in zip(t_odom, w_odom):
-                        writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
-                    writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
-                    writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                          pl.bound_invalid_why)))
+                    if due("envelope", k):
+                        writer.write(t_env, log_ns, w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
+                    if due("odometry", k):
+                        for t, (w, idx) in zip(t_odom, w_odom):
+                            writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
+                    if due("typed", k):
+                        writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
+                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns,
+                                                                              pl.bound_valid, pl.bound_invalid_why)))
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None

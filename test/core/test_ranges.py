@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import math
 import time
+import tracemalloc
 
 import pytest
 
 from switchobs_core import ranges
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.kalman import design_kalman, sample_pattern
+from switchobs_core.gains import kalman_table
+from switchobs_core.kalman import design_bytes, design_kalman, design_pattern, sample_pattern, startup_cap
 from switchobs_core.plan import plan_schedule
-from switchobs_core.scenarios import paper_system
+from switchobs_core.scenarios import camera_agents, paper_system
 from switchobs_core.schedule import Cycle
 
 
@@ -62,6 +64,42 @@ def test_kalman_design_at_1e9_hz_is_refused_at_once():
     with pytest.raises(InvalidArgument, match="beyond the budget"):
         sample_pattern([Cycle.from_ts(2.0, 0.6)], 1e9)
     assert time.monotonic() - t0 < 5
+
+
+def test_kalman_design_of_32_agents_passes_the_budget_and_ten_times_its_rate_does_not():
+    """`design camera_agents(32) --gains kalman --rate 50` was refused ('1.6e+03 samples per period
+    (32 s at 50 Hz) would need 1.05 GiB') though it runs in 0.95 GiB peak RSS: the estimate counted
+    five n x n matrices per sample. The check alone (no design): it passes at 50 Hz, and at 500 Hz
+    (ten times the samples, no start-up cap left to absorb them) it is refused with one line."""
+    system = camera_agents(32)
+    cycle = Cycle([1.0] * 32)
+    pattern = design_pattern(system, cycle, 50.0)
+    assert pattern.K == 1600 and startup_cap(1600, system.n) == 1925
+    need = design_bytes(system.n, max(system.p), 1600, 1925)
+    assert 0.5 * ranges.MEMORY_BUDGET_BYTES < need < ranges.MEMORY_BUDGET_BYTES
+    with pytest.raises(InvalidArgument) as info:
+        design_kalman(system, cycle, 500.0)
+    msg = str(info.value)
+    assert msg.startswith("1.6e+04 samples per period (32 s at 500 Hz) would need 6.68 GiB, beyond the budget "
+                          "of 1 GiB: lower the rate") and "\n" not in msg, msg
+
+
+@pytest.mark.parametrize("agents, startup", [(2, 0), (2, 150), (4, 200)])
+def test_design_bytes_bounds_what_a_kalman_design_and_its_table_allocate(tmp_path, agents, startup):
+    """The budget's estimate (design_bytes) against the allocations tracemalloc sees for the design and
+    the binary table written from it: at least all of them, at most 25 % more (a start-up that never
+    meets the periodic solution, startup_rtol = 0, stores exactly ``startup`` samples)."""
+    system = camera_agents(agents)
+    tracemalloc.start()
+    try:
+        kd = design_kalman(system, Cycle([1.0] * agents), 50.0, max_startup=startup, startup_rtol=0.0)
+        kalman_table(system, [kd]).save(tmp_path / "k.npz")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(kd.startup) == startup
+    est = design_bytes(system.n, max(system.p), kd.pattern.K, startup)
+    assert peak <= est <= 1.25 * peak, (peak, est)
 
 
 @pytest.mark.parametrize("rate, tau_max", [(1e9, 4.0), (50.0, 1e9)])

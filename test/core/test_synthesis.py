@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
@@ -77,3 +80,59 @@ def test_bad_arguments_raise_own_errors(synths):
         LMISynthesizer([[np.inf]], [[1.0]])
     with pytest.raises(InvalidArgument, match="C_o has the wrong number of columns"):
         LMISynthesizer(np.eye(2), [[1.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize("channel", [1, 2])
+def test_conic_form_equals_the_cvxpy_form(paper, channel):
+    """Clarabel on the hand-written conic form and Clarabel through cvxpy solve the same problem:
+    theta* agrees to 1e-6 (relative) over the eta grid the designs scan, in the plain and a
+    rescaled form, and the least-norm (P, Y) of stage 2 agrees to 1e-4."""
+    from switchobs_core.synthesis import KAPPA_GRID, _ScaledSDP
+
+    d = paper.decomposition(channel)
+    for scale in (np.ones(d.A_o.shape[0]), np.linspace(0.5, 2.0, d.A_o.shape[0])):
+        form = _ScaledSDP(d.A_o, d.C_o, scale)
+        for eta in [float(e) for e in KAPPA_GRID[:50:7]]:
+            form.set_eta(eta)
+            assert form.solve_conic(1) == "optimal"
+            direct = form.theta_value
+            assert form.solve_cvxpy(1, "CLARABEL", {}) == "optimal"
+            assert direct == pytest.approx(form.theta_value, rel=1e-6), eta
+        form.set_eta(3.5)
+        form.solve_conic(1)
+        form.theta_cap = form.theta_value * 1.0001
+        assert form.solve_conic(2) == "optimal"
+        P1, Y1 = form.point()
+        assert form.solve_cvxpy(2, "CLARABEL", {}) == "optimal"
+        P2, Y2 = form.point()
+        assert np.linalg.norm(np.hstack([P1 - P2, Y1 - Y2])) <= 1e-4 * np.linalg.norm(np.hstack([P2, Y2]))
+
+
+def test_cvxpy_is_the_fallback_when_the_direct_solve_fails(paper, monkeypatch):
+    """A direct Clarabel solve that fails hands the problem to cvxpy (Clarabel, then SCS): the
+    gain is the same to the solver's tolerance and still verified."""
+    from switchobs_core import synthesis
+
+    d = paper.decomposition(1)
+    direct = LMISynthesizer(d.A_o, d.C_o).gain(1.6)
+    monkeypatch.setattr(synthesis._ScaledSDP, "solve_conic", lambda self, stage: "error (made to fail)")
+    syn = LMISynthesizer(d.A_o, d.C_o)
+    g = syn.gain(1.6)
+    assert g.solver == "CLARABEL" and g.eta_verified >= 1.6
+    assert g.kappa == pytest.approx(direct.kappa, rel=1e-5)
+    assert np.allclose(g.L_o, direct.L_o, rtol=1e-4, atol=1e-6)
+    with pytest.raises(synthesis.DesignError, match=r"did not solve \(SCS: "):
+        monkeypatch.setattr(synthesis._ScaledSDP, "solve_cvxpy", lambda self, stage, s, o: "infeasible")
+        syn.theta_star(2.0)
+
+
+def test_a_design_does_not_import_cvxpy():
+    """The LMI design of a cycle runs without the modelling layer (its import is most of a
+    `switchobs plan`): cvxpy is imported only for a fallback."""
+    code = ("import sys\nfrom switchobs_core.design import Designer\n"
+            "from switchobs_core.scenarios import paper_system\nfrom switchobs_core.schedule import Cycle\n"
+            "d = Designer(paper_system()).design(Cycle.from_ts(1.0, 0.5))\n"
+            "print(d.certified, 'cvxpy' in sys.modules)")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["True", "False"]

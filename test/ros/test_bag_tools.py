@@ -254,6 +254,25 @@ def test_report_png_and_summary(bags, paper_tables, tmp_path, capsys):
     assert "| 1 | 401 |" in (tmp_path / "s.md").read_text()
 
 
+def test_offline_estimate_decimates_outputs_as_the_node_does(bags, paper_tables, tmp_path):
+    """output.*_every as the node applies it (the k-th estimate from 0 goes out when k % m == 0, 0:
+    never; ~/state always): the bag holds what a live node would have published, and the result
+    keeps every estimate, the same numbers as without decimation."""
+    d, _ = bags
+    full = estimate(d / "in_mcap", _params(paper_tables))
+    r = estimate(d / "in_mcap", _params(paper_tables, **{"output.odometry_every": 0, "output.typed_every": 3,
+                                                          "output.envelope_every": 2}), out=tmp_path / "est")
+    assert np.array_equal(r.x_hat, full.x_hat) and np.array_equal(r.envelope, full.envelope)
+    K = r.stamps.size
+    with BagIn(tmp_path / "est") as bag:
+        count: dict[str, int] = {}
+        for m in bag.messages():
+            count[m.topic] = count.get(m.topic, 0) + 1
+    assert count["/estimator/state"] == K and count["/estimator/envelope"] == (K + 1) // 2
+    assert count["/estimator/state_estimate"] == count["/estimator/error_bounds"] == (K + 2) // 3
+    assert not [t for t in count if t.endswith("/odom")]
+
+
 def test_report_without_truth_says_n_a(bags, paper_tables, tmp_path, capsys):
     """A bag of estimates only (inputs not copied, so no /sim/truth): n/a cells and JSON nulls, no
     RuntimeWarning and no nan (they were both printed before)."""

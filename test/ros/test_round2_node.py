@@ -13,7 +13,7 @@ import os
 import shutil
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
@@ -116,6 +116,7 @@ _VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_f
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(values=st.dictionaries(st.sampled_from(_NUMERIC + ["initial_estimate"]), _VALUES, min_size=1, max_size=4))
+@example(values={"consistency.chi2_alpha": 0.5})
 def test_params_files_accepted_values_answer_every_valid_measurement(values, paper_tables):
     """Any numbers in a params file: refused with one ConfigError line, or accepted, and then every
     valid measurement (small, or as large as max_abs_value accepts) is answered with a finite
@@ -130,6 +131,9 @@ def test_params_files_accepted_values_answer_every_valid_measurement(values, pap
     except ConfigError as err:
         assert "\n" not in str(err) and str(err)
         return
+    # likewise the chi-square gate (consistency.chi2_alpha, test_consistency.py): an accepted alpha
+    # would rightly refuse these samples as outliers (alpha 0.5: 20 of them, a failure seen at random)
+    pl.chi2_alpha = 0.0
     now = 100_000 * S
     pl.on_channel(UInt8(data=1))
     answered = []
