@@ -124,11 +124,15 @@ def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict
             else:
                 node.declare_parameter(p.name, list(p.default) if isinstance(p.default, tuple) else p.default,
                                        desc)
-        except InvalidParameterTypeException as err:
-            got = getattr(err, "parameter", None)
+        except InvalidParameterTypeException:
+            # rclpy's exception carries only a message: the offending value is the override's
+            got = overrides.get(p.name)
+            got_type = None if got is None else got.type_
             floats = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY)
-            hint = "; write floats with a decimal point, e.g. 2.0" if p.type in floats else ""
-            got_s = "" if got is None else f" (got {got.type_.name.lower()})"
+            ints = (Parameter.Type.INTEGER, Parameter.Type.INTEGER_ARRAY)
+            hint = ("; write floats with a decimal point, e.g. 2.0"
+                    if p.type in floats and got_type in ints else "")
+            got_s = "" if got is None else f" (got {got.value!r}, {got_type.name.lower()})"
             raise ConfigError(f"parameter '{p.name}' must be a {p.type_name}{got_s}{hint}") from None
         try:
             v = node.get_parameter(p.name).value

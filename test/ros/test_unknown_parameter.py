@@ -5,6 +5,7 @@ known ones: at start-up (test_startup_failures.py) and at run time over DDS, thr
 
 from __future__ import annotations
 
+import pytest
 from rcl_interfaces.msg import Parameter as ParamMsg
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from test_lifecycle import _call, _set
@@ -43,3 +44,21 @@ def test_runtime_misspelled_parameter_gets_the_nodes_line(live):  # noqa: F811
     assert _call(node, get, GetParameters.Request(names=["sensor_timeout"])).values[0].double_value == 0.5
     assert _set(node, client, "sensor_timeout", _pv(0.7)).successful
     assert proc.alive() and _answers_next(node, io)
+
+
+def test_wrong_type_names_the_value_and_hints_only_when_it_helps(ros_node):
+    """``-p e0:=abc`` names the value and its type and gives no decimal-point hint (that hint is
+    for an integer where a float is expected, which is converted anyway)."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from switchobs_ros.params import ConfigError, declare_all
+
+    node = Node("wrong_type", context=ros_node.context,
+                parameter_overrides=[Parameter("e0", value="abc")])
+    try:
+        with pytest.raises(ConfigError) as err:
+            declare_all(node, [p for p in PARAMS if p.name == "e0"])
+    finally:
+        node.destroy_node()
+    assert str(err.value) == "parameter 'e0' must be a double (got 'abc', string)"
