@@ -48,6 +48,9 @@ class FamilyEntry:
         Whether a gain table file can hold this family (the schema of :mod:`.gains`).
     summary : str
         One line for help texts.
+    rate : bool
+        Whether its design needs the nominal sample rate (and a noise model, which the stored
+        table then brings: a Kalman table is designed for one).
     robust : str
         The family that serves robust mode (no promised schedule): its own name, or the one it
         hands over to (a Kalman table needs its schedule: the recursion runs online instead).
@@ -59,6 +62,7 @@ class FamilyEntry:
     table: str
     stored: bool
     summary: str
+    rate: bool = False
     robust: str = ""
 
     def __post_init__(self) -> None:
@@ -75,7 +79,8 @@ REGISTRY: dict[str, FamilyEntry] = {e.name: e for e in (
     FamilyEntry("lmi", "family_lmi", "LmiGains", "lmi", True,
                 "the paper's LMI gains, per cycle"),
     FamilyEntry("kalman", "family_kalman", "KalmanTableGains", "kalman", True,
-                "offline periodic Kalman gains per sample phase (a cache of the Riccati recursion)", "kalman-online"),
+                "offline periodic Kalman gains per sample phase (a cache of the Riccati recursion)", rate=True,
+                robust="kalman-online"),
     FamilyEntry("kalman-online", "family_online", "OnlineKalmanGains", "lmi", False,
                 "the Riccati recursion online (any schedule)"),
 )}
