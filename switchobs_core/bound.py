@@ -123,12 +123,13 @@ class RoundingBound:
             self.ellv.step_shaped(M, rho, K, p * self.noise_max[channel - 1] ** 2)
 
     def fused(self, e: Any, dt: float, E: np.ndarray, nIKH: float, x0n: float, xmn: float, rc: float,
-              K: np.ndarray, p: int, channel: int) -> None:
-        """Both ellipsoids through a table sample's fused map ``E = (I - K H) e^{A dt}``: the
-        prediction's residual through ``||I - K H||_F`` plus the correction's ``rc``."""
-        self.ell.step(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ell, None, None) + rc)
+              K: np.ndarray, p: int, channel: int, u: np.ndarray | None = None) -> None:
+        """Both ellipsoids through a Kalman sample's fused map ``E = (I - K H) e^{A dt}``: the
+        prediction's residual (input ``u`` held, None: zero) through ``||I - K H||_F`` plus the
+        correction's ``rc``."""
+        self.ell.step(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ell, None, u) + rc)
         if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
-            self.ellv.step_shaped(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ellv, None, None) + rc, K,
+            self.ellv.step_shaped(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ellv, None, u) + rc, K,
                                   p * self.noise_max[channel - 1] ** 2)
 
     # ------------------------------------------------------------------ bounds

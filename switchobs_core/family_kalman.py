@@ -81,6 +81,7 @@ class KalmanTableGains(OnlineKalmanGains):
         a = 2.0 * obs._nA * s + float(np.linalg.norm(kd.noise.Q_c, 2))
         self.dt_tol = min(0.1 * self.relock_rtol * s / a if a > 0 else math.inf, MAX_JITTER / f)
         self._fused: dict = {}
+        self._R: dict = {}
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, rate: float = 0.0, noise: Any = None, **_: Any) -> Any:
@@ -100,9 +101,6 @@ class KalmanTableGains(OnlineKalmanGains):
         self.fallback = ""
         self.departures = 0
         self.relocks = 0
-
-    def fuses(self, obs: Any) -> bool:
-        return not self._online and obs._u_zero
 
     def steps_covariance(self) -> bool:
         return self._online
@@ -159,6 +157,10 @@ class KalmanTableGains(OnlineKalmanGains):
         kd = self.kalman
         span = obs._span
         H = obs.rows_of(channel, rows)
+        step = None
+        if self._online and dt > 0:     # the recursion's prediction (fused with its correction)
+            step = self.predict(obs, dt)
+            dt = 0.0
         if self._origin is None:
             self._origin = t
         ph, why = None, ""
@@ -170,12 +172,14 @@ class KalmanTableGains(OnlineKalmanGains):
             why = str(err)
         self._last_k = -2 if ph is None else ph.k
         if not self._online and why:
-            # the real covariance: the last sample's posterior, propagated exactly to this sample
+            # the real covariance: the last sample's posterior (P0 before the first), propagated
+            # exactly to this sample
+            first = self._kgain is None
             self.depart(obs, f"{why}; running the Riccati recursion online from here")
             if dt > 0:
-                obs._step(dt)
+                step = self.predict(obs, dt, covariance=not first)
                 dt = 0.0
-            elif span > 0:
+            elif span > 0 and not first:
                 obs._propagate_covariance(obs._cache.step(obs._key, span), span)
         elif self._online and not why:
             S = ent.P_prior
@@ -183,13 +187,13 @@ class KalmanTableGains(OnlineKalmanGains):
                 self._online = False
                 self.relocks += 1
         if self._online:
-            self.correct_online(obs, channel, rows, H, y)
+            self.correct_online(obs, channel, rows, H, y, step)
             return
         K = kd.gain(ph, channel, rows)
         self._kgain = (ph, channel, rows)
         if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's)
             obs._step(dt, covariance=False)
-        kalman_correct(obs, K, H, y)
+        kalman_correct(obs, K, H, y, step)
 
     def _locked(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray) -> bool:
         """The hot path (locked, all rows, a step to take): the phase found inline and one cached

@@ -48,21 +48,37 @@ class ScheduledCycle:
         return "any schedule (online Riccati)" if self.cycle is None else self.cycle.label()
 
 
-def kalman_correct(obs: Any, K: np.ndarray, H: np.ndarray, y: np.ndarray) -> None:
-    """``x^+ = x^- + K (y - H x^-)`` on ``obs``'s estimate and its error map ``I - K H`` (applied to
-    ``Phi`` and the rigorous bound). The innovation first keeps the rounding of the estimate at
-    the level of the error, not of ``||x||``."""
+def kalman_correct(obs: Any, K: np.ndarray, H: np.ndarray, y: np.ndarray, step: tuple | None = None) -> None:
+    """``x^+ = x^- + K (y - H x^-)`` on ``obs``'s estimate and its error map (applied to ``Phi`` and
+    the rigorous bound). The innovation first keeps the rounding of the estimate at the level of
+    the error, not of ``||x||``.
+
+    ``step``: the prediction just taken by :meth:`OnlineKalmanGains.predict` (``e``, ``dt``,
+    ``||x^+||`` before it, ``||x^-||``); the sample's error map is then the fused
+    ``(I - K H) e^{A dt} = E - K (H E)`` (rank-p, one step of the bound); without it the map is
+    ``I - K H`` alone (the prediction was applied as its own step)."""
     x = obs._x
     xn = math.sqrt(float(x @ x))
     nu = y - H @ x
     x += K @ nu
-    obs.apply_correction(K, H)
     b = obs._bound
+    if step is None:
+        obs.apply_correction(K, H)
+        if b is not None:
+            M = obs._I - K @ H
+            rho = b.rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), xn, math.sqrt(float(y @ y)),
+                                math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
+            b.correct(M, rho, K, y.size, obs._channel)
+        return
+    e, dt, x0n, xmn = step
+    # E_k = (I - K H) e^{A dt} = e^{A dt} - K (H e^{A dt})
+    M = e.E - K @ (H @ e.E)
+    obs.apply_map(M)
     if b is not None:
-        M = obs._I - K @ H
-        rho = b.rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), xn, math.sqrt(float(y @ y)),
-                            math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
-        b.correct(M, rho, K, y.size, obs._channel)
+        nIKH = float(np.linalg.norm(obs._I - K @ H))      # ||.||_F >= ||.||_2
+        rc = b.rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), xmn, math.sqrt(float(y @ y)),
+                           math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
+        b.fused(e, dt, M, nIKH, x0n, xmn, rc, K, y.size, obs._channel)
 
 
 class OnlineKalmanGains:
@@ -85,6 +101,7 @@ class OnlineKalmanGains:
             noise = NoiseModel.from_dict(table.kalman[0]["noise"]) if stored else default_noise(obs.system)
         self.noise = noise
         self.track_covariance = True
+        self._R: dict = {}
 
     def _schedule(self, obs: Any, mode: str, cycles: Any, bounds: Any) -> list:
         """The promised cycles (bookkeeping only: the gains do not depend on them)."""
@@ -113,7 +130,8 @@ class OnlineKalmanGains:
         return None
 
     def fuses(self, obs: Any) -> bool:
-        return False
+        """The prediction is fused with the correction when no input was held over the step."""
+        return obs._u_zero
 
     def steps_covariance(self) -> bool:
         return True
@@ -127,12 +145,27 @@ class OnlineKalmanGains:
     def depart(self, obs: Any, why: str) -> None:
         return None
 
-    def correct_online(self, obs: Any, channel: int, rows: tuple | None, H: np.ndarray, y: np.ndarray) -> None:
+    def predict(self, obs: Any, dt: float, *, covariance: bool = True) -> tuple:
+        """``x^- = e^{A dt} x^+`` (no input held: :meth:`fuses`) and ``P^- = e^{A dt} P^+ e^{A dt}' + Q_d``
+        (unless ``covariance`` is False); returns the ``step`` of :func:`kalman_correct`."""
+        e = obs._cache.step(obs._key, dt)
+        xn = math.sqrt(float(obs._x @ obs._x))
+        x = e.Phi @ obs._x
+        obs._x = x
+        if covariance:
+            obs._propagate_covariance(e, dt)
+        return e, dt, xn, math.sqrt(float(x @ x))
+
+    def correct_online(self, obs: Any, channel: int, rows: tuple | None, H: np.ndarray, y: np.ndarray,
+                       step: tuple | None = None) -> None:
         """The Riccati step on ``obs._P`` (the prior) and the correction with its gain."""
-        R = obs.noise.R(channel, rows)
+        R = self._R.get((channel, rows))
+        if R is None:
+            R = self._R[(channel, rows)] = obs.noise.R(channel, rows)
         K = gain(obs._P, H, R)
         obs._P = joseph(obs._P, K, H, R)
-        kalman_correct(obs, K, H, y)
+        kalman_correct(obs, K, H, y, step)
 
     def sample(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
-        self.correct_online(obs, channel, rows, obs.rows_of(channel, rows), y)
+        step = self.predict(obs, dt) if dt > 0 else None
+        self.correct_online(obs, channel, rows, obs.rows_of(channel, rows), y, step)
