@@ -14,11 +14,62 @@ families (Kalman: ``x^+ = x^- + K (y - H x^-)`` at the sample). The protocol cov
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-__all__ = ["GainFamily"]
+from .exceptions import InvalidArgument, ScheduleError
+
+__all__ = ["GainFamily", "check_bounds", "check_cycles"]
+
+
+@dataclass(frozen=True)
+class ScheduledCycle:
+    """A promised cycle of a Kalman-family observer (the residence bookkeeping's design).
+
+    Kalman gains have no per-channel ``kappa``, ``eta``, ``mu`` (the paper's quantities of LMI
+    gains): they are None, and the paper's factors and envelopes are not applicable.
+    """
+
+    cycle: Any
+    h_bounds: Any = None
+    kappa: Any = None
+    eta: Any = None
+    mu: Any = None
+    f: Any = None
+    kind: str = "kalman"
+
+    def label(self) -> str:
+        return "any schedule (online Riccati)" if self.cycle is None else self.cycle.label()
+
+
+def check_bounds(bounds: Any) -> tuple[float, float] | None:
+    """A2's ``(h_min, h_max)`` as floats with ``0 < h_min <= h_max < inf`` (None passes)."""
+    if bounds is None:
+        return None
+    hmin, hmax = (float(b) for b in bounds)
+    if not (0 < hmin <= hmax and math.isfinite(hmax)):
+        raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
+    return (hmin, hmax)
+
+
+def check_cycles(cycles: Any, mode: str, N: int) -> list:
+    """The promised cycles of periodic (one) or sequence (K >= 1) mode, each with N times."""
+    if cycles is None:
+        raise InvalidArgument(f"cycles is required in {mode} mode")
+    if not isinstance(cycles, (list, tuple)):
+        cycles = [cycles]
+    if len(cycles) == 0:
+        raise InvalidArgument("cycles must hold at least one cycle")
+    if mode == "periodic" and len(cycles) != 1:
+        raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} (use mode='sequence')")
+    for c in cycles:
+        h = getattr(c, "h", None)
+        if h is None or len(h) != N:
+            raise ScheduleError(f"cycles: {c!r} does not have {N} residence times h")
+    return list(cycles)
 
 
 class GainFamily(Protocol):

@@ -16,37 +16,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .design import design_table
-from .exceptions import InvalidArgument, ScheduleError
+from .exceptions import InvalidArgument
+from .family_base import check_bounds, check_cycles
 from .noise import default_noise
 
-__all__ = ["LmiGains", "check_bounds", "check_cycles"]
-
-
-def check_bounds(bounds: Any) -> tuple[float, float] | None:
-    """A2's ``(h_min, h_max)`` as floats with ``0 < h_min <= h_max < inf`` (None passes)."""
-    if bounds is None:
-        return None
-    hmin, hmax = (float(b) for b in bounds)
-    if not (0 < hmin <= hmax and math.isfinite(hmax)):
-        raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
-    return (hmin, hmax)
-
-
-def check_cycles(cycles: Any, mode: str, N: int) -> list:
-    """The promised cycles of periodic (one) or sequence (K >= 1) mode, each with N times."""
-    if cycles is None:
-        raise InvalidArgument(f"cycles is required in {mode} mode")
-    if not isinstance(cycles, (list, tuple)):
-        cycles = [cycles]
-    if len(cycles) == 0:
-        raise InvalidArgument("cycles must hold at least one cycle")
-    if mode == "periodic" and len(cycles) != 1:
-        raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} (use mode='sequence')")
-    for c in cycles:
-        h = getattr(c, "h", None)
-        if h is None or len(h) != N:
-            raise ScheduleError(f"cycles: {c!r} does not have {N} residence times h")
-    return list(cycles)
+__all__ = ["LmiGains"]
 
 
 class LmiGains:

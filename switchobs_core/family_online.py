@@ -16,36 +16,16 @@ the table family (:mod:`.family_kalman`) uses it with stored gains.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
-from .family_lmi import LmiGains, check_bounds, check_cycles
+from .family_base import ScheduledCycle, check_bounds, check_cycles
+from .family_lmi import LmiGains
 from .noise import NoiseModel, default_noise
 from .riccati import gain, joseph
 
-__all__ = ["OnlineKalmanGains", "ScheduledCycle", "kalman_correct"]
-
-
-@dataclass(frozen=True)
-class ScheduledCycle:
-    """A promised cycle of a Kalman-family observer (the residence bookkeeping's design).
-
-    Kalman gains have no per-channel ``kappa``, ``eta``, ``mu`` (the paper's quantities of LMI
-    gains): they are None, and the paper's factors and envelopes are not applicable.
-    """
-
-    cycle: Any
-    h_bounds: Any = None
-    kappa: Any = None
-    eta: Any = None
-    mu: Any = None
-    f: Any = None
-    kind: str = "kalman"
-
-    def label(self) -> str:
-        return "any schedule (online Riccati)" if self.cycle is None else self.cycle.label()
+__all__ = ["OnlineKalmanGains", "kalman_correct"]
 
 
 def kalman_correct(obs: Any, K: np.ndarray, H: np.ndarray, y: np.ndarray, step: tuple | None = None) -> None:

@@ -62,6 +62,7 @@ import numpy as np
 from ._version import __version__
 from .certificate import cycle_factor
 from .exceptions import GainTableError, InvalidArgument, SwitchobsError
+from .families import TABLE_FAMILIES
 from .files import check_output
 from .kalman import KalmanDesign
 from .loading import parse_json, read_text
@@ -71,15 +72,12 @@ from .tablefile import decode, encode, is_binary, jsonable
 if TYPE_CHECKING:
     from .system import LTISystem
 
-__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION", "TABLE_FAMILIES",
-           "kalman_table"]
+__all__ = ["ChannelGain", "CycleDesign", "CertifyCheck", "GainTable", "FORMAT", "FORMAT_VERSION", "kalman_table"]
 
 FORMAT = "switchobs-gain-table"
 FORMAT_VERSION = 2
 #: Versions this software reads (1: LMI tables from before the Kalman family).
 READABLE_VERSIONS = (1, 2)
-#: Gain families a table can hold.
-TABLE_FAMILIES = ("lmi", "kalman")
 
 
 @dataclass(frozen=True)

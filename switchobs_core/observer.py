@@ -72,7 +72,7 @@ from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument
 from .families import FAMILY_NAMES, family_entry, family_of_table
-from .family_online import ScheduledCycle
+from .family_base import ScheduledCycle
 from .kalman import KalmanDesign
 from .noise import NoiseModel
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
@@ -95,9 +95,10 @@ HOLDS = ("innovation", "measurement")
 #: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
 _MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
-#: Error maps held for ``Phi`` before they are multiplied out (``Phi`` is formed when read).
-_PENDING_MAX = 1 << 16
-#: Bytes of distinct arrays the held maps may keep alive before they are multiplied out.
+#: Floating-point work (flops, about ``2 n^3`` per held map) a first read of ``Phi`` may cost: beyond
+#: it (or beyond :data:`_PENDING_BYTES` of held arrays) an unread ``Phi`` is no longer kept.
+_PENDING_FLOPS = 2**31
+#: Bytes of distinct arrays the held maps may keep alive.
 _PENDING_BYTES = 64 << 20
 
 class SwitchedObserver:
@@ -156,6 +157,10 @@ class SwitchedObserver:
         image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
         :mod:`switchobs_core.rounding`; about as much work again per sample). Needs
         ``rounding_bound`` and innovation hold.
+    transition : bool, optional
+        Keep the error transition :attr:`Phi` (an n x n product per sample): True from the
+        start, False never, None (default) from its first read if that comes within a budget of
+        samples after the reset (:meth:`apply_map`).
 
     Raises
     ------
@@ -188,7 +193,8 @@ class SwitchedObserver:
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
                  track_covariance: bool | None = None, relock_rtol: float = 1e-2,
-                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None):
+                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
+                 transition: bool | None = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -257,6 +263,12 @@ class SwitchedObserver:
         self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
         self._cycles = CycleTracker(self.N, self.mode, self.bounds, self.match_tol, float(t0))
+        # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
+        if transition is not None and not isinstance(transition, (bool, np.bool_)):
+            raise InvalidArgument(f"transition must be True, False or None; got {transition!r}")
+        self._phi_init = ("kept" if transition or self.hold == "measurement" else
+                          "held" if transition is None else "off")
+        self._pending_max = int(min(max(_PENDING_FLOPS // (2 * self.n ** 3), 256), 65536))
         self._x0_init = x0
         self._t0_init = t0
         self.reset(x0, t0)
@@ -291,6 +303,7 @@ class SwitchedObserver:
         self._key = ("open",)
         self._entry_L = False
         self._Phi = np.eye(self.n)
+        self._phi_mode = self._phi_init    # "kept", "held" (until read), "dropped", "off": see apply_map
         self._pending: list = []        # error maps not yet multiplied into Phi (see apply_map)
         self._pending_ids: set = set()
         self._pending_bytes = 0
@@ -368,7 +381,17 @@ class SwitchedObserver:
         return self._transition().copy()
 
     def _transition(self) -> np.ndarray:
-        """``Phi`` with the held error maps multiplied in (in the order they were applied)."""
+        """``Phi`` with the held error maps multiplied in (in the order they were applied); from
+        the first read on it is kept up to date at every step."""
+        if self._phi_mode != "kept":
+            if self._phi_mode == "off":
+                raise InvalidArgument("Phi is not kept (transition=False); construct the observer with "
+                                      "transition=True to read it")
+            if self._phi_mode == "dropped":
+                raise InvalidArgument(f"Phi was not read within {self._pending_max} samples of the reset and is no "
+                                      "longer kept (its product costs O(n^3) per sample); construct the observer "
+                                      "with transition=True to keep it")
+            self._phi_mode = "kept"
         Phi = self._Phi
         for K, H in self._pending:
             if H is None:
@@ -382,18 +405,33 @@ class SwitchedObserver:
         return Phi
 
     def _hold_map(self, K: np.ndarray, H: np.ndarray | None) -> None:
+        """Hold the map ``K`` (``H`` None) or ``I - K H`` for ``Phi`` (see :meth:`apply_map`)."""
+        mode = self._phi_mode
+        if mode == "kept":
+            self._Phi = K @ self._Phi if H is None else self._Phi - K @ (H @ self._Phi)
+            return
+        if mode != "held":
+            return
         self._pending.append((K, H))
         for X in (K, H):
             if X is not None and id(X) not in self._pending_ids:
                 self._pending_ids.add(id(X))
                 self._pending_bytes += X.nbytes
-        if len(self._pending) >= _PENDING_MAX or self._pending_bytes >= _PENDING_BYTES:
-            self._transition()
+        if len(self._pending) > self._pending_max or self._pending_bytes > _PENDING_BYTES:
+            self._phi_mode = "dropped"      # nobody read it: stop paying for it
+            self._pending.clear()
+            self._pending_ids.clear()
+            self._pending_bytes = 0
 
     def apply_map(self, E: np.ndarray) -> None:
-        """``Phi <- E Phi`` for a step with error map ``E``. The product is formed when ``Phi`` is
-        read (or when the held maps reach their budget), not per sample: a table sample costs
-        O(n^2) unless something asks for ``Phi``."""
+        """``Phi <- E Phi`` for a step with error map ``E``.
+
+        ``Phi`` costs an n x n product per sample, so it is formed only for a reader
+        (``transition``): by default the maps are held (references to cached matrices) and
+        multiplied out at the first read of :attr:`Phi`, after which ``Phi`` is kept at every
+        step; if it is not read within a budget of held maps (about ``2^31 / (2 n^3)`` of them,
+        at most 65536, and 64 MiB of held arrays) it is no longer kept and reading it raises.
+        ``transition=True`` keeps it from the start; ``False`` never."""
         self._hold_map(E, None)
 
     def apply_correction(self, K: np.ndarray, H: np.ndarray) -> None:
