@@ -145,7 +145,9 @@ class SwitchedObserver:
         LMI gains: propagate ``P`` under ``noise`` (default: when ``noise`` is given).
     relock_rtol : float
         Kalman table: the online recursion returns to the table when its covariance is within
-        this relative distance of the stored one (default 1e-2; see :meth:`_correct`).
+        this relative distance of the stored one (default 1e-3: the published covariance, the
+        stored one from then on, stays within about 1 % of the real one; see
+        :mod:`switchobs_core.family_kalman`).
     rounding_bound : bool
         Keep the exact bound with floating-point rounding (:mod:`switchobs_core.rounding`;
         about 9 us per sample for n = 12). Off: ``envelope().exact_bound`` is ``inf`` (no bound).
@@ -192,7 +194,7 @@ class SwitchedObserver:
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
-                 track_covariance: bool | None = None, relock_rtol: float = 1e-2,
+                 track_covariance: bool | None = None, relock_rtol: float = 1e-3,
                  rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
                  transition: bool | None = None):
         self.system = system
