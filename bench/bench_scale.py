@@ -4,6 +4,7 @@
     python bench/bench_scale.py                 # M = 2, 4, 8, 16, 32, both families, plans
     python bench/bench_scale.py --agents 2 4    # a subset
     python bench/bench_scale.py --out FILE      # also write the markdown section to FILE
+    python bench/bench_scale.py --cost          # only the online cost per sample (issue 20)
 
 What is measured (``camera_agents`` with M agents, n = 4 (M + 1), every h_i = 1 s; one run each,
 as subprocesses, so that every number includes nothing of the others):
@@ -18,6 +19,18 @@ as subprocesses, so that every number includes nothing of the others):
    h_min 0.5 s, tau_max 4 s, every cyclic order for N <= 4, the LMI and Kalman reports of the
    planned cycle): wall and CPU of the whole command, and of the search alone
    (``plan_schedule``, timed after the imports in a fresh interpreter).
+
+4. ``--cost`` (issue 20): the online cost per sample, in this process, of ``camera_agents`` with
+   M = 2, 8, 16, 32 (n = 12, 36, 68, 132), periodic cycle (every h_i = 1 s), 50 Hz, noisy samples
+   (1 mm) of the noise-free plant. Estimators, interleaved in blocks of ``--block`` samples (the
+   order rotated from block to block) and timed by CPU time per block; the medians over the
+   blocks after the first two are reported: the ``kalman`` table with the exact bound (the
+   default), with ``rounding_bound=False``, with ``envelope()`` after every update (what the node
+   does); ``kalman-online`` (exact bound on); a reference Kalman filter in standard form written
+   here (:class:`ReferenceKF`: numpy, discretisation cached, Joseph update); filterpy's
+   ``KalmanFilter`` if it is installed (it is not a dependency); and the bare floor
+   ``x = F x + K (y - H x)`` with precomputed gains. Then the growth exponent of each (least
+   squares of log cost on log n) and issue 20's goals at n = 132 as ratios.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
@@ -37,6 +50,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 from bench_design import machine_info  # the one machine description of the benchmarks
 
 REPO = Path(__file__).resolve().parents[1]
@@ -122,6 +136,172 @@ def bench_plan(tmp: Path, which: str) -> dict:
     return r
 
 
+class ReferenceKF:
+    """A Kalman filter in standard form, written here (independent of switchobs_core): ``F = e^{A dt}``
+    and ``Q_d`` (van Loan) cached per step; predict ``x = F x``, ``P = F P F' + Q_d``; correct
+    ``S = H P H' + R``, ``K = P H' S^-1``, ``x += K (y - H x)``, ``P = (I - K H) P (I - K H)' + K R K'``
+    (Joseph), symmetrised."""
+
+    def __init__(self, A: np.ndarray, Q_c: np.ndarray, P0: np.ndarray, R: np.ndarray):
+        self.A, self.Q_c, self.R = A, Q_c, R
+        self.n = A.shape[0]
+        self.x, self.P, self.I = np.zeros(self.n), P0.copy(), np.eye(self.n)
+        self.t: float | None = None
+        self.K: np.ndarray | None = None
+        self._disc: dict = {}
+
+    def _discretize(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        from scipy.linalg import expm
+
+        key = round(dt * 1e9)
+        hit = self._disc.get(key)
+        if hit is None:
+            n = self.n
+            M = np.zeros((2 * n, 2 * n))
+            M[:n, :n], M[:n, n:], M[n:, n:] = -self.A, self.Q_c, self.A.T
+            E = expm(M * dt)
+            F = E[n:, n:].T
+            hit = self._disc[key] = (F, F @ E[:n, n:])
+        return hit
+
+    def update(self, t: float, H: np.ndarray, y: np.ndarray) -> np.ndarray:
+        if self.t is not None and t > self.t:
+            F, Qd = self._discretize(t - self.t)
+            self.x = F @ self.x
+            self.P = F @ self.P @ F.T + Qd
+        self.t = t
+        PHt = self.P @ H.T
+        self.K = K = PHt @ np.linalg.inv(H @ PHt + self.R)
+        self.x = self.x + K @ (y - H @ self.x)
+        IKH = self.I - K @ H
+        P = IKH @ self.P @ IKH.T + K @ self.R @ K.T
+        self.P = 0.5 * (P + P.T)
+        return self.x
+
+
+def _cost_setup(M: int, samples: int, rate: float = 50.0) -> tuple:
+    """(system, cycle, Kalman table, stream of (t, channel, H, y)) for ``camera_agents(M)``."""
+    import switchobs_core as so
+
+    system = so.camera_agents(M)
+    cycle = so.Cycle([1.0] * M)
+    table = so.kalman_table(system, [so.design_kalman(system, cycle, rate)])
+    sched = so.PeriodicSchedule(cycle)
+    rng = np.random.default_rng(M)
+    x = np.zeros(system.n)
+    x[0::4], x[1::4] = rng.uniform(-5, 5, M + 1), rng.uniform(-5, 5, M + 1)     # positions; at rest
+    stream = []
+    for k in range(samples):
+        t = k / rate
+        ch = sched.channel_at(t)
+        H = np.asarray(system.C[ch - 1])
+        stream.append((t, ch, H, H @ x + rng.normal(scale=1e-3, size=H.shape[0])))
+    return system, cycle, table, stream
+
+
+def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
+    """(name -> per-sample callable ``f(k)`` on sample ``k`` of ``stream`` (module docstring, item 4),
+    the three table observers)."""
+    import switchobs_core as so
+
+    noise = so.default_noise(system)
+    A = np.asarray(system.A, dtype=float)
+
+    def observer(**kw):
+        return so.SwitchedObserver(system, table, "periodic", [cycle], **kw)
+
+    tab, nob, env, onl = observer(), observer(rounding_bound=False), observer(), observer(family="kalman-online")
+    ref = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
+    # the floor's gains: the reference recursion's, run once over the stream beforehand
+    pre = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
+    F = pre._discretize(stream[1][0] - stream[0][0])[0]
+    gains = []
+    for t, _, H, y in stream:
+        pre.update(t, H, y)
+        gains.append(pre.K)
+    xf = [np.zeros(system.n)]
+
+    def floor(k):
+        t, ch, H, y = stream[k]
+        x = F @ xf[0]
+        x += gains[k] @ (y - H @ x)
+        xf[0] = x
+
+    out = {
+        "kalman table, exact bound": lambda k: tab.update(stream[k][0], stream[k][1], stream[k][3]),
+        "kalman table, rounding_bound=False": lambda k: nob.update(stream[k][0], stream[k][1], stream[k][3]),
+        "kalman table + envelope() (the node)": lambda k: (env.update(stream[k][0], stream[k][1], stream[k][3]),
+                                                           env.envelope()),
+        "kalman-online, exact bound": lambda k: onl.update(stream[k][0], stream[k][1], stream[k][3]),
+        "reference Kalman filter (standard form, numpy)": lambda k: ref.update(stream[k][0], stream[k][2],
+                                                                               stream[k][3]),
+    }
+    try:
+        from filterpy.kalman import KalmanFilter
+    except ImportError:
+        pass
+    else:
+        kf = KalmanFilter(dim_x=system.n, dim_z=4)
+        kf.F, kf.Q, kf.P, kf.R = F, ref._discretize(1 / 50.0)[1], noise.P0.copy(), noise.R(1)
+
+        def fpy(k):
+            kf.predict()
+            kf.update(stream[k][3], H=stream[k][2])
+
+        out["filterpy KalmanFilter"] = fpy
+    out["bare floor x = F x + K (y - H x)"] = floor
+    return out, [tab, nob, env]
+
+
+def bench_cost(M: int, samples: int, block: int) -> dict:
+    """Median CPU time per sample of each estimator (interleaved blocks; module docstring, item 4)."""
+    system, cycle, table, stream = _cost_setup(M, samples)
+    est, tables = _estimators(system, cycle, table, stream)
+    names = list(est)
+    times: dict = {name: [] for name in names}
+    for b, start in enumerate(range(0, samples - block + 1, block)):
+        order = names[b % len(names):] + names[: b % len(names)]
+        for name in order:
+            f = est[name]
+            c = time.process_time_ns()
+            for k in range(start, start + block):
+                f(k)
+            times[name].append((time.process_time_ns() - c) / block / 1e3)
+    # the table observers must have stayed on the table (a departure would time the online recursion)
+    departures = [getattr(o, "kalman_departures", None) for o in tables]
+    return {"n": system.n, "median_us": {k: float(np.median(v[2:])) for k, v in times.items()},
+            "blocks": len(times[names[0]]) - 2, "departures": departures,
+            "source": [getattr(o, "gains_source", "?") for o in tables]}
+
+
+def cost_report(rows: list[dict], label: str) -> str:
+    """The markdown of ``--cost``: medians per n, growth exponents, issue 20's goals at the largest n."""
+    names = list(rows[0]["median_us"])
+    ns = [r["n"] for r in rows]
+    lines = [f"| estimator (us per sample, median) | {' | '.join(f'n = {n}' for n in ns)} | exponent p |",
+             "|---|" + "---|" * (len(ns) + 1)]
+    for name in names:
+        v = [r["median_us"][name] for r in rows]
+        p = float(np.polyfit(np.log(ns), np.log(v), 1)[0]) if len(ns) > 1 else float("nan")
+        lines.append(f"| {name} | {' | '.join(f'{x:.1f}' for x in v)} | {p:.2f} |")
+    if "filterpy KalmanFilter" not in names:
+        lines.append(f"| filterpy KalmanFilter | {' | '.join('not installed' for _ in ns)} | - |")
+    last = rows[-1]["median_us"]
+    ref = last["reference Kalman filter (standard form, numpy)"]
+    goals = [
+        ("table + exact bound + envelope() <= 1/3 of the reference", last["kalman table + envelope() (the node)"] / ref,
+         1 / 3),
+        ("table without the bound <= 3x the floor",
+         last["kalman table, rounding_bound=False"] / last["bare floor x = F x + K (y - H x)"], 3.0),
+        ("kalman-online <= 1.5x the reference", last["kalman-online, exact bound"] / ref, 1.5),
+    ]
+    lines += ["", f"| goal at n = {ns[-1]} (issue 20) | ratio ({label}) | status |", "|---|---|---|"]
+    lines += [f"| {g} | {r:.2f} | {'met' if r <= lim else '**not met**'} |" for g, r, lim in goals]
+    lines.append(f"| (table with the exact bound / reference) | "
+                 f"{last['kalman table, exact bound'] / ref:.2f} | - |")
+    return "\n".join(lines) + "\n"
+
+
 def _machine() -> str:
     info = machine_info()          # bench_design's: the CPU, cores and versions of this machine
     return f"{platform.node()}: {info['cpu']}, {os.cpu_count()} cores, Python {platform.python_version()}"
@@ -134,7 +314,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-plan", action="store_true")
     ap.add_argument("--no-design", action="store_true", help="only the plans")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--cost", action="store_true", help="only the online cost per sample (item 4)")
+    ap.add_argument("--cost-agents", type=int, nargs="+", default=[2, 8, 16, 32])
+    ap.add_argument("--samples", type=int, default=1000, help="--cost: samples per n (default 1000, 20 s)")
+    ap.add_argument("--block", type=int, default=25, help="--cost: samples per timed block (default 25)")
+    ap.add_argument("--label", default="", help="--cost: what code is measured (default: its git commit)")
     a = ap.parse_args(argv)
+    if a.cost:
+        return main_cost(a)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=REPO).stdout.strip()
     load0 = os.getloadavg()
@@ -177,6 +364,34 @@ def main(argv: list[str] | None = None) -> int:
                          f"{r.get('search_wall', nan):.2f} s | {r.get('search_cpu', nan):.2f} s | "
                          f"{r.get('evaluations', nan):.0f} | {r['wall']:.1f} s | {r['cpu']:.1f} s | {r['rc']} |")
     text = "\n".join(lines) + "\n"
+    print(text)
+    if a.out:
+        a.out.write_text(text)
+    return 0
+
+
+def main_cost(a: argparse.Namespace) -> int:
+    """``--cost``: item 4 of the module docstring."""
+    import switchobs_core
+    from switchobs_core.threads import single_threaded_blas
+
+    single_threaded_blas()
+    src = Path(switchobs_core.__file__).resolve().parents[1]
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=src).stdout.strip() or "?"
+    label = a.label or f"commit {commit}"
+    load0 = os.getloadavg()
+    rows = []
+    for M in sorted(a.cost_agents):
+        c = time.process_time()
+        rows.append(bench_cost(M, a.samples, a.block))
+        print(f"M={M} (n={rows[-1]['n']}): {time.process_time() - c:.1f} s CPU, table departures "
+              f"{rows[-1]['departures']}, last gains from {rows[-1]['source']}, "
+              + ", ".join(f"{k}: {v:.1f} us" for k, v in rows[-1]["median_us"].items()), file=sys.stderr, flush=True)
+    load1 = os.getloadavg()
+    text = (f"Machine: {_machine()}; {label} (switchobs_core from {src}); load average {load0[0]:.1f} before, "
+            f"{load1[0]:.1f} after; {a.samples} samples per n in blocks of {a.block} "
+            f"({rows[0]['blocks']} blocks in the medians).\n\n" + cost_report(rows, label))
     print(text)
     if a.out:
         a.out.write_text(text)

@@ -22,12 +22,18 @@ cvxpy (only a design or a Lyapunov/box certificate solve does).
 import sys as _sys
 
 from . import (
+    bound,
     certificate,
     cycles,
     decomposition,
     design,
     envelope,
     exceptions,
+    families,
+    family_base,
+    family_kalman,
+    family_lmi,
+    family_online,
     gains,
     kalman,
     kalman_online,
@@ -47,12 +53,18 @@ from . import (
     validation,
 )
 from ._version import __version__
+from .bound import *  # noqa: F403
 from .certificate import *  # noqa: F403
 from .cycles import *  # noqa: F403
 from .decomposition import *  # noqa: F403
 from .design import *  # noqa: F403
 from .envelope import *  # noqa: F403
 from .exceptions import *  # noqa: F403
+from .families import *  # noqa: F403
+from .family_base import *  # noqa: F403
+from .family_kalman import *  # noqa: F403
+from .family_lmi import *  # noqa: F403
+from .family_online import *  # noqa: F403
 from .gains import *  # noqa: F403
 from .kalman import *  # noqa: F403
 from .kalman_online import *  # noqa: F403
@@ -75,8 +87,8 @@ from .validation import *  # noqa: F403
 simulate = _sys.modules[f"{__name__}.simulate"]  # noqa: F811
 
 #: Every module whose ``__all__`` is re-exported here.
-MODULES = (certificate, cycles, decomposition, design, envelope, exceptions, gains, kalman, kalman_online, noise,
-           observer, plan, plant, propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads,
-           validation)
+MODULES = (bound, certificate, cycles, decomposition, design, envelope, exceptions, families, family_base,
+           family_kalman, family_lmi, family_online, gains, kalman, kalman_online, noise, observer, plan, plant,
+           propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads, validation)
 
 __all__ = ["__version__", *(name for m in MODULES for name in m.__all__ if name not in ("simulate",))]

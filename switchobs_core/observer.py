@@ -60,92 +60,46 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .bound import RoundingBound
 from .certificate.paper import design_dead_time
 from .cycles import CycleRecord, CycleTracker, Residence
 from .decomposition import observability_decomposition
 from .envelope import Envelope, EnvelopeTracker
 from .envelope import alpha as _alpha
-from .exceptions import InvalidArgument, ScheduleError
-from .kalman import KalmanDesign, Phase
-from .noise import NoiseModel, default_noise
+from .exceptions import InvalidArgument
+from .families import FAMILY_NAMES, family_entry, family_of_table
+from .family_base import ScheduledCycle
+from .kalman import KalmanDesign
+from .noise import NoiseModel
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
-from .riccati import DiscretizationCache, joseph, symmetrize
-from .riccati import gain as riccati_gain
-from .rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
+from .riccati import DiscretizationCache, symmetrize
 from .schedule import BLIND_TOL
 
 __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
 
-#: Largest stamp offset from the Kalman table's sample grid, in sample periods (as phase_at).
-_MAX_JITTER = 0.25
-#: Entries of the Kalman table's fused step cache (phase, channel, rows, dt) before it is cleared.
-_FUSED_MAX = 8192
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
 
 #: Schedule modes accepted by :class:`SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
-#: Gain families (module docstring): the paper's LMI gains, offline Kalman tables, online Riccati.
-FAMILIES = ("lmi", "kalman", "kalman-online")
+#: Gain families (:data:`switchobs_core.families.REGISTRY`): the paper's LMI gains, offline Kalman
+#: tables, online Riccati.
+FAMILIES = FAMILY_NAMES
 #: What may be held between samples (module docstring).
 HOLDS = ("innovation", "measurement")
 #: Largest accepted norm of a sample (and magnitude of an input entry): beyond it the products
 #: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
 _MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
-
-
-@dataclass(frozen=True)
-class ScheduledCycle:
-    """A promised cycle of a Kalman-family observer (the residence bookkeeping's design).
-
-    Kalman gains have no per-channel ``kappa``, ``eta``, ``mu`` (the paper's quantities of LMI
-    gains): they are None, and the paper's factors and envelopes are not applicable.
-    """
-
-    cycle: Any
-    h_bounds: Any = None
-    kappa: Any = None
-    eta: Any = None
-    mu: Any = None
-    f: Any = None
-    kind: str = "kalman"
-
-    def label(self) -> str:
-        return "any schedule (online Riccati)" if self.cycle is None else self.cycle.label()
-
-
-def _check_bounds(bounds: Any) -> tuple[float, float] | None:
-    """A2's ``(h_min, h_max)`` as floats with ``0 < h_min <= h_max < inf`` (None passes)."""
-    if bounds is None:
-        return None
-    hmin, hmax = (float(b) for b in bounds)
-    if not (0 < hmin <= hmax and math.isfinite(hmax)):
-        raise InvalidArgument(f"bounds must satisfy 0 < h_min <= h_max; got {bounds}")
-    return (hmin, hmax)
-
-
-def _check_cycles(cycles: Any, mode: str, N: int) -> list:
-    """The promised cycles of periodic (one) or sequence (K >= 1) mode, each with N times."""
-    if cycles is None:
-        raise InvalidArgument(f"cycles is required in {mode} mode")
-    if not isinstance(cycles, (list, tuple)):
-        cycles = [cycles]
-    if len(cycles) == 0:
-        raise InvalidArgument("cycles must hold at least one cycle")
-    if mode == "periodic" and len(cycles) != 1:
-        raise InvalidArgument(f"periodic mode takes exactly one cycle; got {len(cycles)} (use mode='sequence')")
-    for c in cycles:
-        h = getattr(c, "h", None)
-        if h is None or len(h) != N:
-            raise ScheduleError(f"cycles: {c!r} does not have {N} residence times h")
-    return list(cycles)
-
+#: Floating-point work (flops, about ``2 n^3`` per held map) a first read of ``Phi`` may cost: beyond
+#: it (or beyond :data:`_PENDING_BYTES` of held arrays) an unread ``Phi`` is no longer kept.
+_PENDING_FLOPS = 2**31
+#: Bytes of distinct arrays the held maps may keep alive.
+_PENDING_BYTES = 64 << 20
 
 class SwitchedObserver:
     """Switched Luenberger observer with exact ZOH propagation (e:switched_observer).
@@ -191,7 +145,9 @@ class SwitchedObserver:
         LMI gains: propagate ``P`` under ``noise`` (default: when ``noise`` is given).
     relock_rtol : float
         Kalman table: the online recursion returns to the table when its covariance is within
-        this relative distance of the stored one (default 1e-2; see :meth:`_correct`).
+        this relative distance of the stored one (default 1e-3: the published covariance, the
+        stored one from then on, stays within about 1 % of the real one; see
+        :mod:`switchobs_core.family_kalman`).
     rounding_bound : bool
         Keep the exact bound with floating-point rounding (:mod:`switchobs_core.rounding`;
         about 9 us per sample for n = 12). Off: ``envelope().exact_bound`` is ``inf`` (no bound).
@@ -203,6 +159,10 @@ class SwitchedObserver:
         image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
         :mod:`switchobs_core.rounding`; about as much work again per sample). Needs
         ``rounding_bound`` and innovation hold.
+    transition : bool, optional
+        Keep the error transition :attr:`Phi` (an n x n product per sample): True from the
+        start, False never, None (default) from its first read if that comes within a budget of
+        samples after the reset (:meth:`apply_map`).
 
     Raises
     ------
@@ -234,8 +194,9 @@ class SwitchedObserver:
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
-                 track_covariance: bool | None = None, relock_rtol: float = 1e-2,
-                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None):
+                 track_covariance: bool | None = None, relock_rtol: float = 1e-3,
+                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
+                 transition: bool | None = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -258,58 +219,30 @@ class SwitchedObserver:
         for name, v in (("cache_size", cache_size), ("max_records", max_records)):
             if not isinstance(v, (int, np.integer)) or v < 1:
                 raise InvalidArgument(f"{name} must be an integer >= 1; got {v!r}")
-        # 1. gain family (module docstring): the table's, or kalman-online on request; a
-        #    kalman table in robust mode (no promised schedule) runs the recursion online
-        family = getattr(table, "family", "lmi") if family is None else family
-        if family not in FAMILIES:
-            raise InvalidArgument(f"family must be one of {FAMILIES}; got {family!r}")
-        if family == "kalman" and mode == "robust":
-            family = "kalman-online"
-        if family != "lmi" and hold != "innovation":
-            raise InvalidArgument("hold='measurement' applies to the LMI family only")
-        if family == "lmi" and getattr(table, "family", "lmi") != "lmi":
-            raise InvalidArgument(f"family 'lmi' needs an LMI gain table; this table holds {table.family!r} gains")
-        self.family = family
+        # 1. gain family (module docstring, switchobs_core.families): the table's, or another on
+        #    request; a family with no promised schedule in robust mode hands over to its entry's
+        entry = family_entry(family_of_table(table) if family is None else family)
+        if mode == "robust":
+            entry = family_entry(entry.robust)
+        Family = entry.type()
+        if hold not in Family.holds:
+            raise InvalidArgument(f"hold={hold!r} is not available with the {entry.name!r} family "
+                                  f"(it holds {', '.join(Family.holds)}); hold='measurement' applies to the LMI "
+                                  "family only")
+        self.family = entry.name
         self.rounding_bound = bool(rounding_bound)
         self.noise_max = self._check_noise_max(noise_max, hold)
-        self.kalman: KalmanDesign | None = None
         self.relock_rtol = float(relock_rtol)
         if not (math.isfinite(self.relock_rtol) and self.relock_rtol >= 0):
             raise InvalidArgument(f"relock_rtol must be a finite number >= 0; got {relock_rtol!r}")
-        # 2. designs of the mode
-        if family != "lmi":
-            self._init_kalman(table, mode, cycles, bounds, noise)
-        elif mode == "robust":
-            d = getattr(table, "robust", None)
-            if d is None:
-                raise InvalidArgument("table has no robust design (table.robust is None); "
-                                      "design one with design_table(..., robust=(h_min, h_max))")
-            self.designs = (d,)
-            self.promised = (None,)
-            self.bounds = _check_bounds(getattr(d, "h_bounds", None) if bounds is None else bounds)
-        else:
-            cycles = _check_cycles(cycles, mode, self.N)
-            self.designs = tuple(table.lookup(c) for c in cycles)
-            self.promised = tuple(cycles)
-            self.bounds = None
-        for d in self.designs if family == "lmi" else ():
-            for i, Li in enumerate(d.L):
-                if np.shape(Li) != (self.n, self.p[i]):
-                    raise InvalidArgument(f"design gain L_{i + 1} has shape {np.shape(Li)}; "
-                                          f"expected {(self.n, self.p[i])}")
-        self._L = tuple(tuple(np.ascontiguousarray(Li, dtype=float) for Li in d.L)
-                        for d in self.designs) if family == "lmi" else ()
-        # covariance: the filter's own for the Kalman families; for LMI gains propagated under
-        # the noise model when one is given (or asked for)
-        if family == "lmi":
-            if track_covariance is None:
-                track_covariance = noise is not None
-            if track_covariance and noise is None:
-                noise = default_noise(system)
-            if track_covariance and hold != "innovation":
-                raise InvalidArgument("track_covariance needs hold='innovation' (the exact error map)")
-            self.noise = noise
-        self.track_covariance = bool(track_covariance) or family != "lmi"
+        self._nA = float(np.linalg.norm(self.A, 2))
+        # 2. the family: designs of the mode, gains, covariance
+        self._gains = gains = Family(self, table, mode, cycles, bounds=bounds, noise=noise,
+                                     track_covariance=track_covariance, relock_rtol=self.relock_rtol)
+        self.designs, self.promised, self.bounds = gains.designs, gains.promised, gains.bounds
+        self.kalman: KalmanDesign | None = gains.kalman
+        self.noise: NoiseModel | None = gains.noise
+        self.track_covariance = bool(gains.track_covariance)
         if self.noise is not None:
             self.noise.check_system(system)
             self._dcache = DiscretizationCache(self.A, self.B, self.noise.Q_c,
@@ -325,17 +258,19 @@ class SwitchedObserver:
         self.e0 = e0
         self._cache = ZOHCache(cache_size, dt_resolution)
         self._cache.register(("open",), self.A, None, self.B)
-        self._fused: dict = {}
-        # constants of the rounding bound: ||A||_F, ||A||_2 (step quantum), gamma_{n+1}, gamma_{p+1}
         self._I = np.eye(self.n)
-        self._fA = float(np.linalg.norm(self.A))
-        self._nA = float(np.linalg.norm(self.A, 2))
-        self._g_n = gamma(self.n + 2)
-        self._g_p = gamma(max(self.p) + 2)
-        self._keys: dict = {}
+        # the rounding-aware bounds (switchobs_core.bound): innovation hold and Kalman
+        self._bound = (RoundingBound(self.A, max(self.p), self.e0, self.noise_max)
+                       if self.hold == "innovation" and self.rounding_bound else None)
         self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
         self._cycles = CycleTracker(self.N, self.mode, self.bounds, self.match_tol, float(t0))
+        # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
+        if transition is not None and not isinstance(transition, (bool, np.bool_)):
+            raise InvalidArgument(f"transition must be True, False or None; got {transition!r}")
+        self._phi_init = ("kept" if transition or self.hold == "measurement" else
+                          "held" if transition is None else "off")
+        self._pending_max = int(min(max(_PENDING_FLOPS // (2 * self.n ** 3), 256), 65536))
         self._x0_init = x0
         self._t0_init = t0
         self.reset(x0, t0)
@@ -370,29 +305,43 @@ class SwitchedObserver:
         self._key = ("open",)
         self._entry_L = False
         self._Phi = np.eye(self.n)
-        # the rounding-aware bound (module switchobs_core.rounding): innovation hold and Kalman
-        self._ell = ErrorEllipsoid(self.n, self.e0) if self.hold == "innovation" and self.rounding_bound else None
-        # the same ellipsoid with the declared noise's image added to every step (noise_max)
-        self._ellv = ErrorEllipsoid(self.n, self.e0) if self._ell is not None and self.noise_max else None
-        self._vn = 0.0      # sqrt(p) v_max of the held sample (the noise's largest norm)
-        self._nu_err = 0.0
+        self._phi_mode = self._phi_init    # "kept", "held" (until read), "dropped", "off": see apply_map
+        self._pending: list = []        # error maps not yet multiplied into Phi (see apply_map)
+        self._pending_ids: set = set()
+        self._pending_bytes = 0
+        self._span = 0.0                # time between the last two samples
+        self._env_cache: tuple | None = None     # (exact, noise) bounds of the current sets
+        if self._bound is not None:
+            self._bound.reset()
         self._k = -1
         self._phase = 0  # sequence mode: offset of the design index, re-synced on mismatch
         self.resyncs = 0
         self._cycles.reset(t0)
         self._records.clear()
-        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self.family == "lmi" else None
-        # covariance and Kalman bookkeeping
+        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
+        # covariance: the family's own
         self._P = self.noise.P0.copy() if self.track_covariance else None
-        self._P_fresh = True
-        self._R_held = None
-        self._origin: float | None = None
-        self._kphase: Phase | None = None
-        self._kgain: tuple | None = None
-        self._online = self.family == "kalman-online"
-        self.kalman_fallback = ""
-        self.kalman_departures = 0
-        self.kalman_relocks = 0
+        self._gains.reset(self)
+
+    @property
+    def gains(self) -> Any:
+        """The gain family in use (:mod:`switchobs_core.families`)."""
+        return self._gains
+
+    @property
+    def kalman_fallback(self) -> str:
+        """Why the Kalman table last left its cache ("" if it has not since the reset)."""
+        return getattr(self._gains, "fallback", "")
+
+    @property
+    def kalman_departures(self) -> int:
+        """Departures of the Kalman table from its cache since the reset (0 for other families)."""
+        return getattr(self._gains, "departures", 0)
+
+    @property
+    def kalman_relocks(self) -> int:
+        """Returns of the Kalman table to its cache since the reset (0 for other families)."""
+        return getattr(self._gains, "relocks", 0)
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -431,35 +380,77 @@ class SwitchedObserver:
         With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
         with no noise and a known input); with measurement hold it is the error-to-error part.
         """
-        return self._Phi.copy()
+        return self._transition().copy()
+
+    def _transition(self) -> np.ndarray:
+        """``Phi`` with the held error maps multiplied in (in the order they were applied); from
+        the first read on it is kept up to date at every step."""
+        if self._phi_mode != "kept":
+            if self._phi_mode == "off":
+                raise InvalidArgument("Phi is not kept (transition=False); construct the observer with "
+                                      "transition=True to read it")
+            if self._phi_mode == "dropped":
+                raise InvalidArgument(f"Phi was not read within {self._pending_max} samples of the reset and is no "
+                                      "longer kept (its product costs O(n^3) per sample); construct the observer "
+                                      "with transition=True to keep it")
+            self._phi_mode = "kept"
+        Phi = self._Phi
+        for K, H in self._pending:
+            if H is None:
+                Phi = K @ Phi
+            else:
+                Phi -= K @ (H @ Phi)
+        self._Phi = Phi
+        self._pending.clear()
+        self._pending_ids.clear()
+        self._pending_bytes = 0
+        return Phi
+
+    def _hold_map(self, K: np.ndarray, H: np.ndarray | None) -> None:
+        """Hold the map ``K`` (``H`` None) or ``I - K H`` for ``Phi`` (see :meth:`apply_map`)."""
+        mode = self._phi_mode
+        if mode == "kept":
+            self._Phi = K @ self._Phi if H is None else self._Phi - K @ (H @ self._Phi)
+            return
+        if mode != "held":
+            return
+        self._pending.append((K, H))
+        for X in (K, H):
+            if X is not None and id(X) not in self._pending_ids:
+                self._pending_ids.add(id(X))
+                self._pending_bytes += X.nbytes
+        if len(self._pending) > self._pending_max or self._pending_bytes > _PENDING_BYTES:
+            self._phi_mode = "dropped"      # nobody read it: stop paying for it
+            self._pending.clear()
+            self._pending_ids.clear()
+            self._pending_bytes = 0
+
+    def apply_map(self, E: np.ndarray) -> None:
+        """``Phi <- E Phi`` for a step with error map ``E``.
+
+        ``Phi`` costs an n x n product per sample, so it is formed only for a reader
+        (``transition``): by default the maps are held (references to cached matrices) and
+        multiplied out at the first read of :attr:`Phi`, after which ``Phi`` is kept at every
+        step; if it is not read within a budget of held maps (about ``2^31 / (2 n^3)`` of them,
+        at most 65536, and 64 MiB of held arrays) it is no longer kept and reading it raises.
+        ``transition=True`` keeps it from the start; ``False`` never."""
+        self._hold_map(E, None)
+
+    def apply_correction(self, K: np.ndarray, H: np.ndarray) -> None:
+        """``Phi <- (I - K H) Phi`` for a correction with gain ``K`` and rows ``H`` (held as :meth:`apply_map`)."""
+        self._hold_map(K, H)
+
+    def rows_of(self, channel: int, rows: tuple | None) -> np.ndarray:
+        """``H = C_channel[rows]`` (all rows for None)."""
+        C = self.C[channel - 1]
+        return C if rows is None else C[list(rows)]
 
     @property
     def cache(self) -> ZOHCache:
         """The ZOH step cache (``hits``, ``misses``)."""
         return self._cache
 
-    # ------------------------------------------------------------------ gains
-    def _gain_key(self, channel: int, rows: Any) -> tuple:
-        """Cache key of channel ``channel`` with output rows ``rows`` under the current design."""
-        di = self.design_index
-        ck = (di, channel, rows)
-        key = self._keys.get(ck)
-        if key is not None:
-            return key
-        Ci = self.C[channel - 1]
-        Li = self._L[di][channel - 1]
-        if rows is not None:
-            Ci = Ci[list(rows), :]
-            Li = Li[:, list(rows)]
-        key = ck
-        if self.hold == "innovation":
-            self._cache.register(key, self.A, Li, self.B, C=Ci)
-        else:
-            self._cache.register(key, self.A - Li @ Ci, Li, self.B)
-        self._Crows[key] = Ci
-        self._keys[ck] = key
-        return key
-
+    # ------------------------------------------------------------------ samples
     def _rows(self, channel: int, rows: Any) -> tuple | None:
         if rows is None:
             return None
@@ -538,34 +529,22 @@ class SwitchedObserver:
                 raise InvalidArgument(f"u must hold {self.m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
                                       f"got {u.tolist()}")
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
-        #    (the Kalman table fuses it with its correction: one map per phase, see _correct)
-        fuse = self.family == "kalman" and not self._online and self._u_zero
+        #    (a family may fuse it with its correction: the Kalman table's one map per phase)
+        fuse = self._gains.fuses(self)
+        self._env_cache = None
         if dt > 0 and not fuse:
             self._step(dt)
         self._t = t
+        self._span = dt
         # 2. switching instant
         if channel != self._channel:
             self._switch(t, channel)
-        # 3. hold the new sample's innovation (or the sample) and input from t on
+        # 3. hold the new sample's input from t on; the family takes the sample (holds its
+        #    innovation, or corrects)
         if u is not None:
             self._u = u
             self._u_zero = not u.any()
-        if self.family == "lmi":
-            if t < self._blind_until:     # dead time after the switch: no gain (module docstring)
-                rows, y, p = (), y[:0], 0
-            self._key = self._gain_key(channel, rows)
-            self._y = y - self._Crows[self._key] @ self._x if self.hold == "innovation" else y
-            if self._ell is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-                Cr = self._Crows[self._key]
-                self._nu_err = (self._g_n * float(np.linalg.norm(Cr)) * math.sqrt(float(self._x @ self._x))
-                                + 2.0 * UNIT_ROUNDOFF * math.sqrt(float(y @ y)))
-            if self._ellv is not None:
-                self._vn = math.sqrt(p) * self.noise_max[channel - 1]
-            self._entry_L = True
-            if self._P is not None:
-                self._R_held = self.noise.R(channel, rows)
-        else:
-            self._correct(t, dt if fuse else 0.0, channel, y, rows)
+        self._gains.sample(self, t, dt if fuse else 0.0, channel, y, rows)
         return self._x
 
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
@@ -595,12 +574,10 @@ class SwitchedObserver:
                 raise InvalidArgument(f"value {v!r} for state {i} must be finite (|v| <= {MAX_ABS_SAMPLE:g})")
         if any(float(v) < 0 for v in (variances or {}).values()):
             raise InvalidArgument("variances must be >= 0")
-        if self.family != "lmi" and not self._online:    # from the table's covariance to the online recursion
-            self._P = self.P
-            self._online = True
-            self.kalman_departures += 1
-            self.kalman_fallback = "the state was set (set_estimate); running the Riccati recursion online"
+        # a cache of the recursion (the Kalman table) leaves it: the real covariance runs online
+        self._gains.depart(self, "the state was set (set_estimate); running the Riccati recursion online")
         if dt > 0:
+            self._env_cache = None
             self._step(dt)
             self._t = float(t)
         P = self.P
@@ -627,13 +604,11 @@ class SwitchedObserver:
         if not self._u_zero:
             x += e.GB @ self._u
         self._x = x
-        self._Phi = e.E @ self._Phi
-        if self._ell is not None:
-            xn_new = math.sqrt(float(x @ x))
-            self._ell.step(e.E, self._rho_step(e, dt, xn, xn_new, self._ell))
-            if self._ellv is not None:
-                self._noise_step(self._ellv, e.E, self._rho_step(e, dt, xn, xn_new, self._ellv), e.GL)
-        if covariance and self._P is not None and (self.family == "lmi" or self._online):
+        self.apply_map(e.E)
+        if self._bound is not None:
+            self._bound.step(e, dt, xn, math.sqrt(float(x @ x)), self._y if self._entry_L else None,
+                             None if self._u_zero else self._u)
+        if covariance and self._P is not None and self._gains.steps_covariance():
             self._propagate_covariance(e, dt)
 
     def _check_noise_max(self, noise_max: Any, hold: str) -> tuple[float, ...] | None:
@@ -654,84 +629,6 @@ class SwitchedObserver:
                                   "(the noise bound extends the rounding-aware exact bound)")
         return tuple(out * self.N if len(out) == 1 else out)
 
-    # ------------------------------------------------------------------ rounding (exact_bound)
-    def _rho_step(self, e: Any, dt: float, xn: float, xn_new: float, ell: ErrorEllipsoid) -> float:
-        """Residual bound ``rho`` of one exact step in floating point (module
-        :mod:`switchobs_core.rounding`, steps 2-4): the exponential's error and the step
-        quantum, times ``||x|| <= ||x_hat|| + ||e||`` (``||e||`` from ``ell``, the ellipsoid
-        being stepped), plus the rounding of the products."""
-        u = UNIT_ROUNDOFF
-        quant = abs(dt - e.dt) * self._fA * math.exp(min(self._nA * max(dt, e.dt), 700.0))   # no OverflowError
-        rho = (e.eps + quant) * (xn + ell.trace_bound()) + self._g_n * e.fPhi * xn + u * xn_new
-        if self._entry_L:
-            nu = math.sqrt(float(self._y @ self._y))
-            rho += self._g_p * e.fGL * nu + e.fGL * self._nu_err
-        if not self._u_zero:
-            un = math.sqrt(float(self._u @ self._u))
-            rho += (e.eps + self._g_n * float(np.linalg.norm(e.GB))) * un
-        return rho
-
-    def _noise_step(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-                    keep: bool = True) -> tuple | None:
-        """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
-        (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
-        if self._entry_L and GL is not None and self._vn > 0.0:
-            if keep:
-                ell.step_shaped(E, rho, GL, self._vn ** 2)
-                return None
-            return ell.propagate_shaped(E, rho, GL, self._vn ** 2)
-        if keep:
-            ell.step(E, rho)
-            return None
-        return ell.propagate(E, rho)
-
-    def _rho_correct(self, fK: float, fH: float, xn_minus: float, yn: float, nun: float, xn_plus: float) -> float:
-        """Residual bound of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating point
-        (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u ||y||``)."""
-        u = UNIT_ROUNDOFF
-        return fK * (self._g_n * fH * xn_minus + 2.0 * u * yn) + self._g_p * fK * nun + u * xn_plus
-
-    def _kalman_fix(self, K: np.ndarray, H: np.ndarray, y: np.ndarray) -> None:
-        """The correction and its error map ``I - K H`` (applied to Phi and the error ellipsoid)."""
-        x = self._x
-        xn = math.sqrt(float(x @ x))
-        nu = y - H @ x
-        x += K @ nu
-        self._Phi -= K @ (H @ self._Phi)
-        if self._ell is not None:
-            M = self._I - K @ H
-            fK = float(np.linalg.norm(K))
-            rho = self._rho_correct(fK, float(np.linalg.norm(H)), xn,
-                                    math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
-            self._ell.step(M, rho)
-            if self._ellv is not None:      # e^+ = (I - K H) e^- + K v
-                self._ellv.step_shaped(M, rho, K, y.size * self.noise_max[self._channel - 1] ** 2)
-
-    # ------------------------------------------------------------------ Kalman families
-    def _init_kalman(self, table: Any, mode: str, cycles: Any, bounds: Any, noise: NoiseModel | None) -> None:
-        """Designs of the Kalman families: the stored table design of the promised cycle
-        sequence (``kalman``) or the noise model alone (``kalman-online``)."""
-        stored = getattr(table, "family", "lmi") == "kalman"
-        if mode == "robust":
-            self.designs = (ScheduledCycle(None, h_bounds=bounds),)
-            self.promised = (None,)
-            self.bounds = _check_bounds(bounds)
-            cycles = []
-        else:
-            cycles = _check_cycles(cycles, mode, self.N)
-            self.designs = tuple(ScheduledCycle(c) for c in cycles)
-            self.promised = tuple(cycles)
-            self.bounds = None
-        if self.family == "kalman":
-            self.kalman = table.kalman_design(cycles, self.system)
-            if noise is not None and noise.fingerprint() != self.kalman.noise.fingerprint():
-                raise InvalidArgument("noise differs from the noise model the Kalman table was designed for; "
-                                      "design the table again with that noise model")
-            noise = self.kalman.noise
-        elif noise is None:
-            noise = NoiseModel.from_dict(table.kalman[0]["noise"]) if stored else default_noise(self.system)
-        self.noise = noise
-
     def _propagate_covariance(self, e: Any, dt: float) -> None:
         """Covariance of the error over one step (Joseph-free: the map is exact).
 
@@ -742,141 +639,27 @@ class SwitchedObserver:
         """
         _, _, Q_d = self._dcache.get(dt)
         P = e.E @ self._P @ e.E.T + Q_d
-        if self.family == "lmi" and self._entry_L:
-            P += e.GL @ self._R_held @ e.GL.T
+        extra = self._gains.held_noise(self, e)
+        if extra is not None:
+            P += extra
         self._P = symmetrize(P)
-
-    def _correct(self, t: float, dt: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
-        """Kalman correction ``x^+ = x^- + K (y - H x^-)`` and its error map ``(I - K H)``.
-
-        ``kalman``: ``K`` from the table at the sample phase (time since the first sample
-        after construction or reset, nearest sample under jitter). A sample on another channel
-        than the table's at that phase (a stamp on a switching instant that floating point put
-        on the other side, a jittered stamp across it, a schedule that departs from the design)
-        switches the observer to the online recursion from the stored prior of that phase: the
-        Kalman filter for whatever happened. It returns to the table (*re-locks*) at the first
-        sample whose online prior covariance is within ``relock_rtol`` of the stored one, from
-        where the gains are the table's again. ``kalman_departures``, ``kalman_relocks`` count
-        both; ``kalman_fallback`` says why the latest departure happened.
-        ``kalman-online``: the Riccati recursion (Joseph form) on the observer's own ``P``.
-
-        ``dt > 0``: the open-loop step over ``dt`` has not been taken yet; the table path takes
-        it with the correction, and ``Phi <- E_k Phi`` uses the sample's error map
-        ``E_k = (I - K H) e^{A dt}`` cached per (phase, channel, rows, dt).
-        """
-        kd = self.kalman
-        if kd is not None and not self._online and rows is None and dt > 0 and self._origin is not None \
-                and self._correct_locked(t, dt, channel, y):
-            return
-        H = self.C[channel - 1] if rows is None else self.C[channel - 1][list(rows)]
-        K = None
-        if kd is not None:
-            if self._origin is None:
-                self._origin = t
-            ph, why = None, ""
-            try:
-                ph = kd.phase_at(t - self._origin)
-                ent = kd.entry(ph)
-                if ent.channel != channel and not (ent.rows is not None and rows == ent.rows):
-                    why = (f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman table's "
-                           f"schedule has channel {ent.channel}")
-            except InvalidArgument as err:
-                why = str(err)
-            if not self._online and why:
-                self.kalman_fallback = f"{why}; running the Riccati recursion online from here"
-                self.kalman_departures += 1
-                self._online = True
-                self._P = (ent.P_prior if ph is not None else self.noise.P0).copy()
-                if dt > 0:              # the prior above is this sample's: step the state only
-                    self._step(dt, covariance=False)
-                    dt = 0.0
-            elif self._online and not why:
-                S = ent.P_prior
-                if np.abs(self._P - S).max() <= self.relock_rtol * np.abs(S).max():
-                    self._online = False
-                    self.kalman_relocks += 1
-            if not self._online:
-                K = kd.gain(ph, channel, rows)
-                self._kgain = (ph, channel, rows)
-                if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's)
-                    self._step(dt, covariance=False)
-        if self._online:
-            R = self.noise.R(channel, rows)
-            K = riccati_gain(self._P, H, R)
-            self._P = joseph(self._P, K, H, R)
-        # x^+ = x^- + K (y - H x^-): the innovation first keeps the rounding of the estimate at
-        # the level of the error, not of ||x||
-        self._kalman_fix(K, H, y)
-
-    def _correct_locked(self, t: float, dt: float, channel: int, y: np.ndarray) -> bool:
-        """The hot path of :meth:`_correct` (table locked, all rows, a step to take): the same
-        arithmetic with the phase found inline and one cached tuple ``(e^{A dt}, E_k, K, H)``
-        per (sample, dt). Returns False (nothing done) whenever the general path is needed."""
-        kd = self.kalman
-        tau = t - self._origin
-        f = kd.pattern.rate
-        k = round(tau * f)
-        if k < 0 or abs(tau - k / f) * f > _MAX_JITTER:
-            return False
-        S = len(kd.startup)
-        startup = k < S
-        idx = k if startup else k % kd.pattern.K
-        fk = (startup, idx, channel, round(dt * 1e9))
-        hit = self._fused.get(fk)
-        if hit is None:
-            ent = kd.startup[idx] if startup else kd.periodic[idx]
-            if ent.channel != channel:
-                return False
-            if len(self._fused) >= _FUSED_MAX:
-                self._fused.clear()
-            H = self.C[channel - 1]
-            e = self._cache.step(self._key, dt)
-            Phi, K = e.Phi, ent.K
-            IKH = self._I - K @ H
-            hit = self._fused[fk] = (Phi, IKH @ Phi, K, H, e, float(np.linalg.norm(IKH)),   # ||.||_F >= ||.||_2
-                                     float(np.linalg.norm(K)), float(np.linalg.norm(H)))
-        Phi, E, K, H, e, nIKH, fK, fH = hit
-        # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
-        # level of the error, not of ||x||); Phi <- (I - K H) e^{A dt} Phi
-        x0n = math.sqrt(float(self._x @ self._x))
-        x = Phi @ self._x
-        xmn = math.sqrt(float(x @ x))
-        nu = y - H @ x
-        x += K @ nu
-        self._x = x
-        self._Phi = E @ self._Phi
-        if self._ell is not None:
-            rc = self._rho_correct(fK, fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)),
-                                   math.sqrt(float(x @ x)))
-            self._ell.step(E, nIKH * self._rho_step(e, dt, x0n, xmn, self._ell) + rc)
-            if self._ellv is not None:      # e^+ = (I - K H) e^- + K v
-                self._ellv.step_shaped(E, nIKH * self._rho_step(e, dt, x0n, xmn, self._ellv) + rc, K,
-                                       y.size * self.noise_max[channel - 1] ** 2)
-        self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
-        return True
 
     @property
     def gains_source(self) -> str:
         """Where the gain of the last sample came from: ``"table"`` (LMI or Kalman table) or
         ``"online"`` (the Riccati recursion: kalman-online, or a departure from the table)."""
-        return "online" if self._online else "table"
+        return self._gains.source
 
     @property
     def P(self) -> np.ndarray | None:
         """Error covariance at the last sample (a copy), or None when not tracked.
 
-        Kalman families: the filter's posterior covariance (from the table: the stored prior of
-        the phase with the Joseph update of the rows received). LMI gains: the covariance
-        propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
+        Kalman families: the filter's real posterior covariance (a locked table: the stored
+        prior of the phase with the Joseph update, which is the real one while locked; after a
+        departure the recursion's own, :mod:`switchobs_core.family_kalman`). LMI gains: the
+        covariance propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
         """
-        if self.family == "kalman" and not self._online:
-            g = self._kgain
-            if g is None:
-                return self.noise.P0.copy()
-            if len(g) == 4:
-                g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
-            return self.kalman.posterior(*g)
-        return None if self._P is None else self._P.copy()
+        return self._gains.covariance(self)
 
     def _switch(self, t: float, channel: int) -> None:
         """Bookkeeping at a switching instant (e:switching_instants), kept by the tracker."""
@@ -974,8 +757,9 @@ class SwitchedObserver:
         e = self._cache.step(self._key, dt)
         _, _, Q_d = self._dcache.get(dt)
         P = e.E @ P @ e.E.T + Q_d
-        if self.family == "lmi" and self._entry_L and self._R_held is not None:
-            P += e.GL @ self._R_held @ e.GL.T
+        extra = self._gains.held_noise(self, e)
+        if extra is not None:
+            P += extra
         return symmetrize(P)
 
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
@@ -991,20 +775,19 @@ class SwitchedObserver:
         """
         x = self.predict(t, hold=True)
         dt = float(t) - self._t
-        if self._ell is None:
+        b = self._bound
+        if b is None:
             env = self.envelope(t)
             return x, env.exact_bound, env.noise_bound
         if dt <= 0:
-            return x, self._ell.S.copy(), None if self._ellv is None else self._ellv.S.copy()
-        step = self._cache.step(self._key, dt)
-        xn = math.sqrt(float(self._x @ self._x))
-        xpn = math.sqrt(float(x @ x))
-        S, _ = self._ell.propagate(step.E, self._rho_step(step, dt, xn, xpn, self._ell))
-        Sv = None
-        if self._ellv is not None:
-            Sv, _ = self._noise_step(self._ellv, step.E, self._rho_step(step, dt, xn, xpn, self._ellv), step.GL,
-                                     keep=False)
+            return x, b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
+        S, Sv = b.propagated(self._cache.step(self._key, dt), dt, math.sqrt(float(self._x @ self._x)),
+                             math.sqrt(float(x @ x)), self._held_nu(), None if self._u_zero else self._u)
         return x, S, Sv
+
+    def _held_nu(self) -> np.ndarray | None:
+        """The held innovation of a held-innovation family (None: no gain held)."""
+        return self._y if self._entry_L else None
 
     def envelope(self, t: float | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
@@ -1022,23 +805,21 @@ class SwitchedObserver:
         dt = float(t) - self._t
         if not dt >= 0 or not math.isfinite(dt):
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
-        Phi = self._Phi
         step = self._cache.step(self._key, dt) if dt > 0 else None
         noisy = None
-        if self._ell is not None:       # rounding included (module switchobs_core.rounding)
-            S = self._ell.S
-            Sv = None if self._ellv is None else self._ellv.S
-            if step is not None:
-                xn = math.sqrt(float(self._x @ self._x))
+        b = self._bound
+        if b is not None:       # rounding included (module switchobs_core.rounding)
+            if step is None:    # the sets of the last sample: their bounds once per sample
+                if self._env_cache is None:
+                    self._env_cache = b.bounds()
+                exact, noisy = self._env_cache
+            else:
                 xp = self.predict(float(t), hold=True)
-                xpn = math.sqrt(float(xp @ xp))
-                S, _ = self._ell.propagate(step.E, self._rho_step(step, dt, xn, xpn, self._ell))
-                if Sv is not None:
-                    Sv, _ = self._noise_step(self._ellv, step.E, self._rho_step(step, dt, xn, xpn, self._ellv),
-                                             step.GL, keep=False)
-            exact = self._ell.bound(S)
-            noisy = None if Sv is None else self._ellv.bound(Sv)
+                exact, noisy = b.bounds(*b.propagated(step, dt, math.sqrt(float(self._x @ self._x)),
+                                                      math.sqrt(float(xp @ xp)), self._held_nu(),
+                                                      None if self._u_zero else self._u))
         elif self.hold == "measurement":    # the error-to-error part, exact arithmetic (class Notes)
+            Phi = self._transition()
             exact = float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self.e0)
         else:                               # rounding_bound=False: no bound is kept
             exact = math.inf

@@ -37,7 +37,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, solve_discrete_are
+from scipy.linalg import solve_discrete_are
 
 from .exceptions import DesignError
 from .propagation import COMPOSE_GRID, DEFAULT_DT_RESOLUTION, quantize_dt, split_step, taylor_pair, van_loan, zoh_pair
@@ -177,23 +177,28 @@ def gain(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
     if H.shape[0] == 0:          # no rows (a fully blind sample): no correction
         return np.zeros((P.shape[0], 0))
     PHt = P @ H.T
-    # S = H P H' + R
+    # S = H P H' + R = L L' (Cholesky)
     S = symmetrize(H @ PHt + R)
     try:
-        c = cho_factor(S, lower=True, check_finite=False)
+        L = np.linalg.cholesky(S)
     except np.linalg.LinAlgError:
         raise RiccatiError(
             f"innovation covariance S = H P H' + R is not positive definite (min eigenvalue "
             f"{np.linalg.eigvalsh(S)[0]:.3g}); the measurement std must be > 0"
         ) from None
-    # K = P H' S^-1  (solve S K' = H P)
-    return cho_solve(c, PHt.T, check_finite=False).T
+    # K = P H' S^-1: solve L Z = H P, then L' K' = Z (numpy's solvers: no wrapper cost per sample)
+    return np.linalg.solve(L.T, np.linalg.solve(L, PHt.T)).T
 
 
 def joseph(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Joseph form ``P^+ = (I - K H) P (I - K H)' + K R K'``, symmetrised (valid for any K)."""
-    IKH = np.eye(P.shape[0]) - K @ H
-    return symmetrize(IKH @ P @ IKH.T + K @ R @ K.T)
+    """Joseph form ``P^+ = (I - K H) P (I - K H)' + K R K'``, symmetrised (valid for any K).
+
+    The two products with ``I - K H`` are taken as rank-p updates, ``X = (I - K H) P = P - K (H P)``
+    and ``X (I - K H)' = X - (X H') K'``: the same formula, O(n^2 p) instead of two n x n products."""
+    # X = (I - K H) P
+    X = P - K @ (H @ P)
+    # P^+ = X (I - K H)' + K R K'
+    return symmetrize(X - (X @ H.T) @ K.T + K @ R @ K.T)
 
 
 def correct_state(x: np.ndarray, K: np.ndarray, H: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -63,6 +63,7 @@ from scipy.linalg import expm
 from .envelope import Segment, envelope_z
 from .envelope import alpha as _alpha
 from .exceptions import InvalidArgument
+from .families import family_entry, family_of_table
 from .observer import SwitchedObserver
 from .plant import Plant
 from .propagation import van_loan, zoh_pair
@@ -79,6 +80,11 @@ __all__ = [
     "sampled_error_transition",
     "designs_for",
 ]
+
+
+def _paper_gains(family: str) -> bool:
+    """Whether the paper's envelopes apply to a family's gains (the registry's type says)."""
+    return bool(family_entry(family).type().paper_envelope)
 
 
 def designs_for(table: Any, schedule: Any, mode: str | None = None) -> tuple[str, list]:
@@ -247,6 +253,11 @@ class SimulationResult:
     noisy: bool = False
 
     @property
+    def paper(self) -> bool:
+        """Whether the paper's envelopes apply to the gains of this run (its LMI family)."""
+        return _paper_gains(self.family)
+
+    @property
     def error_norm(self) -> np.ndarray:
         """``||x_tilde(t)||``, shape (T,)."""
         return np.linalg.norm(self.error, axis=1)
@@ -281,7 +292,7 @@ class SimulationResult:
         if self.noise_bound is not None:
             return self.noise_bound, "guaranteed bound (bounded noise)", checked(
                 self.noise_bound, "||Phi|| e0 plus the declared noise's worst case, rounding included")
-        if self.hold_bound is not None and self.family == "lmi" and not self.noisy:
+        if self.hold_bound is not None and self.paper and not self.noisy:
             return self.hold_bound, "guaranteed bound", checked(
                 self.hold_bound, "||Phi_ee|| e0 + ||Phi_ex|| ||x(0)|| (measurement hold, noise-free, u = 0, "
                 "exact arithmetic)")
@@ -290,14 +301,14 @@ class SimulationResult:
                 "||Phi|| e0, the bound for noise-free outputs: NOT a guarantee for this run, whose outputs "
                 "or plant are noisy (declare a measurement-noise bound, --noise-max, for one)")
         where = ("continuous outputs" if self.rate is None else "sampled outputs, innovation hold"
-                 if self.family == "lmi" else f"sampled outputs, {self.family} gains")
+                 if self.paper else f"sampled outputs, {self.family} gains")
         return self.exact_bound, "guaranteed bound", checked(
             self.exact_bound, f"||Phi|| e0 with the computation's rounding ({where}, noise-free)")
 
     def summary(self) -> dict:
         """JSON-ready summary: final error, bounds and violations of the paper's bound."""
         en = self.error_norm
-        paper = self.family == "lmi"      # the paper's envelopes are for its LMI gains only
+        paper = self.paper      # the paper's envelopes are for its LMI gains only
         viol = [int(np.sum(self.xo_norms[i] > self.z[i] * (1 + 1e-9))) for i in range(self.z.shape[0])]
         ends = [self.at(tc) for tc in self.cycle_ends]
         out = {
@@ -430,7 +441,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
     if noise_max is not None and (rate is None or hold != "innovation"):
         raise InvalidArgument("noise_max (a declared noise bound) needs sampled outputs with innovation hold "
                               "(--rate HZ, --hold innovation)")
-    if getattr(table, "family", "lmi") != "lmi" or (rate is not None and hold == "innovation"):
+    if not _paper_gains(family_of_table(table)) or (rate is not None and hold == "innovation"):
         return _simulate_observer(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise,
                                   seed, mode, u, e0, noise_max)
     mode, designs = designs_for(table, schedule, mode)

@@ -13,11 +13,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from switchobs_core import __version__
-from switchobs_core.design import design_table
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.families import FAMILY_NAMES, design_family_table, family_entry
 from switchobs_core.files import check_private
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.kalman import design_kalman
+from switchobs_core.gains import GainTable
 from switchobs_core.noise import NoiseModel
 from switchobs_core.ranges import MAX_CYCLES
 from switchobs_core.scenarios import load_noise, load_system
@@ -48,7 +47,7 @@ __all__ = [
 DEFAULT_X0 = (0.0, 0.0, 0.2, 0.1, 3.0, 1.0, -0.1, 0.0, -2.0, 2.0, 0.1, 0.0)
 
 #: Values of the ``gain_family`` parameter ('' = the table's family).
-GAIN_FAMILY_PARAM = ("", "lmi", "kalman", "kalman-online")
+GAIN_FAMILY_PARAM = ("", *FAMILY_NAMES)
 
 
 def noise_from_params(cfg: dict, system: LTISystem) -> NoiseModel:
@@ -112,7 +111,7 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
             "version": __version__}
     if any(c.dead_time for c in cycles):        # (tables without one keep their cache key)
         spec["dead_time"] = max(c.dead_time for c in cycles)
-    if family != "lmi":
+    if family_entry(family).rate:
         spec.update(family=family, rate=rate, noise=None if noise is None else noise.fingerprint())
     key = json.dumps(spec, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -137,12 +136,13 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
         except SwitchobsError as err:
             raise ConfigError(f"parameter 'gain_table': {err}") from None
         return table, Path(path)
-    if family == "kalman":
-        if mode == "robust":
-            raise ConfigError("gain_family 'kalman' needs a known schedule (periodic or sequence); without one "
-                              "use gain_family 'kalman-online'")
+    entry = family_entry(family)
+    if entry.rate:
+        if mode == "robust" and entry.robust != entry.name:
+            raise ConfigError(f"gain_family '{family}' needs a known schedule (periodic or sequence); without one "
+                              f"use gain_family '{entry.robust}'")
         if not rate > 0:
-            raise ConfigError("gain_family 'kalman' with no gain_table designs the table at start-up: set 'rate' "
+            raise ConfigError(f"gain_family '{family}' with no gain_table designs the table at start-up: set 'rate' "
                               "(the nominal sample rate in Hz)")
     cache = table_cache_path(cache_dir, system, mode, cycles, robust, delta, family=family, rate=rate, noise=noise)
     check_cache_private(cache, getattr(cache_dir, "trusted", False))
@@ -155,13 +155,10 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
         except SwitchobsError as err:
             log(f"cached gain table {cache} unusable ({err}); designing again")
     log(f"gain_table not set: designing {family} gains for system '{system.name}', mode {mode}, "
-        f"cycles {[c.label() for c in cycles]}, " + (f"delta {delta} (takes a few seconds)" if family == "lmi"
-                                                     else f"rate {rate:g} Hz, {noise.describe()}"))
+        f"cycles {[c.label() for c in cycles]}, " + (f"rate {rate:g} Hz, {noise.describe()}" if entry.rate
+                                                     else f"delta {delta} (takes a few seconds)"))
     try:
-        if family == "kalman":
-            table = kalman_table(system, [design_kalman(system, cycles, rate, noise)])
-        else:
-            table = design_table(system, cycles=cycles, robust=robust, delta=delta)
+        table = design_family_table(family, system, cycles, robust=robust, delta=delta, rate=rate, noise=noise)
     except SwitchobsError as err:
         raise ConfigError(f"gain design failed: {err}") from None
     try:

@@ -78,7 +78,7 @@ class EstimatorDiagnostics:
             conf.append(kv("noise model", obs.noise.describe()))
         if obs.kalman is not None:
             conf += [kv("kalman", obs.kalman.describe())]
-        for k, d in enumerate(obs.designs if obs.family == "lmi" else ()):
+        for k, d in enumerate(obs.designs if obs.gains.paper_envelope else ()):
             conf.append(kv(f"design[{k}].eta", d.eta))
             conf.append(kv(f"design[{k}].kappa", d.kappa))
             conf.append(kv(f"design[{k}].f (paper factors)", d.f))
@@ -96,7 +96,7 @@ class EstimatorDiagnostics:
               kv("clock jumps back (resets)", node.clock_jumps_back),
               kv("clock jumps forward", node.clock_jumps_forward),
               kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
-        if obs.family == "lmi":
+        if obs.gains.paper_envelope:
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
                    kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]
         if obs.kalman is not None:

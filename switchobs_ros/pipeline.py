@@ -93,6 +93,7 @@ from msg_bridge import Reason, Rejection
 from switchobs_core.consistency import Consistency, check_innovation, chi2_gate, nis, spectral_norm
 from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.families import family_entry, family_of_table
 from switchobs_core.measurement import Measurement
 from switchobs_core.observer import SwitchedObserver
 
@@ -315,19 +316,21 @@ class EstimatorPipeline:
         conf = cfg if isinstance(cfg, EstimatorConfig) else EstimatorConfig.from_values(cfg)
         log = log or PipelineLog()
         sys_, mode, cycles, family = conf.system, conf.mode, list(conf.cycles), conf.family
+        # the table a family reads ('' = the table's own family, LMI when one is designed)
+        design = family_entry(family).table if family else "lmi"
         table, table_path = load_or_design_table(
             conf["gain_table"], conf["gain_table_cache_dir"], sys_, mode, cycles, conf.robust, conf["delta"],
-            log.info, family="kalman" if family == "kalman" else "lmi", rate=conf.rate, noise=conf.noise)
-        if family in ("lmi", "kalman") and table.family != family:
+            log.info, family=design, rate=conf.rate, noise=conf.noise)
+        if family and family_entry(family).stored and table.family != family:
             raise ConfigError(f"parameter 'gain_family' is '{family}' but the gain table holds {table.family} gains")
         try:
-            fam = "kalman-online" if family == "kalman-online" else None
-            lmi = table.family == "lmi" and fam is None
-            # the kalman table brings its own noise model; the LMI covariance is tracked only if published
+            # a family whose table brings its noise model takes none; the LMI covariance is tracked
+            # only if published (the Kalman families always keep theirs)
+            own_noise = family_entry(family or family_of_table(table)).rate
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
-                                        e0=conf["e0"], bounds=conf.robust, family=fam,
-                                        noise=None if table.family == "kalman" and fam is None else conf.noise,
-                                        track_covariance=conf.publish_covariance if lmi else None,
+                                        e0=conf["e0"], bounds=conf.robust, family=family or None,
+                                        noise=None if own_noise else conf.noise,
+                                        track_covariance=conf.publish_covariance,
                                         noise_max=conf.noise_max)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None

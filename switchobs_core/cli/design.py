@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..design import Designer, Margin
 from ..exceptions import InvalidArgument
+from ..families import DESIGNABLE, family_entry
 from ..files import check_output
 from ..gains import CycleDesign, GainTable, kalman_table
 from ..kalman import design_kalman
@@ -18,8 +19,8 @@ from ._common import add_dead_time, fmt_table, parse_floats, parse_h, parse_pair
 
 __all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]
 
-#: Gain families ``--gains`` designs (``kalman-online`` needs no table).
-FAMILIES = ("lmi", "kalman")
+#: Gain families ``--gains`` designs (the registry's stored families; ``kalman-online`` needs no table).
+FAMILIES = DESIGNABLE
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -216,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dead_time and args.robust is not None:
         raise InvalidArgument("--dead-time with --robust is not supported: a robust design has no schedule to "
                               "place the blind intervals in; design the cycles you run with --cycle")
-    if args.gains == "kalman":
+    if family_entry(args.gains).rate:       # a design at a nominal rate under a noise model
         return run_kalman(args, system, cycles)
     if args.rate is not None or args.meas_noise is not None or args.process_noise is not None:
         raise InvalidArgument("--rate, --meas-noise and --process-noise belong to --gains kalman "
