@@ -52,9 +52,9 @@ import switchobs_core as so
 RATE = 50.0
 CYCLE = so.Cycle((0.61, 0.39))
 #: Published P vs the filter's, relative to the largest entry of the filter's: the table may
-#: re-lock once the real covariance is within its relock tolerance (1e-2 by default) of the
-#: stored one, after which the two converge (the closed loop contracts); beyond it, P is not
-#: the real one.
+#: re-lock once the real covariance is within its relock tolerance (``relock_rtol``, 1e-3 to 1e-2)
+#: of the stored one, after which the two converge (the closed loop contracts); beyond 1e-2, P is
+#: not the real one.
 P_RTOL = 1e-2
 #: Largest RMS ratio table / filter in any window (issue 20).
 RMS_RATIO = 1.05
