@@ -65,6 +65,11 @@ def certify_table(system: Any, table: Any, *, sequence: Sequence[Any] | None = N
         raise InvalidArgument(f"ratio_cycles must be an integer >= 1; got {ratio_cycles!r}")
     if as_finite(ratio_dt, "ratio_dt") <= 0:
         raise InvalidArgument(f"ratio_dt must be > 0; got {ratio_dt}")
+    if not table.designs:
+        # a Kalman table holds gains per sample phase, no cycle design: nothing here applies
+        raise InvalidArgument(
+            f"nothing to certify: this table holds {table.family} gains, no LMI cycle design; the "
+            "certificates are of the paper's LMI gains (its guarantee is the exact bound: switchobs simulate)")
     rep = TableReport()
     for c in [d.cycle for d in table.designs] + list(sequence or ()):
         check_cycle_horizon(system.A, c, "the table's cycle")

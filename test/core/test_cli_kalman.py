@@ -85,3 +85,12 @@ def test_noise_section_of_a_system_file(tmp_path):
     f.write_text(CART + "noise:\n  measurment_std: 0.01\n")
     with pytest.raises(NoiseModelError, match="unknown key"):
         load_noise(f, load_system(f))
+
+
+def test_certify_a_kalman_table_is_refused_with_one_line(ktable, capsys):
+    """A Kalman table holds no LMI cycle design: `certify` says so (it printed empty tables and
+    exited 0)."""
+    assert main(["certify", str(ktable)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("switchobs certify: error:"), err
+    assert "nothing to certify: this table holds kalman gains" in err
