@@ -18,9 +18,8 @@ in test_bound_read.py), and for a later ``S``:
    column sum of ``n`` nonnegative terms is computed within ``gamma_n`` relative; so
    ``g <= g~ (1 + 2 gamma_{n+4})`` and ``lambda_max(sym S) <= (lam_a + g~ (1 + 2 gamma_{n+4}))
    (1 + 4u)`` (the last factor covers the two roundings of the sum and the product).
-4. The same Gershgorin bound for ``S`` itself, and ``trace S`` (:attr:`~.rounding.ErrorEllipsoid.tr`,
-   kept as an upper bound of the trace), bound ``lambda_max`` too: the smallest of the three is
-   published.
+4. ``trace S`` (:attr:`~.rounding.ErrorEllipsoid.tr`, kept as an upper bound of the trace)
+   bounds ``lambda_max`` too: the smaller of the two is published.
 
 Re-anchoring: when ``g~ > tol lam_a`` (or after ``max_age`` reads) the eigenvalue problem is
 solved for the current ``S``, which becomes the anchor. Looseness: between anchors
@@ -83,7 +82,7 @@ class AnchoredBound:
             if math.isfinite(g) and g <= self.tol * c * self._lam_a:
                 self._age += 1
                 lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF)
-                lam = min(lam, _gershgorin(S) * infl * (1.0 + 4.0 * UNIT_ROUNDOFF), max(ell.tr, 0.0))
+                lam = min(lam, max(ell.tr, 0.0))
                 return math.sqrt(lam) * (1.0 + 2.0 * UNIT_ROUNDOFF)
         # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
         # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
