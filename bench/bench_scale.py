@@ -27,7 +27,8 @@ as subprocesses, so that every number includes nothing of the others):
    order rotated from block to block) and timed by CPU time per block; the medians over the
    blocks after the first two are reported: the ``kalman`` table with the exact bound (the
    default), with ``rounding_bound=False``, with ``envelope()`` after every update (what the node
-   does); ``kalman-online`` (exact bound on); a reference Kalman filter in standard form written
+   does) and with ``envelope(amortised=True)`` (:mod:`switchobs_core.bound_read`);
+   ``kalman-online`` (exact bound on); a reference Kalman filter in standard form written
    here (:class:`ReferenceKF`: numpy, discretisation cached, Joseph update); filterpy's
    ``KalmanFilter`` if it is installed (it is not a dependency); and the bare floor
    ``x = F x + K (y - H x)`` with precomputed gains. Then the growth exponent of each (least
@@ -222,6 +223,7 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
         return so.SwitchedObserver(system, table, "periodic", [cycle], **kw)
 
     tab, nob, env, onl = observer(), observer(rounding_bound=False), observer(), observer(family="kalman-online")
+    amo = observer()
     ref = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
     # the floor's gains: the reference recursion's, run once over the stream beforehand
     pre = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
@@ -243,6 +245,8 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
         "kalman table, rounding_bound=False": lambda k: nob.update(stream[k][0], stream[k][1], stream[k][3]),
         "kalman table + envelope() (the node)": lambda k: (env.update(stream[k][0], stream[k][1], stream[k][3]),
                                                            env.envelope()),
+        "kalman table + envelope(amortised=True)": lambda k: (amo.update(stream[k][0], stream[k][1], stream[k][3]),
+                                                              amo.envelope(amortised=True)),
         "kalman-online, exact bound": lambda k: onl.update(stream[k][0], stream[k][1], stream[k][3]),
         "reference Kalman filter (standard form, numpy)": lambda k: ref.update(stream[k][0], stream[k][2],
                                                                                stream[k][3]),
@@ -261,7 +265,7 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
 
         out["filterpy KalmanFilter"] = fpy
     out["bare floor x = F x + K (y - H x)"] = floor
-    return out, [tab, nob, env]
+    return out, [tab, nob, env, amo]
 
 
 def bench_cost(M: int, samples: int, block: int, h: float = 1.0) -> dict:
@@ -308,6 +312,8 @@ def cost_report(rows: list[dict], label: str) -> str:
     ]
     lines += ["", f"| goal at n = {ns[-1]} (issue 20) | ratio ({label}) | status |", "|---|---|---|"]
     lines += [f"| {g} | {r:.2f} | {'met' if r <= lim else '**not met**'} |" for g, r, lim in goals]
+    lines.append(f"| (table + envelope(amortised=True) / reference) | "
+                 f"{last['kalman table + envelope(amortised=True)'] / ref:.2f} | - |")
     lines.append(f"| (table with the exact bound / reference) | "
                  f"{last['kalman table, exact bound'] / ref:.2f} | - |")
     return "\n".join(lines) + "\n"

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .bound_read import AnchoredBound
 from .rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
 
 __all__ = ["RoundingBound"]
@@ -51,6 +52,7 @@ class RoundingBound:
         """``S = e0^2 I`` for both ellipsoids; nothing held."""
         self.ell = ErrorEllipsoid(self.n, self.e0)
         self.ellv = ErrorEllipsoid(self.n, self.e0) if self.noise_max else None
+        self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
 
@@ -133,8 +135,14 @@ class RoundingBound:
                                   p * self.noise_max[channel - 1] ** 2)
 
     # ------------------------------------------------------------------ bounds
-    def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None) -> tuple[float, float | None]:
-        """``(exact, noise)``: ``sqrt(lambda_max)`` of the shape matrices (default the current ones)."""
+    def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,
+               amortised: bool = False) -> tuple[float, float | None]:
+        """``(exact, noise)``: upper bounds of ``sqrt(lambda_max)`` of the shape matrices (default
+        the current ones): the eigenvalue problem's, or with ``amortised`` (current sets only)
+        :mod:`.bound_read`'s (an eigenvalue problem per anchor, O(n^2) in between, at most 1.051x
+        larger)."""
+        if amortised and S is None and Sv is None:
+            return self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)
         exact = self.ell.bound(S)
         noisy = None if self.ellv is None else self.ellv.bound(Sv)
         return exact, noisy

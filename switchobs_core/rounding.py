@@ -222,6 +222,11 @@ class ErrorEllipsoid:
     def bound(self, S: np.ndarray | None = None) -> float:
         """``sqrt(lambda_max(S)) >= ||e||`` (of ``S``, default the current one), inflated for the
         eigenvalue solver's own error (relative ``n u``)."""
+        return math.sqrt(self.lam_upper(S))
+
+    def lam_upper(self, S: np.ndarray | None = None) -> float:
+        """``>= lambda_max((S + S') / 2)`` (of ``S``, default the current one): the eigenvalue
+        problem's solution plus the solver's own error (relative ``n u``)."""
         S = self.S if S is None else S
         S = S + S.T
         S *= 0.5
@@ -233,8 +238,7 @@ class ErrorEllipsoid:
             lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
         if not math.isfinite(lam):      # a non-finite S, or no convergence: np.linalg's handling (raises)
             lam = float(np.linalg.eigvalsh(S)[-1])
-        lam = max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
-        return math.sqrt(lam)
+        return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
 
 
 def _fro(X: np.ndarray) -> float:
