@@ -3,8 +3,8 @@ per anchor, an O(n^2) rigorous upper bound in between.
 
 The published bound of an ellipsoid ``{e : e' S^-1 e <= 1}`` (:mod:`.rounding`, step 5) is
 ``||e|| <= sqrt(lambda_max(sym S))`` with ``sym S = (S + S') / 2``; solving the eigenvalue
-problem is O(n^3) and was 41 % of a node's per-sample cost at n = 132 (issue 20). Here it is
-solved only at an *anchor* ``S_a`` (:meth:`~.rounding.ErrorEllipsoid.lam_upper`, its model
+problem is O(n^3) and was 41 % of a node's per-sample cost at n = 132 (bench/RESULTS.md, online
+cost per sample). Here it is solved only at an *anchor* ``S_a`` (:meth:`~.rounding.ErrorEllipsoid.lam_upper`, its model
 of the solver's error ``2 n u ||S_a||_F``, plus ``16 u ||S_a||_F`` for the rounding of ``sym S_a``
 itself and a margin on that model, :data:`_SOLVER_MARGIN`: ``lam_a >= lambda_max(sym S_a)``; the
 solver's error is a model, as the matrix exponential's is, checked against extended precision
