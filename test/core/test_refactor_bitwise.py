@@ -98,7 +98,8 @@ def _export_before(dest: Path) -> Path:
 def _run(root: Path, tables: tuple[Path, Path], tmp: Path) -> dict:
     script = tmp / "run_streams.py"
     script.write_text(SCRIPT)
-    env = {**os.environ, "PYTHONPATH": str(root)}
+    # one BLAS thread in both runs: the same kernels and the same summation order on this CPU
+    env = {**os.environ, "PYTHONPATH": str(root), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, str(script), str(root), *map(str, tables)], capture_output=True,
                           text=True, env=env, cwd=tmp, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
