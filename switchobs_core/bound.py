@@ -124,15 +124,21 @@ class RoundingBound:
         if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
             self.ellv.step_shaped(M, rho, K, p * self.noise_max[channel - 1] ** 2)
 
-    def fused(self, e: Any, dt: float, E: np.ndarray, nIKH: float, x0n: float, xmn: float, rc: float,
+    def fused(self, e: Any, dt: float, m: Any, x0n: float, xmn: float, rc: float,
               K: np.ndarray, p: int, channel: int, u: np.ndarray | None = None) -> None:
-        """Both ellipsoids through a Kalman sample's fused map ``E = (I - K H) e^{A dt}``: the
-        prediction's residual (input ``u`` held, None: zero) through ``||I - K H||_F`` plus the
-        correction's ``rc``."""
-        self.ell.step(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ell, None, u) + rc)
-        if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
-            self.ellv.step_shaped(E, nIKH * self.rho_step(e, dt, x0n, xmn, self.ellv, None, u) + rc, K,
-                                  p * self.noise_max[channel - 1] ** 2)
+        """Both ellipsoids through a Kalman sample's fused map ``M = (I - K H) e^{A dt}``
+        (a :class:`~switchobs_core.kalman_map.KalmanMap`: ``M S M'`` dense or factored, with its
+        rounding allowance): the prediction's residual (input ``u`` held, None: zero) through
+        ``||I - K H||_2`` plus the correction's ``rc``."""
+        ell = self.ell
+        Z, eta = m.sandwich(ell.S, ell.tr, ell.g_dense)
+        ell.S, ell.tr = ell.propagate_product(Z, eta, m.nIKH * self.rho_step(e, dt, x0n, xmn, ell, None, u) + rc)
+        ellv = self.ellv
+        if ellv is not None:      # e^+ = (I - K H) e^- + K v
+            Z, eta = m.sandwich(ellv.S, ellv.tr, ellv.g_dense)
+            ellv.S, ellv.tr = ellv.propagate_shaped_product(
+                Z, eta, m.nIKH * self.rho_step(e, dt, x0n, xmn, ellv, None, u) + rc, K,
+                p * self.noise_max[channel - 1] ** 2)
 
     # ------------------------------------------------------------------ bounds
     def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,

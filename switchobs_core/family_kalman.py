@@ -42,6 +42,7 @@ from .exceptions import InvalidArgument
 from .family_online import OnlineKalmanGains, kalman_correct
 from .gains import kalman_table
 from .kalman import Phase, design_kalman
+from .kalman_map import KalmanMap
 
 __all__ = ["KalmanTableGains", "MAX_JITTER"]
 
@@ -204,7 +205,7 @@ class KalmanTableGains(OnlineKalmanGains):
 
     def _locked(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray) -> bool:
         """The hot path (locked, all rows, a step to take): the phase found inline and one cached
-        :class:`_FusedStep` per (sample, dt). Returns False (nothing done) whenever
+        :class:`~.kalman_map.KalmanMap` per (sample, dt). Returns False (nothing done) whenever
         the general path is needed."""
         kd = self.kalman
         tau = t - self._origin
@@ -224,62 +225,24 @@ class KalmanTableGains(OnlineKalmanGains):
                 return False
             if len(self._fused) >= _FUSED_MAX:
                 self._fused.clear()
-            hit = self._fused[fk] = _FusedStep(obs, obs._cache.step(obs._key, dt), ent.K, obs.C[channel - 1])
-        Phi, K, H = hit.Phi, hit.K, hit.H
+            hit = self._fused[fk] = KalmanMap(obs._cache.step(obs._key, dt), ent.K, obs.C[channel - 1], obs._I)
+        K, H = hit.K, hit.H
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
         # level of the error, not of ||x||); Phi <- (I - K H) e^{A dt} Phi
-        x0n = math.sqrt(float(obs._x @ obs._x))
-        x = Phi @ obs._x
-        xmn = math.sqrt(float(x @ x))
+        b = obs._bound
+        x0 = obs._x
+        x = hit.predict(x0)
         nu = y - H @ x
+        if b is not None:
+            x0n = math.sqrt(float(x0 @ x0))
+            xmn = math.sqrt(float(x @ x))
         x += K @ nu
         obs._x = x
         obs.apply_map(hit)      # E formed only if Phi or the bound reads it
-        b = obs._bound
         if b is not None:
             rc = b.rho_correct(hit.fK, hit.fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)),
                                math.sqrt(float(x @ x)))
-            b.fused(hit.e, dt, hit.E, hit.nIKH, x0n, xmn, rc, K, y.size, channel)
+            b.fused(hit.e, dt, hit, x0n, xmn, rc, K, y.size, channel)
         self._last_k = k
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
         return True
-
-
-class _FusedStep:
-    """One cached locked step (phase, dt): ``e^{A dt}``, ``K``, ``H`` and, formed at its first
-    read, the fused error map ``E = (I - K H) e^{A dt}`` (an n x n product: needed only by the
-    bound and by a kept ``Phi``, which multiplies it in through ``@``)."""
-
-    __slots__ = ("Phi", "K", "H", "e", "fK", "fH", "_I", "_IKH", "_E", "_nIKH")
-
-    def __init__(self, obs: Any, e: Any, K: np.ndarray, H: np.ndarray) -> None:
-        self.Phi, self.K, self.H, self.e, self._I = e.Phi, K, H, e, obs._I
-        self.fK, self.fH = float(np.linalg.norm(K)), float(np.linalg.norm(H))
-        self._IKH: np.ndarray | None = None
-        self._E: np.ndarray | None = None
-        self._nIKH: float | None = None
-
-    def _ikh(self) -> np.ndarray:
-        if self._IKH is None:
-            self._IKH = self._I - self.K @ self.H
-        return self._IKH
-
-    @property
-    def E(self) -> np.ndarray:
-        if self._E is None:
-            self._E = self._ikh() @ self.Phi
-        return self._E
-
-    @property
-    def nIKH(self) -> float:
-        """``||I - K H||_F >= ||I - K H||_2``."""
-        if self._nIKH is None:
-            self._nIKH = float(np.linalg.norm(self._ikh()))
-        return self._nIKH
-
-    @property
-    def nbytes(self) -> int:
-        return self.Phi.nbytes
-
-    def __matmul__(self, other: np.ndarray) -> np.ndarray:
-        return self.E @ other

@@ -22,6 +22,7 @@ import numpy as np
 
 from .family_base import ScheduledCycle, check_bounds, check_cycles
 from .family_lmi import LmiGains
+from .kalman_map import KalmanMap
 from .noise import NoiseModel, default_noise
 from .riccati import gain, joseph
 
@@ -35,7 +36,7 @@ def kalman_correct(obs: Any, K: np.ndarray, H: np.ndarray, y: np.ndarray, step: 
 
     ``step``: the prediction just taken by :meth:`OnlineKalmanGains.predict` (``e``, ``dt``,
     ``||x^+||`` before it, ``||x^-||``); the sample's error map is then the fused
-    ``(I - K H) e^{A dt} = E - K (H E)`` (rank-p, one step of the bound); without it the map is
+    ``(I - K H) e^{A dt}`` (a :class:`~.kalman_map.KalmanMap`, one step of the bound); without it the map is
     ``I - K H`` alone (the prediction was applied as its own step)."""
     x = obs._x
     xn = math.sqrt(float(x @ x))
@@ -51,14 +52,13 @@ def kalman_correct(obs: Any, K: np.ndarray, H: np.ndarray, y: np.ndarray, step: 
             b.correct(M, rho, K, y.size, obs._channel)
         return
     e, dt, x0n, xmn = step
-    # E_k = (I - K H) e^{A dt} = e^{A dt} - K (H e^{A dt})
-    M = e.E - K @ (H @ e.E)
+    # E_k = (I - K H) e^{A dt}: dense, or in factors when e^{A dt} is sparse (kalman_map)
+    M = KalmanMap(e, K, H, obs._I)
     obs.apply_map(M)
     if b is not None:
-        nIKH = float(np.linalg.norm(obs._I - K @ H))      # ||.||_F >= ||.||_2
-        rc = b.rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), xmn, math.sqrt(float(y @ y)),
-                           math.sqrt(float(nu @ nu)), math.sqrt(float(x @ x)))
-        b.fused(e, dt, M, nIKH, x0n, xmn, rc, K, y.size, obs._channel)
+        rc = b.rho_correct(M.fK, M.fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)),
+                           math.sqrt(float(x @ x)))
+        b.fused(e, dt, M, x0n, xmn, rc, K, y.size, obs._channel)
 
 
 class OnlineKalmanGains:

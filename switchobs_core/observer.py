@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from .bound import RoundingBound
+from .bound_read import AMORTISED_MIN_N
 from .certificate.paper import design_dead_time
 from .cycles import CycleRecord, CycleTracker, Residence
 from .decomposition import observability_decomposition
@@ -74,6 +75,7 @@ from .exceptions import InvalidArgument
 from .families import FAMILY_NAMES, family_entry, family_of_table
 from .family_base import ScheduledCycle
 from .kalman import KalmanDesign
+from .kalman_map import sparse_transition
 from .noise import NoiseModel
 from .propagation import DEFAULT_DT_RESOLUTION, ZOHCache
 from .riccati import DiscretizationCache, symmetrize
@@ -638,7 +640,8 @@ class SwitchedObserver:
         Kalman families ``E = e^{A dt}`` and the term is absent (the correction follows).
         """
         _, _, Q_d = self._dcache.get(dt)
-        P = e.E @ self._P @ e.E.T + Q_d
+        sp = sparse_transition(e) if e.E is e.Phi else None     # the open-loop map of a Kalman family
+        P = (sp.sandwich(self._P) if sp is not None else e.E @ self._P @ e.E.T) + Q_d
         extra = self._gains.held_noise(self, e)
         if extra is not None:
             P += extra
@@ -789,13 +792,15 @@ class SwitchedObserver:
         """The held innovation of a held-innovation family (None: no gain held)."""
         return self._y if self._entry_L else None
 
-    def envelope(self, t: float | None = None, *, amortised: bool = False) -> Envelope:
+    def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
 
         ``amortised`` (at the last sample's time, with the rounding-aware bound): the bounds read
         in O(n^2) between eigenvalue problems (:mod:`switchobs_core.bound_read`; rigorous, at most
         1.051x the eigenvalue problem's, 1.005x in the median measured), for a caller that
-        publishes every sample.
+        publishes every sample. None (default): amortised from
+        :data:`~switchobs_core.bound_read.AMORTISED_MIN_N` states on (below, the eigenvalue
+        problem is as cheap as the bookkeeping and is exact).
 
         Returns
         -------
@@ -814,6 +819,8 @@ class SwitchedObserver:
         noisy = None
         b = self._bound
         if b is not None:       # rounding included (module switchobs_core.rounding)
+            if amortised is None:
+                amortised = self.n >= AMORTISED_MIN_N
             if step is None:    # the sets of the last sample: their bounds once per sample
                 if self._env_cache is None or self._env_cache[0] != amortised:
                     self._env_cache = (amortised, b.bounds(amortised=amortised))

@@ -157,7 +157,7 @@ class ZOHEntry:
     """One cached step: ``Phi``, ``Gamma``, the input products ``GL = Gamma L``, ``GB = Gamma B``,
     and the error map ``E`` of the step (module docstring)."""
 
-    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "fPhi", "fGL")
+    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "fPhi", "fGL", "sparse")
 
     def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0):
         self.eps = eps           # bound on ||Phi - e^{M dt}||_F (rounding.expm_error)
@@ -169,6 +169,7 @@ class ZOHEntry:
         self.GB = GB
         self.dt = dt
         self.E = Phi if E is None else E
+        self.sparse = False      # Phi's sparse form, None if dense (kalman_map.sparse_transition)
 
 
 def split_step(dtq: float, dt_resolution: float | None) -> tuple[int, float]:

@@ -145,7 +145,16 @@ class ErrorEllipsoid:
         if fM2 is None:
             fM2 = float(np.dot(M.ravel(), M.ravel()))
         # 6. rounding of M S M': an elementwise-dominating allowance on the diagonal (||S||_F <= trace S)
-        eta = self._g * fM2 * self.tr
+        return self.propagate_product(S, self._g * fM2 * self.tr, rho)
+
+    @property
+    def g_dense(self) -> float:
+        """The factor of step 6's allowance: ``eta = g_dense ||M||_F^2 trace S``."""
+        return self._g
+
+    def propagate_product(self, S: np.ndarray, eta: float, rho: float) -> tuple[np.ndarray, float]:
+        """:meth:`propagate` from a product taken elsewhere: ``S`` (overwritten) with ``S + eta I``
+        containing ``M S_k M'`` (:class:`~switchobs_core.kalman_map.KalmanMap`'s factored form)."""
         lam = float(S.trace()) + self.n * eta      # >= lambda_max(M S M' + eta I)
         if rho > 0.0:
             # 5. outer ellipsoid of (ellipsoid + ball)
@@ -174,13 +183,17 @@ class ErrorEllipsoid:
         ``E(c G G')`` plus the ball, so the noise fills only the directions ``G`` reaches (an
         isotropic ball of radius ``||G|| sqrt(c)`` instead is 20-30x looser for the paper's
         gains). ``GGt`` is ``G G'`` if the caller has it (its float rounding is allowed for)."""
+        S = M @ self.S @ M.T
+        fM2 = float(np.dot(M.ravel(), M.ravel()))
+        return self.propagate_shaped_product(S, self._g * fM2 * self.tr, rho, G, c, GGt)   # step 6
+
+    def propagate_shaped_product(self, S: np.ndarray, eta_s: float, rho: float, G: np.ndarray, c: float,
+                                 GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """:meth:`propagate_shaped` from a product taken elsewhere (as :meth:`propagate_product`)."""
         n = self.n
         if GGt is None:
             GGt = G @ G.T
         fG2 = float(np.dot(G.ravel(), G.ravel()))
-        S = M @ self.S @ M.T
-        fM2 = float(np.dot(M.ravel(), M.ravel()))
-        eta_s = self._g * fM2 * self.tr                     # rounding of M S M' (step 6)
         ts = float(S.trace()) + n * eta_s                   # trace of the S side
         Q = c * GGt
         tq = c * fG2                                        # trace of the exact c G G'
