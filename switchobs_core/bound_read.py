@@ -62,6 +62,7 @@ import math
 
 import numpy as np
 from scipy.linalg.blas import daxpy as _daxpy
+from scipy.linalg.lapack import dpotrf
 
 from .rounding import UNIT_ROUNDOFF, ErrorEllipsoid, _fro, gamma
 
@@ -120,8 +121,6 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
     """``(lam, v)`` with ``lam >= lambda_max((S + S') / 2)`` proved by a Cholesky factorisation
     (module docstring), ``v`` the leading direction found on the way; None if no candidate of
     :data:`_DELTAS` could be verified (the caller solves the eigenvalue problem)."""
-    from scipy.linalg.lapack import dpotrf
-
     n = S.shape[0]
     u = UNIT_ROUNDOFF
     T = S + S.T

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg.blas import dgemm as _dgemm
+from scipy.sparse import csr_array
 
 from .rounding import _fro, gamma
 
@@ -75,10 +76,8 @@ class SparseTransition:
     __slots__ = ("n", "csr", "nu", "_ip", "_ix", "_dv")
 
     def __init__(self, Phi: np.ndarray) -> None:
-        import scipy.sparse as sp
-
         self.n = n = Phi.shape[0]
-        self.csr = sp.csr_array(Phi)
+        self.csr = csr_array(Phi)
         self.csr.sort_indices()
         self._ip, self._ix, self._dv = self.csr.indptr, self.csr.indices, self.csr.data
         # nu >= || |Phi~| ||_2 <= sqrt(||Phi~||_1 ||Phi~||_inf) (sums of nonnegative terms, rounded up)
