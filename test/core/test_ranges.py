@@ -87,19 +87,25 @@ def test_kalman_design_of_32_agents_passes_the_budget_and_ten_times_its_rate_doe
 @pytest.mark.parametrize("agents, startup", [(2, 0), (2, 150), (4, 200)])
 def test_design_bytes_bounds_what_a_kalman_design_and_its_table_allocate(tmp_path, agents, startup):
     """The budget's estimate (design_bytes) against the allocations tracemalloc sees for the design and
-    the binary table written from it: at least all of them, at most 25 % more (a start-up that never
-    meets the periodic solution, startup_rtol = 0, stores exactly ``startup`` samples)."""
+    the binary table written from it (a start-up that never meets the periodic solution,
+    startup_rtol = 0, stores exactly ``startup`` samples): at least all of them, measured first
+    (cold or not: that depends on what ran before in this process; a cold design also allocates
+    scipy's lazy imports and caches, 20-30 kB), and at most 30 % more than a warm design's (the
+    smallest case, n = 12 without a start-up, 26 %; the others 8-17 %)."""
     system = camera_agents(agents)
-    tracemalloc.start()
-    try:
-        kd = design_kalman(system, Cycle([1.0] * agents), 50.0, max_startup=startup, startup_rtol=0.0)
-        kalman_table(system, [kd]).save(tmp_path / "k.npz")
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert len(kd.startup) == startup
-    est = design_bytes(system.n, max(system.p), kd.pattern.K, startup)
-    assert peak <= est <= 1.25 * peak, (peak, est)
+    est = None
+    peaks = []
+    for i in range(2):
+        tracemalloc.start()
+        try:
+            kd = design_kalman(system, Cycle([1.0] * agents), 50.0, max_startup=startup, startup_rtol=0.0)
+            kalman_table(system, [kd]).save(tmp_path / f"k{i}.npz")
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+        assert len(kd.startup) == startup
+        est = design_bytes(system.n, max(system.p), kd.pattern.K, startup)
+    assert peaks[0] <= est and peaks[1] <= est <= 1.3 * peaks[1], (peaks, est)
 
 
 @pytest.mark.parametrize("rate, tau_max", [(1e9, 4.0), (50.0, 1e9)])
