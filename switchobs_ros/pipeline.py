@@ -48,7 +48,8 @@ agent's poses were used as the old one's, errors of metres). A sample sent in su
 its shared parts (the camera's own pose) used alone and its channel parts dropped and counted
 (``ambiguous_channel``); with the consistency test on, a sample that only one channel's
 reading passes is used whole on that channel (``lost_channel_named``). A gap found after
-samples in it were answered (on the window's expiry) withdraws the bounds. Without sequence
+samples in it were answered on the window's expiry withdraws the bounds, unless the
+consistency test had named their channel (the only reading it allowed). Without sequence
 numbers (offline, or an rmw that has none) the history is taken as complete, as before.
 
 Without source timestamps (offline: a bag's messages are in the order the recorder wrote them)
@@ -308,6 +309,7 @@ class EstimatorPipeline:
         self._ch_seq: list[int | None] = []      # publication sequence numbers (None: unknown)
         self._ch_dropped = False                 # history truncated (CHANNEL_HISTORY)
         self._answered_src = -1                  # newest source timestamp of an answered sample
+        self._guessed_src = -1                   # the same, of one answered on the window's expiry
         self._last_fixed = 0                     # channel of the latest sample from a one-channel source
         # counters (never cleared)
         self.accepted: Counter = Counter()
@@ -435,7 +437,7 @@ class EstimatorPipeline:
                                "(raise reorder_window_ms)")
         if k and seq is not None and self._ch_seq[k - 1] is not None and seq != self._ch_seq[k - 1] + 1:
             self.lost_channel += max(seq - self._ch_seq[k - 1] - 1, 1)
-            if self._answered_src > self._ch_src[k - 1]:
+            if self._guessed_src > self._ch_src[k - 1]:
                 self._withdraw(f"channel messages were lost (publication sequence {self._ch_seq[k - 1]} then {seq}) "
                                "around samples already answered: their channel is not certain")
         self._ch_src.insert(k, src)
@@ -444,6 +446,17 @@ class EstimatorPipeline:
         if len(self._ch_src) > CHANNEL_HISTORY:
             del self._ch_src[0], self._ch_val[0], self._ch_seq[0]
             self._ch_dropped = True
+
+    def _guessed(self, pend: _Pending) -> bool:
+        """Whether the channel history does not prove the channel of a sample that depends on it:
+        no channel message sent after it has arrived (answered on the window's expiry). A gap
+        found later before such a sample withdraws the bounds (:meth:`_remember_channel`)."""
+        srcs = self.sources
+        if not self.channel_topic or not self._ch_src or all(srcs[i].shared for i in pend.parts) \
+                or any(srcs[i].channel is not None for i in pend.parts):
+            return False
+        stamps = [p.src_ns for i, p in pend.parts.items() if not srcs[i].shared]
+        return None not in stamps and self._ch_src[-1] <= max(stamps)
 
     def _gap_after(self, k: int) -> bool:
         """Whether channel messages were lost between history entries ``k`` and ``k + 1`` (their
@@ -730,6 +743,9 @@ class EstimatorPipeline:
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         dt = t - self.observer.t
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
+        guess = self._guessed(pend)
+        if guess and self.check and self.bound_valid and len(self._fitting_channels(pend, t)) == 1:
+            guess = False       # named by the consistency test (re-attributed below if not `channel`)
         if self.check and self.bound_valid:
             m = self._consistent(pend, t, m)
             if m is None:
@@ -740,6 +756,8 @@ class EstimatorPipeline:
             return
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))
+            if guess:
+                self._guessed_src = max(self._guessed_src, max(srcs))
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
