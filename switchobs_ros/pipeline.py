@@ -403,6 +403,9 @@ class EstimatorPipeline:
             rej = mb.check_channel(msg, self.N)
             if rej is not None:
                 self.reject(topic, rej)
+                k = bisect.bisect_right(self._ch_src, int(src_ns)) if src_ns is not None else 0
+                if k and _sequence(seq) is not None:    # received, not lost: the channel is kept
+                    self._remember_channel(int(src_ns), self._ch_val[k - 1], _sequence(seq))
                 return out
             self.accepted[topic] += 1
             c = int(msg.data)

@@ -137,6 +137,10 @@ def test_lost_channel_message_at_a_switch_is_not_guessed(pl):
     assert [e.stamp_ns for e in out] == [t1 + 10 * MS]
     assert pl.rejected[("target/pose", "ambiguous_channel")] == 1 and pl.partial_updates == 1
     assert pl.lost_channel == 1 and pl.observer.channel == 1 and pl.bound_valid
+    # a rejected channel message (channel 0) is received, not lost: the channel is kept
+    assert pl.on_channel(UInt8(data=0), src_ns=src + 40 * MS, now_mono=0.004, seq=5) == []
+    pl.on_channel(UInt8(data=2), src_ns=src + 50 * MS, now_mono=0.005, seq=6)
+    assert pl.lost_channel == 1 and pl.rejected[("camera/active_channel", "bad_channel")] == 1
 
 
 def test_lost_channel_messages_found_after_an_answer_withdraw_the_bounds(pl):
