@@ -140,6 +140,8 @@ class EstimatorDiagnostics:
         ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
                kv("re-attributed samples", pl.reattributed),
                kv("late channel messages", pl.late_channel),
+               kv("lost channel messages", pl.lost_channel),
+               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
                kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
@@ -156,7 +158,7 @@ class EstimatorDiagnostics:
                     and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
-        if not pl.bound_valid and (pl.inconsistent or pl.late_channel):
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         if recs and not recs[-1].matched:

@@ -278,8 +278,9 @@ class EstimatorMixin:
                 return
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
-            if index is None:
-                self._publish_all(pipeline.on_channel(msg, src_ns=src_ns))
+            if index is None:      # the sequence number shows lost channel messages (the pipeline)
+                seq = info.get("publication_sequence_number") if info else None
+                self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
                 self._publish_all(pipeline.on_input(index, msg, clock.now().nanoseconds, None, src_ns))
         return handle

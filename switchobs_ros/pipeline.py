@@ -36,9 +36,24 @@ message sent after it has arrived (the channel topic is reliable and keeps its o
 window has passed. A sample that is still ambiguous then (its source timestamp is older than
 the channel history kept) is dropped and counted (``ambiguous_channel``), never guessed. A channel
 message that arrives after samples it governs were answered (a window too short for the load)
-withdraws the bounds: an answered sample may have had the wrong channel. Without source
-timestamps (offline: a bag's messages are in the order the recorder wrote them) the latest
-channel received is the channel, as the order is the publishing order.
+withdraws the bounds: an answered sample may have had the wrong channel.
+
+Lost channel messages: reliable keep-last delivery loses messages under load (a history that
+overflows, a writer that no longer holds what the reader's transport dropped), so "a later
+channel message has arrived" does not prove that none was sent in between. The publisher's
+sequence number (rclpy's ``MessageInfo``, ``publication_sequence_number``) does: between two
+received messages whose numbers are not consecutive the channel is unknown (measured beside
+two busy loops: the first message of a new channel lost, a later one received, and the new
+agent's poses were used as the old one's, errors of metres). A sample sent in such a gap has
+its shared parts (the camera's own pose) used alone and its channel parts dropped and counted
+(``ambiguous_channel``); with the consistency test on, a sample that only one channel's
+reading passes is used whole on that channel (``lost_channel_named``). A gap found after
+samples in it were answered on the window's expiry withdraws the bounds, unless the
+consistency test had named their channel (the only reading it allowed). Without sequence
+numbers (offline, or an rmw that has none) the history is taken as complete, as before.
+
+Without source timestamps (offline: a bag's messages are in the order the recorder wrote them)
+the latest channel received is the channel, as the order is the publishing order.
 
 Consistency (the model against the data)
 ----------------------------------------
@@ -121,6 +136,17 @@ INPUT_TOPICS = (POSE_TOPICS["camera"], POSE_TOPICS["target"], CHANNEL_TOPIC)
 MAX_PENDING = 1024
 #: Channel messages remembered for attribution by source timestamp.
 CHANNEL_HISTORY = 256
+#: :meth:`EstimatorPipeline._resolve`'s channel of a sample sent while channel messages were lost.
+LOST_CHANNEL = -3
+
+
+def _sequence(seq: Any) -> int | None:
+    """A publisher's sequence number as rclpy reports it, None when unknown (absent, 0, or the
+    rmw's 'unsupported' value, UINT64_MAX)."""
+    if seq is None:
+        return None
+    seq = int(seq)
+    return seq if 0 < seq < 2**63 else None
 
 
 @dataclass(frozen=True)
@@ -226,7 +252,8 @@ class EstimatorPipeline:
 
     Counters (never cleared, reported in diagnostics): ``accepted`` (per input topic),
     ``rejected`` (per ``(topic, reason)``), ``updates``, ``partial_updates``, ``switches``,
-    ``resets``, ``errors``, ``inconsistent``, ``reattributed``, ``late_channel``;
+    ``resets``, ``errors``, ``inconsistent``, ``reattributed``, ``late_channel``, ``lost_channel``,
+    ``lost_channel_named``;
     ``last_rejection`` is the latest rejection's text.
     """
 
@@ -279,8 +306,10 @@ class EstimatorPipeline:
         self._upto = -1                          # newest stamp of a complete sample: older ones go alone
         self._ch_src: list[int] = []             # channel history by source timestamp (sorted)
         self._ch_val: list[int] = []
+        self._ch_seq: list[int | None] = []      # publication sequence numbers (None: unknown)
         self._ch_dropped = False                 # history truncated (CHANNEL_HISTORY)
         self._answered_src = -1                  # newest source timestamp of an answered sample
+        self._guessed_src = -1                   # the same, of one answered on the window's expiry
         self._last_fixed = 0                     # channel of the latest sample from a one-channel source
         # counters (never cleared)
         self.accepted: Counter = Counter()
@@ -293,6 +322,8 @@ class EstimatorPipeline:
         self.inconsistent = 0
         self.reattributed = 0
         self.late_channel = 0
+        self.lost_channel = 0       # channel messages missing from the publisher's sequence
+        self.lost_channel_named = 0  # samples sent in such a gap whose channel the consistency test named
         self.last_inconsistency = ""
         self.parts_used = 0         # accepted messages an observer update consumed
         self.dropped: Counter = Counter()   # accepted messages no update used, by reason (never silent)
@@ -353,21 +384,28 @@ class EstimatorPipeline:
         return tuple(s.topic for s in self.sources) + ((self.channel_topic,) if self.channel_topic else ())
 
     def on_message(self, topic: str, msg: Any, now_ns: int, now_mono: float | None = None,
-                   src_ns: int | None = None) -> list[Estimate]:
-        """A message on input ``topic`` (a source or the channel topic; relative name)."""
+                   src_ns: int | None = None, seq: int | None = None) -> list[Estimate]:
+        """A message on input ``topic`` (a source or the channel topic; relative name); ``seq``:
+        the publisher's sequence number of a channel message (:meth:`on_channel`)."""
         if topic == self.channel_topic:
-            return self.on_channel(msg, src_ns=src_ns, now_mono=now_mono)
+            return self.on_channel(msg, src_ns=src_ns, now_mono=now_mono, seq=seq)
         return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns)
 
-    def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None) -> list[Estimate]:
+    def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None,
+                   seq: int | None = None) -> list[Estimate]:
         """A channel-topic message: validate, count, remember the channel (by its source timestamp
-        ``src_ns`` when given); returns the pending samples it makes certain, answered."""
+        ``src_ns`` when given, with the publisher's sequence number ``seq`` when known: a gap in
+        the numbers is a lost message, module docstring); returns the pending samples it makes
+        certain, answered."""
         out: list[Estimate] = []
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
             rej = mb.check_channel(msg, self.N)
             if rej is not None:
                 self.reject(topic, rej)
+                k = bisect.bisect_right(self._ch_src, int(src_ns)) if src_ns is not None else 0
+                if k and _sequence(seq) is not None:    # received, not lost: the channel is kept
+                    self._remember_channel(int(src_ns), self._ch_val[k - 1], _sequence(seq))
                 return out
             self.accepted[topic] += 1
             c = int(msg.data)
@@ -382,15 +420,17 @@ class EstimatorPipeline:
                 self.blind_first_ns = None
                 self.target_since_switch = False
             if src_ns is not None:
-                self._remember_channel(int(src_ns), c)
+                self._remember_channel(int(src_ns), c, _sequence(seq))
             self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
             self.internal_error(topic, err)
         return out
 
-    def _remember_channel(self, src: int, c: int) -> None:
+    def _remember_channel(self, src: int, c: int, seq: int | None = None) -> None:
         """Insert a channel message into the history by source timestamp; a late one that changes
-        the channel of samples already answered withdraws the bounds (module docstring)."""
+        the channel of samples already answered, or a gap in the sequence numbers before one
+        (lost messages) after samples in the gap were answered, withdraws the bounds (module
+        docstring)."""
         k = bisect.bisect_right(self._ch_src, src)
         if src <= self._answered_src:
             before = self._ch_val[k - 1] if k else 0
@@ -398,11 +438,34 @@ class EstimatorPipeline:
                 self.late_channel += 1
                 self._withdraw(f"a channel message (channel {c}) arrived after samples it governs were answered "
                                "(raise reorder_window_ms)")
+        if k and seq is not None and self._ch_seq[k - 1] is not None and seq != self._ch_seq[k - 1] + 1:
+            self.lost_channel += max(seq - self._ch_seq[k - 1] - 1, 1)
+            if self._guessed_src > self._ch_src[k - 1]:
+                self._withdraw(f"channel messages were lost (publication sequence {self._ch_seq[k - 1]} then {seq}) "
+                               "around samples already answered: their channel is not certain")
         self._ch_src.insert(k, src)
         self._ch_val.insert(k, c)
+        self._ch_seq.insert(k, seq)
         if len(self._ch_src) > CHANNEL_HISTORY:
-            del self._ch_src[0], self._ch_val[0]
+            del self._ch_src[0], self._ch_val[0], self._ch_seq[0]
             self._ch_dropped = True
+
+    def _guessed(self, pend: _Pending) -> bool:
+        """Whether the channel history does not prove the channel of a sample that depends on it:
+        no channel message sent after it has arrived (answered on the window's expiry). A gap
+        found later before such a sample withdraws the bounds (:meth:`_remember_channel`)."""
+        srcs = self.sources
+        if not self.channel_topic or not self._ch_src or all(srcs[i].shared for i in pend.parts) \
+                or any(srcs[i].channel is not None for i in pend.parts):
+            return False
+        stamps = [p.src_ns for i, p in pend.parts.items() if not srcs[i].shared]
+        return None not in stamps and self._ch_src[-1] <= max(stamps)
+
+    def _gap_after(self, k: int) -> bool:
+        """Whether channel messages were lost between history entries ``k`` and ``k + 1`` (their
+        sequence numbers known and not consecutive)."""
+        a, b = self._ch_seq[k], self._ch_seq[k + 1]
+        return a is not None and b is not None and b != a + 1
 
     def _dep_last_ns(self) -> int | None:
         stamps = [self.last_ns[s.topic] for s in self.sources if s.channel is None and not s.shared
@@ -551,7 +614,8 @@ class EstimatorPipeline:
         """The channel of a pending sample and whether it is certain (module docstring).
 
         Channel 0: none was active when the sample was sent; -1: two one-channel sources disagree;
-        -2: ambiguous (older than the channel history kept).
+        -2: ambiguous (older than the channel history kept); :data:`LOST_CHANNEL`: sent while
+        channel messages were lost (a gap in their sequence numbers).
         """
         srcs = self.sources
         fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
@@ -571,6 +635,8 @@ class EstimatorPipeline:
         certain = force or self._ch_src[-1] > s or now_mono - pend.since >= self.window_ns * 1e-9
         if k < 0:
             return (-2 if self._ch_dropped else 0), certain
+        if k + 1 < len(self._ch_src) and self._gap_after(k):
+            return LOST_CHANNEL, True
         return self._ch_val[k], certain
 
     def _complete(self, pend: _Pending, ch: int) -> bool:
@@ -643,12 +709,29 @@ class EstimatorPipeline:
             channel, certain = self._resolve(pend, now_mono)
             if not certain:          # pushed out of the window before its channel was certain
                 channel = -2
+        lost = "sent while channel messages were lost (a gap in the publisher's sequence numbers)"
+        if channel == LOST_CHANNEL and self.check and self.bound_valid and self.origin_ns is not None:
+            # the consistency test names the channel when it allows exactly one (the model holds)
+            fits = self._fitting_channels(pend, (pend.stamp_ns - self.origin_ns) * 1e-9)
+            if len(fits) == 1:
+                channel = fits[0]
+                self.lost_channel_named += 1
+        if channel == LOST_CHANNEL and any(self.sources[i].shared for i in pend.parts):
+            # its channel is unknown: the shared parts (the same rows in every channel) alone, on
+            # the observer's channel (no switching instant on an unknown channel); the rest dropped
+            for i in [i for i in pend.parts if not self.sources[i].shared]:
+                self.reject(self.sources[i].topic,
+                            Rejection(Reason.AMBIGUOUS_CHANNEL, self.channel_topic or "channel", lost))
+                self.dropped[Reason.AMBIGUOUS_CHANNEL.value] += 1
+                del pend.parts[i]
+            channel = self.observer.channel or self.channel
         topics = [self.sources[i].topic for i in pend.parts]
         if channel <= 0:
             reason, detail = {
                 0: (Reason.NO_CHANNEL, "no active channel when it was sent"),
                 -1: (Reason.AMBIGUOUS_CHANNEL, "parts from sources of different channels share one stamp"),
                 -2: (Reason.AMBIGUOUS_CHANNEL, "its channel was not certain within the reorder window"),
+                LOST_CHANNEL: (Reason.AMBIGUOUS_CHANNEL, lost),
             }[channel]
             for t in topics:
                 self.reject(t, Rejection(reason, self.channel_topic or "channel", detail))
@@ -663,6 +746,9 @@ class EstimatorPipeline:
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         dt = t - self.observer.t
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
+        guess = self._guessed(pend)
+        if guess and self.check and self.bound_valid and len(self._fitting_channels(pend, t)) == 1:
+            guess = False       # named by the consistency test (re-attributed below if not `channel`)
         if self.check and self.bound_valid:
             m = self._consistent(pend, t, m)
             if m is None:
@@ -673,6 +759,8 @@ class EstimatorPipeline:
             return
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))
+            if guess:
+                self._guessed_src = max(self._guessed_src, max(srcs))
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
@@ -712,20 +800,11 @@ class EstimatorPipeline:
 
         Returns the measurement to use (re-attributed when exactly one other channel explains
         the sample), or None when the sample is rejected (the bounds are then withdrawn)."""
-        obs = self.observer
         with np.errstate(all="ignore"):
-            x_p, exact, noisy = obs.prior(t)
-        vmax = obs.noise_max
+            prior = self.observer.prior(t)
 
         def test(mc: Measurement) -> Consistency:
-            key = (mc.channel, mc.rows)
-            if key not in self._norms:
-                C = self._C[mc.channel - 1]
-                C = C if mc.rows is None else C[list(mc.rows)]
-                self._norms[key] = (C, spectral_norm(C))
-            C, nC = self._norms[key]
-            b = exact if vmax is None else noisy
-            return check_innovation(C, mc.channel, b, 0.0 if vmax is None else vmax[mc.channel - 1], x_p, mc.y, nC)
+            return self._innovation(mc, prior)
 
         first = test(m)
         if first.ok:
@@ -749,6 +828,26 @@ class EstimatorPipeline:
                        "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
                        "beyond noise.max)")
         return None
+
+    def _innovation(self, mc: Measurement, prior: tuple) -> Consistency:
+        """The innovation test of ``mc`` against the observer's ``prior`` (``(x_hat, exact, noise)``
+        of :meth:`~switchobs_core.observer.SwitchedObserver.prior` at its time)."""
+        x_p, exact, noisy = prior
+        vmax = self.observer.noise_max
+        key = (mc.channel, mc.rows)
+        if key not in self._norms:
+            C = self._C[mc.channel - 1]
+            C = C if mc.rows is None else C[list(mc.rows)]
+            self._norms[key] = (C, spectral_norm(C))
+        C, nC = self._norms[key]
+        b = exact if vmax is None else noisy
+        return check_innovation(C, mc.channel, b, 0.0 if vmax is None else vmax[mc.channel - 1], x_p, mc.y, nC)
+
+    def _fitting_channels(self, pend: _Pending, t: float) -> list[int]:
+        """The channels whose reading of the pending sample passes the innovation test at ``t``."""
+        with np.errstate(all="ignore"):
+            prior = self.observer.prior(t)
+        return [c for c in range(1, self.N + 1) if self._innovation(self._sample(pend, c), prior).ok]
 
     def _gate(self, pend: _Pending, t: float, m: Measurement) -> bool:
         """The chi-square gate (``consistency.chi2_alpha``): False, counted and rejected, when the
