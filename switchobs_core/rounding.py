@@ -46,7 +46,8 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
 Cost: two n x n products per step (like the transition product itself), one eigenvalue
 problem when the bound is read. A Kalman sample with a sparse ``e^{A dt}`` takes step 6's
 product in factors, O(n^2 p), with its own allowance (:mod:`.kalman_map`), and from 40 states on
-the bound is read in O(n^2) between verified anchors (:mod:`.bound_read`). ``sqrt(trace S)`` (cheaper, larger) bounds ``||e_k||`` inside
+the bound is read in O(n^2) between verified anchors (:mod:`.bound_read`). ``sqrt(trace S)``
+(cheaper, larger) bounds ``||e_k||`` inside
 ``rho``.
 """
 
