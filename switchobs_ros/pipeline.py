@@ -50,7 +50,9 @@ its shared parts (the camera's own pose) used alone and its channel parts droppe
 reading passes is used whole on that channel (``lost_channel_named``). A gap found after
 samples in it were answered on the window's expiry withdraws the bounds, unless the
 consistency test had named their channel (the only reading it allowed). Without sequence
-numbers (offline, or an rmw that has none) the history is taken as complete, as before.
+numbers (offline, or an rmw that has none) the history is taken as complete, as before. A
+sequence that starts again (a restarted publisher: DDS numbers from 1) is not a gap; only a new
+publisher's own first messages, if they are missing, are.
 
 Without source timestamps (offline: a bag's messages are in the order the recorder wrote them)
 the latest channel received is the channel, as the order is the publishing order.
@@ -138,6 +140,16 @@ MAX_PENDING = 1024
 CHANNEL_HISTORY = 256
 #: :meth:`EstimatorPipeline._resolve`'s channel of a sample sent while channel messages were lost.
 LOST_CHANNEL = -3
+
+
+def _lost_between(a: int | None, b: int | None) -> int:
+    """Channel messages lost between two received ones with publication sequence numbers ``a``
+    then ``b`` (None: unknown, nothing is assumed lost). A number that does not increase is a
+    new publisher (a camera restarted: DDS numbers a writer's messages from 1): only its own
+    messages before ``b`` are missing, not the old one's after ``a``."""
+    if a is None or b is None or b == a + 1:
+        return 0
+    return b - 1 if b <= a else b - a - 1
 
 
 def _sequence(seq: Any) -> int | None:
@@ -438,8 +450,9 @@ class EstimatorPipeline:
                 self.late_channel += 1
                 self._withdraw(f"a channel message (channel {c}) arrived after samples it governs were answered "
                                "(raise reorder_window_ms)")
-        if k and seq is not None and self._ch_seq[k - 1] is not None and seq != self._ch_seq[k - 1] + 1:
-            self.lost_channel += max(seq - self._ch_seq[k - 1] - 1, 1)
+        lost = _lost_between(self._ch_seq[k - 1], seq) if k else 0
+        if lost:
+            self.lost_channel += lost
             if self._guessed_src > self._ch_src[k - 1]:
                 self._withdraw(f"channel messages were lost (publication sequence {self._ch_seq[k - 1]} then {seq}) "
                                "around samples already answered: their channel is not certain")
@@ -464,8 +477,7 @@ class EstimatorPipeline:
     def _gap_after(self, k: int) -> bool:
         """Whether channel messages were lost between history entries ``k`` and ``k + 1`` (their
         sequence numbers known and not consecutive)."""
-        a, b = self._ch_seq[k], self._ch_seq[k + 1]
-        return a is not None and b is not None and b != a + 1
+        return _lost_between(self._ch_seq[k], self._ch_seq[k + 1]) > 0
 
     def _dep_last_ns(self) -> int | None:
         stamps = [self.last_ns[s.topic] for s in self.sources if s.channel is None and not s.shared
