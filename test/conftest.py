@@ -79,13 +79,28 @@ def pytest_collection_modifyitems(config, items):
                                order[it.nodeid]))
 
 
-def _serial_lock_path(config) -> str | None:
-    uid = getattr(config, "workerinput", {}).get("testrunuid")
-    if not uid:
-        return None
+def _serial_lock_path(uid: str) -> str:
     import tempfile
 
     return os.path.join(tempfile.gettempdir(), f"switchobs-pytest-serial-{uid}.lock")
+
+
+def pytest_configure(config):
+    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end."""
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None) \
+            and config.getoption("testrunuid", None) is None:
+        import uuid
+
+        config.option.testrunuid = uuid.uuid4().hex
+
+
+def pytest_unconfigure(config):
+    uid = config.getoption("testrunuid", None)
+    if uid and not hasattr(config, "workerinput"):
+        try:
+            os.remove(_serial_lock_path(uid))
+        except FileNotFoundError:
+            pass
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -93,10 +108,11 @@ def pytest_runtest_protocol(item, nextitem):
     """Under xdist, a ``serial`` test (a timed run over DDS whose numbers depend on the CPU it
     gets) runs alone: it takes this run's lock file exclusively, every other test shares it, so
     the other worker waits between two tests while a serial one runs."""
-    path = _serial_lock_path(item.config)
-    if path is None:
+    uid = getattr(item.config, "workerinput", {}).get("testrunuid")
+    if not uid:
         yield
         return
+    path = _serial_lock_path(uid)
     import fcntl
 
     with open(path, "a") as fh:
