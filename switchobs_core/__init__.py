@@ -17,62 +17,78 @@ The paper's transcribed numbers stay in :mod:`switchobs_core.paper`; the figure 
 (:mod:`switchobs_core.figures`, :mod:`switchobs_core.errorfigs`) and the command line
 (:mod:`switchobs_core.cli`) are imported on their own. Importing this package does not import
 cvxpy (only a design or a Lyapunov/box certificate solve does).
-
-The re-exports are lazy (PEP 562): ``import switchobs_core`` loads no library module, a submodule
-(``switchobs_core.observer``) loads just what it imports, and the first top-level name
-(``so.design_table``), ``__all__`` or ``MODULES`` loads every module of :data:`MODULES` once and binds
-their public names here, as an eager ``from .module import *`` of each would. A process that only
-needs the observer (the estimator node, the bag tools) does not pay for the design and certificate
-modules (scipy.optimize, scipy.interpolate).
 """
 
-import importlib as _importlib
+import sys as _sys
 
-# Loaded at once, in the order the eager package had: the library's submodules import each other
-# in a cycle (observer -> certificate -> simulate -> observer) that resolves only from here.
-from . import bound as bound
-from . import certificate as certificate
-from ._version import __version__ as __version__
+from . import (
+    bound,
+    certificate,
+    cycles,
+    decomposition,
+    design,
+    envelope,
+    exceptions,
+    families,
+    family_base,
+    family_kalman,
+    family_lmi,
+    family_online,
+    gains,
+    kalman,
+    kalman_online,
+    noise,
+    observer,
+    paper,  # noqa: F401  (the paper's numbers: so.paper.TABLE)
+    plan,
+    plant,
+    propagation,
+    riccati,
+    scenarios,
+    schedule,
+    simulate,
+    synthesis,
+    system,
+    threads,
+    validation,
+)
+from ._version import __version__
+from .bound import *  # noqa: F403
+from .certificate import *  # noqa: F403
+from .cycles import *  # noqa: F403
+from .decomposition import *  # noqa: F403
+from .design import *  # noqa: F403
+from .envelope import *  # noqa: F403
+from .exceptions import *  # noqa: F403
+from .families import *  # noqa: F403
+from .family_base import *  # noqa: F403
+from .family_kalman import *  # noqa: F403
+from .family_lmi import *  # noqa: F403
+from .family_online import *  # noqa: F403
+from .gains import *  # noqa: F403
+from .kalman import *  # noqa: F403
+from .kalman_online import *  # noqa: F403
+from .noise import *  # noqa: F403
+from .observer import *  # noqa: F403
+from .plan import *  # noqa: F403
+from .plant import *  # noqa: F403
+from .propagation import *  # noqa: F403
+from .riccati import *  # noqa: F403
+from .scenarios import *  # noqa: F403
+from .schedule import *  # noqa: F403
+from .simulate import *  # noqa: F403
+from .synthesis import *  # noqa: F403
+from .system import *  # noqa: F403
+from .threads import *  # noqa: F403
+from .validation import *  # noqa: F403
 
-#: The modules whose ``__all__`` is re-exported here (by name; ``MODULES`` holds the modules).
-_MODULE_NAMES = ("bound", "certificate", "cycles", "decomposition", "design", "envelope", "exceptions",
-                 "families", "family_base", "family_kalman", "family_lmi", "family_online", "gains", "kalman",
-                 "kalman_online", "noise", "observer", "plan", "plant", "propagation", "riccati", "scenarios",
-                 "schedule", "simulate", "synthesis", "system", "threads", "validation")
+# ``so.simulate`` stays the module (``from switchobs_core import simulate`` keeps working);
+# run a simulation with ``so.simulate.simulate(...)``.
+simulate = _sys.modules[f"{__name__}.simulate"]  # noqa: F811
 
+#: Every module whose ``__all__`` is re-exported here.
+MODULES = (bound, certificate, cycles, decomposition, design, envelope, exceptions, families, family_base,
+           family_kalman, family_lmi, family_online, gains, kalman, kalman_online, noise, observer, plan, plant,
+           propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads, validation)
 
-def _load_all() -> None:
-    """Import every module of ``_MODULE_NAMES`` and bind their public names (the eager package)."""
-    g = globals()
-    if "MODULES" in g:
-        return
-    mods = tuple(_importlib.import_module(f"{__name__}.{m}") for m in _MODULE_NAMES)
-    _importlib.import_module(f"{__name__}.paper")       # the paper's numbers: so.paper.TABLE
-    for m in mods:
-        for name in m.__all__:
-            # ``so.simulate`` stays the module (``from switchobs_core import simulate`` keeps
-            # working); run a simulation with ``so.simulate.simulate(...)``.
-            if name != "simulate":
-                g[name] = getattr(m, name)
-    g["__all__"] = ["__version__", *(name for m in mods for name in m.__all__ if name != "simulate")]
-    #: Every module whose ``__all__`` is re-exported here.
-    g["MODULES"] = mods
-
-
-def __getattr__(name: str):
-    if not name.startswith("_"):
-        try:                                               # a submodule: just that one
-            return _importlib.import_module(f"{__name__}.{name}")
-        except ModuleNotFoundError as err:
-            if err.name != f"{__name__}.{name}":
-                raise
-    if name == "__all__" or not name.startswith("_"):       # a re-exported name: every module
-        _load_all()
-        if name in globals():
-            return globals()[name]
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    _load_all()
-    return sorted(set(globals()) | set(__all__))  # noqa: F821  (bound by _load_all)
+__all__ = ["__version__", *(name for m in MODULES for name in m.__all__ if name not in ("simulate",))]
