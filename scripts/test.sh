@@ -3,7 +3,10 @@
 # (a file, a folder or a node id such as test/ros/test_x.py::test_y) pytest runs all of test/
 # (core and ros); with one or more it runs just those (`scripts/test.sh test/core/test_plan.py`).
 # `scripts/test.sh -m "not slow"` skips the DDS convergence runs and the colcon build.
-# The ROS tests claim their own ROS_DOMAIN_ID.
+# The ROS tests claim their own ROS_DOMAIN_ID (each pytest-xdist worker one of its own).
+# The full run uses two pytest-xdist workers (SWITCHOBS_TEST_WORKERS, default 2; 1 = no xdist); a run
+# naming test paths, or passing -n itself, runs as asked. The timed DDS runs (marker `serial`)
+# run alone even then (test/conftest.py).
 set -euo pipefail
 "$(dirname "$0")/bootstrap.sh"
 . "$(dirname "$0")/lib.sh"
@@ -25,4 +28,11 @@ done
 if [ "${#paths[@]}" -gt 0 ]; then
     exec "$VENV/bin/python" -m pytest "$@"
 fi
-exec "$VENV/bin/python" -m pytest test "$@"
+workers=()
+case " $* " in
+    *" -n "*|*" -n"[0-9]*|*" --numprocesses"*|*" -p no:xdist "*|*" -pno:xdist "*) ;;
+    *) if [ "${SWITCHOBS_TEST_WORKERS:-2}" -gt 1 ]; then
+           workers=(-n "${SWITCHOBS_TEST_WORKERS:-2}" --dist load)
+       fi ;;
+esac
+exec "$VENV/bin/python" -m pytest test "${workers[@]}" "$@"

@@ -28,3 +28,96 @@ def device(tmp_path):
     p = tmp_path / "dev"
     os.mknod(p, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
     return p
+
+
+# ---- the full run under pytest-xdist (scripts/test.sh: two workers) -------------------------------
+
+#: Tests known to take long (seconds on a quiet 2-core machine, roughly): they are handed out
+#: first, so that the two workers end together instead of one of them finishing a 2-minute test
+#: alone at the end. Only an order: a test missing here just runs in its place.
+LONG_FIRST = (
+    "test/ros/test_bound_long_bag.py::test_ten_minutes_published_exact_bound_never_below_the_error",
+    "test/core/test_table_exact_cache.py::test_monte_carlo_every_disturbance",
+    "test/ros/test_fail_node.py::test_random_stream_over_dds_node_stays_up_every_valid_answered",
+    "test/ros/test_fail_inputs.py::test_fuzz_100k_messages_every_valid_one_answered",
+    "test/ros/test_typed_msgs.py::test_colcon_builds_the_package_in_a_workspace",
+    "test/ros/test_attribution.py::test_demo_under_load_publishes_no_false_bound",
+    "test/core/test_docs_numbers.py::test_docs_block",
+    "test/ros/test_bound_long_bag.py::test_declared_noise_bound",
+    "test/ros/test_dds_convergence.py::test_converges_over_dds",
+    "test/ros/test_bag_live.py::test_looped_live_replay_sqlite",
+    "test/core/test_simulate.py::test_ten_minutes_without_a_violation",
+    "test/ros/test_tutorial_clone.py::test_own_system_tutorial_from_a_fresh_clone",
+    "test/ros/test_consistency.py",
+    "test/core/test_bound_audit.py::test_bounds_never_below_the_error",
+    "test/core/test_observer.py::test_innovation_hold_exact_bound_is_exact_for_samples",
+    "test/ros/test_fail_faults.py",
+    "test/ros/test_bag_live.py",
+    "test/ros/test_round2_tools.py",
+    "test/ros/test_docs.py",
+    "test/ros/test_clock_jump.py",
+    "test/ros/test_tool_inputs.py",
+    "test/core/test_design_conditioning.py",
+    "test/ros/test_startup_failures.py",
+)
+
+
+def _long_rank(nodeid: str) -> int:
+    for i, prefix in enumerate(LONG_FIRST):
+        if nodeid.startswith(prefix):
+            return i
+    return len(LONG_FIRST)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist: the long tests first (LONG_FIRST), the ``serial`` ones last (each worker
+    collects and sorts alike: the order is a function of the node ids alone)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    order = {item.nodeid: i for i, item in enumerate(items)}
+    items.sort(key=lambda it: (it.get_closest_marker("serial") is not None, _long_rank(it.nodeid),
+                               order[it.nodeid]))
+
+
+def _serial_lock_path(uid: str) -> str:
+    import tempfile
+
+    return os.path.join(tempfile.gettempdir(), f"switchobs-pytest-serial-{uid}.lock")
+
+
+def pytest_configure(config):
+    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end."""
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None) \
+            and config.getoption("testrunuid", None) is None:
+        import uuid
+
+        config.option.testrunuid = uuid.uuid4().hex
+
+
+def pytest_unconfigure(config):
+    uid = config.getoption("testrunuid", None)
+    if uid and not hasattr(config, "workerinput"):
+        try:
+            os.remove(_serial_lock_path(uid))
+        except FileNotFoundError:
+            pass
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Under xdist, a ``serial`` test (a timed run over DDS whose numbers depend on the CPU it
+    gets) runs alone: it takes this run's lock file exclusively, every other test shares it, so
+    the other worker waits between two tests while a serial one runs."""
+    uid = getattr(item.config, "workerinput", {}).get("testrunuid")
+    if not uid:
+        yield
+        return
+    path = _serial_lock_path(uid)
+    import fcntl
+
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX if item.get_closest_marker("serial") else fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)

@@ -96,6 +96,7 @@ def test_pipeline_answers_blind_camera_poses_at_once(tables):
     assert pl.updates == round(6.0 * RATE) + 1 - sum(1 for s in pl.pending)
 
 
+@pytest.mark.serial      # timed over DDS (time_scale > 1): alone under xdist (test/conftest.py)
 @pytest.mark.slow
 def test_planned_schedule_with_dead_time_delivers_the_planned_accuracy(tmp_path, ros_domain):
     """plan --dead-time -> design -> camera_sim + estimator (schedule.dead_time) over DDS -> the

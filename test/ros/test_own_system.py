@@ -74,6 +74,7 @@ def test_bad_specification_stops_start_up_with_one_line(tmp_path, cart_table, so
     assert len(ours) == 1 and "input specification" in ours[0] and needle in ours[0], r.stderr
 
 
+@pytest.mark.serial      # timed over DDS (time_scale > 1): alone under xdist (test/conftest.py)
 @pytest.mark.slow
 def test_own_system_over_dds(tmp_path, cart_table):
     from tools import demo

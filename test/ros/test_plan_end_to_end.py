@@ -14,6 +14,7 @@ from switchobs_core.scenarios import paper_system
 from tools.demo import run
 
 
+@pytest.mark.serial      # timed over DDS (time_scale > 1): alone under xdist (test/conftest.py)
 @pytest.mark.slow
 def test_planned_schedule_delivers_the_planned_accuracy(tmp_path, ros_domain):
     sys_ = paper_system()
