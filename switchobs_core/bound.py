@@ -145,7 +145,7 @@ class RoundingBound:
                amortised: bool = False) -> tuple[float, float | None]:
         """``(exact, noise)``: upper bounds of ``sqrt(lambda_max)`` of the shape matrices (default
         the current ones): the eigenvalue problem's, or with ``amortised`` (current sets only)
-        :mod:`.bound_read`'s (an eigenvalue problem per anchor, O(n^2) in between, at most 1.051x
+        :mod:`.bound_read`'s (a verified upper bound per anchor, O(n^2) in between, at most 1.062x
         larger)."""
         if amortised and S is None and Sv is None:
             return self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)

@@ -156,11 +156,12 @@ class KalmanMap:
     ``||I - K H||_2``.
     """
 
-    __slots__ = ("Phi", "K", "H", "e", "_fK", "_kappa", "_I", "_IKH", "_E", "_fE2", "_nIKH", "_sp", "_cols")
+    __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_fE2", "_nIKH", "_sp", "_cols")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
         self._fK: float | None = None
+        self._fH: float | None = None
         self._kappa: float | None = None
         self._IKH: np.ndarray | None = None
         self._E: np.ndarray | None = None
@@ -178,8 +179,10 @@ class KalmanMap:
 
     @property
     def fH(self) -> float:
-        """``||H||_F``."""
-        return _fro(self.H)
+        """``||H||_F`` (computed at its first read)."""
+        if self._fH is None:
+            self._fH = _fro(self.H)
+        return self._fH
 
     @property
     def kappa(self) -> float:

@@ -143,6 +143,19 @@ def test_lost_channel_message_at_a_switch_is_not_guessed(pl):
     assert pl.lost_channel == 1 and pl.rejected[("camera/active_channel", "bad_channel")] == 1
 
 
+def _answer_on_expiry(pl, seq: int) -> int:
+    """Channel 1 (publication number ``seq``), then a sample 20 ms later answered on the reorder
+    window's expiry (no later channel message yet), bounds valid. Returns the channel message's
+    source timestamp."""
+    src = 1_000 * S
+    t0 = NOW - 10 * S
+    pl.on_channel(UInt8(data=1), src_ns=src, seq=seq)
+    pl.on_pose("camera", _pose((0.0, 0.0), t0), NOW, 0.0, src + 20 * MS + 1)
+    pl.on_pose("target", _pose((3.0, 1.0), t0), NOW, 0.0, src + 20 * MS + 2)
+    assert len(pl.flush_overdue(1.0, 0.2)) == 1 and pl.bound_valid
+    return src
+
+
 def test_a_restarted_channel_publisher_is_not_a_loss(pl):
     """A camera restarted mid-run numbers its messages from 1 again (DDS): 61 then 1 is a new
     publisher, not 60 lost messages, and a sample answered on the window's expiry before it keeps
@@ -152,12 +165,7 @@ def test_a_restarted_channel_publisher_is_not_a_loss(pl):
 
     assert (_lost_between(61, 1), _lost_between(61, 3), _lost_between(4, 5), _lost_between(4, 7),
             _lost_between(None, 9), _lost_between(9, None)) == (0, 2, 0, 2, 0, 0)
-    src = 1_000 * S
-    t0 = NOW - 10 * S
-    pl.on_channel(UInt8(data=1), src_ns=src, seq=61)
-    pl.on_pose("camera", _pose((0.0, 0.0), t0), NOW, 0.0, src + 20 * MS + 1)
-    pl.on_pose("target", _pose((3.0, 1.0), t0), NOW, 0.0, src + 20 * MS + 2)
-    assert len(pl.flush_overdue(1.0, 0.2)) == 1 and pl.bound_valid
+    src = _answer_on_expiry(pl, seq=61)
     pl.on_channel(UInt8(data=1), src_ns=src + 5 * S, now_mono=6.0, seq=1)
     assert pl.lost_channel == 0 and pl.bound_valid
     pl.on_channel(UInt8(data=2), src_ns=src + 5 * S + 30 * MS, now_mono=6.1, seq=4)
@@ -168,12 +176,7 @@ def test_lost_channel_messages_found_after_an_answer_withdraw_the_bounds(pl):
     """A sample answered on the reorder window's expiry (no later channel message yet), then a
     channel message whose number shows that messages sent around it were lost: the answer may
     have had the wrong channel, so the bounds are withdrawn, with the reason."""
-    src = 1_000 * S
-    t0 = NOW - 10 * S
-    pl.on_channel(UInt8(data=1), src_ns=src, seq=1)
-    pl.on_pose("camera", _pose((0.0, 0.0), t0), NOW, 0.0, src + 20 * MS + 1)
-    pl.on_pose("target", _pose((3.0, 1.0), t0), NOW, 0.0, src + 20 * MS + 2)
-    assert len(pl.flush_overdue(1.0, 0.2)) == 1 and pl.bound_valid
+    src = _answer_on_expiry(pl, seq=1)
     pl.on_channel(UInt8(data=2), src_ns=src + 30 * MS, now_mono=1.0, seq=4)
     assert pl.lost_channel == 2 and not pl.bound_valid and "lost" in pl.bound_invalid_why
 
