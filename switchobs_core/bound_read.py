@@ -98,14 +98,20 @@ def _minus_scaled(S: np.ndarray, c: float, Sa: np.ndarray) -> np.ndarray:
 
 
 def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np.ndarray]:
-    """``(theta, v)``: the Rayleigh quotient ``v' T v`` (a lower bound of ``lambda_max(T)`` for a
-    unit ``v``, up to rounding) after ``steps`` power iterations from ``v`` (None: the diagonal's
-    largest entry's axis, plus a little of every axis)."""
+    """``(theta, v)``: a lower bound of ``lambda_max(T)`` (up to rounding): the larger of the
+    Rayleigh quotient ``v' T v`` after ``steps`` power iterations and the largest diagonal entry
+    (``e_i' T e_i``). The start is the last leading direction ``v`` plus the axis of the largest
+    diagonal entry plus a little of every axis: a warm ``v`` alone can lie in a block of ``T``
+    uncoupled from the one that now leads (bodies that do not interact), where power iterations
+    never leave it."""
     n = T.shape[0]
-    if v is None or v.shape != (n,) or not np.all(np.isfinite(v)):
-        v = np.full(n, 1.0 / n)
-        v[int(np.argmax(np.diagonal(T)))] += 1.0
-    v = v / math.sqrt(float(v @ v))
+    d = np.diagonal(T)
+    i = int(np.argmax(d))
+    start = np.full(n, 1.0 / n)
+    start[i] += 1.0
+    if v is not None and v.shape == (n,) and np.all(np.isfinite(v)) and float(v @ v) > 0.0:
+        start += v / math.sqrt(float(v @ v))
+    v = start / math.sqrt(float(start @ start))
     theta = 0.0
     for _ in range(steps):
         w = T @ v
@@ -114,7 +120,7 @@ def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np
         if not nw > 0.0 or not math.isfinite(nw):
             break
         v = w / nw
-    return theta, v
+    return max(theta, float(d[i])), v
 
 
 def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:

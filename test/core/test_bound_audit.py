@@ -246,7 +246,8 @@ def audit(case: Case, family: str, table: so.GainTable) -> dict:
     out.update(factored=any(getattr(m, "_sp", None) is not None
                             for m in getattr(obs._gains, "_fused", {}).values())
                or any(isinstance(getattr(e, "sparse", None), SparseTransition) for e in obs._cache._lru.values()),
-               verified=(b._readv if case.noise else b._read).verified)
+               verified=(b._readv if case.noise else b._read).verified,
+               anchors=(b._readv if case.noise else b._read).anchors)
     out.update(samples=len(ts), error=err_of(obs.x_hat, truth.x[0]), bound=bound, max_x=max_x,
                norm_x=float(np.linalg.norm(truth.x[0].astype(float))), e0=e0,
                phi_bound=float(np.linalg.norm(obs.Phi, 2)) * e0)
@@ -299,7 +300,9 @@ def test_bounds_never_below_the_error(case: Case, family: str):
     """Zero violations: after every update, for every prior and half-way between samples."""
     r = result(case, family)
     if case.system in ("blocks14", "agents10"):     # the paths these cases exist for were taken
-        assert r["factored"] and r["verified"] > 0, r
+        # every anchor verified by the Cholesky check (a warm start stuck in an uncoupled block of
+        # S once left two anchors in three to the eigenvalue problem)
+        assert r["factored"] and r["verified"] == r["anchors"] > 0, r
     assert r["violations"] == 0, f"{r['violations']} of {r['checks']} checks; first: {r['first']}"
     assert r["delta_ratio"] < 1e-3, r          # the truth resolves what is checked (module docstring)
     if case.system in ("unstable15", "blocks14"):
