@@ -136,7 +136,7 @@ class EstimatorDiagnostics:
             if env.noise_bound is not None:
                 ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
                              env.noise_bound if pl.bound_valid else "none (withdrawn)"))
-        # the model against the data (switchobs_core.consistency) and the attribution by source time
+        # the model against the data (switchobs_core.runtime.consistency) and the attribution by source time
         ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
                kv("re-attributed samples", pl.reattributed),
                kv("late channel messages", pl.late_channel),

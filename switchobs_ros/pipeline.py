@@ -11,7 +11,7 @@ and, when the middleware gives it, the publisher's source timestamp (``src_ns``)
 Measurements
 ------------
 The observer sees only measurements ``(stamp_ns, channel, rows, y)``
-(:class:`switchobs_core.measurement.Measurement`). Where they come from is the system's input
+(:class:`switchobs_core.model.measurement.Measurement`). Where they come from is the system's input
 specification (:mod:`msg_bridge.inputs`): sources (topic, message type, fields -> output rows),
 each belonging to one channel or shared by all, and optionally a channel topic
 (``std_msgs/UInt8``, 1..N) for sources shared by several channels. The paper's interface is
@@ -61,7 +61,7 @@ Consistency (the model against the data)
 ----------------------------------------
 With ``consistency.check`` ``always``, or ``auto`` (the default) when a noise bound
 ``noise.max`` is declared (0 for noise-free samples), every sample is tested before it is used
-(:mod:`switchobs_core.consistency`): its innovation cannot exceed what the published bound
+(:mod:`switchobs_core.runtime.consistency`): its innovation cannot exceed what the published bound
 allows if the model holds. A sample that does proves the model broken for it: when exactly one
 other channel explains it, it is re-attributed (``reattributed``); else it is rejected
 (``inconsistent``), and every bound is withdrawn (:data:`NO_BOUND`) until a reset, with the
@@ -107,12 +107,12 @@ from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
-from switchobs_core.consistency import Consistency, check_innovation, chi2_gate, nis, spectral_norm
-from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.families import family_entry, family_of_table
-from switchobs_core.measurement import Measurement
-from switchobs_core.observer import SwitchedObserver
+from switchobs_core.model.measurement import Measurement
+from switchobs_core.runtime.consistency import Consistency, check_innovation, chi2_gate, nis, spectral_norm
+from switchobs_core.runtime.cycles import Residence
+from switchobs_core.runtime.observer import SwitchedObserver
 
 from .config import EstimatorConfig
 from .core_config import load_or_design_table
@@ -808,7 +808,7 @@ class EstimatorPipeline:
 
     # ------------------------------------------------------------------ consistency
     def _consistent(self, pend: _Pending, t: float, m: Measurement) -> Measurement | None:
-        """The innovation test of :mod:`switchobs_core.consistency` before the sample is used.
+        """The innovation test of :mod:`switchobs_core.runtime.consistency` before the sample is used.
 
         Returns the measurement to use (re-attributed when exactly one other channel explains
         the sample), or None when the sample is rejected (the bounds are then withdrawn)."""
@@ -843,7 +843,7 @@ class EstimatorPipeline:
 
     def _innovation(self, mc: Measurement, prior: tuple) -> Consistency:
         """The innovation test of ``mc`` against the observer's ``prior`` (``(x_hat, exact, noise)``
-        of :meth:`~switchobs_core.observer.SwitchedObserver.prior` at its time)."""
+        of :meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior` at its time)."""
         x_p, exact, noisy = prior
         vmax = self.observer.noise_max
         key = (mc.channel, mc.rows)

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidArgument
-from ..schedule import PeriodicSchedule, SequenceSchedule, check_cycle_horizon
-from ..simulate import schedule_segments
+from ..model.schedule import PeriodicSchedule, SequenceSchedule, check_cycle_horizon
+from ..sim.simulate import schedule_segments
 from ..validation import as_finite
 from .box import certify_box
 from .cycle import CycleCertificate, certify_cycle

@@ -19,8 +19,8 @@ from switchobs_core.certificate import (
     paper_factors,
 )
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.schedule import PeriodicSchedule, RandomSchedule
-from switchobs_core.simulate import schedule_segments, simulate
+from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule
+from switchobs_core.sim.simulate import schedule_segments, simulate
 
 
 @pytest.fixture(scope="module")

@@ -33,10 +33,10 @@ import json, sys
 import numpy as np
 from scipy.linalg import expm
 import switchobs_core as so
-from switchobs_core.gains import GainTable
-from switchobs_core.observer import SwitchedObserver
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule
+from switchobs_core.table.gains import GainTable
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
 
 assert so.__file__.startswith(sys.argv[1]), so.__file__
 sysm = paper_system()

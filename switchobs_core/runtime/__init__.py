@@ -1,0 +1,1 @@
+"""Run time: the switched observer, its cycle bookkeeping, the gain families, the innovation consistency test."""
