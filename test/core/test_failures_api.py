@@ -331,9 +331,10 @@ def test_every_public_callable_has_a_case():
         "ScheduledCycle", "fmt_bytes", "kind_of",
     }
     missing = []
-    for mod in ("certificate", "decomposition", "design", "envelope", "gains", "observer", "paper",
-                "plant", "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation",
-                "ranges", "files", "table_check"):
+    for mod in ("certificate", "model.decomposition", "design.lmi", "bounds.envelope", "table.gains",
+                "runtime.observer", "paper", "sim.plant", "numerics.propagation", "model.scenarios",
+                "model.schedule", "sim.simulate", "design.synthesis", "model.system", "validation", "ranges",
+                "files", "table.check"):
         m = importlib.import_module(f"switchobs_core.{mod}")
         for n in m.__all__:
             obj = getattr(m, n)
