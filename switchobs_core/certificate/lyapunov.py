@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidArgument
-from ..rounding import UNIT_ROUNDOFF, gamma
+from ..numerics.rounding import UNIT_ROUNDOFF, gamma
 from ..validation import as_finite, as_matrix
 
 __all__ = ["BACKOFF", "LyapunovCertificate", "common_lyapunov", "lmi_proved"]

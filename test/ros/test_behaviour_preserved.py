@@ -238,7 +238,8 @@ def runs(tables, tmp_path_factory):
 def test_same_doubles_before_and_after(runs, commit, case):
     """Estimates, bounds, envelopes, covariances and designs are the same doubles."""
     before, after = runs[commit]
-    keys = sorted(k for k in after if k == case or k.startswith(case + "_") or (case == "bags" and k.startswith("bag_")))
+    prefix = "bag_" if case == "bags" else case + "_"
+    keys = sorted(k for k in after if k == case or k.startswith(prefix))
     assert keys, f"case {case} produced nothing"
     for k in keys:
         assert len(after[k]) > 200, k          # a real stream, not an empty one
