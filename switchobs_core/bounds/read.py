@@ -33,7 +33,7 @@ The anchor's ``lam_a``:
   (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`, its model of the solver's error
   ``2 n u ||S_a||_F``, plus ``16 u ||S_a||_F`` for the rounding of ``sym S_a`` itself and a
   margin on that model, :data:`_SOLVER_MARGIN`; the solver's error is a model, checked against
-  extended precision in test_bound_read.py);
+  extended precision in test_read.py);
 * from :data:`CHOLESKY_MIN_N` states on, a *verified* candidate (ten times cheaper than the
   eigenvalue problem at n = 132, and no model of a solver): ``T = fl(sym S_a)`` is exactly
   symmetric with ``||T - sym S_a||_2 <= u ||S_a||_F``; power iterations from the last leading
@@ -75,7 +75,7 @@ AMORTISED_MIN_N = 40
 
 #: Extra allowance on the anchor's eigenvalue problem, in units of ``u ||S||_F``: ``lam_upper``'s
 #: model (``2 n u ||S||_F``) was measured short for n = 3 (LAPACK's error 10.4 u ||S||_F against
-#: an extended-precision power iteration; test_bound_read.py), and it omits the symmetrisation.
+#: an extended-precision power iteration; test_read.py), and it omits the symmetrisation.
 _SOLVER_MARGIN = 16.0
 #: Fewest states for which the anchor is a Cholesky-verified candidate (module docstring).
 CHOLESKY_MIN_N = 40

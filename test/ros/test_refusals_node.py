@@ -19,8 +19,8 @@ from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from refusals import assert_refused, run
 from ros_harness import EstimatorIO, spin_until, start_feed
-from round2 import assert_refused, run
 from std_msgs.msg import UInt8
 from test_lifecycle import _change, _feed, _set, _state
 

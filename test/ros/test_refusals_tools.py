@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from round2 import assert_refused, switchobs, switchobs_bag
+from refusals import assert_refused, switchobs, switchobs_bag
 
 from switchobs_core.cli import main as switchobs_main
 
