@@ -1,4 +1,4 @@
-"""Bad input, round 2 (issue 22), the estimator: values out of range refused at start-up, in params
+"""Refusals of bad input by the estimator: values out of range refused at start-up, in params
 files and at run time with one line (the node stays up and answers the next valid measurement);
 lifecycle transitions that are not valid return FAILURE and the node stays in its state; a
 gain-table cache that is not private is refused, a planted table (zero gains, checksum recomputed)

@@ -1,4 +1,4 @@
-"""Audit of the rigorous bounds (issue 20, item 3): the published exact bound and noise bound are
+"""Audit of the rigorous bounds: the published exact bound and noise bound are
 never below the error of the *computed* estimate, on systems, rates and stamps that
 test_rounding.py (the paper's model at 30 and 100 Hz, random corner noise) does not cover.
 
