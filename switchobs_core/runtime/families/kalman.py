@@ -39,9 +39,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
-from ...design.kalman import Phase, design_kalman
+from ...design.kalman import design_kalman
 from ...exceptions import InvalidArgument
 from ...table.gains import kalman_table
+from ...table.kalman import Phase
 from .online import OnlineKalmanGains, kalman_correct
 
 __all__ = ["KalmanTableGains", "MAX_JITTER"]
