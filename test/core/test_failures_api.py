@@ -262,7 +262,7 @@ CASES = [
                                                        np.zeros(12), 1.0, rate=0.0)),
     ("simulate.noise_std", "noise_std", lambda s: sim.simulate(s[0], s[1], sch.PeriodicSchedule(CYC), np.zeros(12),
                                                                  np.zeros(12), 1.0, noise_std=NAN)),
-    ("schedule_segments.t_end", "t_end", lambda s: sim.schedule_segments(sch.PeriodicSchedule(CYC), [s[2]], NAN)),
+    ("schedule_segments.t_end", "t_end", lambda s: env.schedule_segments(sch.PeriodicSchedule(CYC), [s[2]], NAN)),
     ("sampled_error_transition.steps", "steps",
      lambda s: sim.sampled_error_transition(A4, C4, [(0.1, 3, np.zeros((4, 1)))])),
     ("designs_for.mode", "mode", lambda s: sim.designs_for(s[1], sch.PeriodicSchedule(CYC), "weekly")),
