@@ -66,20 +66,20 @@ import numpy as np
 
 from ..bounds.envelope import Envelope, EnvelopeTracker
 from ..bounds.envelope import alpha as _alpha
-from ..bounds.kalman_map import sparse_transition
 from ..bounds.read import AMORTISED_MIN_N
 from ..bounds.rigorous import RoundingBound
 from ..certificate.paper import design_dead_time
 from ..design.kalman import KalmanDesign
-from ..design.riccati import DiscretizationCache, symmetrize
 from ..exceptions import InvalidArgument
 from ..families import FAMILY_NAMES, family_entry, family_of_table
 from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
-from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache
+from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
 from .cycles import CycleRecord, CycleTracker, Residence
-from .families.base import ScheduledCycle
+from .error_maps import ZohMap, norm, zoh_step
+from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
+from .transition import Transition
 
 __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
 
@@ -97,11 +97,6 @@ HOLDS = ("innovation", "measurement")
 #: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
 MAX_ABS_SAMPLE = 1e150
 _MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
-#: Floating-point work (flops, about ``2 n^3`` per held map) a first read of ``Phi`` may cost: beyond
-#: it (or beyond :data:`_PENDING_BYTES` of held arrays) an unread ``Phi`` is no longer kept.
-_PENDING_FLOPS = 2**31
-#: Bytes of distinct arrays the held maps may keep alive.
-_PENDING_BYTES = 64 << 20
 
 class SwitchedObserver:
     """Switched Luenberger observer with exact ZOH propagation (e:switched_observer).
@@ -237,19 +232,16 @@ class SwitchedObserver:
         self.relock_rtol = float(relock_rtol)
         if not (math.isfinite(self.relock_rtol) and self.relock_rtol >= 0):
             raise InvalidArgument(f"relock_rtol must be a finite number >= 0; got {relock_rtol!r}")
-        self._nA = float(np.linalg.norm(self.A, 2))
-        # 2. the family: designs of the mode, gains, covariance
-        self._gains = gains = Family(self, table, mode, cycles, bounds=bounds, noise=noise,
+        # 2. the family (designs of the mode, gains, covariance): it reads the observer through its
+        #    context only (switchobs_core.runtime.families.base)
+        ctx = FamilyContext(system, self.A, self.B, self.C, hold, dt_resolution, self._register, self._zoh)
+        self._gains = gains = Family(ctx, table, mode, cycles, bounds=bounds, noise=noise,
                                      track_covariance=track_covariance, relock_rtol=self.relock_rtol)
         self.designs, self.promised, self.bounds = gains.designs, gains.promised, gains.bounds
         self.kalman: KalmanDesign | None = gains.kalman
         self.noise: NoiseModel | None = gains.noise
         self.track_covariance = bool(gains.track_covariance)
-        if self.noise is not None:
-            self.noise.check_system(system)
-            self._dcache = DiscretizationCache(self.A, self.B, self.noise.Q_c,
-                                               dt_resolution=dt_resolution or DEFAULT_DT_RESOLUTION)
-        # 2. alpha of (e:alpha_def) from the observable subspaces
+        # 3. alpha of (e:alpha_def) from the observable subspaces
         try:
             self.alpha = float(system.alpha)
         except AttributeError:
@@ -259,20 +251,17 @@ class SwitchedObserver:
             raise InvalidArgument(f"e0 must be a finite number >= 0; got {e0}")
         self.e0 = e0
         self._cache = ZOHCache(cache_size, dt_resolution)
-        self._cache.register(("open",), self.A, None, self.B)
-        self._I = np.eye(self.n)
+        self._cache.register(OPEN_LOOP, self.A, None, self.B)
         # the rounding-aware bounds (switchobs_core.bounds.rigorous): innovation hold and Kalman
         self._bound = (RoundingBound(self.A, max(self.p), self.e0, self.noise_max)
                        if self.hold == "innovation" and self.rounding_bound else None)
-        self._Crows: dict = {}
         self._records: deque = deque(maxlen=int(max_records))
         self._cycles = CycleTracker(self.N, self.mode, self.bounds, self.match_tol, float(t0))
         # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
         if transition is not None and not isinstance(transition, (bool, np.bool_)):
             raise InvalidArgument(f"transition must be True, False or None; got {transition!r}")
-        self._phi_init = ("kept" if transition or self.hold == "measurement" else
-                          "held" if transition is None else "off")
-        self._pending_max = int(min(max(_PENDING_FLOPS // (2 * self.n ** 3), 256), 65536))
+        self._phi = Transition(self.n, "kept" if transition or self.hold == "measurement" else
+                               "held" if transition is None else "off")
         self._x0_init = x0
         self._t0_init = t0
         self.reset(x0, t0)
@@ -301,17 +290,9 @@ class SwitchedObserver:
         self.t0 = t0
         self._channel = 0
         self._blind_until = -math.inf     # LMI gains: no correction before this time (dead time)
-        self._y = np.zeros(0)
         self._u = np.zeros(self.m)
         self._u_zero = True
-        self._key = ("open",)
-        self._entry_L = False
-        self._Phi = np.eye(self.n)
-        self._phi_mode = self._phi_init    # "kept", "held" (until read), "dropped", "off": see apply_map
-        self._pending: list = []        # error maps not yet multiplied into Phi (see apply_map)
-        self._pending_ids: set = set()
-        self._pending_bytes = 0
-        self._span = 0.0                # time between the last two samples
+        self._phi.reset()
         self._env_cache: tuple | None = None     # (amortised, (exact, noise)) bounds of the current sets
         if self._bound is not None:
             self._bound.reset()
@@ -321,9 +302,7 @@ class SwitchedObserver:
         self._cycles.reset(t0)
         self._records.clear()
         self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
-        # covariance: the family's own
-        self._P = self.noise.P0.copy() if self.track_covariance else None
-        self._gains.reset(self)
+        self._gains.reset()     # covariance P0, nothing held: the family's own
 
     @property
     def gains(self) -> Any:
@@ -382,50 +361,7 @@ class SwitchedObserver:
         With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
         with no noise and a known input); with measurement hold it is the error-to-error part.
         """
-        return self._transition().copy()
-
-    def _transition(self) -> np.ndarray:
-        """``Phi`` with the held error maps multiplied in (in the order they were applied); from
-        the first read on it is kept up to date at every step."""
-        if self._phi_mode != "kept":
-            if self._phi_mode == "off":
-                raise InvalidArgument("Phi is not kept (transition=False); construct the observer with "
-                                      "transition=True to read it")
-            if self._phi_mode == "dropped":
-                raise InvalidArgument(f"Phi was not read within {self._pending_max} samples of the reset and is no "
-                                      "longer kept (its product costs O(n^3) per sample); construct the observer "
-                                      "with transition=True to keep it")
-            self._phi_mode = "kept"
-        Phi = self._Phi
-        for K, H in self._pending:
-            if H is None:
-                Phi = K @ Phi
-            else:
-                Phi -= K @ (H @ Phi)
-        self._Phi = Phi
-        self._pending.clear()
-        self._pending_ids.clear()
-        self._pending_bytes = 0
-        return Phi
-
-    def _hold_map(self, K: np.ndarray, H: np.ndarray | None) -> None:
-        """Hold the map ``K`` (``H`` None) or ``I - K H`` for ``Phi`` (see :meth:`apply_map`)."""
-        mode = self._phi_mode
-        if mode == "kept":
-            self._Phi = K @ self._Phi if H is None else self._Phi - K @ (H @ self._Phi)
-            return
-        if mode != "held":
-            return
-        self._pending.append((K, H))
-        for X in (K, H):
-            if X is not None and id(X) not in self._pending_ids:
-                self._pending_ids.add(id(X))
-                self._pending_bytes += X.nbytes
-        if len(self._pending) > self._pending_max or self._pending_bytes > _PENDING_BYTES:
-            self._phi_mode = "dropped"      # nobody read it: stop paying for it
-            self._pending.clear()
-            self._pending_ids.clear()
-            self._pending_bytes = 0
+        return self._phi.read().copy()
 
     def apply_map(self, E: np.ndarray) -> None:
         """``Phi <- E Phi`` for a step with error map ``E``.
@@ -435,12 +371,13 @@ class SwitchedObserver:
         multiplied out at the first read of :attr:`Phi`, after which ``Phi`` is kept at every
         step; if it is not read within a budget of held maps (about ``2^31 / (2 n^3)`` of them,
         at most 65536, and 64 MiB of held arrays) it is no longer kept and reading it raises.
-        ``transition=True`` keeps it from the start; ``False`` never."""
-        self._hold_map(E, None)
+        ``transition=True`` keeps it from the start; ``False`` never
+        (:class:`~switchobs_core.runtime.transition.Transition`)."""
+        self._phi.hold(E)
 
     def apply_correction(self, K: np.ndarray, H: np.ndarray) -> None:
         """``Phi <- (I - K H) Phi`` for a correction with gain ``K`` and rows ``H`` (held as :meth:`apply_map`)."""
-        self._hold_map(K, H)
+        self._phi.hold(K, H)
 
     def rows_of(self, channel: int, rows: tuple | None) -> np.ndarray:
         """``H = C_channel[rows]`` (all rows for None)."""
@@ -451,6 +388,25 @@ class SwitchedObserver:
     def cache(self) -> ZOHCache:
         """The ZOH step cache (``hits``, ``misses``)."""
         return self._cache
+
+    # ------------------------------------------------------------------ the family's context
+    def _register(self, key: Any, M: np.ndarray, L: np.ndarray | None = None, B: np.ndarray | None = None, *,
+                  C: np.ndarray | None = None) -> None:
+        """:attr:`FamilyContext.register`: a gain's step in the ZOH cache."""
+        self._cache.register(key, M, L, B, C=C)
+
+    def _zoh(self, key: Any, dt: float) -> ZOHEntry:
+        """:attr:`FamilyContext.zoh`: the cached step of a registered key over ``dt``."""
+        return self._cache.step(key, dt)
+
+    def _held(self) -> tuple[Any, np.ndarray | None]:
+        """The ZOH key and the held vector of the family's hold (the open loop and None: nothing held)."""
+        h = self._gains.held
+        return (OPEN_LOOP, None) if h is None else (h.key, h.v)
+
+    def _u_held(self) -> np.ndarray | None:
+        """The input held (None: zero)."""
+        return None if self._u_zero else self._u
 
     # ------------------------------------------------------------------ samples
     def _rows(self, channel: int, rows: Any) -> tuple | None:
@@ -532,12 +488,11 @@ class SwitchedObserver:
                                       f"got {u.tolist()}")
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         #    (a family may fuse it with its correction: the Kalman table's one map per phase)
-        fuse = self._gains.fuses(self)
+        fuse = self._gains.fuses(not self._u_zero)
         self._env_cache = None
         if dt > 0 and not fuse:
             self._step(dt)
         self._t = t
-        self._span = dt
         # 2. switching instant
         if channel != self._channel:
             self._switch(t, channel)
@@ -546,8 +501,22 @@ class SwitchedObserver:
         if u is not None:
             self._u = u
             self._u_zero = not u.any()
-        self._gains.sample(self, t, dt if fuse else 0.0, channel, y, rows)
+        #    and the observer applies what it returns (the estimate, Phi, the bound's steps)
+        self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, dt, channel, y, rows,
+                                              self.design_index, t < self._blind_until, self._u_held())),
+                    channel)
         return self._x
+
+    def _apply(self, c: Correction, channel: int) -> None:
+        """A family's correction: the held innovation's rounding and each error map into the bound,
+        each map into ``Phi``, and the estimate."""
+        b = self._bound
+        h = c.held
+        if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
+            b.hold(h.C, norm(c.x), h.y, channel, h.y.size)
+        for m in c.maps:
+            m.apply(self._phi, b, channel)
+        self._x = c.x
 
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
         """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
@@ -577,7 +546,7 @@ class SwitchedObserver:
         if any(float(v) < 0 for v in (variances or {}).values()):
             raise InvalidArgument("variances must be >= 0")
         # a cache of the recursion (the Kalman table) leaves it: the real covariance runs online
-        self._gains.depart(self, "the state was set (set_estimate); running the Riccati recursion online")
+        self._gains.depart("the state was set (set_estimate); running the Riccati recursion online")
         if dt > 0:
             self._env_cache = None
             self._step(dt)
@@ -594,24 +563,18 @@ class SwitchedObserver:
                 P[i, :] = 0.0
                 P[:, i] = 0.0
                 P[i, i] = var
-            self._P = P
+            self._gains.set_covariance(P)
 
-    def _step(self, dt: float, *, covariance: bool = True) -> None:
-        """Exact step over ``dt`` with the held innovation/measurement and input (step 1)."""
-        e = self._cache.step(self._key, dt)
-        xn = math.sqrt(float(self._x @ self._x))
-        x = e.Phi @ self._x
-        if self._entry_L:
-            x += e.GL @ self._y
-        if not self._u_zero:
-            x += e.GB @ self._u
+    def _step(self, dt: float) -> None:
+        """Exact step over ``dt`` with the held innovation/measurement and input (step 1): the
+        estimate, its error map into ``Phi`` and the bound, the family's covariance."""
+        key, v = self._held()
+        e = self._cache.step(key, dt)
+        u = self._u_held()
+        x = zoh_step(e, self._x, v, u)
+        ZohMap(e, dt, self._x, x, v, u).apply(self._phi, self._bound, self._channel)
         self._x = x
-        self.apply_map(e.E)
-        if self._bound is not None:
-            self._bound.step(e, dt, xn, math.sqrt(float(x @ x)), self._y if self._entry_L else None,
-                             None if self._u_zero else self._u)
-        if covariance and self._P is not None and self._gains.steps_covariance():
-            self._propagate_covariance(e, dt)
+        self._gains.stepped(e, dt)
 
     def _check_noise_max(self, noise_max: Any, hold: str) -> tuple[float, ...] | None:
         """``noise_max`` as one bound per channel (None: no bound declared)."""
@@ -631,22 +594,6 @@ class SwitchedObserver:
                                   "(the noise bound extends the rounding-aware exact bound)")
         return tuple(out * self.N if len(out) == 1 else out)
 
-    def _propagate_covariance(self, e: Any, dt: float) -> None:
-        """Covariance of the error over one step (Joseph-free: the map is exact).
-
-        ``P <- E P E' + Q_d(dt) + (Gamma L) R (Gamma L)'`` with ``E`` the step's error map,
-        ``Q_d`` the van Loan discretisation of the process intensity, and the last term (LMI
-        gains, innovation hold) the held measurement noise driven through ``Gamma L``; for the
-        Kalman families ``E = e^{A dt}`` and the term is absent (the correction follows).
-        """
-        _, _, Q_d = self._dcache.get(dt)
-        sp = sparse_transition(e) if e.E is e.Phi else None     # the open-loop map of a Kalman family
-        P = (sp.sandwich(self._P) if sp is not None else e.E @ self._P @ e.E.T) + Q_d
-        extra = self._gains.held_noise(self, e)
-        if extra is not None:
-            P += extra
-        self._P = symmetrize(P)
-
     @property
     def gains_source(self) -> str:
         """Where the gain of the last sample came from: ``"table"`` (LMI or Kalman table) or
@@ -662,7 +609,7 @@ class SwitchedObserver:
         departure the recursion's own, :mod:`switchobs_core.runtime.families.kalman`). LMI gains: the
         covariance propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
         """
-        return self._gains.covariance(self)
+        return self._gains.covariance()
 
     def _switch(self, t: float, channel: int) -> None:
         """Bookkeeping at a switching instant (e:switching_instants), kept by the tracker."""
@@ -736,20 +683,14 @@ class SwitchedObserver:
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
         if dt == 0:
             return self._x.copy()
-        key = self._key if hold else ("open",)
-        e = self._cache.step(key, dt)
-        x = e.Phi @ self._x
-        if key != ("open",) and self._entry_L:
-            x += e.GL @ self._y
-        if not self._u_zero:
-            x += e.GB @ self._u
-        return x
+        key, v = self._held() if hold else (OPEN_LOOP, None)
+        return zoh_step(self._cache.step(key, dt), self._x, v, self._u_held())
 
     def prior_covariance(self, t: float) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no
         covariance is kept): the last sample's ``P`` through the step's error map,
         ``E P E' + Q_d(dt)`` (plus the held measurement noise ``(Gamma L) R (Gamma L)'`` for LMI
-        gains), as :meth:`_propagate_covariance` does; the state is unchanged. For the
+        gains, :mod:`switchobs_core.runtime.covariance`); the state is unchanged. For the
         chi-square gate of :mod:`switchobs_core.runtime.consistency`."""
         P = self.P
         dt = float(t) - self._t
@@ -757,13 +698,7 @@ class SwitchedObserver:
             return None
         if dt == 0:
             return P
-        e = self._cache.step(self._key, dt)
-        _, _, Q_d = self._dcache.get(dt)
-        P = e.E @ P @ e.E.T + Q_d
-        extra = self._gains.held_noise(self, e)
-        if extra is not None:
-            P += extra
-        return symmetrize(P)
+        return self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
 
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample
@@ -784,13 +719,9 @@ class SwitchedObserver:
             return x, env.exact_bound, env.noise_bound
         if dt <= 0:
             return x, b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        S, Sv = b.propagated(self._cache.step(self._key, dt), dt, math.sqrt(float(self._x @ self._x)),
-                             math.sqrt(float(x @ x)), self._held_nu(), None if self._u_zero else self._u)
+        key, v = self._held()
+        S, Sv = b.propagated(self._cache.step(key, dt), dt, norm(self._x), norm(x), v, self._u_held())
         return x, S, Sv
-
-    def _held_nu(self) -> np.ndarray | None:
-        """The held innovation of a held-innovation family (None: no gain held)."""
-        return self._y if self._entry_L else None
 
     def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
@@ -815,7 +746,8 @@ class SwitchedObserver:
         dt = float(t) - self._t
         if not dt >= 0 or not math.isfinite(dt):
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
-        step = self._cache.step(self._key, dt) if dt > 0 else None
+        key, v = self._held()
+        step = self._cache.step(key, dt) if dt > 0 else None
         noisy = None
         b = self._bound
         if b is not None:       # rounding included (module switchobs_core.numerics.rounding)
@@ -827,11 +759,9 @@ class SwitchedObserver:
                 exact, noisy = self._env_cache[1]
             else:
                 xp = self.predict(float(t), hold=True)
-                exact, noisy = b.bounds(*b.propagated(step, dt, math.sqrt(float(self._x @ self._x)),
-                                                      math.sqrt(float(xp @ xp)), self._held_nu(),
-                                                      None if self._u_zero else self._u))
+                exact, noisy = b.bounds(*b.propagated(step, dt, norm(self._x), norm(xp), v, self._u_held()))
         elif self.hold == "measurement":    # the error-to-error part, exact arithmetic (class Notes)
-            Phi = self._transition()
+            Phi = self._phi.read()
             exact = float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self.e0)
         else:                               # rounding_bound=False: no bound is kept
             exact = math.inf
