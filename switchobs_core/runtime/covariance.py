@@ -22,7 +22,7 @@ from ..bounds.kalman_map import sparse_transition
 from ..design.riccati import DiscretizationCache, symmetrize
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION
 
-__all__ = ["CovarianceStep"]
+__all__ = ["CovarianceStep", "set_entries"]
 
 
 class CovarianceStep:
@@ -53,3 +53,16 @@ class CovarianceStep:
         if held_noise is not None:
             P += held_noise
         return symmetrize(P)
+
+
+def set_entries(P: np.ndarray, indices: Any, variances: dict) -> np.ndarray:
+    """A copy of ``P`` with row and column ``i`` zeroed and ``P[i, i] = variances[i]`` (default
+    the previous ``P[i, i]``) for every ``i`` in ``indices``: the set entries' errors are then
+    uncorrelated with the others (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.set_estimate`)."""
+    P = P.copy()
+    for i in indices:
+        var = float(variances.get(i, P[i, i]))
+        P[i, :] = 0.0
+        P[:, i] = 0.0
+        P[i, i] = var
+    return P
