@@ -212,7 +212,8 @@ class SwitchedObserver:
         self.relock_rtol = nonnegative("relock_rtol", relock_rtol, repr(relock_rtol))
         # 2. the family (designs of the mode, gains, covariance): it reads the observer through its
         #    context only (switchobs_core.runtime.families.base)
-        ctx = FamilyContext(system, self.A, self.B, self.C, hold, dt_resolution, self._register, self._zoh)
+        ctx = FamilyContext(system, self.A, self.B, self.C, self.n, self.N, self.p, hold, dt_resolution,
+                            self._register, self._zoh)
         self._gains = gains = Family(ctx, table, mode, cycles, bounds=bounds, noise=noise,
                                      track_covariance=track_covariance, relock_rtol=self.relock_rtol)
         self.designs, self.promised, self.bounds = gains.designs, gains.promised, gains.bounds

@@ -82,6 +82,10 @@ class FamilyContext:
         ``A (n, n)`` and ``B (n, m)`` as the observer propagates them (``m = 0``: no input).
     C : tuple of ndarray
         The channels' output matrices ``C_i (p_i, n)`` (e:outputs).
+    n, N : int
+        Numbers of states and of channels.
+    p : tuple of int
+        Rows ``p_i`` of each channel's output.
     hold : str
         What is held between samples (``"innovation"`` or ``"measurement"``).
     dt_resolution : float or None
@@ -99,25 +103,13 @@ class FamilyContext:
     A: np.ndarray
     B: np.ndarray
     C: tuple
+    n: int
+    N: int
+    p: tuple
     hold: str
     dt_resolution: float | None
     register: Callable[..., None]
     zoh: Callable[[Hashable, float], Any]
-
-    @property
-    def n(self) -> int:
-        """Number of states."""
-        return self.A.shape[0]
-
-    @property
-    def N(self) -> int:
-        """Number of channels."""
-        return len(self.C)
-
-    @property
-    def p(self) -> tuple[int, ...]:
-        """Rows of each channel's output."""
-        return tuple(Ci.shape[0] for Ci in self.C)
 
     def rows_of(self, channel: int, rows: tuple | None) -> np.ndarray:
         """``H = C_channel[rows]`` (all rows for None)."""
