@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["CorrectionMap", "FusedMap", "ZohMap", "norm", "zoh_step"]
+__all__ = ["CorrectionMap", "FusedMap", "ZohMap", "apply_zoh", "norm", "zoh_step"]
 
 
 def norm(x: np.ndarray) -> float:
@@ -57,12 +57,18 @@ class ZohMap(NamedTuple):
     u: np.ndarray | None
 
     def apply(self, phi: Any, bound: Any, channel: int) -> None:
-        """``Phi <- E Phi``; the bound's step with the exponential's, the quantum's and the
-        products' residual (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.step`)."""
-        e = self.e
-        phi.hold(e.E)
-        if bound is not None:
-            bound.step(e, self.dt, norm(self.x0), norm(self.x1), self.v, self.u)
+        """``Phi <- E Phi``; the bound's step (:func:`apply_zoh`)."""
+        apply_zoh(phi, bound, self.e, self.dt, self.x0, self.x1, self.v, self.u)
+
+
+def apply_zoh(phi: Any, bound: Any, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, v: np.ndarray | None,
+              u: np.ndarray | None) -> None:
+    """A :class:`ZohMap`'s ``Phi <- E Phi`` and the bound's step with the exponential's, the
+    quantum's and the products' residual (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.step`),
+    without forming the map (the observer's own steps)."""
+    phi.hold(e.E)
+    if bound is not None:
+        bound.step(e, dt, norm(x0), norm(x1), v, u)
 
 
 class CorrectionMap(NamedTuple):

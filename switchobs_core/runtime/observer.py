@@ -77,7 +77,7 @@ from .arguments import (
 from .covariance import set_entries
 from .cycles import CycleRecord, Residence
 from .error_bounds import ErrorBounds
-from .error_maps import ZohMap, norm, zoh_step
+from .error_maps import apply_zoh, norm, zoh_step
 from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
 from .sequence import DesignSequence
 from .transition import Transition
@@ -460,7 +460,7 @@ class SwitchedObserver:
         key, v = self._held()
         e = self._cache.step(key, dt)
         x = zoh_step(e, self._x, v, self._u)
-        ZohMap(e, dt, self._x, x, v, self._u).apply(self._phi, self._bound, self.channel)
+        apply_zoh(self._phi, self._bound, e, dt, self._x, x, v, self._u)
         self._x = x
         self._gains.stepped(e, dt)
 
