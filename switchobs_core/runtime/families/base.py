@@ -31,6 +31,9 @@ Two shapes of family exist: *held-innovation* families (the paper's LMI gains: t
 innovation is held and its gain acts over the next step, e:switched_observer) and *correcting*
 families (Kalman: ``x^+ = x^- + K (y - H x^-)`` at the sample, rows ``H`` of ``C_i``,
 e:outputs). The protocol covers both.
+
+A family module imports these types from here (the top-level package re-exports the protocol
+and the checks only).
 """
 
 from __future__ import annotations
