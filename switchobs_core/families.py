@@ -2,9 +2,10 @@
 the command line and the ROS configuration (beyond the paper).
 
 A *gain family* is one type behind the protocol of :mod:`switchobs_core.runtime.families.base`: it picks
-the gain of every sample, applies it, and says which error map it applied and which covariance
-it keeps. :class:`~switchobs_core.runtime.observer.SwitchedObserver` orchestrates propagation, the
-family and the rigorous bound (:mod:`switchobs_core.bounds.rigorous`) and never names a family.
+the gain of every sample and returns a ``Correction`` (the corrected estimate, what it holds until
+the next sample, the error maps it applied), and keeps its own covariance.
+:class:`~switchobs_core.runtime.observer.SwitchedObserver` orchestrates propagation, the family and
+the rigorous bound (:mod:`switchobs_core.bounds.rigorous`) and never names a family.
 
 ======================  =========================================  ======================
 name                    type (module)                              gain table it reads

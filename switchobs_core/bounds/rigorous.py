@@ -11,9 +11,11 @@ One owner of the two ellipsoids the observer keeps (the argument is in
   to every step (``G = Gamma_A L`` for the held innovation of LMI gains, ``G = K`` for a Kalman
   correction), the degenerate ellipsoid ``E(p v_max^2 G G')``.
 
-A gain family calls :meth:`RoundingBound.step` after a propagation step and
-:meth:`RoundingBound.correct` after a Kalman correction; :meth:`RoundingBound.propagated`
-gives the sets at a later time without keeping them (``prior``, ``envelope``).
+The observer steps it with the error maps of every sample
+(:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
+:meth:`RoundingBound.correct` for a Kalman correction, :meth:`RoundingBound.fused` for both in one
+map, :meth:`RoundingBound.hold` for a held innovation; :meth:`RoundingBound.propagated` gives the
+sets at a later time without keeping them (``prior``, ``envelope``).
 """
 
 from __future__ import annotations

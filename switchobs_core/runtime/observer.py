@@ -29,26 +29,14 @@ The Kalman families correct with the rows the sample holds (the shared rows whil
 the stored gain of that blind phase.
 
 Both coincide with the continuous-output observer as the sample rate grows (first order
-in the step). A change of channel is a switching instant (e:switching_instants);
-two consecutive starts of channel 1 bound a switching cycle (e:tau_k, e:s_k), written for N
-channels visited in the cyclic order 1, 2, ..., N.
-
-Gains come from a :class:`switchobs_core.table.gains.GainTable`. Modes:
-
-``periodic``
-    ``cycles=[c]``: one design for every cycle (the paper's periodic case).
-``sequence``
-    ``cycles=[c_0, c_1, ...]``: cycle k uses the design of ``c_{k mod K}`` (the paper's
-    nonperiodic case, Table ``T:eta_values``).
-``robust``
-    the table's residence-time-box design ``table.robust``, meant for any schedule
-    with ``h_min <= h_i <= h_max`` (assumption A2).
-
-At the end of every cycle a :class:`CycleRecord` stores the measured ``tau_k``, ``h_k``,
-``s_k``, the paper's factors ``f_ii = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)``
-(e:f11_le_delta_main) for the *measured* durations and the gains used, and whether the
-cycle matched the promise (order 1..N, durations within ``match_tol`` of the scheduled
-cycle; in robust mode, A2's box).
+in the step). A change of channel is a switching instant (e:switching_instants). The gains of
+a gain family (:mod:`switchobs_core.families`) come from a
+:class:`switchobs_core.table.gains.GainTable`, one design per cycle by the mode (``periodic``,
+``sequence``, ``robust``: :mod:`switchobs_core.runtime.sequence`, which also keeps a
+:class:`CycleRecord` of every cycle). The observer orchestrates: it propagates, hands each
+sample to its family and applies what the family returns (the estimate, the error maps into
+``Phi`` and the rigorous bound; :mod:`switchobs_core.runtime.families.base`); it never names a
+family.
 
 Channel numbers are 1-based, as in the paper and docs/api.md.
 
@@ -58,7 +46,6 @@ Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
@@ -66,43 +53,43 @@ import numpy as np
 
 from ..bounds.envelope import Envelope, EnvelopeTracker
 from ..bounds.envelope import alpha as _alpha
-from ..bounds.kalman_map import sparse_transition
-from ..bounds.read import AMORTISED_MIN_N
-from ..bounds.rigorous import RoundingBound
 from ..certificate.paper import design_dead_time
-from ..design.riccati import DiscretizationCache
-from ..exceptions import InvalidArgument
 from ..families import FAMILY_NAMES, family_entry, family_of_table
 from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
-from ..numerics.kalman_step import symmetrize
-from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache
+from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
 from ..table.kalman import KalmanDesign
-from .cycles import CycleRecord, CycleTracker, Residence
-from .families.base import ScheduledCycle
+from .arguments import (
+    HOLDS,
+    MAX_ABS_SAMPLE,
+    MODES,
+    check_hold,
+    check_noise_max,
+    check_options,
+    check_sample,
+    check_set,
+    check_time,
+    check_transition,
+    initial_state,
+    nonnegative,
+)
+from .covariance import set_entries
+from .cycles import CycleRecord, Residence
+from .error_bounds import ErrorBounds
+from .error_maps import apply_zoh, norm, zoh_step
+from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
+from .sequence import DesignSequence
+from .transition import Transition
 
 __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "ScheduledCycle", "SwitchedObserver"]
 
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
 
-#: Schedule modes accepted by :class:`SwitchedObserver`.
-MODES = ("periodic", "sequence", "robust")
 #: Gain families (:data:`switchobs_core.families.REGISTRY`): the paper's LMI gains, offline Kalman
 #: tables, online Riccati.
 FAMILIES = FAMILY_NAMES
-#: What may be held between samples (module docstring).
-HOLDS = ("innovation", "measurement")
-#: Largest accepted norm of a sample (and magnitude of an input entry): beyond it the products
-#: with the gains and ZOH matrices in the next step could overflow to inf (1e300 * ||Gamma L|| does).
-MAX_ABS_SAMPLE = 1e150
-_MAX_SQ = MAX_ABS_SAMPLE**2  # 1e300: still a finite double
-#: Floating-point work (flops, about ``2 n^3`` per held map) a first read of ``Phi`` may cost: beyond
-#: it (or beyond :data:`_PENDING_BYTES` of held arrays) an unread ``Phi`` is no longer kept.
-_PENDING_FLOPS = 2**31
-#: Bytes of distinct arrays the held maps may keep alive.
-_PENDING_BYTES = 64 << 20
 
 class SwitchedObserver:
     """Switched Luenberger observer with exact ZOH propagation (e:switched_observer).
@@ -210,70 +197,46 @@ class SwitchedObserver:
         self.C = tuple(np.ascontiguousarray(Ci, dtype=float) for Ci in system.C)
         self.N = len(self.C)
         self.p = tuple(Ci.shape[0] for Ci in self.C)
-        if mode not in MODES:
-            raise InvalidArgument(f"mode must be one of {MODES}; got {mode!r}")
-        self.mode = mode
-        if hold not in HOLDS:
-            raise InvalidArgument(f"hold must be one of {HOLDS}; got {hold!r}")
-        self.hold = hold
-        self.match_tol = float(match_tol)
-        if not (math.isfinite(self.match_tol) and self.match_tol >= 0):
-            raise InvalidArgument(f"match_tol must be a finite number >= 0; got {match_tol}")
-        for name, v in (("cache_size", cache_size), ("max_records", max_records)):
-            if not isinstance(v, (int, np.integer)) or v < 1:
-                raise InvalidArgument(f"{name} must be an integer >= 1; got {v!r}")
+        self.match_tol = check_options(mode, hold, match_tol, cache_size, max_records)
+        self.mode, self.hold = mode, hold
         # 1. gain family (module docstring, switchobs_core.families): the table's, or another on
         #    request; a family with no promised schedule in robust mode hands over to its entry's
         entry = family_entry(family_of_table(table) if family is None else family)
         if mode == "robust":
             entry = family_entry(entry.robust)
         Family = entry.type()
-        if hold not in Family.holds:
-            raise InvalidArgument(f"hold={hold!r} is not available with the {entry.name!r} family "
-                                  f"(it holds {', '.join(Family.holds)}); hold='measurement' applies to the LMI "
-                                  "family only")
+        check_hold(hold, entry.name, Family.holds)
         self.family = entry.name
         self.rounding_bound = bool(rounding_bound)
-        self.noise_max = self._check_noise_max(noise_max, hold)
-        self.relock_rtol = float(relock_rtol)
-        if not (math.isfinite(self.relock_rtol) and self.relock_rtol >= 0):
-            raise InvalidArgument(f"relock_rtol must be a finite number >= 0; got {relock_rtol!r}")
-        self._nA = float(np.linalg.norm(self.A, 2))
-        # 2. the family: designs of the mode, gains, covariance
-        self._gains = gains = Family(self, table, mode, cycles, bounds=bounds, noise=noise,
+        self.noise_max = check_noise_max(noise_max, self.N, self.rounding_bound, hold)
+        self.relock_rtol = nonnegative("relock_rtol", relock_rtol, repr(relock_rtol))
+        # 2. the family (designs of the mode, gains, covariance): it reads the observer through its
+        #    context only (switchobs_core.runtime.families.base)
+        ctx = FamilyContext(system, self.A, self.B, self.C, self.n, self.N, self.p, hold, dt_resolution,
+                            self._register, self._zoh)
+        self._gains = gains = Family(ctx, table, mode, cycles, bounds=bounds, noise=noise,
                                      track_covariance=track_covariance, relock_rtol=self.relock_rtol)
         self.designs, self.promised, self.bounds = gains.designs, gains.promised, gains.bounds
         self.kalman: KalmanDesign | None = gains.kalman
         self.noise: NoiseModel | None = gains.noise
         self.track_covariance = bool(gains.track_covariance)
-        if self.noise is not None:
-            self.noise.check_system(system)
-            self._dcache = DiscretizationCache(self.A, self.B, self.noise.Q_c,
-                                               dt_resolution=dt_resolution or DEFAULT_DT_RESOLUTION)
-        # 2. alpha of (e:alpha_def) from the observable subspaces
+        # 3. alpha of (e:alpha_def) from the observable subspaces
         try:
             self.alpha = float(system.alpha)
         except AttributeError:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
-        e0 = float(e0)
-        if not (math.isfinite(e0) and e0 >= 0):
-            raise InvalidArgument(f"e0 must be a finite number >= 0; got {e0}")
-        self.e0 = e0
+        self.e0 = nonnegative("e0", e0, float(e0))
         self._cache = ZOHCache(cache_size, dt_resolution)
-        self._cache.register(("open",), self.A, None, self.B)
-        self._I = np.eye(self.n)
-        # the rounding-aware bounds (switchobs_core.bounds.rigorous): innovation hold and Kalman
-        self._bound = (RoundingBound(self.A, max(self.p), self.e0, self.noise_max)
-                       if self.hold == "innovation" and self.rounding_bound else None)
-        self._Crows: dict = {}
-        self._records: deque = deque(maxlen=int(max_records))
-        self._cycles = CycleTracker(self.N, self.mode, self.bounds, self.match_tol, float(t0))
+        self._cache.register(OPEN_LOOP, self.A, None, self.B)
+        self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
+                                   max_records)
         # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
-        if transition is not None and not isinstance(transition, (bool, np.bool_)):
-            raise InvalidArgument(f"transition must be True, False or None; got {transition!r}")
-        self._phi_init = ("kept" if transition or self.hold == "measurement" else
-                          "held" if transition is None else "off")
-        self._pending_max = int(min(max(_PENDING_FLOPS // (2 * self.n ** 3), 256), 65536))
+        check_transition(transition)
+        self._phi = Transition(self.n, "kept" if transition or self.hold == "measurement" else
+                               "held" if transition is None else "off")
+        # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
+        self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound, self._phi)
+        self._bound = self._bounds.rigorous
         self._x0_init = x0
         self._t0_init = t0
         self.reset(x0, t0)
@@ -284,47 +247,16 @@ class SwitchedObserver:
 
         The ZOH cache is kept; cycle records, envelopes and ``Phi`` are cleared.
         """
-        if t0 is None:
-            t0 = self._t0_init
-        t0 = float(t0)
-        if not math.isfinite(t0):
-            raise InvalidArgument(f"t0 must be finite; got {t0}")
-        if x0 is None:
-            x = np.zeros(self.n)
-        else:
-            x = np.array(x0, dtype=float).reshape(-1)
-            if x.size != self.n:
-                raise InvalidArgument(f"x0 must have n = {self.n} entries; got {x.size}")
-            if not np.isfinite(x).all():
-                raise InvalidArgument("x0 has a non-finite entry")
-        self._x = x
+        self._x, t0 = initial_state(x0, self._t0_init if t0 is None else t0, self.n)
         self._t = t0
         self.t0 = t0
-        self._channel = 0
         self._blind_until = -math.inf     # LMI gains: no correction before this time (dead time)
-        self._y = np.zeros(0)
-        self._u = np.zeros(self.m)
-        self._u_zero = True
-        self._key = ("open",)
-        self._entry_L = False
-        self._Phi = np.eye(self.n)
-        self._phi_mode = self._phi_init    # "kept", "held" (until read), "dropped", "off": see apply_map
-        self._pending: list = []        # error maps not yet multiplied into Phi (see apply_map)
-        self._pending_ids: set = set()
-        self._pending_bytes = 0
-        self._span = 0.0                # time between the last two samples
-        self._env_cache: tuple | None = None     # (amortised, (exact, noise)) bounds of the current sets
-        if self._bound is not None:
-            self._bound.reset()
-        self._k = -1
-        self._phase = 0  # sequence mode: offset of the design index, re-synced on mismatch
-        self.resyncs = 0
-        self._cycles.reset(t0)
-        self._records.clear()
+        self._u: np.ndarray | None = None     # the input held (None: zero)
+        self._phi.reset()
+        self._bounds.reset()
+        self._seq.reset(t0)
         self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
-        # covariance: the family's own
-        self._P = self.noise.P0.copy() if self.track_covariance else None
-        self._gains.reset(self)
+        self._gains.reset()     # covariance P0, nothing held: the family's own
 
     @property
     def gains(self) -> Any:
@@ -359,22 +291,27 @@ class SwitchedObserver:
     @property
     def channel(self) -> int:
         """Active channel, 1-based (0 before the first sample)."""
-        return self._channel
+        return self._seq.cycles.channel
 
     @property
     def design_index(self) -> int:
         """Index into ``designs`` of the gains in use."""
-        return (max(self._k, 0) + self._phase) % len(self.designs)
+        return self._seq.index
 
     @property
     def current_design(self) -> Any:
         """The CycleDesign whose gains are in use."""
-        return self.designs[self.design_index]
+        return self._seq.design
 
     @property
     def completed_cycles(self) -> list[CycleRecord]:
         """The completed cycles, oldest first (at most ``max_records``)."""
-        return list(self._records)
+        return list(self._seq.records)
+
+    @property
+    def resyncs(self) -> int:
+        """Re-syncs of sequence mode since the reset (:mod:`switchobs_core.runtime.sequence`)."""
+        return self._seq.resyncs
 
     @property
     def Phi(self) -> np.ndarray:
@@ -383,65 +320,17 @@ class SwitchedObserver:
         With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
         with no noise and a known input); with measurement hold it is the error-to-error part.
         """
-        return self._transition().copy()
-
-    def _transition(self) -> np.ndarray:
-        """``Phi`` with the held error maps multiplied in (in the order they were applied); from
-        the first read on it is kept up to date at every step."""
-        if self._phi_mode != "kept":
-            if self._phi_mode == "off":
-                raise InvalidArgument("Phi is not kept (transition=False); construct the observer with "
-                                      "transition=True to read it")
-            if self._phi_mode == "dropped":
-                raise InvalidArgument(f"Phi was not read within {self._pending_max} samples of the reset and is no "
-                                      "longer kept (its product costs O(n^3) per sample); construct the observer "
-                                      "with transition=True to keep it")
-            self._phi_mode = "kept"
-        Phi = self._Phi
-        for K, H in self._pending:
-            if H is None:
-                Phi = K @ Phi
-            else:
-                Phi -= K @ (H @ Phi)
-        self._Phi = Phi
-        self._pending.clear()
-        self._pending_ids.clear()
-        self._pending_bytes = 0
-        return Phi
-
-    def _hold_map(self, K: np.ndarray, H: np.ndarray | None) -> None:
-        """Hold the map ``K`` (``H`` None) or ``I - K H`` for ``Phi`` (see :meth:`apply_map`)."""
-        mode = self._phi_mode
-        if mode == "kept":
-            self._Phi = K @ self._Phi if H is None else self._Phi - K @ (H @ self._Phi)
-            return
-        if mode != "held":
-            return
-        self._pending.append((K, H))
-        for X in (K, H):
-            if X is not None and id(X) not in self._pending_ids:
-                self._pending_ids.add(id(X))
-                self._pending_bytes += X.nbytes
-        if len(self._pending) > self._pending_max or self._pending_bytes > _PENDING_BYTES:
-            self._phi_mode = "dropped"      # nobody read it: stop paying for it
-            self._pending.clear()
-            self._pending_ids.clear()
-            self._pending_bytes = 0
+        return self._phi.read().copy()
 
     def apply_map(self, E: np.ndarray) -> None:
-        """``Phi <- E Phi`` for a step with error map ``E``.
-
-        ``Phi`` costs an n x n product per sample, so it is formed only for a reader
-        (``transition``): by default the maps are held (references to cached matrices) and
-        multiplied out at the first read of :attr:`Phi`, after which ``Phi`` is kept at every
-        step; if it is not read within a budget of held maps (about ``2^31 / (2 n^3)`` of them,
-        at most 65536, and 64 MiB of held arrays) it is no longer kept and reading it raises.
-        ``transition=True`` keeps it from the start; ``False`` never."""
-        self._hold_map(E, None)
+        """``Phi <- E Phi`` for a step with error map ``E``: formed only for a reader
+        (``transition``; held until the first read of :attr:`Phi` within a budget of held maps,
+        then kept at every step; :class:`~switchobs_core.runtime.transition.Transition`)."""
+        self._phi.hold(E)
 
     def apply_correction(self, K: np.ndarray, H: np.ndarray) -> None:
         """``Phi <- (I - K H) Phi`` for a correction with gain ``K`` and rows ``H`` (held as :meth:`apply_map`)."""
-        self._hold_map(K, H)
+        self._phi.hold(K, H)
 
     def rows_of(self, channel: int, rows: tuple | None) -> np.ndarray:
         """``H = C_channel[rows]`` (all rows for None)."""
@@ -453,21 +342,22 @@ class SwitchedObserver:
         """The ZOH step cache (``hits``, ``misses``)."""
         return self._cache
 
-    # ------------------------------------------------------------------ samples
-    def _rows(self, channel: int, rows: Any) -> tuple | None:
-        if rows is None:
-            return None
-        try:
-            r = tuple(int(i) for i in rows)
-        except (TypeError, ValueError):
-            raise InvalidArgument(f"rows must be a sequence of row indices; got {rows!r}") from None
-        p = self.p[channel - 1]
-        if not r or len(set(r)) != len(r) or min(r) < 0 or max(r) >= p:
-            raise InvalidArgument(f"rows must be distinct indices in 0..{p - 1} of C_{channel}'s "
-                                  f"rows; got {rows!r}")
-        return None if r == tuple(range(p)) else r
+    # ------------------------------------------------------------------ the family's context
+    def _register(self, key: Any, M: np.ndarray, L: np.ndarray | None = None, B: np.ndarray | None = None, *,
+                  C: np.ndarray | None = None) -> None:
+        """:attr:`FamilyContext.register`: a gain's step in the ZOH cache."""
+        self._cache.register(key, M, L, B, C=C)
 
-    # ------------------------------------------------------------------ online
+    def _zoh(self, key: Any, dt: float) -> ZOHEntry:
+        """:attr:`FamilyContext.zoh`: the cached step of a registered key over ``dt``."""
+        return self._cache.step(key, dt)
+
+    def _held(self) -> tuple[Any, np.ndarray | None]:
+        """The ZOH key and the held vector of the family's hold (the open loop and None: nothing held)."""
+        h = self._gains.held
+        return (OPEN_LOOP, None) if h is None else (h.key, h.v)
+
+    # ------------------------------------------------------------------ samples
     def update(self, t: float, channel: int, y: Any, u: Any = None, rows: Any = None) -> np.ndarray:
         """Take one sample ``y = C_channel x(t)`` (or the ``rows`` of it) at time ``t``.
 
@@ -500,55 +390,37 @@ class SwitchedObserver:
             ``t`` earlier than the current time or not finite, channel out of range,
             ``y``/``u``/``rows`` of the wrong size or not finite.
         """
-        dt = t - self._t
-        if not dt >= 0:
-            raise InvalidArgument(f"t = {t!r} is earlier than the observer's time {self._t!r} "
-                                  "(samples must come in time order)" if dt < 0 else
-                                  f"t must be a finite time; got {t!r}")
-        if dt == math.inf:
-            raise InvalidArgument(f"t must be a finite time; got {t!r}")
-        if isinstance(channel, (bool, np.bool_)) or not isinstance(channel, (int, np.integer)) \
-                or not 1 <= channel <= self.N:
-            raise InvalidArgument(f"channel must be an integer in 1..{self.N}; got {channel!r}")
-        y = np.asarray(y, dtype=float)
-        if rows is not None:
-            rows = self._rows(channel, rows)
-        p = self.p[channel - 1] if rows is None else len(rows)
-        if y.shape != (p,):
-            y = y.reshape(-1)
-            if y.size != p:
-                raise InvalidArgument(f"y must have {p} entries for channel {channel}"
-                                      f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
-        # one dot product checks both (hot path; 0.3 us vs 2 us for max|y|): y'y <= bound^2 is
-        # False for NaN, for inf and for any entry beyond the bound
-        if p and not float(y @ y) <= _MAX_SQ:
-            if not np.isfinite(y).all():
-                raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
-            raise InvalidArgument(f"y is too large (||y|| = {float(np.linalg.norm(y)):.3g} > {MAX_ABS_SAMPLE:g}): "
-                                  "the update would overflow")
-        if u is not None:
-            u = np.asarray(u, dtype=float).reshape(-1)
-            if u.size != self.m or not np.isfinite(u).all() or (u.size and np.abs(u).max() > MAX_ABS_SAMPLE):
-                raise InvalidArgument(f"u must hold {self.m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
-                                      f"got {u.tolist()}")
+        dt, y, u, rows = check_sample(t, self._t, channel, y, u, rows, self.p, self.m)
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         #    (a family may fuse it with its correction: the Kalman table's one map per phase)
-        fuse = self._gains.fuses(self)
-        self._env_cache = None
+        fuse = self._gains.fuses(self._u is not None)
+        self._bounds.changed()
         if dt > 0 and not fuse:
             self._step(dt)
         self._t = t
-        self._span = dt
         # 2. switching instant
-        if channel != self._channel:
+        if channel != self.channel:
             self._switch(t, channel)
         # 3. hold the new sample's input from t on; the family takes the sample (holds its
         #    innovation, or corrects)
         if u is not None:
-            self._u = u
-            self._u_zero = not u.any()
-        self._gains.sample(self, t, dt if fuse else 0.0, channel, y, rows)
+            self._u = u if u.any() else None
+        #    and the observer applies what it returns (the estimate, Phi, the bound's steps)
+        self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, dt, channel, y, rows,
+                                              self.design_index, t < self._blind_until, self._u)),
+                    channel)
         return self._x
+
+    def _apply(self, c: Correction, channel: int) -> None:
+        """A family's correction: the held innovation's rounding and each error map into the bound,
+        each map into ``Phi``, and the estimate."""
+        b = self._bound
+        h = c.held
+        if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
+            b.hold(h.C, norm(c.x), h.y, channel, h.y.size)
+        for m in c.maps:
+            m.apply(self._phi, b, channel)
+        self._x = c.x
 
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
         """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
@@ -567,20 +439,11 @@ class SwitchedObserver:
             ``t`` before the observer's time or not finite, an index out of range, a value or
             a variance that is not finite (variances must be >= 0).
         """
-        dt = float(t) - self._t
-        if not (math.isfinite(dt) and dt >= 0):
-            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
-        for i, v in list(values.items()) + list((variances or {}).items()):
-            if not (isinstance(i, (int, np.integer)) and 0 <= i < self.n):
-                raise InvalidArgument(f"state index {i!r} out of range 0..{self.n - 1}")
-            if not math.isfinite(float(v)) or abs(float(v)) > MAX_ABS_SAMPLE:
-                raise InvalidArgument(f"value {v!r} for state {i} must be finite (|v| <= {MAX_ABS_SAMPLE:g})")
-        if any(float(v) < 0 for v in (variances or {}).values()):
-            raise InvalidArgument("variances must be >= 0")
+        dt = check_set(t, self._t, values, variances, self.n)
         # a cache of the recursion (the Kalman table) leaves it: the real covariance runs online
-        self._gains.depart(self, "the state was set (set_estimate); running the Riccati recursion online")
+        self._gains.depart("the state was set (set_estimate); running the Riccati recursion online")
         if dt > 0:
-            self._env_cache = None
+            self._bounds.changed()
             self._step(dt)
             self._t = float(t)
         P = self.P
@@ -589,64 +452,17 @@ class SwitchedObserver:
             x[i] = float(v)
         self._x = x
         if P is not None:
-            P = P.copy()
-            for i in set(values) | set(variances or {}):
-                var = float((variances or {}).get(i, P[i, i]))
-                P[i, :] = 0.0
-                P[:, i] = 0.0
-                P[i, i] = var
-            self._P = P
+            self._gains.set_covariance(set_entries(P, set(values) | set(variances or {}), variances or {}))
 
-    def _step(self, dt: float, *, covariance: bool = True) -> None:
-        """Exact step over ``dt`` with the held innovation/measurement and input (step 1)."""
-        e = self._cache.step(self._key, dt)
-        xn = math.sqrt(float(self._x @ self._x))
-        x = e.Phi @ self._x
-        if self._entry_L:
-            x += e.GL @ self._y
-        if not self._u_zero:
-            x += e.GB @ self._u
+    def _step(self, dt: float) -> None:
+        """Exact step over ``dt`` with the held innovation/measurement and input (step 1): the
+        estimate, its error map into ``Phi`` and the bound, the family's covariance."""
+        key, v = self._held()
+        e = self._cache.step(key, dt)
+        x = zoh_step(e, self._x, v, self._u)
+        apply_zoh(self._phi, self._bound, e, dt, self._x, x, v, self._u)
         self._x = x
-        self.apply_map(e.E)
-        if self._bound is not None:
-            self._bound.step(e, dt, xn, math.sqrt(float(x @ x)), self._y if self._entry_L else None,
-                             None if self._u_zero else self._u)
-        if covariance and self._P is not None and self._gains.steps_covariance():
-            self._propagate_covariance(e, dt)
-
-    def _check_noise_max(self, noise_max: Any, hold: str) -> tuple[float, ...] | None:
-        """``noise_max`` as one bound per channel (None: no bound declared)."""
-        if noise_max is None:
-            return None
-        vals = np.atleast_1d(np.asarray(noise_max, dtype=object))
-        if vals.ndim != 1 or vals.size not in (1, self.N):
-            raise InvalidArgument(f"noise_max must be one number or {self.N} (one per channel); got {noise_max!r}")
-        out = []
-        for v in vals:
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not (math.isfinite(float(v)) and 0 <= float(v) <= MAX_ABS_SAMPLE):
-                raise InvalidArgument(f"noise_max must be finite numbers in [0, {MAX_ABS_SAMPLE:g}]; got {noise_max!r}")
-            out.append(float(v))
-        if not self.rounding_bound or hold != "innovation":
-            raise InvalidArgument("noise_max needs rounding_bound=True and hold='innovation' "
-                                  "(the noise bound extends the rounding-aware exact bound)")
-        return tuple(out * self.N if len(out) == 1 else out)
-
-    def _propagate_covariance(self, e: Any, dt: float) -> None:
-        """Covariance of the error over one step (Joseph-free: the map is exact).
-
-        ``P <- E P E' + Q_d(dt) + (Gamma L) R (Gamma L)'`` with ``E`` the step's error map,
-        ``Q_d`` the van Loan discretisation of the process intensity, and the last term (LMI
-        gains, innovation hold) the held measurement noise driven through ``Gamma L``; for the
-        Kalman families ``E = e^{A dt}`` and the term is absent (the correction follows).
-        """
-        _, _, Q_d = self._dcache.get(dt)
-        sp = sparse_transition(e) if e.E is e.Phi else None     # the open-loop map of a Kalman family
-        P = (sp.sandwich(self._P) if sp is not None else e.E @ self._P @ e.E.T) + Q_d
-        extra = self._gains.held_noise(self, e)
-        if extra is not None:
-            P += extra
-        self._P = symmetrize(P)
+        self._gains.stepped(e, dt)
 
     @property
     def gains_source(self) -> str:
@@ -663,60 +479,33 @@ class SwitchedObserver:
         departure the recursion's own, :mod:`switchobs_core.runtime.families.kalman`). LMI gains: the
         covariance propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
         """
-        return self._gains.covariance(self)
+        return self._gains.covariance()
 
     def _switch(self, t: float, channel: int) -> None:
-        """Bookkeeping at a switching instant (e:switching_instants), kept by the tracker."""
-        cyc = self._cycles
-        cyc.end_residence(t)
-        if channel == 1:
-            if cyc.cycle_start is not None:
-                self._close_cycle(t)
-            self._k += 1
-        self._channel = channel
-        d = self.current_design
-        cyc.begin(t, channel, cyc.limits_for(d, channel))
+        """Bookkeeping at a switching instant (e:switching_instants): the design sequence, and for
+        the paper's gains the dead time after the switch and the envelope's jump."""
+        d = self._seq.switch(t, channel)
         if self._tracker is not None:
             dead = design_dead_time(d)
             self._blind_until = t + dead - BLIND_TOL if dead else -math.inf
             self._tracker.switch(t, channel, d.kappa, d.eta, d.mu, dead_time=dead)
 
-    def _close_cycle(self, t: float) -> None:
-        di = self.design_index
-        rec, resync = self._cycles.close_cycle(t, self._k, self.designs[di], di, self.promised[di],
-                                               self.mode == "sequence")
-        if resync:
-            self._resync(rec.h)
-        self._records.append(rec)
-
-    def _resync(self, h: tuple) -> None:
-        """Sequence mode: after a cycle that did not match its promise (a late start, a reset,
-        a skipped cycle), find the first cycle of the sequence it did match and continue the
-        sequence from there, so the next cycle uses the gains of the one after it. Repeated
-        cycle types (the paper's (3, 0.6) twice) are resolved by the following mismatches."""
-        K = len(self.promised)
-        for j, c in enumerate(self.promised):
-            if self._cycles.matches(h, c):
-                self._phase = (j - self._k) % K
-                self.resyncs += 1
-                return
-
     @property
     def residence_violations(self) -> int:
         """Residences outside their designed interval since construction (kept by :meth:`reset`)."""
-        return self._cycles.violations
+        return self._seq.cycles.violations
 
     @property
     def residence_problem(self) -> str:
         """The statement of the residence that ended at the latest switching instant, if it
         broke its interval, else "" (compare ``residence_violations`` before and after an
         update to tell whether this update ended it)."""
-        return self._cycles.problem_at_switch
+        return self._seq.cycles.problem_at_switch
 
     def residence(self) -> Residence | None:
         """The active channel's residence at the observer's time against the gains in use
         (None before the first sample); see :class:`~switchobs_core.runtime.cycles.CycleTracker`."""
-        return self._cycles.residence(self._t, self.current_design)
+        return self._seq.cycles.residence(self._t, self.current_design)
 
     def predict(self, t: float, *, hold: bool = False) -> np.ndarray:
         """Prediction ``x_hat(t)`` for ``t >= obs.t`` without a sample; the state is unchanged.
@@ -732,25 +521,17 @@ class SwitchedObserver:
         -------
         (n,) ndarray
         """
-        dt = float(t) - self._t
-        if not dt >= 0 or not math.isfinite(dt):
-            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
+        dt = check_time(t, self._t)
         if dt == 0:
             return self._x.copy()
-        key = self._key if hold else ("open",)
-        e = self._cache.step(key, dt)
-        x = e.Phi @ self._x
-        if key != ("open",) and self._entry_L:
-            x += e.GL @ self._y
-        if not self._u_zero:
-            x += e.GB @ self._u
-        return x
+        key, v = self._held() if hold else (OPEN_LOOP, None)
+        return zoh_step(self._cache.step(key, dt), self._x, v, self._u)
 
     def prior_covariance(self, t: float) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no
         covariance is kept): the last sample's ``P`` through the step's error map,
         ``E P E' + Q_d(dt)`` (plus the held measurement noise ``(Gamma L) R (Gamma L)'`` for LMI
-        gains), as :meth:`_propagate_covariance` does; the state is unchanged. For the
+        gains, :mod:`switchobs_core.runtime.covariance`); the state is unchanged. For the
         chi-square gate of :mod:`switchobs_core.runtime.consistency`."""
         P = self.P
         dt = float(t) - self._t
@@ -758,13 +539,7 @@ class SwitchedObserver:
             return None
         if dt == 0:
             return P
-        e = self._cache.step(self._key, dt)
-        _, _, Q_d = self._dcache.get(dt)
-        P = e.E @ P @ e.E.T + Q_d
-        extra = self._gains.held_noise(self, e)
-        if extra is not None:
-            P += extra
-        return symmetrize(P)
+        return self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
 
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample
@@ -778,20 +553,12 @@ class SwitchedObserver:
         whose innovation exceeds what they allow proves the model broken for that sample.
         """
         x = self.predict(t, hold=True)
-        dt = float(t) - self._t
-        b = self._bound
-        if b is None:
+        if self._bound is None:
             env = self.envelope(t)
             return x, env.exact_bound, env.noise_bound
-        if dt <= 0:
-            return x, b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        S, Sv = b.propagated(self._cache.step(self._key, dt), dt, math.sqrt(float(self._x @ self._x)),
-                             math.sqrt(float(x @ x)), self._held_nu(), None if self._u_zero else self._u)
-        return x, S, Sv
-
-    def _held_nu(self) -> np.ndarray | None:
-        """The held innovation of a held-innovation family (None: no gain held)."""
-        return self._y if self._entry_L else None
+        dt = float(t) - self._t
+        key, v = self._held()
+        return (x, *self._bounds.sets(self._cache.step(key, dt) if dt > 0 else None, dt, self._x, x, v, self._u))
 
     def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
@@ -813,29 +580,11 @@ class SwitchedObserver:
         """
         if t is None:
             t = self._t
-        dt = float(t) - self._t
-        if not dt >= 0 or not math.isfinite(dt):
-            raise InvalidArgument(f"t = {t!r} must be a finite time >= the observer's time {self._t!r}")
-        step = self._cache.step(self._key, dt) if dt > 0 else None
-        noisy = None
-        b = self._bound
-        if b is not None:       # rounding included (module switchobs_core.numerics.rounding)
-            if amortised is None:
-                amortised = self.n >= AMORTISED_MIN_N
-            if step is None:    # the sets of the last sample: their bounds once per sample
-                if self._env_cache is None or self._env_cache[0] != amortised:
-                    self._env_cache = (amortised, b.bounds(amortised=amortised))
-                exact, noisy = self._env_cache[1]
-            else:
-                xp = self.predict(float(t), hold=True)
-                exact, noisy = b.bounds(*b.propagated(step, dt, math.sqrt(float(self._x @ self._x)),
-                                                      math.sqrt(float(xp @ xp)), self._held_nu(),
-                                                      None if self._u_zero else self._u))
-        elif self.hold == "measurement":    # the error-to-error part, exact arithmetic (class Notes)
-            Phi = self._transition()
-            exact = float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self.e0)
-        else:                               # rounding_bound=False: no bound is kept
-            exact = math.inf
+        dt = check_time(t, self._t)
+        key, v = self._held()
+        step = self._cache.step(key, dt) if dt > 0 else None
+        xp = self.predict(float(t), hold=True) if step is not None and self._bound is not None else None
+        exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._u, amortised)
         if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
             return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)

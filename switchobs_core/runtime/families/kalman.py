@@ -14,7 +14,7 @@ Departure (any other sample)
     partial rows, a missing sample, a channel other than the phase's, a stamp off the grid or a
     step off the design's ``dt``, a state set from outside: the real covariance (the stored
     posterior of the last locked sample, propagated exactly to this sample) becomes the
-    observer's own and the Riccati recursion runs online from it (:mod:`switchobs_core.runtime.families.online`).
+    family's own and the Riccati recursion runs online from it (:mod:`switchobs_core.runtime.families.online`).
 Re-lock
     at the first sample of the designed pattern whose online prior ``P^-`` is within
     ``relock_rtol`` of the stored prior ``S`` of its phase, every entry on its own scale
@@ -43,6 +43,8 @@ from ...design.kalman import design_kalman
 from ...exceptions import InvalidArgument
 from ...table.gains import kalman_table
 from ...table.kalman import Phase
+from ..error_maps import FusedMap, ZohMap, zoh_step
+from .base import OPEN_LOOP, Correction, FamilyContext, Sample
 from .online import OnlineKalmanGains, kalman_correct
 
 __all__ = ["KalmanTableGains", "MAX_JITTER"]
@@ -56,8 +58,9 @@ _FUSED_MAX = 8192
 class KalmanTableGains(OnlineKalmanGains):
     """The ``kalman`` family (module docstring): a :class:`~switchobs_core.runtime.families.base.GainFamily`.
 
-    ``KalmanTableGains(obs, table, mode, cycles, noise=None, relock_rtol=1e-3)``; ``noise``, if
-    given, must be the table's noise model.
+    ``KalmanTableGains(ctx, table, mode, cycles, noise=None, relock_rtol=1e-3)``; ``noise``, if
+    given, must be the table's noise model. Its position in the table (the grid's origin, the
+    last sample's phase) and, after a departure, the covariance are its own.
 
     Attributes
     ----------
@@ -71,24 +74,23 @@ class KalmanTableGains(OnlineKalmanGains):
 
     name: ClassVar[str] = "kalman"
 
-    def __init__(self, obs: Any, table: Any, mode: str, cycles: Any, *, noise: Any = None,
+    def __init__(self, ctx: FamilyContext, table: Any, mode: str, cycles: Any, *, noise: Any = None,
                  relock_rtol: float = 1e-3, **_: Any) -> None:
-        cycles = self._schedule(obs, mode, cycles, None)
-        self.kalman = kd = table.kalman_design(cycles, obs.system)
+        self._ctx = ctx
+        cycles = self._schedule(mode, cycles, None)
+        self.kalman = kd = table.kalman_design(cycles, ctx.system)
         if noise is not None and noise.fingerprint() != kd.noise.fingerprint():
             raise InvalidArgument("noise differs from the noise model the Kalman table was designed for; "
                                   "design the table again with that noise model")
-        self.noise = kd.noise
-        self.track_covariance = True
         self.relock_rtol = float(relock_rtol)
         f = kd.pattern.rate
         self._dtn = 1.0 / f             # the design's step (KalmanPhase.dt of every sample k >= 1)
         S0 = kd.periodic[0].P_prior
         s = float(np.abs(S0).max())
-        a = 2.0 * obs._nA * s + float(np.linalg.norm(kd.noise.Q_c, 2))
+        a = 2.0 * float(np.linalg.norm(ctx.A, 2)) * s + float(np.linalg.norm(kd.noise.Q_c, 2))
         self.dt_tol = min(0.1 * self.relock_rtol * s / a if a > 0 else math.inf, MAX_JITTER / f)
         self._fused: dict = {}
-        self._R: dict = {}
+        self._keep_noise(kd.noise)
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, rate: float = 0.0, noise: Any = None, **_: Any) -> Any:
@@ -101,7 +103,8 @@ class KalmanTableGains(OnlineKalmanGains):
     def source(self) -> str:
         return "online" if self._online else "table"
 
-    def reset(self, obs: Any) -> None:
+    def reset(self) -> None:
+        super().reset()
         self._online = False
         self._origin: float | None = None
         self._last_k = -1           # sample number of the last sample (-1: none; -2: off the grid)
@@ -110,32 +113,33 @@ class KalmanTableGains(OnlineKalmanGains):
         self.departures = 0
         self.relocks = 0
 
-    def steps_covariance(self) -> bool:
-        return self._online
+    def stepped(self, e: Any, dt: float) -> None:
+        """The recursion's prediction after a departure (locked, the table's prior is the real one)."""
+        if self._online:
+            super().stepped(e, dt)
 
-    def covariance(self, obs: Any) -> np.ndarray:
+    def covariance(self) -> np.ndarray:
         """The real covariance after the last sample: the stored posterior of its phase while
         locked (Joseph form from the stored prior), the recursion's own after a departure."""
         if self._online:
-            return obs._P.copy()
+            return self._P.copy()
         g = self._kgain
         if g is None:
-            return obs.noise.P0.copy()
+            return self.noise.P0.copy()
         if len(g) == 4:
             g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
         return self.kalman.posterior(*g)
 
-    def depart(self, obs: Any, why: str) -> None:
-        """Leave the cache: the real covariance becomes the observer's own."""
+    def depart(self, why: str) -> None:
+        """Leave the cache: the real covariance becomes the family's own."""
         if not self._online:
-            obs._P = self.covariance(obs)
+            self._P = self.covariance()
             self._online = True
             self.departures += 1
             self.fallback = why
 
     # ------------------------------------------------------------------ samples
-    def _departure(self, obs: Any, t: float, ph: Phase, ent: Any, channel: int, rows: tuple | None,
-                   span: float) -> str:
+    def _departure(self, t: float, ph: Phase, ent: Any, channel: int, rows: tuple | None, span: float) -> str:
         """Why a sample is not the one the table expects at ``ph`` ("" if it is)."""
         if ent.channel != channel and not (ent.rows is not None and rows == ent.rows):
             return (f"a sample on channel {channel} at t = {t:.9g} s, where the Kalman table's "
@@ -153,21 +157,22 @@ class KalmanTableGains(OnlineKalmanGains):
                     f"{ent.dt:.9g} s (tolerance {self.dt_tol:.3g} s)")
         return ""
 
-    def sample(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
+    def sample(self, s: Sample) -> Correction:
         """The table's gain while locked, else the recursion (module docstring).
 
-        ``dt > 0``: the open-loop step over ``dt`` has not been taken yet; the locked path takes
+        ``s.dt > 0``: the open-loop step over ``dt`` has not been taken yet; the locked path takes
         it with the correction (one fused map per phase and ``dt``).
         """
-        if not self._online and rows is None and dt > 0 and self._origin is not None \
-                and self._locked(obs, t, dt, channel, y):
-            return
-        kd = self.kalman
-        span = obs._span
-        H = obs.rows_of(channel, rows)
-        step = None
+        if not self._online and s.rows is None and s.dt > 0 and self._origin is not None:
+            c = self._locked(s)
+            if c is not None:
+                return c
+        kd, ctx = self.kalman, self._ctx
+        t, dt, span, channel, y, rows = s.t, s.dt, s.span, s.channel, s.y, s.rows
+        H = ctx.rows_of(channel, rows)
+        x, prediction = s.x, None
         if self._online and dt > 0:     # the recursion's prediction (fused with its correction)
-            step = self.predict(obs, dt)
+            x, prediction = self.predict(x, dt)
             dt = 0.0
         if self._origin is None:
             self._origin = t
@@ -175,7 +180,7 @@ class KalmanTableGains(OnlineKalmanGains):
         try:
             ph = kd.phase_at(t - self._origin, max_jitter=MAX_JITTER)
             ent = kd.entry(ph)
-            why = self._departure(obs, t, ph, ent, channel, rows, span)
+            why = self._departure(t, ph, ent, channel, rows, span)
         except InvalidArgument as err:
             why = str(err)
         self._last_k = -2 if ph is None else ph.k
@@ -183,39 +188,44 @@ class KalmanTableGains(OnlineKalmanGains):
             # the real covariance: the last sample's posterior (P0 before the first), propagated
             # exactly to this sample
             first = self._kgain is None
-            self.depart(obs, f"{why}; running the Riccati recursion online from here")
+            self.depart(f"{why}; running the Riccati recursion online from here")
             if dt > 0:
-                step = self.predict(obs, dt, covariance=not first)
+                x, prediction = self.predict(x, dt, covariance=not first)
                 dt = 0.0
             elif span > 0 and not first:
-                obs._propagate_covariance(obs._cache.step(obs._key, span), span)
+                self._P = self._cov.step(self._P, ctx.zoh(OPEN_LOOP, span), span)
         elif self._online and not why:
             # every entry within relock_rtol of its own scale: |P - S|_ij <= rtol sqrt(S_ii S_jj)
             S = ent.P_prior
             d = np.sqrt(np.abs(np.diagonal(S)))
-            if np.all(np.abs(obs._P - S) <= self.relock_rtol * np.outer(d, d)):
+            if np.all(np.abs(self._P - S) <= self.relock_rtol * np.outer(d, d)):
                 self._online = False
                 self.relocks += 1
         if self._online:
-            self.correct_online(obs, channel, rows, H, y, step)
-            return
+            return self.correct_online(channel, rows, H, y, x, prediction)
         K = kd.gain(ph, channel, rows)
         self._kgain = (ph, channel, rows)
-        if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's)
-            obs._step(dt, covariance=False)
-        kalman_correct(obs, K, H, y, step)
+        maps: tuple = ()
+        if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's) with the input held now
+            e = ctx.zoh(OPEN_LOOP, dt)
+            xm = zoh_step(e, x, None, s.u)
+            maps = (ZohMap(e, dt, x, xm, None, s.u),)
+            x = xm
+        xp, m = kalman_correct(x, K, H, y, self._I, prediction)
+        return Correction(xp, maps + (m,))
 
-    def _locked(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray) -> bool:
+    def _locked(self, s: Sample) -> Correction | None:
         """The hot path (locked, all rows, a step to take): the phase found inline and one cached
-        :class:`~switchobs_core.bounds.kalman_map.KalmanMap` per (sample, dt). Returns False (nothing done) whenever
-        the general path is needed."""
+        :class:`~switchobs_core.bounds.kalman_map.KalmanMap` per (sample, dt). Returns None (nothing
+        done) whenever the general path is needed."""
         kd = self.kalman
+        t, dt, channel = s.t, s.dt, s.channel
         tau = t - self._origin
         f = kd.pattern.rate
         k = round(tau * f)
         if k != self._last_k + 1 or abs(tau - k / f) * f > MAX_JITTER \
                 or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
-            return False
+            return None
         S = len(kd.startup)
         startup = k < S
         idx = k if startup else k % kd.pattern.K
@@ -224,27 +234,18 @@ class KalmanTableGains(OnlineKalmanGains):
         if hit is None:
             ent = kd.startup[idx] if startup else kd.periodic[idx]
             if ent.channel != channel or ent.rows is not None:
-                return False
+                return None
             if len(self._fused) >= _FUSED_MAX:
                 self._fused.clear()
-            hit = self._fused[fk] = KalmanMap(obs._cache.step(obs._key, dt), ent.K, obs.C[channel - 1], obs._I)
+            hit = self._fused[fk] = KalmanMap(self._ctx.zoh(OPEN_LOOP, dt), ent.K, self._ctx.C[channel - 1],
+                                              self._I)
         K, H = hit.K, hit.H
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
-        # level of the error, not of ||x||); Phi <- (I - K H) e^{A dt} Phi
-        b = obs._bound
-        x0 = obs._x
+        # level of the error, not of ||x||); the map (I - K H) e^{A dt} for Phi and the bound
+        x0, y = s.x, s.y
         x = hit.predict(x0)
         nu = y - H @ x
-        if b is not None:
-            x0n = math.sqrt(float(x0 @ x0))
-            xmn = math.sqrt(float(x @ x))
-        x += K @ nu
-        obs._x = x
-        obs.apply_map(hit)      # E formed only if Phi or the bound reads it
-        if b is not None:
-            rc = b.rho_correct(hit.fK, hit.fH, xmn, math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu)),
-                               math.sqrt(float(x @ x)))
-            b.fused(hit.e, dt, hit, x0n, xmn, rc, K, y.size, channel)
+        xp = x + K @ nu
         self._last_k = k
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
-        return True
+        return Correction(xp, (FusedMap(hit, dt, x0, x, xp, y, nu),))

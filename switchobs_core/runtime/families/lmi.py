@@ -3,14 +3,15 @@
 At a sample on channel ``i`` the gain ``L_i`` of the current design (per cycle, e:L_original)
 is selected and the innovation ``nu = y - C_i x_hat`` (``hold="innovation"``) or the sample
 (``hold="measurement"``) is held until the next sample; the observer's next exact step applies
-it (e:switched_observer). A sample inside a design's dead time gets no gain. With a noise model
-the covariance is propagated through the exact error map, with the held noise driven through
-``Gamma L`` (:meth:`LmiGains.held_noise`).
+it (e:switched_observer). A sample inside a design's dead time gets no gain. The family
+returns the held innovation (:class:`~switchobs_core.runtime.families.base.Held`: the gain's ZOH
+key, ``nu``, the rows and the data) and changes no estimate at the sample. With a noise model it
+keeps the covariance, propagated through the exact error map of each step with the held noise
+driven through ``Gamma L`` (:mod:`switchobs_core.runtime.covariance`).
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -18,7 +19,8 @@ import numpy as np
 from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
-from .base import check_bounds, check_cycles
+from ..covariance import CovarianceStep
+from .base import Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
 
 __all__ = ["LmiGains"]
 
@@ -26,7 +28,7 @@ __all__ = ["LmiGains"]
 class LmiGains:
     """The ``lmi`` family (module docstring): a :class:`~switchobs_core.runtime.families.base.GainFamily`.
 
-    ``LmiGains(obs, table, mode, cycles, bounds=None, noise=None, track_covariance=None)``
+    ``LmiGains(ctx, table, mode, cycles, bounds=None, noise=None, track_covariance=None)``
     """
 
     name: ClassVar[str] = "lmi"
@@ -34,10 +36,11 @@ class LmiGains:
     holds: ClassVar[tuple[str, ...]] = ("innovation", "measurement")
     kalman = None
 
-    def __init__(self, obs: Any, table: Any, mode: str, cycles: Any, *, bounds: Any = None, noise: Any = None,
-                 track_covariance: bool | None = None, **_: Any) -> None:
+    def __init__(self, ctx: FamilyContext, table: Any, mode: str, cycles: Any, *, bounds: Any = None,
+                 noise: Any = None, track_covariance: bool | None = None, **_: Any) -> None:
         if getattr(table, "family", "lmi") != "lmi":
             raise InvalidArgument(f"family 'lmi' needs an LMI gain table; this table holds {table.family!r} gains")
+        self._ctx = ctx
         # 1. designs of the mode
         if mode == "robust":
             d = getattr(table, "robust", None)
@@ -48,26 +51,31 @@ class LmiGains:
             self.promised = (None,)
             self.bounds = check_bounds(getattr(d, "h_bounds", None) if bounds is None else bounds)
         else:
-            cycles = check_cycles(cycles, mode, obs.N)
+            cycles = check_cycles(cycles, mode, ctx.N)
             self.designs = tuple(table.lookup(c) for c in cycles)
             self.promised = tuple(cycles)
             self.bounds = None
         for d in self.designs:
             for i, Li in enumerate(d.L):
-                if np.shape(Li) != (obs.n, obs.p[i]):
+                if np.shape(Li) != (ctx.n, ctx.p[i]):
                     raise InvalidArgument(f"design gain L_{i + 1} has shape {np.shape(Li)}; "
-                                          f"expected {(obs.n, obs.p[i])}")
+                                          f"expected {(ctx.n, ctx.p[i])}")
         self._L = tuple(tuple(np.ascontiguousarray(Li, dtype=float) for Li in d.L) for d in self.designs)
         # 2. covariance: propagated under the noise model when one is given (or asked for)
         if track_covariance is None:
             track_covariance = noise is not None
         if track_covariance and noise is None:
-            noise = default_noise(obs.system)
-        if track_covariance and obs.hold != "innovation":
+            noise = default_noise(ctx.system)
+        if track_covariance and ctx.hold != "innovation":
             raise InvalidArgument("track_covariance needs hold='innovation' (the exact error map)")
         self.noise = noise
         self.track_covariance = bool(track_covariance)
-        self._keys: dict = {}
+        if noise is not None:
+            noise.check_system(ctx.system)
+            self._cov = CovarianceStep(ctx.A, ctx.B, noise, ctx.dt_resolution)
+        self._keys: dict = {}       # (design, channel, rows) -> (ZOH key, C rows)
+        self._P: np.ndarray | None = None
+        self._held: Held | None = None
         self._R_held = None
 
     @classmethod
@@ -80,58 +88,68 @@ class LmiGains:
     def source(self) -> str:
         return "table"
 
-    def reset(self, obs: Any) -> None:
+    @property
+    def held(self) -> Held | None:
+        return self._held
+
+    def reset(self) -> None:
+        self._P = self.noise.P0.copy() if self.track_covariance else None
+        self._held = None
         self._R_held = None
 
-    def fuses(self, obs: Any) -> bool:
+    def fuses(self, input_held: bool) -> bool:
         return False
 
-    def steps_covariance(self) -> bool:
-        return True
+    def stepped(self, e: Any, dt: float) -> None:
+        if self._P is not None:
+            self._P = self._cov.step(self._P, e, dt, self._held_noise(e))
 
-    def covariance(self, obs: Any) -> np.ndarray | None:
-        return None if obs._P is None else obs._P.copy()
+    def covariance(self) -> np.ndarray | None:
+        return None if self._P is None else self._P.copy()
 
-    def held_noise(self, obs: Any, e: Any) -> np.ndarray | None:
+    def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
+        return self._cov.prior(P, e, dt, self._held_noise(e))
+
+    def depart(self, why: str) -> None:
+        return None
+
+    def set_covariance(self, P: np.ndarray) -> None:
+        self._P = P
+
+    def _held_noise(self, e: Any) -> np.ndarray | None:
         """``(Gamma L) R (Gamma L)'``: the held sample's noise over the step (innovation hold)."""
-        if obs._entry_L and self._R_held is not None:
+        if self._held is not None and self._R_held is not None:
             return e.GL @ self._R_held @ e.GL.T
         return None
 
-    def depart(self, obs: Any, why: str) -> None:
-        return None
-
-    def _gain_key(self, obs: Any, channel: int, rows: Any) -> tuple:
-        """ZOH cache key of channel ``channel`` with output rows ``rows`` under the current design."""
-        di = obs.design_index
-        ck = (di, channel, rows)
-        key = self._keys.get(ck)
-        if key is not None:
-            return key
-        Ci = obs.C[channel - 1]
-        Li = self._L[di][channel - 1]
+    def _gain_key(self, design: int, channel: int, rows: Any) -> tuple:
+        """ZOH cache key and output rows of channel ``channel`` with rows ``rows`` under design
+        ``design`` (registered in the observer's cache at first use)."""
+        ck = (design, channel, rows)
+        hit = self._keys.get(ck)
+        if hit is not None:
+            return hit
+        ctx = self._ctx
+        Ci = ctx.C[channel - 1]
+        Li = self._L[design][channel - 1]
         if rows is not None:
             Ci = Ci[list(rows), :]
             Li = Li[:, list(rows)]
-        key = ck
-        if obs.hold == "innovation":
-            obs._cache.register(key, obs.A, Li, obs.B, C=Ci)
+        if ctx.hold == "innovation":
+            ctx.register(ck, ctx.A, Li, ctx.B, C=Ci)
         else:
-            obs._cache.register(key, obs.A - Li @ Ci, Li, obs.B)
-        obs._Crows[key] = Ci
-        self._keys[ck] = key
-        return key
+            ctx.register(ck, ctx.A - Li @ Ci, Li, ctx.B)
+        hit = self._keys[ck] = (ck, Ci)
+        return hit
 
-    def sample(self, obs: Any, t: float, dt: float, channel: int, y: np.ndarray, rows: tuple | None) -> None:
+    def sample(self, s: Sample) -> Correction:
         """Hold the sample's innovation (or the sample) with the gain of the current design."""
-        p = y.size
-        if t < obs._blind_until:     # dead time after the switch: no gain (module docstring)
-            rows, y, p = (), y[:0], 0
-        key = obs._key = self._gain_key(obs, channel, rows)
-        Cr = obs._Crows[key]
-        obs._y = y - Cr @ obs._x if obs.hold == "innovation" else y
-        if obs._bound is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-            obs._bound.hold(Cr, math.sqrt(float(obs._x @ obs._x)), y, channel, p)
-        obs._entry_L = True
-        if obs._P is not None:
-            self._R_held = obs.noise.R(channel, rows)
+        rows, y = s.rows, s.y
+        if s.blind:     # dead time after the switch: no gain (module docstring)
+            rows, y = (), y[:0]
+        key, Cr = self._gain_key(s.design, s.channel, rows)
+        x = s.x
+        self._held = held = Held(key, y - Cr @ x if self._ctx.hold == "innovation" else y, Cr, y)
+        if self._P is not None:
+            self._R_held = self.noise.R(s.channel, rows)
+        return Correction(x, (), held)

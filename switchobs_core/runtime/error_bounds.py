@@ -1,0 +1,86 @@
+"""The bounds of the observer's error that it publishes, read at a time ``t``.
+
+``hold="innovation"`` with ``rounding_bound``
+    the rigorous ellipsoids of :class:`~switchobs_core.bounds.rigorous.RoundingBound` (the exact
+    bound for noise-free samples and, with a declared ``noise_max``, the noise bound), rounding
+    included (:mod:`switchobs_core.numerics.rounding`). At the last sample's time their bounds are
+    read once per sample (by the eigenvalue problem, or amortised in O(n^2) between verified
+    anchors, :mod:`switchobs_core.bounds.read`); at a later time the sets are propagated over the
+    step without being kept.
+``hold="measurement"``
+    ``||Phi(t, t0)|| e0``: the error-to-error part of the joint transition, in exact arithmetic
+    (:class:`~switchobs_core.runtime.transition.Transition`).
+otherwise
+    no bound (``inf``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..bounds.read import AMORTISED_MIN_N
+from ..bounds.rigorous import RoundingBound
+from .error_maps import norm
+from .transition import Transition
+
+__all__ = ["ErrorBounds"]
+
+
+class ErrorBounds:
+    """The observer's published error bounds (module docstring).
+
+    ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi)``; :attr:`rigorous` is the
+    :class:`~switchobs_core.bounds.rigorous.RoundingBound` the error maps step (None when not kept).
+    """
+
+    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, hold: str,
+                 rounding_bound: bool, phi: Transition) -> None:
+        self.rigorous = RoundingBound(A, p_max, e0, noise_max) if hold == "innovation" and rounding_bound else None
+        self.n = A.shape[0]
+        self._e0 = e0
+        self._measurement = hold == "measurement"
+        self._phi = phi
+        self._last: tuple | None = None     # (amortised, (exact, noise)) of the last sample's sets
+
+    def reset(self) -> None:
+        """``S = e0^2 I``."""
+        if self.rigorous is not None:
+            self.rigorous.reset()
+        self._last = None
+
+    def changed(self) -> None:
+        """The sets changed (a sample, a step): their bounds are read again."""
+        self._last = None
+
+    def read(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray | None, v: np.ndarray | None,
+             u: np.ndarray | None, amortised: bool | None) -> tuple[float, float | None]:
+        """``(exact, noise)`` at ``dt`` after the last sample: ``step`` the ZOH cache entry over
+        ``dt`` (None at the sample's time), ``x`` the estimate at the sample, ``xp`` the prediction
+        at ``t`` (with the rigorous bound and a step), ``v`` and ``u`` what is held; ``amortised``
+        None: from :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on."""
+        b = self.rigorous
+        if b is not None:       # rounding included (module switchobs_core.numerics.rounding)
+            if amortised is None:
+                amortised = self.n >= AMORTISED_MIN_N
+            if step is None:    # the sets of the last sample: their bounds once per sample
+                if self._last is None or self._last[0] != amortised:
+                    self._last = (amortised, b.bounds(amortised=amortised))
+                return self._last[1]
+            return b.bounds(*b.propagated(step, dt, norm(x), norm(xp), v, u))
+        if self._measurement:   # the error-to-error part, exact arithmetic
+            Phi = self._phi.read()
+            return float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self._e0), None
+        return math.inf, None   # rounding_bound=False: no bound is kept
+
+    def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
+             u: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
+        :meth:`read`; copies at the sample's time, propagated and not kept after it)."""
+        b = self.rigorous
+        if step is None:
+            return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
+        return b.propagated(step, dt, norm(x), norm(xp), v, u)
