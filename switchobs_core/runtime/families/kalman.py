@@ -206,10 +206,10 @@ class KalmanTableGains(OnlineKalmanGains):
         K = kd.gain(ph, channel, rows)
         self._kgain = (ph, channel, rows)
         maps: tuple = ()
-        if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's) with the input held now
+        if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's; no input was held)
             e = ctx.zoh(OPEN_LOOP, dt)
-            xm = zoh_step(e, x, None, s.u)
-            maps = (ZohMap(e, dt, x, xm, None, s.u),)
+            xm = zoh_step(e, x, None, None)
+            maps = (ZohMap(e, dt, x, xm, None, None),)
             x = xm
         xp, m = kalman_correct(x, K, H, y, self._I, prediction)
         return Correction(xp, maps + (m,))

@@ -17,6 +17,7 @@ from switchobs_core.exceptions import GainTableError, InvalidArgument
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.scenarios import paper_system
 from switchobs_core.model.schedule import Cycle, PeriodicSchedule, SequenceSchedule
+from switchobs_core.model.system import LTISystem
 from switchobs_core.numerics.propagation import van_loan
 from switchobs_core.runtime.observer import NOT_APPLICABLE, SwitchedObserver
 from switchobs_core.table.gains import GainTable, kalman_table
@@ -223,3 +224,38 @@ def test_set_estimate_sets_entries_and_covariance(paper, family):
         plant.advance(t)
         obs.update(t, c, plant.measure(c))
     assert abs(obs.x_hat[4] - plant.x[4]) < 1e-3
+
+
+def _input_system(paper):
+    """The paper's A and C with a 2-column input."""
+    B = np.zeros((paper.n, 2))
+    B[2, 0] = B[3, 1] = 1.0
+    return LTISystem(paper.A, B, paper.C, name="paper_input")
+
+
+@pytest.mark.parametrize("family", ["kalman", "kalman-online"])
+@pytest.mark.parametrize("dead", [0.0, 0.2])
+def test_an_input_acts_from_its_sample_on(paper, family, dead):
+    """``u`` given with a sample is held from that sample on: the estimate at the sample is the same
+    double with and without it, on the first sample after a reset at a later time and on every
+    sample of a dead-time table's blind phases (where the table takes the step with its correction)."""
+    system = _input_system(paper)
+    cyc = Cycle.from_ts(2.0, 0.6, dead)
+    table = kalman_table(system, [design_kalman(system, cyc, 40.0)])
+    sched = PeriodicSchedule(cyc)
+    blind = [k for k in range(1, 160) if (k / 40.0) % 2.0 < dead - 1e-9 or 1.2 <= (k / 40.0) % 2.0 < 1.2 + dead - 1e-9]
+    checks = [1] + blind[:6]
+    for k in checks:
+        xs = []
+        for u in (None, [5.0, -3.0]):
+            obs = SwitchedObserver(system, table, cycles=[cyc], family=family, x0=X0)
+            obs.reset(X0, 0.0)
+            for j in range(1, k + 1):
+                t = j / 40.0
+                ch = sched.channel_at(t)
+                rows = (0, 1) if j in blind else None
+                C = np.asarray(system.C[ch - 1])
+                y = (C if rows is None else C[list(rows)]) @ (expm(np.asarray(system.A) * t) @ X0)
+                x = obs.update(t, ch, y, u=u if j == k else None, rows=rows)
+            xs.append(x.copy())
+        assert np.array_equal(xs[0], xs[1]), (family, dead, k)
