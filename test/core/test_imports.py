@@ -168,7 +168,7 @@ def test_no_module_imports_a_higher_layer():
         computed += [f"{m}:{line}" for line in lines if m not in COMPUTED_IMPORTS]
     assert not up, "\n".join(up)
     assert not computed, computed
-    # the scan sees imports: the observer imports the bounds and the gain table's Kalman design
+    # the scan sees imports: the observer imports the envelopes and the gain table's Kalman design
     found = {t for _, t in _imports_anywhere("switchobs_core.runtime.observer", mods["switchobs_core.runtime.observer"],
                                              mods)[0]}
-    assert {"switchobs_core.bounds.rigorous", "switchobs_core.table.kalman"} <= found
+    assert {"switchobs_core.bounds.envelope", "switchobs_core.table.kalman"} <= found
