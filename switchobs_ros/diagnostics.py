@@ -14,8 +14,9 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+from switchobs_core.norms import gain_norms
 
 __all__ = ["EstimatorDiagnostics", "FREQUENCY_TOLERANCE", "NodeState", "kv"]
 
@@ -98,7 +99,7 @@ class EstimatorDiagnostics:
               kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
         if obs.gains.paper_envelope:
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
-                   kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]
+                   kv("current gain norms |L_i|", gain_norms(d.L))]
         if obs.kalman is not None:
             ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
                    kv("kalman table re-locks", obs.kalman_relocks),
