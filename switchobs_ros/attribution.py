@@ -35,7 +35,8 @@ from typing import Any
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
 
-from .pairing import Pending, Source
+from .pairing import Pending
+from .sources import Source
 
 __all__ = ["CHANNEL_HISTORY", "ChannelAttribution", "Resolution", "Verdict", "lost_between", "sequence"]
 
@@ -111,7 +112,7 @@ class ChannelAttribution:
     Parameters
     ----------
     sources : tuple of Source
-        The input sources (:mod:`switchobs_ros.pairing`).
+        The input sources (:mod:`switchobs_ros.sources`).
     channel_topic : str or None
         The channel topic (None: every sample's channel comes from one-channel sources).
     window_ns : int

@@ -1,7 +1,7 @@
 """Pairing: the sources' messages with one header stamp form one sample.
 
-An input source (:class:`Source`, from the system's input specification,
-:mod:`msg_bridge.inputs`) feeds some rows of a channel's output ``y_i = C_i x`` (e:outputs).
+An input source (:class:`~switchobs_ros.sources.Source`, from the system's input
+specification) feeds some rows of a channel's output ``y_i = C_i x`` (e:outputs).
 Its messages with the same header stamp are the parts of one sample (:class:`Pending`); a sample
 is *complete* when every source its channel needs has arrived. :class:`Pairing` keeps the
 samples by stamp (at most :data:`MAX_PENDING`) until the pipeline answers them, and reads a
@@ -19,57 +19,18 @@ switching instant): it is complete alone and is answered at once.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from switchobs_core.measurement import Measurement
 
-__all__ = ["MAX_PENDING", "DeadTime", "Pairing", "Part", "Pending", "Source", "sources_from_specs"]
+from .sources import Source
+
+__all__ = ["MAX_PENDING", "DeadTime", "Pairing", "Part", "Pending"]
 
 #: Samples kept waiting for their partners or for their channel (a backlog, the reorder window:
 #: 300 ms at 1 kHz is 300 samples).
 MAX_PENDING = 1024
-
-_POSE_TYPE = "geometry_msgs/msg/PoseStamped"
-
-
-@dataclass(frozen=True)
-class Source:
-    """One input source as the pipeline uses it (built from a :class:`msg_bridge.InputSource`).
-
-    ``rows[c - 1]`` are the rows of channel ``c``'s output that the source's fields feed;
-    ``channel`` is None for a source shared by several channels; ``shared`` is True when its
-    rows are the same quantities in every channel (the camera's own pose), so its samples need
-    no channel to be read; ``read`` is the type's :class:`msg_bridge.FieldReader` ``read``;
-    ``pose`` selects the PoseStamped checks of :func:`msg_bridge.check_pose`.
-    """
-
-    index: int
-    topic: str
-    type: str
-    fields: tuple[str, ...]
-    channel: int | None
-    rows: tuple[tuple[int, ...], ...]
-    shared: bool
-    read: Any
-    pose: bool
-
-
-def sources_from_specs(specs: Any, system: Any) -> list[Source]:
-    """The pipeline's sources of an input specification (:class:`msg_bridge.InputSpecs`).
-
-    A source is *shared* when it serves every channel and feeds the same rows of ``C`` in each
-    (the camera's own pose; :class:`msg_bridge.InputSource`): its samples need no channel to be read.
-    """
-    out = []
-    for k, spec in enumerate(specs.sources):
-        rows = tuple(tuple(spec.rows_for(c)) for c in range(1, system.N + 1))
-        out.append(Source(k, spec.topic, spec.type, tuple(spec.fields), spec.channel, rows, bool(spec.shared),
-                          spec.reader.read, spec.type == _POSE_TYPE))
-    return out
-
 
 class Part:
     """One source's message in a pending sample: its ``values``, its source timestamp

@@ -8,19 +8,17 @@ and sequence number (``seq``), and publishes (or writes) the :class:`Estimate` o
 
 For every message the pipeline orchestrates:
 
-1. validation (:mod:`msg_bridge.validate`): a rejected message is counted under
-   ``(topic, reason)`` and changes nothing else;
+1. validation (:meth:`Source.checked <switchobs_ros.sources.Source.checked>`): a rejected
+   message is counted under ``(topic, reason)`` and changes nothing else;
 2. pairing (:mod:`switchobs_ros.pairing`): the sources' parts with one stamp form a sample;
 3. channel attribution (:mod:`switchobs_ros.attribution`): the channel the sample was sent on,
    from the publisher's source timestamps and sequence numbers, never guessed;
-4. the model against the data (``consistency.check``): the innovation test against the published
-   bound (:class:`switchobs_core.consistency.InnovationTest`), which re-attributes a sample that
-   exactly one other channel explains and otherwise rejects it and withdraws every bound
-   (:data:`NO_BOUND` until a reset); or, with noise and no declared bound, the chi-square gate
-   (:class:`switchobs_core.gate.ChiSquareGate`, ``consistency.chi2_alpha``);
+4. screening (:mod:`switchobs_ros.screening`): the model against the data, with the core's
+   innovation test against the published bound (a sample it refuses is re-attributed, or
+   rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
-   measurement (:class:`switchobs_core.measurement.Measurement`), and an :class:`Estimate` with
-   the envelope (the paper's envelopes and bound, the exact bound).
+   :class:`~switchobs_core.measurement.Measurement`, and an :class:`Estimate` with the envelope
+   (the paper's envelopes and bound, the exact bound).
 
 Observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first sample
 answered after start-up or a reset; every estimate carries the stamp of the sample it answers.
@@ -52,14 +50,14 @@ from .attribution import ChannelAttribution, Resolution, Verdict
 from .config import EstimatorConfig
 from .core_config import load_or_design_table
 from .counters import NO_BOUND, Counters, PipelineLog
-from .pairing import MAX_PENDING, DeadTime, Pairing, Pending, Source, sources_from_specs
+from .pairing import MAX_PENDING, DeadTime, Pairing, Pending
 from .params import ConfigError
 from .screening import Screening
 from .set_state import SET_STATE_TOPIC, read_set_state
+from .sources import Source, sources_from_specs
 
 __all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate",
-           "EstimatorPipeline", "PipelineLog", "Prediction", "Residence", "Source", "channel_bodies",
-           "sources_from_specs"]
+           "EstimatorPipeline", "PipelineLog", "Prediction", "Residence", "Source", "sources_from_specs"]
 
 #: The paper interface's topics (the default input specification; relative names).
 POSE_TOPICS = {"camera": "camera/pose", "target": "target/pose"}
@@ -131,15 +129,13 @@ class EstimatorPipeline(Counters):
         self.in_frame = input_frame_id
         self.max_abs = max_abs
         self.future_ns = int(future_tolerance_ns)
-        self.check = bool(check)
-        self.chi2_alpha = float(chi2_alpha)
         self.N = system.N
         # the parts: pairing, attribution, the dead time, the model against the data
         self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p))
         self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns)
         self.dead_time = DeadTime(int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9)),
                                   next((s.index for s in self.sources if s.shared), None))
-        self.screening = Screening(system, observer, self.pairing, self, check=self.check, chi2_alpha=self.chi2_alpha)
+        self.screening = Screening(system, observer, self.pairing, self, check=check, chi2_alpha=chi2_alpha)
         # run-time state (cleared by reset)
         self.last_ns: dict[str, int | None] = {s.topic: None for s in self.sources}
         self.origin_ns: int | None = None
@@ -205,6 +201,24 @@ class EstimatorPipeline(Counters):
     def pending(self) -> dict[int, Pending]:
         """The samples waiting for their partners or their channel, by stamp."""
         return self.pairing.pending
+
+    @property
+    def check(self) -> bool:
+        """Whether the consistency test is on (``consistency.check``, :mod:`~switchobs_ros.screening`)."""
+        return self.screening.check
+
+    @check.setter
+    def check(self, on: bool) -> None:
+        self.screening.check = bool(on)
+
+    @property
+    def chi2_alpha(self) -> float:
+        """The chi-square gate's false-alarm rate (``consistency.chi2_alpha``; 0: no gate)."""
+        return self.screening.chi2_alpha
+
+    @chi2_alpha.setter
+    def chi2_alpha(self, alpha: float) -> None:
+        self.screening.chi2_alpha = alpha
 
     @property
     def late_channel(self) -> int:
@@ -312,7 +326,9 @@ class EstimatorPipeline(Counters):
         out: list[Estimate] = []
         now_mono = time.monotonic() if now_mono is None else now_mono
         try:
-            stamp_ns, values, rej = self._validate(src, msg, now_ns)
+            stamp_ns, values, rej = src.checked(msg, frame_id=self.in_frame, max_abs=self.max_abs,
+                                                last_ns=self.last_ns[topic], now_ns=now_ns,
+                                                future_tolerance_ns=self.future_ns)
             rej = self.attribution.refuse(src, stamp_ns, src_ns, rej)
             if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
                 rej = Rejection(Reason.OLD_STAMP, "header.stamp",
@@ -335,28 +351,6 @@ class EstimatorPipeline(Counters):
         except Exception as err:
             self.internal_error(topic, err)
         return out
-
-    def _validate(self, src: Source, msg: Any, now_ns: int) -> tuple[int, np.ndarray, Rejection | None]:
-        """The message's stamp and values, and why it is rejected (None: valid)."""
-        last = self.last_ns[src.topic]
-        if src.pose:      # every field of a pose checked
-            rej = mb.check_pose(msg, frame_id=self.in_frame, max_abs=self.max_abs, last_ns=last, now_ns=now_ns,
-                                future_tolerance_ns=self.future_ns)
-            if rej is not None and rej.reason is Reason.BAD_STAMP:
-                return 0, np.empty(0), rej
-            stamp_ns, _, values = src.read(msg)
-            return stamp_ns, values, rej
-        try:
-            stamp_ns, frame, values = src.read(msg)
-        except mb.BridgeError as err:       # a bad stamp, or a labelled array of another layout
-            return 0, np.empty(0), err.rejection or Rejection(Reason.BAD_LAYOUT, "layout", str(err))
-        values = np.asarray(values, dtype=float)
-        rej = mb.check_values(values, src.fields, max_abs=self.max_abs)
-        if rej is None and self.in_frame and src.type != mb.LABELLED_ARRAY and frame != self.in_frame:
-            rej = Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{self.in_frame}')")
-        if rej is None:
-            rej = mb.check_stamp(stamp_ns, last_ns=last, now_ns=now_ns, future_tolerance_ns=self.future_ns)
-        return stamp_ns, values, rej
 
     # ------------------------------------------------------------------ answering samples
     def flush_overdue(self, now_mono: float, timeout: float) -> list[Estimate]:
@@ -560,16 +554,3 @@ class EstimatorPipeline(Counters):
             return None
         return Prediction(int(stamp), x, float(bound) if self.bound_valid else NO_BOUND, elapsed * 1e-9)
 
-
-def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
-    """The body each channel sees (the one whose outputs belong to that channel alone, as
-    ``agent2`` for channel 2 of the camera scenarios): ``{channel: body name}``, channels whose
-    outputs name no such body left out (the markers then highlight none)."""
-    names = {b.name for b in bodies}
-    common = set.intersection(*(set(o) for o in system.output_labels)) if system.N else set()
-    out = {}
-    for c, labels in enumerate(system.output_labels, start=1):
-        own = {lab.rpartition(".")[0] for lab in labels if lab not in common} & names
-        if len(own) == 1:
-            out[c] = own.pop()
-    return out

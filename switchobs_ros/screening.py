@@ -51,9 +51,19 @@ class Screening:
         self.pairing = pairing
         self.counters = counters
         self.N = system.N
-        self.check = check
+        self.C = system.C
+        self.check = bool(check)
         self.innovation = InnovationTest(system.C, observer.noise_max)
         self.gate = ChiSquareGate(system.C, chi2_alpha)
+
+    @property
+    def chi2_alpha(self) -> float:
+        """The chi-square gate's false-alarm rate (0: no gate)."""
+        return self.gate.alpha
+
+    @chi2_alpha.setter
+    def chi2_alpha(self, alpha: float) -> None:
+        self.gate = ChiSquareGate(self.C, alpha)
 
     @property
     def testing(self) -> bool:
@@ -68,7 +78,7 @@ class Screening:
             if m is None:
                 self.counters.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
             return m
-        if self.gate.alpha > 0 and not self._gate(pend, t, m):
+        if self.chi2_alpha > 0 and not self._gate(pend, t, m):
             self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
             return None
         return m
