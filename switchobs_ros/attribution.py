@@ -60,7 +60,8 @@ class Verdict(enum.Enum):
 
     @property
     def rejection(self) -> tuple[Reason, str]:
-        """The reason and detail under which the parts of a sample with this verdict are rejected."""
+        """The reason and detail under which the parts of a sample with this verdict (not
+        :attr:`CHANNEL`) are rejected."""
         return _REJECTIONS[self]
 
 
