@@ -11,7 +11,7 @@ Input handling (validation, pairing, channel attribution, the observer, the coun
 subscriptions, publishing each estimate, the pairing timer (``pairing_timeout``, wall clock),
 the clock-jump callback, ``~/reset`` and ``/diagnostics``.
 
-Inputs (see the pipeline): one subscription per source of the system's input specification
+Inputs (:mod:`switchobs_ros.attribution`): one subscription per source of the system's input specification
 (:mod:`msg_bridge.inputs`; the paper interface ``camera/pose``, ``target/pose`` and
 ``camera/active_channel`` by default), each callback taking rclpy's ``MessageInfo``: the
 publisher's source timestamp attributes a sample to the channel that was active when it was
@@ -218,7 +218,7 @@ class EstimatorMixin:
         self.last_prediction = None
         # inputs (the system's input specification): the channel topic first, so that, when a
         # channel message and a pose are ready together, the executor takes the channel first
-        # (attribution does not depend on it: source timestamps, see the pipeline)
+        # (attribution does not depend on it: source timestamps, switchobs_ros.attribution)
         self._input_subs = []
         hot = []
         if pl.channel_topic:
@@ -293,7 +293,7 @@ class EstimatorMixin:
                 return
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
-            if index is None:      # the sequence number shows lost channel messages (the pipeline)
+            if index is None:      # the sequence number shows lost channel messages (attribution)
                 seq = info.get("publication_sequence_number") if info else None
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
