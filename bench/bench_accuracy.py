@@ -47,13 +47,13 @@ from scipy.linalg import expm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from switchobs_core.design import design_table
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.noise import NoiseModel
-from switchobs_core.observer import SwitchedObserver
-from switchobs_core.scenarios import camera_agents, paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule, RandomSchedule, SequenceSchedule
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.design.lmi import design_table
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.scenarios import camera_agents, paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule, RandomSchedule, SequenceSchedule
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.table.gains import kalman_table
 from switchobs_core.threads import single_threaded_blas
 
 PERIODIC = [Cycle.from_ts(2.0, 0.6)]

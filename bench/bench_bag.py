@@ -50,9 +50,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-live", action="store_true")
     a = ap.parse_args(argv)
 
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.bag.estimate import estimate, estimator_params
     from switchobs_ros.bag.generate import GenerateConfig, generate

@@ -19,7 +19,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import switchobs_core as so
-from switchobs_core.rounding import verify_against_extended
+from switchobs_core.numerics.rounding import verify_against_extended
 from switchobs_core.threads import single_threaded_blas
 
 sysm = so.load_system("paper")

@@ -60,9 +60,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=5)
     a = ap.parse_args(argv)
     single_threaded_blas()
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
 
     tmp = Path(tempfile.mkdtemp())
     design_table(load_system("paper"), cycles=[Cycle.from_ts(2.0, 0.6)], delta=0.99).save(tmp / "t.json")

@@ -64,11 +64,11 @@ if str(REPO) not in sys.path:
 
 from scipy.optimize import brentq  # noqa: E402
 
-from switchobs_core.design import ETA_GRID, Designer  # noqa: E402
-from switchobs_core.figures import S_VALUES, TAUS  # noqa: E402
-from switchobs_core.scenarios import camera_agents, paper_system  # noqa: E402
-from switchobs_core.schedule import Cycle  # noqa: E402
-from switchobs_core.synthesis import LMISynthesizer  # noqa: E402
+from switchobs_core.design.lmi import ETA_GRID, Designer  # noqa: E402
+from switchobs_core.design.synthesis import LMISynthesizer  # noqa: E402
+from switchobs_core.model.scenarios import camera_agents, paper_system  # noqa: E402
+from switchobs_core.model.schedule import Cycle  # noqa: E402
+from switchobs_core.sim.figures import S_VALUES, TAUS  # noqa: E402
 
 PY = sys.executable
 PAPER_CYCLES = ["2,0.6", "4,0.5", "3,0.6", "2,0.4"]
@@ -174,9 +174,9 @@ parser = cli.build_parser()          # imports every subcommand module, as `swit
 t1 = time.perf_counter()
 import cvxpy  # noqa: F401  (imported lazily by LMISynthesizer)
 t2 = time.perf_counter()
-from switchobs_core.scenarios import load_system
-from switchobs_core.design import Designer
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.scenarios import load_system
+from switchobs_core.design.lmi import Designer
+from switchobs_core.model.schedule import Cycle
 system = load_system("paper")
 des = Designer(system, delta=0.99)
 t3 = time.perf_counter()
@@ -204,7 +204,7 @@ def bench_e2e(runs: int, tmp: Path) -> dict:
         cmds[".venv/bin/switchobs design ..."] = [str(script), *cli_args]
     base = {
         "python -c pass": [PY, "-c", "pass"],
-        "python -c 'import switchobs_core.design'": [PY, "-c", "import switchobs_core.design"],
+        "python -c 'import switchobs_core.design.lmi'": [PY, "-c", "import switchobs_core.design.lmi"],
         "python -c 'import cvxpy'": [PY, "-c", "import cvxpy"],
         "python -c 'import switchobs_core.cli' + build_parser()": [
             PY,
@@ -558,7 +558,7 @@ def report(info, e2e, mp, sc, args, wall) -> str:
     L.append(md_table(["package", "cumulative import"], [[f"`{k}`", fmt_s(v)] for k, v in e2e["importtime"]]))
     L.append(
         f"\n`import cvxpy` alone also loads scipy.interpolate and scipy.optimize: {e2e['cvxpy_imports_scipy']} "
-        "(so deferring those imports in `switchobs_core.design` would not shorten `switchobs design`; the "
+        "(so deferring those imports in `switchobs_core.design.lmi` would not shorten `switchobs design`; the "
         "import floor of this command is numpy + scipy + cvxpy).\n"
     )
 

@@ -419,9 +419,9 @@ def main(argv=None) -> int:
 
     lease = claim_domain()
     os.environ.update(localhost_env(lease.domain_id if a.domain is None else a.domain))
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_node_"))
     table = str(design_table(load_system("paper"), [Cycle.from_ts(2.0, 0.6)], progress=False).save(tmp / "p.json"))

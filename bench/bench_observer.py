@@ -26,11 +26,11 @@ from scipy.linalg import expm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from switchobs_core.design import design_table
-from switchobs_core.observer import SwitchedObserver
-from switchobs_core.plant import Plant
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule
+from switchobs_core.design.lmi import design_table
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.sim.plant import Plant
 from switchobs_core.threads import single_threaded_blas
 
 

@@ -43,10 +43,10 @@ def _stat(ts: list[float]) -> str:
 
 
 def main() -> int:
+    from switchobs_core.design.plan import ScheduleCost, cycle_cost, plan_schedule
+    from switchobs_core.model.scenarios import paper_system
+    from switchobs_core.model.schedule import Cycle
     from switchobs_core.paper import TABLE
-    from switchobs_core.plan import ScheduleCost, cycle_cost, plan_schedule
-    from switchobs_core.scenarios import paper_system
-    from switchobs_core.schedule import Cycle
     from switchobs_core.threads import single_threaded_blas
 
     single_threaded_blas()

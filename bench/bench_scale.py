@@ -27,7 +27,7 @@ as subprocesses, so that every number includes nothing of the others):
    order rotated from block to block) and timed by CPU time per block; the medians over the
    blocks after the first two are reported: the ``kalman`` table with the exact bound (the
    default), with ``rounding_bound=False``, with ``envelope()`` after every update (what the node
-   does: the bound read amortised from n = 40 on, :mod:`switchobs_core.bound_read`) and with
+   does: the bound read amortised from n = 40 on, :mod:`switchobs_core.bounds.read`) and with
    ``envelope(amortised=False)`` (an eigenvalue problem at every read, the reading before);
    ``kalman-online`` (exact bound on); a reference Kalman filter in standard form written
    here (:class:`ReferenceKF`: numpy, discretisation cached, Joseph update); filterpy's
@@ -64,9 +64,9 @@ LOAD_SNIPPET = """
 import sys, time
 from switchobs_core.threads import single_threaded_blas
 single_threaded_blas()
-from switchobs_core.gains import GainTable
-from switchobs_core.scenarios import load_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.table.gains import GainTable
+from switchobs_core.model.scenarios import load_system
+from switchobs_core.model.schedule import Cycle
 system = load_system(sys.argv[2])
 t, c = time.perf_counter(), time.process_time()
 table = GainTable.load(sys.argv[1], system=system)
@@ -80,8 +80,8 @@ PLAN_SNIPPET = """
 import sys, time
 from switchobs_core.threads import single_threaded_blas
 single_threaded_blas()
-from switchobs_core.plan import plan_schedule
-from switchobs_core.scenarios import load_system
+from switchobs_core.design.plan import plan_schedule
+from switchobs_core.model.scenarios import load_system
 system = load_system(sys.argv[1])
 t, c = time.perf_counter(), time.process_time()
 res = plan_schedule(system, 100.0, progress=False)
@@ -184,7 +184,8 @@ def _lift_design_budget(budget: int = 4 << 30) -> None:
     973 MiB peak for the same design)."""
     import functools
 
-    from switchobs_core import kalman, ranges
+    from switchobs_core import ranges
+    from switchobs_core.design import kalman
 
     if getattr(kalman, "check_size", None) is ranges.check_size:
         kalman.check_size = functools.partial(ranges.check_size, budget=budget)

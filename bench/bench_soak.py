@@ -71,9 +71,9 @@ def main(argv=None) -> int:
     from std_msgs.msg import Float64MultiArray, UInt8
 
     import msg_bridge as mb
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle, PeriodicSchedule
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle, PeriodicSchedule
     from switchobs_ros import qos
     from tools.launch import NodeProcess, ros_args
 

@@ -40,9 +40,9 @@ def main() -> int:
     from std_msgs.msg import UInt8
 
     import msg_bridge as mb
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.estimator import EstimatorNode
 

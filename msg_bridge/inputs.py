@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 
 from switchobs_core.loading import load_yaml
-from switchobs_core.scenarios import SCENARIOS
-from switchobs_core.system import LTISystem
+from switchobs_core.model.scenarios import SCENARIOS
+from switchobs_core.model.system import LTISystem
 
 from .fields import FieldReader
 from .validate import SpecError

@@ -1,21 +1,21 @@
 """The registry of gain families: one entry per family, read by the observer, the file schema,
 the command line and the ROS configuration (beyond the paper).
 
-A *gain family* is one type behind the protocol of :mod:`switchobs_core.family_base`: it picks
+A *gain family* is one type behind the protocol of :mod:`switchobs_core.runtime.families.base`: it picks
 the gain of every sample, applies it, and says which error map it applied and which covariance
-it keeps. :class:`~switchobs_core.observer.SwitchedObserver` orchestrates propagation, the
-family and the rigorous bound (:mod:`switchobs_core.bound`) and never names a family.
+it keeps. :class:`~switchobs_core.runtime.observer.SwitchedObserver` orchestrates propagation, the
+family and the rigorous bound (:mod:`switchobs_core.bounds.rigorous`) and never names a family.
 
 ======================  =========================================  ======================
 name                    type (module)                              gain table it reads
 ======================  =========================================  ======================
-``lmi``                 ``LmiGains`` (:mod:`.family_lmi`)          ``lmi`` (the paper)
-``kalman``              ``KalmanTableGains`` (:mod:`.family_kalman`)  ``kalman``
-``kalman-online``       ``OnlineKalmanGains`` (:mod:`.family_online`) any (designs ``lmi``)
+``lmi``                 ``LmiGains`` (:mod:`switchobs_core.runtime.families.lmi`)          ``lmi`` (the paper)
+``kalman``              ``KalmanTableGains`` (:mod:`switchobs_core.runtime.families.kalman`)  ``kalman``
+``kalman-online``       ``OnlineKalmanGains`` (:mod:`switchobs_core.runtime.families.online`) any (designs ``lmi``)
 ======================  =========================================  ======================
 
 The types are imported on first use (:meth:`FamilyEntry.type`), so this module is a leaf that
-the table file's schema (:mod:`.gains`) can read without an import circle. Adding a family:
+the table file's schema (:mod:`switchobs_core.table.gains`) can read without an import circle. Adding a family:
 docs/architecture.md, "Adding a gain family".
 """
 
@@ -45,7 +45,7 @@ class FamilyEntry:
         The family of the gain table it is designed into and reads (``stored`` families: their own
         name); a family that needs no stored gains names the table it designs when none is given.
     stored : bool
-        Whether a gain table file can hold this family (the schema of :mod:`.gains`).
+        Whether a gain table file can hold this family (the schema of :mod:`switchobs_core.table.gains`).
     summary : str
         One line for help texts.
     rate : bool
@@ -76,12 +76,12 @@ class FamilyEntry:
 
 #: Every gain family, by name.
 REGISTRY: dict[str, FamilyEntry] = {e.name: e for e in (
-    FamilyEntry("lmi", "family_lmi", "LmiGains", "lmi", True,
+    FamilyEntry("lmi", "runtime.families.lmi", "LmiGains", "lmi", True,
                 "the paper's LMI gains, per cycle"),
-    FamilyEntry("kalman", "family_kalman", "KalmanTableGains", "kalman", True,
+    FamilyEntry("kalman", "runtime.families.kalman", "KalmanTableGains", "kalman", True,
                 "offline periodic Kalman gains per sample phase (a cache of the Riccati recursion)", rate=True,
                 robust="kalman-online"),
-    FamilyEntry("kalman-online", "family_online", "OnlineKalmanGains", "lmi", False,
+    FamilyEntry("kalman-online", "runtime.families.online", "OnlineKalmanGains", "lmi", False,
                 "the Riccati recursion online (any schedule)"),
 )}
 #: Names of all families.

@@ -9,7 +9,7 @@ is refused too.
 
 Writing (:func:`check_output`, :func:`write_with`): an existing target that is not a regular file
 (a directory, a FIFO, a device such as ``/dev/null`` or ``/dev/full``) is refused before anything
-is written; an atomic save (:meth:`switchobs_core.gains.GainTable.save`) checks its target here
+is written; an atomic save (:meth:`switchobs_core.table.gains.GainTable.save`) checks its target here
 first, so its temporary file is always created beside a regular target, in the target's own
 folder (``-o /tmp``, a directory, is refused: its temporary file was created in ``/``). Any
 ``OSError`` while writing (a full disk) is one line of the caller's error class.

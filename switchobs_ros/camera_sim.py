@@ -2,10 +2,10 @@
 
 ``ros2 run switchobs_ros camera_sim --ros-args --params-file config/camera_sim.yaml``
 
-The plant is :class:`switchobs_core.simulate.Plant` (exact propagation with ``expm``) of the
+The plant is :class:`switchobs_core.sim.simulate.Plant` (exact propagation with ``expm``) of the
 configured system (default: the paper's camera + 2 agents, D_c = diag(0, 0), D_1 =
 diag(0, 0.2), D_2 = diag(0, 0.1)). The camera switches between agents by a schedule of
-:mod:`switchobs_core.schedule` (periodic or a sequence of cycles, or random within A2's
+:mod:`switchobs_core.model.schedule` (periodic or a sequence of cycles, or random within A2's
 box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
 
 1. ``/clock`` (only with ``publish_clock``),
@@ -35,9 +35,9 @@ from std_msgs.msg import Float64MultiArray, UInt8
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.plant import Plant
+from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 from switchobs_core.ranges import MAX_DURATION_S, MAX_RATE_HZ, MAX_STAMP_S
-from switchobs_core.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
+from switchobs_core.sim.plant import Plant
 
 from . import qos
 from .core_config import DEFAULT_X0, SensorOutputs, cycles_from_params, load_system_param

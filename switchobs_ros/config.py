@@ -23,11 +23,11 @@ import numpy as np
 import msg_bridge as mb
 from msg_bridge import InputSpecs, SpecError, load_inputs
 from switchobs_core.loading import load_yaml
-from switchobs_core.noise import NoiseModel
-from switchobs_core.observer import MODES
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.model.system import LTISystem
 from switchobs_core.ranges import RANGES, check_range
-from switchobs_core.schedule import Cycle
-from switchobs_core.system import LTISystem
+from switchobs_core.runtime.observer import MODES
 
 from .core_config import (
     GAIN_FAMILY_PARAM,

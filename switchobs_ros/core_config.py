@@ -16,13 +16,13 @@ from switchobs_core import __version__
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.families import FAMILY_NAMES, design_family_table, family_entry
 from switchobs_core.files import check_private
-from switchobs_core.gains import GainTable
-from switchobs_core.noise import NoiseModel
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.scenarios import load_noise, load_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.model.system import LTISystem
 from switchobs_core.ranges import MAX_CYCLES
-from switchobs_core.scenarios import load_noise, load_system
-from switchobs_core.schedule import Cycle
-from switchobs_core.system import LTISystem
-from switchobs_core.table_check import verify_table
+from switchobs_core.table.check import verify_table
+from switchobs_core.table.gains import GainTable
 
 from .params import ConfigError
 

@@ -16,7 +16,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from switchobs_core.norms import gain_norms
+from switchobs_core.numerics.norms import gain_norms
 
 __all__ = ["EstimatorDiagnostics", "FREQUENCY_TOLERANCE", "NodeState", "kv"]
 
@@ -137,7 +137,7 @@ class EstimatorDiagnostics:
             if env.noise_bound is not None:
                 ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
                              env.noise_bound if pl.bound_valid else "none (withdrawn)"))
-        # the model against the data (switchobs_core.consistency) and the attribution by source time
+        # the model against the data (switchobs_core.runtime.consistency) and the attribution by source time
         ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
                kv("re-attributed samples", pl.reattributed),
                kv("late channel messages", pl.late_channel),

@@ -3,7 +3,7 @@
 ``ros2 run switchobs_ros estimator --ros-args --params-file config/estimator.yaml``
 
 Thin glue (docs/architecture.md): parameters, topics, QoS, clocks, diagnostics. The estimation
-is :class:`switchobs_core.observer.SwitchedObserver`; messages go through :mod:`msg_bridge`.
+is :class:`switchobs_core.runtime.observer.SwitchedObserver`; messages go through :mod:`msg_bridge`.
 
 Input handling (validation, pairing, channel attribution, the observer, the counters) is
 :class:`switchobs_ros.pipeline.EstimatorPipeline`, shared with the offline bag tools

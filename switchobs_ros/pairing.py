@@ -5,7 +5,7 @@ specification) feeds some rows of a channel's output ``y_i = C_i x`` (e:outputs)
 Its messages with the same header stamp are the parts of one sample (:class:`Pending`); a sample
 is *complete* when every source its channel needs has arrived. :class:`Pairing` keeps the
 samples by stamp (at most :data:`MAX_PENDING`) until the pipeline answers them, and reads a
-sample as a :class:`~switchobs_core.measurement.Measurement` of a channel. A part whose partners
+sample as a :class:`~switchobs_core.model.measurement.Measurement` of a channel. A part whose partners
 do not come (a newer sample completes, or its pairing timeout passes) is used alone, with the
 rows it holds.
 
@@ -22,7 +22,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from switchobs_core.measurement import Measurement
+from switchobs_core.model.measurement import Measurement
 
 from .sources import Source
 

@@ -17,7 +17,7 @@ For every message the pipeline orchestrates:
    innovation test against the published bound (a sample it refuses is re-attributed, or
    rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
-   :class:`~switchobs_core.measurement.Measurement`, and an :class:`Estimate` with the envelope
+   :class:`~switchobs_core.model.measurement.Measurement`, and an :class:`Estimate` with the envelope
    (the paper's envelopes and bound, the exact bound).
 
 Observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first sample
@@ -40,11 +40,11 @@ from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
-from switchobs_core.cycles import Residence
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.families import family_entry, family_of_table
-from switchobs_core.measurement import Measurement
-from switchobs_core.observer import SwitchedObserver
+from switchobs_core.model.measurement import Measurement
+from switchobs_core.runtime.cycles import Residence
+from switchobs_core.runtime.observer import SwitchedObserver
 
 from .attribution import ChannelAttribution, Resolution, Verdict
 from .config import EstimatorConfig

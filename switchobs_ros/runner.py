@@ -44,9 +44,9 @@ def _quiet_interrupt_in_finalizers(hook):
 
 def run_node(node_cls, prog: str, args=None) -> int:
     """Run ``node_cls()`` until shutdown; the process's exit code (see the module docstring)."""
-    single_threaded_blas()  # small matrices; see switchobs_core.threads
     sys.unraisablehook = _quiet_interrupt_in_finalizers(sys.unraisablehook)
     try:
+        single_threaded_blas()  # small matrices; see switchobs_core.threads (loads BLAS: a Ctrl-C may land here)
         rclpy.init(args=args)
     except KeyboardInterrupt:
         return 0

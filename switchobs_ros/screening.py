@@ -1,14 +1,14 @@
 """Screening: the model against the data, before the observer takes a sample.
 
 With the consistency test on (``consistency.check``), every sample is tested against the bound
-the estimator publishes (:class:`switchobs_core.consistency.InnovationTest`): a sample whose
+the estimator publishes (:class:`switchobs_core.runtime.consistency.InnovationTest`): a sample whose
 innovation exceeds what the bound allows proves the model broken for it. When exactly one other
 channel explains it, it is re-attributed to that channel (``reattributed``); else it is rejected
 (``inconsistent``) and every bound is withdrawn until a reset, with the reason. A published
 guarantee is never silently false.
 
 With noise and no declared bound there is no guarantee to test against; the chi-square gate
-(:class:`switchobs_core.gate.ChiSquareGate`, ``consistency.chi2_alpha``) then rejects samples
+(:class:`switchobs_core.runtime.gate.ChiSquareGate`, ``consistency.chi2_alpha``) then rejects samples
 whose normalised innovation the noise model makes improbable (``outlier``).
 
 The math is the core's; this module decides what the pipeline does with the outcome.
@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from msg_bridge import Reason, Rejection
-from switchobs_core.consistency import Consistency, InnovationTest, consistent_channels
-from switchobs_core.gate import ChiSquareGate
-from switchobs_core.measurement import Measurement
+from switchobs_core.model.measurement import Measurement
+from switchobs_core.runtime.consistency import Consistency, InnovationTest, consistent_channels
+from switchobs_core.runtime.gate import ChiSquareGate
 
 from .counters import Counters
 from .pairing import Pairing, Pending
@@ -38,7 +38,7 @@ class Screening:
     system : System
         The system (its ``C_1..C_N``).
     observer : SwitchedObserver
-        Gives the prior (:meth:`~switchobs_core.observer.SwitchedObserver.prior`) and the prior
+        Gives the prior (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior`) and the prior
         covariance of each test.
     pairing : Pairing
         Reads a sample as another channel's measurement.

@@ -14,7 +14,7 @@ from scipy.linalg import expm
 
 from ..exceptions import InvalidArgument
 from ..validation import as_finite
-from .lyapunov import _solve_feasibility
+from .lyapunov import BACKOFF, _pd_proved, _solve_feasibility, lmi_proved
 
 __all__ = ["BoxCertificate", "certify_box"]
 
@@ -122,8 +122,11 @@ def certify_box(system: Any, design: Any, h_min: float | None = None, h_max: flo
 
     The ``P_i`` are found by an LMI on a coarse grid of ``h`` (common ``c``, bisected;
     a common ``c`` loses nothing since rescaling the ``P_i`` redistributes the ``c_i``
-    at a fixed product). The grid is not the proof. The proof is the verification:
-    ``sqrt(c_i(h)) = ||R_{i+1} E_i(h) R_i^{-1}||``, and for ``h`` in a cell
+    at a fixed product). A ``c`` counts as feasible only when the solver's ``P_i`` are
+    proved (:func:`~.lyapunov.lmi_proved`, rounding included) positive definite and to satisfy
+    the grid LMI at ``c (1 + BACKOFF)^2``: an inaccurate point at the SDP's edge is never
+    used, so the ``P_i`` do not depend on the solver's last digits. The grid is not the proof.
+    The proof is the verification: ``sqrt(c_i(h)) = ||R_{i+1} E_i(h) R_i^{-1}||``, and for ``h`` in a cell
     ``[h_g, h_g + d]``, ``E_i(h) = E_i(h_g) expm(Lambda_i (h - h_g))`` so
 
     .. math::  \\|E_i(h) - E_i(h_g)\\| \\le \\|E_i(h_g)\\| (e^{\\|\\Lambda_i\\| d} - 1),
@@ -193,16 +196,13 @@ def certify_box(system: Any, design: Any, h_min: float | None = None, h_max: flo
         c.value = mid
         if _solve_feasibility(prob):
             cand = [0.5 * (X.value + X.value.T) for X in Pv]
-            try:
-                for X in cand:
-                    np.linalg.cholesky(X)
-            except np.linalg.LinAlgError:
-                lo = mid
+            cb = mid * (1 + BACKOFF) ** 2
+            if all(_pd_proved(X, 0.0)[0] for X in cand) and all(
+                    lmi_proved(cb, cand[i], E, cand[(i + 1) % N])[0] for i in range(N) for E in Es[i]):
+                hi = mid
+                best = cand
                 continue
-            hi = mid
-            best = cand
-        else:
-            lo = mid
+        lo = mid
     ncell = cells
     while True:
         b, g = _box_verify(Lams, best, h_min, h_max, ncell)

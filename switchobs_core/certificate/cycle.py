@@ -28,7 +28,7 @@ def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[flo
 
     ``Phi = expm((A - L_N C_N) h_N) @ ... @ expm((A - L_1 C_1) h_1)``; with a dead time ``d``
     every residence starts blind, where the LMI observer applies no gain:
-    ``expm((A - L_i C_i) (h_i - d)) expm(A d)`` (:mod:`switchobs_core.schedule`).
+    ``expm((A - L_i C_i) (h_i - d)) expm(A d)`` (:mod:`switchobs_core.model.schedule`).
 
     Parameters
     ----------

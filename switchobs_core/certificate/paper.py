@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..envelope import Segment, envelope_z, error_transitions
+from ..bounds.envelope import Segment, envelope_z, error_transitions
 from ..exceptions import InvalidArgument
 from ..validation import as_finite
 
@@ -60,7 +60,7 @@ def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float,
     """The paper's cycle factors ``f_ii`` (e:Fk, e:f11_le_delta_main), N channels.
 
     ``f_i = kappa_i exp(mu_i (tau - h_i) - eta_i h_i)`` with ``tau = sum h``; with the design
-    cycle's dead time ``d`` (blind after each switch, :mod:`switchobs_core.schedule`) channel i
+    cycle's dead time ``d`` (blind after each switch, :mod:`switchobs_core.model.schedule`) channel i
     sees for ``h_i - d`` and is off for ``tau - h_i + d``.
 
     Parameters
@@ -153,7 +153,7 @@ def envelope_ratio(system: Any, segments: Sequence[Segment], t_end: float, *,
     system : LTISystem
     segments : sequence of Segment
         The switching signal and designs (e.g. from
-        :func:`switchobs_core.simulate.schedule_segments`).
+        :func:`switchobs_core.sim.simulate.schedule_segments`).
     t_end : float
     dt : float
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidArgument, ScheduleError
-from ..schedule import Cycle
+from ..model.schedule import Cycle
 
 __all__ = ["parse_ts", "parse_pair", "parse_floats", "print_json", "fmt_table", "OneLineParser",
            "join_negative_values"]
@@ -44,7 +44,7 @@ def parse_h(text: str) -> Cycle:
 
 
 def add_dead_time(p: argparse.ArgumentParser) -> None:
-    """The ``--dead-time S`` flag (blind intervals after each switch, :mod:`switchobs_core.schedule`)."""
+    """The ``--dead-time S`` flag (blind intervals after each switch, :mod:`switchobs_core.model.schedule`)."""
     p.add_argument("--dead-time", type=float, default=0.0, metavar="S",
                    help="seconds after each switch while the camera turns: only the rows every channel shares "
                         "(the camera's own pose) are measured (default 0)")

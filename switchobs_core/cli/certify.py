@@ -7,8 +7,8 @@ from pathlib import Path
 
 from ..certificate import certify_table, format_report
 from ..exceptions import InvalidArgument
-from ..gains import GainTable
-from ..scenarios import load_system
+from ..model.scenarios import load_system
+from ..table.gains import GainTable
 from ._common import parse_ts, print_json
 
 __all__ = ["register", "run"]

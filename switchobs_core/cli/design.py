@@ -5,16 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..design import Designer, Margin
+from ..design.kalman import design_kalman
+from ..design.lmi import Designer, Margin
 from ..exceptions import InvalidArgument
 from ..families import DESIGNABLE, family_entry
 from ..files import check_output
-from ..gains import CycleDesign, GainTable, kalman_table
-from ..kalman import design_kalman
+from ..model.scenarios import load_noise, load_system
+from ..model.schedule import Cycle
+from ..model.system import LTISystem
 from ..ranges import MAX_CYCLES, check_count
-from ..scenarios import load_noise, load_system
-from ..schedule import Cycle
-from ..system import LTISystem
+from ..table.gains import CycleDesign, GainTable, kalman_table
 from ._common import add_dead_time, fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json, with_dead_time
 
 __all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]

@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
+from ..design.kalman import sample_pattern
+from ..design.plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
 from ..exceptions import DesignError, InvalidArgument, ScheduleError
 from ..files import check_output, write_with
-from ..kalman import sample_pattern
+from ..model.scenarios import load_noise, load_system
+from ..model.schedule import Cycle
 from ..paper import TABLE
-from ..plan import ScheduleCost, cost_map, cycle_cost, gain_reports, plan_schedule
-from ..scenarios import load_noise, load_system
-from ..schedule import Cycle
 from ._common import add_dead_time, fmt_table, print_json
 
 __all__ = ["register", "run", "design_command", "fmt_num"]

@@ -9,10 +9,10 @@ import importlib
 from pathlib import Path
 
 from .. import paper
-from ..design import Designer
-from ..figures import eta_min_figures, kappa_figure
-from ..scenarios import paper_system
-from ..schedule import Cycle
+from ..design.lmi import Designer
+from ..model.scenarios import paper_system
+from ..model.schedule import Cycle
+from ..sim.figures import eta_min_figures, kappa_figure
 from ._common import fmt_table, print_json
 
 __all__ = ["register", "run", "reproduce"]
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         figs += [str(p) for p in eta_min_figures(des, args.figures, progress=args.progress)]
         figs.append(str(kappa_figure(des, args.figures, oracle=paper.kappa_closed_form)))
         try:
-            errorfigs = importlib.import_module("switchobs_core.errorfigs")
+            errorfigs = importlib.import_module("switchobs_core.sim.errorfigs")
         except ModuleNotFoundError:
             errorfigs = None
         if errorfigs is not None:

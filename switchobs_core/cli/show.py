@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..gains import GainTable
-from ..scenarios import load_system
-from ..schedule import Cycle
+from ..model.scenarios import load_system
+from ..model.schedule import Cycle
+from ..table.gains import GainTable
 from ._common import fmt_table, print_json
 from .design import print_designs, table_summary
 

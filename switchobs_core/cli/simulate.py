@@ -8,14 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errorfigs import plot_result
 from ..exceptions import InvalidArgument, ScheduleError
 from ..files import check_output
-from ..gains import GainTable
+from ..model.scenarios import load_system
+from ..model.schedule import RandomSchedule, parse_schedule
 from ..ranges import check_range
-from ..scenarios import load_system
-from ..schedule import RandomSchedule, parse_schedule
-from ..simulate import simulate
+from ..sim.errorfigs import plot_result
+from ..sim.simulate import simulate
+from ..table.gains import GainTable
 from ._common import add_dead_time, fmt_table, print_json
 
 __all__ = ["register", "run", "warn_a2"]

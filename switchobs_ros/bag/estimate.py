@@ -64,7 +64,7 @@ class EstimateResult:
     updates: int = 0
     partial_updates: int = 0
     switches: int = 0
-    inconsistent: int = 0              # samples the innovation test refused (switchobs_core.consistency)
+    inconsistent: int = 0              # samples the innovation test refused (switchobs_core.runtime.consistency)
     reattributed: int = 0              # samples it moved to the only channel that explains them
     bound_valid: bool = True           # False: the bounds were withdrawn (bound_invalid_why says why)
     bound_invalid_why: str = ""

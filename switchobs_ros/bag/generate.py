@@ -1,6 +1,6 @@
 """``switchobs_bag generate``: the paper's scenario through camera_sim's model, straight to a bag.
 
-No DDS and no node: the same plant (:class:`switchobs_core.simulate.Plant`, exact), schedule,
+No DDS and no node: the same plant (:class:`switchobs_core.sim.simulate.Plant`, exact), schedule,
 noise draws and messages as :class:`switchobs_ros.camera_sim.CameraSimNode` with
 ``publish_clock: true`` produces, tick by tick, written to a rosbag2 bag as fast as the CPU
 allows (about 1 s for 60 s of 100 Hz data). Per tick ``k`` (stamp ``clock_start + k / rate``):
@@ -23,9 +23,9 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.plant import Plant
+from switchobs_core.model.schedule import RandomSchedule, parse_schedule
 from switchobs_core.ranges import MAX_RATE_HZ, MAX_STAMP_S, OUTPUT_BUDGET_BYTES, check_size
-from switchobs_core.schedule import RandomSchedule, parse_schedule
+from switchobs_core.sim.plant import Plant
 
 from ..core_config import DEFAULT_X0, SensorOutputs, load_system_param
 from ..params import ConfigError

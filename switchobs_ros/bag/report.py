@@ -31,7 +31,7 @@ import numpy as np
 
 import msg_bridge as mb
 from switchobs_core.files import write_with
-from switchobs_core.norms import error_norm
+from switchobs_core.numerics.norms import error_norm
 
 from .io import BagError, BagIn, deserialize
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from switchobs_core.design import design_table
-from switchobs_core.schedule import Cycle
+from switchobs_core.design.lmi import design_table
+from switchobs_core.model.schedule import Cycle
 
 PERIODIC = Cycle.from_ts(2.0, 0.6)
 NONPERIODIC = [Cycle.from_ts(4.0, 0.5), Cycle.from_ts(3.0, 0.6), Cycle.from_ts(3.0, 0.6), Cycle.from_ts(2.0, 0.4)]

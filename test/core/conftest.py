@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from switchobs_core.design import Designer
-from switchobs_core.scenarios import paper_system
+from switchobs_core.design.lmi import Designer
+from switchobs_core.model.scenarios import paper_system
 
 
 @pytest.fixture(scope="session")
@@ -23,6 +23,6 @@ def paper_designer(paper):
 @pytest.fixture(scope="session")
 def paper_table(paper_designer):
     """The paper's periodic (2 s, 0.6) LMI table, designed once per session."""
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.model.schedule import Cycle
 
     return paper_designer.table([Cycle.from_ts(2.0, 0.6)], progress=False)

@@ -12,9 +12,9 @@ import pytest
 from _paper_designs import paper_table
 
 import switchobs_core as so
-from switchobs_core.observer import SwitchedObserver
-from switchobs_core.plant import Plant
-from switchobs_core.schedule import Cycle, PeriodicSchedule
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.sim.plant import Plant
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "api.md"
 

@@ -40,7 +40,7 @@ import pytest
 from test_table_exact_cache import oscillators
 
 import switchobs_core as so
-from switchobs_core.kalman_map import SparseTransition
+from switchobs_core.bounds.kalman_map import SparseTransition
 
 pytestmark = pytest.mark.skipif(np.finfo(np.longdouble).eps > 2.0**-60,
                                 reason="needs an extended-precision longdouble (x86 80-bit or quad)")

@@ -1,4 +1,4 @@
-"""The amortised reading of an error ellipsoid's bound (:mod:`switchobs_core.bound_read`): every
+"""The amortised reading of an error ellipsoid's bound (:mod:`switchobs_core.bounds.read`): every
 value read bounds ``sqrt(lambda_max(sym S))`` (checked by a Cholesky factorisation of
 ``r^2 I - sym S`` in extended precision), most reads avoid the eigenvalue problem, and the value
 stays within the documented ``sqrt((1 + tol) / (1 - tol))`` of the eigenvalue problem's."""
@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import switchobs_core as so
-from switchobs_core.bound_read import AnchoredBound
-from switchobs_core.rounding import ErrorEllipsoid
+from switchobs_core.bounds.read import AnchoredBound
+from switchobs_core.numerics.rounding import ErrorEllipsoid
 
 TOL = 0.05
 LOOSE = math.sqrt((1 + TOL) / (1 - TOL)) * (1 + 1e-12)

@@ -18,9 +18,10 @@ from switchobs_core.certificate import (
     envelope_ratio,
     paper_factors,
 )
+from switchobs_core.certificate.lyapunov import BACKOFF, lmi_proved
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.schedule import PeriodicSchedule, RandomSchedule
-from switchobs_core.simulate import schedule_segments, simulate
+from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule
+from switchobs_core.sim.simulate import schedule_segments, simulate
 
 
 @pytest.fixture(scope="module")
@@ -77,6 +78,44 @@ def test_common_lyapunov_paper_sequence(paper, table):
     for k in range(1, 25):
         x = Phis[rng.integers(4)] @ x
         assert np.linalg.norm(x) <= math.sqrt(cert.cond) * cert.rho ** k * x0 * (1 + 1e-9)
+
+
+def test_common_lyapunov_paper_sequence_has_a_margin(paper, table):
+    """The paper's sequence (4 s, 0.5) (3 s, 0.6) (2 s, 0.4): the certificate holds with room to
+    spare, not only at the SDP's edge (r = 0.4953035, where the best P has cond 3.33).
+
+    Independent checks: the headroom ``1 - max ||R Phi R^-1|| / rho`` is at least BACKOFF / 2,
+    and the certificate survives 40 random perturbations of the maps of relative size 1e-9
+    with an eigenvalue margin far above rounding (rounding is ~1e-14 ||P|| here).
+    """
+    Phis = [cycle_transition(paper.A, paper.C, table.lookup(c).L, c.h) for c in
+            (NONPERIODIC[0], NONPERIODIC[1], NONPERIODIC[3])]
+    cert = common_lyapunov(Phis)
+    assert cert.verified and cert.ok
+    assert 0.49530 <= cert.rho <= 0.4953035 * (1 + BACKOFF) * (1 + 2e-5)
+    assert cert.cond < 10
+    R = np.linalg.cholesky(cert.P).T
+    Rinv = np.linalg.inv(R)
+    headroom = 1 - max(np.linalg.norm(R @ F @ Rinv, 2) for F in Phis) / cert.rho
+    assert headroom >= 0.5 * BACKOFF and cert.margin == pytest.approx(headroom, rel=1e-6)
+    rng = np.random.default_rng(7)
+    lam_P = np.linalg.eigvalsh(cert.P)[0]
+    for _ in range(40):
+        for F in Phis:
+            G = rng.standard_normal(F.shape)
+            Ft = F + 1e-9 * np.linalg.norm(F, 2) * G / np.linalg.norm(G, 2)
+            M = cert.rho ** 2 * cert.P - Ft.T @ cert.P @ Ft
+            assert np.linalg.eigvalsh(0.5 * (M + M.T))[0] >= 1e-5 * lam_P
+            assert lmi_proved(cert.rho ** 2 * (1 - 1e-15), cert.P, Ft)[0]
+
+
+def test_lmi_proof_rejects_a_margin_below_rounding():
+    I = np.eye(6)
+    E = np.diag(np.linspace(0.2, 0.9, 6))
+    assert lmi_proved(0.81 * (1 + 1e-6), I, E)[0]   # c I - E'E >= 8.1e-7 I
+    assert not lmi_proved(0.81, I, E)[0]            # exactly singular
+    assert not lmi_proved(0.81 * (1 + 1e-14), I, E)[0]  # positive by 8e-15: below rounding
+    assert not lmi_proved(0.8, I, E)[0]             # infeasible
 
 
 def test_box_certificate_known_answer():

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from switchobs_core.cli import main
-from switchobs_core.gains import GainTable
-from switchobs_core.noise import NoiseModelError
-from switchobs_core.scenarios import load_noise, load_system
+from switchobs_core.model.noise import NoiseModelError
+from switchobs_core.model.scenarios import load_noise, load_system
+from switchobs_core.table.gains import GainTable
 
 CART = """name: cart_pair
 states: [p1, v1, p2, v2]

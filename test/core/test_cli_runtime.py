@@ -45,6 +45,7 @@ def test_certify_json_side_by_side(table_path, capsys):
     assert d["paper"]["claims_convergence"] and d["sound"]["converges"]
     assert d["envelope_ratio"]["worst"][1] > 1.08  # the paper's z_2 is exceeded (proof gap)
     assert rep["sequence"]["sound"]["verified"] and rep["sequence"]["sound"]["converges_any_order"]
+    assert rep["sequence"]["sound"]["margin"] >= 5e-5  # proved 1e-4 above the SDP's edge, not at it
 
 
 def test_certify_text_labels(table_path, capsys):

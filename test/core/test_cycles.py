@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from switchobs_core.certificate import cycle_factor, paper_factors
-from switchobs_core.cycles import CycleTracker, residence_limits, residence_text
+from switchobs_core.runtime.cycles import CycleTracker, residence_limits, residence_text
 
 
 def _design(h=(1.2, 0.8)):

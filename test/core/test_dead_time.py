@@ -19,16 +19,16 @@ from scipy.linalg import expm
 
 from switchobs_core.certificate import certify_cycle
 from switchobs_core.cli import main
-from switchobs_core.design import Designer
+from switchobs_core.design.kalman import design_kalman, sample_pattern
+from switchobs_core.design.lmi import Designer
+from switchobs_core.design.plan import ScheduleCost, blind_samples, plan_schedule
 from switchobs_core.exceptions import ScheduleError
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.kalman import design_kalman, sample_pattern
-from switchobs_core.observer import SwitchedObserver
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule, SequenceSchedule, common_rows, parse_schedule
 from switchobs_core.paper import kappa_closed_form
-from switchobs_core.plan import ScheduleCost, blind_samples, plan_schedule
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule, SequenceSchedule, common_rows, parse_schedule
-from switchobs_core.simulate import simulate
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.sim.simulate import simulate
+from switchobs_core.table.gains import GainTable, kalman_table
 
 
 @pytest.fixture(scope="module")

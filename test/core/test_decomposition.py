@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from switchobs_core.decomposition import canonical_basis, log_norm, observability_decomposition
+from switchobs_core.model.decomposition import canonical_basis, log_norm, observability_decomposition
 
 
 def random_pair(seed: int, n: int, p: int, r: int, scale_exp: float):

@@ -11,10 +11,10 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from switchobs_core import paper as P
-from switchobs_core.design import Designer, Margin
+from switchobs_core.design.lmi import Designer, Margin
 from switchobs_core.exceptions import InfeasibleDesign, InvalidArgument, ScheduleError, SwitchobsError
-from switchobs_core.scenarios import camera_agents
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.scenarios import camera_agents
+from switchobs_core.model.schedule import Cycle
 
 
 @pytest.mark.parametrize("row", P.TABLE, ids=[f"{r[0]}" for r in P.TABLE])

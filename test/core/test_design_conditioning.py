@@ -12,13 +12,13 @@ from hypothesis import strategies as st
 
 from switchobs_core.certificate import cycle_factor
 from switchobs_core.cli import main
-from switchobs_core.design import ETA_GRID, Designer
+from switchobs_core.design.lmi import ETA_GRID, Designer
+from switchobs_core.design.synthesis import LMISynthesizer, verify_gain
 from switchobs_core.exceptions import InfeasibleDesign
-from switchobs_core.figures import eta_min_figures
-from switchobs_core.scenarios import load_system, paper_system
-from switchobs_core.schedule import Cycle
-from switchobs_core.synthesis import LMISynthesizer, verify_gain
-from switchobs_core.system import LTISystem
+from switchobs_core.model.scenarios import load_system, paper_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.model.system import LTISystem
+from switchobs_core.sim.figures import eta_min_figures
 
 CART_PAIR = """\
 name: cart_pair
@@ -126,7 +126,7 @@ def test_cli_eta_count_must_match_cycles(tmp_path, capsys):
 def test_reproduce_grid_is_designable_under_perturbed_rounding(factor):
     """Every point of the paper's figure grid has an eta_min (the theory admits them all),
     whichever way A is rounded."""
-    from switchobs_core.figures import S_VALUES, TAUS
+    from switchobs_core.sim.figures import S_VALUES, TAUS
 
     des = Designer(_scaled(paper_system(), factor))
     grid = des.eta_min_map(TAUS, S_VALUES, progress=False)

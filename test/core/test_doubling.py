@@ -8,18 +8,18 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from switchobs_core.detectability import undetectable_modes
-from switchobs_core.doubling import (
+from switchobs_core.design.doubling import (
     RiccatiMap,
     closed_loop_transition,
     solve_periodic_riccati,
     sqrt_correct,
 )
-from switchobs_core.kalman import UndetectableSchedule, check_detectable, design_kalman, sample_pattern
-from switchobs_core.noise import default_noise
-from switchobs_core.riccati import RiccatiError, Step, discretize, joseph, periodic_riccati, riccati_step
-from switchobs_core.scenarios import camera_agents, paper_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.design.kalman import UndetectableSchedule, check_detectable, design_kalman, sample_pattern
+from switchobs_core.design.riccati import RiccatiError, Step, discretize, joseph, periodic_riccati, riccati_step
+from switchobs_core.model.detectability import undetectable_modes
+from switchobs_core.model.noise import default_noise
+from switchobs_core.model.scenarios import camera_agents, paper_system
+from switchobs_core.model.schedule import Cycle
 
 PAPER = paper_system()
 

@@ -1,4 +1,4 @@
-"""Tests of switchobs_core.envelope: alpha, the paper's z_i recursions, exact transitions."""
+"""Tests of switchobs_core.bounds.envelope: alpha, the paper's z_i recursions, exact transitions."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from switchobs_core.envelope import EnvelopeTracker, Segment, alpha, envelope_z, error_transitions
+from switchobs_core.bounds.envelope import EnvelopeTracker, Segment, alpha, envelope_z, error_transitions
 from switchobs_core.exceptions import InvalidArgument
 
 

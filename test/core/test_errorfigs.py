@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from switchobs_core.errorfigs import error_figure, figure_curves
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.schedule import Cycle, PeriodicSchedule
-from switchobs_core.simulate import simulate
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.sim.errorfigs import error_figure, figure_curves
+from switchobs_core.sim.simulate import simulate
+from switchobs_core.table.gains import kalman_table
 
 C = Cycle.from_ts(2.0, 0.6)
 

@@ -17,24 +17,24 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from switchobs_core import certificate as cert
-from switchobs_core import decomposition as dec
-from switchobs_core import design as des
-from switchobs_core import envelope as env
 from switchobs_core import files as fil
 from switchobs_core import paper as pap
-from switchobs_core import plant as pla
-from switchobs_core import propagation as prop
 from switchobs_core import ranges as rng
-from switchobs_core import scenarios as scn
-from switchobs_core import schedule as sch
-from switchobs_core import simulate as sim
-from switchobs_core import synthesis as syn
-from switchobs_core import system as sy
-from switchobs_core import table_check as tck
 from switchobs_core import validation as val
+from switchobs_core.bounds import envelope as env
+from switchobs_core.design import lmi as des
+from switchobs_core.design import synthesis as syn
 from switchobs_core.exceptions import GainTableError, SwitchobsError
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.observer import SwitchedObserver
+from switchobs_core.model import decomposition as dec
+from switchobs_core.model import scenarios as scn
+from switchobs_core.model import schedule as sch
+from switchobs_core.model import system as sy
+from switchobs_core.numerics import propagation as prop
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.sim import plant as pla
+from switchobs_core.sim import simulate as sim
+from switchobs_core.table import check as tck
+from switchobs_core.table.gains import GainTable, kalman_table
 
 NAN, INF = math.nan, math.inf
 
@@ -331,9 +331,10 @@ def test_every_public_callable_has_a_case():
         "ScheduledCycle", "fmt_bytes", "kind_of",
     }
     missing = []
-    for mod in ("certificate", "decomposition", "design", "envelope", "gains", "observer", "paper",
-                "plant", "propagation", "scenarios", "schedule", "simulate", "synthesis", "system", "validation",
-                "ranges", "files", "table_check"):
+    for mod in ("certificate", "model.decomposition", "design.lmi", "bounds.envelope", "table.gains",
+                "runtime.observer", "paper", "sim.plant", "numerics.propagation", "model.scenarios",
+                "model.schedule", "sim.simulate", "design.synthesis", "model.system", "validation", "ranges",
+                "files", "table.check"):
         m = importlib.import_module(f"switchobs_core.{mod}")
         for n in m.__all__:
             obj = getattr(m, n)

@@ -12,8 +12,8 @@ import pytest
 
 from switchobs_core import files
 from switchobs_core.exceptions import GainTableError, InvalidArgument, InvalidSystem
-from switchobs_core.gains import GainTable
 from switchobs_core.loading import load_yaml, read_text
+from switchobs_core.table.gains import GainTable
 
 
 def test_reading_a_fifo_is_refused_without_blocking(fifo):

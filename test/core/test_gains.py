@@ -9,9 +9,9 @@ import pytest
 
 from switchobs_core import paper as P
 from switchobs_core.exceptions import GainTableError
-from switchobs_core.gains import GainTable
-from switchobs_core.scenarios import camera_agents
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.scenarios import camera_agents
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.gains import GainTable
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""switchobs_core.gate: the chi-square gate on the normalised innovation nu' (C P C' + R)^-1 nu."""
+"""switchobs_core.runtime.gate: the chi-square gate on the normalised innovation nu' (C P C' + R)^-1 nu."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from switchobs_core.gate import ChiSquareGate, GateResult, chi2_gate, nis
+from switchobs_core.runtime.gate import ChiSquareGate, GateResult, chi2_gate, nis
 
 
 def _spd(rng: np.random.Generator, n: int, cond: float) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""switchobs_core.consistency.InnovationTest: the innovation test of a system's channels against
+"""switchobs_core.runtime.consistency.InnovationTest: the innovation test of a system's channels against
 the observer's prior (the exact bound's set, or the noise bound's with a declared noise_max)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from switchobs_core.consistency import InnovationTest, check_innovation, output_rows, spectral_norm
+from switchobs_core.runtime.consistency import InnovationTest, check_innovation, output_rows, spectral_norm
 
 
 @settings(max_examples=200, deadline=None)

@@ -11,8 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.kalman import (
+from switchobs_core.design.kalman import (
     KalmanDesign,
     KalmanDesignError,
     TableKalman,
@@ -20,17 +19,7 @@ from switchobs_core.kalman import (
     design_kalman,
     sample_pattern,
 )
-from switchobs_core.kalman_online import OnlineKalman
-from switchobs_core.noise import NoiseModel, default_noise
-from switchobs_core.propagation import (
-    COMPOSE_GRID,
-    DEFAULT_DT_RESOLUTION,
-    quantize_dt,
-    split_step,
-    taylor_pair,
-    van_loan,
-)
-from switchobs_core.riccati import (
+from switchobs_core.design.riccati import (
     DiscretizationCache,
     RiccatiError,
     Step,
@@ -40,9 +29,20 @@ from switchobs_core.riccati import (
     periodic_riccati,
     riccati_step,
 )
-from switchobs_core.scenarios import camera_agents, paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule
-from switchobs_core.system import LTISystem
+from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.model.noise import NoiseModel, default_noise
+from switchobs_core.model.scenarios import camera_agents, paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.model.system import LTISystem
+from switchobs_core.numerics.propagation import (
+    COMPOSE_GRID,
+    DEFAULT_DT_RESOLUTION,
+    quantize_dt,
+    split_step,
+    taylor_pair,
+    van_loan,
+)
+from switchobs_core.runtime.kalman_online import OnlineKalman
 
 PAPER = paper_system()
 CYC = Cycle.from_ts(2.0, 0.6)

@@ -1,7 +1,7 @@
-"""The factored ellipsoid step of a Kalman sample (:mod:`switchobs_core.kalman_map`): ``Z~ + eta I``
+"""The factored ellipsoid step of a Kalman sample (:mod:`switchobs_core.bounds.kalman_map`): ``Z~ + eta I``
 contains ``M S M'`` for the exact product (computed in extended precision), on random sparse
 transitions, gains and rows; it agrees with the dense product to within ``eta``; the table and
-the online family take it from :data:`~switchobs_core.kalman_map.SPARSE_MIN_N` states on and
+the online family take it from :data:`~switchobs_core.bounds.kalman_map.SPARSE_MIN_N` states on and
 their published bounds then stay within a hair of the dense ones."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import switchobs_core as so
-import switchobs_core.kalman_map as km
-from switchobs_core.kalman_map import KalmanMap, SparseTransition, sparse_transition
-from switchobs_core.propagation import ZOHEntry
+import switchobs_core.bounds.kalman_map as km
+from switchobs_core.bounds.kalman_map import KalmanMap, SparseTransition, sparse_transition
+from switchobs_core.numerics.propagation import ZOHEntry
 
 LD = np.longdouble
 needs_ld = pytest.mark.skipif(np.finfo(LD).eps > 2.0**-60, reason="needs an extended-precision longdouble")

@@ -18,13 +18,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from switchobs_core.cli import main
-from switchobs_core.design import design_table
+from switchobs_core.design.lmi import design_table
 from switchobs_core.exceptions import GainTableError, InvalidSystem, SwitchobsError
-from switchobs_core.gains import GainTable
 from switchobs_core.loading import MAX_DEPTH, MAX_YAML_BYTES, parse_yaml
-from switchobs_core.scenarios import load_noise, load_system, paper_system
-from switchobs_core.schedule import Cycle
-from switchobs_core.system import LTISystem
+from switchobs_core.model.scenarios import load_noise, load_system, paper_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.model.system import LTISystem
+from switchobs_core.table.gains import GainTable
 
 TINY = {
     "name": "tiny",

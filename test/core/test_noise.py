@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from switchobs_core.exceptions import InvalidArgument, SwitchobsError
-from switchobs_core.noise import (
+from switchobs_core.model.noise import (
     DEFAULT_MEAS_STD,
     DEFAULT_P0,
     DEFAULT_PROCESS_STD,
@@ -20,7 +20,7 @@ from switchobs_core.noise import (
     NoiseModelError,
     default_noise,
 )
-from switchobs_core.scenarios import camera_agents, paper_system
+from switchobs_core.model.scenarios import camera_agents, paper_system
 
 PAPER = paper_system()
 

@@ -1,4 +1,4 @@
-"""Tests of switchobs_core.observer.SwitchedObserver."""
+"""Tests of switchobs_core.runtime.observer.SwitchedObserver."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.observer import SwitchedObserver
-from switchobs_core.schedule import PeriodicSchedule, SequenceSchedule
-from switchobs_core.simulate import _simulate_sampled, designs_for, schedule_segments, simulate
+from switchobs_core.model.schedule import PeriodicSchedule, SequenceSchedule
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.sim.simulate import _simulate_sampled, designs_for, schedule_segments, simulate
 
 
 @pytest.fixture(scope="module")

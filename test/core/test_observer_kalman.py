@@ -11,15 +11,15 @@ import pytest
 from scipy.linalg import expm
 from scipy.stats import chi2
 
-from switchobs_core.design import design_table
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.design.lmi import design_table
 from switchobs_core.exceptions import GainTableError, InvalidArgument
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.noise import NoiseModel
-from switchobs_core.observer import NOT_APPLICABLE, SwitchedObserver
-from switchobs_core.propagation import van_loan
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule, SequenceSchedule
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule, SequenceSchedule
+from switchobs_core.numerics.propagation import van_loan
+from switchobs_core.runtime.observer import NOT_APPLICABLE, SwitchedObserver
+from switchobs_core.table.gains import GainTable, kalman_table
 
 RATE = 50.0
 CYC = Cycle.from_ts(2.0, 0.6)

@@ -7,7 +7,10 @@ import subprocess
 import sys
 
 import switchobs_core as so
-from switchobs_core import design, gains, observer, scenarios
+from switchobs_core.design import lmi as design
+from switchobs_core.model import scenarios
+from switchobs_core.runtime import observer
+from switchobs_core.table import gains
 
 
 def test_every_public_name_resolves_at_top_level():
@@ -21,7 +24,7 @@ def test_every_public_name_resolves_at_top_level():
     assert so.SwitchedObserver is observer.SwitchedObserver
     assert so.GainTable is gains.GainTable
     assert so.load_system is scenarios.load_system
-    assert so.simulate.simulate.__module__ == "switchobs_core.simulate"
+    assert so.simulate.simulate.__module__ == "switchobs_core.sim.simulate"
 
 
 def test_top_level_api_runs_the_paper_model():

@@ -18,11 +18,11 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from switchobs_core.cli import build_parser, main
+from switchobs_core.design.plan import ScheduleCost, neighbours, parse_weights, plan_schedule
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.noise import NoiseModel
-from switchobs_core.plan import ScheduleCost, neighbours, parse_weights, plan_schedule
-from switchobs_core.scenarios import camera_agents, paper_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.scenarios import camera_agents, paper_system
+from switchobs_core.model.schedule import Cycle
 
 RATE = 5.0
 H_MIN = 0.2     # one sample

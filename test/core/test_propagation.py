@@ -1,4 +1,4 @@
-"""Tests of switchobs_core.propagation: exact ZOH pairs, Van Loan, the LRU cache."""
+"""Tests of switchobs_core.numerics.propagation: exact ZOH pairs, Van Loan, the LRU cache."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.propagation import ZOHCache, quantize_dt, van_loan, zoh_pair
+from switchobs_core.numerics.propagation import ZOHCache, quantize_dt, van_loan, zoh_pair
 
 
 def test_zoh_pair_scalar_closed_form():
@@ -84,8 +84,8 @@ def test_composed_steps_are_exact_within_their_eps(dt, seed):
     """A step off the composition grid (a jittered sensor period) is e^{M a} e^{M r} with the short
     factor by Taylor: within its certified eps of the extended-precision exponential, and that eps
     stays at the rounding level (so the exact bound keeps its floor)."""
-    from switchobs_core.propagation import split_step
-    from switchobs_core.rounding import expm_extended
+    from switchobs_core.numerics.propagation import split_step
+    from switchobs_core.numerics.rounding import expm_extended
 
     rng = np.random.default_rng(seed)
     M = rng.standard_normal((5, 5)) * 3.0

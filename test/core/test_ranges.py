@@ -10,12 +10,12 @@ import tracemalloc
 import pytest
 
 from switchobs_core import ranges
+from switchobs_core.design.kalman import design_bytes, design_kalman, design_pattern, sample_pattern, startup_cap
+from switchobs_core.design.plan import plan_schedule
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_bytes, design_kalman, design_pattern, sample_pattern, startup_cap
-from switchobs_core.plan import plan_schedule
-from switchobs_core.scenarios import camera_agents, paper_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.scenarios import camera_agents, paper_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.gains import kalman_table
 
 
 @pytest.mark.parametrize("name, value", [

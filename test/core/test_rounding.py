@@ -1,4 +1,4 @@
-"""The exact bound with rounding (switchobs_core.rounding): it bounds the error of the *computed*
+"""The exact bound with rounding (switchobs_core.numerics.rounding): it bounds the error of the *computed*
 estimate against the true state for long runs, with every gain family, at sample times that are
 not whole nanoseconds, and it stays tight where rounding does not matter."""
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 import switchobs_core as so
-from switchobs_core.rounding import ErrorEllipsoid, expm_error, expm_extended, verify_against_extended
+from switchobs_core.numerics.rounding import ErrorEllipsoid, expm_error, expm_extended, verify_against_extended
 
 PER = [so.Cycle.from_ts(2.0, 0.6)]
 SEQ = [so.Cycle.from_ts(4, 0.5), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(3, 0.6), so.Cycle.from_ts(2, 0.4)]

@@ -1,4 +1,4 @@
-"""Tests of switchobs_core.simulate: exact plant, acceptance runs, sampled vs continuous, bounds."""
+"""Tests of switchobs_core.sim.simulate: exact plant, acceptance runs, sampled vs continuous, bounds."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
+from switchobs_core.bounds.envelope import error_transitions
 from switchobs_core.certificate import cycle_transition
-from switchobs_core.envelope import error_transitions
 from switchobs_core.exceptions import InvalidArgument
-from switchobs_core.plant import Plant
-from switchobs_core.schedule import PeriodicSchedule, SequenceSchedule
-from switchobs_core.simulate import sampled_error_transition, schedule_segments, simulate
+from switchobs_core.model.schedule import PeriodicSchedule, SequenceSchedule
+from switchobs_core.sim.plant import Plant
+from switchobs_core.sim.simulate import sampled_error_transition, schedule_segments, simulate
 
 
 @pytest.fixture(scope="module")
@@ -202,8 +202,8 @@ def test_ten_minutes_without_a_violation(paper, which, rate):
     sampled outputs), and over 10 simulated minutes with the paper's unstable agents the count is 0
     for the periodic and the nonperiodic schedule, while the bound stays informative (within 1e6
     of the error at the rounding floor, where ||Phi|| e0 alone would be ~1e-90)."""
-    from switchobs_core.design import design_table
-    from switchobs_core.schedule import Cycle, PeriodicSchedule, SequenceSchedule
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.schedule import Cycle, PeriodicSchedule, SequenceSchedule
 
     per = [Cycle.from_ts(2.0, 0.6)]
     seq = [Cycle.from_ts(4, 0.5), Cycle.from_ts(3, 0.6), Cycle.from_ts(3, 0.6), Cycle.from_ts(2, 0.4)]

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from switchobs_core.design.synthesis import KappaCurve, LMISynthesizer, verify_gain
 from switchobs_core.exceptions import InvalidArgument, VerificationError
 from switchobs_core.paper import kappa_closed_form
-from switchobs_core.synthesis import KappaCurve, LMISynthesizer, verify_gain
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_conic_form_equals_the_cvxpy_form(paper, channel):
     """Clarabel on the hand-written conic form and Clarabel through cvxpy solve the same problem:
     theta* agrees to 1e-6 (relative) over the eta grid the designs scan, in the plain and a
     rescaled form, and the least-norm (P, Y) of stage 2 agrees to 1e-4."""
-    from switchobs_core.synthesis import KAPPA_GRID, _ScaledSDP
+    from switchobs_core.design.synthesis import KAPPA_GRID, _ScaledSDP
 
     d = paper.decomposition(channel)
     for scale in (np.ones(d.A_o.shape[0]), np.linspace(0.5, 2.0, d.A_o.shape[0])):
@@ -111,7 +111,7 @@ def test_conic_form_equals_the_cvxpy_form(paper, channel):
 def test_cvxpy_is_the_fallback_when_the_direct_solve_fails(paper, monkeypatch):
     """A direct Clarabel solve that fails hands the problem to cvxpy (Clarabel, then SCS): the
     gain is the same to the solver's tolerance and still verified."""
-    from switchobs_core import synthesis
+    from switchobs_core.design import synthesis
 
     d = paper.decomposition(1)
     direct = LMISynthesizer(d.A_o, d.C_o).gain(1.6)
@@ -129,8 +129,8 @@ def test_cvxpy_is_the_fallback_when_the_direct_solve_fails(paper, monkeypatch):
 def test_a_design_does_not_import_cvxpy():
     """The LMI design of a cycle runs without the modelling layer (its import is most of a
     `switchobs plan`): cvxpy is imported only for a fallback."""
-    code = ("import sys\nfrom switchobs_core.design import Designer\n"
-            "from switchobs_core.scenarios import paper_system\nfrom switchobs_core.schedule import Cycle\n"
+    code = ("import sys\nfrom switchobs_core.design.lmi import Designer\n"
+            "from switchobs_core.model.scenarios import paper_system\nfrom switchobs_core.model.schedule import Cycle\n"
             "d = Designer(paper_system()).design(Cycle.from_ts(1.0, 0.5))\n"
             "print(d.certified, 'cvxpy' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

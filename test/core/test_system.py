@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from switchobs_core.exceptions import InvalidSystem, SwitchobsError, UnobservableSystem
-from switchobs_core.scenarios import camera_agents, load_system
-from switchobs_core.system import LTISystem
+from switchobs_core.model.scenarios import camera_agents, load_system
+from switchobs_core.model.system import LTISystem
 
 
 def obsv_rank(A, C):

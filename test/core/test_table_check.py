@@ -1,4 +1,4 @@
-"""Re-verification of loaded gain tables (switchobs_core.table_check, issue 22): a table whose
+"""Re-verification of loaded gain tables (switchobs_core.table.check, issue 22): a table whose
 gains were zeroed and whose checksum was recomputed loads (the checksum is not a signature) but is
 refused before use; real tables of every family pass, cheaply."""
 
@@ -11,11 +11,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.schedule import Cycle
-from switchobs_core.table_check import verify_table
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.check import verify_table
+from switchobs_core.table.gains import GainTable, kalman_table
 
 
 def _replant(table: GainTable, edit) -> GainTable:

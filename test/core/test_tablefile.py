@@ -10,12 +10,12 @@ import zipfile
 import numpy as np
 import pytest
 
+from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
-from switchobs_core.gains import GainTable, kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle
-from switchobs_core.tablefile import MAX_BINARY_BYTES, is_binary, size_limit
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.container import MAX_BINARY_BYTES, is_binary, size_limit
+from switchobs_core.table.gains import GainTable, kalman_table
 
 PAPER = paper_system()
 CYCLES = [Cycle.from_ts(2.0, 0.6), Cycle((0.5, 0.5), 0.1)]

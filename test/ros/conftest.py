@@ -44,9 +44,9 @@ def ros_domain() -> int:
 @pytest.fixture(scope="session")
 def paper_tables(tmp_path_factory):
     """Gain tables for the paper's periodic and sequence schedules, designed once per session."""
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
 
     d = tmp_path_factory.mktemp("tables")
     sys_ = load_system("paper")

@@ -222,11 +222,11 @@ def _lossy_channel_run(table: str, lost_after_switch: int, seq: bool = True, **p
 @pytest.fixture(scope="module")
 def kalman_periodic(tmp_path_factory):
     """A Kalman table for the paper's (2 s, 0.6) at 50 Hz (its default noise model)."""
-    from switchobs_core.gains import kalman_table
-    from switchobs_core.kalman import design_kalman
-    from switchobs_core.noise import default_noise
-    from switchobs_core.scenarios import paper_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.kalman import design_kalman
+    from switchobs_core.model.noise import default_noise
+    from switchobs_core.model.scenarios import paper_system
+    from switchobs_core.model.schedule import Cycle
+    from switchobs_core.table.gains import kalman_table
 
     s = paper_system()
     kd = design_kalman(s, [Cycle.from_ts(2.0, 0.6)], 50.0, default_noise(s))

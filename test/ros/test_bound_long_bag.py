@@ -22,7 +22,7 @@ def _run(tmp_path, paper_tables, schedule, duration, **gen):
     mode, tau, s = SCHEDULES[schedule]
     generate(tmp_path / "in", GenerateConfig(schedule=schedule, duration=duration, extended=True, **gen), "mcap")
     e0 = float(np.linalg.norm(DEFAULT_X0)) * 1.01        # the estimate starts at 0
-    # every sample tested against the published bound (switchobs_core.consistency): no false alarm
+    # every sample tested against the published bound (switchobs_core.runtime.consistency): no false alarm
     over = {"gain_table": paper_tables[schedule], "e0": e0, "schedule.mode": mode, "schedule.tau": tau,
             "schedule.s": s, "consistency.check": "always" if "noise_max" not in gen else "auto",
             # the report reads ~/state, ~/envelope and the truth: the odometry and typed outputs (a

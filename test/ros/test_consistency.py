@@ -1,4 +1,4 @@
-"""The innovation consistency test (switchobs_core.consistency) in the estimator's pipeline: no
+"""The innovation consistency test (switchobs_core.runtime.consistency) in the estimator's pipeline: no
 false alarm on data that follow the model (noise-free and with noise inside the declared bound),
 a sample given to the wrong channel is re-attributed, and on a recording whose bodies do not
 move as modelled the bounds are withdrawn before they are published false for long."""
@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from std_msgs.msg import UInt8
 
 import msg_bridge as mb
-from switchobs_core.consistency import check_innovation
+from switchobs_core.runtime.consistency import check_innovation
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate
 from switchobs_ros.bag.report import load_report
@@ -107,8 +107,8 @@ def test_a_target_given_to_the_wrong_channel_is_reattributed(paper_tables):
     """After convergence (noise-free, check on), a target pose of agent 1 arrives while the channel
     topic says 2 (a delivery that defeated attribution): only channel 1 explains it, so it is
     used as channel 1 and the bound stays valid and true."""
-    from switchobs_core.plant import Plant
-    from switchobs_core.schedule import Cycle, PeriodicSchedule
+    from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+    from switchobs_core.sim.plant import Plant
 
     params = estimator_params(overrides={"gain_table": paper_tables["periodic"], "e0": E0,
                                          "consistency.check": "always"})
@@ -145,11 +145,11 @@ def test_chi2_gate_false_alarm_rate_and_an_outlier(tmp_path, paper_tables):
     """Gaussian noise and no declared bound: the chi-square gate with alpha = 0.01 on the Kalman
     table's innovations rejects about 1 % of a recording that follows the noise model (its
     documented false-alarm rate), and a sample 1 m off is rejected as an outlier."""
-    from switchobs_core.gains import kalman_table
-    from switchobs_core.kalman import design_kalman
-    from switchobs_core.noise import NoiseModel
-    from switchobs_core.scenarios import load_system
-    from switchobs_core.schedule import Cycle
+    from switchobs_core.design.kalman import design_kalman
+    from switchobs_core.model.noise import NoiseModel
+    from switchobs_core.model.scenarios import load_system
+    from switchobs_core.model.schedule import Cycle
+    from switchobs_core.table.gains import kalman_table
 
     system = load_system("paper")
     noise = NoiseModel.from_mapping({"measurement_std": 0.01, "process_std": 1e-9}, system)

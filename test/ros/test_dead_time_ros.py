@@ -9,13 +9,13 @@ import pytest
 from std_msgs.msg import Float64MultiArray
 
 import msg_bridge as mb
-from switchobs_core.design import Designer
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.noise import default_noise
-from switchobs_core.plan import ScheduleCost, blind_samples, plan_schedule
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle, PeriodicSchedule
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.design.lmi import Designer
+from switchobs_core.design.plan import ScheduleCost, blind_samples, plan_schedule
+from switchobs_core.model.noise import default_noise
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.table.gains import kalman_table
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate, scenario_ticks
 from switchobs_ros.bag.io import BagIn, deserialize

@@ -28,10 +28,10 @@ def test_site_builds_in_strict_mode(tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     site = tmp_path / "site"
     for page in ("index.html", "reference/cli/index.html", "reference/parameters/index.html",
-                 "reference/api/switchobs_core.synthesis/index.html", "troubleshooting/index.html"):
+                 "reference/api/switchobs_core.design.synthesis/index.html", "troubleshooting/index.html"):
         assert (site / page).is_file(), page
     # the API pages are rendered from the docstrings, not left as mkdocstrings directives
-    html = (site / "reference/api/switchobs_core.synthesis/index.html").read_text()
+    html = (site / "reference/api/switchobs_core.design.synthesis/index.html").read_text()
     assert "LMISynthesizer" in html and ":::" not in html
     print(f"mkdocs build --strict: {time.monotonic() - t0:.1f} s wall")   # information, not asserted
 
@@ -103,7 +103,7 @@ def test_api_pages_come_from_the_files_so_new_modules_appear(tmp_path, monkeypat
     on_disk = {".".join(p.relative_to(REPO).with_suffix("").parts)
                for pkg in docs_gen.API_PACKAGES for p in (REPO / pkg).rglob("*.py")
                if not any(x.startswith("_") for x in p.relative_to(REPO).with_suffix("").parts)}
-    assert on_disk <= set(mods) and "switchobs_core.synthesis" in mods and "msg_bridge.typed" in mods
+    assert on_disk <= set(mods) and "switchobs_core.design.synthesis" in mods and "msg_bridge.typed" in mods
     assert not any(m.split(".")[-1].startswith("_") for m in mods)
     # a module added later gets its page without editing the docs
     for pkg in docs_gen.API_PACKAGES:

@@ -51,7 +51,7 @@ def test_estimates_match_recorded(name):
     np.testing.assert_allclose(got.x_hat, want["x_hat"], rtol=RTOL, atol=RTOL * scale)
     # the paper's envelopes z_i and bound
     np.testing.assert_allclose(got.envelope[:, :-1], want["envelope"][:, :-1], rtol=RTOL)
-    # the exact bound now includes floating-point rounding (switchobs_core.rounding): not below
+    # the exact bound now includes floating-point rounding (switchobs_core.numerics.rounding): not below
     # the recorded exact-arithmetic ||Phi|| e0 (but for the other CPU's last bits), and above it
     # only by the rounding allowance
     ratio = got.envelope[:, -1] / want["envelope"][:, -1]

@@ -149,8 +149,8 @@ def test_camera_killed_mid_cycle_predicts_warns_and_recovers(paper_tables, ros_n
 # ----------------------------------------------------------------------------- A2 broken
 @pytest.fixture(scope="module")
 def robust_table(tmp_path_factory):
-    from switchobs_core.design import design_table
-    from switchobs_core.scenarios import load_system
+    from switchobs_core.design.lmi import design_table
+    from switchobs_core.model.scenarios import load_system
 
     t = design_table(load_system("paper"), [], robust=(0.8, 1.2), delta=0.99, progress=False)
     return t, str(t.save(tmp_path_factory.mktemp("robust") / "robust.json"))

@@ -11,10 +11,10 @@ import re
 import pytest
 from test_startup_failures import _assert_one_line_failure, _run
 
-from switchobs_core.design import Designer
+from switchobs_core.design.lmi import Designer
 from switchobs_core.exceptions import InfeasibleDesign
-from switchobs_core.scenarios import paper_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle
 from tools.launch import ros_args
 
 

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 import msg_bridge as mb
 from msg_bridge import SpecError
-from switchobs_core.scenarios import load_noise, load_system
-from switchobs_core.system import LTISystem
+from switchobs_core.model.scenarios import load_noise, load_system
+from switchobs_core.model.system import LTISystem
 
 ROOT = Path(__file__).resolve().parents[2]
 CART = ROOT / "config" / "cart_pair.yaml"

@@ -9,11 +9,11 @@ import pytest
 from ros_harness import EstimatorIO, spin_until, start_feed
 
 import msg_bridge as mb
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.noise import NoiseModel
-from switchobs_core.scenarios import load_system
-from switchobs_core.schedule import Cycle
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.model.noise import NoiseModel
+from switchobs_core.model.scenarios import load_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.gains import kalman_table
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate, scenario_ticks
 from tools.launch import NodeProcess, ros_args

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from switchobs_core.gains import kalman_table
-from switchobs_core.kalman import design_kalman
-from switchobs_core.noise import default_noise
-from switchobs_core.plan import plan_schedule
-from switchobs_core.scenarios import paper_system
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.design.plan import plan_schedule
+from switchobs_core.model.noise import default_noise
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.table.gains import kalman_table
 from tools.demo import run
 
 

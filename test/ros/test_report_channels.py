@@ -10,7 +10,7 @@ import numpy as np
 from test_own_system import PERIODIC, RATE, SYSTEM, X0, cart_table  # noqa: F401  (cart_table: the fixture)
 
 import msg_bridge as mb
-from switchobs_core.scenarios import load_system
+from switchobs_core.model.scenarios import load_system
 from switchobs_ros.bag.cli import main as bag_main
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate

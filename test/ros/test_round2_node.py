@@ -25,7 +25,7 @@ from std_msgs.msg import UInt8
 from test_lifecycle import _change, _feed, _set, _state
 
 import msg_bridge as mb
-from switchobs_core.gains import GainTable
+from switchobs_core.table.gains import GainTable
 from switchobs_ros.bag.estimate import unanswered
 from switchobs_ros.config import PARAMS, RUNTIME_PARAMS, EstimatorConfig, check_runtime_value
 from switchobs_ros.core_config import table_cache_path

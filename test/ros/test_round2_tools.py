@@ -181,7 +181,7 @@ def test_bag_with_topics_and_no_messages_is_refused(tmp_path, paper_tables):
 def test_strict_exits_non_zero_and_names_the_reasons(bag, tmp_path, paper_tables, monkeypatch, capsys):
     """Every third observer update not finite (withheld, reset): without --strict exit 0 and the
     summary names the reason; with --strict exit 4 and one line on stderr."""
-    from switchobs_core.observer import SwitchedObserver
+    from switchobs_core.runtime.observer import SwitchedObserver
     from switchobs_ros.bag.cli import main as bag_main
     from switchobs_ros.bag.cli.estimate import STRICT_EXIT
 

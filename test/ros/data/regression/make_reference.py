@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from switchobs_core.design import design_table
-from switchobs_core.schedule import Cycle
-from switchobs_core.system import load_system
+from switchobs_core.design.lmi import design_table
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.model.system import load_system
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate
 

@@ -1,0 +1,232 @@
+"""Reading an error ellipsoid's bound ``sqrt(lambda_max(S))`` amortised: an O(n^3) upper bound
+per anchor, an O(n^2) rigorous upper bound in between.
+
+The published bound of an ellipsoid ``{e : e' S^-1 e <= 1}`` (:mod:`switchobs_core.numerics.rounding`, step 5) is
+``||e|| <= sqrt(lambda_max(sym S))`` with ``sym S = (S + S') / 2``; solving the eigenvalue
+problem is O(n^3) and was 41 % of a node's per-sample cost at n = 132 (bench/RESULTS.md, online
+cost per sample). Here an upper bound ``lam_a >= lambda_max(sym S_a)`` is computed only at an
+*anchor* ``S_a``, and for a later ``S``:
+
+1. Weyl's inequality, for any scalar ``c >= 0``: ``lambda_max(sym S) <= c lambda_max(sym S_a) +
+   lambda_max(sym D)`` with ``D = S - c S_a``. ``c`` follows the anchor's leading direction
+   ``v_a`` (a unit vector): ``c = v_a' S v_a / v_a' S_a v_a`` (one matrix-vector product; a
+   ratio of traces let ``D`` grow when the ellipsoid narrows, and forced an anchor every few
+   samples).
+2. ``lambda_max(sym D) <= ||sym D||_2 <= ||D||_F`` (one pass over ``D``; as tight as the
+   2-norm when ``D`` has low rank, as the change of a narrowing ellipsoid has), and when that
+   is not enough Gershgorin's ``lambda_max(sym D) <= max(||D||_inf, ||D||_1)`` (largest absolute
+   row or column sum: the tighter one when ``D`` is spread over many directions): ``g`` is the
+   smaller.
+3. Floating point: ``D~ = fl(S - fl(c S_a))`` has ``|D| <= (|D~| + u c |S_a|) / (1 - u)``
+   entrywise, so ``||D||_F <= (||D~||_F + u c ||S_a||_F) / (1 - u)`` and likewise for the row
+   and column sums; a computed sum of ``m`` nonnegative terms (in any order) is within
+   ``gamma_m`` of the exact one and a square root within ``u``: ``g <= (g~ + u c g_a)(1 + 2
+   gamma_{m+4})`` with ``m = n^2`` (Frobenius) or ``n`` (Gershgorin) and ``g_a`` the anchor's
+   norm of the same kind, rounded up alike; then ``lambda_max(sym S) <= (c lam_a + g) (1 + 4u)``
+   (the last factor covers the two roundings of the sum and the product).
+4. ``trace S`` (:attr:`~switchobs_core.numerics.rounding.ErrorEllipsoid.tr`, kept as an upper bound of the trace)
+   bounds ``lambda_max`` too: the smaller of the two is published.
+
+The anchor's ``lam_a``:
+
+* below :data:`CHOLESKY_MIN_N` states, the eigenvalue problem
+  (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`, its model of the solver's error
+  ``2 n u ||S_a||_F``, plus ``16 u ||S_a||_F`` for the rounding of ``sym S_a`` itself and a
+  margin on that model, :data:`_SOLVER_MARGIN`; the solver's error is a model, checked against
+  extended precision in test_bound_read.py);
+* from :data:`CHOLESKY_MIN_N` states on, a *verified* candidate (ten times cheaper than the
+  eigenvalue problem at n = 132, and no model of a solver): ``T = fl(sym S_a)`` is exactly
+  symmetric with ``||T - sym S_a||_2 <= u ||S_a||_F``; power iterations from the last leading
+  direction give the Rayleigh quotient ``theta <= lambda_max(T)``; the candidate
+  ``l = theta (1 + delta)`` is proved an upper bound when the Cholesky factorisation of
+  ``fl(A~ - c_R I)``, ``A~ = fl(l I - T)``, runs to completion with Rump's shift
+  ``c_R >= gamma_{n+1} / (1 - 2 gamma_{n+1}) trace(A~) + 4 n (2 (n + 2) + max a~_ii) eta_min``
+  (S. M. Rump, *Verification of positive definiteness*, BIT 46 (2006), Theorem 2.3; doubled here
+  as a margin): then ``A~`` is positive definite, and since ``A~`` differs from ``l I - T`` by
+  the rounding of its diagonal (``|.| <= u (l + max |t_ii|)``),
+  ``lambda_max(sym S_a) < l + u (l + max |t_ii|) + u ||S_a||_F``. If the factorisation fails the
+  candidate was too low: ``delta`` grows (:data:`_DELTAS`), and after the last one the eigenvalue
+  problem decides.
+
+Re-anchoring: when ``g > tol c lam_a`` (or after ``max_age`` reads) a new anchor is taken. Looseness:
+between anchors ``lambda_max(sym S) >= c lam_a' - g`` (Weyl the other way, ``lam_a'`` the anchor's
+exact value, ``lam_a <= (1 + delta) lam_a'`` up to the allowances), so the published value is at
+most ``(1 + delta)(1 + tol) / (1 - tol (1 + delta))`` times the current one in ``lambda``, ``sqrt``
+of that in the bound: ``1.051`` for the default ``tol = 0.05`` with the eigenvalue problem,
+``1.062`` with a verified candidate at ``delta = 0.02``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg.blas import daxpy as _daxpy
+from scipy.linalg.lapack import dpotrf
+
+from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, _fro, gamma
+
+__all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "verified_lambda_max"]
+
+#: Fewest states from which :meth:`~switchobs_core.runtime.observer.SwitchedObserver.envelope` reads the
+#: bound amortised by default (below, the eigenvalue problem costs no more than this module's
+#: bookkeeping, and its bound is the tighter one).
+AMORTISED_MIN_N = 40
+
+#: Extra allowance on the anchor's eigenvalue problem, in units of ``u ||S||_F``: ``lam_upper``'s
+#: model (``2 n u ||S||_F``) was measured short for n = 3 (LAPACK's error 10.4 u ||S||_F against
+#: an extended-precision power iteration; test_bound_read.py), and it omits the symmetrisation.
+_SOLVER_MARGIN = 16.0
+#: Fewest states for which the anchor is a Cholesky-verified candidate (module docstring).
+CHOLESKY_MIN_N = 40
+#: The candidate's margins over the Rayleigh quotient, tried in turn.
+_DELTAS = (0.02, 0.1, 0.5)
+#: Power iterations per anchor (from the last leading direction).
+_POWER_STEPS = 8
+#: The smallest positive double (Rump's underflow term).
+_ETA_MIN = 5e-324
+
+
+def _minus_scaled(S: np.ndarray, c: float, Sa: np.ndarray) -> np.ndarray:
+    """``fl(S - c S_a)`` in two passes (a copy and one BLAS ``axpy``, fused multiply-add or not:
+    either is within step 3's allowance)."""
+    if S.flags.c_contiguous and Sa.flags.c_contiguous:
+        D = S.copy()
+        _daxpy(Sa.ravel(), D.ravel(), a=-c)
+        return D
+    return S - c * Sa
+
+
+def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np.ndarray]:
+    """``(theta, v)``: a lower bound of ``lambda_max(T)`` (up to rounding): the larger of the
+    Rayleigh quotient ``v' T v`` after ``steps`` power iterations and the largest diagonal entry
+    (``e_i' T e_i``). The start is the last leading direction ``v`` plus the axis of the largest
+    diagonal entry plus a little of every axis: a warm ``v`` alone can lie in a block of ``T``
+    uncoupled from the one that now leads (bodies that do not interact), where power iterations
+    never leave it."""
+    n = T.shape[0]
+    d = np.diagonal(T)
+    i = int(np.argmax(d))
+    start = np.full(n, 1.0 / n)
+    start[i] += 1.0
+    if v is not None and v.shape == (n,) and np.all(np.isfinite(v)) and float(v @ v) > 0.0:
+        start += v / math.sqrt(float(v @ v))
+    v = start / math.sqrt(float(start @ start))
+    theta = 0.0
+    for _ in range(steps):
+        w = T @ v
+        theta = float(v @ w)
+        nw = math.sqrt(float(w @ w))
+        if not nw > 0.0 or not math.isfinite(nw):
+            break
+        v = w / nw
+    return max(theta, float(d[i])), v
+
+
+def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:
+    """``(lam, v)`` with ``lam >= lambda_max((S + S') / 2)`` proved by a Cholesky factorisation
+    (module docstring), ``v`` the leading direction found on the way; None if no candidate of
+    :data:`_DELTAS` could be verified (the caller solves the eigenvalue problem)."""
+    n = S.shape[0]
+    u = UNIT_ROUNDOFF
+    T = S + S.T
+    T *= 0.5                                    # exactly symmetric (the sum commutes)
+    theta, v = _leading(T, v, _POWER_STEPS)
+    d = np.diagonal(T)
+    dmax = float(np.abs(d).max())
+    nS = _fro(S)
+    if not (theta > 0.0 and math.isfinite(theta) and math.isfinite(nS)):
+        return None
+    gn = gamma(n + 1)
+    for delta in _DELTAS:
+        lc = theta * (1.0 + delta)
+        A = -T
+        A.flat[:: n + 1] += lc                  # A~ = fl(lc I - T): only the diagonal rounds
+        ad = np.diagonal(A)
+        if not float(ad.min()) > 0.0:
+            continue
+        tr = float(ad.sum()) * (1.0 + 2.0 * n * u)
+        cr = 2.0 * (gn / (1.0 - 2.0 * gn) * tr + 4.0 * n * (2.0 * (n + 2) + float(ad.max())) * _ETA_MIN)
+        A.flat[:: n + 1] -= cr                  # fl(A~ - c_R I), as the theorem has it
+        _, info = dpotrf(A, lower=1, clean=0, overwrite_a=1)
+        if info == 0:
+            lam = (lc + u * (lc + dmax) + 2.0 * u * nS) * (1.0 + 4.0 * u)
+            return lam, v
+    return None
+
+
+class AnchoredBound:
+    """``sqrt(lambda_max(sym S))`` upper bounds of an :class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`'s
+    current ``S``, amortised (module docstring). ``AnchoredBound(tol=0.05, max_age=256)``;
+    ``read(ell)`` per read."""
+
+    def __init__(self, tol: float = 0.05, max_age: int = 256) -> None:
+        self.tol = float(tol)
+        self.max_age = int(max_age)
+        self.anchors = 0        # anchors taken (for the measurements)
+        self.verified = 0       # of which by a verified candidate (no eigenvalue problem)
+        self.reads = 0
+        self._Sa: np.ndarray | None = None
+        self._lam_a = math.inf
+        self._va: np.ndarray | None = None      # the anchor's leading direction (unit)
+        self._theta_a = 0.0                     # v_a' S_a v_a
+        self._v: np.ndarray | None = None       # the latest leading direction (warm start)
+        self._f_a = self._g_a = 0.0   # ||S_a||_F and max(||S_a||_inf, ||S_a||_1), rounded up
+        self._age = 0
+
+    def read(self, ell: ErrorEllipsoid) -> float:
+        """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring)."""
+        S = ell.S
+        n = ell.n
+        self.reads += 1
+        if not n:
+            return 0.0
+        if self._Sa is not None and self._Sa.shape == S.shape and self._age < self.max_age \
+                and np.isfinite(self._lam_a) and self._theta_a > 0.0:
+            w = S @ self._va
+            c = float(self._va @ w) / self._theta_a    # any c >= 0 is valid (step 1)
+            if math.isfinite(c) and c >= 0.0:
+                nw = math.sqrt(float(w @ w))
+                if nw > 0.0 and math.isfinite(nw):
+                    self._v = w / nw                    # one power iteration for the next anchor
+                D = _minus_scaled(S, c, self._Sa)
+                g = (_fro(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
+                if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
+                    A = np.abs(D)
+                    gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
+                    g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
+                if math.isfinite(g) and g <= self.tol * c * self._lam_a:
+                    self._age += 1
+                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+                    lam = min(lam, max(ell.tr, 0.0))
+                    return math.sqrt(lam) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+        return self._anchor(ell)
+
+    def _anchor(self, ell: ErrorEllipsoid) -> float:
+        """A new anchor at the current ``S``: its ``lam_a`` (module docstring) is published."""
+        S = ell.S
+        got = verified_lambda_max(S, self._v) if ell.n >= CHOLESKY_MIN_N else None
+        if got is not None:
+            lam, v = got
+            self.verified += 1
+        else:
+            # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
+            # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
+            # solver's model (module docstring): 16 u ||S||_F more in all
+            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * _fro(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+            T = S + S.T
+            T *= 0.5
+            if np.all(np.isfinite(T)):      # the leading direction (below CHOLESKY_MIN_N: cheap)
+                v = np.linalg.eigh(T)[1][:, -1] if ell.n < CHOLESKY_MIN_N else _leading(T, self._v, _POWER_STEPS)[1]
+            else:
+                v = np.full(ell.n, 1.0 / math.sqrt(ell.n))
+        self.anchors += 1
+        self._Sa = S.copy()
+        self._lam_a = lam
+        self._va = self._v = v
+        self._theta_a = float(v @ (S @ v))
+        self._f_a = _fro(S) * (1.0 + 2.0 * gamma(S.size + 4))
+        A = np.abs(S)
+        self._g_a = float(max(A.sum(axis=1).max(), A.sum(axis=0).max())) * (1.0 + 2.0 * gamma(ell.n + 4))
+        self._age = 0
+        return math.sqrt(min(lam, max(ell.tr, 0.0)))

@@ -1,0 +1,1 @@
+"""Design time: LMI gain synthesis and eta selection, the periodic Kalman design (doubling), schedule planning."""

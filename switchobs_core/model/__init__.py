@@ -1,0 +1,2 @@
+"""The model: the LTI system and its channels, schedules and cycles, noise, built-in scenarios,
+measurements, decomposition, detectability."""

@@ -1,0 +1,266 @@
+"""Orthogonal observability decomposition (Lemma ``t:decomposition``) and the log norm.
+
+For a pair (A, C) we compute an orthogonal T = [T_o T_u] with
+
+    T' A T = [[A_o, 0], [A_uo, A_u]],   C T = [C_o, 0]        (e:A_obs_decomp, e:C_obs_decomp)
+
+where T_u spans the unobservable subspace N(A, C) = ker O(A, C) and (A_o, C_o) is
+observable.
+
+Algorithm (no rank test of a stack of powers A^k): N is the largest A-invariant
+subspace contained in ker C, the limit of the subspace iteration
+
+    N_0 = ker C,   N_{k+1} = {x in N_k : A x in N_k},
+
+which stops after at most n steps. Every step uses only orthonormal bases and an SVD:
+with V_k an orthonormal basis of N_k and Q_k one of its orthogonal complement,
+N_{k+1} = V_k ker(Q_k' A V_k). A singular value counts as zero when it is at most
+``rtol`` times the scale of the matrix it belongs to (``rtol * ||C||_2`` for ker C,
+``rtol * max(||A||_2, tiny)`` for the invariance steps); the default ``rtol = 1e-9``
+is documented in :data:`DEFAULT_RTOL`. Badly scaled systems are handled as well as
+any orthogonal method can: the decision is relative to ||A|| and ||C||, so state
+scaling that makes modes differ by more than 1/rtol in magnitude will hide them.
+
+Canonical basis. The subspaces are unique but their orthonormal bases are not; gains
+and trajectories depend on the basis (any orthonormal basis of the observable subspace fits).
+:func:`canonical_basis` fixes one by
+a stated rule: the eigenvectors of the compression V' W V of the fixed weighting
+W = diag(1, 2, ..., n), sorted by eigenvalue, each signed so that its entry of largest
+magnitude is positive. Any two orthonormal bases V and V R of one subspace give the
+same result (when the compression's eigenvalues are distinct, which holds
+generically), so the basis depends on the subspace only. For coordinate-aligned
+subspaces (the paper's model) the result is the coordinate axes themselves.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..exceptions import InvalidArgument
+from ..validation import as_matrix
+
+__all__ = [
+    "DEFAULT_RTOL",
+    "Decomposition",
+    "observability_decomposition",
+    "unobservable_subspace",
+    "canonical_basis",
+    "log_norm",
+    "spectral_abscissa",
+]
+
+#: Relative tolerance under which a singular value counts as zero (see module docstring).
+DEFAULT_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """The orthogonal observability decomposition of one channel (Lemma ``t:decomposition``).
+
+    Attributes
+    ----------
+    T : (n, n) ndarray
+        Orthogonal, ``T = [T_o T_u]`` (e:T_orthogonal).
+    r : int
+        Observable dimension r_i = rank O(A, C_i).
+    A_o, C_o : ndarray
+        Observable blocks of ``T' A T`` and ``C T`` (e:block_structure).
+    A_uo, A_u : ndarray
+        Lower blocks of ``T' A T``.
+    residual : float
+        Largest of ||T_o' A T_u|| and ||C T_u|| (both zero in exact arithmetic),
+        relative to max(||A||, ||C||, 1).
+    """
+
+    T: np.ndarray
+    r: int
+    A_o: np.ndarray
+    C_o: np.ndarray
+    A_uo: np.ndarray
+    A_u: np.ndarray
+    residual: float
+
+    @property
+    def T_o(self) -> np.ndarray:
+        """Orthonormal basis of the observable subspace (n x r)."""
+        return self.T[:, : self.r]
+
+    @property
+    def T_u(self) -> np.ndarray:
+        """Orthonormal basis of the unobservable subspace (n x (n - r))."""
+        return self.T[:, self.r :]
+
+    @property
+    def observable(self) -> bool:
+        """Whether (A, C) itself is observable (r = n)."""
+        return self.r == self.T.shape[0]
+
+    @property
+    def unobservable_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of A_u: the modes this channel cannot see."""
+        if self.A_u.size == 0:
+            return np.zeros(0, dtype=complex)
+        return np.linalg.eigvals(self.A_u)
+
+    @property
+    def detectable(self) -> bool:
+        """Whether every unobservable mode is asymptotically stable (Re < 0)."""
+        ev = self.unobservable_eigenvalues
+        return bool(np.all(ev.real < 0))
+
+    @property
+    def mu(self) -> float:
+        """Log norm mu_i = lambda_max(sym(A_o)) (e:mu_o_i_def)."""
+        return log_norm(self.A_o)
+
+
+def _null_space(M: np.ndarray, thresh: float) -> np.ndarray:
+    """Orthonormal basis of {x : M x = 0}, singular values <= thresh counting as zero."""
+    n = M.shape[1]
+    if M.shape[0] == 0:
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(M, full_matrices=True)
+    rank = int(np.sum(s > thresh))
+    return vt[rank:].T.copy()
+
+
+def _complement(V: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the orthogonal complement of range(V) (V orthonormal)."""
+    n, k = V.shape
+    if k == 0:
+        return np.eye(n)
+    q, _ = np.linalg.qr(V, mode="complete")
+    return q[:, k:]
+
+
+def unobservable_subspace(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL) -> np.ndarray:
+    """Orthonormal basis of the unobservable subspace ker O(A, C) (n x (n - r)).
+
+    Computed by the orthogonal subspace iteration of the module docstring.
+    """
+    A = as_matrix(A, "A", square=True)
+    C = as_matrix(C, "C", cols=A.shape[0])
+    rtol = _check_rtol(rtol)
+    scale_a = max(np.linalg.norm(A, 2), np.finfo(float).tiny)
+    scale_c = np.linalg.norm(C, 2) if C.size else 0.0
+    V = _null_space(C, rtol * scale_c)
+    for _ in range(A.shape[0] + 1):
+        k = V.shape[1]
+        if k == 0:
+            break
+        Q = _complement(V)
+        if Q.shape[1] == 0:
+            break
+        Z = _null_space(Q.T @ A @ V, rtol * scale_a)
+        if Z.shape[1] == k:
+            break
+        V, _ = np.linalg.qr(V @ Z)
+        V = V[:, : Z.shape[1]]
+    return V
+
+
+def canonical_basis(V: np.ndarray) -> np.ndarray:
+    """Canonical orthonormal basis of range(V) (rule in the module docstring)."""
+    V = as_matrix(V, "V")
+    n, k = V.shape
+    if k == 0:
+        return np.zeros((n, 0))
+    W = np.arange(1.0, n + 1.0)
+    M = V.T @ (W[:, None] * V)
+    _, R = np.linalg.eigh((M + M.T) / 2)
+    B = V @ R
+    for j in range(k):
+        col = B[:, j]
+        idx = int(np.argmax(np.abs(col) > (1 - 1e-8) * np.max(np.abs(col))))
+        if col[idx] < 0:
+            B[:, j] = -col
+    # Re-orthonormalise against rounding without changing the span or the signs.
+    q, r = np.linalg.qr(B)
+    return q * np.sign(np.diag(r))
+
+
+def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL) -> Decomposition:
+    """Orthogonal observability decomposition of (A, C) (Lemma ``t:decomposition``).
+
+    ``D = observability_decomposition(A, C)``
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+    C : (p, n) array_like
+    rtol : float
+        Relative rank tolerance (see module docstring).
+
+    Returns
+    -------
+    Decomposition
+        With canonical, deterministic bases T_o and T_u.
+
+    Raises
+    ------
+    InvalidArgument
+        Wrong shapes or non-finite entries.
+    """
+    A = as_matrix(A, "A", square=True)
+    C = as_matrix(C, "C", cols=A.shape[0])
+    rtol = _check_rtol(rtol)
+    n = A.shape[0]
+    Vu = canonical_basis(unobservable_subspace(A, C, rtol=rtol))
+    To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
+    T = np.hstack([To, Vu])
+    r = To.shape[1]
+    At = T.T @ A @ T
+    Ct = C @ T
+    scale = max(np.linalg.norm(A, 2), np.linalg.norm(C, 2) if C.size else 0.0, 1.0)
+    res = 0.0
+    if r < n:
+        res = max(np.linalg.norm(At[:r, r:], 2), np.linalg.norm(Ct[:, r:], 2) if C.size else 0.0)
+    return Decomposition(
+        T=T,
+        r=r,
+        A_o=At[:r, :r].copy(),
+        C_o=Ct[:, :r].copy(),
+        A_uo=At[r:, :r].copy(),
+        A_u=At[r:, r:].copy(),
+        residual=float(res / scale),
+    )
+
+
+def log_norm(M: ArrayLike) -> float:
+    """Logarithmic 2-norm mu(M) = lambda_max((M + M') / 2) (e:mu2_formula)."""
+    M = _square_or_empty(M)
+    if M.size == 0:
+        return float("-inf")
+    return float(np.linalg.eigvalsh((M + M.T) / 2)[-1])
+
+
+def spectral_abscissa(M: ArrayLike) -> float:
+    """alpha(M) = max Re lambda(M) (Lemma ``t:uniform-euclidean-bound``)."""
+    M = _square_or_empty(M)
+    if M.size == 0:
+        return float("-inf")
+    return float(np.max(np.linalg.eigvals(M).real))
+
+
+def _square_or_empty(M: ArrayLike) -> np.ndarray:
+    """``M`` as a finite square matrix (an empty one allowed: r_i = 0), or InvalidArgument naming M."""
+    arr = np.asarray(M, dtype=float) if not isinstance(M, np.ndarray) else M.astype(float, copy=False)
+    if arr.size == 0:
+        return arr.reshape(0, 0)
+    return as_matrix(arr, "M", square=True)
+
+
+def _check_rtol(rtol: float) -> float:
+    try:
+        val = float(rtol)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"rtol must be a number; got {rtol!r}") from None
+    if not (math.isfinite(val) and 0 <= val < 1):
+        raise InvalidArgument(f"rtol must be a finite relative tolerance in [0, 1); got {val}")
+    return val

@@ -1,0 +1,187 @@
+"""Built-in systems: the paper's camera and two agents (Sec. ``subsec:sim_model``) and its
+generalization to one camera and M agents.
+
+Each body j (camera c, agents 1..M) is a planar double integrator with velocity matrix
+D_j (e:sim_Aj): chi_j = [p_x, p_y, v_x, v_y], A_j = [[0, I], [0, D_j]], and
+A = blkdiag(A_c, A_1, ..., A_M) (e:sim_A_blkdiag). Channel rho measures the camera
+position and the position of agent rho: y_rho = [p_c; p_rho]. Each channel alone is
+unobservable and (with an unstable agent mode) not detectable; all together are
+observable.
+
+Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import InvalidSystem
+from ..loading import as_number
+from .noise import NoiseModel
+from .system import LTISystem, read_spec
+
+__all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system",
+           "load_noise", "PAPER_D"]
+
+#: Most agents :func:`camera_agents` builds (n = 4 (M + 1) states): bounds what a file asks for.
+MAX_AGENTS = 200
+
+#: The paper's velocity matrices (Sec. ``subsec:sim_params``): D_c, D_1, D_2 diagonals.
+PAPER_D: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.2), (0.0, 0.1))
+
+
+def _body(d: Sequence[float]) -> np.ndarray:
+    A = np.zeros((4, 4))
+    A[0, 2] = A[1, 3] = 1.0
+    A[2, 2], A[3, 3] = float(d[0]), float(d[1])
+    return A
+
+
+def camera_agents(
+    agents: int = 2,
+    *,
+    D_c: Sequence[float] = (0.0, 0.0),
+    D_agents: Sequence[Sequence[float]] | None = None,
+    name: str | None = None,
+) -> LTISystem:
+    """One camera and M agents, each a planar double integrator.
+
+    ``sys = camera_agents(M, D_c=(0, 0), D_agents=[(0, 0.2), (0, 0.1), ...])``
+
+    Parameters
+    ----------
+    agents : int
+        M >= 2 (one channel per agent).
+    D_c : (2,) sequence
+        Diagonal of the camera's velocity matrix.
+    D_agents : sequence of M (2,) sequences, optional
+        Diagonals of the agents' velocity matrices. Default: the paper's (0, 0.2) and
+        (0, 0.1) for agents 1 and 2, then (0, 0.1 + 0.03 (j - 2)) for agent j >= 3
+        (0.13, 0.16, 0.19, 0.22, ...), so every agent has an unstable mode and no two
+        agents are alike.
+    """
+    if isinstance(agents, (bool, np.bool_)) or not isinstance(agents, (int, np.integer, str)):
+        raise InvalidSystem(f"agents must be a whole number; got {agents!r}")
+    try:
+        M = int(agents)
+    except ValueError:
+        raise InvalidSystem(f"agents must be a whole number; got {agents!r}") from None
+    if M < 2:
+        raise InvalidSystem(f"camera_agents needs at least 2 agents (one channel each); got {M}")
+    if M > MAX_AGENTS:
+        raise InvalidSystem(f"camera_agents takes at most {MAX_AGENTS} agents; got {M}")
+    if D_agents is None:
+        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.03 * (k - 1)) for k in range(M)]
+    if not isinstance(D_c, (Sequence, np.ndarray)) or not isinstance(D_agents, (Sequence, np.ndarray)) \
+            or any(not isinstance(d, (Sequence, np.ndarray)) for d in D_agents):
+        raise InvalidSystem("D_c must be a pair of numbers and D_agents a list of pairs")
+    D_agents = [tuple(as_number(v, f"D_agents[{k}]", exc=InvalidSystem, finite=False) for v in d)
+                for k, d in enumerate(D_agents)]
+    D_c = tuple(as_number(v, "D_c", exc=InvalidSystem, finite=False) for v in D_c)
+    if len(D_c) != 2 or not all(math.isfinite(v) for v in D_c):
+        raise InvalidSystem(f"D_c must have 2 finite entries; got {D_c}")
+    if len(D_agents) != M or any(len(d) != 2 for d in D_agents):
+        raise InvalidSystem(f"D_agents must hold {M} pairs (one per agent); got {D_agents}")
+    bad = [k + 1 for k, d in enumerate(D_agents) if not all(math.isfinite(v) for v in d)]
+    if bad:
+        raise InvalidSystem(f"D_agents has a non-finite entry for agent(s) {bad}: {D_agents}")
+    bodies = [_body(D_c)] + [_body(d) for d in D_agents]
+    n = 4 * (M + 1)
+    A = np.zeros((n, n))
+    for j, Aj in enumerate(bodies):
+        A[4 * j : 4 * j + 4, 4 * j : 4 * j + 4] = Aj
+    Cs = []
+    for rho in range(1, M + 1):
+        Ci = np.zeros((4, n))
+        Ci[0, 0] = Ci[1, 1] = 1.0
+        Ci[2, 4 * rho] = Ci[3, 4 * rho + 1] = 1.0
+        Cs.append(Ci)
+    body_names = ["camera"] + [f"agent{k}" for k in range(1, M + 1)]
+    labels = [f"{b}.{q}" for b in body_names for q in ("p_x", "p_y", "v_x", "v_y")]
+    outputs = [("camera.p_x", "camera.p_y", f"agent{k}.p_x", f"agent{k}.p_y") for k in range(1, M + 1)]
+    return LTISystem(
+        A,
+        None,
+        Cs,
+        name=name
+        or (
+            "paper" if M == 2 and list(D_agents) == list(PAPER_D[1:]) and tuple(D_c) == (0, 0) else f"camera_{M}_agents"
+        ),
+        state_labels=labels,
+        channel_names=[f"agent{k}" for k in range(1, M + 1)],
+        output_labels=outputs,
+    )
+
+
+def paper_system() -> LTISystem:
+    """The paper's 12-state camera/two-agent model with D_1 = diag(0, 0.2), D_2 = diag(0, 0.1)."""
+    return camera_agents(2, D_c=PAPER_D[0], D_agents=PAPER_D[1:], name="paper")
+
+
+SCENARIOS: dict[str, Callable[..., LTISystem]] = {
+    "paper": paper_system,
+    "camera_agents": camera_agents,
+}
+
+
+def build_scenario(name: str, /, **params: Any) -> LTISystem:
+    """Build a built-in scenario by name with its keyword parameters."""
+    if name not in SCENARIOS:
+        raise InvalidSystem(f"unknown scenario {name!r}; built-in scenarios: {', '.join(sorted(SCENARIOS))}")
+    try:
+        return SCENARIOS[name](**params)
+    except TypeError as err:
+        raise InvalidSystem(f"scenario '{name}': bad parameters ({err})") from None
+
+
+def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
+    """A system from a parsed YAML mapping: ``scenario: name`` with the scenario's
+    parameters, or the explicit schema of :meth:`LTISystem.from_dict`."""
+    if isinstance(spec, dict) and ("noise" in spec or "inputs" in spec):
+        # the noise model is read by load_noise, the input specifications by msg_bridge.inputs
+        spec = {k: v for k, v in spec.items() if k not in ("noise", "inputs")}
+    if isinstance(spec, dict) and "scenario" in spec:
+        params = {k: v for k, v in spec.items() if k != "scenario"}
+        if any(not isinstance(k, str) for k in params):
+            raise InvalidSystem(f"{source}: scenario parameters must be named by strings; got "
+                                f"{sorted(map(repr, params))}")
+        try:
+            return build_scenario(str(spec["scenario"]), **params)
+        except InvalidSystem as err:
+            if source == "<dict>":
+                raise
+            raise type(err)(f"{source}: {err}") from None
+    return LTISystem.from_dict(spec, source=source)
+
+
+def load_noise(spec: str | Path, system: LTISystem, *, meas_std: Any = None,
+               process_q: float | None = None) -> NoiseModel:
+    """The noise model of a system: the ``noise:`` mapping of its YAML file (defaults for a
+    built-in scenario or a file without one, :func:`switchobs_core.model.noise.default_noise`),
+    then the command-line overrides ``meas_std`` (``--meas-noise``) and ``process_q``
+    (``--process-noise``); see :meth:`NoiseModel.from_mapping`."""
+    s = str(spec)
+    mapping, source = None, "noise"
+    if s not in SCENARIOS:
+        data = read_spec(Path(s))
+        if isinstance(data, dict):
+            mapping, source = data.get("noise"), f"{s}: noise"
+    return NoiseModel.from_mapping(mapping, system, meas_std=meas_std, process_q=process_q, source=source)
+
+
+def load_system(spec: str | Path) -> LTISystem:
+    """A built-in scenario by name (``paper``, ``camera_agents``, ...) or a YAML file path."""
+    s = str(spec)
+    if s in SCENARIOS:
+        return build_scenario(s)
+    path = Path(s)
+    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists():
+        if not path.exists():
+            raise InvalidSystem(f"system file {path} does not exist")
+        return system_from_dict(read_spec(path), source=str(path))
+    raise InvalidSystem(f"unknown scenario '{s}' and no such file; built-in scenarios: {', '.join(sorted(SCENARIOS))}")

@@ -1,0 +1,199 @@
+"""The innovation consistency test: a sample that the published bound cannot explain.
+
+A sample of channel ``c`` holding the output rows ``r`` at time ``t`` is
+``y = C_r x(t) + v`` with ``C_r`` those rows of ``C_c`` (e:system) and ``v`` the
+measurement noise. Before the sample is used, the observer's prior estimate ``x_hat(t)`` has
+the error ``e = x(t) - x_hat(t)``, and the observer keeps a rigorous bound ``||e|| <= b(t)``:
+the exact bound (noise-free samples) or, with a declared ``|v_j| <= v_max``, the noise bound
+(:mod:`switchobs_core.numerics.rounding`; both include floating-point rounding). So the innovation obeys
+
+.. math::
+
+    \\|\\nu\\| = \\|y - C_r \\hat x(t)\\| = \\|C_r e + v\\| \\le \\|C_r\\|_2 \\, b(t) + \\sqrt{p} \\, v_{max}
+
+with ``p = len(r)``; where the observer keeps the ellipsoid ``S`` that the bound is the largest
+axis of, ``||C_r||_2 b(t)`` is replaced by the tighter ``sqrt(lambda_max(C_r S C_r'))``
+(:func:`projected_bound`). The computed innovation differs from ``nu`` by the rounding of
+``C_r x_hat`` and of the subtraction, at most ``gamma(n + 1) (||C_r||_F ||x_hat|| + ||y||)``
+(Higham, Accuracy and Stability of Numerical Algorithms, eq. 3.11); the test adds that
+allowance, and takes ``||C_r||_2`` from the SVD enlarged by :data:`NORM_SLACK` (the SVD's
+relative error is a few ``n u``), so a model that holds never fails it.
+
+A sample that fails it is therefore a *proof* that the model is broken for that sample: the
+sample was attributed to the wrong channel, is in the wrong frame, comes from a faulty sensor,
+or the bodies do not move as ``A`` says (a manoeuvre, a collision), or the noise exceeds the
+declared bound. Nothing can then be guaranteed about the estimate: the callers withdraw every
+bound they publish. When the sample is consistent with exactly one other channel, that channel
+is the only one the model allows, and the sample can be re-attributed to it
+(:func:`consistent_channels`). :class:`InnovationTest` runs the test for a system's channels
+against the observer's prior (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior`).
+
+The test is a necessary condition only: a broken model whose innovations stay inside the
+allowance goes unnoticed (the bound is then still an honest statement about everything the data
+has shown). It is as sharp as the bound: with ``b(t)`` at the rounding floor (noise-free samples
+after convergence) an error of 1e-9 of ``||x||`` is caught; right after start-up, with
+``b = e0``, only gross errors are.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..numerics.rounding import UNIT_ROUNDOFF, gamma
+
+__all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
+           "innovation_allowance", "output_rows", "projected_bound", "spectral_norm"]
+
+#: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
+#: products and sums of non-negative numbers: far below 1e-12 relative).
+_SLACK = 1e-12
+#: Relative enlargement of the computed spectral norm ``||C_r||_2`` (LAPACK's SVD is accurate to
+#: a small multiple of ``n u`` relative; 1e-10 covers n up to about 1e5).
+NORM_SLACK = 1e-10
+
+
+def spectral_norm(C_rows: np.ndarray) -> float:
+    """An upper bound on ``||C_rows||_2``: the SVD's largest singular value times ``1 + NORM_SLACK``."""
+    if C_rows.size == 0:
+        return 0.0
+    return float(np.linalg.norm(C_rows, 2)) * (1.0 + NORM_SLACK)
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """The outcome of the test for one sample and one channel.
+
+    ``innovation`` is ``||y - C_r x_hat(t)||`` as computed; ``allowance`` the largest value a
+    model that holds allows (module docstring); ``bound`` the error bound ``b(t)`` used.
+    """
+
+    channel: int
+    innovation: float
+    allowance: float
+    bound: float          # the error bound's largest axis (nan when the test passed on an ellipsoid)
+
+    @property
+    def ok(self) -> bool:
+        """True when the sample is consistent with the model (``innovation <= allowance``)."""
+        return self.innovation <= self.allowance
+
+    @property
+    def ratio(self) -> float:
+        """``innovation / allowance`` (> 1: inconsistent)."""
+        return self.innovation / self.allowance if self.allowance > 0 else math.inf
+
+    def describe(self) -> str:
+        """One line for logs and diagnostics."""
+        return (f"channel {self.channel}: innovation {self.innovation:.3g} > {self.allowance:.3g} allowed by the "
+                f"bound {self.bound:.3g} ({self.ratio:.3g}x)" if not self.ok else
+                f"channel {self.channel}: innovation {self.innovation:.3g} <= {self.allowance:.3g}")
+
+
+def projected_bound(C_rows: np.ndarray, S: np.ndarray) -> float:
+    """A rigorous bound on ``||C_r e||`` over the ellipsoid ``e in {S^(1/2) u : ||u|| <= 1}``:
+    ``sqrt(lambda_max(C_r S C_r'))`` (``p x p``, cheap), inflated for the rounding of the
+    product (``gamma(2n + 2) ||C_r||_F^2 trace S``, as :mod:`switchobs_core.numerics.rounding` step 6) and
+    of the eigenvalue solver (relative ``2 p u``). Tighter than ``||C_r||_2 sqrt(lambda_max(S))``
+    when the error's set is long in directions the rows do not see."""
+    p, n = C_rows.shape
+    if p == 0:
+        return 0.0
+    P = C_rows @ S @ C_rows.T
+    P = 0.5 * (P + P.T)
+    fC2 = float(np.sum(C_rows * C_rows))
+    tr = float(np.trace(S))
+    fP = math.sqrt(float(np.sum(P * P)))
+    lam = float(np.linalg.eigvalsh(P)[-1])
+    lam = max(lam, 0.0) + gamma(2 * n + 2) * fC2 * abs(tr) + 2 * p * UNIT_ROUNDOFF * fP
+    return math.sqrt(lam) * (1.0 + _SLACK)
+
+
+def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: float, x_hat: np.ndarray,
+                         y: np.ndarray, norm_C: float | None = None) -> float:
+    """The largest computed innovation ``||y - C_r x_hat||`` a model that holds allows.
+
+    Parameters
+    ----------
+    C_rows : (p, n) ndarray
+        The rows of ``C_c`` the sample holds.
+    bound : float or (n, n) ndarray
+        Rigorous bound ``b(t) >= ||x(t) - x_hat(t)||`` on the prior error (rounding included), or
+        the shape matrix ``S`` of an ellipsoid holding it (:func:`projected_bound`, tighter).
+    v_max : float
+        Declared bound on every noise entry, ``|v_j| <= v_max`` (0 for noise-free samples).
+    x_hat, y : ndarray
+        The prior estimate and the sample (for the rounding allowance).
+    norm_C : float, optional
+        :func:`spectral_norm` of ``C_rows`` when the caller keeps it (computed if None).
+    """
+    p, n = C_rows.shape
+    fC = math.sqrt(float(np.sum(C_rows * C_rows)))
+    n2 = spectral_norm(C_rows) if norm_C is None else norm_C
+    xn = math.sqrt(float(x_hat @ x_hat))
+    yn = math.sqrt(float(y @ y))
+    seen = projected_bound(C_rows, bound) if isinstance(bound, np.ndarray) else n2 * bound
+    allowance = seen + math.sqrt(p) * v_max + gamma(n + 1) * (fC * xn + yn)
+    return allowance * (1.0 + _SLACK)
+
+
+def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: float, x_hat: np.ndarray,
+                     y: np.ndarray, norm_C: float | None = None) -> Consistency:
+    """The test for one sample ``y`` of ``channel`` (rows ``C_rows``) against the prior ``x_hat``."""
+    nu = y - C_rows @ x_hat
+    inn = math.sqrt(float(nu @ nu))
+    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C)
+    if isinstance(bound, np.ndarray):     # the largest axis, for the report of a failure only
+        b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (bound + bound.T))[-1]), 0.0)) if inn > allow else math.nan
+    else:
+        b = float(bound)
+    return Consistency(channel, inn, allow, b)
+
+
+def consistent_channels(tests: list[Consistency]) -> list[int]:
+    """The channels whose test passed, in order."""
+    return [t.channel for t in tests if t.ok]
+
+
+def output_rows(C_c: np.ndarray, rows: Sequence[int] | None) -> np.ndarray:
+    """``C_r``: the ``rows`` (0-based; None: all) of a channel's output matrix ``C_c`` that a sample holds."""
+    return C_c if rows is None else C_c[list(rows)]
+
+
+class InnovationTest:
+    """The test for the channels of one system, against the observer's prior.
+
+    Parameters
+    ----------
+    C : sequence of (p_i, n) array_like
+        The channels' output matrices ``C_1..C_N`` (e:outputs).
+    noise_max : sequence of float, optional
+        The declared noise bound per channel (:attr:`SwitchedObserver.noise_max
+        <switchobs_core.runtime.observer.SwitchedObserver>`); None: noise-free samples, tested against
+        the exact bound.
+
+    ``C_r`` and its :func:`spectral_norm` are kept per ``(channel, rows)``.
+    """
+
+    def __init__(self, C: Sequence[np.ndarray], noise_max: Sequence[float] | None = None):
+        self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
+        self.noise_max = None if noise_max is None else tuple(noise_max)
+        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float]] = {}
+
+    def check(self, prior: tuple, channel: int, rows: Sequence[int] | None, y: np.ndarray) -> Consistency:
+        """The test of the sample ``y`` of ``channel`` (``rows`` of its output, 0-based; None:
+        all) against ``prior = (x_hat, exact, noise)`` as
+        :meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior` gives it at the sample's time:
+        the exact bound's set for noise-free samples, the noise bound's with ``noise_max``."""
+        x_hat, exact, noise = prior
+        key = (channel, None if rows is None else tuple(rows))
+        if key not in self._rows:
+            C_r = output_rows(self.C[channel - 1], rows)
+            self._rows[key] = (C_r, spectral_norm(C_r))
+        C_r, norm_C = self._rows[key]
+        if self.noise_max is None:
+            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C)
+        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C)

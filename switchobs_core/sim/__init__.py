@@ -1,0 +1,1 @@
+"""Simulation: the exact plant, the simulation driving the run-time observer, the paper's figures."""

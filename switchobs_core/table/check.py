@@ -1,0 +1,112 @@
+"""Re-verification of a loaded gain table before an observer answers with it.
+
+A table's checksum (``payload_sha256``) catches corruption, not tampering: anyone who can write
+the file can recompute it. So every table the estimator loads, from a file or from its cache,
+has its designs re-checked here, cheaply (a few matrix exponentials per design), from the gains
+themselves and the system, never from the numbers the file claims about them:
+
+* every gain is finite and of the right shape (``L_i``: n x p_i; a Kalman gain: n x rows);
+* LMI designs of a cycle: the exact error map over the cycle,
+  ``Phi = expm((A - L_N C_N) h_N) ... expm((A - L_1 C_1) h_1)``
+  (:func:`~switchobs_core.certificate.cycle_transition`), has spectral radius < 1, i.e. the
+  periodic schedule of that cycle converges; a robust design is checked on the cycle at the
+  centre of its residence-time box;
+* Kalman designs: the period's error map ``prod_k (I - K_k H_k) Phi_k`` recomputed from the stored
+  gains has spectral radius < 1.
+
+A table whose gains were all set to zero (and its checksum recomputed) runs the observer open
+loop: for a system with an unstable mode its cycle map has spectral radius >= 1 and it is
+refused. (For a stable ``A`` zero gains still converge, slowly: no check can tell them from a
+poor design.)
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.linalg import expm
+
+from ..certificate import cycle_transition
+from ..certificate.paper import design_dead_time
+from ..design.kalman import KalmanDesign
+from ..exceptions import GainTableError, SwitchobsError
+from ..model.schedule import Cycle
+
+if TYPE_CHECKING:
+    from ..model.system import LTISystem
+    from .gains import CycleDesign, GainTable
+
+__all__ = ["RHO_MAX", "verify_table"]
+
+#: A design is refused when its cycle map's spectral radius is not below this.
+RHO_MAX = 1.0
+
+
+def verify_table(table: GainTable, system: LTISystem, *, source: str = "gain table") -> None:
+    """Raise :class:`~switchobs_core.exceptions.GainTableError` (one line, naming the design) unless
+    every design of ``table`` passes the checks of the module docstring for ``system``."""
+    if table.family == "kalman":
+        for d in table.kalman:
+            _verify_kalman(d, system, source)
+        return
+    designs = list(table.designs) + ([table.robust] if table.robust is not None else [])
+    for design in designs:
+        _verify_lmi(design, system, source)
+
+
+def _shapes(L: np.ndarray, rows: int, cols: int, what: str, source: str) -> None:
+    if L.shape != (rows, cols):
+        raise GainTableError(f"{source}: {what} has shape {L.shape}; expected ({rows}, {cols})")
+    if not np.isfinite(L).all():
+        raise GainTableError(f"{source}: {what} has a non-finite entry")
+
+
+def _verify_lmi(design: CycleDesign, system: LTISystem, source: str) -> None:
+    label = design.label()
+    if design.N != system.N:
+        raise GainTableError(f"{source}: design {label} has {design.N} channels; the system has {system.N}")
+    for i, L in enumerate(design.L):
+        _shapes(np.asarray(L), system.n, system.p[i], f"design {label}, gain L_{i + 1}", source)
+    if design.cycle is not None:
+        h = design.cycle.h
+    elif design.h_bounds is not None:
+        h = (0.5 * (design.h_bounds[0] + design.h_bounds[1]),) * system.N
+    else:
+        return
+    try:
+        with np.errstate(all="ignore"):
+            Phi = cycle_transition(system.A, system.C, design.L, h, design_dead_time(design))
+            rho = float(np.max(np.abs(np.linalg.eigvals(Phi))))
+    except (SwitchobsError, ValueError, np.linalg.LinAlgError) as err:
+        raise GainTableError(f"{source}: design {label}: its cycle map cannot be computed ({err})") from None
+    _check_rho(rho, f"design {label}: the error map over the cycle {Cycle(h).label()}", source)
+
+
+def _verify_kalman(d: dict, system: LTISystem, source: str) -> None:
+    try:
+        kd = KalmanDesign.from_dict(d, system)
+    except SwitchobsError as err:
+        raise GainTableError(f"{source}: stored Kalman design unusable: {err}") from None
+    A = np.asarray(system.A, dtype=float)
+    n = system.n
+    M = np.eye(n)
+    steps: dict[float, np.ndarray] = {}
+    with np.errstate(all="ignore"):
+        for k, ph in enumerate(kd.periodic):
+            C = np.asarray(system.C[ph.channel - 1], dtype=float)
+            H = C if ph.rows is None else C[list(ph.rows)]
+            K = np.asarray(ph.K, dtype=float)
+            _shapes(K, n, H.shape[0], f"Kalman design {kd.rate:g} Hz, gain of sample {k}", source)
+            Phi = steps.get(ph.dt)
+            if Phi is None:
+                Phi = steps[ph.dt] = expm(A * ph.dt)
+            M = (np.eye(n) - K @ H) @ Phi @ M
+        rho = float(np.max(np.abs(np.linalg.eigvals(M)))) if np.isfinite(M).all() else float("inf")
+    _check_rho(rho, f"Kalman design at {kd.rate:g} Hz: the error map over one period", source)
+
+
+def _check_rho(rho: float, what: str, source: str) -> None:
+    if not rho < RHO_MAX:
+        raise GainTableError(f"{source}: {what} has spectral radius {rho:.4g} >= {RHO_MAX:g}: these gains do not "
+                             "make the error converge (a planted or damaged table?); design it again")

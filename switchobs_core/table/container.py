@@ -1,0 +1,305 @@
+"""The binary gain-table container: a ``.npz`` file holding the JSON header and the Kalman arrays.
+
+A gain table (:mod:`switchobs_core.table.gains`) is written as JSON text, or, when its file name ends in ``.npz``, as
+an uncompressed numpy ``.npz`` archive (``format_version = 3``) with the members
+
+* ``header``: the UTF-8 JSON of the table's payload (the JSON format's keys, the same format
+  name and checks), in which the large matrices of every Kalman design are replaced by
+  references ``{"$array": name}``;
+* per Kalman design ``i`` and segment ``s`` (``periodic``, ``startup``): ``k{i}_{s}_P``, the prior
+  covariances ``P^-`` of the S phases as the packed upper triangles (S x n(n+1)/2; a stored
+  prior is exactly symmetric, so nothing is lost), ``k{i}_{s}_K``, the gains ``K`` of all phases
+  flattened (row-major) one after the other, their column counts listed in the header
+  (``K_cols``); and ``k{i}_E``, the period's error transition (n x n).
+
+All arrays are float64, little-endian. The header's ``payload_sha256`` is the SHA-256 of the
+canonical JSON of the header without it, followed by every array (name, dtype, shape, bytes, in
+name order): an edited or truncated file is refused in one line, as a JSON table is. Floats are
+stored as their 8 bytes, so a table round-trips bit for bit.
+
+Size limit. Before reading an array, the file's size is checked against
+:func:`size_limit`: ``MAX_FILE_BYTES`` (16 MiB, for the header and the LMI part) plus, per
+stored phase, ``8 (n (n + 1) / 2 + n p_max)`` bytes (its packed prior and gain), plus
+``8 n^2`` per design, at most ``MAX_BINARY_BYTES`` (4 GiB) in all. For ``camera_agents`` with M
+agents (n = 4 (M + 1), p = 4) that is about 4 n^2 = 64 (M + 1)^2 bytes per phase: 74 KiB per
+phase at M = 32, 5.9 KiB at M = 8.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import stat
+import struct
+import zipfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from ..exceptions import GainTableError
+from ..loading import MAX_FILE_BYTES, parse_json
+
+__all__ = ["MAGIC", "BINARY_VERSION", "MAX_BINARY_BYTES", "is_binary", "size_limit", "encode", "decode", "jsonable",
+           "packed_size", "unpack_symmetric", "PackedRows"]
+
+#: The first bytes of a zip archive (an ``.npz`` file).
+MAGIC = b"PK\x03\x04"
+#: ``format_version`` of the binary container.
+BINARY_VERSION = 3
+#: Largest binary table read (bytes), whatever its header says.
+MAX_BINARY_BYTES = 4 * 1024 ** 3
+_SEGMENTS = ("periodic", "startup")
+
+
+class PackedRows(Sequence):
+    """The priors of a segment as read: a sequence of packed upper triangles (rows of one array),
+    which a JSON table writes as full matrices again."""
+
+    def __init__(self, packed: np.ndarray, n: int) -> None:
+        self.packed, self.n = packed, n
+
+    def __len__(self) -> int:
+        return self.packed.shape[0]
+
+    def __getitem__(self, k):  # type: ignore[override]
+        return self.packed[k]
+
+
+def jsonable(obj: Any) -> Any:
+    """``json.dumps`` hook: an array as nested lists (the same doubles); packed priors unpacked."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, PackedRows):
+        return [unpack_symmetric(row, obj.n).tolist() for row in obj.packed]
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def is_binary(path: str | Path) -> bool:
+    """Whether ``path`` is a regular file that starts like a zip archive (the binary container);
+    anything else (a FIFO or device too: never opened here) is left to the text reader's checks."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return False
+        with open(path, "rb") as fh:
+            return fh.read(4) == MAGIC
+    except OSError:
+        return False
+
+
+def size_limit(n: int, p_max: int, phases: int, designs: int) -> int:
+    """Largest file size (bytes) of a binary table with ``phases`` stored phases (module docstring)."""
+    per_phase = 8 * (n * (n + 1) // 2 + n * p_max)
+    return min(MAX_BINARY_BYTES, MAX_FILE_BYTES + phases * per_phase + designs * 8 * n * n)
+
+
+def packed_size(m: int) -> int:
+    """``n`` of a packed upper triangle of ``m = n (n + 1) / 2`` entries (ValueError otherwise)."""
+    n = int((np.sqrt(8 * m + 1) - 1) / 2 + 0.5)
+    if n * (n + 1) // 2 != m:
+        raise ValueError(f"{m} entries are not the upper triangle of a square matrix")
+    return n
+
+
+def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
+    """The symmetric (n, n) matrix of a packed upper triangle (row-major, ``np.triu_indices`` order)."""
+    P = np.empty((n, n))
+    iu = np.triu_indices(n)
+    P[iu] = packed
+    P.T[iu] = packed
+    return P
+
+
+def _digest(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False).encode())
+    for name in sorted(arrays):
+        a = arrays[name]
+        h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
+        h.update(np.ascontiguousarray(a).data)
+    return h.hexdigest()
+
+
+def encode(payload: dict[str, Any], fh: BinaryIO) -> None:
+    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring); ``payload`` is
+    not modified."""
+    header = dict(payload, format_version=BINARY_VERSION, container="npz")
+    arrays: dict[str, np.ndarray] = {}
+    n = int(payload["system"]["n"])
+    iu = np.triu_indices(n)
+    kalman = []
+    for i, d in enumerate(payload.get("kalman", [])):
+        d = dict(d)
+        for seg in _SEGMENTS:
+            ph = dict(d[seg])
+            Ps = ph.pop("P_prior")
+            Ks = [np.asarray(K, dtype=float).reshape(n, -1) for K in ph.pop("K")]
+            if isinstance(Ps, PackedRows):
+                packed = Ps.packed
+            else:
+                packed = np.empty((len(Ps), iu[0].size))
+                for k, P in enumerate(Ps):
+                    packed[k] = np.asarray(P, dtype=float)[iu]
+            arrays[f"k{i}_{seg}_P"] = packed
+            arrays[f"k{i}_{seg}_K"] = np.concatenate([K.ravel() for K in Ks]) if Ks else np.zeros(0)
+            ph.update(P_prior={"$array": f"k{i}_{seg}_P"}, K={"$array": f"k{i}_{seg}_K"},
+                      K_cols=[int(K.shape[1]) for K in Ks])
+            d[seg] = ph
+        arrays[f"k{i}_E"] = np.asarray(d.pop("error_transition"), dtype=float)
+        d["error_transition"] = {"$array": f"k{i}_E"}
+        kalman.append(d)
+    header["kalman"] = kalman
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise GainTableError(f"gain table: non-finite number in {name}")
+    header["payload_sha256"] = _digest(header, arrays)
+    text = json.dumps(header, sort_keys=True, allow_nan=False).encode()
+    np.savez(fh, header=np.frombuffer(text, dtype=np.uint8), **arrays)
+
+
+def _refused(source: str, why: str) -> GainTableError:
+    return GainTableError(f"{source}: not a complete binary gain table ({why}); the file may be truncated or "
+                          "edited: design it again")
+
+
+def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
+    """The checked payload of a binary table (the JSON format's dict, with arrays where it has
+    matrices: the priors as packed upper triangles, the gains, the error transition).
+
+    Raises
+    ------
+    GainTableError
+        Not a complete archive, a header or array that is not the one written, a file larger
+        than :func:`size_limit` allows, or a checksum mismatch (one line each).
+    """
+    source = str(path) if source is None else source
+    try:
+        size = os.stat(path).st_size
+        if size > MAX_BINARY_BYTES:
+            raise GainTableError(f"gain table {source} is {size / 2**20:.1f} MiB, larger than "
+                                 f"{MAX_BINARY_BYTES / 2**20:.0f} MiB, the limit for any binary table")
+        zf = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as err:
+        raise _refused(source, str(err) or type(err).__name__) from None
+    with zf:
+        try:
+            info = {i.filename: i for i in zf.infolist()}
+            hi = info.get("header.npy")
+            if hi is None or hi.file_size > MAX_FILE_BYTES:
+                raise _refused(source, "header missing or too large")
+            raw = np.load(io.BytesIO(zf.read(hi)), allow_pickle=False)
+            text = raw.tobytes().decode("utf-8")
+        except GainTableError:
+            raise
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError, UnicodeDecodeError) as err:
+            raise _refused(source, f"header: {err}") from None
+        header = parse_json(text, exc=GainTableError, source=source)
+        if not isinstance(header, dict) or header.get("format_version") != BINARY_VERSION:
+            raise _refused(source, f"format version {header.get('format_version')!r} in a binary container"
+                           if isinstance(header, dict) else "header is not an object")
+        refs = _array_refs(header, source)
+        n, p_max, phases = refs["n"], refs["p_max"], refs["phases"]
+        limit = size_limit(n, p_max, phases, len(header.get("kalman", [])))
+        if size > limit:
+            raise GainTableError(f"gain table {source} is {size / 2**20:.1f} MiB, larger than {limit / 2**20:.1f} MiB, "
+                                 f"the limit for a table of n = {n} states and {phases} stored phases")
+        arrays: dict[str, np.ndarray] = {}
+        for name, shape in refs["shapes"].items():
+            zi = info.get(f"{name}.npy")
+            want = 8 * int(np.prod(shape))
+            if zi is None or zi.file_size > want + 4096:
+                raise _refused(source, f"array {name} missing or larger than its {want} bytes")
+            try:
+                a = _read_member(zf, zi)
+            except (zipfile.BadZipFile, OSError, ValueError, EOFError, struct.error) as err:
+                raise _refused(source, f"array {name}: {err}") from None
+            if a.dtype != np.dtype("<f8") or a.shape != shape:
+                raise _refused(source, f"array {name} is {a.dtype} {a.shape}, not float64 {shape}")
+            arrays[name] = a
+    digest = header.pop("payload_sha256", None)
+    if digest is None:
+        raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written by "
+                             "switchobs or was edited; design it again")
+    if digest != _digest(header, arrays):
+        raise GainTableError(f"{source}: checksum mismatch: the file was modified or corrupted after it was written")
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise GainTableError(f"{source}: non-finite number in {name}")
+    return _inflate(header, arrays, n)
+
+
+def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
+    """The array of one ``.npy`` member: read in place with one ``fromfile`` when it is stored
+    uncompressed (what :func:`encode` writes; integrity is the SHA-256's job), else through zipfile."""
+    if zi.compress_type != zipfile.ZIP_STORED or zf.fp is None:
+        return np.lib.format.read_array(zf.open(zi), allow_pickle=False)
+    fh = zf.fp
+    fh.seek(zi.header_offset)
+    head = fh.read(30)
+    if len(head) != 30 or head[:4] != b"PK\x03\x04":
+        raise ValueError("bad local header")
+    name_len, extra_len = struct.unpack("<HH", head[26:30])
+    start = zi.header_offset + 30 + name_len + extra_len
+    fh.seek(start)
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+    else:
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+    count = int(np.prod(shape))
+    if dtype.hasobject or fortran or fh.tell() + count * dtype.itemsize > start + zi.file_size:
+        raise ValueError("array header does not fit the member")
+    a = np.fromfile(fh, dtype=dtype, count=count)
+    if a.size != count:
+        raise ValueError("member shorter than its header says")
+    return a.reshape(shape)
+
+
+def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
+    """Sizes the header declares: n, largest p, stored phases and every array's shape."""
+    try:
+        n = int(header["system"]["n"])
+        p_max = max(int(v) for v in header["system"]["p"])
+        if not (1 <= n <= 100_000 and 1 <= p_max <= 100_000):
+            raise ValueError("n or p out of range")
+        shapes: dict[str, tuple[int, ...]] = {}
+        phases = 0
+        for i, d in enumerate(header.get("kalman", [])):
+            for seg in _SEGMENTS:
+                ph = d[seg]
+                S = len(ph["channel"])
+                cols = [int(c) for c in ph["K_cols"]]
+                if len(cols) != S or any(c < 0 or c > p_max for c in cols):
+                    raise ValueError(f"kalman[{i}].{seg}.K_cols")
+                phases += S
+                shapes[f"k{i}_{seg}_P"] = (S, n * (n + 1) // 2)
+                shapes[f"k{i}_{seg}_K"] = (n * sum(cols),)
+            shapes[f"k{i}_E"] = (n, n)
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise _refused(source, f"header: bad or missing {err}") from None
+    return {"n": n, "p_max": p_max, "phases": phases, "shapes": shapes}
+
+
+def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> dict[str, Any]:
+    """The payload with the references replaced by the matrices (priors as packed rows, gains split)."""
+    payload = dict(header, format_version=2)
+    payload.pop("container", None)
+    kalman = []
+    for i, d in enumerate(header.get("kalman", [])):
+        d = dict(d)
+        for seg in _SEGMENTS:
+            ph = dict(d[seg])
+            packed = arrays[f"k{i}_{seg}_P"]      # rows stay packed: KalmanPhase unpacks on use
+            flat = arrays[f"k{i}_{seg}_K"]
+            Ks, off = [], 0
+            for c in ph.pop("K_cols"):
+                Ks.append(flat[off:off + n * c].reshape(n, c))
+                off += n * c
+            ph.update(P_prior=PackedRows(packed, n), K=Ks)
+            d[seg] = ph
+        d["error_transition"] = arrays[f"k{i}_E"]
+        kalman.append(d)
+    payload["kalman"] = kalman
+    return payload
