@@ -2,7 +2,7 @@
 every message) over the same recorded stream, side by side in one process, interleaved rounds,
 CPU time, medians:
 
-* ``arrival``: no source timestamps (arrival order decides the channel, as before issue 19);
+* ``arrival``: no source timestamps (arrival order decides the channel);
 * ``source``: source timestamps and the 50 ms reorder window (the live node's path);
 * ``source+check``: the same with the innovation consistency test on every sample
   (``consistency.check: always``).

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Performance benchmark of the offline gain design (issue 2, section "Performance").
+"""Performance benchmark of the offline gain design.
 
     python bench/bench_design.py            # full run (~3-6 min on the 2-core box)
     python bench/bench_design.py --quick    # ~1 min smoke version (fewer runs/points)
@@ -475,7 +475,7 @@ def fit_exponent(x, y) -> float:
 # ----------------------------------------------------------------------------- report
 def report(info, e2e, mp, sc, args, wall) -> str:
     L = []
-    L.append("# Benchmark: offline gain design (issue 2, Performance)\n")
+    L.append("# Benchmark: offline gain design\n")
     L.append(
         f"`{' '.join(['python', 'bench/bench_design.py'] + (['--quick'] if args.quick else []))}`"
         f" -- {'QUICK' if args.quick else 'full'} run, total wall time {wall:.0f} s.\n"

@@ -91,7 +91,7 @@ def republisher_main() -> None:
 
 
 def lean_estimator_main(args: list[str]) -> None:
-    """The estimator node spun by a lean loop instead of ``rclpy.spin`` (an experiment for issue 13,
+    """The estimator node spun by a lean loop instead of ``rclpy.spin`` (an experiment on the executor's cost,
     the shipped node keeps ``switchobs_ros.runner``): one wait set holding only the three input
     subscriptions and the executor's SIGINT guard, built once and waited on again and again;
     what it finds is handled by the node's own :meth:`_drain_inputs`; the executor's full

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark of ``switchobs plan`` (issue 14): the schedule optimiser on the paper's model.
+"""Benchmark of ``switchobs plan``: the schedule optimiser on the paper's model.
 
     python bench/bench_plan.py            # 3 runs each, prints a markdown section
 
@@ -75,7 +75,7 @@ def main() -> int:
     paper = [(tau, s, cycle_cost(J, Cycle.from_ts(tau, s))) for (tau, s), _, _ in TABLE]
     commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()
-    print("## Schedule planning (issue 14): `bench/bench_plan.py`")
+    print("## Schedule planning: `bench/bench_plan.py`")
     print()
     print(f"{time.strftime('%Y-%m-%d %H:%M')} UTC, nproc {os.cpu_count()}, Python {platform.python_version()}, "
           f"commit {commit}; load {load0[0]:.2f} at start, {os.getloadavg()[0]:.2f} at end.")

@@ -1,10 +1,10 @@
 #!/usr/bin/env python
-"""Scaling benchmark of the offline side (issue 21): one camera and M agents, M = 2 ... 32.
+"""Scaling benchmark of the offline side: one camera and M agents, M = 2 ... 32.
 
     python bench/bench_scale.py                 # M = 2, 4, 8, 16, 32, both families, plans
     python bench/bench_scale.py --agents 2 4    # a subset
     python bench/bench_scale.py --out FILE      # also write the markdown section to FILE
-    python bench/bench_scale.py --cost          # only the online cost per sample (issue 20)
+    python bench/bench_scale.py --cost          # only the online cost per sample
 
 What is measured (``camera_agents`` with M agents, n = 4 (M + 1), every h_i = 1 s; one run each,
 as subprocesses, so that every number includes nothing of the others):
@@ -20,7 +20,7 @@ as subprocesses, so that every number includes nothing of the others):
    planned cycle): wall and CPU of the whole command, and of the search alone
    (``plan_schedule``, timed after the imports in a fresh interpreter).
 
-4. ``--cost`` (issue 20): the online cost per sample, in this process, of ``camera_agents`` with
+4. ``--cost``: the online cost per sample, in this process, of ``camera_agents`` with
    M = 2, 8, 16, 32 (n = 12, 36, 68, 132), periodic cycle (every h_i = 1 s), 50 Hz, noisy samples
    (1 mm) of the noise-free plant (the design's memory budget is lifted for M = 32:
    :func:`_lift_design_budget`). Estimators, interleaved in blocks of ``--block`` samples (the
@@ -33,11 +33,11 @@ as subprocesses, so that every number includes nothing of the others):
    here (:class:`ReferenceKF`: numpy, discretisation cached, Joseph update); filterpy's
    ``KalmanFilter`` if it is installed (it is not a dependency); and the bare floor
    ``x = F x + K (y - H x)`` with precomputed gains. Then the growth exponent of each (least
-   squares of log cost on log n) and issue 20's goals at n = 132 as ratios.
+   squares of log cost on log n) and the cost goals at n = 132 as ratios.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
-asserted. Goals (issue 21): Kalman design at M = 32 under 60 s wall and 2 GiB; LMI design at M = 32
+asserted. Goals: Kalman design at M = 32 under 60 s wall and 2 GiB; LMI design at M = 32
 under 30 s; every table loads in under 1 s; plan under 3 s (paper) and 10 s (M = 4).
 """
 
@@ -180,7 +180,7 @@ class ReferenceKF:
 
 def _lift_design_budget(budget: int = 4 << 30) -> None:
     """Let the Kalman design take up to ``budget`` bytes: at M = 32, h_i = 1 s, 50 Hz it estimates
-    1.05 GiB and ``switchobs_core.ranges``' default budget (1 GiB) refuses it (issue 21 measured a
+    1.05 GiB and ``switchobs_core.ranges``' default budget (1 GiB) refuses it (measured: a
     973 MiB peak for the same design)."""
     import functools
 
@@ -292,7 +292,7 @@ def bench_cost(M: int, samples: int, block: int, h: float = 1.0) -> dict:
 
 
 def cost_report(rows: list[dict], label: str) -> str:
-    """The markdown of ``--cost``: medians per n, growth exponents, issue 20's goals at the largest n."""
+    """The markdown of ``--cost``: medians per n, growth exponents, the cost goals at the largest n."""
     names = list(rows[0]["median_us"])
     ns = [r["n"] for r in rows]
     lines = [f"| estimator (us per sample, median) | {' | '.join(f'n = {n}' for n in ns)} | exponent p |",
@@ -312,7 +312,7 @@ def cost_report(rows: list[dict], label: str) -> str:
          last["kalman table, rounding_bound=False"] / last["bare floor x = F x + K (y - H x)"], 3.0),
         ("kalman-online <= 1.5x the reference", last["kalman-online, exact bound"] / ref, 1.5),
     ]
-    lines += ["", f"| goal at n = {ns[-1]} (issue 20) | ratio ({label}) | status |", "|---|---|---|"]
+    lines += ["", f"| goal at n = {ns[-1]} | ratio ({label}) | status |", "|---|---|---|"]
     lines += [f"| {g} | {r:.2f} | {'met' if r <= lim else '**not met**'} |" for g, r, lim in goals]
     lines.append(f"| (table + envelope(amortised=False) / reference) | "
                  f"{last['kalman table + envelope(amortised=False)'] / ref:.2f} | - |")
@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
         plans = [] if a.no_plan else [(w, bench_plan(tmp, w)) for w in ("paper", "4")]
     load1 = os.getloadavg()
     lines = [
-        f"### Scaling with the number of agents (issue 21), {_dt.date.today().isoformat()}",
+        f"### Scaling with the number of agents, {_dt.date.today().isoformat()}",
         "",
         f"Machine: {_machine()}; commit {commit}; load average {load0[0]:.1f} before, {load1[0]:.1f} after "
         "(a shared machine: wall times carry the other users' load, CPU times do not).",

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # All tests: ruff check, then pytest. Arguments go to pytest: with none naming a test path
 # (a file, a folder or a node id such as test/ros/test_x.py::test_y) pytest runs all of test/
-# (core and ros); with one or more it runs just those (`scripts/test.sh test/core/test_plan.py`).
+# (core and ros); with one or more it runs just those (`scripts/test.sh test/core/design/test_plan.py`).
 # `scripts/test.sh -m "not slow"` skips the DDS convergence runs and the colcon build.
 # The ROS tests claim their own ROS_DOMAIN_ID (each pytest-xdist worker one of its own).
 # The full run uses two pytest-xdist workers (SWITCHOBS_TEST_WORKERS, default 2; 1 = no xdist); a run

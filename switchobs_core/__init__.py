@@ -14,9 +14,10 @@ The public API of every library module is re-exported here (python-control style
     obs = so.SwitchedObserver(system, table)
 
 The paper's transcribed numbers stay in :mod:`switchobs_core.paper`; the figure writers
-(:mod:`switchobs_core.sim.figures`, :mod:`switchobs_core.sim.errorfigs`) and the command line
-(:mod:`switchobs_core.cli`) are imported on their own. Importing this package does not import
-cvxpy (only a design or a Lyapunov/box certificate solve does).
+(:mod:`switchobs_core.sim.figures`, :mod:`switchobs_core.sim.errorfigs`), the simulator's
+continuous-output step (:mod:`switchobs_core.sim.continuous`, behind ``simulate``) and the
+command line (:mod:`switchobs_core.cli`) are imported on their own. Importing this package does not
+import cvxpy (only a design or a Lyapunov/box certificate solve does).
 """
 
 import sys as _sys
@@ -55,7 +56,8 @@ from .model.noise import *  # noqa: F403
 from .model.scenarios import *  # noqa: F403
 from .model.schedule import *  # noqa: F403
 from .model.system import *  # noqa: F403
-from .numerics import propagation
+from .numerics import kalman_step, propagation
+from .numerics.kalman_step import *  # noqa: F403
 from .numerics.propagation import *  # noqa: F403
 from .runtime import cycles, kalman_online, observer
 from .runtime.cycles import *  # noqa: F403
@@ -70,10 +72,14 @@ from .runtime.families.online import *  # noqa: F403
 from .runtime.kalman_online import *  # noqa: F403
 from .runtime.observer import *  # noqa: F403
 from .sim import plant
+from .sim import result as sim_result
 from .sim.plant import *  # noqa: F403
+from .sim.result import *  # noqa: F403
 from .sim.simulate import *  # noqa: F403
 from .table import gains
+from .table import kalman as table_kalman
 from .table.gains import *  # noqa: F403
+from .table.kalman import *  # noqa: F403
 from .threads import *  # noqa: F403
 from .validation import *  # noqa: F403
 
@@ -86,8 +92,8 @@ SUBPACKAGES = (numerics, model, bounds, certificate, table, design, runtime, sim
 
 #: Every module whose ``__all__`` is re-exported here.
 MODULES = (rigorous, envelope, _sys.modules[f"{__name__}.certificate"], cycles, decomposition, lmi, exceptions,
-           families, family_base, family_kalman, family_lmi, family_online, gains, kalman, kalman_online, noise,
-           observer, plan, plant, propagation, riccati, scenarios, schedule, simulate, synthesis, system, threads,
-           validation)
+           families, family_base, family_kalman, family_lmi, family_online, gains, kalman, kalman_online, kalman_step,
+           noise, observer, plan, plant, propagation, riccati, scenarios, schedule, sim_result, simulate, synthesis,
+           system, table_kalman, threads, validation)
 
 __all__ = ["__version__", *(name for m in MODULES for name in m.__all__ if name not in ("simulate",))]

@@ -13,9 +13,13 @@ __all__ = [
     "InvalidArgument",
     "InvalidSystem",
     "UnobservableSystem",
+    "NoiseModelError",
     "DesignError",
     "InfeasibleDesign",
     "VerificationError",
+    "KalmanDesignError",
+    "UndetectableSchedule",
+    "RiccatiError",
     "GainTableError",
     "ScheduleError",
 ]
@@ -37,6 +41,10 @@ class UnobservableSystem(InvalidSystem):
     """Assumption A1 fails: (A, [C_1; ...; C_N]) is not observable."""
 
 
+class NoiseModelError(InvalidArgument):
+    """A noise model (measurement std, process intensity, P0) is malformed."""
+
+
 class DesignError(SwitchobsError, RuntimeError):
     """The offline gain design could not be carried out."""
 
@@ -47,6 +55,18 @@ class InfeasibleDesign(DesignError):
 
 class VerificationError(DesignError):
     """A synthesized gain failed its a-posteriori floating-point verification."""
+
+
+class KalmanDesignError(DesignError):
+    """The offline Kalman design could not be carried out (sample pattern, convergence)."""
+
+
+class UndetectableSchedule(KalmanDesignError):
+    """The sampled periodic pair is not detectable: some unstable mode is never seen."""
+
+
+class RiccatiError(DesignError):
+    """The periodic Riccati recursion did not converge, or a covariance became invalid."""
 
 
 class GainTableError(SwitchobsError, ValueError):

@@ -37,7 +37,7 @@ def device(tmp_path):
 #: alone at the end. Only an order: a test missing here just runs in its place.
 LONG_FIRST = (
     "test/ros/test_bound_long_bag.py::test_ten_minutes_published_exact_bound_never_below_the_error",
-    "test/core/test_table_exact_cache.py::test_monte_carlo_every_disturbance",
+    "test/core/runtime/test_kalman_table_cache.py::test_monte_carlo_every_disturbance",
     "test/ros/test_fail_node.py::test_random_stream_over_dds_node_stays_up_every_valid_answered",
     "test/ros/test_fail_inputs.py::test_fuzz_100k_messages_every_valid_one_answered",
     "test/ros/test_typed_msgs.py::test_colcon_builds_the_package_in_a_workspace",
@@ -46,18 +46,18 @@ LONG_FIRST = (
     "test/ros/test_bound_long_bag.py::test_declared_noise_bound",
     "test/ros/test_dds_convergence.py::test_converges_over_dds",
     "test/ros/test_bag_live.py::test_looped_live_replay_sqlite",
-    "test/core/test_simulate.py::test_ten_minutes_without_a_violation",
+    "test/core/sim/test_simulate.py::test_ten_minutes_without_a_violation",
     "test/ros/test_tutorial_clone.py::test_own_system_tutorial_from_a_fresh_clone",
     "test/ros/test_consistency.py",
-    "test/core/test_bound_audit.py::test_bounds_never_below_the_error",
-    "test/core/test_observer.py::test_innovation_hold_exact_bound_is_exact_for_samples",
+    "test/core/bounds/test_audit.py::test_bounds_never_below_the_error",
+    "test/core/runtime/test_observer.py::test_innovation_hold_exact_bound_is_exact_for_samples",
     "test/ros/test_fail_faults.py",
     "test/ros/test_bag_live.py",
-    "test/ros/test_round2_tools.py",
+    "test/ros/test_refusals_tools.py",
     "test/ros/test_docs.py",
     "test/ros/test_clock_jump.py",
     "test/ros/test_tool_inputs.py",
-    "test/core/test_design_conditioning.py",
+    "test/core/design/test_conditioning.py",
     "test/ros/test_startup_failures.py",
 )
 

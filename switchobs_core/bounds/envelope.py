@@ -59,6 +59,7 @@ from ..validation import as_finite, as_matrix, as_vector
 __all__ = [
     "Envelope",
     "Segment",
+    "schedule_segments",
     "alpha",
     "EnvelopeTracker",
     "envelope_z",
@@ -133,6 +134,31 @@ class Segment:
     def starts_residence(self) -> bool:
         """Whether ``t0`` is a switching instant (not the end of a dead time)."""
         return self.part != "seeing"
+
+
+def schedule_segments(schedule: Any, designs: Sequence[Any], t_end: float) -> list[Segment]:
+    """The active intervals of ``schedule`` on ``[t0, t_end)``; cycle k uses ``designs[k % K]``."""
+    t_end = as_finite(t_end, "t_end")
+    designs = list(designs)
+    if not designs:
+        raise InvalidArgument("designs: need at least one design")
+    segs: list[Segment] = []
+    t, k = float(schedule.t0), 0
+    while t < t_end:
+        c = schedule.cycle(k)
+        d = designs[k % len(designs)]
+        dead = c.dead_time
+        for i, h in enumerate(c.h):
+            if t >= t_end:
+                break
+            if dead:        # the blind interval after the switch (L = 0), then the rest
+                segs.append(Segment(t, t + dead, i + 1, d, "blind"))
+                segs.append(Segment(t + dead, t + h, i + 1, d, "seeing"))
+            else:
+                segs.append(Segment(t, t + h, i + 1, d))
+            t += h
+        k += 1
+    return segs
 
 
 def alpha(T_o: Sequence[np.ndarray]) -> float:

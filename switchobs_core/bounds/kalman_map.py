@@ -56,7 +56,7 @@ import numpy as np
 from scipy.linalg.blas import dgemm as _dgemm
 from scipy.sparse import csr_array
 
-from ..numerics.rounding import _fro, gamma
+from ..numerics.rounding import fro_norm, gamma
 
 try:        # scipy's kernel behind ``csr_array @ dense`` (the same loop, without 30 us of checks)
     from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
@@ -176,14 +176,14 @@ class KalmanMap:
     def fK(self) -> float:
         """``||K||_F`` (for the bound only: computed at its first read)."""
         if self._fK is None:
-            self._fK = _fro(self.K)
+            self._fK = fro_norm(self.K)
         return self._fK
 
     @property
     def fH(self) -> float:
         """``||H||_F`` (computed at its first read)."""
         if self._fH is None:
-            self._fH = _fro(self.H)
+            self._fH = fro_norm(self.H)
         return self._fH
 
     @property

@@ -33,7 +33,7 @@ The anchor's ``lam_a``:
   (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`, its model of the solver's error
   ``2 n u ||S_a||_F``, plus ``16 u ||S_a||_F`` for the rounding of ``sym S_a`` itself and a
   margin on that model, :data:`_SOLVER_MARGIN`; the solver's error is a model, checked against
-  extended precision in test_bound_read.py);
+  extended precision in test_read.py);
 * from :data:`CHOLESKY_MIN_N` states on, a *verified* candidate (ten times cheaper than the
   eigenvalue problem at n = 132, and no model of a solver): ``T = fl(sym S_a)`` is exactly
   symmetric with ``||T - sym S_a||_2 <= u ||S_a||_F``; power iterations from the last leading
@@ -64,7 +64,7 @@ import numpy as np
 from scipy.linalg.blas import daxpy as _daxpy
 from scipy.linalg.lapack import dpotrf
 
-from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, _fro, gamma
+from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 
 __all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "verified_lambda_max"]
 
@@ -75,7 +75,7 @@ AMORTISED_MIN_N = 40
 
 #: Extra allowance on the anchor's eigenvalue problem, in units of ``u ||S||_F``: ``lam_upper``'s
 #: model (``2 n u ||S||_F``) was measured short for n = 3 (LAPACK's error 10.4 u ||S||_F against
-#: an extended-precision power iteration; test_bound_read.py), and it omits the symmetrisation.
+#: an extended-precision power iteration; test_read.py), and it omits the symmetrisation.
 _SOLVER_MARGIN = 16.0
 #: Fewest states for which the anchor is a Cholesky-verified candidate (module docstring).
 CHOLESKY_MIN_N = 40
@@ -134,7 +134,7 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
     theta, v = _leading(T, v, _POWER_STEPS)
     d = np.diagonal(T)
     dmax = float(np.abs(d).max())
-    nS = _fro(S)
+    nS = fro_norm(S)
     if not (theta > 0.0 and math.isfinite(theta) and math.isfinite(nS)):
         return None
     gn = gamma(n + 1)
@@ -190,7 +190,7 @@ class AnchoredBound:
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
                 D = _minus_scaled(S, c, self._Sa)
-                g = (_fro(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
+                g = (fro_norm(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     A = np.abs(D)
                     gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
@@ -213,7 +213,7 @@ class AnchoredBound:
             # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
             # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
             # solver's model (module docstring): 16 u ||S||_F more in all
-            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * _fro(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * fro_norm(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
             T = S + S.T
             T *= 0.5
             if np.all(np.isfinite(T)):      # the leading direction (below CHOLESKY_MIN_N: cheap)
@@ -225,7 +225,7 @@ class AnchoredBound:
         self._lam_a = lam
         self._va = self._v = v
         self._theta_a = float(v @ (S @ v))
-        self._f_a = _fro(S) * (1.0 + 2.0 * gamma(S.size + 4))
+        self._f_a = fro_norm(S) * (1.0 + 2.0 * gamma(S.size + 4))
         A = np.abs(S)
         self._g_a = float(max(A.sum(axis=1).max(), A.sum(axis=0).max())) * (1.0 + 2.0 * gamma(ell.n + 4))
         self._age = 0

@@ -17,7 +17,7 @@ from scipy.linalg import expm
 
 from ..exceptions import InvalidArgument
 from ..validation import as_matrix
-from .paper import _residences, design_dead_time, paper_factors
+from .paper import check_residences, design_dead_time, paper_factors
 
 __all__ = ["cycle_transition", "CycleCertificate", "certify_cycle"]
 
@@ -47,7 +47,7 @@ def cycle_transition(A: Any, C: Sequence[Any], L: Sequence[Any], h: Sequence[flo
     n = A.shape[0]
     if not (len(C) == len(L) == len(h)):
         raise InvalidArgument(f"C, L and h must have one entry per channel; got {len(C)}, {len(L)}, {len(h)}")
-    h = _residences(h, len(C))
+    h = check_residences(h, len(C))
     C = [as_matrix(Ci, f"C_{i + 1}", cols=n) for i, Ci in enumerate(C)]
     L = [as_matrix(Li, f"L_{i + 1}", rows=n, cols=Ci.shape[0]) for i, (Li, Ci) in enumerate(zip(L, C))]
     d = float(dead_time)
@@ -100,7 +100,7 @@ def certify_cycle(system: Any, design: Any, h: Sequence[float] | None = None) ->
         if design.cycle is None:
             raise InvalidArgument("h is required for a robust design")
         h = design.cycle.h
-    h = _residences(h, len(system.C))
+    h = check_residences(h, len(system.C))
     f = paper_factors(design, h)
     Phi = cycle_transition(system.A, system.C, design.L, h, design_dead_time(design))
     return CycleCertificate(h=h, f=f, paper_ok=max(f) < 1, Phi=Phi,

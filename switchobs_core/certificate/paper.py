@@ -79,7 +79,7 @@ def paper_factors(design: Any, h: Sequence[float] | None = None) -> tuple[float,
         if design.cycle is None:
             raise InvalidArgument("h is required for a design without a cycle (robust design)")
         h = design.cycle.h
-    h = _residences(h, len(design.kappa), allow_zero=True)
+    h = check_residences(h, len(design.kappa), allow_zero=True)
     tau = float(sum(h))
     d = design_dead_time(design)
     return tuple(cycle_factor(k, m, e, max(hi - d, 0.0), tau - max(hi - d, 0.0))
@@ -92,7 +92,7 @@ def design_dead_time(design: Any) -> float:
     return float(getattr(cyc, "dead_time", 0.0) or 0.0)
 
 
-def _residences(h: Any, N: int, *, allow_zero: bool = False) -> tuple[float, ...]:
+def check_residences(h: Any, N: int, *, allow_zero: bool = False) -> tuple[float, ...]:
     """``h`` as N finite residence times > 0 (>= 0 with ``allow_zero``, tau > 0), or
     InvalidArgument naming ``h``."""
     try:
@@ -153,7 +153,7 @@ def envelope_ratio(system: Any, segments: Sequence[Segment], t_end: float, *,
     system : LTISystem
     segments : sequence of Segment
         The switching signal and designs (e.g. from
-        :func:`switchobs_core.sim.simulate.schedule_segments`).
+        :func:`switchobs_core.bounds.envelope.schedule_segments`).
     t_end : float
     dt : float
 

@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from ..bounds.envelope import schedule_segments
 from ..exceptions import InvalidArgument
 from ..model.schedule import PeriodicSchedule, SequenceSchedule, check_cycle_horizon
-from ..sim.simulate import schedule_segments
 from ..validation import as_finite
 from .box import certify_box
 from .cycle import CycleCertificate, certify_cycle

@@ -62,7 +62,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve, qr
 
-from .riccati import PeriodicSolution, RiccatiError, Step, meet_periodic, rel_change, symmetrize
+from ..exceptions import RiccatiError
+from ..numerics.kalman_step import symmetrize
+from .riccati import PeriodicSolution, Step, meet_periodic, rel_change
 
 __all__ = [
     "RiccatiMap",

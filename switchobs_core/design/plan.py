@@ -65,15 +65,17 @@ from typing import Any
 import numpy as np
 
 from ..certificate import certify_cycle
-from ..exceptions import DesignError, InvalidArgument
+from ..exceptions import DesignError, InvalidArgument, UndetectableSchedule
 from ..model.detectability import aliasing_free
 from ..model.noise import NoiseModel, default_noise
 from ..model.schedule import BLIND_TOL, Cycle, common_rows
+from ..numerics.kalman_step import symmetrize
 from ..ranges import check_size
+from ..table.kalman import SamplePattern
 from .doubling import RiccatiMap, fixed_point
-from .kalman import SamplePattern, UndetectableSchedule, check_detectable, design_kalman, sample_pattern
+from .kalman import check_detectable, design_kalman, sample_pattern
 from .lmi import Designer
-from .riccati import discretize, rel_change, symmetrize
+from .riccati import discretize, rel_change
 
 __all__ = [
     "ScheduleCost",

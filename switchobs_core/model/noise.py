@@ -28,7 +28,7 @@ without a dot as a string) are accepted; booleans are not.
 Command-line overrides (``--meas-noise STD`` / ``--process-noise Q``) arrive as
 ``meas_std=STD`` (any form of ``measurement_std``) and ``process_q=Q``, meaning
 ``Qc = Q^2 I``: the same convention as the simulator's and the bag generator's
-``--process-noise`` (``switchobs_core.sim.simulate.Plant``), so the same number on both sides
+``--process-noise`` (``switchobs_core.sim.plant.Plant``), so the same number on both sides
 declares the noise that the data were made with.
 """
 
@@ -43,12 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import InvalidArgument
+from ..exceptions import NoiseModelError
 from ..loading import as_number
 
 __all__ = [
     "NoiseModel",
-    "NoiseModelError",
     "default_noise",
     "DEFAULT_MEAS_STD",
     "DEFAULT_PROCESS_STD",
@@ -69,10 +68,6 @@ NOISE_KEYS = ("measurement_std", "process_std", "process_intensity", "P0")
 # Relative tolerance of the symmetry and PSD checks of Qc and P0 (times max(1, ||M||_2)).
 _SYM_RTOL = 1e-10
 _PSD_RTOL = 1e-12
-
-
-class NoiseModelError(InvalidArgument):
-    """A noise model (measurement std, process intensity, P0) is malformed."""
 
 
 #: Largest magnitude of a covariance or intensity entry (a std: its square root).

@@ -55,7 +55,7 @@ from scipy.linalg import expm
 
 from ..exceptions import InvalidArgument
 from ..validation import as_matrix
-from .rounding import _fro, expm_error, gamma
+from .rounding import expm_error, fro_norm, gamma
 
 __all__ = [
     "zoh_pair",
@@ -161,8 +161,8 @@ class ZOHEntry:
 
     def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0):
         self.eps = eps           # bound on ||Phi - e^{M dt}||_F (rounding.expm_error)
-        self.fPhi = _fro(Phi)                           # Frobenius norms for the
-        self.fGL = 0.0 if GL is None else _fro(GL)     # rounding bound
+        self.fPhi = fro_norm(Phi)                           # Frobenius norms for the
+        self.fGL = 0.0 if GL is None else fro_norm(GL)     # rounding bound
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
@@ -335,13 +335,13 @@ class ZOHCache:
         Ps, Gs = taylor_pair(M, r)
         consts = self._consts.get(id(M))
         if consts is None or consts[0] is not M:     # ||M||_F and the gammas, per registered M
-            consts = self._consts[id(M)] = (M, _fro(M), math.factorial(m + 1), gamma(m * (n + 2) + 2),
+            consts = self._consts[id(M)] = (M, fro_norm(M), math.factorial(m + 1), gamma(m * (n + 2) + 2),
                                             gamma(n + 1), gamma(4))
         _, nM, fact, g_sum, g_n1, g_4 = consts
         x = nM * r
         tail = x ** (m + 1) / fact / (1.0 - x / (m + 2))
         rnd = g_sum * (math.sqrt(n) + math.exp(x))
-        nPs, nPb = _fro(Ps), base.fPhi          # fPhi is ||base.Phi||_F, computed the same way
+        nPs, nPb = fro_norm(Ps), base.fPhi          # fPhi is ||base.Phi||_F, computed the same way
         Phi = base.Phi @ Ps
         # (a + r) is dtq up to the rounding of the two floats: that step difference, too
         split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)

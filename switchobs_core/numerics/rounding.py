@@ -248,7 +248,7 @@ class ErrorEllipsoid:
         S *= 0.5
         if not self.n:
             return 0.0
-        nS = _fro(S)
+        nS = fro_norm(S)
         lam = math.nan
         if _eigvalsh_lo is not None and math.isfinite(nS):
             lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
@@ -257,7 +257,7 @@ class ErrorEllipsoid:
         return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
 
 
-def _fro(X: np.ndarray) -> float:
+def fro_norm(X: np.ndarray) -> float:
     """``np.linalg.norm(X)`` (Frobenius) with the same arithmetic (``sqrt`` of the dot product of
     ``X.ravel(order="K")`` with itself), without the wrapper's checks."""
     v = X.ravel(order="K")

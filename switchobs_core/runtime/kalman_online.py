@@ -13,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ..design.riccati import DiscretizationCache, correct_state, gain, joseph, predict_cov
+from ..design.riccati import DiscretizationCache
 from ..exceptions import InvalidArgument
 from ..model.noise import NoiseModel, default_noise
+from ..numerics.kalman_step import correct_state, gain, joseph, predict_cov
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION
 
 __all__ = ["OnlineKalman"]

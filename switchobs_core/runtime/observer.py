@@ -70,14 +70,15 @@ from ..bounds.kalman_map import sparse_transition
 from ..bounds.read import AMORTISED_MIN_N
 from ..bounds.rigorous import RoundingBound
 from ..certificate.paper import design_dead_time
-from ..design.kalman import KalmanDesign
-from ..design.riccati import DiscretizationCache, symmetrize
+from ..design.riccati import DiscretizationCache
 from ..exceptions import InvalidArgument
 from ..families import FAMILY_NAMES, family_entry, family_of_table
 from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
+from ..numerics.kalman_step import symmetrize
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache
+from ..table.kalman import KalmanDesign
 from .cycles import CycleRecord, CycleTracker, Residence
 from .families.base import ScheduledCycle
 

@@ -131,7 +131,7 @@ def _positive_range(curves: list) -> tuple[float, float]:
 
 
 def error_figure(res: Any, title: str = "") -> Any:
-    """The three-panel matplotlib figure of a :class:`~switchobs_core.sim.simulate.SimulationResult`
+    """The three-panel matplotlib figure of a :class:`~switchobs_core.sim.result.SimulationResult`
     (:func:`figure_curves` decides what is drawn); legends sit beside the panels, never on the
     curves."""
     import matplotlib

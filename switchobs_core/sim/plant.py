@@ -19,6 +19,17 @@ from ..numerics.rounding import expm_extended
 __all__ = ["Plant"]
 
 
+def input_at(u: Any, t: float, m: int) -> np.ndarray | None:
+    """The input at ``t``: ``u`` itself or ``u(t)`` for a callable, as an ``m``-vector (None for None)."""
+    if u is None:
+        return None
+    val = u(t) if callable(u) else u
+    val = np.asarray(val, dtype=float).reshape(-1)
+    if val.size != m:
+        raise InvalidArgument(f"u must have m = {m} entries; got {val.size}")
+    return val
+
+
 class Plant:
     """Exact plant ``xdot = A x + B u + w`` (e:system) with seeded noise.
 

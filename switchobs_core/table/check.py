@@ -29,9 +29,9 @@ from scipy.linalg import expm
 
 from ..certificate import cycle_transition
 from ..certificate.paper import design_dead_time
-from ..design.kalman import KalmanDesign
 from ..exceptions import GainTableError, SwitchobsError
 from ..model.schedule import Cycle
+from .kalman import KalmanDesign
 
 if TYPE_CHECKING:
     from ..model.system import LTISystem

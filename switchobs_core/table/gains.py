@@ -61,12 +61,12 @@ import numpy as np
 
 from .._version import __version__
 from ..certificate.paper_check import CertifyCheck
-from ..design.kalman import KalmanDesign
 from ..exceptions import GainTableError, InvalidArgument, SwitchobsError
 from ..families import TABLE_FAMILIES  # noqa: F401  (kept importable from here)
 from ..model.schedule import CYCLE_ATOL, CYCLE_RTOL, Cycle
 from . import io as table_io
 from .io import FORMAT, FORMAT_VERSION, READABLE_VERSIONS  # noqa: F401  (kept importable from here)
+from .kalman import KalmanDesign
 from .lmi import ChannelGain, CycleDesign
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """Every public function of switchobs_core, given wrong shapes, non-finite numbers or impossible
 parameters, raises the project's own exception (a :class:`SwitchobsError`) whose message names
-the offending argument (issue 6, "Core").
+the offending argument.
 
 The table below is systematic: per public callable, one case per kind of bad argument (shape,
 NaN/inf, impossible value). Where inputs vary continuously, hypothesis draws them.
@@ -78,7 +78,7 @@ def _zeroed(table):
 
 # (id, argument name the message must contain, call(small) -> raises)
 CASES = [
-    # --- ranges, files, table checks (issue 22)
+    # --- ranges, files, table checks
     ("check_range.e0", "e0", lambda s: rng.check_range(1e308, "e0")),
     ("check_range.nan", "sensor_timeout", lambda s: rng.check_range(NAN, "sensor_timeout")),
     ("check_size.samples", "samples", lambda s: rng.check_size(1e12, 8, "samples", "lower the rate")),
@@ -262,7 +262,7 @@ CASES = [
                                                        np.zeros(12), 1.0, rate=0.0)),
     ("simulate.noise_std", "noise_std", lambda s: sim.simulate(s[0], s[1], sch.PeriodicSchedule(CYC), np.zeros(12),
                                                                  np.zeros(12), 1.0, noise_std=NAN)),
-    ("schedule_segments.t_end", "t_end", lambda s: sim.schedule_segments(sch.PeriodicSchedule(CYC), [s[2]], NAN)),
+    ("schedule_segments.t_end", "t_end", lambda s: env.schedule_segments(sch.PeriodicSchedule(CYC), [s[2]], NAN)),
     ("sampled_error_transition.steps", "steps",
      lambda s: sim.sampled_error_transition(A4, C4, [(0.1, 3, np.zeros((4, 1)))])),
     ("designs_for.mode", "mode", lambda s: sim.designs_for(s[1], sch.PeriodicSchedule(CYC), "weekly")),

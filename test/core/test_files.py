@@ -1,4 +1,4 @@
-"""File checks (switchobs_core.files, issue 22): a FIFO, a device or a directory is refused before it
+"""File checks (switchobs_core.files): a FIFO, a device or a directory is refused before it
 is read or replaced; sizes are limited; write errors (a full disk) are one line."""
 
 from __future__ import annotations

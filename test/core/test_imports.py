@@ -107,3 +107,68 @@ def test_module_import_graph_has_no_cycle():
             dfs(m)
     obs = "switchobs_core.runtime.observer"
     assert obs in graph and graph[obs]   # the scan sees imports
+
+
+#: The layers, lowest first (docs/architecture.md): a module imports only from its own layer and
+#: lower ones. Loose modules (exceptions, validation, ranges, files, loading, paper, threads, the
+#: registry families) are the base; a subpackage is its own layer; the package itself (its
+#: ``__init__`` re-exports everything) is above them all.
+LAYERS = ("base", "numerics", "model", "bounds", "certificate", "table", "design", "runtime", "sim", "cli",
+          "package")
+#: Modules that import by a computed name (not checked statically), and why that is no layer's business.
+COMPUTED_IMPORTS = {
+    "switchobs_core.families": "the registry: each entry names its runtime type, imported on first use by "
+                               "the caller (the observer, the simulator, the command line)",
+    "switchobs_core.cli": "its subcommands, modules of its own layer",
+}
+
+
+def _layer(mod: str) -> str:
+    parts = mod.split(".")
+    if len(parts) == 1:
+        return "package"
+    return parts[1] if parts[1] in LAYERS else "base"
+
+
+def _imports_anywhere(mod: str, path: Path, mods: dict[str, Path]) -> tuple[list[tuple[int, str]], list[int]]:
+    """Every project module ``mod`` imports, wherever the import sits (module level, inside a function,
+    under ``TYPE_CHECKING``, or ``importlib.import_module`` of a constant name): ``(line, module)``;
+    and the lines of ``import_module`` calls with a computed name."""
+    tree = ast.parse(path.read_text())
+    is_pkg = path.name == "__init__.py"
+    out: list[tuple[int, str]] = []
+    computed: list[int] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "switchobs_core"]
+        elif isinstance(node, ast.ImportFrom):
+            base, *names = _target(mod, is_pkg, node)
+            if base.split(".")[0] != "switchobs_core":
+                continue
+            # `from pkg import sub` imports the module pkg.sub; `from mod import name`, mod itself
+            out += [(node.lineno, n if n in mods else base) for n in names]
+        elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module":
+            arg = node.args[0] if node.args else None
+            if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+                if arg.value.split(".")[0] == "switchobs_core":
+                    out.append((node.lineno, arg.value))
+            else:
+                computed.append(node.lineno)
+    return out, computed
+
+
+def test_no_module_imports_a_higher_layer():
+    mods = {m: p for m, p in _modules().items() if m != "switchobs_core"}
+    assert {_layer(m) for m in mods} == set(LAYERS) - {"package"}, "a layer without modules, or a new subpackage"
+    up, computed = [], []
+    for m, p in sorted(mods.items()):
+        found, lines = _imports_anywhere(m, p, mods)
+        up += [f"{m} ({_layer(m)}):{line} imports {t} ({_layer(t)})" for line, t in found
+               if LAYERS.index(_layer(t)) > LAYERS.index(_layer(m))]
+        computed += [f"{m}:{line}" for line in lines if m not in COMPUTED_IMPORTS]
+    assert not up, "\n".join(up)
+    assert not computed, computed
+    # the scan sees imports: the observer imports the bounds and the gain table's Kalman design
+    found = {t for _, t in _imports_anywhere("switchobs_core.runtime.observer", mods["switchobs_core.runtime.observer"],
+                                             mods)[0]}
+    assert {"switchobs_core.bounds.rigorous", "switchobs_core.table.kalman"} <= found

@@ -1,4 +1,4 @@
-"""The range policy (switchobs_core.ranges, issue 22): every number a user gives has a documented
+"""The range policy (switchobs_core.ranges): every number a user gives has a documented
 range; sizes that grow with a user's numbers are refused up front, with the amount."""
 
 from __future__ import annotations

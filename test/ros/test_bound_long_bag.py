@@ -1,4 +1,4 @@
-"""The node's published bounds over a long recording (issue: guarantees that hold in floating
+"""The node's published bounds over a long recording (guarantees that hold in floating
 point). A 10-minute bag at 100 Hz, generated with an extended-precision plant, goes through the
 estimator (`switchobs_bag estimate`, the node's pipeline) and the report: the published exact
 bound is never below the error; with bounded noise and a declared `noise.max` the published

@@ -1,4 +1,4 @@
-"""Switching dead time (issue 14) in the ROS layer: the bag generator and camera_sim leave out
+"""Switching dead time in the ROS layer: the bag generator and camera_sim leave out
 the target pose while the camera turns, the estimator's pipeline uses the blind camera poses at
 once, and a planned schedule with a dead time delivers its planned accuracy over DDS."""
 

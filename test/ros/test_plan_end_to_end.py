@@ -1,4 +1,4 @@
-"""Issue 14 acceptance, end to end: plan -> design -> camera_sim + estimator over DDS -> the
+"""Planning end to end: plan -> design -> camera_sim + estimator over DDS -> the
 measured error is consistent with the planned cost (within Monte Carlo error)."""
 
 from __future__ import annotations

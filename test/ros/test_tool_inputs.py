@@ -1,4 +1,4 @@
-"""Bad arguments to the ROS-side tools and nodes (issue: every bad input gets one clear line):
+"""Bad arguments to the ROS-side tools and nodes (every bad input gets one clear line):
 camera_sim's numbers, the demo's flags, the estimator's parameters (an integer for a double is
 accepted; an empty list or an empty world_frame is refused), a deep gain table, and negative-
 looking values after an option."""

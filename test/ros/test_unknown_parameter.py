@@ -9,7 +9,7 @@ import pytest
 from rcl_interfaces.msg import Parameter as ParamMsg
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from test_lifecycle import _call, _set
-from test_round2_node import _answers_next, _pv, live  # noqa: F401  (live: the fixture)
+from test_refusals_node import _answers_next, _pv, live  # noqa: F401  (live: the fixture)
 
 from switchobs_ros.config import PARAMS
 from switchobs_ros.params import unknown_parameters

@@ -22,7 +22,7 @@ Re-lock
     small, well-measured entries differ by 2 % after a re-lock in the start-up): from there the
     gains are the table's again. The remaining difference does not vanish at once
     (the closed loop contracts over a period, not at every sample): with the default 1e-3 the
-    published covariance stays within the 1 % of test_table_exact_cache.py (0.11 % at worst in
+    published covariance stays within the 1 % of test_kalman_table_cache.py (0.11 % at worst in
     six 20 s runs with 5 % partial samples; 1e-2 with a test relative to ``max|S|`` gave 5.8 %).
 
 ``dt_tol`` (seconds) is the step error whose effect on the prior stays inside a tenth of that
@@ -39,9 +39,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
-from ...design.kalman import Phase, design_kalman
+from ...design.kalman import design_kalman
 from ...exceptions import InvalidArgument
 from ...table.gains import kalman_table
+from ...table.kalman import Phase
 from .online import OnlineKalmanGains, kalman_correct
 
 __all__ = ["KalmanTableGains", "MAX_JITTER"]

@@ -21,8 +21,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
-from ...design.riccati import gain, joseph
 from ...model.noise import NoiseModel, default_noise
+from ...numerics.kalman_step import gain, joseph
 from .base import ScheduledCycle, check_bounds, check_cycles
 from .lmi import LmiGains
 

@@ -1,4 +1,4 @@
-"""The ``kalman`` table is an exact cache of the Riccati recursion (issue 20, item 2): whatever the
+"""The ``kalman`` table is an exact cache of the Riccati recursion: whatever the
 sample pattern, its estimates are the Kalman filter's and its published ``P`` is the real one.
 
 Checked, through the public API only, against an online Kalman filter written here
@@ -19,7 +19,7 @@ whenever every row arrives). Disturbances (one per scenario):
   plus N(0, 0.01), with variance 0.01 (so the reset entry's error is independent of the rest,
   which is what zeroing its row and column of ``P`` states).
 
-Criteria (issue 20, "Tests"): the table's RMS error within 1.05x of the filter's over 0-5 s, at
+Criteria: the table's RMS error within 1.05x of the filter's over 0-5 s, at
 10 s and over 10-20 s; average NEES ``e' P^-1 e`` (``P`` the published one) inside the chi-square
 band at 0.5, 1, 2, 5, 10 and 20 s; the published ``P`` equal to the filter's covariance at every
 sample to ``P_RTOL`` of its largest entry.
@@ -34,8 +34,8 @@ scenario, m = 24, band 2.76-5.52): a published covariance too small by a factor 
 given check time with probability 0.76 (too large by 1.5: 0.64), by a factor 2 with 0.999; the
 quick test (R = 10, m = 4, band 2.12-6.58) catches a factor 3 with 0.99. The RMS ratio is paired
 (same streams), so its sampling noise is far below the 5 % margin (a table that runs the
-recursion gives 1.000 to 4 digits). The failures of issue 20 (NEES 1e3-1.6e6, RMS 3.9-875x) are
-far outside. Runtime: about 55 s CPU for the slow test, 2 s for the quick one.
+recursion gives 1.000 to 4 digits). The failures of a table that serves its stored gains regardless
+(NEES 1e3-1.6e6, RMS 3.9-875x) are far outside. Runtime: about 55 s CPU for the slow test, 2 s for the quick one.
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
+from _systems import oscillators
 from scipy.linalg import expm
 from scipy.stats import chi2
 
@@ -56,23 +57,10 @@ CYCLE = so.Cycle((0.61, 0.39))
 #: of the stored one, after which the two converge (the closed loop contracts); beyond 1e-2, P is
 #: not the real one.
 P_RTOL = 1e-2
-#: Largest RMS ratio table / filter in any window (issue 20).
+#: Largest RMS ratio table / filter in any window.
 RMS_RATIO = 1.05
 NEES_TIMES = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
 SET_T, SET_INDEX, SET_VAR = 7.01, 1, 0.01
-
-
-def oscillators(zeta: tuple[float, float] = (0.01, 0.01), hz: tuple[float, float] = (0.5, 0.8)) -> so.LTISystem:
-    """Two oscillators (``hz``, default 0.5 Hz and 0.8 Hz) coupled by a spring of stiffness 1; damping
-    ratios ``zeta`` (negative: unstable). Row 0 of both channels is the shared ``q1 + q2``."""
-    w1, w2, kc = 2 * np.pi * hz[0], 2 * np.pi * hz[1], 1.0
-    A = np.array([[0.0, 1.0, 0.0, 0.0],
-                  [-(w1 * w1 + kc), -2 * zeta[0] * w1, kc, 0.0],
-                  [0.0, 0.0, 0.0, 1.0],
-                  [kc, 0.0, -(w2 * w2 + kc), -2 * zeta[1] * w2]])
-    C1 = np.array([[1.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
-    C2 = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
-    return so.LTISystem(A, None, [C1, C2], name=f"oscillators_{zeta[0]:g}_{zeta[1]:g}_{hz[0]:g}_{hz[1]:g}")
 
 
 class JosephKF:
@@ -295,7 +283,7 @@ def test_reference_filter_matches_the_library_online_filter(stable):
 
 def test_quick_missing_row_at_start(stable):
     """The default run's guard (not slow): 10 runs of 5 s with the shared row alone on the first 3
-    samples (issue 20 measured 875x RMS and NEES 1.6e6 at 0.5 s for this on the old table)."""
+    samples (a table serving its stored gains regardless: 875x RMS and NEES 1.6e6 at 0.5 s here)."""
     system, table = stable
     runs = 10
     st = run_scenario(system, table, "rows3", runs, 5.0, seed=1)
@@ -306,7 +294,7 @@ def test_quick_missing_row_at_start(stable):
 @pytest.mark.slow
 @pytest.mark.parametrize("i, name", list(enumerate(("rows3", "partial5", "drop2", "set_state"))))
 def test_monte_carlo_every_disturbance(stable, unstable, i, name):
-    """Issue 20's test: 40 runs of 20 s per disturbance, every window and check time (24 NEES
+    """Monte Carlo: 40 runs of 20 s per disturbance, every window and check time (24 NEES
     checks in one simultaneous 95 % band over the four disturbances; module docstring). One
     disturbance a test (the same seeds and band), so that two xdist workers share them."""
     runs = 40

@@ -10,14 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from switchobs_core.exceptions import InvalidArgument, SwitchobsError
+from switchobs_core.exceptions import InvalidArgument, NoiseModelError, SwitchobsError
 from switchobs_core.model.noise import (
     DEFAULT_MEAS_STD,
     DEFAULT_P0,
     DEFAULT_PROCESS_STD,
     MAX_ABS_ENTRY,
     NoiseModel,
-    NoiseModelError,
     default_noise,
 )
 from switchobs_core.model.scenarios import camera_agents, paper_system

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from switchobs_core.cli import main
-from switchobs_core.model.noise import NoiseModelError
+from switchobs_core.exceptions import NoiseModelError
 from switchobs_core.model.scenarios import load_noise, load_system
 from switchobs_core.table.gains import GainTable
 

@@ -1,4 +1,4 @@
-"""Helpers of the second round of bad-input tests (issue 22): run a tool as a user would, inside
+"""Helpers of the refusal tests: run a tool as a user would, inside
 the acceptance limits (30 s, 4 GB of address space), and check the one-line failure."""
 
 from __future__ import annotations

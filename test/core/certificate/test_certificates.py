@@ -10,6 +10,7 @@ import pytest
 from _paper_designs import NONPERIODIC, PERIODIC, paper_table
 from scipy.linalg import expm
 
+from switchobs_core.bounds.envelope import schedule_segments
 from switchobs_core.certificate import (
     certify_box,
     certify_cycle,
@@ -21,7 +22,7 @@ from switchobs_core.certificate import (
 from switchobs_core.certificate.lyapunov import BACKOFF, lmi_proved
 from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule
-from switchobs_core.sim.simulate import schedule_segments, simulate
+from switchobs_core.sim.simulate import simulate
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Audit of the rigorous bounds (issue 20, item 3): the published exact bound and noise bound are
+"""Audit of the rigorous bounds: the published exact bound and noise bound are
 never below the error of the *computed* estimate, on systems, rates and stamps that
 test_rounding.py (the paper's model at 30 and 100 Hz, random corner noise) does not cover.
 
@@ -6,7 +6,7 @@ Cases, each for the LMI family and the ``kalman`` table (``rounding_bound`` on, 
 
 * a mode at +1.5/s whose state norm reaches 1e11 (``unstable15``);
 * a stiff system with eigenvalues -0.1 and -500 (``stiff``);
-* two coupled lightly damped oscillators (``osc``, the system of test_table_exact_cache.py);
+* two coupled lightly damped oscillators (``osc``, test/core/_systems.py);
 * 1 kHz; +-30 % jitter on every stamp; sample times that are not whole nanoseconds (k / 30);
   Unix-time stamps (t ~ 1.7e9 s: one ulp is 0.24 us, so every step is off the nanosecond grid);
   a late start (the observer starts at t0 = 0, its first sample comes 1.38 s later, mid-cycle);
@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from test_table_exact_cache import oscillators
+from _systems import oscillators
 
 import switchobs_core as so
 from switchobs_core.bounds.kalman_map import SparseTransition

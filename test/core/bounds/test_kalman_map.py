@@ -86,7 +86,7 @@ def test_observer_bounds_match_the_dense_path(family, monkeypatch):
     """camera_agents(10) (n = 44): estimates equal to the dense path's to rounding, and the exact
     bound never looser than the dense path's (its rounding allowance uses ``|| |Phi~| ||_2``, about
     1, where the dense one has ``n ||M||_F^2``: after a period it is several times tighter; that
-    it still holds is test_bound_audit.py's agents10 and blocks14 cases)."""
+    it still holds is test_audit.py's agents10 and blocks14 cases)."""
     system = so.camera_agents(10)
     cycle = so.Cycle((0.1,) * 10)
     table = so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)])

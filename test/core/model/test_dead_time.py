@@ -1,4 +1,4 @@
-"""Switching dead time (issue 14): blind intervals after each switch, in the schedule, both gain
+"""Switching dead time: blind intervals after each switch, in the schedule, both gain
 families, the certificate, the simulator and the planner.
 
 Oracles are computed here independently: the periodic Riccati recursion with the shared rows

@@ -14,12 +14,14 @@ from switchobs_core.design.doubling import (
     solve_periodic_riccati,
     sqrt_correct,
 )
-from switchobs_core.design.kalman import UndetectableSchedule, check_detectable, design_kalman, sample_pattern
-from switchobs_core.design.riccati import RiccatiError, Step, discretize, joseph, periodic_riccati, riccati_step
+from switchobs_core.design.kalman import check_detectable, design_kalman, sample_pattern
+from switchobs_core.design.riccati import Step, discretize, periodic_riccati
+from switchobs_core.exceptions import RiccatiError, UndetectableSchedule
 from switchobs_core.model.detectability import undetectable_modes
 from switchobs_core.model.noise import default_noise
 from switchobs_core.model.scenarios import camera_agents, paper_system
 from switchobs_core.model.schedule import Cycle
+from switchobs_core.numerics.kalman_step import joseph, riccati_step
 
 PAPER = paper_system()
 

@@ -1,4 +1,4 @@
-"""Re-verification of loaded gain tables (switchobs_core.table.check, issue 22): a table whose
+"""Re-verification of loaded gain tables (switchobs_core.table.check): a table whose
 gains were zeroed and whose checksum was recomputed loads (the checksum is not a signature) but is
 refused before use; real tables of every family pass, cheaply."""
 

@@ -1,4 +1,4 @@
-"""Bad input, round 2 (issue 22), the estimator: values out of range refused at start-up, in params
+"""Refusals of bad input by the estimator: values out of range refused at start-up, in params
 files and at run time with one line (the node stays up and answers the next valid measurement);
 lifecycle transitions that are not valid return FAILURE and the node stays in its state; a
 gain-table cache that is not private is refused, a planted table (zero gains, checksum recomputed)
@@ -19,8 +19,8 @@ from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from refusals import assert_refused, run
 from ros_harness import EstimatorIO, spin_until, start_feed
-from round2 import assert_refused, run
 from std_msgs.msg import UInt8
 from test_lifecycle import _change, _feed, _set, _state
 

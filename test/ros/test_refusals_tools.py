@@ -1,4 +1,4 @@
-"""Bad input, round 2 (issue 22), the command-line tools: every case exits non-zero with one line on
+"""Refusals of bad input by the command-line tools: every case exits non-zero with one line on
 stderr (at most 3 lines, no traceback) within 30 s and 4 GB of address space, or, where the input
 is valid, does not lose anything silently."""
 
@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from round2 import assert_refused, switchobs, switchobs_bag
+from refusals import assert_refused, switchobs, switchobs_bag
 
 from switchobs_core.cli import main as switchobs_main
 
