@@ -47,6 +47,7 @@ from .convert import (
 )
 from .fields import (
     LABELLED_ARRAY,
+    MAX_FIELDS,
     SUPPORTED_TYPES,
     FieldReader,
     FieldWriter,
@@ -56,6 +57,7 @@ from .fields import (
 )
 from .inputs import (
     CHANNEL_TOPIC,
+    MAX_SOURCES,
     InputSource,
     InputSpecs,
     check_topic,
@@ -80,11 +82,13 @@ from .validate import (
 __all__ = [
     "CHANNEL_TOPIC",
     "LABELLED_ARRAY",
+    "MAX_FIELDS",
     "SUPPORTED_TYPES",
     "FieldReader",
     "FieldWriter",
     "InputSource",
     "InputSpecs",
+    "MAX_SOURCES",
     "SpecError",
     "canonical_type",
     "check_topic",

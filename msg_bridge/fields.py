@@ -42,6 +42,7 @@ from .validate import BridgeError, Reason, Rejection, SpecError
 
 __all__ = [
     "LABELLED_ARRAY",
+    "MAX_FIELDS",
     "SUPPORTED_TYPES",
     "FieldReader",
     "FieldWriter",
@@ -52,6 +53,10 @@ __all__ = [
 
 _NS = 1_000_000_000
 _MAX_SEC = 2.0 ** 63 / _NS        # a stamp in ns must fit an int64
+
+#: Most fields one reader or writer takes (a labelled array of more elements can still be read:
+#: only the fields named here are picked out of it).
+MAX_FIELDS = 4096
 
 #: Canonical name of the labelled array type (its fields are element labels).
 LABELLED_ARRAY = "std_msgs/msg/Float64MultiArray"
@@ -127,15 +132,18 @@ def _check_fields(type_name: str, fields: Sequence[str]) -> tuple[str, tuple[str
     name = canonical_type(type_name)
     if isinstance(fields, str) or not isinstance(fields, Sequence):
         raise SpecError(f"{name}: fields must be a list of field names; got {fields!r}")
+    if len(fields) > MAX_FIELDS:
+        raise SpecError(f"{name}: {len(fields)} fields; at most {MAX_FIELDS}")
     fields = tuple(fields)
     if not fields:
         raise SpecError(f"{name}: no fields given; give at least one")
-    bad = [f for f in fields if not isinstance(f, str) or not f]
-    if bad:
-        raise SpecError(f"{name}: a field must be a non-empty string; got {bad[0]!r}")
-    dup = sorted({f for f in fields if fields.count(f) > 1})
-    if dup:
-        raise SpecError(f"{name}: field {dup[0]!r} is given twice")
+    bad = next((f for f in fields if not isinstance(f, str) or not f), None)
+    if bad is not None:
+        raise SpecError(f"{name}: a field must be a non-empty string; got {bad!r}")
+    seen: set[str] = set()
+    dup = next((f for f in fields if f in seen or seen.add(f)), None)     # linear: one set
+    if dup is not None:
+        raise SpecError(f"{name}: field {dup!r} is given twice")
     if name == LABELLED_ARRAY:
         bad = next((f for f in fields if "," in f or f != f.strip()), None)
         if bad is not None:

@@ -51,6 +51,7 @@ __all__ = [
     "CHANNEL_TOPIC",
     "InputSource",
     "InputSpecs",
+    "MAX_SOURCES",
     "check_topic",
     "default_inputs",
     "load_inputs",
@@ -59,6 +60,10 @@ __all__ = [
 
 #: The paper's active-channel topic (std_msgs/UInt8, 1..N).
 CHANNEL_TOPIC = "camera/active_channel"
+
+#: Most sources a specification may hold (and never more than the rows of all channels: each
+#: source feeds at least one row, and no row is fed twice).
+MAX_SOURCES = 1024
 
 _SECTION_KEYS = ("channel_topic", "sources")
 _SOURCE_KEYS = ("topic", "type", "fields", "rows", "channel")
@@ -69,13 +74,40 @@ _EXAMPLE = ("inputs: {sources: [{topic: left/point, type: geometry_msgs/PointSta
             "fields: [point.x], rows: [0]}, ...]}")
 
 
-def check_topic(name: Any, where: str) -> str:
+def _shown(name: str) -> str:
+    """``name`` for a message: whole when short, else its start and its length."""
+    return repr(name) if len(name) <= 60 else f"'{name[:40]}...' ({len(name)} characters)"
+
+
+def ros_topic_error(name: str, namespace: str = "/") -> str | None:
+    """Why ROS refuses the topic ``name`` of a node in ``namespace`` (None: it takes it): rclpy's own
+    validation of the expanded name (:func:`rclpy.expand_topic_name.expand_topic_name`,
+    :func:`rclpy.validate_full_topic_name.validate_full_topic_name`: characters, tokens, the length
+    limit of the middleware), the checks ``create_subscription`` makes. No node is needed."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.expand_topic_name import expand_topic_name
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    try:
+        validate_full_topic_name(expand_topic_name(name, "estimator", namespace))
+    except InvalidTopicNameException as err:      # "Invalid topic name: <why>:\n  '<name>'\n  ^"
+        return str(err).split("\n", 1)[0].removeprefix("Invalid topic name: ").rstrip(":")
+    except ValueError as err:                     # "topic name '<name>' is invalid: <why>, at <file>"
+        return str(err).rpartition(" is invalid: ")[2].rsplit(", at ", 1)[0]
+    return None
+
+
+def check_topic(name: Any, where: str, namespace: str = "/") -> str:
     """A relative ROS topic name (tokens of letters, digits and '_' not starting with a digit,
-    joined by single '/'); else :class:`SpecError` naming ``where``."""
+    joined by single '/') that ROS takes in ``namespace`` (:func:`ros_topic_error`: e.g. at most
+    247 characters once expanded); else :class:`SpecError` naming ``where``."""
     if not isinstance(name, str) or not _TOPIC.fullmatch(name):
-        raise SpecError(f"{where}: {name!r} is not a valid relative topic name (letters, digits, '_' and single "
+        shown = _shown(name) if isinstance(name, str) else repr(name)
+        raise SpecError(f"{where}: {shown} is not a valid relative topic name (letters, digits, '_' and single "
                         "'/' between tokens; no leading '/' or '~', no spaces; a token must not start with a "
                         "digit), e.g. camera/pose")
+    why = ros_topic_error(name, namespace)
+    if why is not None:
+        raise SpecError(f"{where}: {_shown(name)} is not a valid topic name: ROS: {why}")
     return name
 
 
@@ -159,14 +191,15 @@ def _resolve_rows(rows: Sequence[Any], channel: int, system: LTISystem, where: s
     """Row indices of ``rows`` (0-based ints or output labels) in ``channel`` (1-based)."""
     labels = system.output_labels[channel - 1]
     p = len(labels)
+    index = {lab: k for k, lab in enumerate(labels)}
     out = []
     for r in rows:
         if isinstance(r, bool) or not isinstance(r, (int, np.integer, str)):
             raise SpecError(f"{where}: row {r!r} must be a 0-based row index or an output label")
         if isinstance(r, str):
-            if r not in labels:
+            if r not in index:
                 raise SpecError(f"{where}: channel {channel} has no output {r!r}; its outputs: {list(labels)}")
-            out.append(labels.index(r))
+            out.append(index[r])
         elif not 0 <= r < p:
             raise SpecError(f"{where}: row {r} is out of range for channel {channel} (rows 0..{p - 1}: "
                             f"{list(labels)})")
@@ -224,10 +257,16 @@ def _parse_source(i: int, spec: Any, system: LTISystem, source: str) -> InputSou
                             "each (or give it a 'channel')") from None
         raise
     for c, r in enumerate(crs, start=1):
-        dup = sorted({k for k in r if r.count(k) > 1})
-        if dup:
-            raise SpecError(f"{where}: row {dup[0]} of channel {c} is given twice")
+        seen: set[int] = set()
+        dup = next((k for k in r if k in seen or seen.add(k)), None)     # linear: one set
+        if dup is not None:
+            raise SpecError(f"{where}: row {dup} of channel {c} is given twice")
     return _make_source(topic, reader, crs, channel, system)
+
+
+def _topic_used(source: str, i: int, topic: str, first: int) -> SpecError:
+    return SpecError(f"{source}.sources[{i}] ({topic}): topic already used by sources[{first}]; one source per topic "
+                     "(list all its fields in one source)")
 
 
 def _check_specs(sources: Sequence[InputSource], channel_topic: str | None, system: LTISystem,
@@ -238,8 +277,7 @@ def _check_specs(sources: Sequence[InputSource], channel_topic: str | None, syst
     seen: dict[str, int] = {}
     for i, s in enumerate(sources):
         if s.topic in seen:
-            raise SpecError(f"{source}.sources[{i}] ({s.topic}): topic already used by sources[{seen[s.topic]}]; "
-                            "one source per topic (list all its fields in one source)")
+            raise _topic_used(source, i, s.topic, seen[s.topic])
         seen[s.topic] = i
         if s.topic == channel_topic:
             raise SpecError(f"{source}.sources[{i}] ({s.topic}): the topic is also the channel_topic; "
@@ -292,7 +330,18 @@ def parse_inputs(section: Mapping | None, system: LTISystem, *, source: str = "i
     specs = section.get("sources")
     if not isinstance(specs, Sequence) or isinstance(specs, (str, bytes)):
         raise SpecError(f"{source}: 'sources' must be a list of sources, e.g. {_EXAMPLE}")
-    sources = [_parse_source(i, s, system, source) for i, s in enumerate(specs)]
+    limit = min(MAX_SOURCES, sum(int(p) for p in system.p))
+    if len(specs) > limit:
+        raise SpecError(f"{source}: {len(specs)} sources; the system's channels have {sum(system.p)} rows in all, so "
+                        f"at most {limit} sources (each feeds at least one row, no row twice)")
+    sources: list[InputSource] = []
+    seen: dict[str, int] = {}
+    for i, s in enumerate(specs):      # a topic used twice is found at its second use, not after parsing all
+        sources.append(_parse_source(i, s, system, source))
+        t = sources[-1].topic
+        if t in seen:
+            raise _topic_used(source, i, t, seen[t])
+        seen[t] = i
     return _check_specs(sources, channel_topic, system, source)
 
 

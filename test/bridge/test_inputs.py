@@ -415,3 +415,86 @@ def test_cart_pair_file_is_the_tutorial_system_and_its_inputs():
     system = next(yaml.safe_load(b) for b in blocks if "name: cart_pair" in b)
     inputs = next(yaml.safe_load(b) for b in blocks if b.startswith("inputs:"))
     assert yaml.safe_load(CART.read_text()) == {**system, **inputs}
+
+
+def _timed_refusal(section, system, match):
+    """``parse_inputs(section)`` refused with a one-line :class:`SpecError` matching ``match``; its time (s)."""
+    import time
+    t0 = time.perf_counter()
+    with pytest.raises(SpecError, match=match) as err:
+        mb.parse_inputs(section, system)
+    took = time.perf_counter() - t0
+    _one_line(err)
+    return took
+
+
+@pytest.mark.parametrize("case", ["labels_100k", "copies_40k", "sources_9k_duplicate", "sources_9k"])
+def test_huge_specifications_are_refused_in_linear_time(paper, case):
+    """Specifications far beyond what a system can use are refused in one line in well under a
+    second: 100 000 labels and rows in one labelled array, 40 000 copies of one field, 9 000
+    sources (a duplicate topic at sources[1], or all distinct). The checks are linear and the
+    counts have explicit limits (msg_bridge.MAX_FIELDS fields per source; at most as many sources
+    as the channels have rows, and msg_bridge.MAX_SOURCES)."""
+    ct = "camera/active_channel"
+    if case == "labels_100k":
+        section = {"channel_topic": ct, "sources": [{"topic": "t", "type": "std_msgs/Float64MultiArray",
+                                                     "fields": [f"y{k}" for k in range(100_000)],
+                                                     "rows": list(range(100_000))}]}
+        match = r"^inputs.sources\[0\] \(t\): std_msgs/msg/Float64MultiArray: 100000 fields; at most 4096"
+    elif case == "copies_40k":
+        section = {"channel_topic": ct, "sources": [{"topic": "t", "type": "geometry_msgs/PoseStamped",
+                                                     "fields": ["pose.position.x"] * 40_000, "rows": [0] * 40_000}]}
+        match = r"^inputs.sources\[0\] \(t\): geometry_msgs/msg/PoseStamped: 40000 fields; at most 4096"
+    else:
+        src = PAPER_SECTION["sources"][0]
+        sources = [dict(src, topic=f"s{k}") for k in range(9_000)]
+        if case == "sources_9k_duplicate":
+            sources[1] = dict(src, topic="s0")
+        match = r"^inputs: 9000 sources; the system's channels have 8 rows in all, so at most 8 sources"
+        section = {"channel_topic": ct, "sources": sources}
+    assert _timed_refusal(section, paper, match) < 0.25
+
+
+def test_a_topic_used_twice_is_found_at_its_second_use(paper):
+    """The duplicate at sources[1] is refused before sources[2:] are parsed (they would be refused)."""
+    src = PAPER_SECTION["sources"][0]
+    section = {"channel_topic": "camera/active_channel", "sources": [src, src, *[{"topic": 5}] * 6]}
+    with pytest.raises(SpecError, match=r"^inputs.sources\[1\] \(camera/pose\): topic already used by sources\[0\]"):
+        mb.parse_inputs(section, paper)
+
+
+def test_field_reader_counts_are_linear_and_limited():
+    """FieldReader's duplicate check is linear (4 000 copies of a field refused at once) and a
+    reader takes at most MAX_FIELDS fields."""
+    import time
+    t0 = time.perf_counter()
+    with pytest.raises(SpecError, match="field 'pose.position.y' is given twice") as err:
+        mb.FieldReader("geometry_msgs/PoseStamped", ["pose.position.x", *["pose.position.y"] * 4_000,
+                                                     "pose.position.x"])
+    assert time.perf_counter() - t0 < 0.25
+    _one_line(err)
+    with pytest.raises(SpecError, match=rf"{mb.MAX_FIELDS + 1} fields; at most {mb.MAX_FIELDS}") as err:
+        mb.FieldReader(mb.LABELLED_ARRAY, [f"y{k}" for k in range(mb.MAX_FIELDS + 1)])
+    _one_line(err)
+    assert len(mb.FieldReader(mb.LABELLED_ARRAY, [f"y{k}" for k in range(mb.MAX_FIELDS)]).fields) == mb.MAX_FIELDS
+
+
+@pytest.mark.parametrize("topic, match", [
+    ("a" * 5000, r"'aaaa\S*' \(5000 characters\) is not a valid topic name: ROS: topic length should not exceed"),
+    ("a/" * 124 + "b", r"'a/a/\S*' \(249 characters\) is not a valid topic name: ROS: topic length should not exceed"),
+])
+def test_topic_names_are_checked_by_ros_rules_at_parse_time(paper, topic, match):
+    """A topic name ROS refuses (create_subscription would raise InvalidTopicNameException) is
+    refused when the specification is parsed, in one line, by rclpy's own validation of the
+    expanded name."""
+    section = {"channel_topic": "camera/active_channel",
+               "sources": [dict(PAPER_SECTION["sources"][0], topic=topic)]}
+    with pytest.raises(SpecError, match=r"^inputs.sources\[0\].topic: " + match) as err:
+        mb.parse_inputs(section, paper)
+    assert len(_one_line(err)) < 300
+    with pytest.raises(SpecError, match=r"^inputs.channel_topic: " + match):
+        mb.parse_inputs(dict(PAPER_SECTION, channel_topic=topic), paper)
+    # the longest relative name ROS takes under the root namespace is accepted (247 characters expanded)
+    ok = "a/" * 122 + "bc"
+    assert len("/" + ok) == 247
+    assert mb.parse_inputs(dict(PAPER_SECTION, channel_topic=ok), paper).channel_topic == ok
