@@ -22,7 +22,9 @@ Size limit. Before reading an array, the file's size is checked against
 stored phase, ``8 (n (n + 1) / 2 + n p_max)`` bytes (its packed prior and gain), plus
 ``8 n^2`` per design, at most ``MAX_BINARY_BYTES`` (4 GiB) in all. For ``camera_agents`` with M
 agents (n = 4 (M + 1), p = 4) that is about 4 n^2 = 64 (M + 1)^2 bytes per phase: 74 KiB per
-phase at M = 32, 5.9 KiB at M = 8.
+phase at M = 32, 5.9 KiB at M = 8. Every member, stored or compressed, is read only after its
+``.npy`` header was checked against the member's size (the bytes the header claims must be the
+bytes the member holds): a header claiming 2^33 doubles is refused before anything is allocated.
 """
 
 from __future__ import annotations
@@ -189,7 +191,7 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
             hi = info.get("header.npy")
             if hi is None or hi.file_size > MAX_FILE_BYTES:
                 raise _refused(source, "header missing or too large")
-            raw = np.load(io.BytesIO(zf.read(hi)), allow_pickle=False)
+            raw = _npy_from_bytes(zf.read(hi))         # at most file_size bytes: checked above
             text = raw.tobytes().decode("utf-8")
         except GainTableError:
             raise
@@ -231,10 +233,12 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
 
 
 def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
-    """The array of one ``.npy`` member: read in place with one ``fromfile`` when it is stored
-    uncompressed (what :func:`encode` writes; integrity is the SHA-256's job), else through zipfile."""
+    """The array of one ``.npy`` member, its header checked against the member's size before
+    anything is allocated (:func:`_npy_header`). A stored member (what :func:`encode` writes) is
+    read in place with one ``fromfile`` (integrity is the SHA-256's job); a compressed one is
+    decompressed to at most its ``file_size`` (which the caller bounded) and read from those bytes."""
     if zi.compress_type != zipfile.ZIP_STORED or zf.fp is None:
-        return np.lib.format.read_array(zf.open(zi), allow_pickle=False)
+        return _npy_from_bytes(zf.read(zi))
     fh = zf.fp
     fh.seek(zi.header_offset)
     head = fh.read(30)
@@ -243,18 +247,41 @@ def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
     name_len, extra_len = struct.unpack("<HH", head[26:30])
     start = zi.header_offset + 30 + name_len + extra_len
     fh.seek(start)
-    version = np.lib.format.read_magic(fh)
-    if version == (1, 0):
-        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-    else:
-        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-    count = int(np.prod(shape))
-    if dtype.hasobject or fortran or fh.tell() + count * dtype.itemsize > start + zi.file_size:
-        raise ValueError("array header does not fit the member")
+    shape, dtype, count = _npy_header(fh, lambda: start + zi.file_size - fh.tell())
     a = np.fromfile(fh, dtype=dtype, count=count)
     if a.size != count:
         raise ValueError("member shorter than its header says")
     return a.reshape(shape)
+
+
+def _npy_from_bytes(raw: bytes) -> np.ndarray:
+    """The array of a whole ``.npy`` member's bytes (:func:`_npy_header` checks before allocating)."""
+    fh = io.BytesIO(raw)
+    shape, dtype, count = _npy_header(fh, lambda: len(raw) - fh.tell())
+    return np.frombuffer(raw, dtype=dtype, count=count, offset=fh.tell()).reshape(shape).copy()
+
+
+def _npy_header(fh: BinaryIO, remaining) -> tuple[tuple[int, ...], np.dtype, int]:
+    """``(shape, dtype, count)`` of the ``.npy`` header at ``fh``; ``remaining()`` is the number of
+    bytes of the member after the header. ValueError, before any allocation, if the data the header
+    claims is not exactly what the member holds (a header claiming 2^33 doubles over a few kB), or if
+    it is not a plain array (objects, Fortran order, an unknown format version)."""
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh, max_header_size=4096)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh, max_header_size=4096)
+    else:
+        raise ValueError(f".npy format version {version[0]}.{version[1]} is not one this container writes")
+    if dtype.hasobject or fortran:
+        raise ValueError("its .npy header describes objects or a Fortran-ordered array")
+    count = 1
+    for d in shape:
+        count *= int(d)
+    claims, holds = count * dtype.itemsize, remaining()
+    if claims != holds:
+        raise ValueError(f"its .npy header claims {claims} bytes; the member holds {holds}")
+    return shape, dtype, count
 
 
 def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:

@@ -72,3 +72,36 @@ def test_a_topic_name_ros_refuses_is_refused_at_start_up(paper_tables, tmp_path)
     res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": paper_tables["periodic"], "inputs": spec}))
     assert_refused(res, "estimator: error:", "channel_topic", "(5000 characters) is not a valid topic name",
                    "topic length should not exceed", code=2)
+
+
+# ------------------------------------------------------------------ binary gain tables
+@pytest.fixture(scope="module")
+def lying_table(tmp_path_factory):
+    """A Kalman table of the paper's system (.npz) whose error transition's .npy header claims
+    2^33 doubles (64 GiB), in a DEFLATE member."""
+    from _binary_tables import lying_member
+
+    from switchobs_core.design.kalman import design_kalman
+    from switchobs_core.model.scenarios import paper_system
+    from switchobs_core.model.schedule import Cycle
+    from switchobs_core.table.gains import kalman_table
+
+    d = tmp_path_factory.mktemp("tables")
+    sys_ = paper_system()
+    saved = kalman_table(sys_, [design_kalman(sys_, Cycle.from_ts(2.0, 0.6), 20.0)]).save(d / "k.npz")
+    bad = d / "lying.npz"
+    bad.write_bytes(lying_member(saved, "k0_E.npy"))
+    return bad
+
+
+def test_a_binary_table_whose_member_lies_is_one_line_everywhere(lying_table, bag, tmp_path):
+    """`switchobs show`, `switchobs_bag estimate --gain-table` and the estimator's start-up died
+    with a 26-line traceback (Unable to allocate 64.0 GiB)."""
+    from refusals import switchobs
+
+    needles = ("not a complete binary gain table", "k0_E: its .npy header claims 68719476736 bytes")
+    assert_refused(switchobs("show", lying_table), *needles, code=2)
+    res = switchobs_bag("estimate", bag, "--csv", tmp_path / "e.csv", "--gain-table", lying_table)
+    assert_refused(res, *needles, code=2)
+    res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": str(lying_table)}))
+    assert_refused(res, "estimator: error:", "gain_table", *needles, code=2)

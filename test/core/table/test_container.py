@@ -9,6 +9,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from _binary_tables import lying_member
 
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
@@ -139,3 +140,27 @@ def test_size_limit_from_n_and_phases(saved, tmp_path):
     with pytest.raises(GainTableError, match=rf"larger than {limit / 2**20:.1f} MiB, the limit for a table of "
                                              rf"n = 12 states and {phases} stored phases"):
         GainTable.load(big)
+
+
+@pytest.mark.parametrize("member", ["k0_E.npy", "header.npy"])
+@pytest.mark.parametrize("deflate", [True, False])
+def test_a_member_header_that_lies_is_refused_before_allocating(saved, tmp_path, member, deflate):
+    """A ``.npy`` header claiming 2^33 elements (64 GiB of float64) in a DEFLATE member was read by
+    numpy, which allocated first (``Unable to allocate 64.0 GiB``); only stored members were
+    checked. Now every member's header is checked against the member's size before anything is
+    allocated: one line, at once, whatever the compression."""
+    import resource
+    import time
+    p = tmp_path / "lying.npz"
+    p.write_bytes(lying_member(saved, member, 2**33 if member != "header.npy" else 2**36, deflate=deflate))
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    resource.setrlimit(resource.RLIMIT_AS, (4 * 10**9, hard))       # the acceptance limit: no 64 GiB
+    try:
+        t0 = time.perf_counter()
+        with pytest.raises(GainTableError, match=rf"{member[:-4]}: its \.npy header claims \d+ bytes; the member "
+                                                 r"holds \d+") as err:
+            GainTable.load(p)
+        assert time.perf_counter() - t0 < 1.0
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+    assert "\n" not in str(err.value)
