@@ -142,6 +142,7 @@ class EstimatorPipeline(Counters):
         self.obs_ns: int | None = None           # stamp of the last observer update
         self.last_accept_clock_ns: int | None = None
         self.publish_covariance = bool(observer.track_covariance)   # Estimate.P (from_params: the parameter)
+        self.uncovered: tuple[int, ...] = ()     # channels no source feeds (from_params: the specification's)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -184,6 +185,11 @@ class EstimatorPipeline(Counters):
                    specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"])
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
+        pipe.uncovered = tuple(conf.inputs.uncovered)
+        if pipe.uncovered:        # accepted, and said at start-up (the node's log, the bag tool's warning)
+            c = ", ".join(map(str, pipe.uncovered))
+            log.warn(f"no source feeds channel{'s' if len(pipe.uncovered) > 1 else ''} {c} (the input specification): "
+                     "nothing is measured while it is active")
         return pipe
 
     # ------------------------------------------------------------------ the parts' state

@@ -40,7 +40,7 @@ from ..pipeline import EstimatorPipeline
 from .cdr import Template, decode_pose, decode_uint8
 from .io import BagError, BagIn, BagOut, deserialize, type_name
 
-__all__ = ["EstimateResult", "estimate", "estimator_params"]
+__all__ = ["EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
 
 #: The estimator's parameter values from params files (owned by switchobs_ros.config).
 estimator_params = params_from_file
@@ -70,6 +70,7 @@ class EstimateResult:
     bound_invalid_why: str = ""
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
+    uncovered: tuple = ()              # channels that no source feeds (msg_bridge.InputSpecs.uncovered)
     out: str | None = None
     csv: str | None = None
 
@@ -83,6 +84,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         if pl.channel_topic:
             needed["/" + pl.channel_topic] = "std_msgs/msg/UInt8"
         bag.require(needed, " (the estimator's inputs)")
+        check_estimable(bag, pl)
         msgs = bag.messages()
         in_topics = dict(bag.topics)
         storage = storage or bag.storage or "mcap"
@@ -217,11 +219,41 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
-        seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl))
+        seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
+        uncovered=tuple(pl.uncovered))
     if csv is not None:
         write_csv(csv, res)
         res.csv = str(csv)
     return res
+
+
+def _listed(items: list[str]) -> str:
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def check_estimable(bag: BagIn, pl: EstimatorPipeline) -> None:
+    """Refuse, before anything is written, a bag in which nothing can be estimated: every source
+    topic empty, or the channel topic empty while every source needs the channel (a source of no
+    fixed channel is attributed by it, :mod:`switchobs_ros.attribution`)."""
+    topics = ["/" + s.topic for s in pl.sources]
+    if not any(bag.counts.get(t, 0) for t in topics):
+        raise BagError(f"bag {bag.path}: {'topics' if len(topics) > 1 else 'topic'} {_listed(topics)} "
+                       f"{'hold' if len(topics) > 1 else 'holds'} no messages: nothing to estimate")
+    ct = "/" + pl.channel_topic if pl.channel_topic else None
+    if ct and not bag.counts.get(ct, 0) and all(s.channel is None for s in pl.sources):
+        raise BagError(f"bag {bag.path}: channel topic {ct} holds no messages, and the samples of "
+                       f"{', '.join(topics)} need their channel: nothing to estimate")
+
+
+def nothing_estimated(res: EstimateResult) -> str:
+    """Why a run produced no estimate (for the one-line refusal of ``switchobs_bag estimate``)."""
+    if res.rejected and not any(res.accepted.values()):
+        return "every input message was rejected (" + ", ".join(f"{k} {v}" for k, v in res.rejected.items()) + ")"
+    if res.unanswered:
+        return ("no valid measurement was answered (" + ", ".join(f"{k} {v}" for k, v in res.unanswered.items())
+                + (f"; rejected: {', '.join(f'{k} {v}' for k, v in res.rejected.items())}" if res.rejected else "")
+                + ")")
+    return f"none of its {res.messages_in} messages is an input the estimator could use"
 
 
 def unanswered(pl: EstimatorPipeline) -> dict[str, int]:

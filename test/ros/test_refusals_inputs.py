@@ -6,6 +6,7 @@ recorded stamps that are no time. Every refusal is one line and a non-zero exit 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -105,3 +106,89 @@ def test_a_binary_table_whose_member_lies_is_one_line_everywhere(lying_table, ba
     assert_refused(res, *needles, code=2)
     res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": str(lying_table)}))
     assert_refused(res, "estimator: error:", "gain_table", *needles, code=2)
+
+
+# ------------------------------------------------------------------ nothing estimated, channels never fed
+CART = str(Path(__file__).resolve().parents[2] / "config" / "cart_pair.yaml")
+
+
+def _copy_bag(src, dst, *, drop=(), keep=None, edit=None) -> Path:
+    """A copy of bag ``src`` (file order, log times kept) without the messages of ``drop``, only the
+    topics of ``keep`` (None: all), ``edit(message) -> bytes | None`` applied to each message."""
+    from switchobs_ros.bag.io import BagIn, BagOut
+
+    with BagIn(src) as b:
+        msgs, topics = b.messages(order="file"), dict(b.topics)
+    with BagOut(dst, "mcap") as out:
+        for t, ty in topics.items():
+            if keep is None or t in keep:
+                out.add(t, ty)
+        for m in msgs:
+            if m.topic in drop or (keep is not None and m.topic not in keep):
+                continue
+            data = m.data if edit is None else edit(m)
+            if data is not None:
+                out.write(m.topic, m.log_ns, data)
+    return dst
+
+
+@pytest.fixture(scope="module")
+def cart_bag(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bags") / "cart"
+    res = switchobs_bag("generate", out, "--system", CART, "--duration", "3", "--rate", "20")
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def test_nothing_estimated_is_a_non_zero_exit_for_any_system(bag, cart_bag, tmp_path, paper_tables):
+    """Exit 0 with nothing estimated: a channel topic with 0 messages (0 estimates, 122 rejected
+    no_channel), a cart_pair bag whose point topics are empty, a channel topic whose every message
+    is invalid. Now one line naming why, exit 2."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import UInt8
+
+    table = ["--gain-table", paper_tables["periodic"]]
+    no_channel = _copy_bag(bag, tmp_path / "no_channel", drop={"/camera/active_channel"})
+    res = switchobs_bag("estimate", no_channel, "--csv", tmp_path / "a.csv", *table)
+    assert_refused(res, "channel topic /camera/active_channel holds no messages",
+                   "/camera/pose, /target/pose need their channel", "nothing to estimate", code=2)
+    empty = _copy_bag(cart_bag, tmp_path / "cart_empty", drop={"/left/point", "/right/point"})
+    res = switchobs_bag("estimate", empty, "--csv", tmp_path / "b.csv", "--system", CART)
+    assert_refused(res, "topics /left/point and /right/point hold no messages", "nothing to estimate", code=2)
+    bad = serialize_message(UInt8(data=7))
+    invalid = _copy_bag(bag, tmp_path / "invalid", edit=lambda m: bad if m.topic == "/camera/active_channel" else m.data)
+    res = switchobs_bag("estimate", invalid, "--csv", tmp_path / "c.csv", *table)
+    line = assert_refused(res, "no estimate:", "every input message was rejected", code=2)
+    assert "camera/active_channel bad_channel 41" in line and "target/pose no_channel 41" in line, line
+    only_clock = _copy_bag(bag, tmp_path / "only_clock", keep={"/clock"})
+    res = switchobs_bag("estimate", only_clock, "--csv", tmp_path / "d.csv", *table)
+    assert_refused(res, "topic /camera/pose is missing", code=2)
+
+
+def test_a_channel_no_source_feeds_is_reported(cart_bag, tmp_path):
+    """cart_pair read with a source for channel 1 only: accepted, and the bag tool said nothing of
+    the samples of channel 2 it never sees (the docs promise such a channel "is reported, not
+    refused"). Now the tool warns on stderr and in --json; the node logs it at start-up."""
+    import json
+
+    from switchobs_ros.counters import PipelineLog
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    spec = _inputs_file(tmp_path / "left.yaml", {"sources": [
+        {"topic": "left/point", "type": "geometry_msgs/PointStamped", "channel": 1, "fields": ["point.x"],
+         "rows": [0]}]})
+    res = switchobs_bag("estimate", cart_bag, "--csv", tmp_path / "e.csv", "--system", CART, "-p", f"inputs:={spec}",
+                        "--json")
+    assert res.returncode == 0, res.stderr
+    warn = res.stderr.strip().splitlines()
+    assert len(warn) == 1 and warn[0].startswith("switchobs_bag: warning: no source feeds channel 2 "), warn
+    assert json.loads(res.stdout)["uncovered_channels"] == [2]
+
+    class Log(PipelineLog):
+        lines: list = []
+
+        def warn(self, text, throttle=False):
+            self.lines.append(text)
+
+    EstimatorPipeline.from_params({"system": CART, "inputs": spec, "gain_table_cache_dir": str(tmp_path)}, Log())
+    assert [t for t in Log.lines if t.startswith("no source feeds channel 2 ")], Log.lines

@@ -10,14 +10,13 @@ from switchobs_core.files import check_output
 from switchobs_core.loading import parse_yaml
 
 from ...config import params_from_file
-from ..estimate import estimate
-from ..io import BagError, BagIn
+from ..estimate import estimate, nothing_estimated
+from ..io import BagError
 
 __all__ = ["STRICT_EXIT", "register", "run", "params_of"]
 
 #: Exit code of ``--strict`` when valid measurements went unanswered.
 STRICT_EXIT = 4
-_POSES = ("/camera/pose", "/target/pose")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -61,16 +60,21 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
         raise BagError("give -o OUT (a new bag) and/or --csv FILE")
     if a.csv:
         check_output(a.csv, "--csv", exc=BagError)       # before the run, not after it
-    with BagIn(a.bag) as bag:
-        if all(t in bag.topics for t in _POSES) and not any(bag.counts.get(t, 0) for t in _POSES):
-            raise BagError(f"bag {a.bag}: topics {' and '.join(_POSES)} hold no messages: nothing to estimate")
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
                    node=a.node)
+    if res.uncovered:
+        many = len(res.uncovered) > 1
+        print(f"switchobs_bag: warning: no source feeds channel{'s' if many else ''} "
+              f"{', '.join(map(str, res.uncovered))} (the input specification): {'their' if many else 'its'} "
+              "samples never arrive, so nothing is measured while it is active", file=sys.stderr)
+    if not res.stamps.size:
+        raise BagError(f"bag {a.bag}: no estimate: {nothing_estimated(res)}")
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
     info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
             "partial_updates": res.partial_updates, "rejected": res.rejected, "unanswered": res.unanswered,
             "inconsistent": res.inconsistent, "reattributed": res.reattributed, "bounds_valid": res.bound_valid,
+            "uncovered_channels": list(res.uncovered),
             "out": res.out, "csv": res.csv}
     code = STRICT_EXIT if a.strict and res.unanswered else 0
     if a.json:
