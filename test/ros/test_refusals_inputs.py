@@ -156,7 +156,8 @@ def test_nothing_estimated_is_a_non_zero_exit_for_any_system(bag, cart_bag, tmp_
     res = switchobs_bag("estimate", empty, "--csv", tmp_path / "b.csv", "--system", CART)
     assert_refused(res, "topics /left/point and /right/point hold no messages", "nothing to estimate", code=2)
     bad = serialize_message(UInt8(data=7))
-    invalid = _copy_bag(bag, tmp_path / "invalid", edit=lambda m: bad if m.topic == "/camera/active_channel" else m.data)
+    invalid = _copy_bag(bag, tmp_path / "invalid",
+                        edit=lambda m: bad if m.topic == "/camera/active_channel" else m.data)
     res = switchobs_bag("estimate", invalid, "--csv", tmp_path / "c.csv", *table)
     line = assert_refused(res, "no estimate:", "every input message was rejected", code=2)
     assert "camera/active_channel bad_channel 41" in line and "target/pose no_channel 41" in line, line
