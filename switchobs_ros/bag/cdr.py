@@ -19,7 +19,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 
-__all__ = ["Template", "decode_pose", "decode_uint8"]
+__all__ = ["Template", "decode_pose", "decode_uint8", "header_stamp"]
 
 _HDR_LE = (b"\x00\x01", b"\x00\x03")     # CDR_LE, PL_CDR_LE (encapsulation id, big-endian u16)
 _U32 = struct.Struct("<I")
@@ -51,6 +51,14 @@ def decode_pose(data: bytes, fallback: Callable[[bytes], object]):
     px, py, pz, qx, qy, qz, qw = _SEVEN.unpack_from(data, off)
     return _Obj(header=_Obj(stamp=_Obj(sec=sec, nanosec=nsec), frame_id=frame),
                 pose=_Obj(position=_Obj(x=px, y=py, z=pz), orientation=_Obj(x=qx, y=qy, z=qz, w=qw)))
+
+
+def header_stamp(data: bytes) -> tuple[int, int] | None:
+    """``(sec, nanosec)`` of the ``std_msgs/Header`` that starts the little-endian CDR ``data`` of a
+    stamped message (PoseStamped, PointStamped, Odometry, ...); None for another encoding."""
+    if len(data) < 12 or data[:2] not in _HDR_LE:
+        return None
+    return _STAMP.unpack_from(data, 4)
 
 
 def decode_uint8(data: bytes, fallback: Callable[[bytes], object]):

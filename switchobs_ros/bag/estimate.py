@@ -1,13 +1,15 @@
 """``switchobs_bag estimate``: the estimator's pipeline over a bag, offline, deterministic.
 
 The same :class:`switchobs_ros.pipeline.EstimatorPipeline` the estimator node runs, fed with the
-bag's ``/camera/active_channel``, ``/camera/pose`` and ``/target/pose`` messages in the bag's
-order (log time, ties by :data:`~switchobs_ros.bag.io.TOPIC_RANK`), with the node clock taken
-as each message's log time (what the node's clock reads when ``switchobs_bag play`` replays the
-bag with ``/clock``). Halves of a camera/target pair whose partner never comes are used alone
-when a newer pair completes or at the end of the bag (the node's wall-clock pairing timeout has
-no offline meaning). So a live replay and the offline run answer the same samples with the
-same estimates (tested to 1e-9).
+bag's input messages (the system's input specification: by default ``/camera/active_channel``,
+``/camera/pose`` and ``/target/pose``) in the recording's order, checked against their own stamps
+(:mod:`switchobs_ros.bag.order`: log time, ties in the file's order; a target pose whose side of
+a channel change the recording does not establish is rejected, ``ambiguous_channel``, and counted
+in ``unordered``), with the node clock taken as each message's log time (what the node's clock
+reads when ``switchobs_bag play`` replays the bag with ``/clock``). Halves of a camera/target
+pair whose partner never comes are used alone when a newer pair completes or at the end of the
+bag (the node's wall-clock pairing timeout has no offline meaning). So a live replay and the
+offline run answer the same samples with the same estimates (tested to 1e-9).
 
 Writes a new bag with the estimator's output topics (``<node>/state``, ``<node>/envelope``,
 ``<node>/<body>/odom``, the typed ``<node>/state_estimate`` and ``<node>/error_bounds``: the same
@@ -33,12 +35,14 @@ from std_msgs.msg import Float64MultiArray, UInt8
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
+from msg_bridge import Reason, Rejection
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, decode_pose, decode_uint8
+from .cdr import Template, decode_pose, decode_uint8, header_stamp
 from .io import BagError, BagIn, BagOut, deserialize, type_name
+from .order import Ordering, evidence, order_messages
 
 __all__ = ["EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
 
@@ -71,6 +75,8 @@ class EstimateResult:
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
     uncovered: tuple = ()              # channels that no source feeds (msg_bridge.InputSpecs.uncovered)
+    unordered: int = 0                 # parts whose side of a channel change the recording cannot tell (rejected)
+    unproven_ties: int = 0             # log-time ties whose file order the stamps contradict
     out: str | None = None
     csv: str | None = None
 
@@ -85,7 +91,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             needed["/" + pl.channel_topic] = "std_msgs/msg/UInt8"
         bag.require(needed, " (the estimator's inputs)")
         check_estimable(bag, pl)
-        msgs = bag.messages()
+        msgs = bag.messages(order="file")     # ordered below (switchobs_ros.bag.order)
         in_topics = dict(bag.topics)
         storage = storage or bag.storage or "mcap"
     sys_ = pl.system
@@ -176,12 +182,20 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         n_inputs = 0
         last_ns = 0
         t0 = time.perf_counter()
-        for m in msgs:
+        ordering = recording_order(msgs, pl, sources, channel_topic)
+        unordered_why = Rejection(Reason.AMBIGUOUS_CHANNEL, pl.channel_topic or "channel",
+                                  "the recording does not establish whether it was sent before or after a change of "
+                                  "the channel (log times that tie or contradict the stamps)")
+        for i in ordering.order:
+            m = msgs[i]
             last_ns = m.log_ns
             src = sources.get(m.topic)
             if src is not None:
                 n_inputs += 1
-                emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
+                if i in ordering.unordered:         # never attributed by a guess: rejected, counted
+                    pl.reject(src.topic, unordered_why)
+                else:
+                    emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
             elif m.topic == channel_topic:
                 n_inputs += 1
                 emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
@@ -198,6 +212,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                      KeyValue(key="switches", value=str(pl.switches)),
                      KeyValue(key="inconsistent samples", value=str(pl.inconsistent)),
                      KeyValue(key="re-attributed samples", value=str(pl.reattributed)),
+                     KeyValue(key="unordered samples (recording)", value=str(len(ordering.unordered))),
                      KeyValue(key="bounds valid", value=str(pl.bound_valid).lower()
                               + ("" if pl.bound_valid else f" ({pl.bound_invalid_why})"))]
             arr = DiagnosticArray()
@@ -220,11 +235,43 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
         seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
-        uncovered=tuple(pl.uncovered))
+        uncovered=tuple(pl.uncovered), unordered=len(ordering.unordered), unproven_ties=ordering.unproven)
     if csv is not None:
         write_csv(csv, res)
         res.csv = str(csv)
     return res
+
+
+def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_topic: str | None) -> Ordering:
+    """The order to process the bag's messages (given in file order) and the unordered parts
+    (:mod:`switchobs_ros.bag.order`), from their log times, file order, header stamps and the
+    channel messages' values."""
+    from msg_bridge import BridgeError
+
+    n = len(msgs)
+    log_ns = [m.log_ns for m in msgs]
+    stamp: list[int | None] = [None] * n
+    dependent = [False] * n
+    channel: list[int | None] = [None] * n
+    is_channel = [False] * n
+    for i, m in enumerate(msgs):
+        src = sources.get(m.topic)
+        if src is not None:
+            dependent[i] = bool(channel_topic) and src.channel is None and not src.shared
+            st = header_stamp(m.data) if src.type != mb.LABELLED_ARRAY else None
+            if st is None:
+                try:
+                    st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], 1_000_000_000)
+                except (BagError, BridgeError):
+                    continue
+            if st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
+                stamp[i] = st[0] * 1_000_000_000 + st[1]
+        elif m.topic == channel_topic:
+            is_channel[i] = True
+            c = decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8)).data
+            channel[i] = int(c) if 1 <= int(c) <= pl.N else None
+    ev = evidence([m.topic for m in msgs], log_ns, stamp, pl.future_ns)
+    return order_messages(log_ns, stamp, ev, dependent, channel, is_channel)
 
 
 def _listed(items: list[str]) -> str:

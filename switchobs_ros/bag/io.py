@@ -8,9 +8,9 @@ deserialises exactly what the node would receive. Topic names in bags are absolu
 (``/camera/pose``), as rosbag2 records them.
 
 Message order: :meth:`BagIn.messages` returns the messages sorted by their log time (the
-receive time on the recorder's clock), ties broken by :data:`TOPIC_RANK` (``/clock``, then the
-active channel, then the poses) and then by the order in the file. The player publishes in
-this order and the offline estimator processes in it, so both see the same sequence.
+receive time on the recorder's clock), ties in the order of the file (the recorder's: the order
+it received them), never by topic. The player publishes in this order; the offline estimator
+checks it against the messages' own stamps first (:mod:`switchobs_ros.bag.order`).
 
 Every failure is a :class:`BagError` with one line naming the file or the topic. Before anything
 is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: the offline tools
@@ -57,7 +57,8 @@ CONTRACT_TYPES = {
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
-#: Order of messages that share a log time (see the module docstring); other topics rank 9.
+#: The topics of a paper-interface tick in camera_sim's publishing order (other topics rank 9): the
+#: player's channel topic is rank 1. Ties of log time are never broken by it (module docstring).
 TOPIC_RANK = {"/clock": 0, "/camera/active_channel": 1, "/camera/pose": 2, "/target/pose": 3, "/sim/truth": 4}
 
 
@@ -216,9 +217,10 @@ class BagIn:
     def messages(self, topics: Iterable[str] | None = None, order: str = "log") -> list[BagMessage]:
         """The messages (of ``topics``, default all).
 
-        ``order="log"``: by log time (see the module docstring), what a player publishes.
-        ``order="file"``: as written, i.e. in receive order for a recorded bag (a recording on sim
-        time of a looped replay has log times that go back; its passes stay apart in this order).
+        ``order="log"``: by log time, ties in file order (see the module docstring), what a player
+        publishes. ``order="file"``: as written, i.e. in receive order for a recorded bag (a
+        recording on sim time of a looped replay has log times that go back; its passes stay apart
+        in this order).
 
         Raises :class:`BagError` if the file ends early or a record is damaged, or if fewer
         messages than metadata.yaml counts could be read (a truncated file).
@@ -228,12 +230,8 @@ class BagIn:
         out: list[tuple] = []
         got: dict[str, int] = {}
         try:
-            if order == "file":
-                it = self._file_order({c.topic for c in conns})
-            else:
-                it = ((c.topic, c.msgtype, t, d) for c, t, d in self._reader.messages(connections=conns))
-            for seq, (topic, msgtype, t, data) in enumerate(it):
-                out.append((t, TOPIC_RANK.get(topic, 9), seq, BagMessage(topic, msgtype, t, bytes(data))))
+            for topic, msgtype, t, data in self._file_order({c.topic for c in conns}):
+                out.append(BagMessage(topic, msgtype, t, bytes(data)))
                 got[topic] = got.get(topic, 0) + 1
         except Exception as err:
             raise BagError(f"bag {self.path}: reading messages failed after {len(out)} messages "
@@ -243,8 +241,8 @@ class BagIn:
                 raise BagError(f"bag {self.path}: topic {c.topic} has {got.get(c.topic, 0)} readable messages "
                                f"but metadata.yaml counts {self.counts[c.topic]}; the file is truncated")
         if order != "file":
-            out.sort(key=lambda r: r[:3])
-        return [r[3] for r in out]
+            out.sort(key=lambda m: m.log_ns)        # stable: ties stay in the file's order
+        return out
 
     def _file_order(self, topics: set[str]):
         """``(topic, type, log_ns, data)`` in the order written (mcap: records; sqlite3: row ids)."""

@@ -74,7 +74,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
             "partial_updates": res.partial_updates, "rejected": res.rejected, "unanswered": res.unanswered,
             "inconsistent": res.inconsistent, "reattributed": res.reattributed, "bounds_valid": res.bound_valid,
-            "uncovered_channels": list(res.uncovered),
+            "uncovered_channels": list(res.uncovered), "unordered": res.unordered,
             "out": res.out, "csv": res.csv}
     code = STRICT_EXIT if a.strict and res.unanswered else 0
     if a.json:
@@ -85,6 +85,9 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
               f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
         if res.unanswered:
             print(f"valid measurements without an estimate: {sum(res.unanswered.values())} {res.unanswered}")
+        if res.unordered:
+            print(f"samples whose channel the recording cannot tell: {res.unordered} (log times that tie or contradict "
+                  f"the stamps around a channel change; rejected as ambiguous_channel, never guessed)")
         if not res.bound_valid:
             print(f"bounds withdrawn: {res.bound_invalid_why}")
         for what in ("out", "csv"):
