@@ -64,6 +64,7 @@ from .inputs import (
     default_inputs,
     load_inputs,
     parse_inputs,
+    ros_topic_error,
 )
 from .markers import MarkersWriter
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
@@ -97,6 +98,7 @@ __all__ = [
     "load_inputs",
     "message_class",
     "parse_inputs",
+    "ros_topic_error",
     "STAMP_PAD",
     "Body",
     "BridgeError",

@@ -56,6 +56,7 @@ __all__ = [
     "default_inputs",
     "load_inputs",
     "parse_inputs",
+    "ros_topic_error",
 ]
 
 #: The paper's active-channel topic (std_msgs/UInt8, 1..N).

@@ -59,7 +59,7 @@ class EstimatorDiagnostics:
         self.name = name
         self.pipeline = pipeline
         self._t_first_ns = now_ns
-        self._rate_base = (now_ns, Counter(), 0, 0)
+        self._rate_base = (now_ns, Counter(), 0, 0, 0)
 
     def array(self, now, node: NodeState) -> DiagnosticArray:
         """The /diagnostics message at node-clock time ``now`` (an rclpy Time)."""
@@ -67,7 +67,7 @@ class EstimatorDiagnostics:
         conf = self._configuration()
         ob = self._observer(node) + self._bounds() + self._model_against_data()
         level, msg = self._observer_status(now_ns, node, ob)
-        inp, new_rej, freq_problem = self._inputs(now_ns)
+        inp, new_rej, new_lost, freq_problem = self._inputs(now_ns)
         arr = DiagnosticArray()
         arr.header.stamp = now.to_msg()
         name = self.name
@@ -76,9 +76,11 @@ class EstimatorDiagnostics:
                              hardware_id="switchobs", values=conf),
             DiagnosticStatus(level=level, name=f"{name}: observer", message=msg, hardware_id="switchobs",
                              values=ob),
-            DiagnosticStatus(level=DiagnosticStatus.WARN if new_rej or freq_problem else DiagnosticStatus.OK,
+            DiagnosticStatus(level=DiagnosticStatus.WARN if new_rej or new_lost or freq_problem
+                             else DiagnosticStatus.OK,
                              name=f"{name}: inputs",
                              message="; ".join(x for x in (f"{new_rej} rejected in the last period" if new_rej else "",
+                                                           f"{new_lost} lost in the last period" if new_lost else "",
                                                            freq_problem) if x) or "ok",
                              hardware_id="switchobs", values=inp),
         ]
@@ -217,25 +219,38 @@ class EstimatorDiagnostics:
             msg += f"; {res.problem}"
         return level, msg
 
-    def _inputs(self, now_ns: int) -> tuple[list[KeyValue], int, str]:
-        """The inputs status's values (rates over the last period on the node clock, accepted and
-        rejected counts by reason), the rejections new in the period, and the frequency problem
-        ('' if none); starts the next period."""
+    def _inputs(self, now_ns: int) -> tuple[list[KeyValue], int, int, str]:
+        """The inputs status's values (rates over the last period on the node clock, accepted,
+        lost and rejected counts), the rejections and losses new in the period, and the frequency
+        problem ('' if none); starts the next period."""
         pl = self.pipeline
-        t0_ns, acc0, _, upd0 = self._rate_base
+        t0_ns, acc0, _, upd0, _ = self._rate_base
         dt = (now_ns - t0_ns) * 1e-9
         inp = []
         rates = {}
+        total_lost = 0
+        wrong: list[str] = []
         for topic in pl.input_topics:
             rates[topic] = rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
             inp.append(kv(f"{topic} rate (Hz)", rate))
             inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
+            # messages the publisher's sequence numbers show never arrived (switchobs_ros.loss)
+            lost = pl.lost_channel if topic == pl.channel_topic else pl.loss.lost[topic]
+            total_lost += lost
+            inp.append(kv(f"{topic} lost", lost))
+            if pl.loss.restarts[topic]:
+                inp.append(kv(f"{topic} publisher restarts", pl.loss.restarts[topic]))
+            if pl.loss.wrong_type[topic]:
+                wrong.append(f"{topic} has {pl.loss.wrong_type[topic]} publisher(s) of another type "
+                             f"({pl.loss.wrong_type_names.get(topic, 'unknown')}): not received")
+                inp.append(kv(f"{topic} publishers of another type", pl.loss.wrong_type[topic]))
+                inp.append(kv(f"{topic} other types", pl.loss.wrong_type_names.get(topic, "unknown")))
         # frequency status (as robot_localization's): measured against the expected rate
         out_rate = (pl.updates - upd0) / dt if dt > 0 else 0.0
         expected = float(getattr(pl, "config", None)["rate"]) if getattr(pl, "config", None) is not None else 0.0
         inp.append(kv("estimates published rate (Hz)", out_rate))
         inp.append(kv("expected measurement rate (Hz)", expected if expected > 0 else "not set (parameter rate)"))
-        freq_problem = self._frequency_problem(expected, t0_ns, rates, out_rate)
+        freq_problem = "; ".join([*wrong, self._frequency_problem(expected, t0_ns, rates, out_rate)]).strip("; ")
         inp.append(kv("frequency status", freq_problem or ("ok" if expected > 0 else "not checked (no rate)")))
         total_rej = sum(pl.rejected.values())
         for (topic, reason), n in sorted(pl.rejected.items()):
@@ -244,8 +259,9 @@ class EstimatorDiagnostics:
         if pl.last_rejection:
             inp.append(kv("last rejection", pl.last_rejection))
         new_rej = total_rej - self._rate_base[2]
-        self._rate_base = (now_ns, Counter(pl.accepted), total_rej, pl.updates)
-        return inp, new_rej, freq_problem
+        new_lost = total_lost - self._rate_base[4]
+        self._rate_base = (now_ns, Counter(pl.accepted), total_rej, pl.updates, total_lost)
+        return inp, new_rej, new_lost, freq_problem
 
     def _frequency_problem(self, expected: float, t0_ns: int, rates: dict[str, float], out_rate: float) -> str:
         """The input or output rate outside :data:`FREQUENCY_TOLERANCE` of the expected one ('' if

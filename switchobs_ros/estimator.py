@@ -62,7 +62,7 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 from . import qos
 from .config import PARAMS, EstimatorConfig, check_runtime_value
 from .diagnostics import EstimatorDiagnostics, NodeState
-from .params import declare_all, unknown_parameters
+from .params import ConfigError, declare_all, unknown_parameters
 from .pipeline import Estimate, EstimatorPipeline, PipelineLog
 from .runner import run_node
 
@@ -143,6 +143,10 @@ class EstimatorMixin:
         # the input handling (validation, pairing, observer, counters) is the pipeline's
         conf = EstimatorConfig.from_values(cfg)     # every check of the values, in one place
         self.pipeline = pl = EstimatorPipeline.from_params(conf, _NodeLog(self.get_logger()))
+        for topic in (pl.channel_topic, *(s.topic for s in pl.sources)):    # in this node's namespace
+            why = mb.ros_topic_error(topic, self.get_namespace()) if topic else None
+            if why:
+                raise ConfigError(f"parameter 'inputs': topic {topic} in namespace {self.get_namespace()}: ROS: {why}")
         self.system = sys_ = pl.system
         self.mode = pl.mode
         self.cycles = pl.cycles
@@ -181,7 +185,10 @@ class EstimatorMixin:
         # here took the idle wait from 127 to 218 us (measured, bench/RESULTS.md). The
         # subscriptions keep the incompatible-QoS warning (a sensor or channel publisher whose
         # QoS does not match gets its messages silently dropped); a subscriber of our outputs
-        # with incompatible QoS is warned on its own side.
+        # with incompatible QoS is warned on its own side. A publisher of another message type is
+        # found in the graph instead (:meth:`_check_input_types`): the incompatible-type event
+        # does not come between processes with rmw_fastrtps (measured), so it would be a waitable
+        # that never fires.
         def pub(msg_type, topic, profile):
             return self.create_publisher(msg_type, topic, profile,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
@@ -233,6 +240,9 @@ class EstimatorMixin:
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
         self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
         self._hot_inputs = tuple(hot)
+        self._input_types = {s.topic: s.type for s in pl.sources}      # what each input topic must carry
+        if pl.channel_topic:
+            self._input_types[pl.channel_topic] = "std_msgs/msg/UInt8"
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -293,11 +303,12 @@ class EstimatorMixin:
                 return
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
-            if index is None:      # the sequence number shows lost channel messages (attribution)
-                seq = info.get("publication_sequence_number") if info else None
+            # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
+            seq = info.get("publication_sequence_number") if info else None
+            if index is None:
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
-                self._publish_all(pipeline.on_input(index, msg, clock.now().nanoseconds, None, src_ns))
+                self._publish_all(pipeline.on_input(index, msg, clock.now().nanoseconds, None, src_ns, seq))
         return handle
 
     def _with_drain(self, handle):
@@ -461,9 +472,24 @@ class EstimatorMixin:
         except Exception as err:
             self.pipeline.internal_error("prediction", err)
         try:
+            self._check_input_types()
+        except Exception as err:
+            self.pipeline.internal_error("graph", err)
+        try:
             self.pub_diag.publish(self.diagnostics())
         except Exception as err:
             self.pipeline.internal_error("diagnostics", err)
+
+    def _check_input_types(self) -> None:
+        """Publishers of another message type on an input topic (the ROS graph): none of their
+        messages reach the node. Counted per topic (:mod:`switchobs_ros.loss`), in /diagnostics,
+        and logged when their number changes."""
+        for topic, ours in getattr(self, "_input_types", {}).items():
+            name = self.resolve_topic_name(topic)
+            theirs = sorted(i.topic_type for i in self.get_publishers_info_by_topic(name) if i.topic_type != ours)
+            if self.pipeline.loss.wrong_type_seen(topic, len(theirs), ", ".join(dict.fromkeys(theirs))) and theirs:
+                self.get_logger().warn(f"a publisher on '{name}' sends {', '.join(dict.fromkeys(theirs))}, not "
+                                       f"{ours}: its messages are not received")
 
     def diagnostics(self) -> DiagnosticArray:
         """The /diagnostics message now (built by :class:`~switchobs_ros.diagnostics.EstimatorDiagnostics`)."""

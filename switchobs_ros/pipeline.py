@@ -50,6 +50,7 @@ from .attribution import ChannelAttribution, Resolution, Verdict
 from .config import EstimatorConfig
 from .core_config import load_or_design_table
 from .counters import NO_BOUND, Counters, PipelineLog
+from .loss import SequenceLoss
 from .pairing import MAX_PENDING, DeadTime, Pairing, Pending
 from .params import ConfigError
 from .screening import Screening
@@ -136,6 +137,7 @@ class EstimatorPipeline(Counters):
         self.dead_time = DeadTime(int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9)),
                                   next((s.index for s in self.sources if s.shared), None))
         self.screening = Screening(system, observer, self.pairing, self, check=check, chi2_alpha=chi2_alpha)
+        self.loss = SequenceLoss()               # messages the publishers' numbers show never arrived
         # run-time state (cleared by reset)
         self.last_ns: dict[str, int | None] = {s.topic: None for s in self.sources}
         self.origin_ns: int | None = None
@@ -245,10 +247,10 @@ class EstimatorPipeline(Counters):
     def on_message(self, topic: str, msg: Any, now_ns: int, now_mono: float | None = None,
                    src_ns: int | None = None, seq: int | None = None) -> list[Estimate]:
         """A message on input ``topic`` (a source or the channel topic; relative name); ``seq``:
-        the publisher's sequence number of a channel message (:meth:`on_channel`)."""
+        the publisher's sequence number (:meth:`on_channel`, :meth:`on_input`)."""
         if topic == self.channel_topic:
             return self.on_channel(msg, src_ns=src_ns, now_mono=now_mono, seq=seq)
-        return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns)
+        return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns, seq)
 
     def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None,
                    seq: int | None = None) -> list[Estimate]:
@@ -320,9 +322,10 @@ class EstimatorPipeline(Counters):
         return self.on_input(self.by_topic[POSE_TOPICS[part]].index, msg, now_ns, now_mono, src_ns)
 
     def on_input(self, index: int, msg: Any, now_ns: int, now_mono: float | None = None,
-                 src_ns: int | None = None) -> list[Estimate]:
+                 src_ns: int | None = None, seq: int | None = None) -> list[Estimate]:
         """A message of source ``index`` received at node-clock ``now_ns`` (sent at ``src_ns`` on
-        the publisher's clock, when known).
+        the publisher's clock, when known; ``seq``: its publication sequence number, whose gaps
+        are counted as lost messages, :mod:`switchobs_ros.loss`).
 
         ``now_mono`` (default ``time.monotonic()``) starts the pairing timeout and the reorder
         window of a new pending sample. Returns the estimates produced (none while waiting).
@@ -332,6 +335,7 @@ class EstimatorPipeline(Counters):
         out: list[Estimate] = []
         now_mono = time.monotonic() if now_mono is None else now_mono
         try:
+            self.loss.seen(topic, seq)
             stamp_ns, values, rej = src.checked(msg, frame_id=self.in_frame, max_abs=self.max_abs,
                                                 last_ns=self.last_ns[topic], now_ns=now_ns,
                                                 future_tolerance_ns=self.future_ns)

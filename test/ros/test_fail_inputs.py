@@ -314,3 +314,46 @@ def test_fuzz_100k_messages_every_valid_one_answered(pl):
     assert dict(pl.rejected) == dict(expected_rej)
     assert pl.errors == 0 and sum(pl.accepted.values()) > 0.5 * N
     assert len(answered) > 20_000
+
+
+def test_messages_lost_before_the_node_are_counted_per_topic(pl):
+    """The publishers' sequence numbers show the pose messages that never arrived (a best-effort
+    transport, a subscription queue overwritten under a flood), per topic, as they already did for
+    the channel: sent = accepted + rejected + lost. A restarted publisher starts a new sequence (no
+    loss for its numbers before the first one seen); a second publisher on the topic is no gap in
+    the first one's sequence. Diagnostics report them (`<topic> lost`, `<topic> publisher restarts`)."""
+    from switchobs_ros.diagnostics import EstimatorDiagnostics, NodeState
+
+    pl.on_channel(UInt8(data=1), seq=1)
+    t0 = NOW - 10 * S
+    sent = {"camera/pose": 0, "target/pose": 0}
+    # 40 pairs, numbers 1..40 on each topic; the camera's 11..15 and the target's 30 never arrive
+    for k in range(1, 41):
+        ns = t0 + k * 10 * MS
+        for part, topic in (("camera", "camera/pose"), ("target", "target/pose")):
+            sent[topic] += 1
+            if (topic == "camera/pose" and 11 <= k <= 15) or (topic == "target/pose" and k == 30):
+                continue
+            pl.on_message(topic, _pose((0.1, 0.2) if part == "camera" else (3.0, 1.0), ns), NOW, seq=k)
+    assert dict(pl.loss.lost) == {"camera/pose": 5, "target/pose": 1}
+    for topic, n in sent.items():
+        got = pl.accepted[topic] + sum(c for (t, _), c in pl.rejected.items() if t == topic)
+        assert got + pl.loss.lost[topic] == n
+    # the camera publisher restarts (numbers from 1 again, its first 3 never seen): a new sequence, no loss;
+    # a second target publisher (numbers 1, 2, 3) interleaved with the first (41, 42, 43): no loss either
+    for k in range(1, 4):
+        ns = t0 + (40 + k) * 10 * MS
+        pl.on_message("camera/pose", _pose((0.1, 0.2), ns), NOW, seq=3 + k)
+        pl.on_message("target/pose", _pose((3.0, 1.0), ns), NOW, seq=40 + k)
+        pl.on_message("target/pose", _pose((3.0, 1.0), ns + 5 * MS), NOW, seq=k)
+    assert dict(pl.loss.lost) == {"camera/pose": 5, "target/pose": 1}
+    assert dict(pl.loss.restarts) == {"camera/pose": 1, "target/pose": 1}
+    diag = EstimatorDiagnostics("/estimator", pl, NOW - S)
+    arr = diag.array(type("T", (), {"nanoseconds": NOW, "to_msg": lambda self: mb.ns_to_stamp(NOW)})(),
+                     NodeState(0, 0, "", 1.0, None, 0))
+    vals = {kv.key: kv.value for s in arr.status for kv in s.values}
+    inputs = next(s for s in arr.status if s.name.endswith("inputs"))
+    assert vals["camera/pose lost"] == "5" and vals["target/pose lost"] == "1"
+    assert vals["camera/active_channel lost"] == "0"
+    assert vals["camera/pose publisher restarts"] == "1" and vals["target/pose publisher restarts"] == "1"
+    assert "6 lost in the last period" in inputs.message and inputs.level == inputs.WARN

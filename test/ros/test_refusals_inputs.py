@@ -73,6 +73,15 @@ def test_a_topic_name_ros_refuses_is_refused_at_start_up(paper_tables, tmp_path)
     res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": paper_tables["periodic"], "inputs": spec}))
     assert_refused(res, "estimator: error:", "channel_topic", "(5000 characters) is not a valid topic name",
                    "topic length should not exceed", code=2)
+    # 240 characters: a valid name at the root, too long once the node's namespace is prepended
+    spec = _inputs_file(tmp_path / "inputs240.yaml", {"channel_topic": "c" * 240, "sources": [
+        {"topic": "camera/pose", "type": "geometry_msgs/PoseStamped", "fields": ["pose.position.x", "pose.position.y"],
+         "rows": ["camera.p_x", "camera.p_y"]},
+        {"topic": "target/pose", "type": "geometry_msgs/PoseStamped", "fields": ["pose.position.x", "pose.position.y"],
+         "rows": [2, 3]}]})
+    res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": paper_tables["periodic"], "inputs": spec}),
+              "-r", "__ns:=/robot_one")
+    assert_refused(res, "estimator: error:", "in namespace /robot_one", "topic length should not exceed", code=2)
 
 
 # ------------------------------------------------------------------ binary gain tables
