@@ -114,7 +114,8 @@ def labelled_array(values: Sequence[float], labels: Sequence[str], stamp_ns: int
 
 
 def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
-    """Inverse of :func:`labelled_array`. Raises :class:`~msg_bridge.validate.BridgeError` on another layout."""
+    """Inverse of :func:`labelled_array`. Raises :class:`~msg_bridge.validate.BridgeError` on another
+    layout or a stamp that is not a valid time (inf, NaN, negative, fractional)."""
     lay = msg.layout
     if lay.data_offset != STAMP_PAD or len(lay.dim) != 1:
         raise BridgeError(
@@ -128,8 +129,17 @@ def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
     labels = tuple(lay.dim[0].label.split(",")) if n else ()
     if len(labels) != n:
         raise BridgeError(f"{len(labels)} labels for {n} elements")
-    stamp_ns = int(data[0]) * 1_000_000_000 + int(data[1])
-    return LabelledArray(stamp_ns, labels, data[STAMP_PAD:].copy())
+    return LabelledArray(labelled_stamp_ns(data[0], data[1]), labels, data[STAMP_PAD:].copy())
+
+
+def labelled_stamp_ns(sec: float, nsec: float) -> int:
+    """The stamp (ns) a labelled array carries as two doubles; :class:`~msg_bridge.validate.BridgeError`
+    unless whole numbers with ``0 <= sec``, ``0 <= nsec < 1e9`` and the stamp an int64 of ns."""
+    sec, nsec = float(sec), float(nsec)
+    if not (0.0 <= sec < 2.0**63 / 1e9 and 0.0 <= nsec < 1e9 and sec.is_integer() and nsec.is_integer()):
+        raise BridgeError(f"labelled array stamp ({sec!r}, {nsec!r}) is not a valid time "
+                          "(whole sec >= 0, whole nanosec < 1e9)")
+    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 def envelope_labels(N: int, noise_bound: bool = False) -> tuple[str, ...]:

@@ -36,7 +36,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamp
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
 
-from .convert import STAMP_PAD, labelled_array
+from .convert import STAMP_PAD, labelled_array, labelled_stamp_ns
 from .stamps import ns_to_stamp
 from .validate import BridgeError, Reason, Rejection, SpecError
 
@@ -52,7 +52,6 @@ __all__ = [
 ]
 
 _NS = 1_000_000_000
-_MAX_SEC = 2.0 ** 63 / _NS        # a stamp in ns must fit an int64
 
 #: Most fields one reader or writer takes (a labelled array of more elements can still be read:
 #: only the fields named here are picked out of it).
@@ -254,11 +253,7 @@ class FieldReader:
         if len(data) != STAMP_PAD + n:
             raise BridgeError(f"labelled array has {len(data) - STAMP_PAD} elements after the stamp; its layout "
                               f"says {n}")
-        sec, nsec = float(data[0]), float(data[1])
-        if not (0.0 <= sec < _MAX_SEC and 0.0 <= nsec < _NS and sec.is_integer() and nsec.is_integer()):
-            raise BridgeError(f"labelled array stamp ({sec!r}, {nsec!r}) is not a valid time "
-                              "(whole sec >= 0, whole nanosec < 1e9)")
-        return int(sec) * _NS + int(nsec), "", np.asarray(data, dtype=float)[index]
+        return labelled_stamp_ns(data[0], data[1]), "", np.asarray(data, dtype=float)[index]
 
     def _index_labels(self, label: str, size: int) -> tuple[str, int, np.ndarray]:
         labels = label.split(",") if size else []
