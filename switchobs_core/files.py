@@ -144,17 +144,20 @@ def write_with(path: str | Path, what: str, write: Callable[[Path], object], *,
 
 
 def check_private(path: str | Path, what: str, *, exc: type[SwitchobsError] = InvalidArgument,
-                  hint: str = "") -> None:
-    """Refuse ``path`` if another user (not root) owns it or group/others may write it (ssh's rule)."""
+                  hint: str = "", named: bool = True) -> None:
+    """Refuse ``path`` if another user (not root) owns it or group/others may write it (ssh's rule).
+    The messages say ``"<what> <path> is ..."``, or ``"<what> ..."`` with ``named`` False (``what``
+    then names the path itself)."""
+    it = f"{what} {path} is" if named else what
     try:
         st = os.stat(path)
     except OSError as err:
         raise exc(f"cannot check {what} {path}: {err.strerror or err}") from None
     me = os.geteuid()
     if st.st_uid not in (me, 0):
-        raise exc(f"{what} {path} is owned by another user (uid {st.st_uid}), so its content cannot be trusted{hint}")
+        raise exc(f"{it} owned by another user (uid {st.st_uid}), so its content cannot be trusted{hint}")
     if st.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
         who = "group and others" if st.st_mode & stat.S_IWOTH and st.st_mode & stat.S_IWGRP else \
             "others" if st.st_mode & stat.S_IWOTH else "the group"
-        raise exc(f"bad permissions: {what} {path} is writable by {who} (mode {stat.S_IMODE(st.st_mode):04o}), so "
+        raise exc(f"bad permissions: {it} writable by {who} (mode {stat.S_IMODE(st.st_mode):04o}), so "
                   f"its content cannot be trusted; chmod go-w it{hint}")

@@ -9,13 +9,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 from collections.abc import Callable
 from pathlib import Path
 
 from switchobs_core import __version__
-from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.exceptions import SwitchobsError, one_line
 from switchobs_core.families import FAMILY_NAMES, design_family_table, family_entry
-from switchobs_core.files import check_private
+from switchobs_core.files import check_private, kind_of
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.scenarios import load_noise, load_system
 from switchobs_core.model.schedule import Cycle
@@ -122,11 +123,13 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
 def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str,
                          cycles: list[Cycle], robust: tuple[float, float] | None, delta: float,
                          log: Callable[[str], None], *, family: str = "lmi", rate: float = 0.0,
-                         noise: NoiseModel | None = None):
+                         noise: NoiseModel | None = None, warn: Callable[[str], None] | None = None):
     """The gain table: from ``path``; else from the cache; else designed now and cached.
 
     ``family`` says what to design when there is no table: the paper's LMI gains, or offline
-    Kalman gains for the cycle sequence at ``rate`` Hz under ``noise``.
+    Kalman gains for the cycle sequence at ``rate`` Hz under ``noise``. A cache that cannot be
+    written (a read-only or full filesystem, a symlink loop) is said once on ``warn`` (default
+    ``log``), and the start-up goes on with the designed table.
     Returns ``(table, where)`` with ``where`` the file the table came from or went to.
     """
     if path:
@@ -165,8 +168,11 @@ def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str
         cache.parent.mkdir(mode=0o700, parents=True, exist_ok=True)    # private: see check_cache_private
         table.save(cache)
         log(f"wrote the designed gain table to {cache} (set gain_table to it to skip the design)")
-    except OSError as err:
-        log(f"could not cache the gain table at {cache}: {err}")
+    except (OSError, SwitchobsError) as err:
+        why = err.strerror if isinstance(err, OSError) and err.strerror else one_line(err)
+        (warn or log)(f"could not cache the gain table at {cache} ({why}): it is designed again at every start "
+                      "until the cache can be written; fix gain_table_cache_dir, or save a table with "
+                      "'switchobs design' and set gain_table to it")
     return table, cache
 
 
@@ -217,13 +223,51 @@ def cache_dir_param(cache_dir: str, trusted: str) -> CacheDir:
 def check_cache_private(table: Path, trusted: bool) -> None:
     """Refuse a cache folder (if it exists) or cached table (if it exists) that another user owns
     or group/others may write (ssh's rule for its keys): anyone who can write there can plant a
-    table with a valid checksum. Checked before the cache is read or written, so a shared folder is
-    refused at the first start, not only at the second. ``trusted`` (the folder named by
-    ``gain_table_cache_trusted``) skips the check."""
+    table with a valid checksum. Symlinks are followed: every link on the way must be ours (or
+    root's) in a folder others cannot write (unless sticky), and the folder that finally holds the
+    table must be private too (whoever may write it may replace the file); a target that is not a
+    regular file is refused as such. Checked before the cache is read or written, so a shared folder
+    is refused at the first start, not only at the second. ``trusted`` (the folder named by
+    ``gain_table_cache_trusted``) skips the check. A link that leads nowhere (dangling, or a loop)
+    is left to the save, which replaces it or says why it cannot."""
     if trusted:
         return
     hint = (f"; or set gain_table_cache_trusted:={table.parent} to trust it, or gain_table to a table of "
             "your own")
     for path, what in ((table.parent, "gain_table_cache_dir"), (table, "cached gain table")):
-        if path.exists():
-            check_private(path, what, exc=ConfigError, hint=hint)
+        if not os.path.lexists(path):
+            continue
+        real = _follow_links(path, what, hint)
+        if real is None or not real.exists():
+            continue
+        via = f" (a symlink to {real})" if real != Path(os.path.abspath(path)) else ""
+        if path is table:
+            mode = os.stat(real).st_mode
+            if not stat.S_ISREG(mode):
+                raise ConfigError(f"{what} {path} is {kind_of(mode)}{via}, not a regular file: remove it, or set "
+                                  "gain_table to a table of your own")
+            check_private(real.parent, f"the folder {real.parent} holding {what} {path}{via} is", exc=ConfigError,
+                          hint=hint, named=False)
+        check_private(real, f"{what} {path}{via} is", exc=ConfigError, hint=hint, named=False)
+
+
+def _follow_links(path: Path, what: str, hint: str) -> Path | None:
+    """The path that ``path``'s symlinks lead to; :class:`ConfigError` for a link that another user
+    owns or that lies in a folder group or others may write (not sticky: they could replace it).
+    None for a loop (left to the save)."""
+    me = os.geteuid()
+    p = Path(os.path.abspath(path))
+    for _ in range(40):
+        st = os.lstat(p)
+        if not stat.S_ISLNK(st.st_mode):
+            return p
+        folder = os.stat(p.parent)
+        if st.st_uid not in (me, 0):
+            raise ConfigError(f"{what} {path}: symlink {p} is owned by another user (uid {st.st_uid}), so where it "
+                              f"leads cannot be trusted{hint}")
+        if folder.st_mode & (stat.S_IWGRP | stat.S_IWOTH) and not folder.st_mode & stat.S_ISVTX:
+            raise ConfigError(f"bad permissions: {what} {path}: symlink {p} is in {p.parent}, which group and others "
+                              f"may write (mode {stat.S_IMODE(folder.st_mode):04o}), so where it leads cannot be "
+                              f"trusted; chmod go-w {p.parent}{hint}")
+        p = Path(os.path.abspath(p.parent / os.readlink(p)))
+    return None

@@ -226,3 +226,108 @@ def test_report_on_a_state_stamp_that_is_no_time_is_one_line(bag, tmp_path, pape
         bad = _copy_bag(est, tmp_path / f"bad{k}", edit=edit)
         res = switchobs_bag("report", bad, "-o", tmp_path / f"r{k}.png")
         assert_refused(res, "/estimator/state", "is not a valid time", code=2)
+
+
+# ------------------------------------------------------------------ the gain-table cache
+@pytest.fixture
+def cache_case(paper_tables, tmp_path, monkeypatch):
+    """A private cache folder, where the paper's default table is cached, and a log that keeps its
+    lines; the design at start-up is the session's table (no SDP here)."""
+    import os
+
+    from switchobs_core.table.gains import GainTable
+    from switchobs_ros import core_config
+    from switchobs_ros.config import EstimatorConfig
+    from switchobs_ros.counters import PipelineLog
+
+    table = GainTable.load(paper_tables["periodic"])
+    designs = []
+    monkeypatch.setattr(core_config, "design_family_table", lambda *a, **k: designs.append(1) or table)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    os.chmod(cache, 0o700)
+    conf = EstimatorConfig.from_values({"gain_table_cache_dir": str(cache)})
+    where = core_config.table_cache_path(str(cache), conf.system, conf.mode, list(conf.cycles), None, conf["delta"])
+
+    class Log(PipelineLog):
+        def __init__(self):
+            self.lines = []
+
+        def info(self, text):
+            self.lines.append(("info", text))
+
+        def warn(self, text, throttle=False):
+            self.lines.append(("warn", text))
+    return {"cache": cache, "where": where, "table": table, "designs": designs, "Log": Log}
+
+
+def test_the_cache_trust_check_follows_links_safely(cache_case, tmp_path):
+    """The cached table a symlink into a world-writable folder: only the target file was checked,
+    and trusted. A symlink to /dev/zero: refused as "writable by group and others" (the wrong
+    reason). Now every link on the way and the folder that finally holds the table are checked,
+    and a target that is not a regular file is named as such."""
+    import os
+
+    from switchobs_ros.params import ConfigError
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    c = cache_case
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    os.chmod(shared, 0o777)
+    c["table"].save(shared / "t.npz")            # a private file (0644), in a folder anyone may write
+    os.symlink(shared / "t.npz", c["where"])
+    cfg = {"gain_table_cache_dir": str(c["cache"])}
+    with pytest.raises(ConfigError, match=rf"the folder {shared} holding cached gain table {c['where']} \(a symlink "
+                                          r"to .*t\.npz\) is writable by group and others") as err:
+        EstimatorPipeline.from_params(cfg, c["Log"]())
+    assert "\n" not in str(err.value)
+    os.unlink(c["where"])
+    os.symlink("/dev/zero", c["where"])
+    with pytest.raises(ConfigError, match=rf"cached gain table {c['where']} is a character device \(a symlink to "
+                                          r"/dev/zero\), not a regular file"):
+        EstimatorPipeline.from_params(cfg, c["Log"]())
+    # a link that another folder anyone may write holds (not sticky): refused for the link's folder
+    os.unlink(c["where"])
+    os.symlink(c["cache"] / "real.npz", shared / "hop")
+    c["table"].save(c["cache"] / "real.npz")
+    os.symlink(shared / "hop", c["where"])
+    with pytest.raises(ConfigError, match=rf"symlink {shared / 'hop'} is in {shared}, which group and others may "
+                                          "write"):
+        EstimatorPipeline.from_params(cfg, c["Log"]())
+    # links within private folders are fine
+    os.unlink(c["where"])
+    os.symlink(c["cache"] / "real.npz", c["where"])
+    EstimatorPipeline.from_params(cfg, c["Log"]())
+    assert not c["designs"]
+
+
+@pytest.mark.parametrize("how", ["read_only", "full", "loop"])
+def test_a_cache_that_cannot_be_written_is_reported_once(cache_case, monkeypatch, how):
+    """A cache write that fails (read-only or full filesystem, a symlink loop) was silent (or, for a
+    loop, refused the start-up): the table was designed again at every start without a word.
+    Now the start-up goes on with the designed table and says once, as a warning, why the cache
+    was not written and what it costs."""
+    import errno
+    import os
+
+    from switchobs_core.table.gains import GainTable
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    c = cache_case
+    if how == "loop":
+        os.symlink(c["where"], c["where"])
+    else:
+        code = errno.EROFS if how == "read_only" else errno.ENOSPC
+
+        def fails(self, path, *a, **k):
+            raise OSError(code, os.strerror(code), str(path))
+        monkeypatch.setattr(GainTable, "save", fails)
+    log = c["Log"]()
+    pl = EstimatorPipeline.from_params({"gain_table_cache_dir": str(c["cache"])}, log)
+    assert pl.table is c["table"] and c["designs"] == [1]
+    warns = [t for lvl, t in log.lines if lvl == "warn"]
+    assert len(warns) == 1 and warns[0].startswith(f"could not cache the gain table at {c['where']}"), log.lines
+    assert "designed again at every start" in warns[0]
+    assert {"read_only": "Read-only file system", "full": "No space left on device",
+            "loop": "symbolic links"}[how] in warns[0]
