@@ -267,7 +267,8 @@ class FieldReader:
 
     def covariance(self, msg: object) -> np.ndarray | None:
         """The 6x6 pose covariance (x, y, z, roll, pitch, yaw) of a PoseWithCovarianceStamped or
-        an Odometry, row-major as in the message; None for the other types.
+        an Odometry, row-major as in the message; None for the other types. The estimator does not
+        use it (its noise model is the system's, docs/tutorials/own-system.md).
 
         Raises :class:`BridgeError` if the covariance does not hold 36 numbers.
         """

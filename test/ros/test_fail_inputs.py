@@ -357,3 +357,47 @@ def test_messages_lost_before_the_node_are_counted_per_topic(pl):
     assert vals["camera/active_channel lost"] == "0"
     assert vals["camera/pose publisher restarts"] == "1" and vals["target/pose publisher restarts"] == "1"
     assert "6 lost in the last period" in inputs.message and inputs.level == inputs.WARN
+
+
+def test_input_covariances_are_not_used_as_the_docs_say(cfg, tmp_path):
+    """PoseWithCovarianceStamped covariances (NaN, negative, asymmetric) were ignored while the
+    tutorial said they are read. They are not used, whatever they hold (the noise model is the
+    system's): the estimates equal those from zero covariances, bit for bit, and the tutorial
+    says so."""
+    from pathlib import Path
+
+    import yaml
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    spec = tmp_path / "inputs.yaml"
+    spec.write_text(yaml.safe_dump({"inputs": {"channel_topic": "camera/active_channel", "sources": [
+        {"topic": "camera/pose", "type": "geometry_msgs/PoseWithCovarianceStamped",
+         "fields": ["pose.pose.position.x", "pose.pose.position.y"], "rows": ["camera.p_x", "camera.p_y"]},
+        {"topic": "target/pose", "type": "geometry_msgs/PoseWithCovarianceStamped",
+         "fields": ["pose.pose.position.x", "pose.pose.position.y"], "rows": [2, 3]}]}}))
+
+    def msg(xy, ns, cov):
+        m = PoseWithCovarianceStamped()
+        m.header.stamp = mb.ns_to_stamp(ns)
+        m.header.frame_id = "map"
+        m.pose.pose.position.x, m.pose.pose.position.y = xy
+        m.pose.pose.orientation.w = 1.0
+        m.pose.covariance = cov
+        return m
+
+    bad = np.arange(36.0) - 20.0                 # negative and asymmetric
+    bad[7] = math.nan
+    runs = []
+    for cov in (np.zeros(36), bad):
+        pl = EstimatorPipeline.from_params({**cfg, "inputs": str(spec)})
+        pl.on_channel(UInt8(data=1))
+        out = []
+        for k in range(30):
+            ns = NOW - 10 * S + k * 10 * MS
+            out += pl.on_message("camera/pose", msg((0.1, 0.2 + k * 1e-3), ns, cov), NOW)
+            out += pl.on_message("target/pose", msg((3.0, 1.0), ns, cov), NOW)
+        assert len(out) == 30 and not pl.rejected
+        runs.append(np.array([e.x_hat for e in out]))
+    assert np.array_equal(runs[0], runs[1])
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "own-system.md").read_text()
+    assert "covariance is\nread" not in doc and "A message's covariance is not used, whatever it holds" in doc
