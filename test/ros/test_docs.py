@@ -126,3 +126,28 @@ def test_readme_is_short_and_its_links_lead_into_the_site():
     for link in links:
         assert (REPO / link).exists(), link
         assert link.startswith("docs/"), link
+
+
+def test_every_failure_catalogue_row_names_a_test_that_exists():
+    """Each row of docs/failures.md's tables names, in its last column, at least one test, and every
+    test it names (``file.py::test_name``, ``::test_name`` for the file named before it) is a test
+    function of that file."""
+    tests: dict[str, set[str]] = {}
+    for p in (REPO / "test").rglob("test_*.py"):
+        tests.setdefault(p.name, set()).update(re.findall(r"^def (test_\w+)", p.read_text(), re.M))
+    rows = 0
+    for line in (REPO / "docs" / "failures.md").read_text().splitlines():
+        if not line.startswith("|") or set(line) <= set("|-: "):
+            continue
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line.strip().strip("|"))]
+        if cells[-1] == "test":          # a header
+            continue
+        rows += 1
+        named = re.findall(r"(test_\w+\.py)(?:::(test_\w+))?|::(test_\w+)", cells[-1])
+        assert named, f"no test named: {cells[0][:80]}"
+        current = None
+        for file, fn, fn_after in named:
+            current = file or current
+            assert current in tests, f"{cells[0][:60]}: no test file {current}"
+            assert (fn or fn_after) in (tests[current] | {""}), f"{cells[0][:60]}: no {current}::{fn or fn_after}"
+    assert rows > 80

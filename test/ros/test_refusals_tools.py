@@ -237,3 +237,19 @@ def test_report_on_an_envelope_holding_inf_writes_valid_json(bag, tmp_path, pape
     assert rep["passes"][0]["final_exact_bound"] is None and rep["passes"][0]["final_paper_bound"] is None
     res = switchobs_bag("report", tmp_path / "inf", "-o", tmp_path)
     assert_refused(res, "a directory", code=2)
+
+
+def test_output_decimation_and_generated_stamps_within_range(tmp_path):
+    """`output.*_every` is an integer in [0, 1e9] (an int64 parameter; beyond it nothing is
+    published); a generated bag's stamps fit `builtin_interfaces/Time.sec` (an int32)."""
+    from switchobs_ros.config import EstimatorConfig
+    from switchobs_ros.params import ConfigError
+
+    for name in ("output.envelope_every", "output.odometry_every", "output.covariance_every", "output.typed_every"):
+        assert EstimatorConfig.from_values({name: 10**9})[name] == 10**9
+        for bad in (10**9 + 1, -1):
+            with pytest.raises(ConfigError, match=rf"'{name}'.*\[0, 1000000000\]"):
+                EstimatorConfig.from_values({name: bad})
+    res = switchobs_bag("generate", tmp_path / "late", "--clock-start", "2147483000", "--duration", "1000")
+    assert_refused(res, "--clock-start + --duration", "int32", code=2)
+    assert not (tmp_path / "late").exists()
