@@ -16,6 +16,7 @@ fields    one converter per sensor message type: :class:`FieldReader` (message -
           ``(stamp_ns, frame_id, y)``) and :class:`FieldWriter` (values -> message)
 inputs    input specifications: topic, type, fields -> output rows, and how the channel is
           known (:class:`InputSpecs`, :func:`load_inputs`)
+control   the control topic of a system with inputs: type, fields -> u (:class:`ControlSpec`)
 markers   ``~/markers`` for RViz (:class:`MarkersWriter`): per body its position, 2-sigma
           ellipse, the guaranteed bound's circle, the body in view highlighted
 typed     the typed outputs ``switchobs_msgs/StateEstimate`` and ``ErrorBounds``: writers,
@@ -27,6 +28,7 @@ Together, ``fields`` and ``inputs`` give the observer its measurement
 ``(stamp_ns, channel, rows, y)`` from any supported topic.
 """
 
+from .control import CONTROL_TOPIC, ControlSpec, input_labels
 from .convert import (
     STAMP_PAD,
     UNESTIMATED_VARIANCE,
@@ -79,6 +81,9 @@ from .validate import (
 
 __all__ = [
     "CHANNEL_TOPIC",
+    "CONTROL_TOPIC",
+    "ControlSpec",
+    "input_labels",
     "LABELLED_ARRAY",
     "SUPPORTED_TYPES",
     "FieldReader",

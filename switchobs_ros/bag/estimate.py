@@ -165,6 +165,10 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
+        # the commands u, if the bag has them (~/control is the node's private topic)
+        ctl = pl.control
+        ctl_topic = None if ctl is None else (f"{node}/{ctl.topic[2:]}" if ctl.topic.startswith("~/")
+                                              else "/" + ctl.topic)
 
         def decoded(m, src):
             if src.pose:          # the CDR fast path of the paper interface
@@ -183,6 +187,9 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             elif m.topic == channel_topic:
                 n_inputs += 1
                 emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
+            elif m.topic == ctl_topic:
+                n_inputs += 1
+                pl.on_control(deserialize(m, mb.message_class(ctl.spec.type)), m.log_ns)
             if writer is not None and inputs and m.topic not in outputs and m.topic != "/diagnostics":
                 writer.write(m.topic, m.log_ns, m.data)
         emit(pl.flush_all(), last_ns)
