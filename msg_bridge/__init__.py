@@ -39,12 +39,14 @@ from .convert import (
     bodies,
     body_odometry,
     covariance_labels,
+    describe_bodies,
     envelope_labels,
     labelled_array,
     odometry_covariances,
     pose_to_xy,
     state_odometries,
     unpack_labelled,
+    unused_states,
     xy_to_pose,
 )
 from .fields import (
@@ -111,6 +113,8 @@ __all__ = [
     "check_after_switch",
     "body_odometry",
     "covariance_labels",
+    "describe_bodies",
+    "unused_states",
     "odometry_covariances",
     "UNESTIMATED_VARIANCE",
     "check_channel",

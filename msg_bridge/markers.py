@@ -1,6 +1,7 @@
 """RViz markers of the estimate: ``visualization_msgs/MarkerArray`` for ``~/markers``.
 
-Per planar body (:func:`~msg_bridge.convert.bodies`), four markers with fixed namespaces and
+Per body with a position (:func:`~msg_bridge.convert.bodies`: planar, on a line (y = 0), with or
+without velocity), four markers with fixed namespaces and
 ids (the body's position ``k`` in ``bodies``), so RViz replaces them at every message:
 
 * ``switchobs/position``, SPHERE: the estimated position (p_x, p_y), coloured :data:`HIGHLIGHT`
@@ -111,7 +112,7 @@ class MarkersWriter:
         for b, (pos, lab, cov, bnd) in zip(self.bodies, self._sets):
             for m in (pos, lab, cov, bnd):
                 m.header.stamp.sec, m.header.stamp.nanosec = sec, nsec
-            px, py = float(x[b.p_x]), float(x[b.p_y])
+            px, py = float(x[b.p_x]), 0.0 if b.p_y is None else float(x[b.p_y])
             pos.pose.position.x = lab.pose.position.x = cov.pose.position.x = px
             pos.pose.position.y = lab.pose.position.y = cov.pose.position.y = py
             pos.color = self._highlight if b.name == active_body else self._body
@@ -129,14 +130,16 @@ class MarkersWriter:
         """Fill the 2-sigma ellipse of body ``b``; return its action (DELETE: nothing to show)."""
         if P is None:
             return Marker.DELETE
-        ip = [b.p_x, b.p_y]
-        Ppp = np.asarray(P, dtype=float)[np.ix_(ip, ip)]
+        Ppp = np.zeros((2, 2))      # a body on a line: no spread across it
+        for a, i in b.pose_pairs:
+            for c, j in b.pose_pairs:
+                Ppp[a, c] = P[i, j]
         if not np.isfinite(Ppp).all():
             return Marker.DELETE
         # P_pp = V diag(l) V' (ascending l): semi-axes 2 sqrt(l), the major axis along V[:, 1]
         l, V = np.linalg.eigh(0.5 * (Ppp + Ppp.T))
         l = np.clip(l, 0.0, None)
-        cov.scale.x, cov.scale.y = 4.0 * math.sqrt(l[1]), 4.0 * math.sqrt(l[0])
+        cov.scale.x, cov.scale.y = 4.0 * math.sqrt(l[1]), 4.0 * math.sqrt(l[0]) if b.p_y is not None else _THIN
         yaw = math.atan2(V[1, 1], V[0, 1])
         cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
         return Marker.ADD

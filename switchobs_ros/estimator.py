@@ -149,6 +149,7 @@ class EstimatorMixin:
         self.table, self.table_path = pl.table, pl.table_path
         self.observer = pl.observer
         self.bodies = mb.bodies(sys_.state_labels)
+        self.get_logger().info(mb.describe_bodies(sys_.state_labels))
         self.child_frames = list(conf.child_frames)
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)

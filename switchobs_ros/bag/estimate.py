@@ -99,8 +99,12 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     w_env = Template(mb.labelled_array(np.zeros(ne), env_labels, 0), array=("data",))
     odom_paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
                   ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-    w_odom = [(Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
-                        doubles=odom_paths), (b.p_x, b.p_y, b.v_x, b.v_y)) for b, c in zip(bodies, frames)]
+
+    def odom_template(b, c):    # the entries the body has (position always; y, velocity where it has them)
+        have = [(path, i) for path, i in zip(odom_paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
+        return (Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
+                         doubles=[p for p, _ in have]), tuple(i for _, i in have))
+    w_odom = [odom_template(b, c) for b, c in zip(bodies, frames)]
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]

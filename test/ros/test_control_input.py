@@ -28,7 +28,7 @@ RATE = 50.0
 X0 = np.array([1.0, 0.2, -0.5, 0.1])
 K = 301                      # samples: 6 s, three cycles
 PARAMS = {"system": SYSTEM, "schedule.mode": "periodic", "schedule.tau": [2.0], "schedule.s": [0.6],
-          "e0": float(np.linalg.norm(X0)) * 1.01, "publish_covariance": False, "output.markers_every": 0}
+          "e0": float(np.linalg.norm(X0)) * 1.01, "publish_covariance": False, "output.markers_every": 10}
 
 
 @pytest.fixture(scope="module")
@@ -121,9 +121,16 @@ def test_driven_system_over_dds_matches_the_offline_observer(system, table, tmp_
     err_ref = np.linalg.norm(truth - ref_x, axis=1)
     assert err_ref[0] > 0.1 and int((err_ref > ref_b).sum()) == 0
 
-    state, env = [], []
+    from nav_msgs.msg import Odometry
+    from visualization_msgs.msg import MarkerArray
+
+    state, env, markers = [], [], []
+    odom = {"body1": [], "body2": []}
     ros_node.create_subscription(Float64MultiArray, "/estimator/state", state.append, qos.TRUTH)
     ros_node.create_subscription(Float64MultiArray, "/estimator/envelope", env.append, qos.TRUTH)
+    ros_node.create_subscription(MarkerArray, "/estimator/markers", markers.append, qos.TRUTH)
+    for b, got in odom.items():     # cart_pair's p1, v1 and p2, v2: bodies on a line
+        ros_node.create_subscription(Odometry, f"/estimator/{b}/odom", got.append, qos.TRUTH)
     pub_ctl = ros_node.create_publisher(Float64MultiArray, "/estimator/control", qos.CHANNEL_SUB)
     pubs = {1: ros_node.create_publisher(mb.message_class("geometry_msgs/PointStamped"), "left/point", qos.SENSOR),
             2: ros_node.create_publisher(mb.message_class("geometry_msgs/PointStamped"), "right/point", qos.SENSOR)}
@@ -143,7 +150,8 @@ def test_driven_system_over_dds_matches_the_offline_observer(system, table, tmp_
         for s, c, x in zip(stamps, channels, truth):
             pubs[c].publish(_point((system.C[c - 1] @ x)[0], s))
             spin_until(ros_node, lambda: False, 0.004)
-        assert spin_until(ros_node, lambda: len(state) >= K and len(env) >= K, 30.0), (len(state), proc.output())
+        assert spin_until(ros_node, lambda: len(state) >= K and len(env) >= K and len(odom["body2"]) >= K
+                          and len(markers) >= K // 10, 30.0), (len(state), proc.output())
         # a command for a time already estimated: rejected (old_stamp), counted
         pub_ctl.publish(w.msg(np.array([0.5]), stamps[-2]))
         spin_until(ros_node, lambda: False, 0.5)
@@ -161,6 +169,17 @@ def test_driven_system_over_dds_matches_the_offline_observer(system, table, tmp_
     err = np.linalg.norm(truth - x_live, axis=1)
     assert int((err > b_live).sum()) == 0
     assert err[-1] < 1e-3 * err[0], "converges with the input known"
+    # every body on the outputs: odometry (position, velocity) and markers for p1/v1 and p2/v2
+    assert "outputs: 2 bodies with odometry and markers: body1 (p1, v1); body2 (p2, v2)" in proc.output()
+    for b, (ip, iv) in (("body1", (0, 1)), ("body2", (2, 3))):
+        o = {mb.stamp_to_ns(m.header.stamp): m for m in odom[b]}
+        assert sorted(o) == stamps
+        assert all((o[s].pose.pose.position.x, o[s].twist.twist.linear.x, o[s].pose.pose.position.y)
+                   == (got[s][ip], got[s][iv], 0.0) for s in stamps)
+    last = markers[-1]
+    k = mb.stamp_to_ns(last.markers[0].header.stamp)
+    pos = [m for m in last.markers if m.ns == "switchobs/position"]
+    assert [(m.pose.position.x, m.pose.position.y) for m in pos] == [(got[k][0], 0.0), (got[k][2], 0.0)]
     # without the commands the same samples are not explained: the input matters here
     free = SwitchedObserver(system, table, cycles=[CYC], e0=PARAMS["e0"])
     free.reset(np.zeros(system.n), 0.0)
