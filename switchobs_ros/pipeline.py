@@ -114,7 +114,7 @@ class EstimatorPipeline(Counters):
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
                  reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = "",
-                 chi2_alpha: float = 0.0, control: Any = None):
+                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
@@ -128,6 +128,7 @@ class EstimatorPipeline(Counters):
         self.channel_topic = channel_topic
         self.specs_text = specs_text
         self.in_frame = input_frame_id
+        self.transforms = dict(transforms or {})     # input_transforms: {frame: FrameTransform}
         self.max_abs = max_abs
         self.future_ns = int(future_tolerance_ns)
         self.N = system.N
@@ -184,7 +185,7 @@ class EstimatorPipeline(Counters):
                    log=log, table_path=table_path, mode=mode, cycles=cycles,
                    reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
                    specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"],
-                   control=conf.inputs.control)
+                   control=conf.inputs.control, transforms=conf.transforms)
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
         return pipe
@@ -352,7 +353,7 @@ class EstimatorPipeline(Counters):
         try:
             stamp_ns, values, rej = src.checked(msg, frame_id=self.in_frame, max_abs=self.max_abs,
                                                 last_ns=self.last_ns[topic], now_ns=now_ns,
-                                                future_tolerance_ns=self.future_ns)
+                                                future_tolerance_ns=self.future_ns, transforms=self.transforms)
             rej = self.attribution.refuse(src, stamp_ns, src_ns, rej)
             if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
                 rej = Rejection(Reason.OLD_STAMP, "header.stamp",
