@@ -38,8 +38,8 @@ def system():
 
 @pytest.fixture(scope="module")
 def table(system, tmp_path_factory):
-    """A Kalman table for cart_pair at the sample rate and the file it is saved in."""
-    path = tmp_path_factory.mktemp("cart") / "cart_kalman.json"
+    """A Kalman table for cart_pair at the sample rate and the file it is saved in (.npz)."""
+    path = tmp_path_factory.mktemp("cart") / "cart_kalman.npz"      # the binary container: the node loads it
     t = kalman_table(system, [design_kalman(system, CYC, RATE)])
     t.save(path)
     return t, str(path)
