@@ -130,8 +130,11 @@ def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
     labels = tuple(lay.dim[0].label.split(",")) if n else ()
     if len(labels) != n:
         raise BridgeError(f"{len(labels)} labels for {n} elements")
-    stamp_ns = int(data[0]) * 1_000_000_000 + int(data[1])
-    return LabelledArray(stamp_ns, labels, data[STAMP_PAD:].copy())
+    sec, nsec = float(data[0]), float(data[1])
+    if not (0.0 <= sec < 2.0 ** 63 / 1e9 and 0.0 <= nsec < 1e9 and sec.is_integer() and nsec.is_integer()):
+        raise BridgeError(f"labelled array stamp ({sec!r}, {nsec!r}) is not a valid time (whole sec >= 0, whole "
+                          "nanosec < 1e9)")
+    return LabelledArray(int(sec) * 1_000_000_000 + int(nsec), labels, data[STAMP_PAD:].copy())
 
 
 def envelope_labels(N: int, noise_bound: bool = False) -> tuple[str, ...]:

@@ -88,7 +88,10 @@ def _labelled(bag_msgs, topic, cls, pick: tuple[str, ...] = ()):
     out = []
     for m in bag_msgs:
         if m.topic == topic:
-            a = mb.unpack_labelled(deserialize(m, cls))
+            try:
+                a = mb.unpack_labelled(deserialize(m, cls))
+            except mb.BridgeError as err:       # e.g. an infinite stamp
+                raise BagError(f"{topic}: the message logged at {m.log_ns} ns: {err}") from None
             vals = a.values
             if pick:
                 where = {lab: i for i, lab in enumerate(a.labels)}

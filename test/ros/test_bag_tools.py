@@ -390,3 +390,22 @@ def test_estimate_writes_the_typed_outputs(tmp_path):
     assert np.array_equal(np.array([s.x for s in se]), res.x_hat)
     assert np.array_equal(np.array([b.envelope() for b in eb]), res.envelope)
     assert all(b.exact_bound_valid for b in eb)
+
+
+@pytest.mark.parametrize("sec", [math.inf, math.nan, -1.0, 0.5])
+def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
+    """A state message whose stamp (in the labelled array's padding) is not a time: one line naming the
+    topic and the message, exit code 2 (it was an OverflowError traceback for an infinite stamp)."""
+    bag = tmp_path / "bad"
+    msg = mb.labelled_array([1.0, 2.0], ("a.p_x", "a.p_y"), 5)
+    msg.data[0] = sec
+    env = mb.labelled_array([0.5, 1.0, 0.25, 0.1], mb.envelope_labels(2), 5)
+    with BagOut(bag, "mcap") as out:
+        out.add("/estimator/state", "std_msgs/msg/Float64MultiArray")
+        out.add("/estimator/envelope", "std_msgs/msg/Float64MultiArray")
+        out.write("/estimator/envelope", 1_000, serialize_message(env))
+        out.write("/estimator/state", 1_000, serialize_message(msg))
+    assert bag_main(["report", str(bag)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("switchobs_bag: error: /estimator/state: the message logged at 1000 ns: labelled array "
+                           f"stamp ({sec!r}, 5.0) is not a valid time"), line
