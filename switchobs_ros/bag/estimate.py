@@ -75,8 +75,10 @@ class EstimateResult:
 
 
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
-             storage: str | None = None, inputs: bool = True, node: str = "/estimator") -> EstimateResult:
-    """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring)."""
+             storage: str | None = None, inputs: bool = True, node: str = "/estimator",
+             progress: bool | None = False) -> EstimateResult:
+    """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring);
+    ``progress``: a bar of the messages on stderr (None: on a terminal)."""
     with BagIn(bag_path) as bag:
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
@@ -182,7 +184,10 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         n_inputs = 0
         last_ns = 0
         t0 = time.perf_counter()
-        for m in msgs:
+        from tqdm import tqdm
+
+        for m in tqdm(msgs, disable=None if progress is None else not progress, leave=False, unit="msg",
+                      desc="estimate"):
             last_ns = m.log_ns
             src = sources.get(m.topic)
             if src is not None:

@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "whose inputs: section names the topics to read)")
     p.add_argument("--node", default="/estimator", help="namespace of the output topics (default /estimator)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: on a terminal, off with --json)")
     p.add_argument("--strict", action="store_true",
                    help=f"exit {STRICT_EXIT} when any valid (accepted) measurement got no estimate (the summary "
                         "names the reasons)")
@@ -65,7 +67,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
         if all(t in bag.topics for t in _POSES) and not any(bag.counts.get(t, 0) for t in _POSES):
             raise BagError(f"bag {a.bag}: topics {' and '.join(_POSES)} hold no messages: nothing to estimate")
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
-                   node=a.node)
+                   node=a.node, progress=False if a.json else a.progress)
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
     info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
