@@ -409,3 +409,17 @@ def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith("switchobs_bag: error: /estimator/state: the message logged at 1000 ns: labelled array "
                            f"stamp ({sec!r}, 5.0) is not a valid time"), line
+
+
+def test_error_ratios_leave_out_cycles_at_the_rounding_floor():
+    """A ratio of errors at the rounding floor (1e-15: 5.47 per cycle) is not divergence: the report's
+    ratios count the cycles that start above 1e-9 of the first error."""
+    from types import SimpleNamespace
+
+    from switchobs_ros.bag.report import FLOOR, converging
+
+    err = [0.5, 0.05, 0.005, 4e-16, 2.2e-15]
+    p = SimpleNamespace(e_first=0.55, cycle_err=err, contraction=[b / a for a, b in zip(err, err[1:])])
+    assert FLOOR == 1e-9
+    assert converging(p) == pytest.approx([0.1, 0.1, 4e-16 / 0.005])      # the last cycle starts at 4e-16
+    assert max(p.contraction) == pytest.approx(5.5) and max(converging(p)) == pytest.approx(0.1)
