@@ -32,6 +32,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from switchobs_core.numerics.ellipse import covariance_ellipse
+
 from .convert import Body
 from .validate import BridgeError
 
@@ -134,12 +136,11 @@ class MarkersWriter:
         for a, i in b.pose_pairs:
             for c, j in b.pose_pairs:
                 Ppp[a, c] = P[i, j]
-        if not np.isfinite(Ppp).all():
+        ell = covariance_ellipse(Ppp, sigmas=2.0)
+        if ell is None:
             return Marker.DELETE
-        # P_pp = V diag(l) V' (ascending l): semi-axes 2 sqrt(l), the major axis along V[:, 1]
-        l, V = np.linalg.eigh(0.5 * (Ppp + Ppp.T))
-        l = np.clip(l, 0.0, None)
-        cov.scale.x, cov.scale.y = 4.0 * math.sqrt(l[1]), 4.0 * math.sqrt(l[0]) if b.p_y is not None else _THIN
-        yaw = math.atan2(V[1, 1], V[0, 1])
+        cov.scale.x, cov.scale.y, yaw = ell
+        if b.p_y is None:
+            cov.scale.y = _THIN
         cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
         return Marker.ADD
