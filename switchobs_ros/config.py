@@ -49,7 +49,7 @@ CONSISTENCY = ("auto", "always", "never")
 PARAMS = [
     Param("system", "paper", "The system: a built-in scenario name (paper, camera_agents) or a path to a "
           "system YAML file."),
-    Param("gain_table", "", "Path of the gain table (JSON, from `switchobs design`). Empty: use a cached "
+    Param("gain_table", "", "Path of the gain table (JSON or .npz, from `switchobs design`). Empty: use a cached "
           "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
     Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up. A cached "
           "table is used only if the folder and the file are private (owned by this user, not writable by group or "

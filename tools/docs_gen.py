@@ -136,10 +136,12 @@ def parameters_reference() -> str:
             out += ["Parameters marked *runtime* can change while the node runs (`ros2 param set`, the "
                     "`set_parameters` service); any other is refused with the reason, and a name the node does "
                     "not declare gets `unknown parameter NAME (known: ...)`.", ""]
-        out += ["| parameter | type | default | runtime | meaning |", "|---|---|---|---|---|"]
+        # two columns: the name (never broken: stylesheets/tables.css) with its type, default and whether it
+        # is a runtime parameter under it; the meaning takes the rest of the width
+        out += ["| parameter | meaning |", "|---|---|"]
         for p in params:
-            out.append(f"| `{p.name}` | {p.type_name} | {_default(p.default)} | "
-                       f"{'runtime' if p.name in runtime else ''} | {_cell(p.description)} |")
+            rt = " · *runtime*" if p.name in runtime else ""
+            out.append(f"| `{p.name}`<br>{p.type_name} · default {_default(p.default)}{rt} | {_cell(p.description)} |")
         out.append("")
     return "\n".join(out) + "\n"
 

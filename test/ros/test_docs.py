@@ -66,10 +66,12 @@ def test_parameter_reference_lists_every_parameter_with_its_default(node, params
     page = docs_gen.parameters_reference().split(f"## `{node}`", 1)[1].split("\n## ", 1)[0]
     for p in params:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
-        row = next((ln for ln in page.splitlines() if ln.startswith(f"| `{p.name}` | {p.type_name} |")), None)
+        row = next((ln for ln in page.splitlines() if ln.startswith(f"| `{p.name}`<br>{p.type_name} · default ")),
+                   None)
         assert row is not None, p.name
-        assert yaml.safe_load(row.split("|")[3].strip().strip("`")) == default, (p.name, row)
-        assert ("| runtime |" in row) == (p.name in runtime), row
+        shown = row.split(" · default ", 1)[1].split(" · ")[0].split(" | ")[0]
+        assert yaml.safe_load(shown.strip().strip("`")) == default, (p.name, row)
+        assert (" · *runtime* |" in row) == (p.name in runtime), row
 
 
 @pytest.mark.parametrize("mod,cfg", [(config, "estimator.yaml"), (camera_sim, "camera_sim.yaml")])
