@@ -12,7 +12,6 @@ from switchobs_core.design.doubling import (
     RiccatiMap,
     closed_loop_transition,
     solve_periodic_riccati,
-    sqrt_correct,
 )
 from switchobs_core.design.kalman import check_detectable, design_kalman, sample_pattern
 from switchobs_core.design.riccati import Step, discretize, periodic_riccati
@@ -21,7 +20,7 @@ from switchobs_core.model.detectability import undetectable_modes
 from switchobs_core.model.noise import default_noise
 from switchobs_core.model.scenarios import camera_agents, paper_system
 from switchobs_core.model.schedule import Cycle
-from switchobs_core.numerics.kalman_step import joseph, riccati_step
+from switchobs_core.numerics.kalman_step import joseph, riccati_step, sqrt_correct
 
 PAPER = paper_system()
 
