@@ -28,7 +28,12 @@ fastest switching allowed; with one every switch costs ``k_d`` blind samples and
 moves inside the box.
 
 Undetectable schedules (an unstable mode never observed by the sampled periodic pair, the
-test of :func:`~switchobs_core.design.kalman.check_detectable`) cost ``inf``.
+test of :func:`~switchobs_core.design.kalman.check_detectable`) cost ``inf``, and so do schedules
+beyond double precision (a channel unseen so long that the periodic covariance would span more
+than :data:`~switchobs_core.design.precision.PRECISION_RANGE`, the test the Kalman design refuses
+them with, :func:`~switchobs_core.design.precision.check_unseen`): they are counted in
+:attr:`ScheduleCost.beyond`, and a plan where every candidate is one of them is refused with
+:class:`~switchobs_core.exceptions.PrecisionError`.
 
 Optimiser (deterministic; no randomness):
 
@@ -65,7 +70,7 @@ from typing import Any
 import numpy as np
 
 from ..certificate import certify_cycle
-from ..exceptions import DesignError, InvalidArgument, UndetectableSchedule
+from ..exceptions import DesignError, InvalidArgument, PrecisionError, UndetectableSchedule
 from ..model.detectability import aliasing_free
 from ..model.noise import NoiseModel, default_noise
 from ..model.schedule import BLIND_TOL, Cycle, common_rows
@@ -75,6 +80,7 @@ from ..table.kalman import SamplePattern
 from .doubling import RiccatiMap, fixed_point
 from .kalman import check_detectable, design_kalman, sample_pattern
 from .lmi import Designer
+from .precision import beyond_precision, pattern_stretches
 from .riccati import discretize, rel_change
 
 __all__ = [
@@ -247,6 +253,9 @@ class ScheduleCost:
         self._detect: dict[frozenset, bool] = {}
         self.cache: dict[tuple[int, ...], float] = {}
         self.evaluations = 0
+        #: Candidates beyond double precision so far, and the refusal of the first one.
+        self.beyond = 0
+        self.beyond_reason = ""
 
     def channels(self, counts: Sequence[int], order: Sequence[int] | None = None) -> tuple[int, ...]:
         """Channel of every sample of one period: ``k_i`` samples of each channel, in ``order``."""
@@ -299,6 +308,12 @@ class ScheduleCost:
         pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
                                 tuple(int(c) for c in channels), (), blind)
         if not self._detectable(pattern):
+            return math.inf
+        why = beyond_precision(self.system, pattern_stretches(pattern.channels, blind, self.rate, self.system.N),
+                               power=2, what=f"the schedule of {K} samples ({K / self.rate:g} s) at {self.rate:g} Hz")
+        if why:
+            self.beyond += 1
+            self.beyond_reason = self.beyond_reason or why
             return math.inf
         # runs of equal (channel, blind)
         runs: list[tuple[_Run, int]] = []
@@ -444,6 +459,8 @@ def plan_schedule(
         Bad rate, ``h_min`` or ``tau_max``, or no schedule fits (``N ceil(h_min f) > tau_max f``).
     DesignError
         Every candidate is undetectable (cost inf everywhere).
+    PrecisionError
+        Every candidate is undetectable or beyond double precision, some of them the latter.
     """
     for name, v in (("h_min", h_min), ("tau_max", tau_max)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
@@ -478,6 +495,10 @@ def plan_schedule(
     finally:
         bar.close()
     order, counts, val, local = results[0]
+    if not math.isfinite(val) and J.beyond:
+        raise PrecisionError(
+            f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable or "
+            f"beyond double precision ({J.beyond} of them, e.g. {J.beyond_reason}); lower --tau-max or --h-min")
     if not math.isfinite(val):
         raise DesignError(
             f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable "
