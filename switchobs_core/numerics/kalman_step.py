@@ -188,5 +188,5 @@ def check_factor(L: np.ndarray, what: str) -> None:
         d = np.abs(np.diagonal(L))
         raise CovarianceError(
             f"{what}: the covariance lost positive definiteness in double precision (its factor's reciprocal "
-            f"condition {rcond:.3g} < {FACTOR_RCOND * n * _U:.3g}; variances from {d.min() ** 2:.3g} to "
-            f"{d.max() ** 2:.3g})")
+            f"condition {rcond:.2e}, below n u = {FACTOR_RCOND * n * _U:.2e}; its variances span "
+            f"{d.min() ** 2:.3g} to {d.max() ** 2:.3g})")

@@ -173,6 +173,13 @@ class OnlineKalmanGains:
     def covariance(self) -> np.ndarray | None:
         return self._P.copy()
 
+    @property
+    def factor(self) -> np.ndarray:
+        """The factor ``L`` of the recursion's covariance, ``P = L L'`` (a copy; n x n, or n x 2n
+        between a prediction and its correction): what carries the covariance when ``P`` itself
+        spans more than a double resolves (module docstring)."""
+        return self._L.copy()
+
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         return self._cov.prior(P, e, dt)
 
