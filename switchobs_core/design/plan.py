@@ -31,7 +31,8 @@ Undetectable schedules (an unstable mode never observed by the sampled periodic 
 test of :func:`~switchobs_core.design.kalman.check_detectable`) cost ``inf``, and so do schedules
 beyond double precision (a channel unseen so long that the periodic covariance would span more
 than :data:`~switchobs_core.design.precision.PRECISION_RANGE`, the test the Kalman design refuses
-them with, :func:`~switchobs_core.design.precision.check_unseen`): they are counted in
+them with, :func:`~switchobs_core.design.precision.check_unseen`, or a cost pass whose periodic
+prior does not come back, its digits lost): they are counted in
 :attr:`ScheduleCost.beyond`, and a plan where every candidate is one of them is refused with
 :class:`~switchobs_core.exceptions.PrecisionError`.
 
@@ -302,23 +303,32 @@ class ScheduleCost:
         maps composed; 2. its fixed point by doubling (:func:`~switchobs_core.design.doubling.fixed_point`):
         the prior of phase 0; 3. the mean weighted trace over the runs from there, all priors of a
         run at once; the prior of phase 0 must come back within ``PLAN_FLOOR`` (else the pass
-        repeats from where it ended)."""
+        repeats from where it ended). A pattern beyond double precision (before step 1, or a pass
+        that never comes back) costs inf and is counted in :attr:`beyond`."""
         K = len(channels)
         blind = tuple(bool(b) for b in blind) if any(blind) else ()
         pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
                                 tuple(int(c) for c in channels), (), blind)
         if not self._detectable(pattern):
             return math.inf
+        what = f"the schedule of {K} samples ({K / self.rate:g} s) at {self.rate:g} Hz"
         why = beyond_precision(self.system, pattern_stretches(pattern.channels, blind, self.rate, self.system.N),
-                               power=2, what=f"the schedule of {K} samples ({K / self.rate:g} s) at {self.rate:g} Hz")
-        if why:
-            self.beyond += 1
-            self.beyond_reason = self.beyond_reason or why
-            return math.inf
-        # runs of equal (channel, blind)
-        runs: list[tuple[_Run, int]] = []
-        for key, grp in itertools.groupby(zip(channels, blind or (False,) * K)):
-            runs.append((self._run(int(key[0]), bool(key[1])), sum(1 for _ in grp)))
+                               power=2, what=what)
+        if not why:
+            # runs of equal (channel, blind)
+            runs: list[tuple[_Run, int]] = []
+            for key, grp in itertools.groupby(zip(channels, blind or (False,) * K)):
+                runs.append((self._run(int(key[0]), bool(key[1])), sum(1 for _ in grp)))
+            try:
+                return self._cost(runs, K, what)
+            except PrecisionError as err:
+                why = str(err)
+        self.beyond += 1
+        self.beyond_reason = self.beyond_reason or why
+        return math.inf
+
+    def _cost(self, runs: list, K: int, what: str) -> float:
+        """Steps 1-3 of :meth:`of_channels` over the runs of one period of ``K`` samples."""
         # 1. period map; 2. fixed point
         F = runs[0][0].power(runs[0][1])
         for r, m in runs[1:]:
@@ -335,7 +345,9 @@ class ScheduleCost:
                 break
             X = Y
         else:
-            raise DesignError(f"schedule cost: the periodic Riccati solution did not come back within {PLAN_FLOOR:g}")
+            raise PrecisionError(f"{what} is beyond double precision: its periodic Riccati solution does not come back "
+                                 f"within {PLAN_FLOOR:g} over a period (the covariance spans more than its digits "
+                                 "resolve); shorten the residences or the cycle")
         return total / K
 
     def __call__(self, counts: Sequence[int], order: Sequence[int] | None = None) -> float:
