@@ -172,7 +172,8 @@ def test_camera_states_of_32_agents_are_detectable():
     check_detectable(system, sample_pattern(Cycle([1.0] * 32), 50.0))
     pat = sample_pattern(Cycle([1.0] * 30 + [1.05, 0.05]), 10.0)     # agent 32: [31.05, 31.1) s, no sample
     assert pat.K == 311 and 32 not in pat.channels
-    want = r"not detectable: 3 mode\(s\) .*growth rates 0, 0, 1 1/s.*agent32\.p_x.*agent32\.v_y.*Channel\(s\) \[32\]"
+    want = (r"not detectable: 3 mode\(s\) .*growth rates 0, 0, 0\.05161 1/s.*agent32\.p_x.*agent32\.v_y"
+            r".*Channel\(s\) \[32\]")
     with pytest.raises(UndetectableSchedule, match=want) as err:
         check_detectable(system, pat)
     assert "agent31" not in str(err.value) and "camera" not in str(err.value)

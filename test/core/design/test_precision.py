@@ -60,8 +60,9 @@ def test_refused_after_the_doubling_from_the_span_of_its_covariance():
     pattern = design_kalman_module.design_pattern(system, Cycle([1.0] * 20), 50.0)
     st = pattern_stretches(pattern.channels, pattern.blind, 50.0, 20)
     assert max(u.growth for u in unseen_growth(system, st)) ** 2 < PRECISION_RANGE
-    with pytest.raises(PrecisionError, match=r"its periodic covariance spans 1\.36e\+13 .*camera\.p_x.*"
-                                             r"channel 20 \(agent20\), whose directions grow most, goes unseen for 19 s"):
+    want = (r"its periodic covariance spans 1\.36e\+13 .*camera\.p_x.*"
+            r"channel 20 \(agent20\), whose directions grow most, goes unseen for 19 s")
+    with pytest.raises(PrecisionError, match=want):
         design_kalman(system, Cycle([1.0] * 20), 50.0, max_startup=0)
 
 
