@@ -16,16 +16,16 @@ positive semidefinite by construction, with no cancellation however much a view 
 covariance. The prediction (:meth:`~switchobs_core.runtime.covariance.CovarianceStep.factor_step`)
 is the Cholesky factor of ``e^{A dt} L L' e^{A dt}' + Q_d`` while that is well conditioned (within
 about 1e12: four digits or more in its smallest direction, as a design accepts; the cheap path),
-else the exact
-square root ``[e^{A dt} L, Q_d^{1/2}]``, which the correction's QR compresses: the factor then
-carries the square root of the covariance's dynamic range, and a covariance spanning 1e20, past
-the 16 digits where the covariance form's ``S = H P H' + R`` loses positive definiteness, is a
-factor spanning 1e10. So ``P`` stays symmetric positive definite over any run length and stamp
-pattern as long as the arithmetic allows. The covariance itself (:meth:`OnlineKalmanGains.covariance`,
-and what the table family reads after a departure) is ``L L'``, formed on demand. Against the
-Joseph form on the same samples the estimates differ in the last bits (an equivalent formula,
-rounded differently): at most 5e-13 of the state's norm on the paper's model, 2e-11 on a stiff
-system (``test/core/runtime/test_online_sqrt.py``; bench/RESULTS.md).
+else the exact square root ``[e^{A dt} L, Q_d^{1/2}]``, which the correction's QR compresses: the
+factor then carries the square root of the covariance's dynamic range, and a covariance spanning
+1e20, past the 16 digits where the covariance form's ``S = H P H' + R`` loses positive
+definiteness, is a factor spanning 1e10. So ``P`` stays symmetric positive definite over any run
+length and stamp pattern as long as the arithmetic allows. The covariance itself
+(:meth:`OnlineKalmanGains.covariance`, and what the table family reads after a departure) is
+``L L'``, formed on demand. Against the Joseph form on the same samples the estimates differ in
+the last bits (an equivalent formula, rounded differently): at most 4.6e-14 of the estimate and
+3.6e-12 of the covariance on the paper's model, 3.8e-13 and 1.2e-12 on a stiff system
+(bench/RESULTS.md).
 
 Loss of positive definiteness. If even the factor runs out of digits (singular to working
 precision, or an overflow: :func:`~switchobs_core.numerics.kalman_step.check_factor`), the family
