@@ -31,6 +31,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from switchobs_core.numerics.ellipse import covariance_ellipse
+
 from .convert import Body
 from .validate import BridgeError
 
@@ -130,13 +132,9 @@ class MarkersWriter:
         if P is None:
             return Marker.DELETE
         ip = [b.p_x, b.p_y]
-        Ppp = np.asarray(P, dtype=float)[np.ix_(ip, ip)]
-        if not np.isfinite(Ppp).all():
+        ell = covariance_ellipse(np.asarray(P, dtype=float)[np.ix_(ip, ip)], sigmas=2.0)
+        if ell is None:
             return Marker.DELETE
-        # P_pp = V diag(l) V' (ascending l): semi-axes 2 sqrt(l), the major axis along V[:, 1]
-        l, V = np.linalg.eigh(0.5 * (Ppp + Ppp.T))
-        l = np.clip(l, 0.0, None)
-        cov.scale.x, cov.scale.y = 4.0 * math.sqrt(l[1]), 4.0 * math.sqrt(l[0])
-        yaw = math.atan2(V[1, 1], V[0, 1])
+        cov.scale.x, cov.scale.y, yaw = ell
         cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
         return Marker.ADD

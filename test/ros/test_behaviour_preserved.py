@@ -20,8 +20,8 @@ the estimator's pipeline split by concept)
     every case: the above, the noise bound and the paper's envelopes, a Kalman table with partial
     rows, missing samples and off-grid stamps (departures and re-locks), ``kalman-online``, robust
     and sequence modes, ``set_estimate`` and ``reset`` mid-run, the LMI design (gains, kappa, eta)
-    and the Kalman design (every stored gain and prior), and the estimator's pipeline over the
-    recorded bags of ``test/ros/data/regression``.
+    the Kalman design (every stored gain and prior), the schedule plan (``so.plan_schedule``), and
+    the estimator's pipeline over the recorded bags of ``test/ros/data/regression``.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ BASELINES = {
     "7c28b8d": ("lmi_innovation", "lmi_noise_cov", "lmi_measurement", "kalman_table_complete"),
     "b74056c": ("lmi_innovation", "lmi_noise_cov", "lmi_measurement", "kalman_table_complete",
                 "lmi_noise_bound", "kalman_table_partial", "kalman_online", "lmi_robust", "lmi_sequence",
-                "set_estimate_reset", "design_lmi", "design_kalman", "bags"),
+                "set_estimate_reset", "design_lmi", "design_kalman", "plan", "bags"),
 }
 
 #: Cases whose numbers change on purpose, compared within RTOL instead of bit for bit. The online
@@ -192,6 +192,12 @@ if case("design_kalman"):
     for ph in list(d.startup) + list(d.periodic):
         vals += list(np.ravel(ph.K)) + list(np.ravel(ph.P_prior))
     res["design_kalman"] = hexof(vals)
+if case("plan"):
+    vals = []
+    for rate in (20.0, 50.0):
+        r = so.plan_schedule(sysm, rate, progress=False)
+        vals += [rate, *r.counts, r.cost, r.evaluations, r.k_min, r.k_total_max]
+    res["plan"] = hexof(vals)
 if case("bags"):
     from switchobs_ros.bag.estimate import estimate, estimator_params
     cases_json = json.loads((Path(data) / "cases.json").read_text())
