@@ -22,6 +22,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.rviz"))),
+        ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
     # scripts/bootstrap.sh installs the pinned set from requirements.txt first.
@@ -47,7 +48,7 @@ setup(
             "managed_estimator = switchobs_ros.entry:managed_estimator",
             "camera_sim = switchobs_ros.entry:camera_sim",
             "switchobs = switchobs_core.cli:main",
-            "switchobs_bag = switchobs_ros.bag.cli:main",
+            "switchobs_bag = switchobs_ros.entry:switchobs_bag",
         ],
     },
 )

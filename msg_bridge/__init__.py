@@ -16,6 +16,7 @@ fields    one converter per sensor message type: :class:`FieldReader` (message -
           ``(stamp_ns, frame_id, y)``) and :class:`FieldWriter` (values -> message)
 inputs    input specifications: topic, type, fields -> output rows, and how the channel is
           known (:class:`InputSpecs`, :func:`load_inputs`)
+control   the control topic of a system with inputs: type, fields -> u (:class:`ControlSpec`)
 markers   ``~/markers`` for RViz (:class:`MarkersWriter`): per body its position, 2-sigma
           ellipse, the guaranteed bound's circle, the body in view highlighted
 typed     the typed outputs ``switchobs_msgs/StateEstimate`` and ``ErrorBounds``: writers,
@@ -27,6 +28,7 @@ Together, ``fields`` and ``inputs`` give the observer its measurement
 ``(stamp_ns, channel, rows, y)`` from any supported topic.
 """
 
+from .control import CONTROL_TOPIC, ControlSpec, input_labels
 from .convert import (
     STAMP_PAD,
     UNESTIMATED_VARIANCE,
@@ -37,12 +39,14 @@ from .convert import (
     bodies,
     body_odometry,
     covariance_labels,
+    describe_bodies,
     envelope_labels,
     labelled_array,
     odometry_covariances,
     pose_to_xy,
     state_odometries,
     unpack_labelled,
+    unused_states,
     xy_to_pose,
 )
 from .fields import (
@@ -82,6 +86,9 @@ from .validate import (
 
 __all__ = [
     "CHANNEL_TOPIC",
+    "CONTROL_TOPIC",
+    "ControlSpec",
+    "input_labels",
     "LABELLED_ARRAY",
     "MAX_FIELDS",
     "SUPPORTED_TYPES",
@@ -112,6 +119,8 @@ __all__ = [
     "check_after_switch",
     "body_odometry",
     "covariance_labels",
+    "describe_bodies",
+    "unused_states",
     "odometry_covariances",
     "UNESTIMATED_VARIANCE",
     "check_channel",

@@ -15,13 +15,16 @@ answers travels in the layout's padding:
 
 Bodies
 ------
-A state label ``"<body>.<q>"`` with ``q`` in ``p_x, p_y, v_x, v_y`` names a planar body
-(the camera scenario's ``camera``, ``agent1``, ``agent2``, ...). :func:`bodies` finds them;
-:func:`state_odometries` gives one ``nav_msgs/Odometry`` per body.
+A state label ``"<body>.<q>"`` with ``q`` in ``p_x, p_y, v_x, v_y`` (or ``p``, ``v`` on a line)
+names a body (the camera scenario's ``camera``, ``agent1``, ``agent2``, ...; a landmark with a
+position only); bare ``p<k>``, ``v<k>`` name body ``body<k>``. :func:`bodies` finds every body
+with a position; :func:`state_odometries` gives one ``nav_msgs/Odometry`` per body (velocity and
+covariance for what the body's states hold).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -44,6 +47,8 @@ __all__ = [
     "LabelledArray",
     "bodies",
     "body_odometry",
+    "describe_bodies",
+    "unused_states",
     "envelope_labels",
     "labelled_array",
     "pose_to_xy",
@@ -54,9 +59,6 @@ __all__ = [
 
 #: Number of leading padding elements of a labelled array: (stamp.sec, stamp.nanosec).
 STAMP_PAD = 2
-
-_Q = ("p_x", "p_y", "v_x", "v_y")
-
 
 # --- poses -------------------------------------------------------------------------------
 
@@ -153,26 +155,76 @@ def envelope_labels(N: int, noise_bound: bool = False) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Body:
-    """A planar body in the state vector: its name and the indices of p_x, p_y, v_x, v_y."""
+    """A body in the state vector: its name and the state indices of its position ``p_x``
+    (always), ``p_y`` (a planar body) and velocity ``v_x``, ``v_y`` (None where the state has none:
+    a landmark has no velocity, a cart on a line no ``y``)."""
 
     name: str
     p_x: int
-    p_y: int
-    v_x: int
-    v_y: int
+    p_y: int | None = None
+    v_x: int | None = None
+    v_y: int | None = None
+
+    @property
+    def pose_pairs(self) -> tuple[tuple[int, int], ...]:
+        """``(axis, state index)`` of the position entries the body has (axis 0: x, 1: y)."""
+        return tuple((a, i) for a, i in ((0, self.p_x), (1, self.p_y)) if i is not None)
+
+    @property
+    def twist_pairs(self) -> tuple[tuple[int, int], ...]:
+        """``(axis, state index)`` of the velocity entries the body has."""
+        return tuple((a, i) for a, i in ((0, self.v_x), (1, self.v_y)) if i is not None)
+
+    @property
+    def indices(self) -> tuple[int, ...]:
+        """Every state index of the body."""
+        return tuple(i for _, i in self.pose_pairs + self.twist_pairs)
+
+
+#: State label forms that name a body's position and velocity: ``<body>.<q>``, and a bare
+#: ``p<k>`` / ``v<k>`` (a 1-D position and velocity, e.g. config/cart_pair.yaml's ``p1, v1``: body ``body<k>``).
+_DOTTED = {"p_x": "p_x", "p_y": "p_y", "v_x": "v_x", "v_y": "v_y", "p": "p_x", "v": "v_x"}
+_BARE = re.compile(r"([pv])_?(\d+)")
+
+
+def _body_part(label: str) -> tuple[str, str] | None:
+    """``(body name, Body field)`` a state label stands for, or None."""
+    name, dot, q = label.rpartition(".")
+    if dot:
+        return (name, _DOTTED[q]) if q in _DOTTED and name else None
+    m = _BARE.fullmatch(label)
+    return (f"body{m.group(2)}", f"{m.group(1)}_x") if m else None
 
 
 def bodies(state_labels: Sequence[str]) -> tuple[Body, ...]:
-    """The planar bodies named by ``"<body>.<q>"`` state labels, in state order.
-
-    A body needs all four of p_x, p_y, v_x, v_y; labels of another form are ignored.
-    """
+    """The bodies named by the state labels, in state order: ``"<body>.<q>"`` with ``q`` one of
+    ``p_x, p_y, v_x, v_y`` (or ``p``, ``v`` for a body on a line), and bare ``p<k>``, ``v<k>`` (body
+    ``body<k>``). A body needs a position: velocity alone makes none (:func:`unused_states` lists
+    what no body takes)."""
     index: dict[str, dict[str, int]] = {}
     for k, lab in enumerate(state_labels):
-        name, dot, q = lab.rpartition(".")
-        if dot and q in _Q:
-            index.setdefault(name, {})[q] = k
-    return tuple(Body(name, **idx) for name, idx in index.items() if len(idx) == 4)
+        part = _body_part(lab)
+        if part is not None and part[1] not in index.setdefault(part[0], {}):
+            index[part[0]][part[1]] = k
+    return tuple(Body(name, **idx) for name, idx in index.items() if "p_x" in idx)
+
+
+def unused_states(state_labels: Sequence[str], body_list: Sequence[Body] | None = None) -> tuple[str, ...]:
+    """The state labels that no body's odometry or marker shows (of ``body_list``, default :func:`bodies`)."""
+    used = {i for b in (bodies(state_labels) if body_list is None else body_list) for i in b.indices}
+    return tuple(lab for k, lab in enumerate(state_labels) if k not in used)
+
+
+def describe_bodies(state_labels: Sequence[str]) -> str:
+    """One line for the start-up log: the bodies found, the states each shows, and the states
+    that go to no odometry or marker."""
+    bs = bodies(state_labels)
+    parts = [f"{b.name} ({', '.join(state_labels[i] for i in b.indices)})" for b in bs]
+    rest = unused_states(state_labels, bs)
+    return (f"outputs: {len(bs)} bod{'y' if len(bs) == 1 else 'ies'} with odometry and markers"
+            + (f": {'; '.join(parts)}" if parts else " (no state label names a position: <body>.p_x, <body>.p, p<k>)")
+            + (f"; states on no odometry or marker (only ~/state): {', '.join(rest)}" if rest else
+               "; every state is on a body's odometry"))
 
 
 #: Variance written for what the model does not estimate (z, roll, pitch, yaw and their rates):
@@ -185,27 +237,38 @@ def covariance_labels(state_labels: Sequence[str]) -> tuple[str, ...]:
     return tuple(f"{a}|{b}" for a in state_labels for b in state_labels)
 
 
+def _fill_block(cov: np.ndarray, P: np.ndarray, pairs: tuple[tuple[int, int], ...]) -> None:
+    for a, i in pairs:
+        for b, j in pairs:
+            cov[a, b] = P[i, j]
+
+
 def odometry_covariances(P: np.ndarray | None, body: Body) -> tuple[list[float], list[float]]:
     """Row-major 6x6 pose and twist covariances of one body from the state covariance ``P``.
 
-    Pose (x, y, z, roll, pitch, yaw): the (p_x, p_y) block of P; twist (vx, vy, vz, wx, wy,
-    wz): the (v_x, v_y) block. Everything the planar model does not estimate gets
-    :data:`UNESTIMATED_VARIANCE`; with ``P`` None (no covariance known) every variance does.
+    Pose (x, y, z, roll, pitch, yaw): the block of P of the body's position entries; twist (vx,
+    vy, vz, wx, wy, wz): that of its velocity entries. Everything the body's states do not
+    estimate gets :data:`UNESTIMATED_VARIANCE` (a landmark's velocity, a line's y); with ``P``
+    None (no covariance known) every variance does.
     """
     pose = np.zeros((6, 6))
     twist = np.zeros((6, 6))
     np.fill_diagonal(pose, UNESTIMATED_VARIANCE)
     np.fill_diagonal(twist, UNESTIMATED_VARIANCE)
     if P is not None:
-        ip, iv = [body.p_x, body.p_y], [body.v_x, body.v_y]
-        pose[:2, :2] = P[np.ix_(ip, ip)]
-        twist[:2, :2] = P[np.ix_(iv, iv)]
+        _fill_block(pose, P, body.pose_pairs)
+        _fill_block(twist, P, body.twist_pairs)
     return pose.ravel().tolist(), twist.ravel().tolist()
+
+
+def _at(x: np.ndarray, i: int | None) -> float:
+    return 0.0 if i is None else float(x[i])
 
 
 def body_odometry(x: np.ndarray, body: Body, stamp_ns: int, frame_id: str, child_frame_id: str,
                   P: np.ndarray | None = None) -> Odometry:
-    """``nav_msgs/Odometry`` of one body: position and velocity from ``x``, covariances from ``P``.
+    """``nav_msgs/Odometry`` of one body: position and velocity from ``x`` (0 where the body has
+    no such state), covariances from ``P``.
 
     The velocity is written in ``twist`` (REP 105 puts it in the child frame; with the
     identity orientation used here that equals the world frame). The orientation is not
@@ -216,11 +279,11 @@ def body_odometry(x: np.ndarray, body: Body, stamp_ns: int, frame_id: str, child
     msg.header.stamp = ns_to_stamp(stamp_ns)
     msg.header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
-    msg.pose.pose.position.x = float(x[body.p_x])
-    msg.pose.pose.position.y = float(x[body.p_y])
+    msg.pose.pose.position.x = _at(x, body.p_x)
+    msg.pose.pose.position.y = _at(x, body.p_y)
     msg.pose.pose.orientation.w = 1.0
-    msg.twist.twist.linear.x = float(x[body.v_x])
-    msg.twist.twist.linear.y = float(x[body.v_y])
+    msg.twist.twist.linear.x = _at(x, body.v_x)
+    msg.twist.twist.linear.y = _at(x, body.v_y)
     msg.pose.covariance, msg.twist.covariance = odometry_covariances(P, body)
     return msg
 
@@ -271,21 +334,26 @@ class OdometryWriter:
 
     def __init__(self, body: Body, frame_id: str, child_frame_id: str):
         self.body = body
-        self._msg = body_odometry(np.zeros(max(body.p_x, body.p_y, body.v_x, body.v_y) + 1), body, 0,
-                                  frame_id, child_frame_id)
+        self._msg = body_odometry(np.zeros(max(body.indices) + 1), body, 0, frame_id, child_frame_id)
+        # (6x6 row-major entry, P row, P column) of the covariance blocks the body has
+        self._cov = tuple((6 * a + b, i, j) for pairs in (body.pose_pairs, body.twist_pairs)
+                          for a, i in pairs for b, j in pairs)
+        self._n_pose = len(body.pose_pairs) ** 2
 
     def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> Odometry:
         m, b = self._msg, self.body
         if P is not None:
-            ip, iv = [b.p_x, b.p_y], [b.v_x, b.v_y]
-            pc, tc = m.pose.covariance, m.twist.covariance      # 6x6 row-major: (0,0) (0,1) (1,0) (1,1)
-            pc[0], pc[1], pc[6], pc[7] = P[ip[0], ip[0]], P[ip[0], ip[1]], P[ip[1], ip[0]], P[ip[1], ip[1]]
-            tc[0], tc[1], tc[6], tc[7] = P[iv[0], iv[0]], P[iv[0], iv[1]], P[iv[1], iv[0]], P[iv[1], iv[1]]
+            pc, tc = m.pose.covariance, m.twist.covariance
+            for k, (e, i, j) in enumerate(self._cov):
+                (pc if k < self._n_pose else tc)[e] = P[i, j]
         sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
         m.header.stamp.sec = sec
         m.header.stamp.nanosec = nsec
         m.pose.pose.position.x = float(x[b.p_x])
-        m.pose.pose.position.y = float(x[b.p_y])
-        m.twist.twist.linear.x = float(x[b.v_x])
-        m.twist.twist.linear.y = float(x[b.v_y])
+        if b.p_y is not None:
+            m.pose.pose.position.y = float(x[b.p_y])
+        if b.v_x is not None:
+            m.twist.twist.linear.x = float(x[b.v_x])
+        if b.v_y is not None:
+            m.twist.twist.linear.y = float(x[b.v_y])
         return m

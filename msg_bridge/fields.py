@@ -15,6 +15,8 @@ type                                       fields (every float64 scalar of the t
 ``geometry_msgs/msg/PointStamped``         ``point.x``, ``point.y``, ``point.z``
 ``geometry_msgs/msg/PoseWithCovarianceStamped``  ``pose.pose.position.x``, ...
 ``nav_msgs/msg/Odometry``                  ``pose.pose.position.x``, ..., ``twist.twist.linear.x``, ...
+``geometry_msgs/msg/TwistStamped``         ``twist.linear.x``, ..., ``twist.angular.z`` (commands)
+``geometry_msgs/msg/AccelStamped``         ``accel.linear.x``, ..., ``accel.angular.z`` (commands)
 ``std_msgs/msg/Float64MultiArray``         element labels of a labelled array
                                            (:func:`msg_bridge.convert.labelled_array`)
 =========================================  =============================================
@@ -32,7 +34,7 @@ from functools import cache
 from operator import attrgetter
 
 import numpy as np
-from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped, PointStamped, PoseStamped, PoseWithCovarianceStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
 
@@ -66,6 +68,8 @@ _CLASSES: dict[str, type] = {
     "geometry_msgs/msg/PoseWithCovarianceStamped": PoseWithCovarianceStamped,
     "nav_msgs/msg/Odometry": Odometry,
     LABELLED_ARRAY: Float64MultiArray,
+    "geometry_msgs/msg/TwistStamped": TwistStamped,
+    "geometry_msgs/msg/AccelStamped": AccelStamped,
 }
 
 #: Message types an input may have, canonical ``'pkg/msg/Type'`` form.

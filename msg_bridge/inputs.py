@@ -24,6 +24,9 @@ YAML: a top-level ``inputs:`` section of the system file, beside ``noise:``::
         - {topic: target/pose, type: geometry_msgs/PoseStamped,
            fields: [pose.position.x, pose.position.y], rows: [2, 3]}
 
+A system with inputs (``B u``) takes its commands on a control topic: the section's ``control:``
+key, or ``~/control`` (:mod:`msg_bridge.control`).
+
 ``rows`` are 0-based row indices of ``C_c`` or output labels (``system.output_labels``); a
 label must exist in every channel the source serves. Without an ``inputs:`` section the paper's
 interface is the default (:func:`default_inputs`). Every mistake is a :class:`SpecError` with
@@ -34,7 +37,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +47,7 @@ from switchobs_core.loading import load_yaml
 from switchobs_core.model.scenarios import SCENARIOS
 from switchobs_core.model.system import LTISystem
 
+from .control import ControlSpec, default_control, parse_control
 from .fields import FieldReader
 from .validate import SpecError
 
@@ -66,7 +70,7 @@ CHANNEL_TOPIC = "camera/active_channel"
 #: source feeds at least one row, and no row is fed twice).
 MAX_SOURCES = 1024
 
-_SECTION_KEYS = ("channel_topic", "sources")
+_SECTION_KEYS = ("channel_topic", "sources", "control")
 _SOURCE_KEYS = ("topic", "type", "fields", "rows", "channel")
 _TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
 _TOPIC = re.compile(rf"{_TOKEN}(/{_TOKEN})*")
@@ -170,6 +174,7 @@ class InputSpecs:
     sources: tuple[InputSource, ...]
     channel_topic: str | None
     uncovered: tuple[int, ...] = ()
+    control: ControlSpec | None = None      # the known input u (msg_bridge.control)
 
     def shared_rows(self, channel: int) -> tuple[int, ...]:
         """The rows of ``channel`` (1-based) fed by channel-independent (shared) sources, in source order."""
@@ -182,6 +187,8 @@ class InputSpecs:
         lines += [f"  {s.describe()}" for s in self.sources]
         if self.uncovered:
             lines.append(f"  no source feeds channel(s) {list(self.uncovered)}")
+        if self.control is not None:
+            lines.append(f"  {self.control.describe()}")
         return "\n".join(lines)
 
 
@@ -343,7 +350,8 @@ def parse_inputs(section: Mapping | None, system: LTISystem, *, source: str = "i
         if t in seen:
             raise _topic_used(source, i, t, seen[t])
         seen[t] = i
-    return _check_specs(sources, channel_topic, system, source)
+    return _with_control(_check_specs(sources, channel_topic, system, source),
+                         parse_control(section.get("control"), system, f"{source}.control"), source)
 
 
 def default_inputs(system: LTISystem, camera_body: str = "camera") -> InputSpecs:
@@ -370,7 +378,16 @@ def default_inputs(system: LTISystem, camera_body: str = "camera") -> InputSpecs
     reader = FieldReader("geometry_msgs/msg/PoseStamped", ("pose.position.x", "pose.position.y"))
     sources = [_make_source("camera/pose", reader, cam_rows, None, system),
                _make_source("target/pose", reader, tgt_rows, None, system)]
-    return _check_specs(sources, CHANNEL_TOPIC, system, "default inputs")
+    return _with_control(_check_specs(sources, CHANNEL_TOPIC, system, "default inputs"), default_control(system),
+                         "default inputs")
+
+
+def _with_control(specs: InputSpecs, control: ControlSpec | None, source: str) -> InputSpecs:
+    """``specs`` with its control topic (one that no source or the channel topic uses)."""
+    if control is not None and control.topic in {s.topic for s in specs.sources} | {specs.channel_topic}:
+        raise SpecError(f"{source}.control: topic {control.topic} is also an input source's or the channel topic; "
+                        "give the commands a topic of their own")
+    return replace(specs, control=control)
 
 
 def _read_section(path: str, what: str) -> tuple[bool, Any]:

@@ -1,6 +1,7 @@
 """RViz markers of the estimate: ``visualization_msgs/MarkerArray`` for ``~/markers``.
 
-Per planar body (:func:`~msg_bridge.convert.bodies`), four markers with fixed namespaces and
+Per body with a position (:func:`~msg_bridge.convert.bodies`: planar, on a line (y = 0), with or
+without velocity), four markers with fixed namespaces and
 ids (the body's position ``k`` in ``bodies``), so RViz replaces them at every message:
 
 * ``switchobs/position``, SPHERE: the estimated position (p_x, p_y), coloured :data:`HIGHLIGHT`
@@ -113,7 +114,7 @@ class MarkersWriter:
         for b, (pos, lab, cov, bnd) in zip(self.bodies, self._sets):
             for m in (pos, lab, cov, bnd):
                 m.header.stamp.sec, m.header.stamp.nanosec = sec, nsec
-            px, py = float(x[b.p_x]), float(x[b.p_y])
+            px, py = float(x[b.p_x]), 0.0 if b.p_y is None else float(x[b.p_y])
             pos.pose.position.x = lab.pose.position.x = cov.pose.position.x = px
             pos.pose.position.y = lab.pose.position.y = cov.pose.position.y = py
             pos.color = self._highlight if b.name == active_body else self._body
@@ -131,10 +132,15 @@ class MarkersWriter:
         """Fill the 2-sigma ellipse of body ``b``; return its action (DELETE: nothing to show)."""
         if P is None:
             return Marker.DELETE
-        ip = [b.p_x, b.p_y]
-        ell = covariance_ellipse(np.asarray(P, dtype=float)[np.ix_(ip, ip)], sigmas=2.0)
+        Ppp = np.zeros((2, 2))      # a body on a line: no spread across it
+        for a, i in b.pose_pairs:
+            for c, j in b.pose_pairs:
+                Ppp[a, c] = P[i, j]
+        ell = covariance_ellipse(Ppp, sigmas=2.0)
         if ell is None:
             return Marker.DELETE
         cov.scale.x, cov.scale.y, yaw = ell
+        if b.p_y is None:
+            cov.scale.y = _THIN
         cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
         return Marker.ADD

@@ -20,6 +20,8 @@ __all__ = [
     "KalmanDesignError",
     "UndetectableSchedule",
     "RiccatiError",
+    "PrecisionError",
+    "CovarianceError",
     "GainTableError",
     "ScheduleError",
 ]
@@ -67,6 +69,27 @@ class UndetectableSchedule(KalmanDesignError):
 
 class RiccatiError(DesignError):
     """The periodic Riccati recursion did not converge, or a covariance became invalid."""
+
+
+class PrecisionError(DesignError):
+    """The design needs more dynamic range than double precision carries (a channel unseen for so
+    long that its error grows past what 16 digits resolve): refused at design time, naming the
+    numbers and what would fix it (:mod:`switchobs_core.design.precision`)."""
+
+
+class CovarianceError(RiccatiError):
+    """The online Riccati recursion lost positive definiteness (or finiteness) of its covariance:
+    the arithmetic ran out of digits at run time.
+
+    ``correction``: what the family did with the sample after restarting its recursion from the
+    noise model's ``P0`` (a :class:`~switchobs_core.runtime.families.base.Correction`, or None), so
+    that a caller can keep answering with it while it withdraws the covariance and the bounds
+    that rest on it (:mod:`switchobs_core.runtime.families.online`).
+    """
+
+    def __init__(self, message: str, correction: object = None) -> None:
+        super().__init__(message)
+        self.correction = correction
 
 
 class GainTableError(SwitchobsError, ValueError):

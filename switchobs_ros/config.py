@@ -22,7 +22,9 @@ import numpy as np
 
 import msg_bridge as mb
 from msg_bridge import InputSpecs, SpecError, load_inputs
+from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.loading import load_yaml
+from switchobs_core.model.frames import FrameTransform, parse_transforms
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
@@ -47,7 +49,7 @@ CONSISTENCY = ("auto", "always", "never")
 PARAMS = [
     Param("system", "paper", "The system: a built-in scenario name (paper, camera_agents) or a path to a "
           "system YAML file."),
-    Param("gain_table", "", "Path of the gain table (JSON, from `switchobs design`). Empty: use a cached "
+    Param("gain_table", "", "Path of the gain table (JSON or .npz, from `switchobs design`). Empty: use a cached "
           "table for this system/schedule/delta, or design one at start-up and write it to gain_table_cache_dir."),
     Param("gain_table_cache_dir", "~/.cache/switchobs", "Folder for gain tables designed at start-up. A cached "
           "table is used only if the folder and the file are private (owned by this user, not writable by group or "
@@ -83,6 +85,10 @@ PARAMS = [
     Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound."),
     Param("world_frame", "map", "frame_id of the published odometry (and of the expected input poses)."),
     Param("input_frame_id", "map", "Expected header.frame_id of camera/pose and target/pose ('' accepts any)."),
+    Param("input_transforms", (), "Fixed transforms into input_frame_id of the frames inputs may come in, one per "
+          "frame: '<frame> x y z yaw pitch roll' (radians) or '<frame> x y z qx qy qz qw', as "
+          "static_transform_publisher --frame-id <input_frame_id> --child-frame-id <frame> would broadcast. A "
+          "position (and orientation) in such a frame is mapped before it is checked and used.", str),
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
@@ -250,6 +256,7 @@ class EstimatorConfig:
     rate: float
     publish_covariance: bool
     child_frames: tuple[str, ...]
+    transforms: dict[str, FrameTransform] | None = None     # input_transforms by frame
 
     def __getitem__(self, name: str) -> Any:
         """The raw value of parameter ``name``."""
@@ -325,7 +332,11 @@ class EstimatorConfig:
         if frames and len(frames) != len(bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
+        try:
+            transforms = parse_transforms(values["input_transforms"], values["input_frame_id"])
+        except InvalidArgument as err:
+            raise ConfigError(f"parameter 'input_transforms': {err}") from None
         return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
                    inputs=inputs, family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
-                   child_frames=tuple(frames) if frames else tuple(bodies))
+                   child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms)

@@ -7,7 +7,9 @@ that Ctrl-C a quiet stop with exit code 0 (the runner's contract for a Ctrl-C, s
 :mod:`switchobs_ros.runner`): nothing has started yet, so there is nothing to clean up. Once the
 module is imported the usual handling takes over (:func:`~switchobs_ros.runner.run_node`).
 
-This module imports nothing heavy itself, so that the handler is in place at once.
+This module imports nothing heavy itself, so that the handler is in place at once. A ``pip install``
+without the interface package switchobs_msgs gets one line saying how to build it (exit code 2),
+not an import traceback.
 ``python -m switchobs_ros.<node>`` still runs the module directly.
 """
 
@@ -16,17 +18,30 @@ from __future__ import annotations
 import importlib
 import os
 import signal
+import sys
 
 
 def _stop_quietly(signum, frame) -> None:
     os._exit(0)     # no rclpy context, no open outputs yet: a plain exit, no traceback
 
 
-def _run(module: str) -> int:
-    """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``."""
+#: What a missing interface package (a ``pip install`` without the message build) is told.
+NO_MSGS = ("the interface package switchobs_msgs (the typed outputs' messages) is not installed: build it into "
+           "this environment with `bash scripts/build_msgs.sh`, or build it with colcon beside switchobs_ros "
+           "(docs/how-to/ros2.md)")
+
+
+def _run(module: str, prog: str) -> int:
+    """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
+    switchobs_msgs is one line on stderr and exit code 2."""
     previous = signal.signal(signal.SIGINT, _stop_quietly)
     try:
         node = importlib.import_module(f"switchobs_ros.{module}")
+    except ModuleNotFoundError as err:
+        if not (err.name or "").startswith("switchobs_msgs"):
+            raise
+        print(f"{prog}: error: {NO_MSGS}", file=sys.stderr)
+        return 2
     finally:
         signal.signal(signal.SIGINT, previous)
     return node.main()
@@ -34,14 +49,19 @@ def _run(module: str) -> int:
 
 def estimator() -> int:
     """``estimator``: :mod:`switchobs_ros.estimator`."""
-    return _run("estimator")
+    return _run("estimator", "estimator")
 
 
 def managed_estimator() -> int:
     """``managed_estimator``: :mod:`switchobs_ros.managed_estimator`."""
-    return _run("managed_estimator")
+    return _run("managed_estimator", "managed_estimator")
 
 
 def camera_sim() -> int:
     """``camera_sim``: :mod:`switchobs_ros.camera_sim`."""
-    return _run("camera_sim")
+    return _run("camera_sim", "camera_sim")
+
+
+def switchobs_bag() -> int:
+    """``switchobs_bag``: :mod:`switchobs_ros.bag.cli`."""
+    return _run("bag.cli", "switchobs_bag")

@@ -153,6 +153,7 @@ class EstimatorMixin:
         self.table, self.table_path = pl.table, pl.table_path
         self.observer = pl.observer
         self.bodies = mb.bodies(sys_.state_labels)
+        self.get_logger().info(mb.describe_bodies(sys_.state_labels))
         self.child_frames = list(conf.child_frames)
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
@@ -237,6 +238,10 @@ class EstimatorMixin:
             s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB)
             self._input_subs.append(s)
             hot.append((s, handle))
+        self.sub_control = None
+        if pl.control is not None:      # commands u, held from their stamps (switchobs_ros.control); reliable
+            self.sub_control = sub(mb.message_class(pl.control.spec.type), pl.control.topic, self.control_callback,
+                                   qos.CHANNEL_SUB)
         self.srv_reset = self.create_service(Trigger, "~/reset", self.reset_callback)
         self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
         self._hot_inputs = tuple(hot)
@@ -271,7 +276,7 @@ class EstimatorMixin:
         for sub in getattr(self, "_input_subs", []):
             self.destroy_subscription(sub)
         self._input_subs = []
-        for name in ("sub_channel", "sub_set_state"):
+        for name in ("sub_channel", "sub_set_state", "sub_control"):
             sub = getattr(self, name, None)
             if sub is not None:
                 self.destroy_subscription(sub)
@@ -347,6 +352,14 @@ class EstimatorMixin:
                     return
         except Exception as err:
             self.pipeline.internal_error("input", err)
+
+    def control_callback(self, msg: Any) -> None:
+        """The control topic: a command ``u`` held from its stamp on (the pipeline's
+        :meth:`~switchobs_ros.pipeline.EstimatorPipeline.on_control`)."""
+        if not self.answering:
+            self.ignored_inactive += 1
+            return
+        self.pipeline.on_control(msg, self.get_clock().now().nanoseconds)
 
     def set_state_callback(self, msg: Float64MultiArray) -> None:
         """``~/set_state``: set some or all entries of the estimate at a stamp (the pipeline's

@@ -167,8 +167,11 @@ def unknown_parameters(names: Iterable[str], params: list[Param], node_name: str
     if not unknown:
         return ""
     hints = []
+    by_lower = {k.lower(): k for k in known}
     for n in unknown:
-        close = difflib.get_close_matches(n, known, n=1, cutoff=0.75)
+        # a name that differs in case only (schedule.H) is that name; else the closest one, case ignored
+        close = [by_lower[n.lower()]] if n.lower() in by_lower else \
+            [by_lower[c] for c in difflib.get_close_matches(n.lower(), list(by_lower), n=1, cutoff=0.75)]
         if close:
             hints.append(f"'{n}': did you mean '{close[0]}'?")
     return (f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} for node '{node_name}'"

@@ -48,6 +48,7 @@ from switchobs_core.runtime.observer import SwitchedObserver
 
 from .attribution import ChannelAttribution, Resolution, Verdict
 from .config import EstimatorConfig
+from .control import ControlInput
 from .core_config import load_or_design_table
 from .counters import NO_BOUND, Counters, PipelineLog
 from .loss import SequenceLoss
@@ -114,7 +115,7 @@ class EstimatorPipeline(Counters):
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
                  reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = "",
-                 chi2_alpha: float = 0.0):
+                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
@@ -128,6 +129,7 @@ class EstimatorPipeline(Counters):
         self.channel_topic = channel_topic
         self.specs_text = specs_text
         self.in_frame = input_frame_id
+        self.transforms = dict(transforms or {})     # input_transforms: {frame: FrameTransform}
         self.max_abs = max_abs
         self.future_ns = int(future_tolerance_ns)
         self.N = system.N
@@ -138,6 +140,7 @@ class EstimatorPipeline(Counters):
                                   next((s.index for s in self.sources if s.shared), None))
         self.screening = Screening(system, observer, self.pairing, self, check=check, chi2_alpha=chi2_alpha)
         self.loss = SequenceLoss()               # messages the publishers' numbers show never arrived
+        self.control = None if control is None else ControlInput(control)     # commands u (switchobs_ros.control)
         # run-time state (cleared by reset)
         self.last_ns: dict[str, int | None] = {s.topic: None for s in self.sources}
         self.origin_ns: int | None = None
@@ -184,7 +187,8 @@ class EstimatorPipeline(Counters):
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
                    log=log, table_path=table_path, mode=mode, cycles=cycles,
                    reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
-                   specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"])
+                   specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"],
+                   control=conf.inputs.control, transforms=conf.transforms)
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
@@ -240,8 +244,9 @@ class EstimatorPipeline(Counters):
 
     @property
     def input_topics(self) -> tuple[str, ...]:
-        """Every input topic (sources, then the channel topic), relative names."""
-        return tuple(s.topic for s in self.sources) + ((self.channel_topic,) if self.channel_topic else ())
+        """Every input topic (sources, the channel topic, the control topic), relative names."""
+        return tuple(s.topic for s in self.sources) + ((self.channel_topic,) if self.channel_topic else ()) \
+            + ((self.control.topic,) if self.control else ())
 
     # ------------------------------------------------------------------ inputs
     def on_message(self, topic: str, msg: Any, now_ns: int, now_mono: float | None = None,
@@ -250,6 +255,9 @@ class EstimatorPipeline(Counters):
         the publisher's sequence number (:meth:`on_channel`, :meth:`on_input`)."""
         if topic == self.channel_topic:
             return self.on_channel(msg, src_ns=src_ns, now_mono=now_mono, seq=seq)
+        if self.control is not None and topic == self.control.topic:
+            self.on_control(msg, now_ns)
+            return []
         return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns, seq)
 
     def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None,
@@ -278,6 +286,23 @@ class EstimatorPipeline(Counters):
         except Exception as err:
             self.internal_error(topic, err)
         return out
+
+    def on_control(self, msg: Any, now_ns: int) -> bool:
+        """A command on the control topic (:mod:`switchobs_ros.control`) received at node-clock
+        ``now_ns``: checked, counted, and held from its stamp on; True when accepted."""
+        c = self.control
+        try:
+            stamp_ns, u, rej = c.checked(msg, max_abs=self.max_abs, now_ns=now_ns, future_tolerance_ns=self.future_ns,
+                                         obs_ns=self.obs_ns)
+            if rej is not None:
+                self.reject(c.topic, rej)
+                return False
+            self.accepted[c.topic] += 1
+            c.accept(stamp_ns, u, self.observer, self.origin_ns)
+            return True
+        except Exception as err:
+            self.internal_error(c.topic, err)
+            return False
 
     def on_set_state(self, msg: Any, now_ns: int) -> bool:
         """A ``~/set_state`` message (:mod:`switchobs_ros.set_state`) received at node-clock
@@ -338,7 +363,7 @@ class EstimatorPipeline(Counters):
             self.loss.seen(topic, seq)
             stamp_ns, values, rej = src.checked(msg, frame_id=self.in_frame, max_abs=self.max_abs,
                                                 last_ns=self.last_ns[topic], now_ns=now_ns,
-                                                future_tolerance_ns=self.future_ns)
+                                                future_tolerance_ns=self.future_ns, transforms=self.transforms)
             rej = self.attribution.refuse(src, stamp_ns, src_ns, rej)
             if rej is None and self.obs_ns is not None and stamp_ns <= self.obs_ns:
                 rej = Rejection(Reason.OLD_STAMP, "header.stamp",
@@ -444,6 +469,8 @@ class EstimatorPipeline(Counters):
         if self.origin_ns is None:
             self.origin_ns = pend.stamp_ns
             self.observer.reset(self.x0, 0.0)
+            if self.control is not None:
+                self.control.start(self.observer, self.origin_ns)
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         guessed = self.attribution.guessed(pend)
         if guessed and self.screening.testing and len(self.screening.fitting_channels(pend, t)) == 1:
@@ -520,6 +547,8 @@ class EstimatorPipeline(Counters):
         self.attribution.reset()
         self.dead_time.switched()
         self.observer.reset(self.x0, 0.0)
+        if self.control is not None:
+            self.control.restart()
         self.resets += 1
         self.bound_valid = False
         self.bound_invalid_why = why

@@ -116,9 +116,13 @@ class Screening:
         ctr.inconsistent += 1
         ctr.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
         ctr.reject(self.pairing.topic(pend), Rejection(Reason.INCONSISTENT, "innovation", first.describe()))
-        ctr.withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): the model does not "
-                     "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
-                     "beyond noise.max)")
+        if t == 0.0:        # the first sample: its prior is x_hat(t0) with the ball of radius e0
+            why = (f"at the first sample the initial error exceeds e0 = {self.observer.e0:g}: parameter e0 must bound "
+                   "||x_hat(t0) - x(t0)|| (raise it, or give an initial_estimate closer to the truth)")
+        else:
+            why = ("the model does not hold for the data (wrong channel or frame, a faulty sensor, a body off the "
+                   "model, noise beyond noise.max, or an initial error above e0)")
+        ctr.withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): {why}")
         return None
 
     def _gate(self, pend: Pending, t: float, m: Measurement) -> bool:

@@ -9,6 +9,7 @@ message and says why it is rejected (:mod:`msg_bridge.validate`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,6 +17,7 @@ import numpy as np
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from msg_bridge.frames import FramedFields
 
 __all__ = ["Source", "sources_from_specs"]
 
@@ -42,31 +44,52 @@ class Source:
     shared: bool
     read: Any
     pose: bool
+    framed: FramedFields | None = None
 
     def checked(self, msg: Any, *, frame_id: str, max_abs: float, last_ns: int | None, now_ns: int,
-                future_tolerance_ns: int) -> tuple[int, np.ndarray, Rejection | None]:
+                future_tolerance_ns: int, transforms: Mapping[str, Any] | None = None
+                ) -> tuple[int, np.ndarray, Rejection | None]:
         """The message's stamp and values, and why it is rejected (None: valid): values not finite
-        or above ``max_abs``, another frame than ``frame_id`` (empty: any), a stamp not after
-        ``last_ns`` (the source's previous one) or more than ``future_tolerance_ns`` ahead of the
-        node clock ``now_ns``."""
+        or above ``max_abs``, another frame than ``frame_id`` (empty: any) with no declared transform
+        in ``transforms`` (``{frame: FrameTransform}``: the positions and orientations are mapped into
+        ``frame_id`` first, :mod:`msg_bridge.frames`), a stamp not after ``last_ns`` (the source's
+        previous one) or more than ``future_tolerance_ns`` ahead of the node clock ``now_ns``."""
+        tf = None
+        if transforms and self.framed is not None and self.framed.framed:
+            frame = msg.header.frame_id
+            tf = transforms.get(frame.strip("/")) if frame != frame_id else None
         if self.pose:      # every field of a pose checked
-            rej = mb.check_pose(msg, frame_id=frame_id, max_abs=max_abs, last_ns=last_ns, now_ns=now_ns,
-                                future_tolerance_ns=future_tolerance_ns)
+            rej = mb.check_pose(msg, frame_id=None if tf else frame_id, max_abs=max_abs, last_ns=last_ns,
+                                now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
             if rej is not None and rej.reason is Reason.BAD_STAMP:
                 return 0, np.empty(0), rej
             stamp_ns, _, values = self.read(msg)
-            return stamp_ns, values, rej
+            if tf is not None and rej is None:
+                values = self.framed.apply(msg, values, tf)
+                rej = mb.check_values(values, self.fields, max_abs=max_abs)
+            return stamp_ns, values, _named(rej)
         try:
             stamp_ns, frame, values = self.read(msg)
         except mb.BridgeError as err:       # a bad stamp, or a labelled array of another layout
             return 0, np.empty(0), err.rejection or Rejection(Reason.BAD_LAYOUT, "layout", str(err))
         values = np.asarray(values, dtype=float)
         rej = mb.check_values(values, self.fields, max_abs=max_abs)
-        if rej is None and frame_id and self.type != mb.LABELLED_ARRAY and frame != frame_id:
-            rej = Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')")
+        if rej is None and tf is not None:
+            values = self.framed.apply(msg, values, tf)
+            rej = mb.check_values(values, self.fields, max_abs=max_abs)
+        elif rej is None and frame_id and self.type != mb.LABELLED_ARRAY and frame != frame_id:
+            rej = _named(Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')"))
         if rej is None:
             rej = mb.check_stamp(stamp_ns, last_ns=last_ns, now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
         return stamp_ns, values, rej
+
+
+def _named(rej: Rejection | None) -> Rejection | None:
+    """A ``wrong_frame`` rejection naming the parameters that fix it."""
+    if rej is None or rej.reason is not Reason.WRONG_FRAME:
+        return rej
+    return Rejection(rej.reason, rej.field, f"{rej.detail}: declare the frame's fixed transform in parameter "
+                     "input_transforms ('<frame> x y z yaw pitch roll'), or publish in input_frame_id")
 
 
 def sources_from_specs(specs: Any, system: Any) -> list[Source]:
@@ -79,5 +102,5 @@ def sources_from_specs(specs: Any, system: Any) -> list[Source]:
     for k, spec in enumerate(specs.sources):
         rows = tuple(tuple(spec.rows_for(c)) for c in range(1, system.N + 1))
         out.append(Source(k, spec.topic, spec.type, tuple(spec.fields), spec.channel, rows, bool(spec.shared),
-                          spec.reader.read, spec.type == _POSE_TYPE))
+                          spec.reader.read, spec.type == _POSE_TYPE, FramedFields(spec.type, spec.fields)))
     return out

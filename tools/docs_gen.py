@@ -20,10 +20,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
-__all__ = ["API_PACKAGES", "GENERATED", "api_modules", "api_pages", "benchmarks_page", "cli_reference", "copied_files",
-           "generated_pages", "parameters_reference"]
+__all__ = ["API_PACKAGES", "GENERATED", "PUBLIC_API", "api_modules", "api_nav", "api_pages", "benchmarks_page",
+           "cli_reference", "copied_files", "generated_pages", "parameters_reference", "strip_roles"]
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The packages whose modules get an API page (``reference/api/<module>.md``).
@@ -135,10 +136,12 @@ def parameters_reference() -> str:
             out += ["Parameters marked *runtime* can change while the node runs (`ros2 param set`, the "
                     "`set_parameters` service); any other is refused with the reason, and a name the node does "
                     "not declare gets `unknown parameter NAME (known: ...)`.", ""]
-        out += ["| parameter | type | default | runtime | meaning |", "|---|---|---|---|---|"]
+        # two columns: the name (never broken: stylesheets/tables.css) with its type, default and whether it
+        # is a runtime parameter under it; the meaning takes the rest of the width
+        out += ["| parameter | meaning |", "|---|---|"]
         for p in params:
-            out.append(f"| `{p.name}` | {p.type_name} | {_default(p.default)} | "
-                       f"{'runtime' if p.name in runtime else ''} | {_cell(p.description)} |")
+            rt = " · *runtime*" if p.name in runtime else ""
+            out.append(f"| `{p.name}`<br>{p.type_name} · default {_default(p.default)}{rt} | {_cell(p.description)} |")
         out.append("")
     return "\n".join(out) + "\n"
 
@@ -163,6 +166,50 @@ def _is_package(mod: str) -> bool:
     return (ROOT / mod.replace(".", "/") / "__init__.py").is_file()
 
 
+#: The public API, first in the navigation and the index (in this order); every other module is
+#: listed after them, under its package (collapsed in the navigation).
+PUBLIC_API = (
+    "switchobs_core",                       # re-exports every public name (import switchobs_core as so)
+    "switchobs_core.runtime.observer",      # SwitchedObserver: update, hold_input, envelope
+    "switchobs_core.model.system",          # LTISystem
+    "switchobs_core.model.schedule",        # Cycle, schedules
+    "switchobs_core.table.gains",           # GainTable: save, load
+    "switchobs_core.design.lmi",            # the paper's LMI design
+    "switchobs_core.design.kalman",         # offline periodic Kalman design
+    "switchobs_core.sim.simulate",          # simulate
+    "msg_bridge",                           # messages <-> numpy
+    "msg_bridge.typed",                     # StateEstimate, ErrorBounds
+    "switchobs_ros.pipeline",               # EstimatorPipeline: the node's input handling, offline too
+    "switchobs_ros.bag.estimate",           # switchobs_bag estimate from Python
+)
+
+
+def _summary(mod: str) -> str:
+    """The first line of a module's docstring (read from the file, nothing imported)."""
+    import ast
+
+    path = ROOT / mod.replace(".", "/")
+    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+    try:
+        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+    except (OSError, SyntaxError):
+        return ""
+    line = doc.strip().split("\n\n", 1)[0].replace("\n", " ")
+    return _cell(re.sub(r":(?:mod|class|func|meth|attr|data|exc|obj):`~?([^`]+)`", r"`\1`", line))
+
+
+def api_nav() -> list:
+    """The navigation of the Python API: the overview, the public API, then every module under its
+    package (collapsed: a section per package)."""
+    mods = api_modules()
+    public = [m for m in PUBLIC_API if m in mods]
+    nav: list = [{"Overview": "reference/api/index.md"},
+                 {"Public API": [{m: f"reference/api/{m}.md"} for m in public]}]
+    nav.append({"All modules": [{pkg: [{m: f"reference/api/{m}.md"} for m in mods
+                                       if m == pkg or m.startswith(pkg + ".")]} for pkg in API_PACKAGES]})
+    return nav
+
+
 def api_pages() -> dict[str, str]:
     """``{path under docs/: Markdown}`` of the API reference: an index and one page per module."""
     mods = api_modules()
@@ -171,9 +218,13 @@ def api_pages() -> dict[str, str]:
              "One page per module, rendered from the docstrings (numpydoc) at every build; the list is "
              "made from the packages' files, so a new module appears here by itself. `switchobs_core` is "
              "ROS-free; `msg_bridge` converts messages; `switchobs_ros` holds the nodes and tools. "
-             "The [API overview](../../api.md) shows the calls in use.", ""]
+             "The [API overview](../../api.md) shows the calls in use.", "",
+             "## Public API", "",
+             "What an application imports; `import switchobs_core as so` gives every public name of the core.", ""]
+    index += [f"- [`{m}`]({m}.md): {_summary(m)}" for m in PUBLIC_API if m in mods]
+    index += ["", "## All modules", "", "Every module, by package: the internals the public API is built from.", ""]
     for pkg in API_PACKAGES:
-        index += [f"## `{pkg}`", ""]
+        index += [f"### `{pkg}`", ""]
         for m in mods:
             if m == pkg or m.startswith(pkg + "."):
                 index.append(f"- [`{m}`]({m}.md)")
@@ -185,6 +236,19 @@ def api_pages() -> dict[str, str]:
         tail = ("\n\nModules: " + ", ".join(f"[`{s}`]({s}.md)" for s in subs)) if subs else ""
         pages[f"reference/api/{m}.md"] = f"# `{m}`\n\n::: {m}{opts}{tail}\n"
     return pages
+
+
+#: Sphinx roles in docstrings (``:mod:`x```, ``:class:`~a.B```): the site shows their target as code.
+ROLE = re.compile(r":(?:mod|class|func|meth|attr|data|exc|obj|ref):(<code>)~?")
+
+
+#: A role left as text (inside a code span or an attribute): ``:class:`X``` -> ``X``.
+ROLE_TEXT = re.compile(r":(?:mod|class|func|meth|attr|data|exc|obj|ref):`~?([^`<>]*)`")
+
+
+def strip_roles(html: str) -> str:
+    """A rendered page with the reST roles of its docstrings dropped (``:mod:<code>x</code>`` -> ``<code>x</code>``)."""
+    return ROLE_TEXT.sub(r"\1", ROLE.sub(r"\1", html))
 
 
 def benchmarks_page() -> str:

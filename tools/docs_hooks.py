@@ -25,8 +25,7 @@ def on_config(config, **kwargs):
     """Make the pages once per build and put the API modules under the nav's "Python API" entry."""
     _PAGES.clear()
     _PAGES.update(docs_gen.generated_pages())
-    api = [{"Overview": "reference/api/index.md"}] + [
-        {m: f"reference/api/{m}.md"} for m in docs_gen.api_modules()]
+    api = docs_gen.api_nav()        # the public API first, every module after it by package
 
     def walk(items):
         for i, item in enumerate(items):
@@ -46,3 +45,8 @@ def on_files(files, config, **kwargs):
     for path, source in docs_gen.copied_files().items():
         files.append(File.generated(config, path, abs_src_path=str(source)))
     return files
+
+
+def on_page_content(html, page, config, files):
+    """The docstrings' reST roles (``:mod:`x```) shown as plain code."""
+    return docs_gen.strip_roles(html)

@@ -104,20 +104,22 @@ class RoundingBound:
         return ell.propagate(E, rho)
 
     def step(self, e: Any, dt: float, xn: float, xn_new: float, nu: np.ndarray | None,
-             u: np.ndarray | None) -> None:
-        """Both ellipsoids through one propagation step ``e`` (a ZOH cache entry) over ``dt``."""
-        self.ell.step(e.E, self.rho_step(e, dt, xn, xn_new, self.ell, nu, u))
+             u: np.ndarray | None, extra: float = 0.0) -> None:
+        """Both ellipsoids through one propagation step ``e`` (a ZOH cache entry) over ``dt``;
+        ``extra``: the residual of what the step added besides (an input changed within it)."""
+        self.ell.step(e.E, self.rho_step(e, dt, xn, xn_new, self.ell, nu, u) + extra)
         if self.ellv is not None:
-            self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xn_new, self.ellv, nu, u),
+            self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xn_new, self.ellv, nu, u) + extra,
                         e.GL if nu is not None else None, True)
 
     def propagated(self, e: Any, dt: float, xn: float, xpn: float, nu: np.ndarray | None,
-                   u: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``."""
-        S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, xn, xpn, self.ell, nu, u))
+                   u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
+        (``extra`` as in :meth:`step`)."""
+        S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, xn, xpn, self.ell, nu, u) + extra)
         Sv = None
         if self.ellv is not None:
-            Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xpn, self.ellv, nu, u),
+            Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xpn, self.ellv, nu, u) + extra,
                                 e.GL if nu is not None else None, False)
         return S, Sv
 

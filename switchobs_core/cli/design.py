@@ -3,18 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+from typing import Any
 
 from ..design.kalman import design_kalman
 from ..design.lmi import Designer, Margin
 from ..exceptions import InvalidArgument
 from ..families import DESIGNABLE, family_entry
 from ..files import check_output
+from ..loading import MAX_FILE_BYTES
 from ..model.scenarios import load_noise, load_system
 from ..model.schedule import Cycle
 from ..model.system import LTISystem
 from ..ranges import MAX_CYCLES, check_count
 from ..table.gains import CycleDesign, GainTable, kalman_table
+from ..table.io import save_loadable
 from ._common import add_dead_time, fmt_table, parse_floats, parse_h, parse_pair, parse_ts, print_json, with_dead_time
 
 __all__ = ["register", "run", "run_kalman", "design_rows", "table_summary", "kalman_summary"]
@@ -93,7 +97,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="process noise q on every state: continuous white noise of intensity Q_c = q^2 I, discretised by "
         "van Loan (the same meaning as `switchobs_bag generate --process-noise`)",
     )
-    p.add_argument("-o", "--output", required=True, type=Path, help="gain table file to write (JSON)")
+    p.add_argument("-o", "--output", required=True, type=Path,
+                   help="gain table file to write: JSON, or the binary container for a name ending in .npz (a JSON "
+                        "name for a table over 16 MiB is written as .npz beside it, with a note)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument(
         "--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar (default: on a terminal)"
@@ -193,7 +199,7 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
     kd = design_kalman(system, cycles, args.rate, noise)
     table = kalman_table(system, [kd])
-    table.save(args.output)
+    args.output = save(table, args.output)
     if args.json:
         out = kalman_summary(table, system)
         out["output"] = str(args.output)
@@ -207,6 +213,19 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
           "and norm above (< 1: the error contracts every period, for noise-free samples on the schedule)")
     print(f"wrote {args.output}")
     return 0
+
+
+def save(table: Any, path: Path) -> Path:
+    """Write the table where ``-o`` says, or, for a JSON name whose JSON loading would refuse (over
+    16 MiB: a Kalman table of many phases), as ``.npz`` beside it, saying so in one line on stderr;
+    the path written."""
+    written, size = save_loadable(table, path)
+    if size is not None:
+        limit = MAX_FILE_BYTES // 2 ** 20
+        print(f"note: the table's JSON would be at least {size / 2 ** 20:.0f} MiB, above the {limit} MiB a JSON gain "
+              f"table may have: wrote the binary container {written} instead (switchobs show, simulate and the nodes "
+              "load it; name the output .npz to choose it)", file=sys.stderr)
+    return written
 
 
 def run(args: argparse.Namespace) -> int:
@@ -228,7 +247,7 @@ def run(args: argparse.Namespace) -> int:
     designer = Designer(system, delta=args.delta, margin=args.margin)
     etas = _etas_for(args.eta, cycles)
     table = designer.table(cycles, robust=args.robust, etas=etas, progress=args.progress)
-    table.save(args.output)
+    args.output = save(table, args.output)
     if args.json:
         out = table_summary(table)
         out["output"] = str(args.output)

@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
         "evaluations": res.evaluations,
         "local_minimum": res.local_minimum,
         "design_command": cmd,
-        "design_command_lmi": cmd_lmi,
+        "design_command_lmi": cmd_lmi if extras["lmi"]["feasible"] else None,   # never a design found infeasible
         "design_pattern_matches": matches,
         "cost_as_designed": res.cost if matches or "channels" not in kal else
         J.of_channels(kal["channels"], (read,), sample_pattern(read, J.rate).blind),
@@ -254,7 +254,11 @@ def _print_text(out: dict, res: Any, system: Any) -> None:
         print("note: `switchobs design` assigns a sample at a switching instant to the other channel in floating "
               f"point (a tie); the cost of its sample pattern is {out['cost_as_designed']:.4e}")
     print(f"design: {out['design_command']}")
-    print(f"        {out['design_command_lmi']}")
+    if out["design_command_lmi"]:
+        print(f"        {out['design_command_lmi']}")
+    else:
+        print("        (no LMI design command: the paper's LMI gains are infeasible for this cycle, see above; "
+              "design the Kalman gains)")
     dead = f", schedule.dead_time: {fmt_num(out['dead_time'])}" if out["dead_time"] else ""
     if N == 2:
         print(f"ROS parameters: schedule.tau: [{fmt_num(out['tau'])}], schedule.s: [{fmt_num(out['s'])}]{dead}")

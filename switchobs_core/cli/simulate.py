@@ -52,9 +52,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "or the measurement between samples")
     p.add_argument("--process-noise", type=float, default=0.0, help="process noise spectral density (std)")
     p.add_argument("--e0", type=float, default=0.1,
-                   help="initial error scale: x_hat(0) = x(0) + E0 * randn (default 0.1)")
+                   help="scale of a random initial error: x_hat(0) = x(0) + E0 * randn(n), so ||x_hat(0) - x(0)|| "
+                        "is about E0 sqrt(n) (default 0.1; the node's e0 is a bound on that norm, not a scale)")
     p.add_argument("--seed", type=int, default=0, help="seed of x(0), the initial error and the noise")
     p.add_argument("--plot", type=Path, metavar="PNG", help="write the three-panel error figure")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar over the simulated samples (default: on a terminal)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run)
 
@@ -101,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     xhat0 = x0 + args.e0 * rng.standard_normal(system.n)
     res = simulate(system, table, schedule, x0, xhat0, args.t_end, rate=args.rate, hold=args.hold,
                    noise_std=args.noise, process_noise=args.process_noise, seed=args.seed,
-                   noise_max=args.noise_max)
+                   noise_max=args.noise_max, progress=args.progress)
     summ = res.summary()
     summ["schedule"] = args.schedule
     bound, label, status = res.guarantee()

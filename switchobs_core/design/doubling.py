@@ -60,17 +60,14 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve, qr
+from scipy.linalg import lu_factor, lu_solve
 
 from ..exceptions import RiccatiError
-from ..numerics.kalman_step import symmetrize
+from ..numerics.kalman_step import psd_sqrt, sqrt_correct, sqrt_predict, symmetrize
 from .riccati import PeriodicSolution, Step, meet_periodic, rel_change
 
 __all__ = [
     "RiccatiMap",
-    "psd_sqrt",
-    "sqrt_correct",
-    "sqrt_predict",
     "period_map",
     "fixed_point",
     "solve_periodic_riccati",
@@ -112,55 +109,6 @@ class RiccatiMap:
     def doubled(self) -> RiccatiMap:
         """``self o self``: the map over twice as many periods."""
         return self.then(self)
-
-
-def psd_sqrt(P: np.ndarray) -> np.ndarray:
-    """A square root ``L`` with ``L L' = P`` of a symmetric PSD matrix (eigenvalues < 0 from
-    rounding clipped to 0); Cholesky when it succeeds."""
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(symmetrize(P))
-        return V * np.sqrt(np.clip(w, 0.0, None))
-
-
-def sqrt_correct(L: np.ndarray, H: np.ndarray, R_sqrt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Square-root Kalman correction: ``(K, L^+, S^{1/2})`` from a prior factor ``L`` (``P^- = L L'``,
-    n x m with m >= n; ``L^+`` is n x n).
-
-    One QR of the pre-array (Kaminski, Bryson and Schmidt, IEEE TAC 16(6), 1971)
-
-    .. math::
-
-        \\begin{bmatrix} R^{1/2\\prime} & 0 \\\\ L' H' & L' \\end{bmatrix} = \\Theta
-        \\begin{bmatrix} S^{1/2\\prime} & \\bar K' \\\\ 0 & L^{+\\prime} \\end{bmatrix},
-        \\quad K = \\bar K S^{-1/2},
-
-    so that ``S = H P^- H' + R``, ``K = P^- H' S^{-1}`` and ``P^+ = L^+ L^{+'}`` equals the Joseph
-    form: positive semidefinite by construction, whatever the dynamic range of ``P^-``.
-    ``S^{1/2}`` is lower triangular.
-    """
-    n, p = L.shape[0], H.shape[0]
-    if p == 0:                               # nothing measured: only compress L to n x n
-        Lc = L if L.shape[1] <= n else qr(L.T, mode="r", check_finite=False)[0][:n].T
-        return np.zeros((n, 0)), Lc, np.zeros((0, 0))
-    pre = np.zeros((p + L.shape[1], p + n))
-    pre[:p, :p] = R_sqrt.T
-    pre[p:, :p] = (H @ L).T
-    pre[p:, p:] = L.T
-    post = qr(pre, mode="r", check_finite=False)[0]
-    Ss = post[:p, :p].T                      # S^{1/2}
-    Kbar = post[:p, p:].T                    # K S^{1/2}
-    # K = Kbar S^{-1/2}: solve S^{1/2}' K' = Kbar'
-    K = np.linalg.solve(Ss.T, Kbar.T).T
-    return K, post[p:p + n, p:].T, Ss
-
-
-def sqrt_predict(L: np.ndarray, Phi: np.ndarray, Qd_sqrt: np.ndarray) -> np.ndarray:
-    """Square-root prediction: ``L^- = [Phi L, Q_d^{1/2}]`` (n x 2n), ``L^- L^-' = Phi L L' Phi' + Q_d``.
-
-    Not triangular: the next :func:`sqrt_correct` compresses it in its QR (one QR per sample)."""
-    return np.hstack([Phi @ L, Qd_sqrt])
 
 
 class _Factors:

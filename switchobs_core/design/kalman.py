@@ -28,6 +28,13 @@ stays right for large n: :mod:`switchobs_core.model.detectability`; d:obs_detect
 discrete time). The Riccati solver checks it once more on its result: the closed-loop error map
 of the period must be a contraction (:func:`~switchobs_core.design.doubling.solve_periodic_riccati`).
 
+Precision. A schedule that leaves a channel unseen so long that the periodic covariance would
+span more than double precision resolves is refused with one line
+(:class:`~switchobs_core.exceptions.PrecisionError`, :mod:`switchobs_core.design.precision`):
+before the doubling from the growth of the directions only that channel sees over its longest
+unseen stretch, after it from the span of the priors themselves. A table is never written for a
+filter that no float64 filter can run.
+
 The result is a :class:`~switchobs_core.table.kalman.KalmanDesign` (the stored data and its lookup by
 sample phase, :mod:`switchobs_core.table.kalman`), which a gain table holds
 (:func:`~switchobs_core.table.gains.kalman_table`).
@@ -48,6 +55,7 @@ from ..model.schedule import Cycle, PeriodicSchedule, Schedule, SequenceSchedule
 from ..ranges import check_size
 from ..table.kalman import KalmanDesign, KalmanPhase, SamplePattern
 from .doubling import solve_periodic_riccati, startup_run
+from .precision import check_covariance, check_unseen, cycles_label, pattern_stretches
 from .riccati import Step, discretize, rel_change
 
 __all__ = [
@@ -219,11 +227,13 @@ def design_kalman(
 
     ``design = design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0, default_noise(system))``
 
-    Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair;
+    Steps: 1. sample pattern over one period; 2. detectability of the sampled periodic pair, and
+    the growth of each channel's unseen directions within double precision;
     3. periodic Riccati solution by doubling (:func:`~switchobs_core.design.doubling.solve_periodic_riccati`,
-    residual ``<= rtol``), and the start-up segment from ``P0`` (``startup_rtol``, at most
-    ``max_startup`` samples: default 64 periods, at most what :data:`STARTUP_BUDGET_BYTES` of
-    priors hold but at least one period: :func:`~switchobs_core.design.doubling.startup_run`);
+    residual ``<= rtol``; its covariance's span within double precision), and the start-up segment
+    from ``P0`` (``startup_rtol``, at most ``max_startup`` samples: default 64 periods, at most what
+    :data:`STARTUP_BUDGET_BYTES` of priors hold but at least one period:
+    :func:`~switchobs_core.design.doubling.startup_run`);
     4. the period's error transition.
 
     Raises
@@ -232,6 +242,11 @@ def design_kalman(
         No whole number of samples per period (see :func:`sample_pattern`).
     UndetectableSchedule
         Some unstable mode is never observed by the sampled schedule.
+    PrecisionError
+        The design is beyond double precision: a channel unseen so long that the periodic
+        covariance would span more than :data:`~switchobs_core.design.precision.PRECISION_RANGE`
+        (checked before the doubling from the growth of what only that channel sees, and after it
+        on the priors; :mod:`switchobs_core.design.precision`).
     RiccatiError
         The doubling does not settle, or its solution is not stabilising.
     """
@@ -244,9 +259,12 @@ def design_kalman(
         if isinstance(c, Cycle):
             check_cycle_horizon(system.A, c)
     pattern = design_pattern(system, cycles, rate, max_repeat=max_repeat, max_startup=max_startup)
-    # 2. detectability
+    # 2. detectability, and the dynamic range double precision must carry (before the doubling)
     check_detectable(system, pattern)
-    # 3. periodic Riccati solution and start-up
+    what = f"the Kalman design of {cycles_label(pattern.cycles)} at {pattern.rate:g} Hz"
+    stretches = pattern_stretches(pattern.channels, pattern.blind, pattern.rate, system.N)
+    check_unseen(system, stretches, power=2, what=what)
+    # 3. periodic Riccati solution (its covariance within double precision) and start-up
     A = np.asarray(system.A, dtype=float)
     dt = 1.0 / pattern.rate
     Phi, _, Qd = discretize(A, np.asarray(system.B, dtype=float), noise.Q_c, dt)
@@ -255,6 +273,7 @@ def design_kalman(
     steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
              for c, r in zip(pattern.channels, rows)]
     sol = solve_periodic_riccati(steps, rtol=rtol)
+    check_covariance(system, sol.P_prior, stretches, what=what)
     if max_startup is None:
         max_startup = startup_cap(K, A.shape[0])
     # max_startup = 0: no start-up segment (its distance: P0 from the periodic prior of phase 0)

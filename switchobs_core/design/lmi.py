@@ -26,6 +26,12 @@ Robust design (assumption A2, beyond the paper): if every residence time lies in
 per cycle (at least (N - 1) h_min when mu_i < 0). Designing eta_i for that worst case
 makes f_ii <= delta_i for every admissible cycle, so one gain set serves all schedules.
 
+Precision. A cycle (or box) that leaves a channel unseen so long that the error of what only it
+sees grows past :data:`~switchobs_core.design.precision.PRECISION_RANGE` meanwhile is refused
+before any SDP (:class:`~switchobs_core.exceptions.PrecisionError`): the cycle's error map
+passes through that growth, and its entries keep ``u g`` relative accuracy
+(:mod:`switchobs_core.design.precision`).
+
 Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
@@ -46,6 +52,7 @@ from ..model.schedule import Cycle, check_cycle_horizon
 from ..model.system import LTISystem
 from ..table.gains import ChannelGain, CycleDesign, GainTable
 from ..validation import as_finite
+from .precision import check_unseen, cycle_stretches, cycles_label
 from .synthesis import KAPPA_GRID, THETA_SLACK, KappaCurve, LMISynthesizer
 
 __all__ = [
@@ -230,6 +237,8 @@ class Designer:
         if cycle.N != self.system.N:
             raise ScheduleError(f"cycle {cycle.label()} has {cycle.N} channels; the system has {self.system.N}")
         check_cycle_horizon(self.system.A, cycle)
+        check_unseen(self.system, cycle_stretches(cycle.h, cycle.dead_time), power=1,
+                     what=f"the LMI design of {cycles_label([cycle])}")
 
     def _channel_gain(self, i: int, eta: float, eta_min: float | None, active: float, inactive: float) -> ChannelGain:
         ch = self.channels[i]
@@ -295,6 +304,7 @@ class Designer:
             raise ScheduleError(f"residence-time bounds need 0 < h_min <= h_max; got [{h_min}, {h_max}]")
         N = self.system.N
         what = f"robust design h in [{h_min:g}, {h_max:g}]"
+        check_unseen(self.system, [(N - 1) * h_max] * N, power=1, what=f"the {what}")
         gains = []
         for i, ch in enumerate(self.channels):
             inactive = (N - 1) * (h_max if ch.mu >= 0 else h_min)

@@ -28,7 +28,13 @@ fastest switching allowed; with one every switch costs ``k_d`` blind samples and
 moves inside the box.
 
 Undetectable schedules (an unstable mode never observed by the sampled periodic pair, the
-test of :func:`~switchobs_core.design.kalman.check_detectable`) cost ``inf``.
+test of :func:`~switchobs_core.design.kalman.check_detectable`) cost ``inf``, and so do schedules
+beyond double precision (a channel unseen so long that the periodic covariance would span more
+than :data:`~switchobs_core.design.precision.PRECISION_RANGE`, the test the Kalman design refuses
+them with, :func:`~switchobs_core.design.precision.check_unseen`, or a cost pass whose periodic
+prior does not come back, its digits lost): they are counted in
+:attr:`ScheduleCost.beyond`, and a plan where every candidate is one of them is refused with
+:class:`~switchobs_core.exceptions.PrecisionError`.
 
 Optimiser (deterministic; no randomness):
 
@@ -65,7 +71,7 @@ from typing import Any
 import numpy as np
 
 from ..certificate import certify_cycle
-from ..exceptions import DesignError, InvalidArgument, UndetectableSchedule
+from ..exceptions import DesignError, InvalidArgument, PrecisionError, UndetectableSchedule
 from ..model.detectability import aliasing_free
 from ..model.noise import NoiseModel, default_noise
 from ..model.schedule import BLIND_TOL, Cycle, common_rows
@@ -75,6 +81,7 @@ from ..table.kalman import SamplePattern
 from .doubling import RiccatiMap, fixed_point
 from .kalman import check_detectable, design_kalman, sample_pattern
 from .lmi import Designer
+from .precision import beyond_precision, pattern_stretches
 from .riccati import discretize, rel_change
 
 __all__ = [
@@ -247,6 +254,9 @@ class ScheduleCost:
         self._detect: dict[frozenset, bool] = {}
         self.cache: dict[tuple[int, ...], float] = {}
         self.evaluations = 0
+        #: Candidates beyond double precision so far, and the refusal of the first one.
+        self.beyond = 0
+        self.beyond_reason = ""
 
     def channels(self, counts: Sequence[int], order: Sequence[int] | None = None) -> tuple[int, ...]:
         """Channel of every sample of one period: ``k_i`` samples of each channel, in ``order``."""
@@ -293,17 +303,32 @@ class ScheduleCost:
         maps composed; 2. its fixed point by doubling (:func:`~switchobs_core.design.doubling.fixed_point`):
         the prior of phase 0; 3. the mean weighted trace over the runs from there, all priors of a
         run at once; the prior of phase 0 must come back within ``PLAN_FLOOR`` (else the pass
-        repeats from where it ended)."""
+        repeats from where it ended). A pattern beyond double precision (before step 1, or a pass
+        that never comes back) costs inf and is counted in :attr:`beyond`."""
         K = len(channels)
         blind = tuple(bool(b) for b in blind) if any(blind) else ()
         pattern = SamplePattern(self.rate, tuple(cycles) or (Cycle([1.0] * self.system.N),), 1,
                                 tuple(int(c) for c in channels), (), blind)
         if not self._detectable(pattern):
             return math.inf
-        # runs of equal (channel, blind)
-        runs: list[tuple[_Run, int]] = []
-        for key, grp in itertools.groupby(zip(channels, blind or (False,) * K)):
-            runs.append((self._run(int(key[0]), bool(key[1])), sum(1 for _ in grp)))
+        what = f"the schedule of {K} samples ({K / self.rate:g} s) at {self.rate:g} Hz"
+        why = beyond_precision(self.system, pattern_stretches(pattern.channels, blind, self.rate, self.system.N),
+                               power=2, what=what)
+        if not why:
+            # runs of equal (channel, blind)
+            runs: list[tuple[_Run, int]] = []
+            for key, grp in itertools.groupby(zip(channels, blind or (False,) * K)):
+                runs.append((self._run(int(key[0]), bool(key[1])), sum(1 for _ in grp)))
+            try:
+                return self._cost(runs, K, what)
+            except PrecisionError as err:
+                why = str(err)
+        self.beyond += 1
+        self.beyond_reason = self.beyond_reason or why
+        return math.inf
+
+    def _cost(self, runs: list, K: int, what: str) -> float:
+        """Steps 1-3 of :meth:`of_channels` over the runs of one period of ``K`` samples."""
         # 1. period map; 2. fixed point
         F = runs[0][0].power(runs[0][1])
         for r, m in runs[1:]:
@@ -320,7 +345,9 @@ class ScheduleCost:
                 break
             X = Y
         else:
-            raise DesignError(f"schedule cost: the periodic Riccati solution did not come back within {PLAN_FLOOR:g}")
+            raise PrecisionError(f"{what} is beyond double precision: its periodic Riccati solution does not come back "
+                                 f"within {PLAN_FLOOR:g} over a period (the covariance spans more than its digits "
+                                 "resolve); shorten the residences or the cycle")
         return total / K
 
     def __call__(self, counts: Sequence[int], order: Sequence[int] | None = None) -> float:
@@ -444,6 +471,8 @@ def plan_schedule(
         Bad rate, ``h_min`` or ``tau_max``, or no schedule fits (``N ceil(h_min f) > tau_max f``).
     DesignError
         Every candidate is undetectable (cost inf everywhere).
+    PrecisionError
+        Every candidate is undetectable or beyond double precision, some of them the latter.
     """
     for name, v in (("h_min", h_min), ("tau_max", tau_max)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
@@ -478,6 +507,10 @@ def plan_schedule(
     finally:
         bar.close()
     order, counts, val, local = results[0]
+    if not math.isfinite(val) and J.beyond:
+        raise PrecisionError(
+            f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable or "
+            f"beyond double precision ({J.beyond} of them, e.g. {J.beyond_reason}); lower --tau-max or --h-min")
     if not math.isfinite(val):
         raise DesignError(
             f"every schedule with h_i >= {h_min:g} s and tau <= {tau_max:g} s tried at {f:g} Hz is undetectable "

@@ -143,7 +143,10 @@ def verify_gain(A: ArrayLike, C: ArrayLike, L: ArrayLike, P: ArrayLike, eta: flo
     ab = spectral_abscissa(Lam)
     if eta_v < eta:
         raise VerificationError(
-            f"gain fails its Lyapunov certificate: P certifies decay rate {eta_v:.9g} < eta = {eta:.9g}"
+            f"gain fails its Lyapunov certificate: checked in floating point, the solver's P certifies decay rate "
+            f"{eta_v:.9g} < eta = {eta:.9g} 1/s asked for (the SDP at this rate is beyond what the solver resolves "
+            "for this channel): ask for less (a larger --delta, a smaller --eta), or design Kalman gains "
+            "(--gains kalman --rate HZ); docs/troubleshooting.md"
         )
     if ab >= -eta:
         raise VerificationError(f"gain fails: spectral abscissa {ab:.6g} is not below -eta = {-eta:.6g}")

@@ -61,9 +61,19 @@ def camera_agents(
         Diagonal of the camera's velocity matrix.
     D_agents : sequence of M (2,) sequences, optional
         Diagonals of the agents' velocity matrices. Default: the paper's (0, 0.2) and
-        (0, 0.1) for agents 1 and 2, then (0, 0.1 + 0.03 (j - 2)) for agent j >= 3
-        (0.13, 0.16, 0.19, 0.22, ...), so every agent has an unstable mode and no two
-        agents are alike.
+        (0, 0.1) for agents 1 and 2, then (0, 0.05 + 0.05 / (j - 1)) for agent j >= 3
+        (0.075, 0.067, 0.0625, ..., 0.0516 at j = 32, towards 0.05; agent 2's 0.1 is the
+        same formula at j = 2): every agent has an unstable mode of the order of the paper's,
+        no two agents are alike, and adding agents changes none of the others.
+
+    What grows with M: the state (n = 4 (M + 1)), the cycle (M residences) and the time each
+    agent goes unseen, ``(M - 1) h`` for residences ``h``. Over that stretch the error of an
+    agent's unstable velocity grows by ``e^{d (M - 1) h}`` and its position's by about
+    ``e^{d (M - 1) h} / d`` (agent 1, d = 0.2/s, grows most), and the Kalman design's periodic
+    covariance spans the square of that and more: with every h = 1 s at 50 Hz, 200 at M = 2,
+    2.8e4 at M = 8, 9.3e8 at M = 32. Past the limit of double precision
+    (:mod:`switchobs_core.design.precision`, 1e12) the design is refused with one line: at
+    10 Hz from M = 53 on (agent 1 unseen for 52 s); shorter residences carry more agents.
     """
     if isinstance(agents, (bool, np.bool_)) or not isinstance(agents, (int, np.integer, str)):
         raise InvalidSystem(f"agents must be a whole number; got {agents!r}")
@@ -76,7 +86,7 @@ def camera_agents(
     if M > MAX_AGENTS:
         raise InvalidSystem(f"camera_agents takes at most {MAX_AGENTS} agents; got {M}")
     if D_agents is None:
-        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.1 + 0.03 * (k - 1)) for k in range(M)]
+        D_agents = [PAPER_D[1 + k] if k < 2 else (0.0, 0.05 + 0.05 / k) for k in range(M)]
     if not isinstance(D_c, (Sequence, np.ndarray)) or not isinstance(D_agents, (Sequence, np.ndarray)) \
             or any(not isinstance(d, (Sequence, np.ndarray)) for d in D_agents):
         raise InvalidSystem("D_c must be a pair of numbers and D_agents a list of pairs")

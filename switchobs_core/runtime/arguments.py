@@ -15,7 +15,8 @@ import numpy as np
 from ..exceptions import InvalidArgument
 
 __all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "check_hold", "check_noise_max", "check_options", "check_rows",
-           "check_sample", "check_set", "check_time", "check_transition", "initial_state", "nonnegative"]
+           "check_input", "check_sample", "check_set", "check_time", "check_transition", "initial_state",
+           "input_change", "nonnegative"]
 
 #: Schedule modes accepted by :class:`~switchobs_core.runtime.observer.SwitchedObserver`.
 MODES = ("periodic", "sequence", "robust")
@@ -149,12 +150,25 @@ def check_sample(t: Any, t_now: float, channel: Any, y: Any, u: Any, rows: Any, 
             raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
         raise InvalidArgument(f"y is too large (||y|| = {float(np.linalg.norm(y)):.3g} > {MAX_ABS_SAMPLE:g}): "
                               "the update would overflow")
-    if u is not None:
-        u = np.asarray(u, dtype=float).reshape(-1)
-        if u.size != m or not np.isfinite(u).all() or (u.size and np.abs(u).max() > MAX_ABS_SAMPLE):
-            raise InvalidArgument(f"u must hold {m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
-                                  f"got {u.tolist()}")
-    return dt, y, u, rows
+    return dt, y, None if u is None else check_input(u, m), rows
+
+
+def check_input(u: Any, m: int) -> np.ndarray:
+    """The input ``u`` as a float vector of the system's ``m`` entries, finite and at most
+    :data:`MAX_ABS_SAMPLE` in magnitude."""
+    u = np.asarray(u, dtype=float).reshape(-1)
+    if u.size != m or not np.isfinite(u).all() or (u.size and np.abs(u).max() > MAX_ABS_SAMPLE):
+        raise InvalidArgument(f"u must hold {m} finite entries of magnitude <= {MAX_ABS_SAMPLE:g}; "
+                              f"got {u.tolist()}")
+    return u
+
+
+def input_change(u: Any, m: int, held: np.ndarray | None) -> tuple[bool, np.ndarray | None]:
+    """``(changed, u)``: the checked input to hold (None for zero) and whether it differs from ``held``."""
+    u = None if u is None else check_input(u, m)
+    u = u if u is not None and u.any() else None
+    same = (u is None) == (held is None) and (u is None or np.array_equal(u, held))
+    return not same, u
 
 
 def check_set(t: Any, t_now: float, values: dict, variances: dict | None, n: int) -> float:

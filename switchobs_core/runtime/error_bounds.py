@@ -57,11 +57,12 @@ class ErrorBounds:
         self._last = None
 
     def read(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray | None, v: np.ndarray | None,
-             u: np.ndarray | None, amortised: bool | None) -> tuple[float, float | None]:
+             u: np.ndarray | None, amortised: bool | None, extra: float = 0.0) -> tuple[float, float | None]:
         """``(exact, noise)`` at ``dt`` after the last sample: ``step`` the ZOH cache entry over
         ``dt`` (None at the sample's time), ``x`` the estimate at the sample, ``xp`` the prediction
         at ``t`` (with the rigorous bound and a step), ``v`` and ``u`` what is held; ``amortised``
-        None: from :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on."""
+        None: from :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on; ``extra`` the residual
+        of an input changed within the step (:mod:`switchobs_core.runtime.held_input`)."""
         b = self.rigorous
         if b is not None:       # rounding included (module switchobs_core.numerics.rounding)
             if amortised is None:
@@ -70,17 +71,17 @@ class ErrorBounds:
                 if self._last is None or self._last[0] != amortised:
                     self._last = (amortised, b.bounds(amortised=amortised))
                 return self._last[1]
-            return b.bounds(*b.propagated(step, dt, norm(x), norm(xp), v, u))
+            return b.bounds(*b.propagated(step, dt, norm(x), norm(xp), v, u, extra))
         if self._measurement:   # the error-to-error part, exact arithmetic
             Phi = self._phi.read()
             return float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self._e0), None
         return math.inf, None   # rounding_bound=False: no bound is kept
 
     def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
-             u: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+             u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
         :meth:`read`; copies at the sample's time, propagated and not kept after it)."""
         b = self.rigorous
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        return b.propagated(step, dt, norm(x), norm(xp), v, u)
+        return b.propagated(step, dt, norm(x), norm(xp), v, u, extra)

@@ -62,13 +62,14 @@ class ZohMap(NamedTuple):
 
 
 def apply_zoh(phi: Any, bound: Any, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, v: np.ndarray | None,
-              u: np.ndarray | None) -> None:
+              u: np.ndarray | None, extra: float = 0.0) -> None:
     """A :class:`ZohMap`'s ``Phi <- E Phi`` and the bound's step with the exponential's, the
     quantum's and the products' residual (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.step`),
-    without forming the map (the observer's own steps)."""
+    without forming the map (the observer's own steps); ``extra``: the residual of an input changed
+    within the step (:mod:`switchobs_core.runtime.held_input`)."""
     phi.hold(e.E)
     if bound is not None:
-        bound.step(e, dt, norm(x0), norm(x1), v, u)
+        bound.step(e, dt, norm(x0), norm(x1), v, u, extra)
 
 
 class CorrectionMap(NamedTuple):

@@ -72,6 +72,7 @@ from .arguments import (
     check_time,
     check_transition,
     initial_state,
+    input_change,
     nonnegative,
 )
 from .covariance import set_entries
@@ -79,6 +80,7 @@ from .cycles import CycleRecord, Residence
 from .error_bounds import ErrorBounds
 from .error_maps import apply_zoh, norm, zoh_step
 from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
+from .held_input import HeldInput
 from .sequence import DesignSequence
 from .transition import Transition
 
@@ -228,6 +230,7 @@ class SwitchedObserver:
         self.e0 = nonnegative("e0", e0, float(e0))
         self._cache = ZOHCache(cache_size, dt_resolution)
         self._cache.register(OPEN_LOOP, self.A, None, self.B)
+        self._in = HeldInput(self.A, self.B)
         self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
                                    max_records)
         # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
@@ -248,10 +251,10 @@ class SwitchedObserver:
         The ZOH cache is kept; cycle records, envelopes and ``Phi`` are cleared.
         """
         self._x, t0 = initial_state(x0, self._t0_init if t0 is None else t0, self.n)
-        self._t = t0
+        self._t = self._ts = t0          # the observer's time; the last sample's (or t0)
         self.t0 = t0
         self._blind_until = -math.inf     # LMI gains: no correction before this time (dead time)
-        self._u: np.ndarray | None = None     # the input held (None: zero)
+        self._in.reset()                  # the input held, and its changes ahead
         self._phi.reset()
         self._bounds.reset()
         self._seq.reset(t0)
@@ -285,7 +288,7 @@ class SwitchedObserver:
 
     @property
     def t(self) -> float:
-        """Time of the last sample (or of the reset)."""
+        """The observer's time: of the last sample, :meth:`set_estimate` or :meth:`hold_input` (or the reset)."""
         return self._t
 
     @property
@@ -327,15 +330,6 @@ class SwitchedObserver:
         (``transition``; held until the first read of :attr:`Phi` within a budget of held maps,
         then kept at every step; :class:`~switchobs_core.runtime.transition.Transition`)."""
         self._phi.hold(E)
-
-    def apply_correction(self, K: np.ndarray, H: np.ndarray) -> None:
-        """``Phi <- (I - K H) Phi`` for a correction with gain ``K`` and rows ``H`` (held as :meth:`apply_map`)."""
-        self._phi.hold(K, H)
-
-    def rows_of(self, channel: int, rows: tuple | None) -> np.ndarray:
-        """``H = C_channel[rows]`` (all rows for None)."""
-        C = self.C[channel - 1]
-        return C if rows is None else C[list(rows)]
 
     @property
     def cache(self) -> ZOHCache:
@@ -393,23 +387,37 @@ class SwitchedObserver:
         dt, y, u, rows = check_sample(t, self._t, channel, y, u, rows, self.p, self.m)
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         #    (a family may fuse it with its correction: the Kalman table's one map per phase)
-        fuse = self._gains.fuses(self._u is not None)
+        fuse = self._gains.fuses(self._in.u is not None or self._in.pending(t))
         self._bounds.changed()
         if dt > 0 and not fuse:
-            self._step(dt)
+            self._step(dt, t)
         self._t = t
+        self._in.settle(t)
         # 2. switching instant
         if channel != self.channel:
             self._switch(t, channel)
         # 3. hold the new sample's input from t on; the family takes the sample (holds its
         #    innovation, or corrects)
         if u is not None:
-            self._u = u if u.any() else None
+            self._in.u = u if u.any() else None
         #    and the observer applies what it returns (the estimate, Phi, the bound's steps)
-        self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, dt, channel, y, rows,
-                                              self.design_index, t < self._blind_until, self._u)),
+        self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, t - self._ts, channel, y, rows,
+                                              self.design_index, t < self._blind_until, self._in.u)),
                     channel)
+        self._ts = t
         return self._x
+
+    def hold_input(self, t: float, u: Any) -> None:
+        """Hold the known input ``u`` (``m`` entries; None: zero) from ``t`` on (not before the observer's
+        time or an earlier call's ``t``): a command between samples, at its own stamp. The next step adds
+        its exact ZOH from ``t`` (:mod:`~switchobs_core.runtime.held_input`); ``B u`` cancels in the error
+        (e:system), so ``Phi`` and the bounds are those without an input (rounding aside)."""
+        ch = self._in.changes
+        check_time(t, ch[-1][0] if ch else self._t)
+        changed, u = input_change(u, self.m, self._in.last)
+        if changed:
+            self._in.change(t, u)
+            self._in.settle(self._t)
 
     def _apply(self, c: Correction, channel: int) -> None:
         """A family's correction: the held innovation's rounding and each error map into the bound,
@@ -442,10 +450,7 @@ class SwitchedObserver:
         dt = check_set(t, self._t, values, variances, self.n)
         # a cache of the recursion (the Kalman table) leaves it: the real covariance runs online
         self._gains.depart("the state was set (set_estimate); running the Riccati recursion online")
-        if dt > 0:
-            self._bounds.changed()
-            self._step(dt)
-            self._t = float(t)
+        self._advance(t, dt)
         P = self.P
         x = self._x.copy()
         for i, v in values.items():
@@ -454,13 +459,26 @@ class SwitchedObserver:
         if P is not None:
             self._gains.set_covariance(set_entries(P, set(values) | set(variances or {}), variances or {}))
 
-    def _step(self, dt: float) -> None:
-        """Exact step over ``dt`` with the held innovation/measurement and input (step 1): the
+    def _advance(self, t: float, dt: float) -> None:
+        if dt > 0:      # propagate to t (dt ahead) as between samples
+            self._bounds.changed()
+            self._step(dt, t)
+            self._t = float(t)
+            self._in.settle(t)
+
+    def _propagated(self, key: Any, v: np.ndarray | None, dt: float, t: float) -> tuple[Any, np.ndarray, float]:
+        """The step to ``t`` (``dt`` ahead) with ``key``'s matrix and ``v`` held: its ZOH entry, the
+        estimate (the input's changes added) and their rounding's residual."""
+        e = self._cache.step(key, dt)
+        x = zoh_step(e, self._x, v, self._in.u)
+        return (e, *self._in.add(x, t, lambda d: self._cache.step(key, d)))
+
+    def _step(self, dt: float, t: float) -> None:
+        """Exact step over ``dt`` to ``t`` with the held innovation/measurement and input (step 1): the
         estimate, its error map into ``Phi`` and the bound, the family's covariance."""
         key, v = self._held()
-        e = self._cache.step(key, dt)
-        x = zoh_step(e, self._x, v, self._u)
-        apply_zoh(self._phi, self._bound, e, dt, self._x, x, v, self._u)
+        e, x, rho = self._propagated(key, v, dt, t)
+        apply_zoh(self._phi, self._bound, e, dt, self._x, x, v, self._in.u, rho)
         self._x = x
         self._gains.stepped(e, dt)
 
@@ -508,24 +526,15 @@ class SwitchedObserver:
         return self._seq.cycles.residence(self._t, self.current_design)
 
     def predict(self, t: float, *, hold: bool = False) -> np.ndarray:
-        """Prediction ``x_hat(t)`` for ``t >= obs.t`` without a sample; the state is unchanged.
+        """Prediction ``x_hat(t)`` (an (n,) array) for ``t >= obs.t`` without a sample; the state is unchanged.
 
-        Parameters
-        ----------
-        t : float
-        hold : bool
-            False (default): open loop, ``xdot = A x + B u_held`` (no correction).
-            True: what :meth:`update` would propagate, with the last sample held.
-
-        Returns
-        -------
-        (n,) ndarray
-        """
+        ``hold`` False (default): open loop, ``xdot = A x + B u_held`` (no correction); True: what
+        :meth:`update` would propagate, with the last sample held (and the input held)."""
         dt = check_time(t, self._t)
         if dt == 0:
             return self._x.copy()
         key, v = self._held() if hold else (OPEN_LOOP, None)
-        return zoh_step(self._cache.step(key, dt), self._x, v, self._u)
+        return self._propagated(key, v, dt, float(t))[1]
 
     def prior_covariance(self, t: float) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no
@@ -542,23 +551,22 @@ class SwitchedObserver:
         return self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
 
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
-        """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample
-        held) and the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape
-        matrix ``S`` of an ellipsoid ``{S^(1/2) u : ||u|| <= 1}`` holding the error
-        (:class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`, rounding included), or a float norm
-        bound where no ellipsoid is kept; ``noise`` is None without a declared ``noise_max``. The
-        state is unchanged.
-
-        The innovation test of :mod:`switchobs_core.runtime.consistency` takes these: a sample at ``t``
-        whose innovation exceeds what they allow proves the model broken for that sample.
-        """
-        x = self.predict(t, hold=True)
+        """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample held) and
+        the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape matrix ``S`` of an ellipsoid
+        ``{S^(1/2) u : ||u|| <= 1}`` holding the error (:class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`,
+        rounding included), or a float norm bound where no ellipsoid is kept; ``noise`` is None without a
+        declared ``noise_max``. The state is unchanged. The innovation test of
+        :mod:`switchobs_core.runtime.consistency` takes these: a sample at ``t`` whose innovation exceeds
+        what they allow proves the model broken for that sample."""
         if self._bound is None:
             env = self.envelope(t)
-            return x, env.exact_bound, env.noise_bound
-        dt = float(t) - self._t
+            return self.predict(t, hold=True), env.exact_bound, env.noise_bound
+        dt = check_time(t, self._t)
+        if dt == 0:
+            return (self._x.copy(), *self._bounds.sets(None, dt, self._x, self._x, None, None))
         key, v = self._held()
-        return (x, *self._bounds.sets(self._cache.step(key, dt) if dt > 0 else None, dt, self._x, x, v, self._u))
+        e, x, rho = self._propagated(key, v, dt, float(t))
+        return (x, *self._bounds.sets(e, dt, self._x, x, v, self._in.u, rho))
 
     def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
@@ -582,9 +590,8 @@ class SwitchedObserver:
             t = self._t
         dt = check_time(t, self._t)
         key, v = self._held()
-        step = self._cache.step(key, dt) if dt > 0 else None
-        xp = self.predict(float(t), hold=True) if step is not None and self._bound is not None else None
-        exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._u, amortised)
+        step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
+        exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
         if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
             return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)

@@ -33,6 +33,7 @@ from ..bounds.envelope import Segment
 from ..numerics.propagation import van_loan, zoh_pair
 from ..numerics.rounding import EXPM_ULPS, UNIT_ROUNDOFF, ErrorEllipsoid, expm_error, gamma
 from .plant import input_at
+from .progress import progress_bar
 
 __all__ = ["ContinuousRun", "continuous_outputs"]
 
@@ -53,7 +54,7 @@ class ContinuousRun:
 
 def continuous_outputs(A: np.ndarray, B: np.ndarray, C: Sequence[np.ndarray], segments: Sequence[Segment],
                        x0: np.ndarray, xhat0: np.ndarray, t0: float, t_end: float, dt_out: float, u: Any,
-                       process_noise: Any, seed: int, e0: float) -> ContinuousRun:
+                       process_noise: Any, seed: int, e0: float, *, progress: bool | None = False) -> ContinuousRun:
     """Joint ``(x, x_hat)`` propagation between grid points and switching instants, with the exact
     bound of the *computed* pair (module docstring).
 
@@ -92,7 +93,7 @@ def continuous_outputs(A: np.ndarray, B: np.ndarray, C: Sequence[np.ndarray], se
     ell = ErrorEllipsoid(n, e0)
     exact = np.empty(grid.size)
     g2n, gm = gamma(2 * n + 2), gamma(m + 2)
-    for k, tk in enumerate(grid):
+    for k, tk in enumerate(progress_bar(grid, progress, "step")):
         if k > 0:
             ta = grid[k - 1]
             seg = segments[si]

@@ -63,6 +63,7 @@ from ..runtime.observer import SwitchedObserver
 from ..validation import as_matrix
 from .continuous import continuous_outputs
 from .plant import Plant, input_at
+from .progress import progress_bar
 from .result import SimulationResult, paper_gains
 
 __all__ = [
@@ -175,7 +176,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
              rate: float | None = None, noise_std: float = 0.0, process_noise: Any = 0.0,
              seed: int = 0, mode: str | None = None, dt_out: float = 0.01,
              u: Any = None, e0: float | None = None, t0: float | None = None,
-             hold: str = "innovation", noise_max: Any = None) -> SimulationResult:
+             hold: str = "innovation", noise_max: Any = None, progress: bool | None = False) -> SimulationResult:
     """Simulate plant and switched observer exactly (e:system, e:switched_observer).
 
     ``res = simulate(system, table, schedule, x0, xhat0, t_end, rate=None)``
@@ -218,6 +219,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         A declared bound on the measurement noise (per row, one value or one per channel):
         the noise draws are clipped to it and the result carries the observer's
         ``noise_bound`` (innovation hold and the Kalman families).
+    progress : bool or None
+        A progress bar on stderr over the simulated samples (None: on a terminal only; default off).
 
     Returns
     -------
@@ -267,7 +270,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
                               "(--rate HZ, --hold innovation)")
     if rate is not None or not paper_gains(family_of_table(table)):
         return _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode, u,
-                        e0, noise_max, hold)
+                        e0, noise_max, hold, progress)
     mode, designs = designs_for(table, schedule, mode)
     segments = schedule_segments(schedule, designs, t_end)
     T_o = [system.decomposition(i + 1).T_o for i in range(N)]
@@ -275,7 +278,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         alpha_ = float(system.alpha)
     except AttributeError:
         alpha_ = _alpha(T_o)
-    run = continuous_outputs(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, process_noise, seed, e0)
+    run = continuous_outputs(A, B, C, segments, x0, xhat0, t0, t_end, dt_out, u, process_noise, seed, e0,
+                             progress=progress)
     t = run.t
     err = run.x_hat - run.x
     z = envelope_z(t, segments, e0)
@@ -290,7 +294,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
 
 
 def _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode, u, e0,
-             noise_max, hold) -> SimulationResult:
+             noise_max, hold, progress=False) -> SimulationResult:
     """Sampled outputs through :class:`SwitchedObserver` itself, the code the node runs (module docstring).
 
     With innovation hold and the Kalman families the plant is :class:`Plant` with ``extended=True``
@@ -334,7 +338,7 @@ def _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, pro
             raise InvalidArgument("a dead time with channels that share no output row: nothing is measured while "
                                   "blind, which simulate does not model; use channels with common rows")
     u_held = None
-    for k, tk in enumerate(t):
+    for k, tk in enumerate(progress_bar(t, progress, "sample")):
         uk = input_at(u, tk, plant.B.shape[1])
         X[k] = plant.advance(tk, u_held)
         u_held = uk

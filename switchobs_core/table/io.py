@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 from ..exceptions import GainTableError
 from ..families import TABLE_FAMILIES
 from ..files import check_output
-from ..loading import parse_json, read_text
+from ..loading import MAX_FILE_BYTES, parse_json, read_text
 from .container import decode, encode, is_binary, jsonable
 from .lmi import CycleDesign
 from .schema import check_finite, check_layout
@@ -91,7 +91,55 @@ def save(table: Any, path: str | Path) -> Path:
     usually 0644), so a service running as another user can read it; ``tempfile`` would
     make it 0600."""
     path = check_output(path, "gain table", exc=GainTableError)   # never replace a directory or device
-    write = writer(table, binary=path.suffix.lower() == ".npz")
+    return _write_atomic(path, writer(table, binary=path.suffix.lower() == ".npz"))
+
+
+#: Fewest bytes a float takes in the JSON text (a short repr, its indent, the comma and newline).
+MIN_JSON_FLOAT_BYTES = 8
+
+
+def _floats(obj: Any) -> int:
+    """How many numbers a payload holds (arrays, lists, mappings walked; nothing serialised)."""
+    if isinstance(obj, (str, bytes)) or obj is None:
+        return 0
+    if isinstance(obj, (int, float)):
+        return 1
+    if isinstance(obj, dict):
+        return sum(_floats(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(_floats(v) for v in obj)
+    size = getattr(obj, "size", None)
+    if isinstance(size, int):
+        return size
+    if hasattr(obj, "__len__") and hasattr(obj, "__getitem__"):
+        return sum(_floats(v) for v in obj)
+    to_dict = getattr(obj, "to_dict", None)
+    return _floats(to_dict()) if callable(to_dict) else 0
+
+
+def save_loadable(table: Any, path: str | Path) -> tuple[Path, int | None]:
+    """Save ``table`` at ``path``, or, when ``path`` is a JSON name and the JSON would exceed
+    :data:`~switchobs_core.loading.MAX_FILE_BYTES` (the largest JSON table that loading reads), as the
+    binary container beside it (``path`` with ``.npz``), which loading reads at any size this
+    software designs. Returns ``(the path written, the JSON's size in bytes when it was too large,
+    else None)``; the size is a lower bound when the JSON was not formed (about 17 bytes a float in
+    practice, at least :data:`MIN_JSON_FLOAT_BYTES`)."""
+    path = check_output(path, "gain table", exc=GainTableError)
+    if path.suffix.lower() == ".npz":
+        return _write_atomic(path, writer(table, binary=True)), None
+    payload = table_payload(table)
+    size = _floats(payload) * MIN_JSON_FLOAT_BYTES
+    if size <= MAX_FILE_BYTES:           # small enough to form: its real size decides
+        text = to_json(table).encode()
+        if len(text) <= MAX_FILE_BYTES:
+            return _write_atomic(path, lambda fh: fh.write(text)), None
+        size = len(text)
+    npz = check_output(path.with_suffix(".npz"), "gain table", exc=GainTableError)
+    return _write_atomic(npz, writer(table, binary=True)), size
+
+
+def _write_atomic(path: Path, write: Callable[[BinaryIO], Any]) -> Path:
+    """``write(fh)`` into a temporary file beside ``path``, fsync, rename (:func:`save`)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     while True:
         tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"

@@ -2,6 +2,6 @@
 
 import sys
 
-from .cli import main
+from ..entry import switchobs_bag
 
-sys.exit(main())
+sys.exit(switchobs_bag())

@@ -82,8 +82,10 @@ class EstimateResult:
 
 
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
-             storage: str | None = None, inputs: bool = True, node: str = "/estimator") -> EstimateResult:
-    """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring)."""
+             storage: str | None = None, inputs: bool = True, node: str = "/estimator",
+             progress: bool | None = False) -> EstimateResult:
+    """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring);
+    ``progress``: a bar of the messages on stderr (None: on a terminal)."""
     with BagIn(bag_path) as bag:
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
@@ -107,8 +109,12 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     w_env = Template(mb.labelled_array(np.zeros(ne), env_labels, 0), array=("data",))
     odom_paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
                   ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-    w_odom = [(Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
-                        doubles=odom_paths), (b.p_x, b.p_y, b.v_x, b.v_y)) for b, c in zip(bodies, frames)]
+
+    def odom_template(b, c):    # the entries the body has (position always; y, velocity where it has them)
+        have = [(path, i) for path, i in zip(odom_paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
+        return (Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
+                         doubles=[p for p, _ in have]), tuple(i for _, i in have))
+    w_odom = [odom_template(b, c) for b, c in zip(bodies, frames)]
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
@@ -173,6 +179,10 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
+        # the commands u, if the bag has them (~/control is the node's private topic)
+        ctl = pl.control
+        ctl_topic = None if ctl is None else (f"{node}/{ctl.topic[2:]}" if ctl.topic.startswith("~/")
+                                              else "/" + ctl.topic)
 
         def decoded(m, src):
             if src.pose:          # the CDR fast path of the paper interface
@@ -182,11 +192,14 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         n_inputs = 0
         last_ns = 0
         t0 = time.perf_counter()
-        ordering = recording_order(msgs, pl, sources, channel_topic)
+        from tqdm import tqdm
+
+        ordering = recording_order(msgs, pl, sources, channel_topic, ctl_topic)
         unordered_why = Rejection(Reason.AMBIGUOUS_CHANNEL, pl.channel_topic or "channel",
                                   "the recording does not establish whether it was sent before or after a change of "
                                   "the channel (log times that tie or contradict the stamps)")
-        for i in ordering.order:
+        for i in tqdm(ordering.order, disable=None if progress is None else not progress, leave=False, unit="msg",
+                      desc="estimate"):
             m = msgs[i]
             last_ns = m.log_ns
             src = sources.get(m.topic)
@@ -199,6 +212,9 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             elif m.topic == channel_topic:
                 n_inputs += 1
                 emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
+            elif m.topic == ctl_topic:
+                n_inputs += 1
+                pl.on_control(deserialize(m, mb.message_class(ctl.spec.type)), m.log_ns)
             if writer is not None and inputs and m.topic not in outputs and m.topic != "/diagnostics":
                 writer.write(m.topic, m.log_ns, m.data)
         emit(pl.flush_all(), last_ns)
@@ -242,10 +258,11 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     return res
 
 
-def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_topic: str | None) -> Ordering:
+def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_topic: str | None,
+                    control_topic: str | None = None) -> Ordering:
     """The order to process the bag's messages (given in file order) and the unordered parts
-    (:mod:`switchobs_ros.bag.order`), from their log times, file order, header stamps and the
-    channel messages' values."""
+    (:mod:`switchobs_ros.bag.order`), from their log times, file order, header stamps (the
+    sources' and the commands') and the channel messages' values."""
     from msg_bridge import BridgeError
 
     n = len(msgs)
@@ -270,6 +287,10 @@ def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_to
             is_channel[i] = True
             c = decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8)).data
             channel[i] = int(c) if 1 <= int(c) <= pl.N else None
+        elif m.topic == control_topic:          # a command: taken in stamp order in a tie the file does not prove
+            st = header_stamp(m.data)
+            if st is not None and st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
+                stamp[i] = st[0] * 1_000_000_000 + st[1]
     ev = evidence([m.topic for m in msgs], log_ns, stamp, pl.future_ns)
     return order_messages(log_ns, stamp, ev, dependent, channel, is_channel)
 

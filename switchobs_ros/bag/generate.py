@@ -138,17 +138,22 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         yield stamp_ns, msgs
 
 
-def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap") -> dict:
-    """Write the scenario's input bag to ``out``; return a summary (ticks, messages, span)."""
+def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap", progress: bool | None = False) -> dict:
+    """Write the scenario's input bag to ``out``; return a summary (ticks, messages, span).
+    ``progress``: a bar of the ticks on stderr (None: on a terminal)."""
     from rclpy.serialization import serialize_message
+    from tqdm import tqdm
 
     ticks = 0
     first = last = None
     it = scenario_ticks(cfg)
     head = next(it, None)       # every check of cfg runs here, before the bag folder is created
     added: set[str] = set()
+    total = round(cfg.duration * cfg.rate) + 1
     with BagOut(out, storage) as bag:
-        for stamp_ns, msgs in itertools.chain([head] if head is not None else [], it):
+        for stamp_ns, msgs in tqdm(itertools.chain([head] if head is not None else [], it), total=total,
+                                   disable=None if progress is None else not progress, leave=False, unit="tick",
+                                   desc="generate"):
             for topic, msg in msgs:
                 if topic not in added:          # the system's topics, each with its message type
                     bag.add(topic, type_name(type(msg)))

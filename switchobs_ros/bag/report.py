@@ -17,15 +17,18 @@ are read in the order written (receive order). A bag of a looped replay holds se
 
 Outputs: a PNG (top: ``||x_hat - x||``, the paper's bound and the exact bound on a log scale
 with agent 2's residence intervals shaded; bottom: the active channel), and a summary: per
-pass the initial and final error, the per-cycle contraction (the error at each cycle end over
-the error at the previous cycle end; a cycle ends where the channel goes back to channel 1),
-and the rejected inputs reported in the last ``/diagnostics`` of the estimator.
+pass the error at the first estimate (after the first sample's update) and the final error, the
+per-cycle error ratio (the error at each cycle end over the error at the previous cycle end; a
+cycle ends where the channel goes back to channel 1; cycles that start at the rounding floor,
+below :data:`FLOOR` of the first error, are left out), and the rejected inputs reported in the
+last ``/diagnostics`` of the estimator.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -90,9 +93,8 @@ def _labelled(bag_msgs, topic, cls, pick: tuple[str, ...] = ()):
         if m.topic == topic:
             try:
                 a = mb.unpack_labelled(deserialize(m, cls))
-            except mb.BridgeError as err:
-                raise BagError(f"topic {topic}: the message at log time {m.log_ns} ns: {err}; a damaged "
-                               "recording?") from None
+            except mb.BridgeError as err:       # e.g. an infinite stamp
+                raise BagError(f"{topic}: the message logged at {m.log_ns} ns: {err}") from None
             vals = a.values
             if pick:
                 where = {lab: i for i, lab in enumerate(a.labels)}
@@ -201,13 +203,24 @@ def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
                   has_truth=bool(truth))
 
 
+#: Cycles whose starting error is below this fraction of the first estimate's error are left out of the
+#: error ratios: at the rounding floor the error's ratios are noise (5.47 per cycle at 1e-15 is not divergence).
+FLOOR = 1e-9
+
+
+def converging(p: Any) -> list[float]:
+    """The pass's per-cycle error ratios (finite), of the cycles starting above :data:`FLOOR` of its first error."""
+    e0 = p.e_first
+    return [r for a, r in zip(p.cycle_err, p.contraction) if np.isfinite(r) and np.isfinite(e0) and a > FLOOR * e0]
+
+
 def summary_table(rep: Report) -> str:
     """A Markdown summary of the report."""
     lines = [f"Bag `{rep.bag}`: {rep.n_estimates} estimates in {len(rep.passes)} pass(es); "
              f"truth {'present' if rep.has_truth else 'absent (no error, bounds only)'}.", "",
-             "| pass | estimates | span [s] | initial error | final error | final exact bound (noise-free) "
-             "| samples above it | final noise bound | samples above it | final paper bound (claim) "
-             "| cycles | median contraction/cycle | worst contraction/cycle |",
+             "| pass | estimates | span [s] | error at the first estimate | final error "
+             "| final exact bound (noise-free) | samples above it | final noise bound | samples above it "
+             "| final paper bound (claim) | cycles | median error ratio per cycle | largest error ratio per cycle |",
              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
 
     def num(v: float, f: str = ".3e") -> str:
@@ -217,7 +230,7 @@ def summary_table(rep: Report) -> str:
         return "n/a" if v is None else str(v)
 
     for k, p in enumerate(rep.passes, 1):
-        c = np.array([v for v in p.contraction if np.isfinite(v)])
+        c = np.array(converging(p))
         exact = f"{p.exact[-1]:.3e}" if p.exact[-1] > 0 else "none (after a reset)"
         noise = "not declared" if p.noise is None else (f"{p.noise[-1]:.3e}" if p.noise[-1] > 0 else "none")
         paper = f"{p.paper[-1]:.3e}" if p.paper[-1] >= 0 else "n/a"     # -1: not applicable (Kalman gains)
@@ -228,7 +241,12 @@ def summary_table(rep: Report) -> str:
                      f"| {num(np.max(c), '.3g') if c.size else 'n/a'} |")
     lines += ["", "The exact bound holds for noise-free measurements (it counts the estimator's rounding); with "
               "noisy measurements it is exceeded and only a declared noise bound (parameter noise.max) is a "
-              "guarantee. The paper's bound is the paper's claim."]
+              "guarantee. The paper's bound is the paper's claim.",
+              "", "Error at the first estimate: after the first sample's update (the error before it is the initial "
+              "estimate's, which e0 bounds). Error ratio per cycle: the error at a cycle's end over the error at the "
+              f"previous cycle's end (< 1: it shrank), over the cycles that start above {FLOOR:g} of the first "
+              "error: below that the error is at the rounding (or noise) floor, where ratios are noise, not "
+              "divergence."]
     if any(p.cycle_ends is None for p in rep.passes):
         lines += ["", "Cycles: n/a: the bag holds no channel signal (no channel topic, no per-channel topic of the "
                   "system's inputs); pass --system (and --inputs) of the estimated system."]
@@ -297,7 +315,8 @@ def plot_report(rep: Report, png: str | Path, title: str = "") -> None:
         ax.set_ylabel("estimation error norm")
         sub = f"pass {k + 1}: " if len(rep.passes) > 1 else ""
         if p.err is not None:
-            con = f", median contraction per cycle {np.median(p.contraction):.3f}" if p.contraction else ""
+            c = converging(p)
+            con = f", median error ratio per cycle {np.median(c):.3f}" if c else ""
             ax.set_title(f"{sub}error {p.e_first:.2e} -> {p.e_final:.2e}{con}", fontsize=10)
         else:
             ax.set_title(f"{sub}no truth in the bag: bounds only", fontsize=10)

@@ -76,7 +76,50 @@ def test_bodies_and_odometry():
     assert o.header.frame_id == "map" and mb.stamp_to_ns(o.header.stamp) == 5_000_000_123
     assert (o.pose.pose.position.x, o.pose.pose.position.y) == (8.0, 9.0)
     assert (o.twist.twist.linear.x, o.twist.twist.linear.y) == (10.0, 11.0)
-    assert mb.bodies(("a", "b.p_x", "b.p_y")) == ()   # incomplete bodies are not bodies
+    assert mb.bodies(("a", "b.v_x", "b.v_y")) == ()   # velocity alone: no body (nothing to place)
+
+
+def test_every_body_with_a_position_gets_odometry():
+    """A landmark (position only), a body on a line (``<body>.p``, ``.v``) and bare ``p<k>``, ``v<k>``
+    (config/cart_pair.yaml) are bodies; odometry holds what they have, 0 and a large variance elsewhere;
+    the start-up line names the bodies and the states no output shows."""
+    labels = ("robot.p_x", "robot.p_y", "robot.v_x", "robot.v_y", "lm1.p_x", "lm1.p_y", "cart.p", "cart.v",
+              "p3", "v3", "bias", "w.v_x")
+    bodies = mb.bodies(labels)
+    assert bodies == (mb.Body("robot", 0, 1, 2, 3), mb.Body("lm1", 4, 5), mb.Body("cart", 6, None, 7),
+                      mb.Body("body3", 8, None, 9))
+    assert mb.unused_states(labels) == ("bias", "w.v_x")
+    assert mb.describe_bodies(labels) == (
+        "outputs: 4 bodies with odometry and markers: robot (robot.p_x, robot.p_y, robot.v_x, robot.v_y); "
+        "lm1 (lm1.p_x, lm1.p_y); cart (cart.p, cart.v); body3 (p3, v3); states on no odometry or marker "
+        "(only ~/state): bias, w.v_x")
+    assert [b.name for b in mb.bodies(("p1", "v1", "p2", "v2"))] == ["body1", "body2"]     # cart_pair
+    rng = np.random.default_rng(1)
+    M = rng.normal(size=(12, 12))
+    P = M @ M.T
+    x = rng.normal(size=12)
+    lm, cart = bodies[1], bodies[2]
+    for m in (mb.body_odometry(x, lm, 5, "map", "lm1", P=P), mb.OdometryWriter(lm, "map", "lm1").msg(x, 5, P)):
+        assert (m.pose.pose.position.x, m.pose.pose.position.y) == (x[4], x[5])
+        assert (m.twist.twist.linear.x, m.twist.twist.linear.y) == (0.0, 0.0)
+        pose, twist = np.reshape(m.pose.covariance, (6, 6)), np.reshape(m.twist.covariance, (6, 6))
+        np.testing.assert_array_equal(pose[:2, :2], P[4:6, 4:6])
+        assert np.all(np.diag(twist) == mb.UNESTIMATED_VARIANCE), "no velocity state: not estimated"
+    for m in (mb.body_odometry(x, cart, 5, "map", "cart", P=P), mb.OdometryWriter(cart, "map", "cart").msg(x, 5, P)):
+        assert (m.pose.pose.position.x, m.pose.pose.position.y, m.twist.twist.linear.x) == (x[6], 0.0, x[7])
+        pose, twist = np.reshape(m.pose.covariance, (6, 6)), np.reshape(m.twist.covariance, (6, 6))
+        assert (pose[0, 0], pose[1, 1], twist[0, 0], twist[1, 1]) == (P[6, 6], mb.UNESTIMATED_VARIANCE, P[7, 7],
+                                                                      mb.UNESTIMATED_VARIANCE)
+        assert pose[0, 1] == 0.0
+    w = mb.MarkersWriter(bodies, "map")
+    arr = w.msg(x, 7, P, bound=0.5)
+    assert len(arr.markers) == 16
+    pos = {m.id: m for m in arr.markers if m.ns == "switchobs/position"}
+    assert (pos[1].pose.position.x, pos[1].pose.position.y) == (x[4], x[5])
+    assert (pos[2].pose.position.x, pos[2].pose.position.y) == (x[6], 0.0)
+    ell = {m.id: m for m in arr.markers if m.ns == "switchobs/covariance"}
+    assert ell[2].action == ell[2].ADD and ell[2].scale.x == pytest.approx(4.0 * math.sqrt(P[6, 6]), rel=1e-12)
+    assert ell[2].scale.y == pytest.approx(0.01) and ell[2].pose.orientation.z == pytest.approx(0.0, abs=1e-15)
 
 
 def _pose(x=1.0, y=2.0, ns=10_000_000_000, frame="map"):

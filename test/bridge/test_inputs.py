@@ -113,7 +113,9 @@ def test_type_names_normalise_and_give_the_rclpy_class():
     assert mb.message_class("nav_msgs/msg/Odometry") is Odometry
     assert set(mb.SUPPORTED_TYPES) == {
         "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PointStamped",
-        "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry", "std_msgs/msg/Float64MultiArray"}
+        "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry", "std_msgs/msg/Float64MultiArray",
+        "geometry_msgs/msg/TwistStamped", "geometry_msgs/msg/AccelStamped"}
+    assert mb.float64_fields("geometry_msgs/AccelStamped")[:2] == ("accel.linear.x", "accel.linear.y")
     assert mb.float64_fields("geometry_msgs/PointStamped") == ("point.x", "point.y", "point.z")
     assert "twist.twist.linear.x" in mb.float64_fields("nav_msgs/Odometry")
 
@@ -266,8 +268,44 @@ def test_cart_pair_file_loads_as_a_system_and_as_inputs(cart):
     assert (right.topic, right.channel, right.rows) == ("right/point", 2, (0,))
     assert left.type == right.type == "geometry_msgs/msg/PointStamped"
     assert left.rows_for(2) == () and right.rows_for(1) == () and specs.shared_rows(1) == ()
-    assert specs.describe().count("\n") == 2
+    assert specs.describe().count("\n") == 3
+    assert specs.describe().endswith("control ~/control (std_msgs/msg/Float64MultiArray) ['u_1'] -> u[0..0]")
     load_noise(str(CART), cart)                    # the noise reader ignores the inputs: section too
+
+
+def test_control_topic_of_a_system_with_inputs(cart, paper):
+    """cart_pair has B (m = 1): ~/control by default, a labelled array u_1; another stamped type through
+    inputs.control; the paper system (m = 0) takes none, and refuses one."""
+    assert mb.load_inputs(str(CART), cart).control == mb.ControlSpec("~/control", mb.LABELLED_ARRAY, ("u_1",),
+                                                                      None)
+    assert mb.default_inputs(paper).control is None
+    section = {"sources": [{"topic": "left/point", "type": "geometry_msgs/PointStamped", "channel": 1,
+                            "fields": ["point.x"], "rows": [0]}],
+               "control": {"topic": "cmd_accel", "type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.x"]}}
+    c = mb.parse_inputs(section, cart).control
+    assert (c.topic, c.type, c.fields) == ("cmd_accel", "geometry_msgs/msg/AccelStamped", ("accel.linear.x",))
+    from geometry_msgs.msg import AccelStamped
+    m = AccelStamped()
+    m.header.stamp.sec, m.accel.linear.x = 3, 0.25
+    stamp, _, u = c.reader.read(m)
+    assert stamp == 3_000_000_000 and u.tolist() == [0.25]
+    for bad, match in [
+        ({"type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.x", "accel.linear.y"]},
+         r"inputs.control: 2 field\(s\) for an input of m = 1 entries"),
+        ({"type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.w"]}, "has no float64 field"),
+        ({"fields": ["accel.linear.x"]}, r"missing key\(s\) \['type'\]"),
+        ({"type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.x"], "rate": 5}, r"unknown key\(s\)"),
+        ({"topic": "left/point", "type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.x"]},
+         "is also an input source's or the channel topic"),
+        ({"topic": "~ctl", "type": "geometry_msgs/AccelStamped", "fields": ["accel.linear.x"]},
+         "not a valid relative topic name"),
+    ]:
+        with pytest.raises(SpecError, match=match) as err:
+            mb.parse_inputs({**section, "control": bad}, cart)
+        _one_line(err)
+    with pytest.raises(SpecError, match="the system has no input .B has no columns.") as err:
+        mb.parse_inputs({**PAPER_SECTION, "control": section["control"]}, paper)
+    _one_line(err)
 
 
 def test_a_scenario_file_with_inputs_loads(tmp_path):
@@ -309,7 +347,8 @@ def test_load_inputs_override_file_and_defaults(tmp_path, cart, paper):
 
 @pytest.mark.parametrize("section, match", [
     # unknown keys, shapes
-    ({"sources": [_src()], "channel": 1}, r"^inputs: unknown key\(s\) \['channel'\] \(known: channel_topic, sources\)"),
+    ({"sources": [_src()], "channel": 1},
+     r"^inputs: unknown key\(s\) \['channel'\] \(known: channel_topic, sources, control\)"),
     ({"sources": [_src(frame="map")]}, r"^inputs.sources\[0\] \(left/point\): unknown key\(s\) \['frame'\]"),
     ([1], "inputs: must be a mapping"),
     ({"sources": "left/point"}, "'sources' must be a list"),

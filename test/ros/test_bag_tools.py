@@ -390,3 +390,36 @@ def test_estimate_writes_the_typed_outputs(tmp_path):
     assert np.array_equal(np.array([s.x for s in se]), res.x_hat)
     assert np.array_equal(np.array([b.envelope() for b in eb]), res.envelope)
     assert all(b.exact_bound_valid for b in eb)
+
+
+@pytest.mark.parametrize("sec", [math.inf, math.nan, -1.0, 0.5])
+def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
+    """A state message whose stamp (in the labelled array's padding) is not a time: one line naming the
+    topic and the message, exit code 2 (it was an OverflowError traceback for an infinite stamp)."""
+    bag = tmp_path / "bad"
+    msg = mb.labelled_array([1.0, 2.0], ("a.p_x", "a.p_y"), 5)
+    msg.data[0] = sec
+    env = mb.labelled_array([0.5, 1.0, 0.25, 0.1], mb.envelope_labels(2), 5)
+    with BagOut(bag, "mcap") as out:
+        out.add("/estimator/state", "std_msgs/msg/Float64MultiArray")
+        out.add("/estimator/envelope", "std_msgs/msg/Float64MultiArray")
+        out.write("/estimator/envelope", 1_000, serialize_message(env))
+        out.write("/estimator/state", 1_000, serialize_message(msg))
+    assert bag_main(["report", str(bag)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("switchobs_bag: error: /estimator/state: the message logged at 1000 ns: labelled array "
+                           f"stamp ({sec!r}, 5.0) is not a valid time"), line
+
+
+def test_error_ratios_leave_out_cycles_at_the_rounding_floor():
+    """A ratio of errors at the rounding floor (1e-15: 5.47 per cycle) is not divergence: the report's
+    ratios count the cycles that start above 1e-9 of the first error."""
+    from types import SimpleNamespace
+
+    from switchobs_ros.bag.report import FLOOR, converging
+
+    err = [0.5, 0.05, 0.005, 4e-16, 2.2e-15]
+    p = SimpleNamespace(e_first=0.55, cycle_err=err, contraction=[b / a for a, b in zip(err, err[1:])])
+    assert FLOOR == 1e-9
+    assert converging(p) == pytest.approx([0.1, 0.1, 4e-16 / 0.005])      # the last cycle starts at 4e-16
+    assert max(p.contraction) == pytest.approx(5.5) and max(converging(p)) == pytest.approx(0.1)

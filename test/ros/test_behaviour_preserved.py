@@ -5,7 +5,8 @@ Each run is a fresh interpreter with ``PYTHONPATH`` at one tree (the earlier com
 ``switchobs_core``, ``msg_bridge`` and ``switchobs_ros``, exported with ``git archive``), one BLAS
 thread in both (the same kernels and summation order on this CPU), driving only names that both
 trees export at the top of the package (``so.SwitchedObserver``, ``so.GainTable``, ...) and the bag
-tool's ``estimate``. Results are compared bit for bit.
+tool's ``estimate``. Results are compared bit for bit, but for the cases of ``TOLERANT``, whose
+numbers change on purpose (the square-root online recursion): within ``RTOL``.
 
 Two baselines:
 
@@ -33,6 +34,7 @@ import tarfile
 from io import BytesIO
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -44,6 +46,23 @@ BASELINES = {
                 "lmi_noise_bound", "kalman_table_partial", "kalman_online", "lmi_robust", "lmi_sequence",
                 "set_estimate_reset", "design_lmi", "design_kalman", "plan", "bags"),
 }
+
+#: Cases whose numbers change on purpose, compared within RTOL instead of bit for bit. The online
+#: Riccati recursion (``kalman-online``, and a Kalman table after a departure or a set estimate, which
+#: runs it) keeps its covariance as a square-root factor (runtime/families/online.py), so that it
+#: stays positive definite where the covariance form's Joseph update cannot: an equivalent formula,
+#: rounded differently, which moves the estimates, bounds and covariances of these streams in the
+#: last bits (measured: at most 4.6e-14 of the estimate's largest entry, 1.3e-11 of the bound,
+#: 3.6e-12 of the covariance's; the same departures and re-locks). Each value is compared relative
+#: to the largest entry of its block in its row: the estimate, the bound, the covariance, the
+#: table flag. Key: (row width, blocks).
+TOLERANT = {
+    "kalman_online": (157, (slice(0, 12), slice(12, 13), slice(13, 157))),
+    "kalman_table_partial": (158, (slice(0, 12), slice(12, 13), slice(13, 157), slice(157, 158))),
+    "set_estimate_reset": (12, (slice(0, 12),)),
+    "set_estimate_reset_P": (144, (slice(0, 144),)),
+}
+RTOL = 1e-9
 
 # One script, run once against each tree: the same streams through the same public names.
 SCRIPT = r'''
@@ -249,4 +268,17 @@ def test_same_doubles_before_and_after(runs, commit, case):
     assert keys, f"case {case} produced nothing"
     for k in keys:
         assert len(after[k]) > 200, k          # a real stream, not an empty one
-        assert after[k] == before[k], f"{k} differs from commit {commit}"
+        if k in TOLERANT:
+            _assert_close(after[k], before[k], *TOLERANT[k], f"{k} differs from commit {commit}")
+        else:
+            assert after[k] == before[k], f"{k} differs from commit {commit}"
+
+
+def _assert_close(after: str, before: str, width: int, blocks: tuple, what: str) -> None:
+    """The rows of two hex-encoded streams agree within RTOL of each block's largest entry (TOLERANT)."""
+    a = np.frombuffer(bytes.fromhex(after), dtype=float).reshape(-1, width)
+    b = np.frombuffer(bytes.fromhex(before), dtype=float).reshape(-1, width)
+    assert a.shape == b.shape, what
+    for blk in blocks:
+        scale = np.abs(b[:, blk]).max(axis=1, keepdims=True)
+        assert np.all(np.abs(a[:, blk] - b[:, blk]) <= RTOL * scale), what

@@ -181,3 +181,26 @@ def test_chi2_gate_false_alarm_rate_and_an_outlier(tmp_path, paper_tables):
         if planted:
             assert pl.outliers == before + 1
             break
+
+
+def test_a_first_sample_beyond_e0_names_e0(paper_tables):
+    """The first sample's prior is the initial estimate with the ball of radius e0: a sample it cannot
+    explain says that e0 is too small (and how to fix it), not a generic model failure."""
+    import time as _time
+
+    from std_msgs.msg import UInt8
+
+    import msg_bridge as _mb
+    from switchobs_ros.config import params_from_file
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    pl = EstimatorPipeline.from_params(params_from_file(overrides={
+        "gain_table": paper_tables["periodic"], "reorder_window_ms": 0.0, "consistency.check": "always", "e0": 0.1}))
+    pl.on_channel(UInt8(data=1))
+    s = _time.time_ns() - 10**9
+    pl.on_pose("camera", _mb.xy_to_pose((0.0, 0.0), s, "map"), _time.time_ns())
+    out = pl.on_pose("target", _mb.xy_to_pose((3.0, 1.0), s, "map"), _time.time_ns())
+    assert out == [] and pl.inconsistent == 1 and not pl.bound_valid
+    assert pl.bound_invalid_why.endswith("at the first sample the initial error exceeds e0 = 0.1: parameter e0 must "
+                                         "bound ||x_hat(t0) - x(t0)|| (raise it, or give an initial_estimate closer "
+                                         "to the truth)"), pl.bound_invalid_why

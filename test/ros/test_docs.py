@@ -33,6 +33,14 @@ def test_site_builds_in_strict_mode(tmp_path):
     # the API pages are rendered from the docstrings, not left as mkdocstrings directives
     html = (site / "reference/api/switchobs_core.design.synthesis/index.html").read_text()
     assert "LMISynthesizer" in html and ":::" not in html
+    # the docstrings' reST roles (:mod:`x`) are shown as code, not as raw text
+    for mod in ("switchobs_core", "msg_bridge", "switchobs_core.runtime.observer"):
+        page = (site / f"reference/api/{mod}/index.html").read_text()
+        assert not re.search(r":(mod|class|func|meth|attr|data):[`<]", page), mod
+    # the reference tables' names are not broken mid-word (the stylesheet is on every page)
+    params = (site / "reference/parameters/index.html").read_text()
+    assert "stylesheets/tables.css" in params
+    assert "white-space: nowrap" in (site / "stylesheets" / "tables.css").read_text()
     print(f"mkdocs build --strict: {time.monotonic() - t0:.1f} s wall")   # information, not asserted
 
 
@@ -58,10 +66,12 @@ def test_parameter_reference_lists_every_parameter_with_its_default(node, params
     page = docs_gen.parameters_reference().split(f"## `{node}`", 1)[1].split("\n## ", 1)[0]
     for p in params:
         default = list(p.default) if isinstance(p.default, tuple) else p.default
-        row = next((ln for ln in page.splitlines() if ln.startswith(f"| `{p.name}` | {p.type_name} |")), None)
+        row = next((ln for ln in page.splitlines() if ln.startswith(f"| `{p.name}`<br>{p.type_name} · default ")),
+                   None)
         assert row is not None, p.name
-        assert yaml.safe_load(row.split("|")[3].strip().strip("`")) == default, (p.name, row)
-        assert ("| runtime |" in row) == (p.name in runtime), row
+        shown = row.split(" · default ", 1)[1].split(" · ")[0].split(" | ")[0]
+        assert yaml.safe_load(shown.strip().strip("`")) == default, (p.name, row)
+        assert (" · *runtime* |" in row) == (p.name in runtime), row
 
 
 @pytest.mark.parametrize("mod,cfg", [(config, "estimator.yaml"), (camera_sim, "camera_sim.yaml")])
@@ -126,6 +136,22 @@ def test_readme_is_short_and_its_links_lead_into_the_site():
     for link in links:
         assert (REPO / link).exists(), link
         assert link.startswith("docs/"), link
+
+
+def test_api_navigation_puts_the_public_api_first_and_every_module_after_it():
+    nav = docs_gen.api_nav()
+    assert [next(iter(item)) for item in nav] == ["Overview", "Public API", "All modules"]
+    public = [next(iter(e)) for e in nav[1]["Public API"]]
+    assert public == list(docs_gen.PUBLIC_API) and public[0] == "switchobs_core"
+    sections = nav[2]["All modules"]
+    assert [next(iter(sec)) for sec in sections] == list(docs_gen.API_PACKAGES)
+    listed = [next(iter(e)) for sec in sections for e in next(iter(sec.values()))]
+    assert sorted(listed) == sorted(docs_gen.api_modules()) and len(listed) > 90
+    index = docs_gen.api_pages()["reference/api/index.md"]
+    assert index.index("## Public API") < index.index("## All modules")
+    assert "- [`switchobs_core.runtime.observer`](switchobs_core.runtime.observer.md): The online switched" in index
+    assert docs_gen.strip_roles("see :mod:<code>x.y</code> and :class:`~a.B` here") \
+        == "see <code>x.y</code> and a.B here"
 
 
 def test_every_failure_catalogue_row_names_a_test_that_exists():

@@ -283,3 +283,28 @@ def test_the_code_blocks_of_docs_typed_outputs_run():
     assert len(blocks) == 3
     for code in blocks:
         exec(compile(code, "docs/typed-outputs.md", "exec"), {})
+
+
+_BLOCK = """
+import importlib.abc, sys
+class _NoMsgs(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name == "switchobs_msgs" or name.startswith("switchobs_msgs."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+sys.meta_path.insert(0, _NoMsgs())
+sys.argv = [sys.argv[0], *sys.argv[1:]]
+from switchobs_ros import entry
+sys.exit(getattr(entry, sys.argv.pop(1))())
+"""
+
+
+@pytest.mark.parametrize("prog, args", [("estimator", []), ("managed_estimator", []),
+                                        ("switchobs_bag", ["info", "nothing"])])
+def test_without_the_message_package_one_line(prog, args):
+    """A ``pip install`` without the interface package: the executables that publish or write the typed
+    outputs say how to build it, one line and exit code 2 (no traceback); python -m switchobs_ros.bag too."""
+    from switchobs_ros.entry import NO_MSGS
+
+    r = subprocess.run([sys.executable, "-c", _BLOCK, prog, *args], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr == f"{prog}: error: {NO_MSGS}\n", r.stderr
+    assert "scripts/build_msgs.sh" in NO_MSGS and "colcon" in NO_MSGS

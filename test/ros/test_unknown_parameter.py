@@ -22,6 +22,9 @@ def test_unknown_parameters_message():
     assert unknown_parameters(["sensor_timeot"], PARAMS, "estimator") == (
         "unknown parameter sensor_timeot for node 'estimator' ('sensor_timeot': did you mean 'sensor_timeout'?) "
         f"(known: {KNOWN})")
+    # a name that differs in case only is that name (difflib alone suggested schedule.s for schedule.H)
+    assert "('schedule.H': did you mean 'schedule.h'?)" in unknown_parameters(["schedule.H"], PARAMS, "estimator")
+    assert "('E0': did you mean 'e0'?)" in unknown_parameters(["E0"], PARAMS, "estimator")
     # no close name: no guess; several: all named, sorted, once
     assert unknown_parameters(["zzz", "abc", "zzz"], PARAMS, "n") == (
         f"unknown parameters abc, zzz for node 'n' (known: {KNOWN})")
@@ -62,3 +65,35 @@ def test_wrong_type_names_the_value_and_hints_only_when_it_helps(ros_node):
     finally:
         node.destroy_node()
     assert str(err.value) == "parameter 'e0' must be a double (got 'abc', string)"
+
+
+def test_a_number_list_mixing_integers_and_decimals_is_read_as_doubles(tmp_path):
+    """rcl refuses ``h: [1, 0.8, 0.8]`` (``Sequence should be of same type``); the nodes read it as doubles,
+    from a params file (a corrected copy; the rest of the text, e.g. rcl's ``1.0e6``, as written) and from
+    ``-p``."""
+    import rclpy
+    from rclpy.context import Context
+
+    from switchobs_ros.ros_args import with_float_lists
+
+    f = tmp_path / "p.yaml"
+    f.write_text("estimator:\n  ros__parameters:\n    max_abs_value: 1.0e6\n    schedule:\n"
+                 "      h: [1, 0.8, 0.8]   # three channels\n      tau: [2, 3]\n")
+    for args in (["x", "--ros-args", "--params-file", str(f)], ["x", "--ros-args", "-p", "schedule.h:=[1, 0.8, 0.8]",
+                                                                 "-p", "schedule.tau:=[2, 3]",
+                                                                 "-p", "max_abs_value:=1.0e6"]):
+        ctx = Context()
+        with pytest.raises(Exception, match="Sequence should be of same type"):
+            rclpy.init(args=args, context=ctx)          # rcl's own reading
+        ctx = Context()
+        fixed = with_float_lists(args)
+        rclpy.init(args=fixed, context=ctx)
+        try:
+            node = rclpy.create_node("estimator", context=ctx, automatically_declare_parameters_from_overrides=True)
+            assert node.get_parameter("schedule.h").value == [1.0, 0.8, 0.8]
+            assert node.get_parameter("schedule.tau").value == [2, 3], "a list of integers alone: as written"
+            assert node.get_parameter("max_abs_value").value == 1.0e6
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=ctx)
+    assert fixed[-3:] == ["schedule.tau:=[2, 3]", "-p", "max_abs_value:=1.0e6"]

@@ -33,6 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "whose inputs: section names the topics to read)")
     p.add_argument("--node", default="/estimator", help="namespace of the output topics (default /estimator)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: on a terminal, off with --json)")
     p.add_argument("--strict", action="store_true",
                    help=f"exit {STRICT_EXIT} when any valid (accepted) measurement got no estimate (the summary "
                         "names the reasons)")
@@ -61,7 +63,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     if a.csv:
         check_output(a.csv, "--csv", exc=BagError)       # before the run, not after it
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
-                   node=a.node)
+                   node=a.node, progress=False if a.json else a.progress)
     if res.uncovered:
         many = len(res.uncovered) > 1
         print(f"switchobs_bag: warning: no source feeds channel{'s' if many else ''} "

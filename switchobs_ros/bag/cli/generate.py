@@ -31,6 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--initial-state", default="", help="comma-separated x(0) (default: camera_sim's scene)")
     p.add_argument("--clock-start", type=float, default=1.0, help="stamp of tick 0 in seconds (default 1.0)")
     p.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: on a terminal)")
 
     p.set_defaults(func=run)
 
@@ -41,7 +43,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
                          process_noise=a.process_noise, seed=a.seed, noise_max=a.noise_max,
                          extended=a.extended_truth, initial_state=x0, system=a.system,
                          clock_start=a.clock_start, dead_time=a.dead_time)
-    res = generate(a.out, cfg, a.storage)
+    res = generate(a.out, cfg, a.storage, progress=a.progress)
     print(f"wrote {res['path']} ({res['storage']}): {res['ticks']} ticks, {res['messages']} messages, "
           f"{(res['end_ns'] - res['start_ns']) * 1e-9:.2f} s")
     return 0

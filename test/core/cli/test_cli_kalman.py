@@ -94,3 +94,32 @@ def test_certify_a_kalman_table_is_refused_with_one_line(ktable, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("switchobs certify: error:"), err
     assert "nothing to certify: this table holds kalman gains" in err
+
+
+def test_a_table_over_the_json_limit_is_written_as_npz_and_loads(tmp_path, capsys):
+    """A Kalman table of many phases (the paper's model at 500 Hz: 7725 phases, a 25 MiB JSON) asked
+    for as JSON: `design` writes the binary container beside it and says so in one line; `show`,
+    `simulate` and GainTable.load (the nodes' loader) read it; a small table stays JSON."""
+    out = tmp_path / "big.json"
+    assert main(["design", "paper", "--cycle", "2,0.6", "--gains", "kalman", "--rate", "500", "-o", str(out),
+                 "--json"]) == 0
+    cap = capsys.readouterr()
+    s = json.loads(cap.out)
+    npz = tmp_path / "big.npz"
+    assert s["output"] == str(npz) and npz.is_file() and not out.exists()
+    (note,) = cap.err.splitlines()
+    assert note == (f"note: the table's JSON would be at least 25 MiB, above the 16 MiB a JSON gain table may have: "
+                    f"wrote the binary container {npz} instead (switchobs show, simulate and the nodes load it; name "
+                    "the output .npz to choose it)")
+    assert npz.stat().st_size < 16 * 2 ** 20
+    table = GainTable.load(npz, system=load_system("paper"))
+    assert table.family == "kalman"
+    assert main(["show", str(npz), "--system", "paper"]) == 0
+    assert "family kalman" in capsys.readouterr().out
+    assert main(["simulate", "paper", "--table", str(npz), "--rate", "500", "--t-end", "0.2"]) == 0
+    capsys.readouterr()
+    # a table that fits stays what was asked for, without a note
+    small = tmp_path / "small.json"
+    assert main(["design", "paper", "--cycle", "2,0.6", "--gains", "kalman", "--rate", "20", "-o", str(small)]) == 0
+    cap = capsys.readouterr()
+    assert small.is_file() and "note:" not in cap.err and f"wrote {small}" in cap.out

@@ -166,8 +166,32 @@ def test_cli_json_and_design_command(system, capsys, tmp_path):
     assert args.gains == "kalman" and args.rate == 5.0 and args.config == "paper"
     assert args.cycle[0].matches(Cycle(out["h"]), rtol=1e-12)
     assert args.cycle[0].tau == out["tau"] and args.cycle[0].s == out["s"]
-    lmi_args = build_parser().parse_args(shlex.split(out["design_command_lmi"])[1:])
-    assert lmi_args.gains == "lmi" and lmi_args.cycle[0].matches(args.cycle[0], rtol=0, atol=0)
+    if out["lmi"]["feasible"]:
+        lmi_args = build_parser().parse_args(shlex.split(out["design_command_lmi"])[1:])
+        assert lmi_args.gains == "lmi" and lmi_args.cycle[0].matches(args.cycle[0], rtol=0, atol=0)
+    else:
+        assert out["design_command_lmi"] is None
+
+
+def test_plan_never_recommends_an_lmi_design_it_found_infeasible(capsys, monkeypatch):
+    import switchobs_core.cli.plan as cli_plan
+
+    real = cli_plan.gain_reports
+
+    def lmi_infeasible(*a, **k):
+        r = real(*a, **k)
+        r["lmi"] = {"feasible": False, "reason": "gain fails its Lyapunov certificate (test)"}
+        return r
+
+    monkeypatch.setattr(cli_plan, "gain_reports", lmi_infeasible)
+    assert main(["plan", "paper", "--rate", "5", "--h-min", "0.2", "--tau-max", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "lmi gains (the paper's): infeasible: gain fails its Lyapunov certificate (test)" in text
+    assert "--gains kalman" in text
+    assert [ln for ln in text.splitlines() if "switchobs design" in ln and "--gains kalman" not in ln] == []
+    assert "(no LMI design command: the paper's LMI gains are infeasible for this cycle" in text
+    assert main(["plan", "paper", "--rate", "5", "--h-min", "0.2", "--tau-max", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["design_command_lmi"] is None
 
 
 def test_cli_text_and_error(capsys):

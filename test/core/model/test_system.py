@@ -135,3 +135,13 @@ def test_camera_agents_default_agents_all_differ():
     d = [s.A[4 * j + 3, 4 * j + 3] for j in range(1, 11)]
     assert d[:2] == [0.2, 0.1] and len(set(d)) == 10 and min(d) > 0
     assert len({round(c.mu, 12) for c in s.channels()}) == 10
+
+
+def test_camera_agents_modes_stay_of_the_papers_order():
+    """Many agents invent no faster modes: agent j >= 2 has 0.05 + 0.05 / (j - 1) (agent 2 the paper's
+    0.1), all in (0.05, 0.1] beside agent 1's 0.2, and adding agents changes none of the others."""
+    s8, s32 = camera_agents(8), camera_agents(32)
+    d32 = [s32.A[4 * j + 3, 4 * j + 3] for j in range(1, 33)]
+    assert d32[:2] == [0.2, 0.1] and d32[2] == pytest.approx(0.075) and d32[31] == pytest.approx(0.05 + 0.05 / 31)
+    assert all(0.05 < x <= 0.1 for x in d32[1:]) and len(set(d32)) == 32
+    assert np.array_equal(s32.A[:36, :36], s8.A)
