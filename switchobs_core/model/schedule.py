@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import ScheduleError
+from ..numerics.scaling import balanced_norm
 from ..validation import as_finite
 
 __all__ = [
@@ -56,20 +57,27 @@ __all__ = [
 #: and the observer: a sample at exactly ``switch + d`` in floating point is not blind).
 BLIND_TOL = 1e-9
 
-#: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the open-loop transition over one
-#: cycle) leaves double precision (``e^709`` overflows), and designs and certificates computed
-#: from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
+#: Largest ``min(||A||_2, ||A_b||_2) tau`` of a cycle (``A_b`` the balanced ``A``,
+#: :func:`~switchobs_core.numerics.scaling.balanced_norm`): beyond it ``e^{A tau}`` (the open-loop
+#: transition over one cycle) leaves double precision (``e^709`` overflows), and designs and
+#: certificates computed from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
 MAX_NORM_TAU = 600.0
 
 
 def check_cycle_horizon(A: Any, cycle: Cycle, what: str = "--cycle") -> None:
     """Refuse a cycle too long for the system to be represented in floating point
-    (``||A||_2 tau > MAX_NORM_TAU``), naming the longest tau that works."""
-    nA = float(np.linalg.norm(np.asarray(A, dtype=float), 2))
+    (``min(||A||_2, ||A_b||_2) tau > MAX_NORM_TAU``), naming the longest tau that works.
+
+    ``A_b`` is ``A`` in balanced coordinates (:mod:`switchobs_core.numerics.scaling`): its norm
+    bounds the growth rate of ``e^{A t}`` in those coordinates, and it does not depend on the units
+    of the state (a 10 Hz oscillator in SI units has ``||A||_2 = 3.9e3`` from ``omega^2`` alone,
+    and ``||A_b||_2 = 65``); the smaller of the two norms decides."""
+    A = np.asarray(A, dtype=float)
+    nA = min(float(np.linalg.norm(A, 2)), balanced_norm(A)) if A.size else 0.0
     if nA * cycle.tau > MAX_NORM_TAU:
         raise ScheduleError(f"{what} {cycle.label()}: tau = {cycle.tau:g} s is too long for this system: the "
-                            f"transition over one cycle, e^(A tau) with ||A|| = {nA:.3g}, leaves double precision; "
-                            f"use tau <= {MAX_NORM_TAU / nA:.4g} s")
+                            f"transition over one cycle, e^(A tau) with ||A|| = {nA:.3g} (in balanced units), "
+                            f"leaves double precision; use tau <= {MAX_NORM_TAU / nA:.4g} s")
 
 #: Default tolerance of :meth:`Cycle.matches` (relative, absolute in seconds).
 CYCLE_RTOL = 1e-6

@@ -30,13 +30,12 @@ the stored gain of that blind phase.
 
 Both coincide with the continuous-output observer as the sample rate grows (first order
 in the step). A change of channel is a switching instant (e:switching_instants). The gains of
-a gain family (:mod:`switchobs_core.families`) come from a
-:class:`switchobs_core.table.gains.GainTable`, one design per cycle by the mode (``periodic``,
-``sequence``, ``robust``: :mod:`switchobs_core.runtime.sequence`, which also keeps a
-:class:`CycleRecord` of every cycle). The observer orchestrates: it propagates, hands each
-sample to its family and applies what the family returns (the estimate, the error maps into
-``Phi`` and the rigorous bound; :mod:`switchobs_core.runtime.families.base`); it never names a
-family.
+a gain family (:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`,
+one design per cycle by the mode (``periodic``, ``sequence``, ``robust``:
+:mod:`switchobs_core.runtime.sequence`, which also keeps a :class:`CycleRecord` of every cycle).
+The observer propagates, hands each sample to its family and applies what the family returns
+(the estimate, the error maps into ``Phi`` and the rigorous bound;
+:mod:`switchobs_core.runtime.families.base`); it never names a family.
 
 Channel numbers are 1-based, as in the paper and docs/api.md.
 
@@ -59,6 +58,7 @@ from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
+from ..numerics.scaling import balance
 from ..table.kalman import KalmanDesign
 from .arguments import (
     HOLDS,
@@ -77,7 +77,7 @@ from .arguments import (
 from .covariance import set_entries
 from .cycles import CycleRecord, Residence
 from .error_bounds import ErrorBounds
-from .error_maps import apply_zoh, norm, zoh_step
+from .error_maps import apply_zoh, zoh_step
 from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
 from .sequence import DesignSequence
 from .transition import Transition
@@ -87,8 +87,7 @@ __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "Sc
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
 
-#: Gain families (:data:`switchobs_core.families.REGISTRY`): the paper's LMI gains, offline Kalman
-#: tables, online Riccati.
+#: Gain families (:data:`switchobs_core.families.REGISTRY`): LMI gains, Kalman tables, online Riccati.
 FAMILIES = FAMILY_NAMES
 
 class SwitchedObserver:
@@ -226,7 +225,9 @@ class SwitchedObserver:
         except AttributeError:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
         self.e0 = nonnegative("e0", e0, float(e0))
-        self._cache = ZOHCache(cache_size, dt_resolution)
+        # balanced coordinates of A: the bound's norms and proven expm errors are taken there
+        self._scale = balance(self.A)
+        self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
         self._cache.register(OPEN_LOOP, self.A, None, self.B)
         self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
                                    max_records)
@@ -235,7 +236,8 @@ class SwitchedObserver:
         self._phi = Transition(self.n, "kept" if transition or self.hold == "measurement" else
                                "held" if transition is None else "off")
         # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
-        self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound, self._phi)
+        self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
+                                   self._phi, B=self.B, scale=self._scale)
         self._bound = self._bounds.rigorous
         self._x0_init = x0
         self._t0_init = t0
@@ -277,6 +279,12 @@ class SwitchedObserver:
     def kalman_relocks(self) -> int:
         """Returns of the Kalman table to its cache since the reset (0 for other families)."""
         return getattr(self._gains, "relocks", 0)
+
+    @property
+    def bounds_withdrawn(self) -> str:
+        """Why the rigorous bounds are ``inf`` until :meth:`reset` ("" while they hold): they could no
+        longer be computed; the estimate is kept (:mod:`switchobs_core.bounds.rigorous`)."""
+        return self._bounds.withdrawn
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -417,7 +425,7 @@ class SwitchedObserver:
         b = self._bound
         h = c.held
         if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-            b.hold(h.C, norm(c.x), h.y, channel, h.y.size)
+            b.hold(h.C, c.x, h.y, channel, h.y.size)
         for m in c.maps:
             m.apply(self._phi, b, channel)
         self._x = c.x
@@ -564,11 +572,10 @@ class SwitchedObserver:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
 
         ``amortised`` (at the last sample's time, with the rounding-aware bound): the bounds read
-        in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`; rigorous, at most 1.062x the
-        eigenvalue problem's, 1.02x in the median measured at n = 68), for a caller that
-        publishes every sample. None (default): amortised from
-        :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on (below, the eigenvalue
-        problem is as cheap as the bookkeeping and is exact).
+        in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`: rigorous, within the factor
+        stated there), for a caller that publishes every sample. None (default): amortised from
+        :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on. Never raises for a bound that
+        cannot be computed: it is ``inf``, and :attr:`bounds_withdrawn` says why.
 
         Returns
         -------
