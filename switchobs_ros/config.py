@@ -40,7 +40,7 @@ from .params import ConfigError, Param
 
 __all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
 
-#: Values of the ``consistency.check`` parameter (switchobs_ros.pipeline).
+#: Values of the ``consistency.check`` parameter (switchobs_ros.screening).
 CONSISTENCY = ("auto", "always", "never")
 
 #: The estimator node's parameters (the documentation's parameter reference is generated from it: tools/docs_gen.py).

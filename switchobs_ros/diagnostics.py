@@ -14,8 +14,9 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+from switchobs_core.numerics.norms import gain_norms
 
 __all__ = ["EstimatorDiagnostics", "FREQUENCY_TOLERANCE", "NodeState", "kv"]
 
@@ -63,144 +64,10 @@ class EstimatorDiagnostics:
     def array(self, now, node: NodeState) -> DiagnosticArray:
         """The /diagnostics message at node-clock time ``now`` (an rclpy Time)."""
         now_ns = now.nanoseconds
-
-        obs = self.pipeline.observer
-        pl = self.pipeline
-        # configuration (static)
-        conf = [kv("system", self.pipeline.system.name), kv("fingerprint", self.pipeline.system.fingerprint()[:16]),
-                kv("gain_table", str(self.pipeline.table_path)), kv("mode", self.pipeline.mode),
-                kv("cycles", " ".join(c.label() for c in self.pipeline.cycles) or "robust"),
-                kv("e0", obs.e0), kv("gain family", obs.family),
-                kv("inputs", pl.specs_text or "paper interface"),
-                kv("consistency check", "on" if pl.check else "off"),
-                kv("reorder window (ms)", pl.window_ns * 1e-6)]
-        if obs.noise is not None:
-            conf.append(kv("noise model", obs.noise.describe()))
-        if obs.kalman is not None:
-            conf += [kv("kalman", obs.kalman.describe())]
-        for k, d in enumerate(obs.designs if obs.gains.paper_envelope else ()):
-            conf.append(kv(f"design[{k}].eta", d.eta))
-            conf.append(kv(f"design[{k}].kappa", d.kappa))
-            conf.append(kv(f"design[{k}].f (paper factors)", d.f))
-        # observer (dynamic)
-        d = obs.current_design
-        cyc = getattr(d, "cycle", None)
-        ob = [kv("channel", obs.channel), kv("estimate time (s since origin)", obs.t),
-              kv("current cycle tau", cyc.tau if cyc is not None else "robust"),
-              kv("current cycle s", cyc.s if cyc is not None else "robust"),
-              kv("current design index", obs.design_index),
-              kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
-              kv("switches", pl.switches), kv("resets", pl.resets),
-              kv("states set (~/set_state)", getattr(pl, "states_set", 0)),
-              kv("estimates withheld (non-finite, then reset)", pl.nonfinite), kv("internal errors", pl.errors),
-              kv("clock jumps back (resets)", node.clock_jumps_back),
-              kv("clock jumps forward", node.clock_jumps_forward),
-              kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
-        if obs.gains.paper_envelope:
-            ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
-                   kv("current gain norms |L_i|", [float(np.linalg.norm(L, 2)) for L in d.L])]
-        if obs.kalman is not None:
-            ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
-                   kv("kalman table re-locks", obs.kalman_relocks),
-                   kv("kalman gains now", obs.gains_source)]
-            if obs.kalman_fallback:
-                ob.append(kv("last kalman departure", obs.kalman_fallback))
-        if node.last_clock_jump:
-            ob.append(kv("last clock jump", node.last_clock_jump))
-        recs = obs.completed_cycles
-        if recs:
-            r = recs[-1]
-            ob += [kv("cycles completed", len(recs)), kv("last cycle measured tau", r.tau),
-                   kv("last cycle measured s", r.s), kv("last cycle measured h", r.h),
-                   kv("last cycle paper factors f", r.f), kv("last cycle matched schedule", r.matched)]
-            if r.a2_ok is not None:
-                ob.append(kv("last cycle A2 held", r.a2_ok))
-        else:
-            ob.append(kv("cycles completed", 0))
-        res = pl.residence()
-        if res is not None:
-            ob += [kv("active channel residence (s)", res.current),
-                   kv(f"designed residence (s, {res.kind})", [res.lo, res.hi]),
-                   kv("residence violations", res.violations)]
-            if res.last is not None:
-                ob.append(kv("last residence (channel, s)", [res.last[0], res.last[1]]))
-            if res.f is not None:
-                ob.append(kv("cycle so far paper factors f", res.f))
-        if pl.origin_ns is not None:
-            env = obs.envelope()
-            pl = self.pipeline
-            ob += [kv("paper bound", env.paper_bound),
-                   kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
-                      env.exact_bound if pl.bound_valid else "none (withdrawn)"),
-                   kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
-            if env.noise_bound is not None:
-                ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
-                             env.noise_bound if pl.bound_valid else "none (withdrawn)"))
-        # the model against the data (switchobs_core.runtime.consistency) and the attribution by source time
-        ob += [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
-               kv("re-attributed samples", pl.reattributed),
-               kv("late channel messages", pl.late_channel),
-               kv("lost channel messages", pl.lost_channel),
-               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
-               kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
-        if pl.last_inconsistency:
-            ob.append(kv("last inconsistency", pl.last_inconsistency))
-        level, msg = DiagnosticStatus.OK, "estimating"
-        if pl.last_accept_clock_ns is None:
-            level, msg = DiagnosticStatus.WARN, "waiting for measurements"
-        else:
-            age = (now_ns - pl.last_accept_clock_ns) * 1e-9
-            ob.append(kv("seconds since last measurement", age))
-            if age > node.sensor_timeout:
-                level = DiagnosticStatus.WARN
-                msg = f"no measurement for {age:.2f} s (sensor_timeout {node.sensor_timeout} s)"
-            if age > node.sensor_timeout and node.last_prediction is not None \
-                    and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
-                ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
-                       kv("outage predictions published", node.predictions)]
-        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
-            level = max(level, DiagnosticStatus.WARN)
-            msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
-        if recs and not recs[-1].matched:
-            level = max(level, DiagnosticStatus.WARN)
-            msg += "; last cycle did not match the schedule"
-        if res is not None and res.problem:
-            level = max(level, DiagnosticStatus.WARN)
-            msg += f"; {res.problem}"
-        # inputs: rates over the last period (node clock), rejected totals by reason
-        t0_ns, acc0, _, upd0 = self._rate_base
-        dt = (now_ns - t0_ns) * 1e-9
-        inp = []
-        rates = {}
-        topics = pl.input_topics
-        for topic in topics:
-            rates[topic] = rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
-            inp.append(kv(f"{topic} rate (Hz)", rate))
-            inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
-        # frequency status (as robot_localization's): measured against the expected rate
-        out_rate = (pl.updates - upd0) / dt if dt > 0 else 0.0
-        expected = float(getattr(pl, "config", None)["rate"]) if getattr(pl, "config", None) is not None else 0.0
-        inp.append(kv("estimates published rate (Hz)", out_rate))
-        inp.append(kv("expected measurement rate (Hz)", expected if expected > 0 else "not set (parameter rate)"))
-        freq_problem = ""
-        if expected > 0 and t0_ns > self._t_first_ns:
-            lo, hi = FREQUENCY_TOLERANCE
-            # the channel-specific topics together carry one message per tick (the shared ones too)
-            own = [s.topic for s in pl.sources if not s.shared] or [pl.sources[0].topic]
-            for what, r in ((" + ".join(own), sum(rates[t] for t in own)), ("estimates", out_rate)):
-                if not lo * expected <= r <= hi * expected:
-                    freq_problem = (f"{what} at {r:.1f} Hz, outside [{lo * expected:.1f}, {hi * expected:.1f}] Hz "
-                                    f"(expected {expected:g} Hz)")
-                    break
-        inp.append(kv("frequency status", freq_problem or ("ok" if expected > 0 else "not checked (no rate)")))
-        total_rej = sum(pl.rejected.values())
-        for (topic, reason), n in sorted(pl.rejected.items()):
-            inp.append(kv(f"rejected {topic} {reason}", n))
-        inp.append(kv("rejected total", total_rej))
-        if pl.last_rejection:
-            inp.append(kv("last rejection", pl.last_rejection))
-        new_rej = total_rej - self._rate_base[2]
-        self._rate_base = (now_ns, Counter(pl.accepted), total_rej, pl.updates)
+        conf = self._configuration()
+        ob = self._observer(node) + self._bounds() + self._model_against_data()
+        level, msg = self._observer_status(now_ns, node, ob)
+        inp, new_rej, freq_problem = self._inputs(now_ns)
         arr = DiagnosticArray()
         arr.header.stamp = now.to_msg()
         name = self.name
@@ -217,3 +84,180 @@ class EstimatorDiagnostics:
         ]
         return arr
 
+    def _configuration(self) -> list[KeyValue]:
+        """The configuration status's values (static)."""
+        pl = self.pipeline
+        obs = pl.observer
+        conf = [kv("system", pl.system.name), kv("fingerprint", pl.system.fingerprint()[:16]),
+                kv("gain_table", str(pl.table_path)), kv("mode", pl.mode),
+                kv("cycles", " ".join(c.label() for c in pl.cycles) or "robust"),
+                kv("e0", obs.e0), kv("gain family", obs.family),
+                kv("inputs", pl.specs_text or "paper interface"),
+                kv("consistency check", "on" if pl.check else "off"),
+                kv("reorder window (ms)", pl.window_ns * 1e-6)]
+        if obs.noise is not None:
+            conf.append(kv("noise model", obs.noise.describe()))
+        if obs.kalman is not None:
+            conf += [kv("kalman", obs.kalman.describe())]
+        for k, d in enumerate(obs.designs if obs.gains.paper_envelope else ()):
+            conf.append(kv(f"design[{k}].eta", d.eta))
+            conf.append(kv(f"design[{k}].kappa", d.kappa))
+            conf.append(kv(f"design[{k}].f (paper factors)", d.f))
+        return conf
+
+    def _observer(self, node: NodeState) -> list[KeyValue]:
+        """The observer status's values: channel, cycle, gains, counters, cycles and residences."""
+        pl = self.pipeline
+        obs = pl.observer
+        d = obs.current_design
+        cyc = getattr(d, "cycle", None)
+        ob = [kv("channel", obs.channel), kv("estimate time (s since origin)", obs.t),
+              kv("current cycle tau", cyc.tau if cyc is not None else "robust"),
+              kv("current cycle s", cyc.s if cyc is not None else "robust"),
+              kv("current design index", obs.design_index),
+              kv("updates", pl.updates), kv("partial updates", pl.partial_updates),
+              kv("switches", pl.switches), kv("resets", pl.resets),
+              kv("states set (~/set_state)", getattr(pl, "states_set", 0)),
+              kv("estimates withheld (non-finite, then reset)", pl.nonfinite), kv("internal errors", pl.errors),
+              kv("clock jumps back (resets)", node.clock_jumps_back),
+              kv("clock jumps forward", node.clock_jumps_forward),
+              kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
+        if obs.gains.paper_envelope:
+            ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
+                   kv("current gain norms |L_i|", gain_norms(d.L))]
+        if obs.kalman is not None:
+            ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
+                   kv("kalman table re-locks", obs.kalman_relocks),
+                   kv("kalman gains now", obs.gains_source)]
+            if obs.kalman_fallback:
+                ob.append(kv("last kalman departure", obs.kalman_fallback))
+        if node.last_clock_jump:
+            ob.append(kv("last clock jump", node.last_clock_jump))
+        return ob + self._cycles()
+
+    def _cycles(self) -> list[KeyValue]:
+        """The last completed cycle and the active channel's residence, against the design."""
+        recs = self.pipeline.observer.completed_cycles
+        if recs:
+            r = recs[-1]
+            ob = [kv("cycles completed", len(recs)), kv("last cycle measured tau", r.tau),
+                  kv("last cycle measured s", r.s), kv("last cycle measured h", r.h),
+                  kv("last cycle paper factors f", r.f), kv("last cycle matched schedule", r.matched)]
+            if r.a2_ok is not None:
+                ob.append(kv("last cycle A2 held", r.a2_ok))
+        else:
+            ob = [kv("cycles completed", 0)]
+        res = self.pipeline.residence()
+        if res is not None:
+            ob += [kv("active channel residence (s)", res.current),
+                   kv(f"designed residence (s, {res.kind})", [res.lo, res.hi]),
+                   kv("residence violations", res.violations)]
+            if res.last is not None:
+                ob.append(kv("last residence (channel, s)", [res.last[0], res.last[1]]))
+            if res.f is not None:
+                ob.append(kv("cycle so far paper factors f", res.f))
+        return ob
+
+    def _bounds(self) -> list[KeyValue]:
+        """The published bounds now, or that they are withdrawn (none before the first sample)."""
+        pl = self.pipeline
+        obs = pl.observer
+        if pl.origin_ns is None:
+            return []
+        env = obs.envelope()
+        ob = [kv("paper bound", env.paper_bound),
+              kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
+                 env.exact_bound if pl.bound_valid else "none (withdrawn)"),
+              kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
+        if env.noise_bound is not None:
+            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
+                         env.noise_bound if pl.bound_valid else "none (withdrawn)"))
+        return ob
+
+    def _model_against_data(self) -> list[KeyValue]:
+        """The screening's and the attribution's counters (switchobs_ros.screening, .attribution)."""
+        pl = self.pipeline
+        ob = [kv("inconsistent samples (rejected, bounds withdrawn)", pl.inconsistent),
+              kv("re-attributed samples", pl.reattributed),
+              kv("late channel messages", pl.late_channel),
+              kv("lost channel messages", pl.lost_channel),
+              kv("samples in a loss named by the consistency test", pl.lost_channel_named),
+              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
+        if pl.last_inconsistency:
+            ob.append(kv("last inconsistency", pl.last_inconsistency))
+        return ob
+
+    def _observer_status(self, now_ns: int, node: NodeState, ob: list[KeyValue]) -> tuple[int, str]:
+        """The observer status's level and message; appends the measurement age and the outage
+        prediction to ``ob``."""
+        pl = self.pipeline
+        level, msg = DiagnosticStatus.OK, "estimating"
+        if pl.last_accept_clock_ns is None:
+            level, msg = DiagnosticStatus.WARN, "waiting for measurements"
+        else:
+            age = (now_ns - pl.last_accept_clock_ns) * 1e-9
+            ob.append(kv("seconds since last measurement", age))
+            if age > node.sensor_timeout:
+                level = DiagnosticStatus.WARN
+                msg = f"no measurement for {age:.2f} s (sensor_timeout {node.sensor_timeout} s)"
+            if age > node.sensor_timeout and node.last_prediction is not None \
+                    and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
+                ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
+                       kv("outage predictions published", node.predictions)]
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
+            level = max(level, DiagnosticStatus.WARN)
+            msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
+        recs = pl.observer.completed_cycles
+        if recs and not recs[-1].matched:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += "; last cycle did not match the schedule"
+        res = pl.residence()
+        if res is not None and res.problem:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += f"; {res.problem}"
+        return level, msg
+
+    def _inputs(self, now_ns: int) -> tuple[list[KeyValue], int, str]:
+        """The inputs status's values (rates over the last period on the node clock, accepted and
+        rejected counts by reason), the rejections new in the period, and the frequency problem
+        ('' if none); starts the next period."""
+        pl = self.pipeline
+        t0_ns, acc0, _, upd0 = self._rate_base
+        dt = (now_ns - t0_ns) * 1e-9
+        inp = []
+        rates = {}
+        for topic in pl.input_topics:
+            rates[topic] = rate = (pl.accepted[topic] - acc0[topic]) / dt if dt > 0 else 0.0
+            inp.append(kv(f"{topic} rate (Hz)", rate))
+            inp.append(kv(f"{topic} accepted", pl.accepted[topic]))
+        # frequency status (as robot_localization's): measured against the expected rate
+        out_rate = (pl.updates - upd0) / dt if dt > 0 else 0.0
+        expected = float(getattr(pl, "config", None)["rate"]) if getattr(pl, "config", None) is not None else 0.0
+        inp.append(kv("estimates published rate (Hz)", out_rate))
+        inp.append(kv("expected measurement rate (Hz)", expected if expected > 0 else "not set (parameter rate)"))
+        freq_problem = self._frequency_problem(expected, t0_ns, rates, out_rate)
+        inp.append(kv("frequency status", freq_problem or ("ok" if expected > 0 else "not checked (no rate)")))
+        total_rej = sum(pl.rejected.values())
+        for (topic, reason), n in sorted(pl.rejected.items()):
+            inp.append(kv(f"rejected {topic} {reason}", n))
+        inp.append(kv("rejected total", total_rej))
+        if pl.last_rejection:
+            inp.append(kv("last rejection", pl.last_rejection))
+        new_rej = total_rej - self._rate_base[2]
+        self._rate_base = (now_ns, Counter(pl.accepted), total_rej, pl.updates)
+        return inp, new_rej, freq_problem
+
+    def _frequency_problem(self, expected: float, t0_ns: int, rates: dict[str, float], out_rate: float) -> str:
+        """The input or output rate outside :data:`FREQUENCY_TOLERANCE` of the expected one ('' if
+        none, or no full period yet)."""
+        if not (expected > 0 and t0_ns > self._t_first_ns):
+            return ""
+        pl = self.pipeline
+        lo, hi = FREQUENCY_TOLERANCE
+        # the channel-specific topics together carry one message per tick (the shared ones too)
+        own = [s.topic for s in pl.sources if not s.shared] or [pl.sources[0].topic]
+        for what, r in ((" + ".join(own), sum(rates[t] for t in own)), ("estimates", out_rate)):
+            if not lo * expected <= r <= hi * expected:
+                return (f"{what} at {r:.1f} Hz, outside [{lo * expected:.1f}, {hi * expected:.1f}] Hz "
+                        f"(expected {expected:g} Hz)")
+        return ""

@@ -5,13 +5,13 @@
 Thin glue (docs/architecture.md): parameters, topics, QoS, clocks, diagnostics. The estimation
 is :class:`switchobs_core.runtime.observer.SwitchedObserver`; messages go through :mod:`msg_bridge`.
 
-Input handling (validation, measurement pairing, the observer, the counters) is
+Input handling (validation, pairing, channel attribution, the observer, the counters) is
 :class:`switchobs_ros.pipeline.EstimatorPipeline`, shared with the offline bag tools
 (``switchobs_bag estimate``); this module is the rclpy glue around it: parameters,
 subscriptions, publishing each estimate, the pairing timer (``pairing_timeout``, wall clock),
 the clock-jump callback, ``~/reset`` and ``/diagnostics``.
 
-Inputs (see the pipeline): one subscription per source of the system's input specification
+Inputs (:mod:`switchobs_ros.attribution`): one subscription per source of the system's input specification
 (:mod:`msg_bridge.inputs`; the paper interface ``camera/pose``, ``target/pose`` and
 ``camera/active_channel`` by default), each callback taking rclpy's ``MessageInfo``: the
 publisher's source timestamp attributes a sample to the channel that was active when it was
@@ -21,7 +21,7 @@ Time: observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stam
 sample accepted after start-up or a reset (integer nanoseconds until that subtraction).
 Every output carries the stamp of the sample it answers.
 
-Executor cost (issue 13): each input callback also takes the input messages already waiting
+Executor cost: each input callback also takes the input messages already waiting
 (:meth:`EstimatorMixin._drain_inputs`), so a camera/target pair costs one wait of the executor,
 not two, and a backlog none; publishers and subscriptions carry no default middleware event
 handlers (each one a waitable that rclpy's executor re-adds on every wait), the subscriptions
@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -62,13 +63,27 @@ from . import qos
 from .config import PARAMS, EstimatorConfig, check_runtime_value
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import declare_all, unknown_parameters
-from .pipeline import Estimate, EstimatorPipeline, PipelineLog, channel_bodies
+from .pipeline import Estimate, EstimatorPipeline, PipelineLog
 from .runner import run_node
 
 __all__ = ["PARAMS", "PREDICTION_BOUND_LABELS", "EstimatorNode", "main"]
 
 #: Element names of ``~/prediction/bound``.
 PREDICTION_BOUND_LABELS = ("exact_bound", "seconds_since_measurement")
+
+
+def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
+    """The body each channel sees (the one whose outputs belong to that channel alone, as
+    ``agent2`` for channel 2 of the camera scenarios): ``{channel: body name}``, channels whose
+    outputs name no such body left out (the markers then highlight none)."""
+    names = {b.name for b in bodies}
+    common = set.intersection(*(set(o) for o in system.output_labels)) if system.N else set()
+    out = {}
+    for c, labels in enumerate(system.output_labels, start=1):
+        own = {lab.rpartition(".")[0] for lab in labels if lab not in common} & names
+        if len(own) == 1:
+            out[c] = own.pop()
+    return out
 
 
 class _NodeLog(PipelineLog):
@@ -163,7 +178,7 @@ class EstimatorMixin:
         # Middleware events: rclpy gives every publisher and subscription two event handlers
         # by default (incompatible QoS, incompatible type), each a waitable that its
         # SingleThreadedExecutor adds to the wait set it rebuilds on every wait: 28 of them
-        # here took the idle wait from 127 to 218 us (measured, bench/RESULTS.md, issue 13). The
+        # here took the idle wait from 127 to 218 us (measured, bench/RESULTS.md). The
         # subscriptions keep the incompatible-QoS warning (a sensor or channel publisher whose
         # QoS does not match gets its messages silently dropped); a subscriber of our outputs
         # with incompatible QoS is warned on its own side.
@@ -203,7 +218,7 @@ class EstimatorMixin:
         self.last_prediction = None
         # inputs (the system's input specification): the channel topic first, so that, when a
         # channel message and a pose are ready together, the executor takes the channel first
-        # (attribution does not depend on it: source timestamps, see the pipeline)
+        # (attribution does not depend on it: source timestamps, switchobs_ros.attribution)
         self._input_subs = []
         hot = []
         if pl.channel_topic:
@@ -278,7 +293,7 @@ class EstimatorMixin:
                 return
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
-            if index is None:      # the sequence number shows lost channel messages (the pipeline)
+            if index is None:      # the sequence number shows lost channel messages (attribution)
                 seq = info.get("publication_sequence_number") if info else None
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
@@ -299,7 +314,7 @@ class EstimatorMixin:
 
         rclpy's SingleThreadedExecutor rebuilds its wait set and waits again for every
         callback it runs (about 150 us of Python and middleware per wait for this node,
-        measured; bench/RESULTS.md, issue 13): the target pose that arrives while the camera
+        measured; bench/RESULTS.md): the target pose that arrives while the camera
         pose is handled would cost one more wait, and a backlog one wait per message. Taking
         them here costs a few microseconds each. The bound keeps timers and services served.
         """

@@ -13,8 +13,9 @@
   (measured beside two busy loops, camera_sim at 200 ticks/s: 5-30 % of the channel messages
   lost, mostly one or two at a time, with keep last 50 on both sides as with 10 and 1). A lost
   first message of a new channel made the estimator attribute that channel's target poses to
-  the previous one (errors of metres), so the pipeline detects losses by the publisher's
-  sequence numbers and drops the channel parts of samples sent in a gap instead of guessing.
+  the previous one (errors of metres), so channel attribution (switchobs_ros.attribution)
+  detects losses by the publisher's sequence numbers and drops the channel parts of samples
+  sent in a gap instead of guessing.
   A reliable subscription does not match a best-effort publisher: publish the channel reliably
   (rclpy's default). camera_sim publishes it reliable + transient local (depth 1) so a late
   estimator gets the current channel at once; a volatile subscriber accepts that.

@@ -23,9 +23,10 @@ A sample that fails it is therefore a *proof* that the model is broken for that 
 sample was attributed to the wrong channel, is in the wrong frame, comes from a faulty sensor,
 or the bodies do not move as ``A`` says (a manoeuvre, a collision), or the noise exceeds the
 declared bound. Nothing can then be guaranteed about the estimate: the callers withdraw every
-bound they publish (switchobs_ros.pipeline). When the sample is consistent with exactly one
-other channel, that channel is the only one the model allows, and the sample can be
-re-attributed to it (:func:`consistent_channels`).
+bound they publish. When the sample is consistent with exactly one other channel, that channel
+is the only one the model allows, and the sample can be re-attributed to it
+(:func:`consistent_channels`). :class:`InnovationTest` runs the test for a system's channels
+against the observer's prior (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior`).
 
 The test is a necessary condition only: a broken model whose innovations stay inside the
 allowance goes unnoticed (the bound is then still an honest statement about everything the data
@@ -37,15 +38,15 @@ after convergence) an error of 1e-9 of ``||x||`` is caught; right after start-up
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import chdtri
 
 from ..numerics.rounding import UNIT_ROUNDOFF, gamma
 
-__all__ = ["NORM_SLACK", "Consistency", "check_innovation", "chi2_gate", "consistent_channels",
-           "innovation_allowance", "nis", "projected_bound", "spectral_norm"]
+__all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
+           "innovation_allowance", "output_rows", "projected_bound", "spectral_norm"]
 
 #: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
 #: products and sums of non-negative numbers: far below 1e-12 relative).
@@ -157,22 +158,42 @@ def consistent_channels(tests: list[Consistency]) -> list[int]:
     return [t.channel for t in tests if t.ok]
 
 
-# ------------------------------------------------------------------ the chi-square gate (noise, no bound)
+def output_rows(C_c: np.ndarray, rows: Sequence[int] | None) -> np.ndarray:
+    """``C_r``: the ``rows`` (0-based; None: all) of a channel's output matrix ``C_c`` that a sample holds."""
+    return C_c if rows is None else C_c[list(rows)]
 
-def nis(C_rows: np.ndarray, P_prior: np.ndarray, R: np.ndarray, x_hat: np.ndarray, y: np.ndarray) -> float:
-    """The normalised innovation squared ``nu' S^-1 nu`` with ``S = C_r P^- C_r' + R``.
 
-    With Gaussian noise of covariance ``R``, process noise as modelled, and ``P^-`` the true
-    covariance of the prior error (a Kalman filter's, or the LMI observer's propagated one), it is
-    chi-square distributed with ``p = len(y)`` degrees of freedom.
+class InnovationTest:
+    """The test for the channels of one system, against the observer's prior.
+
+    Parameters
+    ----------
+    C : sequence of (p_i, n) array_like
+        The channels' output matrices ``C_1..C_N`` (e:outputs).
+    noise_max : sequence of float, optional
+        The declared noise bound per channel (:attr:`SwitchedObserver.noise_max
+        <switchobs_core.runtime.observer.SwitchedObserver>`); None: noise-free samples, tested against
+        the exact bound.
+
+    ``C_r`` and its :func:`spectral_norm` are kept per ``(channel, rows)``.
     """
-    nu = y - C_rows @ x_hat
-    S = C_rows @ P_prior @ C_rows.T + R
-    S = 0.5 * (S + S.T)
-    return float(nu @ np.linalg.solve(S, nu))
 
+    def __init__(self, C: Sequence[np.ndarray], noise_max: Sequence[float] | None = None):
+        self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
+        self.noise_max = None if noise_max is None else tuple(noise_max)
+        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float]] = {}
 
-def chi2_gate(p: int, alpha: float) -> float:
-    """The threshold ``chi2.ppf(1 - alpha, p)``: a sample of a model that holds exceeds it with
-    probability ``alpha`` (the gate's false-alarm rate per sample)."""
-    return float(chdtri(p, alpha))      # the upper-tail inverse of the chi-square distribution
+    def check(self, prior: tuple, channel: int, rows: Sequence[int] | None, y: np.ndarray) -> Consistency:
+        """The test of the sample ``y`` of ``channel`` (``rows`` of its output, 0-based; None:
+        all) against ``prior = (x_hat, exact, noise)`` as
+        :meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior` gives it at the sample's time:
+        the exact bound's set for noise-free samples, the noise bound's with ``noise_max``."""
+        x_hat, exact, noise = prior
+        key = (channel, None if rows is None else tuple(rows))
+        if key not in self._rows:
+            C_r = output_rows(self.C[channel - 1], rows)
+            self._rows[key] = (C_r, spectral_norm(C_r))
+        C_r, norm_C = self._rows[key]
+        if self.noise_max is None:
+            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C)
+        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C)

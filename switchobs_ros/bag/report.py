@@ -31,6 +31,7 @@ import numpy as np
 
 import msg_bridge as mb
 from switchobs_core.files import write_with
+from switchobs_core.numerics.norms import error_norm
 
 from .io import BagError, BagIn, deserialize
 
@@ -171,7 +172,7 @@ def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
         t = (stamps - stamps[0]) * 1e-9
         err = None
         if truth:
-            err = np.array([np.linalg.norm(states[i][2] - truth[states[i][1]]) if states[i][1] in truth else np.nan
+            err = np.array([error_norm(states[i][2], truth[states[i][1]]) if states[i][1] in truth else np.nan
                             for i in idx])
         env = np.array([envs.get(states[i][1], np.full(3, np.nan)) for i in idx])
         ch = [(ln, c) for ln, c in chan if log0 - 1 <= ln <= log1]

@@ -161,10 +161,10 @@ def test_a_restarted_channel_publisher_is_not_a_loss(pl):
     publisher, not 60 lost messages, and a sample answered on the window's expiry before it keeps
     its bounds (test_fail_faults' killed camera withdrew them for good). A new publisher whose
     own first messages are missing (61 then 3) has lost those two."""
-    from switchobs_ros.pipeline import _lost_between
+    from switchobs_ros.attribution import lost_between
 
-    assert (_lost_between(61, 1), _lost_between(61, 3), _lost_between(4, 5), _lost_between(4, 7),
-            _lost_between(None, 9), _lost_between(9, None)) == (0, 2, 0, 2, 0, 0)
+    assert (lost_between(61, 1), lost_between(61, 3), lost_between(4, 5), lost_between(4, 7),
+            lost_between(None, 9), lost_between(9, None)) == (0, 2, 0, 2, 0, 0)
     src = _answer_on_expiry(pl, seq=61)
     pl.on_channel(UInt8(data=1), src_ns=src + 5 * S, now_mono=6.0, seq=1)
     assert pl.lost_channel == 0 and pl.bound_valid

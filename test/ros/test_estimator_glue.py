@@ -77,7 +77,8 @@ def test_channel_messages_reach_the_pipeline_with_their_sequence_numbers(paper_t
         pl = est.pipeline
         for c in (1, 1, 2, 2, 1):
             io.pub_channel.publish(UInt8(data=c))
-        assert _drain_until(est, lambda: len(pl._ch_seq) == 5)
-        assert None not in pl._ch_seq and np.all(np.diff(pl._ch_seq) == 1) and pl.lost_channel == 0
+        assert _drain_until(est, lambda: len(pl.attribution.sequence_numbers) == 5)
+        seq = pl.attribution.sequence_numbers
+        assert None not in seq and np.all(np.diff(seq) == 1) and pl.lost_channel == 0
     finally:
         est.destroy_node()

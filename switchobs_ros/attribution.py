@@ -1,0 +1,261 @@
+"""Channel attribution: the channel a sample was taken on, never guessed from arrival order.
+
+A source of one channel names its channel. A source shared by several channels (the target pose
+of the paper interface) takes the channel that was active when its message was *sent*: the latest
+channel message whose source timestamp (the publisher's clock, rclpy's ``MessageInfo``) is not
+after the sample's. DDS and the executor reorder messages of different topics under load, so a
+sample waits, in a bounded reorder window, until its channel is certain: a channel message sent
+after it has arrived (the channel topic is reliable and keeps its order), or the window has
+passed. :meth:`ChannelAttribution.resolve` gives the :class:`Verdict`.
+
+Lost channel messages: reliable keep-last delivery loses messages under load, so a later channel
+message does not prove that none was sent in between; the publisher's sequence numbers
+(``publication_sequence_number``) do. A sample sent between two received channel messages whose
+numbers are not consecutive has an unknown channel (:attr:`Verdict.LOST`). A sequence that starts
+again is a restarted publisher (DDS numbers a writer's messages from 1), not a gap; only its own
+missing first messages are. Without sequence numbers the history is taken as complete.
+
+A channel message that arrives after samples it governs were answered (a window too short for the
+load), or a gap found after samples in it were answered on the window's expiry, means that an
+answer may have used the wrong channel: :meth:`ChannelAttribution.remember` returns the reason, and
+the pipeline withdraws the bounds.
+
+Without source timestamps (a bag's messages in the order the recorder wrote them) the latest
+channel received is the channel: that order is the publishing order.
+"""
+
+from __future__ import annotations
+
+import bisect
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import msg_bridge as mb
+from msg_bridge import Reason, Rejection
+
+from .pairing import Pending
+from .sources import Source
+
+__all__ = ["CHANNEL_HISTORY", "ChannelAttribution", "Resolution", "Verdict", "lost_between", "sequence"]
+
+#: Channel messages remembered for attribution by source timestamp.
+CHANNEL_HISTORY = 256
+
+
+class Verdict(enum.Enum):
+    """What attribution says of a sample's channel."""
+
+    #: The channel is known (:attr:`Resolution.channel`).
+    CHANNEL = "channel"
+    #: No channel was active when the sample was sent.
+    NO_CHANNEL = "no_channel"
+    #: Parts of one-channel sources of different channels share the sample's stamp.
+    CONFLICT = "conflict"
+    #: Not certain within the reorder window (or sent before the channel history kept).
+    UNCERTAIN = "uncertain"
+    #: Sent while channel messages were lost (a gap in the publisher's sequence numbers).
+    LOST = "lost"
+
+    @property
+    def rejection(self) -> tuple[Reason, str]:
+        """The reason and detail under which the parts of a sample with this verdict (not
+        :attr:`CHANNEL`) are rejected."""
+        return _REJECTIONS[self]
+
+
+_REJECTIONS = {
+    Verdict.NO_CHANNEL: (Reason.NO_CHANNEL, "no active channel when it was sent"),
+    Verdict.CONFLICT: (Reason.AMBIGUOUS_CHANNEL, "parts from sources of different channels share one stamp"),
+    Verdict.UNCERTAIN: (Reason.AMBIGUOUS_CHANNEL, "its channel was not certain within the reorder window"),
+    Verdict.LOST: (Reason.AMBIGUOUS_CHANNEL,
+                   "sent while channel messages were lost (a gap in the publisher's sequence numbers)"),
+}
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """A sample's :class:`Verdict`, its ``channel`` (1-based, with :attr:`Verdict.CHANNEL`) and
+    whether that is ``certain`` (False: the sample waits in the reorder window)."""
+
+    verdict: Verdict
+    channel: int = 0
+    certain: bool = True
+
+    @classmethod
+    def of(cls, channel: int, certain: bool = True) -> Resolution:
+        """Channel ``channel``, or :attr:`Verdict.NO_CHANNEL` for 0 (none active)."""
+        return cls(Verdict.CHANNEL, channel, certain) if channel > 0 else cls(Verdict.NO_CHANNEL, 0, certain)
+
+
+def lost_between(a: int | None, b: int | None) -> int:
+    """Channel messages lost between two received ones with publication sequence numbers ``a``
+    then ``b`` (None: unknown, nothing is assumed lost). A number that does not increase is a
+    new publisher: only its own messages before ``b`` are missing, not the old one's after ``a``."""
+    if a is None or b is None or b == a + 1:
+        return 0
+    return b - 1 if b <= a else b - a - 1
+
+
+def sequence(seq: Any) -> int | None:
+    """A publisher's sequence number as rclpy reports it, None when unknown (absent, 0, or the
+    rmw's 'unsupported' value, UINT64_MAX)."""
+    if seq is None:
+        return None
+    seq = int(seq)
+    return seq if 0 < seq < 2**63 else None
+
+
+class ChannelAttribution:
+    """The history of channel messages and the verdicts it gives (module docstring).
+
+    Parameters
+    ----------
+    sources : tuple of Source
+        The input sources (:mod:`switchobs_ros.sources`).
+    channel_topic : str or None
+        The channel topic (None: every sample's channel comes from one-channel sources).
+    window_ns : int
+        The reorder window (0: none; arrival order decides before any channel message).
+
+    ``channel`` is the latest channel received (arrival order); ``late`` counts channel messages
+    that arrived after samples they govern were answered, ``lost`` the channel messages missing
+    from the publisher's sequence.
+    """
+
+    def __init__(self, sources: tuple[Source, ...], channel_topic: str | None, window_ns: int):
+        self.sources = sources
+        self.channel_topic = channel_topic
+        self.window_ns = int(window_ns)
+        self.channel = 0
+        self.switch_ns: int | None = None    # newest channel-topic part stamp before the latest change
+        self.late = 0
+        self.lost = 0
+        self._src: list[int] = []             # the history by source timestamp (sorted)
+        self._val: list[int] = []
+        self._seq: list[int | None] = []      # publication sequence numbers (None: unknown)
+        self._truncated = False               # older entries dropped (CHANNEL_HISTORY)
+        self._answered_src = -1               # newest source timestamp of an answered sample
+        self._guessed_src = -1                # the same, of one answered on the window's expiry
+        self._last_fixed = 0                  # channel of the latest sample from a one-channel source
+
+    @property
+    def sequence_numbers(self) -> tuple[int | None, ...]:
+        """The publication sequence numbers of the history, by source timestamp."""
+        return tuple(self._seq)
+
+    # ------------------------------------------------------------------ channel messages
+    def switch(self, channel: int, last_ns: Mapping[str, int | None]) -> None:
+        """A valid channel message changed the latest channel (arrival order); ``last_ns``: the
+        newest accepted stamp per topic (the parts up to the newest of the channel-topic sources'
+        were taken while the previous channel was active)."""
+        self.channel = channel
+        stamps = [last_ns[s.topic] for s in self.sources if s.channel is None and not s.shared
+                  and last_ns[s.topic] is not None]
+        if stamps:
+            self.switch_ns = max(stamps)
+
+    def remember(self, src_ns: int, channel: int, seq: Any = None) -> list[str]:
+        """Insert a channel message sent at ``src_ns`` (publication sequence number ``seq``) into
+        the history. Returns why the bounds must be withdrawn (empty: they need not): the message
+        changes the channel of samples already answered, or a gap in the sequence before it
+        holds samples answered on the window's expiry."""
+        seq = sequence(seq)
+        why = []
+        k = bisect.bisect_right(self._src, src_ns)
+        if src_ns <= self._answered_src and (self._val[k - 1] if k else 0) != channel:
+            self.late += 1
+            why.append(f"a channel message (channel {channel}) arrived after samples it governs were answered "
+                       "(raise reorder_window_ms)")
+        lost = lost_between(self._seq[k - 1], seq) if k else 0
+        if lost:
+            self.lost += lost
+            if self._guessed_src > self._src[k - 1]:
+                why.append(f"channel messages were lost (publication sequence {self._seq[k - 1]} then {seq}) "
+                           "around samples already answered: their channel is not certain")
+        self._src.insert(k, src_ns)
+        self._val.insert(k, channel)
+        self._seq.insert(k, seq)
+        if len(self._src) > CHANNEL_HISTORY:
+            del self._src[0], self._val[0], self._seq[0]
+            self._truncated = True
+        return why
+
+    def remember_invalid(self, src_ns: int | None, seq: Any) -> list[str]:
+        """A channel message with an invalid value: received, not lost, so with a sequence number
+        it enters the history with the channel then active (:meth:`remember`)."""
+        k = bisect.bisect_right(self._src, int(src_ns)) if src_ns is not None else 0
+        if k and sequence(seq) is not None:
+            return self.remember(int(src_ns), self._val[k - 1], seq)
+        return []
+
+    # ------------------------------------------------------------------ samples
+    def refuse(self, src: Source, stamp_ns: int, src_ns: int | None, rej: Rejection | None) -> Rejection | None:
+        """Why a part of ``src`` cannot be attributed, given the validation's ``rej`` (None: it can,
+        or it waits for its channel): no channel received yet when arrival order decides (no
+        source timestamp, or no reorder window), or, without source timestamps, stamped at or
+        before the switch (taken while the previous channel was active)."""
+        if rej is None and src.channel is None and self.channel_topic and not self.channel \
+                and (src_ns is None or not self.window_ns):
+            rej = Rejection(Reason.NO_CHANNEL, self.channel_topic, "no active channel received yet")
+        if not src.shared and src.channel is None and src_ns is None \
+                and (rej is None or rej.reason in (Reason.OLD_STAMP, Reason.DUPLICATE_STAMP)):
+            rej = mb.check_after_switch(stamp_ns, self.switch_ns) or rej   # the more specific reason
+        return rej
+
+    def resolve(self, pend: Pending, now_mono: float, force: bool = False) -> Resolution:
+        """The channel of a pending sample and whether it is certain at ``now_mono`` (``force``:
+        the window is over)."""
+        srcs = self.sources
+        fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
+        if fixed:
+            return Resolution.of(fixed.pop()) if len(fixed) == 1 else Resolution(Verdict.CONFLICT)
+        if not self.channel_topic:          # shared rows only, one-channel sources elsewhere
+            return Resolution.of(self._last_fixed)
+        dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
+        stamps = [p.src_ns for p in dep]
+        if any(s is None for s in stamps) or not self._src:
+            if self._src or not self.window_ns or any(s is None for s in stamps) or force:
+                return Resolution.of(dep[0].arrival_channel or self.channel)
+            # source timestamps but no channel message yet: wait for one (the window)
+            return Resolution(Verdict.NO_CHANNEL, certain=self._expired(pend, now_mono))
+        s = max(stamps)
+        k = bisect.bisect_right(self._src, s) - 1
+        certain = force or self._src[-1] > s or self._expired(pend, now_mono)
+        if k < 0:
+            return Resolution(Verdict.UNCERTAIN if self._truncated else Verdict.NO_CHANNEL, certain=certain)
+        if k + 1 < len(self._src) and lost_between(self._seq[k], self._seq[k + 1]) > 0:
+            return Resolution(Verdict.LOST)
+        return Resolution.of(self._val[k], certain)
+
+    def _expired(self, pend: Pending, now_mono: float) -> bool:
+        return now_mono - pend.since >= self.window_ns * 1e-9
+
+    def guessed(self, pend: Pending) -> bool:
+        """Whether the history does not prove the channel of a sample that depends on it: no
+        channel message sent after it has arrived (answered on the window's expiry)."""
+        srcs = self.sources
+        if not self.channel_topic or not self._src or all(srcs[i].shared for i in pend.parts) \
+                or any(srcs[i].channel is not None for i in pend.parts):
+            return False
+        stamps = [p.src_ns for i, p in pend.parts.items() if not srcs[i].shared]
+        return None not in stamps and self._src[-1] <= max(stamps)
+
+    def read_as(self, pend: Pending, channel: int) -> None:
+        """The sample is read as ``channel``: a sample of one-channel sources sets the channel of
+        the shared rows that follow (no channel topic)."""
+        if self.sources[next(iter(pend.parts))].channel is not None:
+            self._last_fixed = channel
+
+    def answered(self, pend: Pending, guessed: bool) -> None:
+        """The sample was answered (``guessed``: on the window's expiry, :meth:`guessed`)."""
+        srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
+        if srcs:
+            self._answered_src = max(self._answered_src, max(srcs))
+            if guessed:
+                self._guessed_src = max(self._guessed_src, max(srcs))
+
+    def reset(self) -> None:
+        """The estimator reset: no switch is known for the parts that follow."""
+        self.switch_ns = None

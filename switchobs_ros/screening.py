@@ -1,0 +1,138 @@
+"""Screening: the model against the data, before the observer takes a sample.
+
+With the consistency test on (``consistency.check``), every sample is tested against the bound
+the estimator publishes (:class:`switchobs_core.runtime.consistency.InnovationTest`): a sample whose
+innovation exceeds what the bound allows proves the model broken for it. When exactly one other
+channel explains it, it is re-attributed to that channel (``reattributed``); else it is rejected
+(``inconsistent``) and every bound is withdrawn until a reset, with the reason. A published
+guarantee is never silently false.
+
+With noise and no declared bound there is no guarantee to test against; the chi-square gate
+(:class:`switchobs_core.runtime.gate.ChiSquareGate`, ``consistency.chi2_alpha``) then rejects samples
+whose normalised innovation the noise model makes improbable (``outlier``).
+
+The math is the core's; this module decides what the pipeline does with the outcome.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from msg_bridge import Reason, Rejection
+from switchobs_core.model.measurement import Measurement
+from switchobs_core.runtime.consistency import Consistency, InnovationTest, consistent_channels
+from switchobs_core.runtime.gate import ChiSquareGate
+
+from .counters import Counters
+from .pairing import Pairing, Pending
+
+__all__ = ["Screening"]
+
+
+class Screening:
+    """The consistency test (``check``) or the chi-square gate (``chi2_alpha > 0``) for the
+    pipeline's samples.
+
+    Parameters
+    ----------
+    system : System
+        The system (its ``C_1..C_N``).
+    observer : SwitchedObserver
+        Gives the prior (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior`) and the prior
+        covariance of each test.
+    pairing : Pairing
+        Reads a sample as another channel's measurement.
+    counters : Counters
+        Where outcomes are counted, rejections recorded and bounds withdrawn (the pipeline).
+    """
+
+    def __init__(self, system, observer, pairing: Pairing, counters: Counters, *, check: bool, chi2_alpha: float):
+        self.observer = observer
+        self.pairing = pairing
+        self.counters = counters
+        self.N = system.N
+        self.C = system.C
+        self.check = bool(check)
+        self.innovation = InnovationTest(system.C, observer.noise_max)
+        self.gate = ChiSquareGate(system.C, chi2_alpha)
+
+    @property
+    def chi2_alpha(self) -> float:
+        """The chi-square gate's false-alarm rate (0: no gate)."""
+        return self.gate.alpha
+
+    @chi2_alpha.setter
+    def chi2_alpha(self, alpha: float) -> None:
+        self.gate = ChiSquareGate(self.C, alpha)
+
+    @property
+    def testing(self) -> bool:
+        """Whether the consistency test runs now (on, and the bounds not withdrawn)."""
+        return self.check and self.counters.bound_valid
+
+    def admit(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
+        """The measurement to use at ``t`` (``m``, or another channel's reading of the sample), or
+        None when the consistency test or the chi-square gate rejects the sample."""
+        if self.testing:
+            m = self._consistent(pend, t, m)
+            if m is None:
+                self.counters.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
+            return m
+        if self.chi2_alpha > 0 and not self._gate(pend, t, m):
+            self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
+            return None
+        return m
+
+    def fitting_channels(self, pend: Pending, t: float) -> list[int]:
+        """The channels whose reading of the pending sample passes the innovation test at ``t``."""
+        with np.errstate(all="ignore"):
+            prior = self.observer.prior(t)
+        return consistent_channels([self._test(prior, self.pairing.measurement(pend, c))
+                                    for c in range(1, self.N + 1)])
+
+    def _test(self, prior: tuple, m: Measurement) -> Consistency:
+        return self.innovation.check(prior, m.channel, m.rows, m.y)
+
+    def _consistent(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
+        """``m`` when it passes the innovation test; the reading of the one other channel that
+        passes when exactly one does (only a sample whose channel came from the channel topic can
+        have another); else None: rejected, and the bounds withdrawn."""
+        with np.errstate(all="ignore"):
+            prior = self.observer.prior(t)
+        first = self._test(prior, m)
+        if first.ok:
+            return m
+        ctr = self.counters
+        srcs = self.pairing.sources
+        if any(srcs[i].channel is None and not srcs[i].shared for i in pend.parts):
+            fits = [mc for mc in (self.pairing.measurement(pend, c) for c in range(1, self.N + 1) if c != m.channel)
+                    if self._test(prior, mc).ok]
+            if len(fits) == 1:
+                ctr.reattributed += 1
+                ctr.log.warn(f"sample at stamp {pend.stamp_ns} re-attributed from channel {m.channel} to "
+                             f"{fits[0].channel}, the only channel consistent with it ({first.describe()})",
+                             throttle=True)
+                return fits[0]
+        ctr.inconsistent += 1
+        ctr.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
+        ctr.reject(self.pairing.topic(pend), Rejection(Reason.INCONSISTENT, "innovation", first.describe()))
+        ctr.withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): the model does not "
+                     "hold for the data (wrong channel or frame, a faulty sensor, a body off the model, or noise "
+                     "beyond noise.max)")
+        return None
+
+    def _gate(self, pend: Pending, t: float, m: Measurement) -> bool:
+        """The chi-square gate: False, counted and rejected, when the sample's normalised
+        innovation exceeds it (no bound is involved: none is claimed under such noise)."""
+        obs = self.observer
+        with np.errstate(all="ignore"):
+            P = obs.prior_covariance(t)
+            if P is None or obs.noise is None:
+                return True
+            x_p = obs.predict(t, hold=True)
+        g = self.gate.check(m.channel, m.rows, m.y, x_p, P, obs.noise.R(m.channel, m.rows))
+        if g.ok:
+            return True
+        self.counters.outliers += 1
+        self.counters.reject(self.pairing.topic(pend), Rejection(Reason.OUTLIER, "innovation", g.describe()))
+        return False
