@@ -37,12 +37,12 @@ another phase; the channel of a sample at a switching instant follows the schedu
 which the design's sample pattern used too (:mod:`switchobs_core.model.schedule`).
 
 ``dt_tol`` (seconds) is the step error whose effect on the prior stays inside a tenth of that
-tolerance, every entry on its own scale as in the re-lock test: the prior moves at the rate
-``dS/dt = A S + S A' + Q_c`` (to first order), so ``dt_tol = 0.1 relock_rtol / max_ij
-|A S + S A' + Q_c|_ij / sqrt(S_ii S_jj)`` over the stored priors ``S``, at most a quarter of a
-sample period (plus the spacing of the stamps' doubles, ``4e-16 |t|``). The ratio does not depend
-on the units of the state (a norm of ``A`` does: in SI units a 10 Hz oscillator's ``||A||_2 =
-3.9e3`` made a tolerance of 13 ns).
+tolerance, in the balanced coordinates of ``A`` (:mod:`switchobs_core.numerics.scaling`: ``A_b =
+D^-1 A D``, ``S_b = D^-1 S D^-1``, ``Q_b`` likewise): ``||P(dt') - P(dt)|| <= |dt' - dt| (2 ||A_b||
+||S_b|| + ||Q_b||)`` to first order, so ``dt_tol = 0.1 relock_rtol max|S_b| / (2 ||A_b||_2 max|S_b| +
+||Q_b||_2)`` with ``S`` the stored prior of phase 0, at most a quarter of a sample period (plus the
+spacing of the stamps' doubles, ``4e-16 |t|``). The units of the state do not change it (with
+``||A||_2`` in the user's units a 10 Hz oscillator in SI units, ``||A||_2 = 3.9e3``, got 13 ns).
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ import numpy as np
 from ...bounds.kalman_map import KalmanMap
 from ...design.kalman import design_kalman
 from ...exceptions import InvalidArgument
+from ...numerics.scaling import balance, balanced_norm
 from ...table.gains import kalman_table
 from ...table.kalman import Phase
 from ..error_maps import FusedMap, ZohMap, zoh_step
@@ -69,14 +70,9 @@ MAX_JITTER = 0.25
 _FUSED_MAX = 8192
 
 
-def _prior_rate(A: np.ndarray, Qc: np.ndarray, S: np.ndarray) -> float:
-    """``max_ij |A S + S A' + Q_c|_ij / sqrt(S_ii S_jj)``: how fast the prior ``S`` moves, every entry
-    on its own scale (module docstring, ``dt_tol``)."""
-    dS = A @ S
-    dS = dS + dS.T + Qc
-    r = np.sqrt(np.abs(np.diagonal(S)))
-    r = np.where(r > 0, r, np.inf)
-    return float(np.max(np.abs(dS) / np.outer(r, r)))
+def scaled_cov(S: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``D^-1 S D^-1`` (a covariance in balanced units)."""
+    return S / np.outer(d, d)
 
 
 class KalmanTableGains(OnlineKalmanGains):
@@ -110,8 +106,11 @@ class KalmanTableGains(OnlineKalmanGains):
         f = kd.pattern.rate
         self._dtn = 1.0 / f             # the design's step (KalmanPhase.dt of every sample k >= 1)
         self._ns_per_sample = 1e9 / f
-        rate = max(_prior_rate(ctx.A, kd.noise.Q_c, ph.P_prior) for ph in kd.periodic)
-        self.dt_tol = min(0.1 * self.relock_rtol / rate if rate > 0 else math.inf, MAX_JITTER / f)
+        d = balance(ctx.A)
+        S0 = scaled_cov(kd.periodic[0].P_prior, d)
+        sb = float(np.abs(S0).max())
+        a = 2.0 * balanced_norm(ctx.A) * sb + float(np.linalg.norm(scaled_cov(kd.noise.Q_c, d), 2))
+        self.dt_tol = min(0.1 * self.relock_rtol * sb / a if a > 0 else math.inf, MAX_JITTER / f)
         self._fused: dict = {}
         self._keep_noise(kd.noise)
 
