@@ -226,7 +226,7 @@ class SwitchedObserver:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
         self.e0 = nonnegative("e0", e0, float(e0))
         # balanced coordinates of A: the bound's norms and proven expm errors are taken there
-        self._scale = balance(self.A)
+        self._scale = balance(self.A, np.vstack(self.C))
         self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
         self._cache.register(OPEN_LOOP, self.A, None, self.B)
         self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
