@@ -25,8 +25,8 @@ velocities are in km/s). With the outputs ``C`` given, :func:`balance` pins thos
     F(x) = \\sum_{i \ne j} |A_{ij}| e^{x_j - x_i}
          + w \\sum_{C_{oi} \ne 0} \big(|C_{oi}| e^{x_i} + e^{-x_i} / |C_{oi}|\big)
 
-(the sum of the balanced ``|A_b|``, Osborne's objective, plus a weak pull of every measured state
-to the units of its outputs; ``w`` is ``1e-3`` of the ``A`` part at ``gebal``'s point per nonzero of
+(the sum of the balanced ``|A_b|``, Osborne's objective, plus a pull of every measured state
+to the units of its outputs; ``w`` is the ``A`` part at ``gebal``'s point per nonzero of
 ``C``), by cyclic coordinate descent (each step the exact minimiser in one ``x_i``). For
 ``A' = T A T^{-1}``, ``C' = C T^{-1}`` (``T`` positive diagonal) ``F'(x + log T) = F(x)``, so the
 minimiser moves by ``log T`` exactly and ``D'^{-1} A' D' = D^{-1} A D``: the balanced
@@ -80,7 +80,7 @@ def _pinned(aA: np.ndarray, aC: np.ndarray, x: np.ndarray, sweeps: int = 200, to
         return x
     ex = np.exp(x)
     fa = float(((M * ex[None, :]) / ex[:, None]).sum())
-    w = 1e-3 * (fa if fa > 0 else 1.0) / int(nz.sum())
+    w = (fa if fa > 0 else 1.0) / int(nz.sum())
     cu = w * aC.sum(axis=0)                                     # coefficient of e^{x_i}
     cd = w * np.where(nz, 1.0 / np.where(nz, aC, 1.0), 0.0).sum(axis=0)     # of e^{-x_i}
     for _ in range(sweeps):
