@@ -76,7 +76,7 @@ SPARSE_MAX_FILL = 0.125
 class SparseTransition:
     """``Phi~`` in compressed rows: ``sandwich(S) = Phi~ S Phi~'`` and ``Phi~ @ v``."""
 
-    __slots__ = ("n", "csr", "nu", "_ip", "_ix", "_dv", "_adv")
+    __slots__ = ("n", "csr", "nu", "inf_norm", "_ip", "_ix", "_dv", "_adv")
 
     def __init__(self, Phi: np.ndarray) -> None:
         self.n = n = Phi.shape[0]
@@ -88,6 +88,7 @@ class SparseTransition:
         rows = np.bincount(np.repeat(np.arange(n), np.diff(self._ip)), weights=a, minlength=n)
         cols = np.bincount(self._ix, weights=a, minlength=n)
         self.nu = math.sqrt(float(rows.max()) * float(cols.max())) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
+        self.inf_norm = float(rows.max()) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
         self._adv = a
 
     def abs_matvec(self, x: np.ndarray) -> np.ndarray:
@@ -273,8 +274,9 @@ class KalmanMap:
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 
-    def sandwich(self, ell: Any) -> tuple[np.ndarray, np.ndarray, float]:
-        """``(Z, w, c)``: ``|Z - M S M'| <= c w w'`` entrywise for the ellipsoid's ``S``.
+    def sandwich(self, ell: Any) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """``(Z, w, c, mn)``: ``|Z - M S M'| <= c w w'`` entrywise for the ellipsoid's ``S`` (up to
+        underflow), ``mn >= ||M||_inf`` for its underflow allowance.
 
         Dense: ``Z = E~ S E~'`` with :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.image_bound`
         (:mod:`switchobs_core.numerics.rounding`, step 6); factored: the module docstring's three
@@ -283,7 +285,8 @@ class KalmanMap:
         sp = self._sp
         if sp is None:
             E = self.E
-            return E @ S @ E.T, ell.image_bound(np.abs(E)), ell.c_dense
+            aE = np.abs(E)
+            return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, float(aE.sum(axis=1).max())
         K, H = self.K, self.H
         Y = sp.sandwich_either(S)       # C-ordered
         cols = self._cols
@@ -309,4 +312,5 @@ class KalmanMap:
         s = np.sqrt(np.maximum(np.diagonal(S), 0.0))
         y = sp.abs_matvec(s)
         w = (y + np.abs(K) @ (np.abs(H) @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
-        return Z, w, 2.01 * gamma(2 * n + 4 * p + 4)
+        mn = (1.0 + float((np.abs(K) @ np.abs(H).sum(axis=1)).max())) * sp.inf_norm    # ||J |Phi|||_inf
+        return Z, w, 2.01 * gamma(2 * n + 4 * p + 4), mn

@@ -73,7 +73,7 @@ import numpy as np
 from scipy.linalg.blas import daxpy as _daxpy
 from scipy.linalg.lapack import dpotrf
 
-from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 
 __all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "LOOSENESS", "verified_lambda_max"]
 
@@ -167,7 +167,7 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
             A.flat[:: n + 1] -= cr                  # fl(A~ - c_R I), as the theorem has it
             _, info = dpotrf(A, lower=1, clean=0, overwrite_a=1)
             if info == 0:
-                lam = (lc + u * (lc + dmax) + 2.0 * u * nS) * (1.0 + 4.0 * u)
+                lam = (lc + u * (lc + dmax) + 2.0 * u * nS) * (1.0 + 4.0 * u) + 8 * n * UNDERFLOW
                 return lam, v
     return None
 
@@ -214,7 +214,7 @@ class AnchoredBound:
                     g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:
                     self._age += 1
-                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF) + 8 * n * UNDERFLOW
                     lam = min(lam, max(ell.tr, 0.0))
                     return math.sqrt(lam) * (1.0 + 2.0 * UNIT_ROUNDOFF)
         return self._anchor(ell)

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..numerics.expm_bound import nu as nu2
-from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
 
@@ -68,6 +68,10 @@ class RoundingBound:
         self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
+        # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
+        # per component of a step's result, in balanced units
+        self._uf = (self.n + p_max + (0 if B is None else B.shape[1]) + 4) * UNDERFLOW * math.sqrt(
+            float(self._id @ self._id))
         self.reset()
 
     def reset(self) -> None:
@@ -108,7 +112,8 @@ class RoundingBound:
     # ------------------------------------------------------------------ residuals
     def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int) -> None:
         """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, and its noise's norm."""
-        self.nu_err = self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
+        self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
+                       + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
@@ -125,7 +130,7 @@ class RoundingBound:
         delta = abs(dt - e.dt) + _U * dt
         q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
         en = math.sqrt(ell.lam_scaled())
-        rho = (e.eps + q) * (xs + en) + e.emap * en + self.g_n * e.fPhi * xs + 2.0 * _U * xs1
+        rho = (e.eps + q) * (xs + en) + e.emap * en + self.g_n * e.fPhi * xs + 2.0 * _U * xs1 + self._uf
         if nu is not None:
             nun = math.sqrt(float(nu @ nu))
             rho += self.g_p * e.fGL * nun + e.fGL * self.nu_err
@@ -140,8 +145,9 @@ class RoundingBound:
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
         ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
-        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn) + self.g_p * fK * nun
-                + _U * self.xn(x_plus)) * (1.0 + 8.0 * _U)
+        uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
+        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
+                + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
     # ------------------------------------------------------------------ steps
     def _check(self) -> None:
@@ -215,11 +221,12 @@ class RoundingBound:
                     continue
                 rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
                        + m.emap * math.sqrt(ell.lam_scaled()))
-                Z, w, c = m.sandwich(ell)
+                Z, w, c, mn = m.sandwich(ell)
                 if noisy:       # e^+ = (I - K H) e^- + K v
-                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, K, p * self.noise_max[channel - 1] ** 2)
+                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K,
+                                                                 p * self.noise_max[channel - 1] ** 2)
                 else:
-                    ell.S, ell.tr = ell.propagate_product(Z, w, c, rho)
+                    ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
 
     # ------------------------------------------------------------------ bounds

@@ -66,6 +66,15 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
    joins ``S2`` the same way (:meth:`ErrorEllipsoid.propagate_shaped`). A second ellipsoid kept
    this way bounds the error under any noise in the box: the *noise bound*.
 
+8. Underflow. The model of step 4 holds for normal numbers; a product that underflows errs by up
+   to ``eta / 2`` absolutely (``eta = 2^-1074``, the smallest subnormal; sums of subnormals are
+   exact). A decaying system reaches that range in the shape matrix first (``S`` holds squared
+   errors: a bound of 1e-154 is ``S ~ 1e-308``), so every step adds an absolute allowance too:
+   ``(n + 4) n eta (1 + ||M||_inf)`` on the diagonal of ``S`` (each entry of ``fl(M S M')`` off by at
+   most ``n eta (1 + ||M||_inf) / 2``, dominated by ``n`` times that on the diagonal) and the
+   residuals' ``eta`` terms (:data:`UNDERFLOW`). The bound then never falls below about
+   ``n sqrt(eta) = n 2.2e-162``.
+
 Cost: two n x n products per step (like the transition product itself) and O(n^2) for the
 allowances, one eigenvalue problem when the bound is read. A Kalman sample with a sparse
 ``e^{A dt}`` takes step 6's product in factors, O(n^2 p), with its own ``c`` and ``w``
@@ -84,11 +93,14 @@ try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without it
 except ImportError:     # pragma: no cover - another numpy layout: the public function
     _eigvalsh_lo = None
 
-__all__ = ["UNIT_ROUNDOFF", "gamma", "expm_extended", "ErrorEllipsoid", "verify_against_extended"]
+__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "verify_against_extended"]
 
 #: Unit roundoff of IEEE double precision, ``u = 2^-53``.
 UNIT_ROUNDOFF = 2.0**-53
 _U = UNIT_ROUNDOFF
+#: The smallest subnormal double, ``2^-1074``: the absolute error of an underflowing product is at
+#: most half of it (module docstring, step 8).
+UNDERFLOW = 2.0**-1074
 
 
 def gamma(m: int) -> float:
@@ -167,13 +179,15 @@ class ErrorEllipsoid:
     def propagate(self, M: np.ndarray, rho: float) -> tuple[np.ndarray, float]:
         """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it."""
         Z = M @ self.S @ M.T
-        return self.propagate_product(Z, self.image_bound(np.abs(M)), self.c_dense, rho)
+        aM = np.abs(M)
+        return self.propagate_product(Z, self.image_bound(aM), self.c_dense, rho, float(aM.sum(axis=1).max()))
 
-    def propagate_product(self, Z: np.ndarray, w: np.ndarray, c: float, rho: float) -> tuple[np.ndarray, float]:
+    def propagate_product(self, Z: np.ndarray, w: np.ndarray, c: float, rho: float,
+                          mn: float) -> tuple[np.ndarray, float]:
         """:meth:`propagate` from a product taken elsewhere: ``Z`` (overwritten) with
-        ``|Z - M S M'| <= c w w'`` entrywise before its symmetrisation here
-        (:class:`~switchobs_core.bounds.kalman_map.KalmanMap`'s factored form)."""
-        return self._assemble(Z, w, c, rho, None)
+        ``|Z - M S M'| <= c w w'`` entrywise before its symmetrisation here, up to underflow, and
+        ``mn >= ||M||_inf`` (:class:`~switchobs_core.bounds.kalman_map.KalmanMap`'s factored form)."""
+        return self._assemble(Z, w, c, rho, None, mn)
 
     def propagate_shaped(self, M: np.ndarray, rho: float, G: np.ndarray, c: float,
                          GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -182,15 +196,16 @@ class ErrorEllipsoid:
         ``E(c G G')`` plus the ball, so the noise fills only the directions ``G`` reaches.
         ``GGt`` is ``G G'`` if the caller has it (its float rounding is allowed for)."""
         Z = M @ self.S @ M.T
-        return self._assemble(Z, self.image_bound(np.abs(M)), self.c_dense, rho, (G, c, GGt))
+        aM = np.abs(M)
+        return self._assemble(Z, self.image_bound(aM), self.c_dense, rho, (G, c, GGt), float(aM.sum(axis=1).max()))
 
-    def propagate_shaped_product(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, G: np.ndarray,
-                                 c: float, GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    def propagate_shaped_product(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, mn: float,
+                                 G: np.ndarray, c: float, GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """:meth:`propagate_shaped` from a product taken elsewhere (as :meth:`propagate_product`)."""
-        return self._assemble(Z, w, cz, rho, (G, c, GGt))
+        return self._assemble(Z, w, cz, rho, (G, c, GGt), mn)
 
     def _assemble(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float,
-                  noise: tuple | None) -> tuple[np.ndarray, float]:
+                  noise: tuple | None, mn: float) -> tuple[np.ndarray, float]:
         """``S' = (1 + a) (Z + R_z) + (1 + 1/a) [(1 + b) (Q + R_q) + (1 + 1/b) rho^2 D^2]`` with the
         allowances of steps 5-7 and the rounding of this assembly (module docstring)."""
         n, d2, id2 = self.n, self._d2, self._id2
@@ -241,8 +256,9 @@ class ErrorEllipsoid:
             # the rounding of alpha Z + beta' Q: relative 2u of |alpha Z| + |beta' Q|, entrywise
             q += self._diag(wq, 3.0 * _U * theta * beta)
         q += self._diag(wz, 3.0 * _U * alpha)
-        # the diagonal's own addition: relative u of the result (and q's few operations)
-        q += 2.0 * _U * np.abs(np.diagonal(S))
+        # the diagonal's own addition: relative u of the result (and q's few operations); underflow
+        # (step 8): the products' absolute errors, and those of c G G' and the scalings
+        q += 2.0 * _U * np.abs(np.diagonal(S)) + (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
         q *= 1.0 + 8.0 * _U
         S[self._ii, self._ii] += q      # in place whatever S's layout (a reshape could copy)
         tr = max(float(np.trace(S)), 0.0) * self._gsum
@@ -292,7 +308,7 @@ class ErrorEllipsoid:
             return math.inf
         if not math.isfinite(lam):
             return math.inf
-        return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
+        return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
 
 
 def fro_norm(X: np.ndarray) -> float:

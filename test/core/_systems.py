@@ -24,7 +24,7 @@ def oscillators(zeta: tuple[float, float] = (0.01, 0.01), hz: tuple[float, float
 # Systems of the bound audit across units, stiffness and channel counts (test/core/bounds/test_units_audit.py,
 # bench/bench_units.py): each with its cycle, rate and a true initial state.
 
-def oscillator_si(hz: float = 10.0, zeta: float = 0.02) -> so.LTISystem:
+def oscillator_si(hz: float = 10.0, zeta: float = 0.005) -> so.LTISystem:
     """A ``hz`` oscillator in SI units (position in m, velocity in m/s: ``||A||_2 = omega^2 = 3.9e3``
     at 10 Hz) driving a second one with the same frequency: ``A = [[A_o, I], [0, A_o]]``, a Jordan
     block of the complex pair. Channel 1 measures the first position, channel 2 the second."""

@@ -301,9 +301,11 @@ def test_bounds_never_below_the_error(case: Case, family: str):
     """Zero violations: after every update, for every prior and half-way between samples."""
     r = result(case, family)
     if case.system in ("blocks14", "agents10"):     # the paths these cases exist for were taken
-        # every anchor verified by the Cholesky check (a warm start stuck in an uncoupled block of
-        # S once left two anchors in three to the eigenvalue problem)
-        assert r["factored"] and r["verified"] == r["anchors"] > 0, r
+        # the anchors verified by the Cholesky check (a warm start stuck in an uncoupled block of
+        # S once left two anchors in three to the eigenvalue problem); a candidate more than 5 %
+        # above the Rayleigh quotient is not taken (bound_read's proven factor): one anchor in 79
+        # goes to the eigenvalue problem on agents10
+        assert r["factored"] and r["anchors"] > 0 and r["verified"] >= 0.95 * r["anchors"], r
     assert r["violations"] == 0, f"{r['violations']} of {r['checks']} checks; first: {r['first']}"
     assert r["delta_ratio"] < 1e-3, r          # the truth resolves what is checked (module docstring)
     if case.system in ("unstable15", "blocks14"):

@@ -57,7 +57,7 @@ def test_factored_step_contains_the_exact_product(seed, blocks, b, p, sparse_row
     assert m._sp is not None
     ell = ErrorEllipsoid(n, 1.0, d)
     ell.S = S.copy(order="K")
-    Z, w, c = m.sandwich(ell)
+    Z, w, c, _ = m.sandwich(ell)
     # exact M S M' in extended precision
     M = (np.eye(n, dtype=LD) - K.astype(LD) @ H.astype(LD)) @ Phi.astype(LD)
     T = M @ S.astype(LD) @ M.T
