@@ -170,7 +170,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs")
+                 "_emap", "_Ks", "_Hs", "_aE")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -183,6 +183,7 @@ class KalmanMap:
         self._emap: float | None = None
         self._Ks: np.ndarray | None = None
         self._Hs: np.ndarray | None = None
+        self._aE: tuple | None = None
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
 
@@ -285,8 +286,11 @@ class KalmanMap:
         sp = self._sp
         if sp is None:
             E = self.E
-            aE = np.abs(E)
-            return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, float(aE.sum(axis=1).max())
+            if self._aE is None:
+                aE = np.abs(E)
+                self._aE = (aE, float(aE.sum(axis=1).max()))
+            aE, mn = self._aE
+            return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
         Y = sp.sandwich_either(S)       # C-ordered
         cols = self._cols

@@ -157,29 +157,30 @@ class RoundingBound:
                               "the bounds are withdrawn until the next reset")
 
     def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool) -> tuple | None:
+               keep: bool, absE: tuple | None = None) -> tuple | None:
         """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
         (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
         if GL is not None and self.vn > 0.0:
             if keep:
-                ell.step_shaped(E, rho, GL, self.vn ** 2)
+                ell.step_shaped(E, rho, GL, self.vn ** 2, absM=absE)
                 return None
-            return ell.propagate_shaped(E, rho, GL, self.vn ** 2)
+            return ell.propagate_shaped(E, rho, GL, self.vn ** 2, absM=absE)
         if keep:
-            ell.step(E, rho)
+            ell.step(E, rho, absE)
             return None
-        return ell.propagate(E, rho)
+        return ell.propagate(E, rho, absE)
 
     def step(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
              u: np.ndarray | None) -> None:
         """Both ellipsoids through one propagation step ``e`` (a ZOH cache entry) over ``dt``."""
         if self.withdrawn:
             return
+        absE = e.abs_E() if hasattr(e, "abs_E") else None
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u))
+            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u), absE)
             if self.ellv is not None:
                 self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u),
-                            e.GL if nu is not None else None, True)
+                            e.GL if nu is not None else None, True, absE)
         self._check()
 
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,

@@ -131,6 +131,12 @@ def expm_extended(M: np.ndarray, dt: float) -> np.ndarray:
     return E
 
 
+def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(|M|, ||M||_inf)``."""
+    aM = np.abs(M)
+    return aM, float(aM.sum(axis=1).max()) if aM.size else 0.0
+
+
 def _clamp(a: float) -> float:
     """A coefficient of an outer sum kept in ``[2^-40, 1e150]`` (any ``a > 0`` is valid; from
     ``2^-40`` on, ``fl(1 + a) - 1`` is exact and positive)."""
@@ -176,11 +182,12 @@ class ErrorEllipsoid:
         return (c * W) * (w * self.d) * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ steps
-    def propagate(self, M: np.ndarray, rho: float) -> tuple[np.ndarray, float]:
-        """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it."""
+    def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
+        """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it; ``absM`` is
+        ``(|M|, ||M||_inf)`` if the caller keeps them."""
         Z = M @ self.S @ M.T
-        aM = np.abs(M)
-        return self.propagate_product(Z, self.image_bound(aM), self.c_dense, rho, float(aM.sum(axis=1).max()))
+        aM, mn = _abs(M) if absM is None else absM
+        return self.propagate_product(Z, self.image_bound(aM), self.c_dense, rho, mn)
 
     def propagate_product(self, Z: np.ndarray, w: np.ndarray, c: float, rho: float,
                           mn: float) -> tuple[np.ndarray, float]:
@@ -190,14 +197,14 @@ class ErrorEllipsoid:
         return self._assemble(Z, w, c, rho, None, mn)
 
     def propagate_shaped(self, M: np.ndarray, rho: float, G: np.ndarray, c: float,
-                         GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                         GGt: np.ndarray | None = None, absM: tuple | None = None) -> tuple[np.ndarray, float]:
         """The next ``(S, trace S)`` for ``e <- M e + r + G v`` with ``||D^{-1} r|| <= rho`` and
         ``||v||^2 <= c`` (module docstring, step 7): the added set is the degenerate ellipsoid
         ``E(c G G')`` plus the ball, so the noise fills only the directions ``G`` reaches.
         ``GGt`` is ``G G'`` if the caller has it (its float rounding is allowed for)."""
         Z = M @ self.S @ M.T
-        aM = np.abs(M)
-        return self._assemble(Z, self.image_bound(aM), self.c_dense, rho, (G, c, GGt), float(aM.sum(axis=1).max()))
+        aM, mn = _abs(M) if absM is None else absM
+        return self._assemble(Z, self.image_bound(aM), self.c_dense, rho, (G, c, GGt), mn)
 
     def propagate_shaped_product(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, mn: float,
                                  G: np.ndarray, c: float, GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -212,11 +219,10 @@ class ErrorEllipsoid:
         Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
         Z *= 0.5
         cz = cz + _U * (1.0 + cz)       # the symmetrisation's rounding, relative u of |sym Z|
-        rz = self._diag(w, cz)
-        # |Z| <= (1 + cz) w w' entrywise: the rounding of the scalings below is dominated through it
-        wz = w * math.sqrt(1.0 + cz)
-        diagZ = np.diagonal(Z)
-        tz = max(float((diagZ + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
+        wd = w * self.d
+        Wz = float(w @ self._id) * self._gsum
+        rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
+        tz = max(float((np.diagonal(Z) + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
         Q, rq, wq, tq = None, None, None, 0.0
         if noise is not None:
             G, c, GGt = noise
@@ -249,29 +255,33 @@ class ErrorEllipsoid:
         S = Z
         if alpha != 1.0:
             S *= alpha
-        q = alpha * rz + (theta * kappa * rho2) * d2
+        # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
+        # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
+        q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
+        if rho2 > 0.0:
+            q += (theta * kappa * rho2) * d2
         if Q is not None:
             S += (theta * beta) * Q
             q += (theta * beta) * rq
             # the rounding of alpha Z + beta' Q: relative 2u of |alpha Z| + |beta' Q|, entrywise
             q += self._diag(wq, 3.0 * _U * theta * beta)
-        q += self._diag(wz, 3.0 * _U * alpha)
         # the diagonal's own addition: relative u of the result (and q's few operations); underflow
         # (step 8): the products' absolute errors, and those of c G G' and the scalings
-        q += 2.0 * _U * np.abs(np.diagonal(S)) + (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
+        dS = np.diagonal(S)
+        q += 2.0 * _U * np.abs(dS) + (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
         q *= 1.0 + 8.0 * _U
         S[self._ii, self._ii] += q      # in place whatever S's layout (a reshape could copy)
-        tr = max(float(np.trace(S)), 0.0) * self._gsum
+        tr = max(float(dS.sum()), 0.0) * self._gsum
         return S, tr
 
-    def step(self, M: np.ndarray, rho: float) -> None:
+    def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
-        self.S, self.tr = self.propagate(M, rho)
+        self.S, self.tr = self.propagate(M, rho, absM)
 
     def step_shaped(self, M: np.ndarray, rho: float, G: np.ndarray, c: float,
-                    GGt: np.ndarray | None = None) -> None:
+                    GGt: np.ndarray | None = None, absM: tuple | None = None) -> None:
         """Apply one noise step (:meth:`propagate_shaped`)."""
-        self.S, self.tr = self.propagate_shaped(M, rho, G, c, GGt)
+        self.S, self.tr = self.propagate_shaped(M, rho, G, c, GGt, absM)
 
     def trace_bound(self) -> float:
         """``sqrt(trace S) >= ||e||`` (cheap)."""
