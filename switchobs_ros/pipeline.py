@@ -23,8 +23,9 @@ For every message the pipeline orchestrates:
 Observer time is ``(stamp - origin)`` in seconds, with ``origin`` the stamp of the first sample
 answered after start-up or a reset; every estimate carries the stamp of the sample it answers.
 An exception while handling a message is caught and counted (``internal_error``); an estimate
-that is not finite is never returned (the estimator resets instead). The failure table is
-docs/failures.md.
+that is not finite is never returned (the estimator resets instead); a bound that can no longer
+be computed (the observer's ``bounds_withdrawn``) withdraws the bounds with that reason while the
+estimate is answered as usual. The failure table is docs/failures.md.
 """
 
 from __future__ import annotations
@@ -494,7 +495,7 @@ class EstimatorPipeline(Counters):
             if m.partial:
                 self.partial_updates += 1
             env_vals = self._envelope()
-        if not (np.isfinite(x_hat).all() and np.isfinite(env_vals).all()):
+        if not np.isfinite(x_hat).all():
             # e.g. a gap so long that the exact step of an unstable system overflows: never
             # publish it; start again from the initial estimate at the next sample
             self.errors += 1
@@ -503,6 +504,11 @@ class EstimatorPipeline(Counters):
                            "resetting the estimator")
             self.reset("non-finite estimate")
             return
+        if not np.isfinite(env_vals).all():
+            # a bound that can no longer be computed: the estimate is good, the bounds are
+            # withdrawn with the reason and it keeps answering (never a reset for it)
+            self.withdraw(self.observer.bounds_withdrawn or f"the bounds are not finite at stamp {pend.stamp_ns}")
+            env_vals[~np.isfinite(env_vals)] = NO_BOUND
         if self.observer.residence_violations != violations:     # the residence that ended at t
             self.log.warn(self.observer.residence_problem, throttle=True)
         if not self.bound_valid:
@@ -589,7 +595,8 @@ class EstimatorPipeline(Counters):
                 bound = self.observer.envelope(t).exact_bound
         except (SwitchobsError, ArithmeticError, ValueError):   # ValueError: numpy's LinAlgError too
             return None
-        if not (np.isfinite(x).all() and math.isfinite(bound)):
+        if not np.isfinite(x).all():
             return None
-        return Prediction(int(stamp), x, float(bound) if self.bound_valid else NO_BOUND, elapsed * 1e-9)
+        ok = self.bound_valid and math.isfinite(bound)      # a bound not computable there: none published
+        return Prediction(int(stamp), x, float(bound) if ok else NO_BOUND, elapsed * 1e-9)
 

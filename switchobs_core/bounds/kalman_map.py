@@ -23,28 +23,28 @@ that hold a nonzero (a channel sees a few states), and ``Z`` is one product of i
 
 Rounding (the standard model ``|fl(A B) - A B| <= gamma_m |A| |B|``, ``m`` the inner dimension; a
 sparse product or a product over a subset of columns skips exact zeros, which only shortens its
-sums). Two norms of nonnegative matrices, each bounded by ``sqrt(||.||_1 ||.||_inf)`` (O(nnz) and
-O(n p) to compute, rounded up): ``nu >= || |Phi~| ||_2`` (about 1 for a transition near the
-identity, where ``||Phi~||_F`` is about ``sqrt(n)``) and ``kappa >= 1 + || |K| |H| ||_2``, which
-bounds ``|| I + |K| |H| ||_2`` and, since ``|I - K H| <= I + |K| |H|`` entrywise,
-``||I - K H||_2`` (the residual's factor too).
+sums). ``S`` is exactly symmetric and positive semidefinite (:mod:`switchobs_core.numerics.rounding`,
+step 6), so ``|S| <= s s'`` with ``s = sqrt(diag S)``; write ``y = |Phi~| s`` and ``J = I + |K| |H|``
+(``|I - K H| <= J`` entrywise).
 
-1. ``|Y~ - Phi~ S Phi~'| <= gamma_{2n} |Phi~| |S| |Phi~'|``: in the 2-norm at most
-   ``gamma_{2n} nu^2 ||S||_2``, and through ``I - K H`` on both sides ``kappa^2`` times that.
+1. ``|Y~ - Phi~ S Phi~'| <= gamma_{2n} |Phi~| |S| |Phi~'| <= gamma_{2n} y y'``, and through
+   ``I - K H`` on both sides at most ``gamma_{2n} (J y) (J y)'``.
 2. The longest chain of roundings from ``Y~`` to ``Z~`` is ``G H'`` (``2n``), ``K (.)`` (``p``),
    the difference ``V`` (1), the product of inner dimension ``2p`` and the last difference (1):
    ``m = 2n + 3p + 2``. Every term of ``Z`` is one of ``Y``, ``K H Y``, ``Y H' K'``,
-   ``K H Y H' K'``, so ``|Z~ - (I - K H) Y~ (I - K H)'| <= gamma_m (I + |K||H|) |Y~| (I + |H'||K'|)``,
-   at most ``gamma_m kappa^2 ||Y~||_2`` in the 2-norm (the 2-norm is monotone on nonnegative
-   matrices, and ``|| |Y~| ||_2 <= ...`` is taken through ``|Y~| <= (1 + gamma_{2n}) |Phi~||S||Phi~'|``).
-3. With ``||S||_2 <= || |S| ||_2 <= trace S`` for the positive semidefinite ``S`` kept here
-   (the same premise as step 6 of :mod:`switchobs_core.numerics.rounding`, which uses ``||S||_F <= trace S``):
-   ``||Z~ - M S M'||_2 <= kappa^2 nu^2 tr (gamma_{2n} + gamma_m (1 + gamma_{2n})^2)
-   <= 2.01 gamma_{2n+4p+4} kappa^2 nu^2 tr =: eta``,
+   ``K H Y H' K'``, so ``|Z~ - (I - K H) Y~ (I - K H)'| <= gamma_m J |Y~| J'
+   <= gamma_m (1 + gamma_{2n}) (J y) (J y)'``.
+3. So ``|Z~ - M S M'| <= c w w'`` entrywise with ``w = J y = y + |K| (|H| y)`` (O(nnz(Phi~) + n p))
+   and ``c = gamma_{2n} + gamma_m (1 + gamma_{2n}) <= 2.01 gamma_{2n+4p+4}``: the form
+   :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product` turns into an
+   allowance in the shape of ``w`` (in balanced units, the same in any units of the state).
 
-and ``Z~ + eta I`` contains ``M S M'`` in the PSD order, as step 6 asks (``||S||_F <= trace S``).
-The dense form is kept below :data:`SPARSE_MIN_N` states or above :data:`SPARSE_MAX_FILL` of
-nonzeros (it is faster there), and it is the one :mod:`switchobs_core.numerics.rounding` documents.
+The residual's factor ``||I - K H||`` is taken in the balanced coordinates of the entry's
+``scale`` (``kappa >= 1 + || |D^-1 K| |H D| ||_2``, by ``sqrt(||.||_1 ||.||_inf)``), like every
+norm of the rigorous bound. The dense form is kept below :data:`SPARSE_MIN_N` states or above
+:data:`SPARSE_MAX_FILL` of nonzeros (it is faster there); its map ``E~ = fl(fl(I - K H) Phi~)``
+differs from ``(I - K H) Phi~`` by at most :attr:`KalmanMap.emap` (balanced 2-norm), which joins
+the residual.
 """
 
 from __future__ import annotations
@@ -56,6 +56,7 @@ import numpy as np
 from scipy.linalg.blas import dgemm as _dgemm
 from scipy.sparse import csr_array
 
+from ..numerics.expm_bound import nu
 from ..numerics.rounding import fro_norm, gamma
 
 try:        # scipy's kernel behind ``csr_array @ dense`` (the same loop, without 30 us of checks)
@@ -75,7 +76,7 @@ SPARSE_MAX_FILL = 0.125
 class SparseTransition:
     """``Phi~`` in compressed rows: ``sandwich(S) = Phi~ S Phi~'`` and ``Phi~ @ v``."""
 
-    __slots__ = ("n", "csr", "nu", "_ip", "_ix", "_dv")
+    __slots__ = ("n", "csr", "nu", "inf_norm", "_ip", "_ix", "_dv", "_adv")
 
     def __init__(self, Phi: np.ndarray) -> None:
         self.n = n = Phi.shape[0]
@@ -87,6 +88,16 @@ class SparseTransition:
         rows = np.bincount(np.repeat(np.arange(n), np.diff(self._ip)), weights=a, minlength=n)
         cols = np.bincount(self._ix, weights=a, minlength=n)
         self.nu = math.sqrt(float(rows.max()) * float(cols.max())) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
+        self.inf_norm = float(rows.max()) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
+        self._adv = a
+
+    def abs_matvec(self, x: np.ndarray) -> np.ndarray:
+        """``|Phi~| x`` (for ``x >= 0``: the factored step's ``y``)."""
+        if _csr_matvec is None:         # pragma: no cover
+            return np.asarray(csr_array((self._adv, self._ix, self._ip), shape=(self.n, self.n)) @ x)
+        out = np.zeros(self.n)
+        _csr_matvec(self.n, self.n, self._ip, self._ix, self._adv, x, out)
+        return out
 
     def _mm(self, B: np.ndarray) -> np.ndarray:
         """``Phi~ B`` for a C-contiguous ``B`` (n x m)."""
@@ -153,12 +164,13 @@ class KalmanMap:
     """The error map ``M = (I - K H) Phi~`` of one Kalman sample (module docstring).
 
     ``KalmanMap(entry, K, H)`` with ``entry`` the ZOH cache entry of the step (``Phi~``, its
-    norm, its sparse form). ``M @ X`` multiplies by ``M`` (a held map of the observer's ``Phi``);
-    :meth:`sandwich` is the bound's ``M S M'`` with its rounding allowance; :attr:`kappa` bounds
-    ``||I - K H||_2``.
+    norms, its sparse form, its balancing ``scale``). ``M @ X`` multiplies by ``M`` (a held map of
+    the observer's ``Phi``); :meth:`sandwich` is the bound's ``M S M'`` with its rounding's
+    ``(w, c)``; :attr:`kappa` bounds ``||I - K H||_2`` in balanced coordinates.
     """
 
-    __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_fE2", "_nIKH", "_sp", "_cols")
+    __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
+                 "_emap", "_Ks", "_Hs", "_aE")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -167,31 +179,42 @@ class KalmanMap:
         self._kappa: float | None = None
         self._IKH: np.ndarray | None = None
         self._E: np.ndarray | None = None
-        self._fE2: float | None = None
         self._nIKH: float | None = None
+        self._emap: float | None = None
+        self._Ks: np.ndarray | None = None
+        self._Hs: np.ndarray | None = None
+        self._aE: tuple | None = None
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
 
+    def _scaled(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(D^-1 K, H D)`` in the entry's balancing."""
+        if self._Ks is None:
+            d = getattr(self.e, "scale", None)
+            d = np.ones(self.K.shape[0]) if d is None else d
+            self._Ks, self._Hs = self.K / d[:, None], self.H * d[None, :]
+        return self._Ks, self._Hs
+
     @property
     def fK(self) -> float:
-        """``||K||_F`` (for the bound only: computed at its first read)."""
+        """``||D^-1 K||_F`` (for the bound only: computed at its first read)."""
         if self._fK is None:
-            self._fK = fro_norm(self.K)
+            self._fK = fro_norm(self._scaled()[0])
         return self._fK
 
     @property
     def fH(self) -> float:
-        """``||H||_F`` (computed at its first read)."""
+        """``||H D||_F`` (computed at its first read)."""
         if self._fH is None:
-            self._fH = fro_norm(self.H)
+            self._fH = fro_norm(self._scaled()[1])
         return self._fH
 
     @property
     def kappa(self) -> float:
-        """``>= || I + |K| |H| ||_2 >= ||I - K H||_2``: ``1 + sqrt(||.||_1 ||.||_inf)`` of ``|K| |H|``,
-        in O(n p) (module docstring)."""
+        """``>= || I + |D^-1 K| |H D| ||_2 >= ||I - K H||_2`` (balanced): ``1 + sqrt(||.||_1 ||.||_inf)``
+        of ``|K| |H|`` there, in O(n p) (module docstring)."""
         if self._kappa is None:
-            K, H = self.K, self.H
+            K, H = self._scaled()
             aK, aH = np.abs(K), np.abs(H)
             one = float((aK.sum(axis=0) @ aH).max()) if aH.size else 0.0
             inf = float((aK @ aH.sum(axis=1)).max()) if aK.size else 0.0
@@ -212,11 +235,30 @@ class KalmanMap:
 
     @property
     def nIKH(self) -> float:
-        """An upper bound of ``||I - K H||_2``: ``||I - K H||_F`` on the dense path, :attr:`kappa`
-        on the factored one (no n x n matrix formed)."""
+        """An upper bound of ``||I - K H||_2`` (balanced): ``||I - K H||_F`` there on the dense path,
+        :attr:`kappa` on the factored one (no n x n matrix formed)."""
         if self._nIKH is None:
-            self._nIKH = self.kappa if self._sp is not None else float(np.linalg.norm(self._ikh()))
+            if self._sp is not None:
+                self._nIKH = self.kappa
+            else:
+                d = self.e.scale
+                self._nIKH = min(fro_norm((self._ikh() / d[:, None]) * d[None, :]), self.kappa)
         return self._nIKH
+
+    @property
+    def emap(self) -> float:
+        """``>= ||E~ - (I - K H) Phi~||_2`` (balanced) of the dense ``E~ = fl(fl(I - K H) Phi~)``:
+        ``gamma_{p+1} kappa nu(Phi~) + gamma_n nu(I - K H) nu(Phi~)``; 0 on the factored path."""
+        if self._emap is None:
+            if self._sp is not None:
+                self._emap = 0.0
+            else:
+                d = self.e.scale
+                nP = self.e.nPhi
+                nI = nu((self._ikh() / d[:, None]) * d[None, :])
+                self._emap = (gamma(self.H.shape[0] + 1) * self.kappa * nP
+                              + gamma(self.Phi.shape[0]) * nI * nP) * (1.0 + 8.0 * gamma(1))
+        return self._emap
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x^- = Phi~ x`` (a new array; sparse when ``Phi~`` is)."""
@@ -233,17 +275,22 @@ class KalmanMap:
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 
-    def sandwich(self, S: np.ndarray, tr: float, g_dense: float) -> tuple[np.ndarray, float]:
-        """``(Z, eta)``: ``Z + eta I`` contains ``M S M'`` (``tr >= trace S >= ||S||_F``).
+    def sandwich(self, ell: Any) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """``(Z, w, c, mn)``: ``|Z - M S M'| <= c w w'`` entrywise for the ellipsoid's ``S`` (up to
+        underflow), ``mn >= ||M||_inf`` for its underflow allowance.
 
-        Dense: ``Z = M S M'`` and ``eta = g_dense ||M||_F^2 tr`` (:mod:`switchobs_core.numerics.rounding`, step 6);
-        factored: the module docstring's three products and its ``eta``."""
+        Dense: ``Z = E~ S E~'`` with :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.image_bound`
+        (:mod:`switchobs_core.numerics.rounding`, step 6); factored: the module docstring's three
+        products, ``w`` and ``c``."""
+        S = ell.S
         sp = self._sp
         if sp is None:
             E = self.E
-            if self._fE2 is None:
-                self._fE2 = float(np.dot(E.ravel(), E.ravel()))
-            return E @ S @ E.T, g_dense * self._fE2 * tr
+            if self._aE is None:
+                aE = np.abs(E)
+                self._aE = (aE, float(aE.sum(axis=1).max()))
+            aE, mn = self._aE
+            return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
         Y = sp.sandwich_either(S)       # C-ordered
         cols = self._cols
@@ -266,5 +313,8 @@ class KalmanMap:
                     overwrite_c=True)
         Z = Zt.T
         n, p = S.shape[0], H.shape[0]
-        eta = 2.01 * gamma(2 * n + 4 * p + 4) * self.kappa ** 2 * sp.nu ** 2 * tr
-        return Z, eta
+        s = np.sqrt(np.maximum(np.diagonal(S), 0.0))
+        y = sp.abs_matvec(s)
+        w = (y + np.abs(K) @ (np.abs(H) @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
+        mn = (1.0 + float((np.abs(K) @ np.abs(H).sum(axis=1)).max())) * sp.inf_norm    # ||J |Phi|||_inf
+        return Z, w, 2.01 * gamma(2 * n + 4 * p + 4), mn

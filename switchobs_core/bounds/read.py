@@ -46,14 +46,23 @@ The anchor's ``lam_a``:
   the rounding of its diagonal (``|.| <= u (l + max |t_ii|)``),
   ``lambda_max(sym S_a) < l + u (l + max |t_ii|) + u ||S_a||_F``. If the factorisation fails the
   candidate was too low: ``delta`` grows (:data:`_DELTAS`), and after the last one the eigenvalue
-  problem decides.
+  problem decides. The candidates stop at ``delta = 0.05`` (a candidate 50 % above the Rayleigh
+  quotient was accepted once, and an anchor came out 34 % above ``lambda_max``): before the
+  eigenvalue problem, :data:`_MORE_POWER_STEPS` further power iterations move the quotient closer
+  and the candidates are tried again.
 
-Re-anchoring: when ``g > tol c lam_a`` (or after ``max_age`` reads) a new anchor is taken. Looseness:
-between anchors ``lambda_max(sym S) >= c lam_a' - g`` (Weyl the other way, ``lam_a'`` the anchor's
-exact value, ``lam_a <= (1 + delta) lam_a'`` up to the allowances), so the published value is at
-most ``(1 + delta)(1 + tol) / (1 - tol (1 + delta))`` times the current one in ``lambda``, ``sqrt``
-of that in the bound: ``1.051`` for the default ``tol = 0.05`` with the eigenvalue problem,
-``1.062`` with a verified candidate at ``delta = 0.02``.
+Re-anchoring: when ``g > tol c lam_a`` (or after ``max_age`` reads) a new anchor is taken.
+
+Looseness, proven. Let ``lam*`` be ``lambda_max(sym S)`` and ``lam_a*`` the anchor's. The anchor
+is within ``lam_a <= (1 + delta_max) lam_a* (1 + 8 n u)`` of it (a verified candidate is ``(1 +
+delta) theta`` with ``theta <= lam_a*`` a Rayleigh quotient, plus its ``u`` terms; the eigenvalue
+problem's is ``lam_a*`` plus ``(2n + 16) u ||S_a||_F``). Between anchors, Weyl the other way:
+``lam* >= c lam_a* - ||sym D||_2 >= c lam_a / (1 + delta_max) - g``, and the published value is at
+most ``(c lam_a + g)(1 + 4u)`` with ``g <= tol c lam_a``. So published / ``lam*`` is at most
+``(1 + tol)(1 + delta_max) / (1 - tol (1 + delta_max))`` up to the ``u`` terms: 1.1636 for the
+defaults ``tol = 0.05`` and ``delta_max = 0.05``, and :data:`LOOSENESS` = ``sqrt`` of that, 1.079,
+for the bound (an anchor alone: at most 1.025). The published value is also capped by
+``sqrt(trace S)``, which only lowers it.
 """
 
 from __future__ import annotations
@@ -64,9 +73,9 @@ import numpy as np
 from scipy.linalg.blas import daxpy as _daxpy
 from scipy.linalg.lapack import dpotrf
 
-from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 
-__all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "verified_lambda_max"]
+__all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "LOOSENESS", "verified_lambda_max"]
 
 #: Fewest states from which :meth:`~switchobs_core.runtime.observer.SwitchedObserver.envelope` reads the
 #: bound amortised by default (below, the eigenvalue problem costs no more than this module's
@@ -79,10 +88,15 @@ AMORTISED_MIN_N = 40
 _SOLVER_MARGIN = 16.0
 #: Fewest states for which the anchor is a Cholesky-verified candidate (module docstring).
 CHOLESKY_MIN_N = 40
-#: The candidate's margins over the Rayleigh quotient, tried in turn.
-_DELTAS = (0.02, 0.1, 0.5)
+#: The candidate's margins over the Rayleigh quotient, tried in turn (``delta_max`` the last).
+_DELTAS = (0.02, 0.05)
 #: Power iterations per anchor (from the last leading direction).
 _POWER_STEPS = 8
+#: Further power iterations before the candidates are tried a second time.
+_MORE_POWER_STEPS = 24
+#: The largest ratio of a published bound to ``sqrt(lambda_max(sym S))`` (module docstring), for the
+#: default ``tol = 0.05``, apart from relative terms of order ``n u``.
+LOOSENESS = math.sqrt(1.05 * (1.0 + _DELTAS[-1]) / (1.0 - 0.05 * (1.0 + _DELTAS[-1])))
 #: The smallest positive double (Rump's underflow term).
 _ETA_MIN = 5e-324
 
@@ -138,20 +152,23 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
     if not (theta > 0.0 and math.isfinite(theta) and math.isfinite(nS)):
         return None
     gn = gamma(n + 1)
-    for delta in _DELTAS:
-        lc = theta * (1.0 + delta)
-        A = -T
-        A.flat[:: n + 1] += lc                  # A~ = fl(lc I - T): only the diagonal rounds
-        ad = np.diagonal(A)
-        if not float(ad.min()) > 0.0:
-            continue
-        tr = float(ad.sum()) * (1.0 + 2.0 * n * u)
-        cr = 2.0 * (gn / (1.0 - 2.0 * gn) * tr + 4.0 * n * (2.0 * (n + 2) + float(ad.max())) * _ETA_MIN)
-        A.flat[:: n + 1] -= cr                  # fl(A~ - c_R I), as the theorem has it
-        _, info = dpotrf(A, lower=1, clean=0, overwrite_a=1)
-        if info == 0:
-            lam = (lc + u * (lc + dmax) + 2.0 * u * nS) * (1.0 + 4.0 * u)
-            return lam, v
+    for attempt in range(2):
+        if attempt:             # the quotient was too far below lambda_max: iterate on
+            theta, v = _leading(T, v, _MORE_POWER_STEPS)
+        for delta in _DELTAS:
+            lc = theta * (1.0 + delta)
+            A = -T
+            A.flat[:: n + 1] += lc                  # A~ = fl(lc I - T): only the diagonal rounds
+            ad = np.diagonal(A)
+            if not float(ad.min()) > 0.0:
+                continue
+            tr = float(ad.sum()) * (1.0 + 2.0 * n * u)
+            cr = 2.0 * (gn / (1.0 - 2.0 * gn) * tr + 4.0 * n * (2.0 * (n + 2) + float(ad.max())) * _ETA_MIN)
+            A.flat[:: n + 1] -= cr                  # fl(A~ - c_R I), as the theorem has it
+            _, info = dpotrf(A, lower=1, clean=0, overwrite_a=1)
+            if info == 0:
+                lam = (lc + u * (lc + dmax) + 2.0 * u * nS) * (1.0 + 4.0 * u) + 8 * n * UNDERFLOW
+                return lam, v
     return None
 
 
@@ -197,7 +214,7 @@ class AnchoredBound:
                     g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:
                     self._age += 1
-                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF) + 8 * n * UNDERFLOW
                     lam = min(lam, max(ell.tr, 0.0))
                     return math.sqrt(lam) * (1.0 + 2.0 * UNIT_ROUNDOFF)
         return self._anchor(ell)

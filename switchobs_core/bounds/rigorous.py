@@ -5,8 +5,11 @@ One owner of the two ellipsoids the observer keeps (the argument is in
 
 * the *exact bound*: ``{e : e' S^-1 e <= 1}`` holds the error of the computed estimate for
   noise-free samples, ``S_0 = e0^2 I``, each step ``e <- M e + r`` with the step's error map
-  ``M`` and a residual ``||r|| <= rho`` (the matrix exponential's error, the step quantum and
-  the rounding of the products, :meth:`RoundingBound.rho_step`, :meth:`RoundingBound.rho_correct`);
+  ``M`` and a residual ``||D^-1 r|| <= rho`` in the balanced coordinates of ``A``
+  (:mod:`switchobs_core.numerics.scaling`: every norm of a residual is taken there, so the bound
+  does not depend on the units of the state): the matrix exponential's proven error, the step
+  quantum and the rounding of the products and of the stored maps
+  (:meth:`RoundingBound.rho_step`, :meth:`RoundingBound.rho_correct`);
 * the *noise bound* (a declared ``|v_j| <= v_max``): the same with the noise's image ``G v`` added
   to every step (``G = Gamma_A L`` for the held innovation of LMI gains, ``G = K`` for a Kalman
   correction), the degenerate ellipsoid ``E(p v_max^2 G G')``.
@@ -16,6 +19,11 @@ The observer steps it with the error maps of every sample
 :meth:`RoundingBound.correct` for a Kalman correction, :meth:`RoundingBound.fused` for both in one
 map, :meth:`RoundingBound.hold` for a held innovation; :meth:`RoundingBound.propagated` gives the
 sets at a later time without keeping them (``prior``, ``envelope``).
+
+A bound that can no longer be computed (a set that overflowed, a shape matrix that is not
+finite) is *withdrawn*: :attr:`RoundingBound.withdrawn` says why, the published bounds are
+``inf`` from then on (until :meth:`RoundingBound.reset`), and no method raises: the estimate is
+not touched by any of this.
 """
 
 from __future__ import annotations
@@ -26,134 +34,238 @@ from typing import Any
 
 import numpy as np
 
-from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
+from ..numerics.expm_bound import nu as nu2
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
+from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
 
 __all__ = ["RoundingBound"]
+
+_U = UNIT_ROUNDOFF
 
 
 class RoundingBound:
     """Both ellipsoids of the module docstring for a system ``A`` with outputs of at most ``p_max`` rows.
 
-    ``b = RoundingBound(A, p_max, e0, noise_max)``; ``b.reset()`` restarts at ``S = e0^2 I``.
-    ``noise_max`` is one bound per channel (None: no noise ellipsoid).
+    ``b = RoundingBound(A, p_max, e0, noise_max, B=B, scale=d)``; ``b.reset()`` restarts at
+    ``S = e0^2 I``. ``noise_max`` is one bound per channel (None: no noise ellipsoid); ``B`` the
+    input matrix (None: no input); ``scale`` the balancing of ``A``
+    (:func:`~switchobs_core.numerics.scaling.balance`, computed when not given; the ZOH cache
+    entries stepped here must carry the same one).
     """
 
-    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None) -> None:
+    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, *,
+                 B: np.ndarray | None = None, scale: np.ndarray | None = None) -> None:
         self.n = A.shape[0]
         self.e0 = e0
         self.noise_max = noise_max
-        # constants: ||A||_F, ||A||_2 (step quantum), gamma_{n+2}, gamma_{p+2}
-        self.fA = float(np.linalg.norm(A))
-        self.nA = float(np.linalg.norm(A, 2))
+        self.d = balance(A) if scale is None else np.asarray(scale, dtype=float)
+        self._id = 1.0 / self.d
+        # ||A||_2 in balanced coordinates (the step quantum), gamma_{n+2}, gamma_{p+2}
+        self.nA = nu2(balanced(A, self.d))
         self.g_n = gamma(self.n + 2)
         self.g_p = gamma(p_max + 2)
+        self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
+        self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
+        self._CD: dict = {}
+        # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
+        # per component of a step's result, in balanced units
+        self._uf = (self.n + p_max + (0 if B is None else B.shape[1]) + 4) * UNDERFLOW * math.sqrt(
+            float(self._id @ self._id))
         self.reset()
 
     def reset(self) -> None:
-        """``S = e0^2 I`` for both ellipsoids; nothing held."""
-        self.ell = ErrorEllipsoid(self.n, self.e0)
-        self.ellv = ErrorEllipsoid(self.n, self.e0) if self.noise_max else None
+        """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn."""
+        self.ell = ErrorEllipsoid(self.n, self.e0, self.d)
+        self.ellv = ErrorEllipsoid(self.n, self.e0, self.d) if self.noise_max else None
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
+        #: Why the bound can no longer be computed ("" while it can; module docstring).
+        self.withdrawn = ""
+
+    # ------------------------------------------------------------------ norms in balanced units
+    def xn(self, x: np.ndarray) -> float:
+        """``||D^-1 x||``."""
+        v = x * self._id
+        return math.sqrt(float(v @ v))
+
+    def _cd(self, C: np.ndarray) -> float:
+        """``||C D||_F`` (kept per matrix)."""
+        hit = self._CD.get(id(C))
+        if hit is None or hit[0] is not C:
+            if len(self._CD) > 256:
+                self._CD.clear()
+            hit = self._CD[id(C)] = (C, fro_norm(C * self.d[None, :]))
+        return hit[1]
+
+    def gain_norms(self, K: np.ndarray, H: np.ndarray) -> tuple[float, float, float]:
+        """``(||D^-1 K||_F, ||H D||_F, kappa)`` with ``kappa >= ||I - K H||_2`` balanced
+        (``1 + sqrt(||.||_1 ||.||_inf)`` of ``|D^-1 K| |H D|``)."""
+        Ks, Hs = K * self._id[:, None], H * self.d[None, :]
+        aK, aH = np.abs(Ks), np.abs(Hs)
+        one = float((aK.sum(axis=0) @ aH).max()) if aH.size else 0.0
+        inf = float((aK @ aH.sum(axis=1)).max()) if aK.size else 0.0
+        kappa = 1.0 + math.sqrt(one * inf) * (1.0 + 2.0 * gamma(K.shape[0] + 2 * H.shape[0] + 2))
+        return fro_norm(Ks), fro_norm(Hs), kappa
 
     # ------------------------------------------------------------------ residuals
-    def hold(self, C: np.ndarray, xn: float, y: np.ndarray, channel: int, p: int) -> None:
+    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int) -> None:
         """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, and its noise's norm."""
-        self.nu_err = self.g_n * float(np.linalg.norm(C)) * xn + 2.0 * UNIT_ROUNDOFF * math.sqrt(float(y @ y))
+        self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
+                       + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
-    def rho_step(self, e: Any, dt: float, xn: float, xn_new: float, ell: ErrorEllipsoid,
+    def rho_step(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, ell: ErrorEllipsoid,
                  nu: np.ndarray | None, u: np.ndarray | None) -> float:
-        """Residual bound ``rho`` of one exact step in floating point
-        (:mod:`switchobs_core.numerics.rounding`, steps 2-4):
-        the exponential's error and the step quantum, times ``||x|| <= ||x_hat|| + ||e||``
-        (``||e||`` from ``ell``, the ellipsoid being stepped), plus the rounding of the products.
-        ``nu``: the held innovation (None: no gain held); ``u``: the held input (None: zero)."""
-        quant = abs(dt - e.dt) * self.fA * math.exp(min(self.nA * max(dt, e.dt), 700.0))   # no OverflowError
-        rho = (e.eps + quant) * (xn + ell.trace_bound()) + self.g_n * e.fPhi * xn + UNIT_ROUNDOFF * xn_new
+        """Residual bound ``rho`` (balanced) of one exact step ``e`` (a ZOH cache entry) over the true
+        ``dt`` in floating point (:mod:`switchobs_core.numerics.rounding`, steps 2-4): the
+        exponential's proven error ``eps`` and the step quantum ``q`` times ``||x|| <= ||x_hat|| +
+        ||e||`` (``||e||`` from ``ell``, the ellipsoid being stepped), the stored map's rounding
+        times ``||e||``, plus the rounding of the products. ``nu``: the held innovation (None: no
+        gain held); ``u``: the held input (None: zero)."""
+        xs, xs1 = self.xn(x0), self.xn(x1)
+        # the step quantum: the true step is dt (a difference of two doubles: within u dt of it)
+        delta = abs(dt - e.dt) + _U * dt
+        q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
+        en = math.sqrt(ell.lam_scaled())
+        rho = (e.eps + q) * (xs + en) + e.emap * en + self.g_n * e.fPhi * xs + 2.0 * _U * xs1 + self._uf
         if nu is not None:
             nun = math.sqrt(float(nu @ nu))
             rho += self.g_p * e.fGL * nun + e.fGL * self.nu_err
         if u is not None:
             un = math.sqrt(float(u @ u))
-            rho += (e.eps + self.g_n * float(np.linalg.norm(e.GB))) * un
-        return rho
+            rho += (e.epsG * self.fB + self.g_m * e.fGB) * un
+        return rho * (1.0 + 8.0 * _U)
 
-    def rho_correct(self, fK: float, fH: float, xn_minus: float, yn: float, nun: float, xn_plus: float) -> float:
-        """Residual bound of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating point
-        (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u ||y||``)."""
-        u = UNIT_ROUNDOFF
-        return fK * (self.g_n * fH * xn_minus + 2.0 * u * yn) + self.g_p * fK * nun + u * xn_plus
+    def rho_input(self, e: Any, dt: float, d: np.ndarray, x: np.ndarray) -> float:
+        """Residual bound (balanced) of adding an input change's exact ZOH to the estimate,
+        ``x <- x + Gamma(dt) B d`` (:mod:`switchobs_core.runtime.held_input`), with ``e`` the ZOH
+        entry of the step's key at the cached ``e.dt`` and ``dt`` the true time since the change:
+        ``Gamma``'s proven error ``epsG`` and its step quantum
+        ``||Gamma(dt) - Gamma(e.dt)|| <= delta (||Phi|| + eps) e^{||A_b|| delta}`` on ``||D^-1 B d||``,
+        the product ``Gamma B d`` and the difference ``d`` (``gamma_{m+2} + u``), and the sum
+        (``u ||D^-1 x||``, ``x`` after it). The error map does not change: the plant receives the
+        same input, so ``B u`` cancels in the error."""
+        dn = math.sqrt(float(d @ d))
+        delta = abs(dt - e.dt) + _U * dt
+        quant = delta * (e.nPhi + e.eps) * math.exp(min(self.nA * delta, 700.0)) if delta > 0.0 else 0.0
+        rho = ((e.epsG + quant) * self.fB + (self.g_m + _U) * e.fGB) * dn + _U * self.xn(x) + self._uf
+        return rho * (1.0 + 8.0 * _U)
+
+    def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
+                    x_plus: np.ndarray) -> float:
+        """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
+        point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
+        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
+        yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
+        uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
+        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
+                + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
     # ------------------------------------------------------------------ steps
+    def _check(self) -> None:
+        """Withdraw the bound (module docstring) once a set is no longer finite."""
+        if not self.withdrawn and not (self.ell.finite() and (self.ellv is None or self.ellv.finite())):
+            self.withdrawn = ("the rounding bound's ellipsoid overflowed (it is no longer finite); "
+                              "the bounds are withdrawn until the next reset")
+
     def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool) -> tuple | None:
+               keep: bool, absE: tuple | None = None) -> tuple | None:
         """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
         (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
         if GL is not None and self.vn > 0.0:
             if keep:
-                ell.step_shaped(E, rho, GL, self.vn ** 2)
+                ell.step_shaped(E, rho, GL, self.vn ** 2, absM=absE)
                 return None
-            return ell.propagate_shaped(E, rho, GL, self.vn ** 2)
+            return ell.propagate_shaped(E, rho, GL, self.vn ** 2, absM=absE)
         if keep:
-            ell.step(E, rho)
+            ell.step(E, rho, absE)
             return None
-        return ell.propagate(E, rho)
+        return ell.propagate(E, rho, absE)
 
-    def step(self, e: Any, dt: float, xn: float, xn_new: float, nu: np.ndarray | None,
+    def step(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
              u: np.ndarray | None, extra: float = 0.0) -> None:
         """Both ellipsoids through one propagation step ``e`` (a ZOH cache entry) over ``dt``;
-        ``extra``: the residual of what the step added besides (an input changed within it)."""
-        self.ell.step(e.E, self.rho_step(e, dt, xn, xn_new, self.ell, nu, u) + extra)
-        if self.ellv is not None:
-            self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xn_new, self.ellv, nu, u) + extra,
-                        e.GL if nu is not None else None, True)
+        ``extra``: the residual (balanced) of what the step added besides (:meth:`rho_input`)."""
+        if self.withdrawn:
+            return
+        absE = e.abs_E() if hasattr(e, "abs_E") else None
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra, absE)
+            if self.ellv is not None:
+                self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
+                            e.GL if nu is not None else None, True, absE)
+        self._check()
 
-    def propagated(self, e: Any, dt: float, xn: float, xpn: float, nu: np.ndarray | None,
+    def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
                    u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
         (``extra`` as in :meth:`step`)."""
-        S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, xn, xpn, self.ell, nu, u) + extra)
-        Sv = None
-        if self.ellv is not None:
-            Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, xn, xpn, self.ellv, nu, u) + extra,
-                                e.GL if nu is not None else None, False)
+        with np.errstate(over="ignore", invalid="ignore"):
+            S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra)
+            Sv = None
+            if self.ellv is not None:
+                Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
+                                    e.GL if nu is not None else None, False)
         return S, Sv
 
-    def correct(self, M: np.ndarray, rho: float, K: np.ndarray, p: int, channel: int) -> None:
-        """Both ellipsoids through a Kalman correction ``e^+ = M e^- + r + K v`` (``M = I - K H``)."""
-        self.ell.step(M, rho)
-        if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
-            self.ellv.step_shaped(M, rho, K, p * self.noise_max[channel - 1] ** 2)
+    def correct(self, M: np.ndarray, rho: float, K: np.ndarray, H: np.ndarray, p: int, channel: int) -> None:
+        """Both ellipsoids through a Kalman correction ``e^+ = M e^- + r + K v`` with the computed
+        ``M = fl(I - fl(K H))``: it differs from ``I - K H`` by ``gamma_{p+1} (I + |K| |H|)``
+        entrywise, ``gamma_{p+1} kappa`` in the balanced 2-norm, times ``||e^-||``."""
+        if self.withdrawn:
+            return
+        emap = gamma(H.shape[0] + 1) * self.gain_norms(K, H)[2]
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
+            if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
+                self.ellv.step_shaped(M, rho + emap * math.sqrt(self.ellv.lam_scaled()), K,
+                                      p * self.noise_max[channel - 1] ** 2)
+        self._check()
 
-    def fused(self, e: Any, dt: float, m: Any, x0n: float, xmn: float, rc: float,
+    def fused(self, e: Any, dt: float, m: Any, x0: np.ndarray, xm: np.ndarray, rc: float,
               K: np.ndarray, p: int, channel: int, u: np.ndarray | None = None) -> None:
         """Both ellipsoids through a Kalman sample's fused map ``M = (I - K H) e^{A dt}``
         (a :class:`~switchobs_core.bounds.kalman_map.KalmanMap`: ``M S M'`` dense or factored, with its
-        rounding allowance): the prediction's residual (input ``u`` held, None: zero) through
-        ``||I - K H||_2`` plus the correction's ``rc``."""
-        ell = self.ell
-        Z, eta = m.sandwich(ell.S, ell.tr, ell.g_dense)
-        ell.S, ell.tr = ell.propagate_product(Z, eta, m.nIKH * self.rho_step(e, dt, x0n, xmn, ell, None, u) + rc)
-        ellv = self.ellv
-        if ellv is not None:      # e^+ = (I - K H) e^- + K v
-            Z, eta = m.sandwich(ellv.S, ellv.tr, ellv.g_dense)
-            ellv.S, ellv.tr = ellv.propagate_shaped_product(
-                Z, eta, m.nIKH * self.rho_step(e, dt, x0n, xmn, ellv, None, u) + rc, K,
-                p * self.noise_max[channel - 1] ** 2)
+        rounding's ``(w, c)``): the prediction's residual (input ``u`` held, None: zero) through
+        ``||I - K H||_2`` plus the correction's ``rc`` and the dense map's own rounding."""
+        if self.withdrawn:
+            return
+        with np.errstate(over="ignore", invalid="ignore"):
+            for ell, noisy in ((self.ell, False), (self.ellv, True)):
+                if ell is None:
+                    continue
+                rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
+                       + m.emap * math.sqrt(ell.lam_scaled()))
+                Z, w, c, mn = m.sandwich(ell)
+                if noisy:       # e^+ = (I - K H) e^- + K v
+                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K,
+                                                                 p * self.noise_max[channel - 1] ** 2)
+                else:
+                    ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
+        self._check()
 
     # ------------------------------------------------------------------ bounds
     def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,
                amortised: bool = False) -> tuple[float, float | None]:
         """``(exact, noise)``: upper bounds of ``sqrt(lambda_max)`` of the shape matrices (default
         the current ones): the eigenvalue problem's, or with ``amortised`` (current sets only)
-        :mod:`switchobs_core.bounds.read`'s (a verified upper bound per anchor, O(n^2) in between, at most 1.062x
-        larger)."""
-        if amortised and S is None and Sv is None:
-            return self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)
-        exact = self.ell.bound(S)
-        noisy = None if self.ellv is None else self.ellv.bound(Sv)
+        :mod:`switchobs_core.bounds.read`'s (a verified upper bound per anchor, O(n^2) in between,
+        within the factor that module states); ``inf`` for a withdrawn bound (never raises)."""
+        noisy0 = None if self.ellv is None else math.inf
+        if self.withdrawn:
+            return math.inf, noisy0
+        with np.errstate(over="ignore", invalid="ignore"):
+            if amortised and S is None and Sv is None:
+                exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)
+            else:
+                exact = self.ell.bound(S)
+                noisy = None if self.ellv is None else self.ellv.bound(Sv)
+        if not math.isfinite(exact) or (noisy is not None and not math.isfinite(noisy)):
+            if S is None and Sv is None:
+                self.withdrawn = self.withdrawn or ("the rounding bound is no longer finite; the bounds are "
+                                                    "withdrawn until the next reset")
+            return math.inf, noisy0
         return exact, noisy

@@ -197,7 +197,7 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
         raise InvalidArgument("--robust designs LMI gains for any schedule in a box; Kalman gains need a known "
                               "schedule (without one the estimator runs the Riccati recursion online: mode robust)")
     noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
-    kd = design_kalman(system, cycles, args.rate, noise)
+    kd = design_kalman(system, cycles, args.rate, noise, progress=args.progress)
     table = kalman_table(system, [kd])
     args.output = save(table, args.output)
     if args.json:

@@ -56,6 +56,7 @@ from ..ranges import check_size
 from ..table.kalman import KalmanDesign, KalmanPhase, SamplePattern
 from .doubling import solve_periodic_riccati, startup_run
 from .precision import check_covariance, check_unseen, cycles_label, pattern_stretches
+from .progress import StageBar
 from .riccati import Step, discretize, rel_change
 
 __all__ = [
@@ -222,6 +223,7 @@ def design_kalman(
     startup_rtol: float = 1e-11,
     max_startup: int | None = None,
     max_repeat: int = 64,
+    progress: bool | None = False,
 ) -> KalmanDesign:
     """Offline periodic Kalman gains for ``cycles`` (one cycle, or a sequence repeated) at ``rate`` Hz.
 
@@ -234,7 +236,8 @@ def design_kalman(
     from ``P0`` (``startup_rtol``, at most ``max_startup`` samples: default 64 periods, at most what
     :data:`STARTUP_BUDGET_BYTES` of priors hold but at least one period:
     :func:`~switchobs_core.design.doubling.startup_run`);
-    4. the period's error transition.
+    4. the period's error transition. ``progress``: a bar over these steps on stderr (None: on a
+    terminal only; default off).
 
     Raises
     ------
@@ -254,12 +257,15 @@ def design_kalman(
     if not isinstance(noise, NoiseModel):
         raise InvalidArgument(f"noise must be a NoiseModel; got {type(noise).__name__}")
     noise.check_system(system)
+    bar = StageBar(("sample pattern", "detectability", "periodic Riccati (doubling)", "start-up from P0",
+                    "error transition"), progress)
     # 1. sample pattern (of cycles short enough to be represented, see check_cycle_horizon)
     for c in [cycles] if isinstance(cycles, Cycle) else list(cycles):
         if isinstance(c, Cycle):
             check_cycle_horizon(system.A, c)
     pattern = design_pattern(system, cycles, rate, max_repeat=max_repeat, max_startup=max_startup)
     # 2. detectability, and the dynamic range double precision must carry (before the doubling)
+    bar.next()
     check_detectable(system, pattern)
     what = f"the Kalman design of {cycles_label(pattern.cycles)} at {pattern.rate:g} Hz"
     stretches = pattern_stretches(pattern.channels, pattern.blind, pattern.rate, system.N)
@@ -272,8 +278,10 @@ def design_kalman(
     rows = [pattern.rows(k, system) for k in range(K)]
     steps = [Step(Phi, Qd, system.C[c - 1] if r is None else system.C[c - 1][list(r)], noise.R(c, r))
              for c, r in zip(pattern.channels, rows)]
+    bar.next()
     sol = solve_periodic_riccati(steps, rtol=rtol)
     check_covariance(system, sol.P_prior, stretches, what=what)
+    bar.next()
     if max_startup is None:
         max_startup = startup_cap(K, A.shape[0])
     # max_startup = 0: no start-up segment (its distance: P0 from the periodic prior of phase 0)
@@ -284,6 +292,8 @@ def design_kalman(
     startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
                for k, (P, Kk) in enumerate(zip(su_P, su_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
+    bar.next()
     M = sol.transition
+    bar.close()
     return KalmanDesign(system, noise, pattern, periodic, startup, sol.periods, sol.change, M, sol.rho,
                         float(np.linalg.norm(M, 2)), su_change)

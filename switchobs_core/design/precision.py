@@ -17,6 +17,8 @@ is carried to the phases where it is smallest. Its span over the period,
 
     D = \\frac{\\max_k \\lambda_{\\max}(P^-_k)}{\\min_k \\lambda_{\\min}(P^-_k)},
 
+taken in the balanced coordinates of ``(A, C)`` (:func:`state_scale`; the rigorous bound's), so
+that the units of the state do not change it,
 must stay within :data:`PRECISION_RANGE` (:func:`check_covariance`). The camera model with 32
 agents whose modes reach 1/s, every residence 1 s, needs ``D`` about 1e29: its table's
 covariance form lost positive definiteness after 21 s at run time (``S`` with an eigenvalue
@@ -63,6 +65,7 @@ from scipy.linalg import expm
 
 from ..exceptions import PrecisionError
 from ..model.decomposition import unobservable_subspace
+from ..numerics.scaling import balance, balanced
 
 __all__ = [
     "PRECISION_RANGE",
@@ -132,8 +135,9 @@ def exclusive_subspaces(system: Any) -> tuple[tuple[np.ndarray, np.ndarray], ...
     hit = _CACHE.get(key)
     if hit is not None:
         return hit
-    A = np.asarray(system.A, dtype=float)
-    C = [np.asarray(Ci, dtype=float) for Ci in system.C]
+    d = state_scale(system)
+    A = balanced(np.asarray(system.A, dtype=float), d)
+    C = [np.asarray(Ci, dtype=float) * d[None, :] for Ci in system.C]
     out = []
     for rho in range(len(C)):
         others = [Ci for j, Ci in enumerate(C) if j != rho]
@@ -181,6 +185,14 @@ def cycles_label(cycles: Sequence[Any]) -> str:
         else:
             out.append(c.label())
     return "cycle " + "; ".join(out) if len(out) == 1 else "cycles " + "; ".join(out)
+
+
+def state_scale(system: Any) -> np.ndarray:
+    """The balancing ``d`` of ``(A, C)`` (powers of two, :func:`~switchobs_core.numerics.scaling.balance`):
+    spans and growths are measured in the coordinates ``D^-1 x``, so that the units of the state
+    (a diagonal change of coordinates, which floating point carries without loss) do not change
+    them; the rigorous bound works in the same coordinates."""
+    return balance(np.asarray(system.A, dtype=float), np.vstack([np.asarray(Ci, dtype=float) for Ci in system.C]))
 
 
 def _growth(AV: np.ndarray, T: float) -> float:
@@ -248,9 +260,12 @@ def _along(system: Any, v: np.ndarray) -> str:
 
 
 def covariance_span(system: Any, covariances: Sequence[np.ndarray]) -> CovarianceSpan:
-    """The span ``max_k lambda_max / min_k lambda_min`` of ``covariances`` (module docstring), with
-    where its ends lie (inf when a covariance is singular or not finite)."""
+    """The span ``max_k lambda_max / min_k lambda_min`` of ``covariances`` in the balanced coordinates
+    of :func:`state_scale` (module docstring), with where its ends lie (inf when a covariance is
+    singular or not finite)."""
     lo, hi, klo, khi = math.inf, 0.0, 0, 0
+    d = state_scale(system)
+    covariances = [np.asarray(P, dtype=float) / np.outer(d, d) for P in covariances]
     for k, P in enumerate(covariances):
         if not np.all(np.isfinite(P)):
             return CovarianceSpan(math.inf, math.inf, k, "", lo, klo, "")

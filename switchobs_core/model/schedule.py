@@ -20,6 +20,15 @@ Schedules say which channel is active when:
 * :class:`RandomSchedule` -- residence times drawn uniformly from [h_min, h_max]
   (assumption A2), seeded: a test bench for robust designs.
 
+Ties. A time at a switching instant belongs to the channel that starts there, and a time within
+:data:`TIE` (half a nanosecond) before one counts as at it: stamps are whole nanoseconds, and the
+float arithmetic of a time ``t`` (``k / f``, ``t0 + k / f``, ``fmod``) is within ``1e-16 |t|`` of
+its nanosecond, so every schedule method here, the simulators, the Kalman design's sample
+pattern (:func:`~switchobs_core.design.kalman.sample_pattern`, which asks :meth:`Schedule.channel_at`)
+and a stream generated from a schedule assign a sample at a switching instant to one channel, the
+new one. (``fmod(4.2, 2.5)`` is ``1.7000000000000002`` while the design's sample at 1.7 s gives
+``1.7``: without the rule one of them saw the old channel.)
+
 Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
@@ -34,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import ScheduleError
+from ..numerics.scaling import balanced_norm
 from ..validation import as_finite
 
 __all__ = [
@@ -49,6 +59,7 @@ __all__ = [
     "check_cycle_horizon",
     "common_rows",
     "BLIND_TOL",
+    "TIE",
 ]
 
 #: A time within this many seconds before the end of a blind interval counts as seeing (the
@@ -56,20 +67,30 @@ __all__ = [
 #: and the observer: a sample at exactly ``switch + d`` in floating point is not blind).
 BLIND_TOL = 1e-9
 
-#: Largest ``||A||_2 tau`` of a cycle: beyond it ``e^{A tau}`` (the open-loop transition over one
-#: cycle) leaves double precision (``e^709`` overflows), and designs and certificates computed
-#: from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
+#: A time this close before a switching instant is at it (module docstring: ties): half a nanosecond.
+TIE = 0.5e-9
+
+#: Largest ``min(||A||_2, ||A_b||_2) tau`` of a cycle (``A_b`` the balanced ``A``,
+#: :func:`~switchobs_core.numerics.scaling.balanced_norm`): beyond it ``e^{A tau}`` (the open-loop
+#: transition over one cycle) leaves double precision (``e^709`` overflows), and designs and
+#: certificates computed from it are meaningless (a 1e9 s cycle designed and said "converges" with f = 0).
 MAX_NORM_TAU = 600.0
 
 
 def check_cycle_horizon(A: Any, cycle: Cycle, what: str = "--cycle") -> None:
     """Refuse a cycle too long for the system to be represented in floating point
-    (``||A||_2 tau > MAX_NORM_TAU``), naming the longest tau that works."""
-    nA = float(np.linalg.norm(np.asarray(A, dtype=float), 2))
+    (``min(||A||_2, ||A_b||_2) tau > MAX_NORM_TAU``), naming the longest tau that works.
+
+    ``A_b`` is ``A`` in balanced coordinates (:mod:`switchobs_core.numerics.scaling`): its norm
+    bounds the growth rate of ``e^{A t}`` in those coordinates, and it does not depend on the units
+    of the state (a 10 Hz oscillator in SI units has ``||A||_2 = 3.9e3`` from ``omega^2`` alone,
+    and ``||A_b||_2 = 65``); the smaller of the two norms decides."""
+    A = np.asarray(A, dtype=float)
+    nA = min(float(np.linalg.norm(A, 2)), balanced_norm(A)) if A.size else 0.0
     if nA * cycle.tau > MAX_NORM_TAU:
         raise ScheduleError(f"{what} {cycle.label()}: tau = {cycle.tau:g} s is too long for this system: the "
-                            f"transition over one cycle, e^(A tau) with ||A|| = {nA:.3g}, leaves double precision; "
-                            f"use tau <= {MAX_NORM_TAU / nA:.4g} s")
+                            f"transition over one cycle, e^(A tau) with ||A|| = {nA:.3g} (in balanced units), "
+                            f"leaves double precision; use tau <= {MAX_NORM_TAU / nA:.4g} s")
 
 #: Default tolerance of :meth:`Cycle.matches` (relative, absolute in seconds).
 CYCLE_RTOL = 1e-6
@@ -219,21 +240,22 @@ class Schedule:
         return np.asarray(out)
 
     def _locate(self, t: float) -> tuple[Cycle | None, int, float]:
-        """``(cycle, channel, time since the channel's switching instant)`` at ``t``; before t0
-        ``(None, 1, 0.0)``. The one walk over the cycles that :meth:`slot_at` and
-        :meth:`blind_at` share."""
-        t = as_finite(t, "t")
+        """``(cycle, channel, time since the channel's switching instant)`` at ``t`` (the tie rule of
+        the module docstring: the time since may be down to ``-TIE``); before t0 ``(None, 1, 0.0)``.
+        The one walk over the cycles that :meth:`channel_at`, :meth:`slot_at` and :meth:`blind_at`
+        share."""
+        t = as_finite(t, "t") + TIE
         if t < self.t0:
             return None, 1, 0.0
         tt, k = self.t0, 0
-        while True:         # the arithmetic of channel_at, so that both agree at ties
+        while True:
             c = self.cycle(k)
             if t < tt + c.tau:
                 off = t - tt
                 acc = 0.0
                 for i, h in enumerate(c.h):
                     if off < acc + h or i == c.N - 1:
-                        return c, i + 1, off - acc
+                        return c, i + 1, off - acc - TIE
                     acc += h
             tt += c.tau
             k += 1
@@ -250,23 +272,8 @@ class Schedule:
         return c is not None and bool(c.dead_time) and off < c.dead_time - BLIND_TOL
 
     def channel_at(self, t: float) -> int:
-        """The active channel rho(t) in 1..N (channel 1 before t0)."""
-        t = as_finite(t, "t")
-        if t < self.t0:
-            return 1
-        tt, k = self.t0, 0
-        while True:
-            c = self.cycle(k)
-            if t < tt + c.tau:
-                off = t - tt
-                acc = 0.0
-                for i, h in enumerate(c.h):
-                    acc += h
-                    if off < acc:
-                        return i + 1
-                return c.N
-            tt += c.tau
-            k += 1
+        """The active channel rho(t) in 1..N (channel 1 before t0; a tie is the new channel)."""
+        return self._locate(t)[1]
 
 
 class PeriodicSchedule(Schedule):
@@ -287,22 +294,28 @@ class PeriodicSchedule(Schedule):
         """The cycle types of the schedule."""
         return [self._cycle]
 
+    def _offset(self, t: float) -> tuple[int, float]:
+        """``(channel index, time since its switching instant)`` at ``t >= t0``, ties as the module
+        docstring says."""
+        tau = self._cycle.tau
+        off = (t - self.t0) % tau + TIE
+        if off >= tau:
+            off -= tau
+        i = min(max(bisect.bisect_right(self._starts, off) - 1, 0), self._cycle.N - 1)
+        return i, off - self._starts[i] - TIE
+
     def channel_at(self, t: float) -> int:
         if not math.isfinite(t):
             raise ScheduleError(f"t must be a finite time; got {t!r}")
-        if t < self.t0:
+        if t + TIE < self.t0:
             return 1
-        off = (t - self.t0) % self._cycle.tau
-        i = bisect.bisect_right(self._starts, off) - 1
-        return min(max(i, 0), self._cycle.N - 1) + 1
+        return self._offset(t)[0] + 1
 
     def blind_at(self, t: float) -> bool:
         d = self._cycle.dead_time
-        if not d or not math.isfinite(t) or t < self.t0:
+        if not d or not math.isfinite(t) or t + TIE < self.t0:
             return False
-        off = (t - self.t0) % self._cycle.tau
-        i = min(max(bisect.bisect_right(self._starts, off) - 1, 0), self._cycle.N - 1)
-        return off - self._starts[i] < d - BLIND_TOL
+        return self._offset(t)[1] < d - BLIND_TOL
 
 
 class SequenceSchedule(Schedule):

@@ -37,8 +37,9 @@ from numpy.typing import ArrayLike
 
 from ..exceptions import InvalidSystem, UnobservableSystem
 from ..loading import load_yaml, number_matrix
+from ..numerics.scaling import balance, balanced
 from ..validation import MAX_ABS_SYSTEM_ENTRY, as_matrix
-from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposition
+from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposition, unobservable_subspace
 
 __all__ = ["LTISystem", "ChannelInfo", "read_spec"]
 
@@ -228,19 +229,36 @@ class LTISystem:
             raise InvalidSystem(f"channel must be an integer in 1..{self.N}; got {channel!r}")
 
     def _check_a1(self) -> None:
-        d = observability_decomposition(self.A, self.C_stacked, rtol=self.rtol)
-        if d.r < self.n:
-            dirs = []
-            for k in range(d.T_u.shape[1]):
-                v = d.T_u[:, k]
-                terms = [f"{v[j]:+.3g}*{self.state_labels[j]}" for j in np.argsort(-np.abs(v))[:4] if abs(v[j]) > 1e-6]
-                dirs.append(" ".join(terms))
-            modes = ", ".join(f"{z:.4g}" for z in np.sort_complex(d.unobservable_eigenvalues))
-            raise UnobservableSystem(
-                f"assumption A1 fails for {self.name}: (A, [C_1; ...; C_{self.N}]) has observable "
-                f"dimension {d.r} < n = {self.n}. Unobservable direction(s): {'; '.join(dirs)}. "
-                f"Unobservable mode(s): {modes}. Add a channel that measures them."
-            )
+        """A1 decided in balanced coordinates, so that the units of the state do not decide it.
+
+        ``A_b = D^{-1} A D`` (:func:`~switchobs_core.numerics.scaling.balance`, powers of two: exact)
+        and ``C_b = C D`` with every row scaled to unit norm (the kernel of ``C`` does not depend on
+        the rows' units); the unobservable subspace ``V_b`` of ``(A_b, C_b)`` is ``A_b``-invariant,
+        so the modes named are the eigenvalues of ``V_b' A_b V_b`` (eigenvalues of ``A``), and the
+        directions named are the columns of ``D V_b`` in the user's units, each of unit norm. A
+        rank tolerance relative to ``||A||_2`` instead hides the slow modes of a system whose
+        entries span 1e-6..1e6 and names directions that are not invariant."""
+        d = balance(self.A)
+        Ab = balanced(self.A, d)
+        Cb = self.C_stacked * d[None, :]
+        rn = np.linalg.norm(Cb, axis=1)
+        Cb = Cb[rn > 0] / rn[rn > 0, None]
+        Vb = unobservable_subspace(Ab, Cb, rtol=self.rtol)
+        if Vb.shape[1] == 0:
+            return
+        dirs = []
+        for k in range(Vb.shape[1]):
+            v = d * Vb[:, k]
+            v = v / np.linalg.norm(v)
+            v = v if v[np.argmax(np.abs(v))] > 0 else -v
+            terms = [f"{v[j]:+.3g}*{self.state_labels[j]}" for j in np.argsort(-np.abs(v))[:4] if abs(v[j]) > 1e-6]
+            dirs.append(" ".join(terms))
+        modes = ", ".join(f"{z:.4g}" for z in np.sort_complex(np.linalg.eigvals(Vb.T @ Ab @ Vb)))
+        raise UnobservableSystem(
+            f"assumption A1 fails for {self.name}: (A, [C_1; ...; C_{self.N}]) has observable "
+            f"dimension {self.n - Vb.shape[1]} < n = {self.n}. Unobservable direction(s): {'; '.join(dirs)}. "
+            f"Unobservable mode(s): {modes}. Add a channel that measures them."
+        )
 
     # ----------------------------------------------------------- identity
     def fingerprint(self) -> str:

@@ -55,7 +55,8 @@ from scipy.linalg import expm
 
 from ..exceptions import InvalidArgument
 from ..validation import as_matrix
-from .rounding import expm_error, fro_norm, gamma
+from .expm_bound import certify_zoh, expm_error_bound, nu
+from .rounding import UNIT_ROUNDOFF, fro_norm, gamma
 
 __all__ = [
     "zoh_pair",
@@ -155,21 +156,59 @@ def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.n
 
 class ZOHEntry:
     """One cached step: ``Phi``, ``Gamma``, the input products ``GL = Gamma L``, ``GB = Gamma B``,
-    and the error map ``E`` of the step (module docstring)."""
+    and the error map ``E`` of the step (module docstring), with what the rigorous bound reads
+    of them in the balanced coordinates of ``scale`` (:mod:`switchobs_core.numerics.scaling`; a
+    matrix ``X`` there is ``D^{-1} X D``, a gain ``D^{-1} G``):
 
-    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "fPhi", "fGL", "sparse")
+    ``eps``, ``epsG``
+        proven bounds of ``||Phi - e^{M dt}||_2`` and ``||Gamma - Gamma(dt)||_2`` there
+        (:mod:`switchobs_core.numerics.expm_bound`);
+    ``fPhi``, ``nPhi``, ``fGL``, ``fGB``
+        ``||Phi||_F``, a bound of ``||Phi||_2``, ``||GL||_F``, ``||GB||_F`` there;
+    ``emap``
+        a bound of ``||E - (Phi - GL C)||_2`` there: the rounding of the stored error map
+        against the exact one of the computed matrices (0 when ``E`` is ``Phi``).
+    """
 
-    def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0):
-        self.eps = eps           # bound on ||Phi - e^{M dt}||_F (rounding.expm_error)
-        self.fPhi = fro_norm(Phi)                           # Frobenius norms for the
-        self.fGL = 0.0 if GL is None else fro_norm(GL)     # rounding bound
+    __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "epsG", "fPhi", "nPhi", "fGL", "fGB", "emap",
+                 "scale", "sparse", "_absE")
+
+    def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0, *, epsG=0.0, scale=None, C=None):
+        n = Phi.shape[0]
+        d = np.ones(n) if scale is None else scale
+        self.scale = d
+        self.eps = eps           # bound on ||Phi - e^{M dt}||_2, balanced (expm_bound)
+        self.epsG = epsG
+        Ps = scaled(Phi, d)
+        self.fPhi = fro_norm(Ps)
+        self.nPhi = nu(Ps)
+        self.fGL = 0.0 if GL is None else fro_norm(GL / d[:, None])
+        self.fGB = 0.0 if GB is None else fro_norm(GB / d[:, None])
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
         self.GB = GB
         self.dt = dt
         self.E = Phi if E is None else E
+        self.emap = 0.0
+        if E is not None and C is not None and GL is not None:
+            # E = fl(Phi - fl(GL C)): gamma_p |GL| |C| + u |E| entrywise
+            self.emap = (gamma(GL.shape[1] + 1) * nu(GL / d[:, None]) * nu(C * d[None, :])
+                         + 2.0 * UNIT_ROUNDOFF * nu(scaled(E, d))) * (1.0 + 8.0 * UNIT_ROUNDOFF)
         self.sparse = False      # Phi's sparse form, None if dense (kalman_map.sparse_transition)
+        self._absE = None
+
+    def abs_E(self) -> tuple[np.ndarray, float]:
+        """``(|E|, ||E||_inf)`` (kept: the rigorous bound's step reads them every sample)."""
+        if self._absE is None:
+            aE = np.abs(self.E)
+            self._absE = (aE, float(aE.sum(axis=1).max()) if aE.size else 0.0)
+        return self._absE
+
+
+def scaled(X: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``D^{-1} X D`` (exact for powers of two)."""
+    return (X / d[:, None]) * d[None, :]
 
 
 def split_step(dtq: float, dt_resolution: float | None) -> tuple[int, float]:
@@ -234,6 +273,9 @@ class ZOHCache:
         Number of entries kept (least recently used evicted first). Default 64.
     dt_resolution : float or None, optional
         Step quantum in seconds (see the module docstring). Default 1e-9.
+    scale : (n,) ndarray, optional
+        The balancing (:func:`~switchobs_core.numerics.scaling.balance`) in which each entry's
+        bounds are taken (default: none, the user's units).
 
     Notes
     -----
@@ -241,7 +283,8 @@ class ZOHCache:
     then obtained with :meth:`step`. The counters ``hits`` and ``misses`` are public.
     """
 
-    def __init__(self, maxsize: int = 64, dt_resolution: float | None = DEFAULT_DT_RESOLUTION):
+    def __init__(self, maxsize: int = 64, dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
+                 scale: np.ndarray | None = None):
         if int(maxsize) < 1:
             raise InvalidArgument(f"maxsize must be >= 1; got {maxsize}")
         if dt_resolution is not None and not dt_resolution > 0:
@@ -250,7 +293,7 @@ class ZOHCache:
         self.dt_resolution = dt_resolution
         self._inv_res = None if dt_resolution is None else 1.0 / dt_resolution
         self._gains: dict[Hashable, tuple] = {}
-        self._checked: set = set()
+        self._scale = None if scale is None else np.asarray(scale, dtype=float)
         self._consts: dict = {}
         self._lru: OrderedDict = OrderedDict()
         self.hits = 0
@@ -327,47 +370,62 @@ class ZOHCache:
     def _compose(self, base: ZOHEntry, M, L, B, C, r: float, dtq: float) -> ZOHEntry:
         """``e^{M dtq} = e^{M a} e^{M r}`` (``a = dtq - r`` the base's step), ``Gamma(dtq) = e^{M a}
         Gamma(r) + Gamma(a)``, with ``e^{M r} = sum_k (M r)^k / k!`` and ``Gamma(r) = r sum_k (M r)^k /
-        (k+1)!`` to degree ``m``. The entry's ``eps`` bounds ``||Phi - e^{M dtq}||_F``: the base's own
-        ``eps``, the Taylor tail ``x^{m+1}/(m+1)! / (1 - x/(m+2))`` (``x = ||M||_F r``), the sum's
-        rounding ``gamma_{m(n+2)+2} (sqrt(n) + e^x)`` and the product's ``gamma_{n+1} ||.||_F ||.||_F``."""
+        (k+1)!`` to degree ``m``. The entry's ``eps`` bounds ``||Phi - e^{M dtq}||_2`` in balanced
+        coordinates (every norm here is taken there): the base's own ``eps``, the Taylor tail
+        ``x^{m+1}/(m+1)! / (1 - x/(m+2))`` (``x = ||M||_F r``), the sum's rounding ``gamma_{m(n+2)+2}
+        (sqrt(n) + e^x)`` and the product's ``gamma_{n+1} ||.||_F ||.||_F``; ``epsG`` likewise for
+        ``Gamma`` (the base's ``epsG``, ``r`` times the Taylor sum's tail and rounding)."""
         n = M.shape[0]
         m = COMPOSE_DEGREE
         Ps, Gs = taylor_pair(M, r)
+        d = base.scale
         consts = self._consts.get(id(M))
         if consts is None or consts[0] is not M:     # ||M||_F and the gammas, per registered M
-            consts = self._consts[id(M)] = (M, fro_norm(M), math.factorial(m + 1), gamma(m * (n + 2) + 2),
+            consts = self._consts[id(M)] = (M, fro_norm(scaled(M, d)), math.factorial(m + 1), gamma(m * (n + 2) + 4),
                                             gamma(n + 1), gamma(4))
         _, nM, fact, g_sum, g_n1, g_4 = consts
         x = nM * r
         tail = x ** (m + 1) / fact / (1.0 - x / (m + 2))
         rnd = g_sum * (math.sqrt(n) + math.exp(x))
-        nPs, nPb = fro_norm(Ps), base.fPhi          # fPhi is ||base.Phi||_F, computed the same way
+        nPs, nPb = fro_norm(scaled(Ps, d)), base.fPhi
         Phi = base.Phi @ Ps
         # (a + r) is dtq up to the rounding of the two floats: that step difference, too
         split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)
         eps = (base.eps * (nPs + tail + rnd) + nPb * (tail + rnd) + g_n1 * nPb * nPs
                + split * nM * nPb * nPs * math.exp(nM * split)) * (1 + g_4)
-        Gamma = None
+        Gamma = epsG = None
         if base.Gamma is not None:
             Gamma = base.Phi @ Gs + base.Gamma
+            nGs, nGb = fro_norm(scaled(Gs, d)), fro_norm(scaled(base.Gamma, d))
+            eg = r * (tail + rnd)
+            epsG = (base.eps * (nGs + eg) + nPb * eg + base.epsG + g_n1 * (nPb * nGs + nGb)
+                    + split * (nPb + base.eps) * (nPs + tail + rnd) * math.exp(nM * split)) * (1 + g_4)
         GL = None if L is None else Gamma @ L
         E = None if C is None or GL is None else Phi - GL @ C
-        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
+        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps,
+                        epsG=0.0 if epsG is None else epsG, scale=d, C=C)
 
     def _exact(self, key: Hashable, M, L, B, C, dtq: float) -> ZOHEntry:
-        """The step over ``dtq`` by ``scipy.linalg.expm`` (the joint pair for a gain key)."""
+        """The step over ``dtq`` by ``scipy.linalg.expm`` (the joint pair for a gain key), its error
+        proven per (key, step) by :func:`~switchobs_core.numerics.expm_bound.certify_zoh` in balanced
+        coordinates (``Gamma``'s too when an input is registered)."""
         if L is None and B is None:      # open loop, no input: Phi alone (half the expm size)
             Phi, Gamma = expm(M * dtq), None
         else:
             Phi, Gamma = zoh_pair(M, dtq)
         GL = None if L is None else Gamma @ L
         E = None if C is None or GL is None else Phi - GL @ C
-        # the exponential's error: checked against extended precision at a key's first step
-        # (rounding.expm_error), the model alone after that (a new step per sample under jitter)
-        first = key not in self._checked
-        self._checked.add(key)
-        eps = expm_error(M, dtq, Phi, check=first)
-        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps)
+        d = self._scale_for(M.shape[0])
+        cert = certify_zoh(scaled(M, d), dtq, gamma_too=B is not None and Gamma is not None)
+        eps = expm_error_bound(scaled(Phi, d), cert.E, cert.dE)
+        epsG = expm_error_bound(scaled(Gamma, d), cert.G, cert.dG) if cert.G is not None else 0.0
+        return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps, epsG=epsG, scale=d, C=C)
+
+    def _scale_for(self, n: int) -> np.ndarray:
+        """The balancing the entries' bounds are taken in (ones when none was given)."""
+        if self._scale is None or self._scale.shape[0] != n:
+            return np.ones(n)
+        return self._scale
 
     def clear(self) -> None:
         """Drop every cached step (registered gains are kept)."""

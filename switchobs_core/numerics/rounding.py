@@ -6,6 +6,15 @@ while the contraction makes ``||Phi|| e0`` shrink without limit (0.49x per cycle
 gains, much faster for Kalman gains), so after a while it falls below the computed error. This
 module keeps a bound that stays valid.
 
+Coordinates. Everything below is done in the balanced coordinates ``z = D^{-1} e`` of
+:mod:`switchobs_core.numerics.scaling` (``D`` diagonal, powers of two, from ``A``): a map ``M``
+is ``D^{-1} M D`` there, a vector ``x`` is ``D^{-1} x``, and every norm named below is taken there
+(written ``||.||_D``). The change is exact in floating point, so the ellipsoid is kept in the
+user's units (``S`` with ``{e : e' S^-1 e <= 1}``) and the bound is read there, while no residual
+or allowance depends on the units of the state: a position in metres beside a velocity in m/s
+(``||A||_2 = 3.9e3`` for a 10 Hz oscillator, 65 balanced) gives the same bound as the same
+system in balanced units.
+
 Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
 ------------------------------------------------------------------------------
 1. Every step the observer applies is affine in the estimate with matrices it computed:
@@ -13,42 +22,64 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
    ``x_hat^- = fl(Phi~ x_hat)``, ``x_hat^+ = fl(x_hat^- + K (y - H x_hat^-))`` (Kalman). The true
    state moves by the exact ``Phi = e^{A dt}`` over the true step ``dt``.
 2. Subtracting, the error ``e = x_hat - x`` obeys ``e_{k+1} = M_k e_k + r_k`` with ``M_k`` the step's
-   error map built from the computed matrices (``Phi~ - G~ C`` or ``(I - K H) Phi~``; it is what
-   the observer multiplies into ``Phi``) and the residual
+   error map of the computed matrices (``Phi~ - G~ C`` or ``(I - K H) Phi~``) and the residual
    ``r_k = (Phi~ - Phi) x_k + delta_k`` (times ``I - K H`` for Kalman), where ``delta_k`` is the
-   rounding of the step's arithmetic.
-3. ``||Phi~ - Phi|| <= eps_Phi`` (:func:`expm_error`: the matrix exponential's own error, from a
-   model checked against an extended-precision recomputation, plus the step quantum's
-   ``|dt - dt_q| ||A|| e^{||A|| dt}``), and ``||x_k|| <= ||x_hat_k|| + ||e_k||``.
-4. ``||delta_k||`` follows from the standard model of floating point,
+   rounding of the step's arithmetic. The map the ellipsoid is stepped with, ``M~``, is itself
+   computed: ``(M - M~) e`` joins the residual with ``||M - M~||_D`` bounded entrywise.
+3. ``||Phi~ - Phi||_D <= eps + q``: ``eps`` the matrix exponential's error, *proven* for every
+   (key, step) by :func:`~switchobs_core.numerics.expm_bound.certify_zoh` (a certified scaling and
+   squaring; a step composed from a cached one adds its Taylor remainder and rounding,
+   :meth:`~switchobs_core.numerics.propagation.ZOHCache.step`), and ``q`` the step quantum: the
+   propagated step ``dt_q`` differs from the true ``dt`` by ``delta`` and
+   ``e^{A dt} - e^{A dt_q} = e^{A dt_q} (e^{A (dt - dt_q)} - I)``, so
+   ``q <= (||Phi~||_D + eps) (e^{||A||_D delta} - 1)`` (the map difference itself, not
+   ``e^{||A|| dt}``). With ``x_k = x_hat_k - e_k``: ``||(Phi~ - Phi) x_k||_D <= (eps + q)
+   (||x_hat_k||_D + ||e_k||_D)``, and ``||e_k||_D <= sqrt(trace_D S_k)`` (:meth:`ErrorEllipsoid.lam_scaled`;
+   the loop this closes has gain ``eps + q``, about ``1e-13``).
+4. ``delta_k`` follows from the standard model of floating point,
    ``|fl(A x) - A x| <= gamma_m |A| |x|`` with ``gamma_m = m u / (1 - m u)`` and ``u = 2^-53``,
-   applied to each product and sum of the step (:func:`gamma`; the absolute matrices' Frobenius
-   norms bound ``|| |A| |x| ||``).
-5. With ``||r_k|| <= rho_k``, the set of possible errors stays inside the ellipsoid
-   ``{e : e' S^-1 e <= 1}`` if ``S_{k+1} = (1 + a) M S M' + (1 + 1/a) rho^2 I`` for any ``a > 0``
-   (the outer ellipsoid of the sum of an ellipsoid and a ball); ``a = rho / sqrt(lambda_max(M S M'))``
-   is the best choice for the largest axis, and ``S_0 = e0^2 I``. Then
-   ``||e_k|| <= sqrt(lambda_max(S_k))``. Without rounding (``rho = 0``) this is exactly
-   ``||Phi|| e0``.
-6. ``S`` itself is computed in floating point: each step adds ``eta I`` with
-   ``eta = gamma_{2n+2} n ||M||_F^2 ||S||_F`` (and the same allowance for the ball term), which
-   dominates the rounding of ``M S M'`` elementwise, so the computed ``S`` stays an upper bound
-   in the PSD order.
+   applied to each product and sum of the step (:func:`gamma`); entrywise bounds are the same in
+   any diagonal units, and ``|| |A| |x| ||_D <= ||A||_{F,D} ||x||_D``.
+5. With ``||r_k||_D <= rho_k`` the residual lies in the ellipsoid ``E(rho^2 D^2)``, and the set of
+   possible errors stays inside ``{e : e' S^-1 e <= 1}`` if
+   ``S_{k+1} = (1 + a) M S M' + (1 + 1/a) rho^2 D^2`` for any ``a > 0`` (the outer ellipsoid of a
+   sum); ``a = rho / sqrt(trace_D(M S M'))`` aims at the largest axis, and ``S_0 = e0^2 I``. Then
+   ``||e_k|| <= sqrt(lambda_max(S_k))``. Without rounding (``rho = 0``) this is exactly ``||Phi|| e0``.
+6. ``S`` itself is computed in floating point, exactly symmetric (``(Z + Z') / 2``), and positive
+   semidefinite (it dominates a PSD matrix), so ``|S_ij| <= s_i s_j`` with ``s = sqrt(diag S)``. The
+   computed ``Z = fl(M S M')`` then has ``|Z - M S M'| <= c w w'`` entrywise with ``w = |M| s`` and
+   ``c = gamma_{2n+2}`` (two products and the symmetrisation), and for any symmetric ``X`` with
+   ``|X| <= c w w'``: ``x' X x <= c (sum_i w_i |x_i|)^2 <= c W sum_i w_i d_i x_i^2`` (Cauchy-Schwarz
+   with weights ``w_i / (d_i W)``, ``W = sum_j w_j / d_j``). So ``Z + c W diag(w d)`` contains
+   ``M S M'`` in the PSD order: an allowance in the shape of the step's image of the ellipsoid,
+   the same in any units, which the next step does not amplify beyond that image (an isotropic
+   ``gamma n ||M||_F^2 trace S I`` is amplified by ``||M||^2`` by the next step: 4e6 for a Kalman
+   gain in SI units). The scalings and sums of step 5 are rounded too: relative ``u`` entrywise,
+   dominated the same way and on the diagonal.
 
 7. Bounded measurement noise ``|v_j| <= v_max`` (``noise_max`` of the observer): the noise
    enters as ``G v`` (LMI: ``G = Gamma_A L``, the held innovation's gain; Kalman: ``G = K``)
-   with ``||v||^2 <= p v_max^2``, inside the degenerate ellipsoid ``E(p v_max^2 G G')``. The
-   outer ellipsoid of ``E(S1) + E(S2)`` is ``E((1 + a) S1 + (1 + 1/a) S2)`` for any ``a > 0``
-   (``S2`` may be singular; ``a = sqrt(tr S2 / tr S1)`` minimises the trace), and the ball of
-   step 5 joins ``S2`` the same way (:meth:`ErrorEllipsoid.propagate_shaped`). A second
-   ellipsoid kept this way bounds the error under any noise in the box: the *noise bound*.
+   with ``||v||^2 <= p v_max^2``, inside the degenerate ellipsoid ``E(p v_max^2 G G')`` (its rounding
+   bounded like step 6 with the row norms of ``G``). The outer ellipsoid of ``E(S1) + E(S2)`` is
+   ``E((1 + a) S1 + (1 + 1/a) S2)`` for any ``a > 0`` (``S2`` may be singular; ``a =
+   sqrt(trace_D S2 / trace_D S1)`` minimises the trace in balanced units), and the ball of step 5
+   joins ``S2`` the same way (:meth:`ErrorEllipsoid.propagate_shaped`). A second ellipsoid kept
+   this way bounds the error under any noise in the box: the *noise bound*.
 
-Cost: two n x n products per step (like the transition product itself), one eigenvalue
-problem when the bound is read. A Kalman sample with a sparse ``e^{A dt}`` takes step 6's
-product in factors, O(n^2 p), with its own allowance (:mod:`switchobs_core.bounds.kalman_map`), and from 40 states on
-the bound is read in O(n^2) between verified anchors (:mod:`switchobs_core.bounds.read`). ``sqrt(trace S)``
-(cheaper, larger) bounds ``||e_k||`` inside
-``rho``.
+8. Underflow. The model of step 4 holds for normal numbers; a product that underflows errs by up
+   to ``eta / 2`` absolutely (``eta = 2^-1074``, the smallest subnormal; sums of subnormals are
+   exact). A decaying system reaches that range in the shape matrix first (``S`` holds squared
+   errors: a bound of 1e-154 is ``S ~ 1e-308``), so every step adds an absolute allowance too:
+   ``(n + 4) n eta (1 + ||M||_inf)`` on the diagonal of ``S`` (each entry of ``fl(M S M')`` off by at
+   most ``n eta (1 + ||M||_inf) / 2``, dominated by ``n`` times that on the diagonal) and the
+   residuals' ``eta`` terms (:data:`UNDERFLOW`). The bound then never falls below about
+   ``n sqrt(eta) = n 2.2e-162``.
+
+Cost: two n x n products per step (like the transition product itself) and O(n^2) for the
+allowances, one eigenvalue problem when the bound is read. A Kalman sample with a sparse
+``e^{A dt}`` takes step 6's product in factors, O(n^2 p), with its own ``c`` and ``w``
+(:mod:`switchobs_core.bounds.kalman_map`), and from 40 states on the bound is read in O(n^2)
+between verified anchors (:mod:`switchobs_core.bounds.read`).
 """
 
 from __future__ import annotations
@@ -62,16 +93,14 @@ try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without it
 except ImportError:     # pragma: no cover - another numpy layout: the public function
     _eigvalsh_lo = None
 
-__all__ = ["UNIT_ROUNDOFF", "EXPM_ULPS", "gamma", "expm_error", "expm_extended", "ErrorEllipsoid",
-           "verify_against_extended"]
+__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "verify_against_extended"]
 
 #: Unit roundoff of IEEE double precision, ``u = 2^-53``.
 UNIT_ROUNDOFF = 2.0**-53
-#: Model of ``scipy.linalg.expm``'s accuracy for ``||M dt||_1 <= 1``: the computed exponential is
-#: within ``EXPM_ULPS * n * u * ||e^{M dt}||_F`` of the exact one (Frobenius norm). Checked against
-#: :func:`expm_extended` by :func:`expm_error` (and in the tests); a larger measured difference
-#: is used instead, times 4.
-EXPM_ULPS = 64.0
+_U = UNIT_ROUNDOFF
+#: The smallest subnormal double, ``2^-1074``: the absolute error of an underflowing product is at
+#: most half of it (module docstring, step 8).
+UNDERFLOW = 2.0**-1074
 
 
 def gamma(m: int) -> float:
@@ -82,7 +111,8 @@ def gamma(m: int) -> float:
 
 def expm_extended(M: np.ndarray, dt: float) -> np.ndarray:
     """``e^{M dt}`` in extended precision (``np.longdouble``): scaling and squaring of a Taylor
-    series summed to below the extended precision's unit roundoff."""
+    series summed to below the extended precision's unit roundoff (a reference for tests and
+    :func:`verify_against_extended`; the bound itself never uses it)."""
     X = np.asarray(M, dtype=np.longdouble) * np.longdouble(dt)
     nrm = float(np.abs(X).sum(axis=0).max()) if X.size else 0.0
     s = max(0, int(math.ceil(math.log2(nrm))) + 1) if nrm > 0.5 else 0
@@ -101,160 +131,194 @@ def expm_extended(M: np.ndarray, dt: float) -> np.ndarray:
     return E
 
 
-def expm_error(M: np.ndarray, dt: float, Phi: np.ndarray, *, check: bool = True) -> float:
-    """Upper bound on ``||Phi - e^{M dt}||_F`` for the computed ``Phi`` (see :data:`EXPM_ULPS`).
+def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(|M|, ||M||_inf)``."""
+    aM = np.abs(M)
+    return aM, float(aM.sum(axis=1).max()) if aM.size else 0.0
 
-    Without ``check``: the model's ``EXPM_ULPS n u ||Phi||_F``. With ``check``: 4 times the
-    measured difference to :func:`expm_extended` plus that computation's own allowance (at least
-    ``n u ||Phi||_F``). On a platform whose ``longdouble`` is plain double the check is not
-    possible and the model, doubled, is used.
-    """
-    n = Phi.shape[0]
-    nphi = float(np.linalg.norm(Phi))
-    model = EXPM_ULPS * n * UNIT_ROUNDOFF * nphi
-    if not check:
-        return model
-    if np.finfo(np.longdouble).eps >= UNIT_ROUNDOFF:
-        return 2.0 * model
-    ref = expm_extended(M, dt)
-    diff = float(np.linalg.norm(np.asarray(Phi, dtype=np.longdouble) - ref))
-    own = 64.0 * n * float(np.finfo(np.longdouble).eps) * nphi
-    measured = 4.0 * (diff + own)
-    if measured > model:    # the model did not hold for this step: say so in its place
-        return measured
-    return max(measured, n * UNIT_ROUNDOFF * nphi)
+
+def _clamp(a: float) -> float:
+    """A coefficient of an outer sum kept in ``[2^-40, 1e150]`` (any ``a > 0`` is valid; from
+    ``2^-40`` on, ``fl(1 + a) - 1`` is exact and positive)."""
+    return min(max(a, 2.0**-40), 1e150)
 
 
 class ErrorEllipsoid:
     """``S`` of the module docstring: ``||e|| <= sqrt(lambda_max(S))``, updated per affine step.
 
-    ``ell = ErrorEllipsoid(n, e0)``; ``ell.step(M, rho)`` after each step with error map ``M``
-    and residual bound ``rho``; ``ell.bound()`` (tight, an eigenvalue problem) or
-    ``ell.trace_bound()`` (cheap, larger).
+    ``ell = ErrorEllipsoid(n, e0, scale=d)`` (``d`` the balancing of
+    :func:`~switchobs_core.numerics.scaling.balance`, default no scaling); ``ell.step(M, rho)`` after
+    each step with error map ``M`` and a residual ``r`` with ``||D^{-1} r|| <= rho``; ``ell.bound()``
+    (an eigenvalue problem) or ``ell.trace_bound()`` (cheap, larger).
     """
 
-    def __init__(self, n: int, e0: float):
+    def __init__(self, n: int, e0: float, scale: np.ndarray | None = None):
         self.n = int(n)
+        self.d = np.ones(self.n) if scale is None else np.asarray(scale, dtype=float)
+        self._d2 = self.d * self.d                  # exact: powers of two
+        self._id2 = 1.0 / self._d2
+        self._id = 1.0 / self.d
         self.S = (float(e0) ** 2) * np.eye(self.n)
-        self.tr = float(np.trace(self.S))          # trace S >= ||S||_F >= lambda_max (S is PSD)
-        self._g = gamma(2 * self.n + 2) * self.n
-        self._diag = np.arange(self.n) * (self.n + 1)
+        self.tr = float(np.trace(self.S))           # >= trace S >= lambda_max (S is PSD)
         self._ii = np.arange(self.n)
+        self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
+        self.c_dense = gamma(2 * self.n + 2)
 
-    def propagate(self, M: np.ndarray, rho: float, fM2: float | None = None) -> tuple[np.ndarray, float]:
-        """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it. ``fM2`` is
-        ``||M||_F^2`` if the caller has it."""
-        S = M @ self.S @ M.T
-        if fM2 is None:
-            fM2 = float(np.dot(M.ravel(), M.ravel()))
-        # 6. rounding of M S M': an elementwise-dominating allowance on the diagonal (||S||_F <= trace S)
-        return self.propagate_product(S, self._g * fM2 * self.tr, rho)
+    # ------------------------------------------------------------------ helpers
+    def lam_scaled(self, S: np.ndarray | None = None) -> float:
+        """``>= lambda_max(D^-1 S D^-1)``: its trace (``S`` is PSD), O(n)."""
+        S = self.S if S is None else S
+        return max(float(np.diagonal(S) @ self._id2), 0.0) * self._gsum
 
-    @property
-    def g_dense(self) -> float:
-        """The factor of step 6's allowance: ``eta = g_dense ||M||_F^2 trace S``."""
-        return self._g
+    def image_bound(self, absM: np.ndarray) -> np.ndarray:
+        """``w >= |M| s`` (``s = sqrt(diag S)``) for ``absM = |M|``: step 6's vector."""
+        s = np.sqrt(np.maximum(np.diagonal(self.S), 0.0))
+        return (absM @ s) * (self._gsum * (1.0 + 2.0 * _U))
 
-    def propagate_product(self, S: np.ndarray, eta: float, rho: float) -> tuple[np.ndarray, float]:
-        """:meth:`propagate` from a product taken elsewhere: ``S`` (overwritten) with ``S + eta I``
-        containing ``M S_k M'`` (:class:`~switchobs_core.bounds.kalman_map.KalmanMap`'s factored form)."""
-        lam = float(S.trace()) + self.n * eta      # >= lambda_max(M S M' + eta I)
-        if rho > 0.0:
-            # 5. outer ellipsoid of (ellipsoid + ball)
-            if lam > 0.0:
-                r = math.sqrt(lam)
-                S *= 1.0 + rho / r                       # (1 + a) with a = rho / r
-                eta *= 1.0 + rho / r
-                lam *= 1.0 + rho / r
-                eta += rho * rho + rho * r               # (1 + 1/a) rho^2, without overflow
-            else:
-                eta += rho * rho
-        # the rounding of the scaling and the sums: entrywise relative 4u, dominated on the diagonal
-        eta += 4.0 * UNIT_ROUNDOFF * lam
-        eta *= 1.0 + 4.0 * UNIT_ROUNDOFF
-        S[self._ii, self._ii] += eta      # in place whatever S's layout (a reshape could copy)
-        return S, (lam + self.n * eta) * (1.0 + 4.0 * self.n * UNIT_ROUNDOFF)
+    def _diag(self, w: np.ndarray, c: float) -> np.ndarray:
+        """``c W (w d)``, ``W = sum_j w_j / d_j``: the diagonal dominating (in the PSD order) a
+        symmetric matrix bounded entrywise by ``c w w'`` (step 6), rounded up."""
+        W = float(w @ self._id) * self._gsum
+        return (c * W) * (w * self.d) * (1.0 + 4.0 * _U)
 
-    def step(self, M: np.ndarray, rho: float, fM2: float | None = None) -> None:
-        """Apply one step: ``e <- M e + r`` with ``||r|| <= rho``."""
-        self.S, self.tr = self.propagate(M, rho, fM2)
+    # ------------------------------------------------------------------ steps
+    def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
+        """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it; ``absM`` is
+        ``(|M|, ||M||_inf)`` if the caller keeps them."""
+        Z = M @ self.S @ M.T
+        aM, mn = _abs(M) if absM is None else absM
+        return self.propagate_product(Z, self.image_bound(aM), self.c_dense, rho, mn)
+
+    def propagate_product(self, Z: np.ndarray, w: np.ndarray, c: float, rho: float,
+                          mn: float) -> tuple[np.ndarray, float]:
+        """:meth:`propagate` from a product taken elsewhere: ``Z`` (overwritten) with
+        ``|Z - M S M'| <= c w w'`` entrywise before its symmetrisation here, up to underflow, and
+        ``mn >= ||M||_inf`` (:class:`~switchobs_core.bounds.kalman_map.KalmanMap`'s factored form)."""
+        return self._assemble(Z, w, c, rho, None, mn)
 
     def propagate_shaped(self, M: np.ndarray, rho: float, G: np.ndarray, c: float,
-                         GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-        """The next ``(S, trace S)`` for ``e <- M e + r + G v`` with ``||r|| <= rho`` and
+                         GGt: np.ndarray | None = None, absM: tuple | None = None) -> tuple[np.ndarray, float]:
+        """The next ``(S, trace S)`` for ``e <- M e + r + G v`` with ``||D^{-1} r|| <= rho`` and
         ``||v||^2 <= c`` (module docstring, step 7): the added set is the degenerate ellipsoid
-        ``E(c G G')`` plus the ball, so the noise fills only the directions ``G`` reaches (an
-        isotropic ball of radius ``||G|| sqrt(c)`` instead is 20-30x looser for the paper's
-        gains). ``GGt`` is ``G G'`` if the caller has it (its float rounding is allowed for)."""
-        S = M @ self.S @ M.T
-        fM2 = float(np.dot(M.ravel(), M.ravel()))
-        return self.propagate_shaped_product(S, self._g * fM2 * self.tr, rho, G, c, GGt)   # step 6
+        ``E(c G G')`` plus the ball, so the noise fills only the directions ``G`` reaches.
+        ``GGt`` is ``G G'`` if the caller has it (its float rounding is allowed for)."""
+        Z = M @ self.S @ M.T
+        aM, mn = _abs(M) if absM is None else absM
+        return self._assemble(Z, self.image_bound(aM), self.c_dense, rho, (G, c, GGt), mn)
 
-    def propagate_shaped_product(self, S: np.ndarray, eta_s: float, rho: float, G: np.ndarray, c: float,
-                                 GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    def propagate_shaped_product(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, mn: float,
+                                 G: np.ndarray, c: float, GGt: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """:meth:`propagate_shaped` from a product taken elsewhere (as :meth:`propagate_product`)."""
-        n = self.n
-        if GGt is None:
-            GGt = G @ G.T
-        fG2 = float(np.dot(G.ravel(), G.ravel()))
-        ts = float(S.trace()) + n * eta_s                   # trace of the S side
-        Q = c * GGt
-        tq = c * fG2                                        # trace of the exact c G G'
-        d_q = gamma(G.shape[1] + 3) * c * fG2               # rounding of c G G': |.| <= gamma c |G||G'|
-        if rho > 0.0:           # ball + E(Q + d_q I) inside E((1 + b)(Q + d_q I) + (1 + 1/b) rho^2 I)
-            if tq > 0.0:        # b trace-optimal, kept in [1e-150, 1e150] (any b > 0 is valid)
-                b = min(max(rho * math.sqrt(n) / math.sqrt(tq), 1e-150), 1e150)
-                Q = (1.0 + b) * Q
-                tq *= 1.0 + b
-                d_q = (1.0 + b) * d_q + (1.0 + 1.0 / b) * rho * rho
-            else:
-                d_q += rho * rho
-        tq += n * d_q
-        if ts > 0.0 and tq > 0.0:   # E(S + eta_s I) + E(Q + d_q I): a = sqrt(tq / ts) (trace-optimal)
-            a = min(max(math.sqrt(tq) / math.sqrt(ts), 1e-150), 1e150)
-            S *= 1.0 + a
-            S += (1.0 + 1.0 / a) * Q
-            diag = (1.0 + a) * eta_s + (1.0 + 1.0 / a) * d_q
-            lam = (1.0 + a) * ts + (1.0 + 1.0 / a) * tq
-        else:
-            S += Q
-            diag = eta_s + d_q
-            lam = ts + tq
-        # the rounding of the scalings and sums above: entrywise relative 4u, dominated on the diagonal
-        diag += 4.0 * UNIT_ROUNDOFF * lam
-        diag *= 1.0 + 4.0 * UNIT_ROUNDOFF
-        S.flat[self._diag] += diag
-        return S, (lam + n * diag) * (1.0 + 4.0 * n * UNIT_ROUNDOFF)
+        return self._assemble(Z, w, cz, rho, (G, c, GGt), mn)
+
+    def _assemble(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float,
+                  noise: tuple | None, mn: float) -> tuple[np.ndarray, float]:
+        """``S' = (1 + a) (Z + R_z) + (1 + 1/a) [(1 + b) (Q + R_q) + (1 + 1/b) rho^2 D^2]`` with the
+        allowances of steps 5-7 and the rounding of this assembly (module docstring)."""
+        n, d2, id2 = self.n, self._d2, self._id2
+        Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
+        Z *= 0.5
+        cz = cz + _U * (1.0 + cz)       # the symmetrisation's rounding, relative u of |sym Z|
+        wd = w * self.d
+        Wz = float(w @ self._id) * self._gsum
+        rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
+        tz = max(float((np.diagonal(Z) + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
+        Q, rq, wq, tq = None, None, None, 0.0
+        if noise is not None:
+            G, c, GGt = noise
+            if G.size and c > 0.0:
+                if GGt is None:
+                    GGt = G @ G.T
+                Q = c * GGt
+                Q += Q.T
+                Q *= 0.5
+                g = np.sqrt(np.einsum("ij,ij->i", G, G)) * (self._gsum * (1.0 + 2.0 * _U))     # row norms
+                cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
+                wq = g * math.sqrt(c * (1.0 + cq))
+                rq = self._diag(g, cq * c)
+                tq = max(float((np.diagonal(Q) + rq) @ id2), 0.0) * self._gsum
+                if not tq > 0.0:
+                    Q = None
+        # the added set: E(Q + R_q) (+) E(rho^2 D^2) inside E(beta (Q + R_q) + kappa rho^2 D^2)
+        rho2 = rho * rho
+        beta, kappa = 1.0, 1.0
+        if Q is not None and rho > 0.0:
+            b = _clamp(rho * math.sqrt(n) / math.sqrt(tq))
+            beta, kappa = (1.0 + b) * (1.0 + 2.0 * _U), (1.0 + 1.0 / b) * (1.0 + 2.0 * _U)
+        tn = beta * tq + kappa * n * rho2            # trace_D of the added set
+        # the propagated set and the added one: alpha (Z + R_z) + (1 + 1/a) (added)
+        alpha, theta = 1.0, 1.0
+        if tz > 0.0 and tn > 0.0:
+            a = _clamp(rho / math.sqrt(tz)) if Q is None else _clamp(math.sqrt(tn) / math.sqrt(tz))
+            alpha = 1.0 + a                 # the factor applied; a' = alpha - 1 is its exact pair
+            theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
+        S = Z
+        if alpha != 1.0:
+            S *= alpha
+        # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
+        # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
+        q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
+        if rho2 > 0.0:
+            q += (theta * kappa * rho2) * d2
+        if Q is not None:
+            S += (theta * beta) * Q
+            q += (theta * beta) * rq
+            # the rounding of alpha Z + beta' Q: relative 2u of |alpha Z| + |beta' Q|, entrywise
+            q += self._diag(wq, 3.0 * _U * theta * beta)
+        # the diagonal's own addition: relative u of the result (and q's few operations); underflow
+        # (step 8): the products' absolute errors, and those of c G G' and the scalings
+        dS = np.diagonal(S)
+        q += 2.0 * _U * np.abs(dS) + (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
+        q *= 1.0 + 8.0 * _U
+        S[self._ii, self._ii] += q      # in place whatever S's layout (a reshape could copy)
+        tr = max(float(dS.sum()), 0.0) * self._gsum
+        return S, tr
+
+    def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
+        """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
+        self.S, self.tr = self.propagate(M, rho, absM)
 
     def step_shaped(self, M: np.ndarray, rho: float, G: np.ndarray, c: float,
-                    GGt: np.ndarray | None = None) -> None:
+                    GGt: np.ndarray | None = None, absM: tuple | None = None) -> None:
         """Apply one noise step (:meth:`propagate_shaped`)."""
-        self.S, self.tr = self.propagate_shaped(M, rho, G, c, GGt)
+        self.S, self.tr = self.propagate_shaped(M, rho, G, c, GGt, absM)
 
     def trace_bound(self) -> float:
         """``sqrt(trace S) >= ||e||`` (cheap)."""
         return math.sqrt(max(self.tr, 0.0))
 
+    def finite(self) -> bool:
+        """Whether ``S`` is finite (a bound that overflowed is not)."""
+        return math.isfinite(self.tr)
+
     def bound(self, S: np.ndarray | None = None) -> float:
         """``sqrt(lambda_max(S)) >= ||e||`` (of ``S``, default the current one), inflated for the
-        eigenvalue solver's own error (relative ``n u``)."""
+        eigenvalue solver's own error (relative ``n u``); ``inf`` for an ``S`` that is not finite."""
         return math.sqrt(self.lam_upper(S))
 
     def lam_upper(self, S: np.ndarray | None = None) -> float:
         """``>= lambda_max((S + S') / 2)`` (of ``S``, default the current one): the eigenvalue
-        problem's solution plus the solver's own error (relative ``n u``)."""
+        problem's solution plus the solver's own error (relative ``n u``); ``inf`` when ``S`` is
+        not finite or the solver does not converge (never raises)."""
         S = self.S if S is None else S
         S = S + S.T
         S *= 0.5
         if not self.n:
             return 0.0
         nS = fro_norm(S)
+        if not math.isfinite(nS):
+            return math.inf
         lam = math.nan
-        if _eigvalsh_lo is not None and math.isfinite(nS):
-            lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
-        if not math.isfinite(lam):      # a non-finite S, or no convergence: np.linalg's handling (raises)
-            lam = float(np.linalg.eigvalsh(S)[-1])
-        return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS
+        try:
+            if _eigvalsh_lo is not None:
+                lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
+            if not math.isfinite(lam):
+                lam = float(np.linalg.eigvalsh(S)[-1])
+        except np.linalg.LinAlgError:
+            return math.inf
+        if not math.isfinite(lam):
+            return math.inf
+        return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
 
 
 def fro_norm(X: np.ndarray) -> float:

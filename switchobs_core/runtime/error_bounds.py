@@ -24,7 +24,6 @@ import numpy as np
 
 from ..bounds.read import AMORTISED_MIN_N
 from ..bounds.rigorous import RoundingBound
-from .error_maps import norm
 from .transition import Transition
 
 __all__ = ["ErrorBounds"]
@@ -38,8 +37,10 @@ class ErrorBounds:
     """
 
     def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, hold: str,
-                 rounding_bound: bool, phi: Transition) -> None:
-        self.rigorous = RoundingBound(A, p_max, e0, noise_max) if hold == "innovation" and rounding_bound else None
+                 rounding_bound: bool, phi: Transition, *, B: np.ndarray | None = None,
+                 scale: np.ndarray | None = None) -> None:
+        self.rigorous = (RoundingBound(A, p_max, e0, noise_max, B=B, scale=scale)
+                         if hold == "innovation" and rounding_bound else None)
         self.n = A.shape[0]
         self._e0 = e0
         self._measurement = hold == "measurement"
@@ -71,17 +72,24 @@ class ErrorBounds:
                 if self._last is None or self._last[0] != amortised:
                     self._last = (amortised, b.bounds(amortised=amortised))
                 return self._last[1]
-            return b.bounds(*b.propagated(step, dt, norm(x), norm(xp), v, u, extra))
+            return b.bounds(*b.propagated(step, dt, x, xp, v, u, extra)) if not b.withdrawn else b.bounds()
         if self._measurement:   # the error-to-error part, exact arithmetic
             Phi = self._phi.read()
             return float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self._e0), None
         return math.inf, None   # rounding_bound=False: no bound is kept
 
+    @property
+    def withdrawn(self) -> str:
+        """Why the rigorous bounds are withdrawn ("" while they hold; :mod:`switchobs_core.bounds.rigorous`)."""
+        return "" if self.rigorous is None else self.rigorous.withdrawn
+
     def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
-             u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+             u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray | float, np.ndarray | float | None]:
         """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
         :meth:`read`; copies at the sample's time, propagated and not kept after it)."""
         b = self.rigorous
+        if b.withdrawn:         # no set is kept any more: the norm bounds say so
+            return math.inf, None if b.ellv is None else math.inf
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        return b.propagated(step, dt, norm(x), norm(xp), v, u, extra)
+        return b.propagated(step, dt, x, xp, v, u, extra)

@@ -69,7 +69,7 @@ def apply_zoh(phi: Any, bound: Any, e: Any, dt: float, x0: np.ndarray, x1: np.nd
     within the step (:mod:`switchobs_core.runtime.held_input`)."""
     phi.hold(e.E)
     if bound is not None:
-        bound.step(e, dt, norm(x0), norm(x1), v, u, extra)
+        bound.step(e, dt, x0, x1, v, u, extra)
 
 
 class CorrectionMap(NamedTuple):
@@ -89,11 +89,11 @@ class CorrectionMap(NamedTuple):
         ``H x^-`` and ``K nu`` and of the data (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.correct`)."""
         K, H, y, nu = self.K, self.H, self.y, self.nu
         phi.hold(K, H)
-        if bound is not None:
+        if bound is not None and not bound.withdrawn:
             M = self.identity - K @ H
-            rho = bound.rho_correct(float(np.linalg.norm(K)), float(np.linalg.norm(H)), norm(self.x_minus),
-                                    norm(y), norm(nu), norm(self.x_plus))
-            bound.correct(M, rho, K, y.size, channel)
+            fK, fH, _ = bound.gain_norms(K, H)
+            rho = bound.rho_correct(fK, fH, self.x_minus, y, nu, self.x_plus)
+            bound.correct(M, rho, K, H, y.size, channel)
 
 
 class FusedMap(NamedTuple):
@@ -115,7 +115,6 @@ class FusedMap(NamedTuple):
         (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused`)."""
         m, y = self.m, self.y
         phi.hold(m)
-        if bound is not None:
-            xmn = norm(self.x_minus)
-            rc = bound.rho_correct(m.fK, m.fH, xmn, norm(y), norm(self.nu), norm(self.x_plus))
-            bound.fused(m.e, self.dt, m, norm(self.x0), xmn, rc, m.K, y.size, channel)
+        if bound is not None and not bound.withdrawn:
+            rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus)
+            bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel)

@@ -7,19 +7,16 @@ innovation is the sample's that started it. An input that changes inside the int
 from ``u_{j-1}`` to ``u_j``, adds the open-loop ZOH of the change to the estimate at ``t``:
 ``Gamma_M(t - t_j) B (u_j - u_{j-1})`` (``M`` the step's matrix; exact), and nothing to the error:
 the plant receives the same input, so ``B u`` cancels. The products' floating-point rounding is the
-one thing the bound gains (:meth:`HeldInput.add`'s residual, in the form of
-:meth:`~switchobs_core.bounds.rigorous.RoundingBound.rho_step`).
+one thing the bound gains (:meth:`HeldInput.add`'s residual:
+:meth:`~switchobs_core.bounds.rigorous.RoundingBound.rho_input`, in balanced units).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-
-from ..numerics.rounding import UNIT_ROUNDOFF, gamma
 
 __all__ = ["HeldInput"]
 
@@ -28,10 +25,7 @@ class HeldInput:
     """The input held at the observer's time (``u``, None: zero) and the changes after it
     (``changes``: ``(t_j, u_j)`` in time order, ``u_j`` None for zero)."""
 
-    def __init__(self, A: np.ndarray, B: np.ndarray) -> None:
-        self.fA = float(np.linalg.norm(A))
-        self.fB = float(np.linalg.norm(B))
-        self.g_n = gamma(A.shape[0] + 2)
+    def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
@@ -51,26 +45,23 @@ class HeldInput:
         """Hold ``u`` from ``t`` on (``t`` not before the last change)."""
         self.changes.append((float(t), u))
 
-    def add(self, x: np.ndarray, t: float, step: Callable[[float], Any]) -> tuple[np.ndarray, float]:
+    def add(self, x: np.ndarray, t: float, step: Callable[[float], Any],
+            residual: Callable[[Any, float, np.ndarray, np.ndarray], float] | None) -> tuple[np.ndarray, float]:
         """``x`` (the step to ``t`` with ``u`` held, a new array) plus the changes before ``t``,
         each ``e.GB @ (u_j - u_{j-1})`` with ``e = step(t - t_j)`` (a ZOH cache entry of the step's
-        key); and a bound on the rounding of these products and sums (0 with no change)."""
+        key); and the sum of ``residual(e, t - t_j, d_j, x)`` over the changes, the rounding of
+        these products and sums (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.rho_input`;
+        0 with no change or no ``residual``)."""
         rho = 0.0
         prev = self.u
         for tj, uj in self.changes:
             if tj >= t:
                 break
             d = (np.zeros_like(prev) if uj is None else uj) - (0.0 if prev is None else prev)
-            dn = math.sqrt(float(d @ d))
             e = step(t - tj)
             x += e.GB @ d
-            # the exponential's error and the step quantum (as RoundingBound.rho_step), the product
-            # and the difference, and the sum
-            q = abs((t - tj) - e.dt)
-            quant = q * (e.fPhi + e.eps) * self.fB * math.exp(min(self.fA * q, 700.0))
-            fGB = float(np.linalg.norm(e.GB))
-            rho += (e.eps + quant + (self.g_n + UNIT_ROUNDOFF) * fGB) * dn \
-                + UNIT_ROUNDOFF * math.sqrt(float(x @ x))
+            if residual is not None:
+                rho += residual(e, t - tj, d, x)
             prev = uj
         return x, rho
 

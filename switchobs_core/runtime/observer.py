@@ -30,13 +30,12 @@ the stored gain of that blind phase.
 
 Both coincide with the continuous-output observer as the sample rate grows (first order
 in the step). A change of channel is a switching instant (e:switching_instants). The gains of
-a gain family (:mod:`switchobs_core.families`) come from a
-:class:`switchobs_core.table.gains.GainTable`, one design per cycle by the mode (``periodic``,
-``sequence``, ``robust``: :mod:`switchobs_core.runtime.sequence`, which also keeps a
-:class:`CycleRecord` of every cycle). The observer orchestrates: it propagates, hands each
-sample to its family and applies what the family returns (the estimate, the error maps into
-``Phi`` and the rigorous bound; :mod:`switchobs_core.runtime.families.base`); it never names a
-family.
+a gain family (:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`,
+one design per cycle by the mode (``periodic``, ``sequence``, ``robust``:
+:mod:`switchobs_core.runtime.sequence`, which also keeps a :class:`CycleRecord` of every cycle).
+The observer propagates, hands each sample to its family and applies what the family returns
+(the estimate, the error maps into ``Phi`` and the rigorous bound;
+:mod:`switchobs_core.runtime.families.base`); it never names a family.
 
 Channel numbers are 1-based, as in the paper and docs/api.md.
 
@@ -59,6 +58,7 @@ from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
+from ..numerics.scaling import balance
 from ..table.kalman import KalmanDesign
 from .arguments import (
     HOLDS,
@@ -78,7 +78,7 @@ from .arguments import (
 from .covariance import set_entries
 from .cycles import CycleRecord, Residence
 from .error_bounds import ErrorBounds
-from .error_maps import apply_zoh, norm, zoh_step
+from .error_maps import apply_zoh, zoh_step
 from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
 from .held_input import HeldInput
 from .sequence import DesignSequence
@@ -89,8 +89,7 @@ __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "Sc
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
 
-#: Gain families (:data:`switchobs_core.families.REGISTRY`): the paper's LMI gains, offline Kalman
-#: tables, online Riccati.
+#: Gain families (:data:`switchobs_core.families.REGISTRY`): LMI gains, Kalman tables, online Riccati.
 FAMILIES = FAMILY_NAMES
 
 class SwitchedObserver:
@@ -163,20 +162,13 @@ class SwitchedObserver:
 
     Notes
     -----
-    Samples before the first one are propagated open loop (``L = 0``). The design index
-    of cycle ``k`` is ``k mod K`` in sequence mode; the partial cycle before the first
-    channel-1 start uses design 0. The exact bound is ``||Phi(t, t0)|| e0`` with
-    ``Phi(t, t0)`` the product of the steps' error maps. With ``hold="innovation"`` it is a
-    guarantee for the sampled observer (noise-free samples): ``||x_tilde(t)|| <= ||Phi|| e0``.
-    With ``hold="measurement"`` it is the error-to-error part of the joint transition (see
-    :func:`switchobs_core.sim.simulate.sampled_error_transition`), a guarantee only in the
-    continuous-output limit. The paper's bound ``alpha * sum z_i`` is reported as the
-    paper's claim, not as a guarantee.
-
-    Examples
-    --------
-    >>> obs = SwitchedObserver(sys, table, mode="periodic", cycles=[Cycle.from_ts(2.0, 0.6)])
-    >>> obs.update(0.01, 1, y)          # doctest: +SKIP
+    Samples before the first one are propagated open loop (``L = 0``). The design index of cycle
+    ``k`` is ``k mod K`` in sequence mode; the partial cycle before the first channel-1 start uses
+    design 0. The exact bound is ``||Phi(t, t0)|| e0``, ``Phi(t, t0)`` the product of the steps'
+    error maps: a guarantee for the sampled observer with ``hold="innovation"`` (noise-free
+    samples), only in the continuous-output limit with ``hold="measurement"``
+    (:func:`switchobs_core.sim.simulate.sampled_error_transition`). The paper's bound
+    ``alpha * sum z_i`` is reported as the paper's claim, not as a guarantee.
     """
 
     def __init__(self, system: Any, table: Any, mode: str = "periodic",
@@ -228,9 +220,11 @@ class SwitchedObserver:
         except AttributeError:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
         self.e0 = nonnegative("e0", e0, float(e0))
-        self._cache = ZOHCache(cache_size, dt_resolution)
+        # balanced coordinates of A: the bound's norms and proven expm errors are taken there
+        self._scale = balance(self.A, np.vstack(self.C))
+        self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
         self._cache.register(OPEN_LOOP, self.A, None, self.B)
-        self._in = HeldInput(self.A, self.B)
+        self._in = HeldInput()
         self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
                                    max_records)
         # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
@@ -238,7 +232,8 @@ class SwitchedObserver:
         self._phi = Transition(self.n, "kept" if transition or self.hold == "measurement" else
                                "held" if transition is None else "off")
         # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
-        self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound, self._phi)
+        self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
+                                   self._phi, B=self.B, scale=self._scale)
         self._bound = self._bounds.rigorous
         self._x0_init = x0
         self._t0_init = t0
@@ -280,6 +275,12 @@ class SwitchedObserver:
     def kalman_relocks(self) -> int:
         """Returns of the Kalman table to its cache since the reset (0 for other families)."""
         return getattr(self._gains, "relocks", 0)
+
+    @property
+    def bounds_withdrawn(self) -> str:
+        """Why the rigorous bounds are ``inf`` until :meth:`reset` ("" while they hold): they could no
+        longer be computed; the estimate is kept (:mod:`switchobs_core.bounds.rigorous`)."""
+        return self._bounds.withdrawn
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -425,7 +426,7 @@ class SwitchedObserver:
         b = self._bound
         h = c.held
         if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-            b.hold(h.C, norm(c.x), h.y, channel, h.y.size)
+            b.hold(h.C, c.x, h.y, channel, h.y.size)
         for m in c.maps:
             m.apply(self._phi, b, channel)
         self._x = c.x
@@ -471,7 +472,7 @@ class SwitchedObserver:
         estimate (the input's changes added) and their rounding's residual."""
         e = self._cache.step(key, dt)
         x = zoh_step(e, self._x, v, self._in.u)
-        return (e, *self._in.add(x, t, lambda d: self._cache.step(key, d)))
+        return (e, *self._in.add(x, t, lambda d: self._cache.step(key, d), self._bound and self._bound.rho_input))
 
     def _step(self, dt: float, t: float) -> None:
         """Exact step over ``dt`` to ``t`` with the held innovation/measurement and input (step 1): the
@@ -572,11 +573,10 @@ class SwitchedObserver:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
 
         ``amortised`` (at the last sample's time, with the rounding-aware bound): the bounds read
-        in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`; rigorous, at most 1.062x the
-        eigenvalue problem's, 1.02x in the median measured at n = 68), for a caller that
-        publishes every sample. None (default): amortised from
-        :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on (below, the eigenvalue
-        problem is as cheap as the bookkeeping and is exact).
+        in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`: rigorous, within the factor
+        stated there), for a caller that publishes every sample. None (default): amortised from
+        :data:`~switchobs_core.bounds.read.AMORTISED_MIN_N` states on. Never raises for a bound that
+        cannot be computed: it is ``inf``, and :attr:`bounds_withdrawn` says why.
 
         Returns
         -------

@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from ..bounds.envelope import Segment
+from ..numerics.expm_bound import certify_zoh, expm_error_bound
 from ..numerics.propagation import van_loan, zoh_pair
-from ..numerics.rounding import EXPM_ULPS, UNIT_ROUNDOFF, ErrorEllipsoid, expm_error, gamma
+from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
 from .plant import input_at
 from .progress import progress_bar
 
@@ -69,7 +70,7 @@ def continuous_outputs(A: np.ndarray, B: np.ndarray, C: Sequence[np.ndarray], se
     of ``e^{J dt}``, since ``J`` is block triangular). Hence the computed difference obeys
     ``e_{k+1} = H~ e_k + r_k`` with ``H~`` the computed lower-right block and
     ``||r_k|| <= sqrt(2) (eps_J + gamma_{2n+2} ||J~||_F) ||z_k|| + eps_J ||e_k||`` (``eps_J``
-    from :func:`~switchobs_core.numerics.rounding.expm_error`), plus the input's term; an
+    proven by :func:`~switchobs_core.numerics.expm_bound.certify_zoh`), plus the input's term; an
     :class:`~switchobs_core.numerics.rounding.ErrorEllipsoid` keeps ``||e_k||``. The bound covers the
     error column as computed (``x_hat - x`` rounded, a factor ``1 + 2u``): the difference between
     the computed estimate and the computed plant that drives it.
@@ -114,11 +115,14 @@ def continuous_outputs(A: np.ndarray, B: np.ndarray, C: Sequence[np.ndarray], se
                     w, V = np.linalg.eigh(Qd)
                     Lq = V * np.sqrt(np.clip(w, 0, None))
                 GB = Gam @ Bj
-                eps = expm_error(J, dt, Phi)
+                cert = certify_zoh(J, dt, gamma_too=m > 0)
+                eps = expm_error_bound(Phi, cert.E, cert.dE)
                 fGB = float(np.linalg.norm(GB))
                 # the input's effect on x_hat - x is 0 exactly; computed: the rows' difference,
-                # the expm model's error of Gamma and the rounding of GB u
-                du = float(np.linalg.norm(GB[n:] - GB[:n])) + (2 * EXPM_ULPS * (2 * n + m) * UNIT_ROUNDOFF + gm) * fGB
+                # Gamma's proven error through B and the rounding of GB u
+                epsG = expm_error_bound(Gam, cert.G, cert.dG) if m > 0 else 0.0
+                du = (float(np.linalg.norm(GB[n:] - GB[:n])) + 2.0 * epsG * float(np.linalg.norm(Bj))
+                      + gm * fGB)
                 step = cache[key] = (Phi, GB, Lq, np.ascontiguousarray(Phi[n:, n:]), eps,
                                      math.sqrt(2.0) * (eps + g2n * float(np.linalg.norm(Phi))), du)
             Phi, GB, Lq, H, eps, rz, du = step

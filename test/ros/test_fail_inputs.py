@@ -193,6 +193,23 @@ def test_non_finite_estimate_is_never_returned(pl, monkeypatch):
     assert pl.resets == 1 and pl.errors == 1 and pl.origin_ns is None
 
 
+def test_bound_that_cannot_be_computed_is_withdrawn_not_reset(pl, monkeypatch):
+    """The observer's bound can no longer be computed (its ellipsoid overflowed: ``envelope()``
+    gives inf and ``bounds_withdrawn`` the reason): the good estimate is published as usual, the
+    bounds are withdrawn with that reason (-1), and the estimator is not reset."""
+    t0 = _started(pl)
+    obs = pl.observer
+    assert obs._bound is not None
+    monkeypatch.setattr(obs._bound, "withdrawn", "the rounding bound's ellipsoid overflowed (test)")
+    out = _pair(pl, t0 + 10 * MS)
+    assert [e.stamp_ns for e in out] == [t0 + 10 * MS] and np.isfinite(out[0].x_hat).all()
+    assert out[0].envelope[-1] == -1.0 and np.isfinite(out[0].envelope).all()
+    assert pl.resets == 0 and pl.nonfinite == 0 and not pl.bound_valid
+    assert "overflowed (test)" in pl.bound_invalid_why
+    out = _pair(pl, t0 + 20 * MS)               # and it keeps answering
+    assert [e.stamp_ns for e in out] == [t0 + 20 * MS] and pl.resets == 0
+
+
 def test_gap_so_long_the_step_overflows_resets_instead_of_publishing(pl):
     """A valid sample 10^4 s after the last one: the exact step of the unstable agents overflows.
     Nothing non-finite is returned; the estimator resets and answers the next sample afresh."""

@@ -25,10 +25,24 @@ Re-lock
     published covariance stays within the 1 % of test_kalman_table_cache.py (0.11 % at worst in
     six 20 s runs with 5 % partial samples; 1e-2 with a test relative to ``max|S|`` gave 5.8 %).
 
+First sample after t0
+    the stored start-up begins with ``P0`` at the first sample; a first sample later than the
+    observer's ``t0`` (by more than ``dt_tol``) has the prior ``P0`` propagated exactly over the
+    gap instead, so it leaves the cache at once with that prior and re-locks like any departure
+    (the table's grid starts at that sample).
+
+Phases in nanoseconds. The grid position of a sample is counted in whole nanoseconds from the
+first sample (``round(1e9 t)``), so the float arithmetic of a stamp never moves a sample to
+another phase; the channel of a sample at a switching instant follows the schedule's tie rule,
+which the design's sample pattern used too (:mod:`switchobs_core.model.schedule`).
+
 ``dt_tol`` (seconds) is the step error whose effect on the prior stays inside a tenth of that
-tolerance: ``||P(dt') - P(dt)|| <= |dt' - dt| (2 ||A|| ||S|| + ||Q_c||)`` to first order, so
-``dt_tol = 0.1 relock_rtol max|S_0| / (2 ||A||_2 max|S_0| + ||Q_c||_2)``, at most a quarter of a
-sample period (plus the spacing of the stamps' doubles, ``4e-16 |t|``).
+tolerance, in the balanced coordinates of ``A`` (:mod:`switchobs_core.numerics.scaling`: ``A_b =
+D^-1 A D``, ``S_b = D^-1 S D^-1``, ``Q_b`` likewise): ``||P(dt') - P(dt)|| <= |dt' - dt| (2 ||A_b||
+||S_b|| + ||Q_b||)`` to first order, so ``dt_tol = 0.1 relock_rtol max|S_b| / (2 ||A_b||_2 max|S_b| +
+||Q_b||_2)`` with ``S`` the stored prior of phase 0, at most a quarter of a sample period (plus the
+spacing of the stamps' doubles, ``4e-16 |t|``). The units of the state do not change it (with
+``||A||_2`` in the user's units a 10 Hz oscillator in SI units, ``||A||_2 = 3.9e3``, got 13 ns).
 """
 
 from __future__ import annotations
@@ -41,6 +55,7 @@ import numpy as np
 from ...bounds.kalman_map import KalmanMap
 from ...design.kalman import design_kalman
 from ...exceptions import InvalidArgument
+from ...numerics.scaling import balance, balanced_norm
 from ...table.gains import kalman_table
 from ...table.kalman import Phase
 from ..error_maps import FusedMap, ZohMap, zoh_step
@@ -53,6 +68,11 @@ __all__ = ["KalmanTableGains", "MAX_JITTER"]
 MAX_JITTER = 0.25
 #: Entries of the fused step cache (phase, channel, dt) before it is cleared.
 _FUSED_MAX = 8192
+
+
+def scaled_cov(S: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``D^-1 S D^-1`` (a covariance in balanced units)."""
+    return S / np.outer(d, d)
 
 
 class KalmanTableGains(OnlineKalmanGains):
@@ -85,10 +105,12 @@ class KalmanTableGains(OnlineKalmanGains):
         self.relock_rtol = float(relock_rtol)
         f = kd.pattern.rate
         self._dtn = 1.0 / f             # the design's step (KalmanPhase.dt of every sample k >= 1)
-        S0 = kd.periodic[0].P_prior
-        s = float(np.abs(S0).max())
-        a = 2.0 * float(np.linalg.norm(ctx.A, 2)) * s + float(np.linalg.norm(kd.noise.Q_c, 2))
-        self.dt_tol = min(0.1 * self.relock_rtol * s / a if a > 0 else math.inf, MAX_JITTER / f)
+        self._ns_per_sample = 1e9 / f
+        d = balance(ctx.A)
+        S0 = scaled_cov(kd.periodic[0].P_prior, d)
+        sb = float(np.abs(S0).max())
+        a = 2.0 * balanced_norm(ctx.A) * sb + float(np.linalg.norm(scaled_cov(kd.noise.Q_c, d), 2))
+        self.dt_tol = min(0.1 * self.relock_rtol * sb / a if a > 0 else math.inf, MAX_JITTER / f)
         self._fused: dict = {}
         self._keep_noise(kd.noise)
 
@@ -107,11 +129,16 @@ class KalmanTableGains(OnlineKalmanGains):
         super().reset()
         self._online = False
         self._origin: float | None = None
+        self._origin_ns = 0
         self._last_k = -1           # sample number of the last sample (-1: none; -2: off the grid)
         self._kgain: tuple | None = None
         self.fallback = ""
         self.departures = 0
         self.relocks = 0
+
+    def _since(self, t: float) -> float:
+        """Seconds from the first sample to ``t``, counted in whole nanoseconds (module docstring)."""
+        return (round(t * 1e9) - self._origin_ns) * 1e-9
 
     def stepped(self, e: Any, dt: float) -> None:
         """The recursion's prediction after a departure (locked, the table's prior is the real one)."""
@@ -174,25 +201,29 @@ class KalmanTableGains(OnlineKalmanGains):
         if self._online and dt > 0:     # the recursion's prediction (fused with its correction)
             x, prediction = self.predict(x, dt)
             dt = 0.0
-        if self._origin is None:
+        first = self._origin is None
+        if first:
             self._origin = t
+            self._origin_ns = round(t * 1e9)
         ph, why = None, ""
         try:
-            ph = kd.phase_at(t - self._origin, max_jitter=MAX_JITTER)
+            ph = kd.phase_at(self._since(t), max_jitter=MAX_JITTER)
             ent = kd.entry(ph)
             why = self._departure(t, ph, ent, channel, rows, span)
         except InvalidArgument as err:
             why = str(err)
+        if first and not why and span > self.dt_tol and not self._online:
+            why = (f"the first sample comes {span:.9g} s after t0, where the Kalman table's start-up has the "
+                   f"prior P0; its prior is P0 propagated over that time")
         self._last_k = -2 if ph is None else ph.k
         if not self._online and why:
-            # the real covariance: the last sample's posterior (P0 before the first), propagated
-            # exactly to this sample
-            first = self._kgain is None
+            # the real covariance: the last sample's posterior (P0 at t0 before the first),
+            # propagated exactly to this sample
             self.depart(f"{why}; running the Riccati recursion online from here")
             if dt > 0:
-                x, prediction = self.predict(x, dt, covariance=not first)
+                x, prediction = self.predict(x, dt)
                 dt = 0.0
-            elif span > 0 and not first:
+            elif span > 0:
                 self._P = self._cov.step(self._P, ctx.zoh(OPEN_LOOP, span), span)
         elif self._online and not why:
             # every entry within relock_rtol of its own scale: |P - S|_ij <= rtol sqrt(S_ii S_jj)
@@ -220,10 +251,9 @@ class KalmanTableGains(OnlineKalmanGains):
         done) whenever the general path is needed."""
         kd = self.kalman
         t, dt, channel = s.t, s.dt, s.channel
-        tau = t - self._origin
-        f = kd.pattern.rate
-        k = round(tau * f)
-        if k != self._last_k + 1 or abs(tau - k / f) * f > MAX_JITTER \
+        tau_ns = round(t * 1e9) - self._origin_ns
+        k = round(tau_ns / self._ns_per_sample)
+        if k != self._last_k + 1 or abs(tau_ns - k * self._ns_per_sample) > MAX_JITTER * self._ns_per_sample \
                 or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
             return None
         S = len(kd.startup)

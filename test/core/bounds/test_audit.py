@@ -278,21 +278,23 @@ def result(case: Case, family: str) -> dict:
 
 def _params(loose: bool = False) -> list:
     """Every (case, family); with ``loose``, the ones whose bound is known to be uninformative carry
-    a strict xfail (a fix makes them pass, and the mark must then go)."""
+    an xfail (not strict: the run with unix-time stamps settles just within 1e6 of the error on some
+    runs, 1.5e8 on others; ``test_bounds_never_below_the_error`` checks all of them hold)."""
     out = []
     for c in CASES:
         for fam in c.families:
             marks = [pytest.mark.slow] if c.slow else []
             if loose and fam == "lmi" and c.system == "unstable15":
-                marks.append(pytest.mark.xfail(strict=True, reason=LOOSE_LMI))
+                marks.append(pytest.mark.xfail(strict=False, reason=LOOSE_LMI))
             out.append(pytest.param(c, fam, id=f"{c.id}-{fam}", marks=marks))
     return out
 
 
-#: Why the LMI family's bound on ``unstable15`` says nothing (measured on 7c28b8d: 6.7e46 at 17.5 s
-#: for an error of 4e-3 and ``||Phi|| e0`` of 2e-54).
-LOOSE_LMI = ("channel 2's LMI gain makes ||E|| = 4.65e3 per sample, and the ellipsoid's rounding "
-             "allowance for M S M' (gamma n ||M||_F^2 ||S||_F per step) then grows faster than the cycle contracts")
+#: Why the LMI family's bound on ``unstable15`` is not within six orders of the error (measured: 5.7e5
+#: at 17.5 s for an error of 3.7e-3, ||x|| = 2.7e11; it was 6.7e46 with an isotropic allowance).
+LOOSE_LMI = ("channel 2's LMI gain makes ||E|| = 4.65e3 per sample: the rounding of a 2.7e11 state, "
+             "u ||x|| = 3e-5 per step, passes through it before the cycle contracts, so the bound settles "
+             "at 1.5e8 times the error, above the test's 1e6")
 
 
 @pytest.mark.parametrize("case,family", _params())
@@ -300,9 +302,11 @@ def test_bounds_never_below_the_error(case: Case, family: str):
     """Zero violations: after every update, for every prior and half-way between samples."""
     r = result(case, family)
     if case.system in ("blocks14", "agents10"):     # the paths these cases exist for were taken
-        # every anchor verified by the Cholesky check (a warm start stuck in an uncoupled block of
-        # S once left two anchors in three to the eigenvalue problem)
-        assert r["factored"] and r["verified"] == r["anchors"] > 0, r
+        # the anchors verified by the Cholesky check (a warm start stuck in an uncoupled block of
+        # S once left two anchors in three to the eigenvalue problem); a candidate more than 5 %
+        # above the Rayleigh quotient is not taken (bound_read's proven factor): 1 to 5 anchors in
+        # about 90 go to the eigenvalue problem on agents10 (5 with the square-root online recursion)
+        assert r["factored"] and r["anchors"] > 0 and r["verified"] >= 0.9 * r["anchors"], r
     assert r["violations"] == 0, f"{r['violations']} of {r['checks']} checks; first: {r['first']}"
     assert r["delta_ratio"] < 1e-3, r          # the truth resolves what is checked (module docstring)
     if case.system in ("unstable15", "blocks14"):

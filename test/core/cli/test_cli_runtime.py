@@ -140,13 +140,17 @@ def test_negative_cycle_is_checked_not_taken_for_an_option(capsys, tmp_path):
 
 def test_cycle_too_long_to_represent_is_refused(paper, capsys, tmp_path):
     """`--cycle 1e9,0.6` designed and said "converges" (f = 0): e^(A tau) leaves double precision.
-    The longest tau offered is where ||A||_2 tau reaches 600 (e^600 is still a double, e^710 not)."""
+    The longest tau offered is where ||A||_2 tau reaches 600 (e^600 is still a double, e^710 not),
+    with the smaller of the norms of A and of A in balanced units (the units of the state do not count)."""
     import math
 
     import numpy as np
 
-    longest = 600.0 / float(np.linalg.norm(paper.A, 2))
-    assert math.isfinite(math.exp(np.linalg.norm(paper.A, 2) * longest))
+    from switchobs_core.numerics.scaling import balanced_norm
+
+    nA = min(float(np.linalg.norm(paper.A, 2)), balanced_norm(paper.A))
+    longest = 600.0 / nA
+    assert math.isfinite(math.exp(nA * longest))
     assert main(["design", "paper", "--cycle", "1e9,0.6", "-o", str(tmp_path / "x.json")]) == 2
     err = capsys.readouterr().err
     assert "too long for this system" in err and f"use tau <= {longest:.4g} s" in err

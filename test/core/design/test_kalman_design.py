@@ -217,10 +217,10 @@ def test_monte_carlo_nees_in_chi2_band(design):
 
 
 def test_table_observer_with_drops_close_to_online():
-    """2 % dropped target rows and the simulator's channel rule over 266 s (in floating point the
-    tie sample at 1.2 s into a cycle flips to channel 1 from about 257 s on): the observer with the
-    Kalman table (the stored gains while the samples follow the pattern, the recursion online from
-    a dropped row or a flipped channel until its prior is the table's again) has an RMS error
+    """2 % dropped target rows and the simulator's channel rule over 266 s (the tie sample 1.2 s into
+    a cycle stays on the new channel all along: the schedule's tie rule, which the design used too):
+    the observer with the Kalman table (the stored gains while the samples follow the pattern, the
+    recursion online from a dropped row until its prior is the table's again) has an RMS error
     within 5 % of the online filter's. Agents with stable velocity modes, so that the plant state
     stays of moderate size over the long run (the paper's unstable agents grow by e^{0.2 t}, and
     the error would drown in the rounding of a 1e23 m state)."""
@@ -240,9 +240,9 @@ def test_table_observer_with_drops_close_to_online():
             err_t.append(x[:, 0] - obs.x_hat)
             err_o.append(x[:, 0] - on.x)
     rms_t, rms_o = (float(np.sqrt(np.mean(np.square(e)))) for e in (err_t, err_o))
-    assert drops >= 150 and flips >= 3
+    assert drops >= 150 and flips == 0
     assert rms_t <= 1.05 * rms_o
-    # the drops and flips left the table (245 times here), the observer came back to it after
+    # the drops left the table (about 240 times here), the observer came back to it after
     # each, and the table served most samples (85 % here)
     assert obs.kalman_departures >= 100 and obs.kalman_relocks >= obs.kalman_departures - 1
     assert from_table >= 0.8 * 13300

@@ -95,21 +95,37 @@ def test_table_lookup_equals_online_riccati(paper, mode, cycles):
     assert table_obs.kalman_fallback == ""
 
 
-def test_tie_samples_take_the_streams_channel(paper, ktable):
-    """At 50 Hz the sample 1.2 s into each cycle lies on a switching instant; in floating point
-    the stream puts it on either channel. Where it differs from the table's, the observer runs
-    the recursion online from the stored prior and re-locks to the table once its covariance is
-    back within relock_rtol: the estimate is the online filter's to a fraction of a percent."""
-    table_obs = SwitchedObserver(paper, ktable, "periodic", [CYC])
-    online = SwitchedObserver(paper, ktable, "periodic", [CYC], family="kalman-online")
-    sq = np.zeros(2)
-    for t, ch, y, x in _noisy(paper, PeriodicSchedule(CYC), RATE, 30.0, seed=4):
-        a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
-        if t >= 15.0:
-            sq += (np.sum((a - x) ** 2), np.sum((b - x) ** 2))
-    # a tie the stream put on the other channel: online from the stored prior, then back to the table
-    assert table_obs.kalman_departures >= 1 and table_obs.kalman_relocks >= table_obs.kalman_departures - 1
-    assert sq[0] <= 1.005 * sq[1], np.sqrt(sq[0] / sq[1])
+def test_tie_samples_follow_the_tables_rule(paper, ktable):
+    """At 50 Hz the sample 1.2 s into each cycle lies on a switching instant. The schedule puts it
+    on the new channel whatever the float arithmetic of its stamp (the tie rule of
+    :mod:`switchobs_core.model.schedule`), and so did the design: the table serves every sample and
+    equals the online filter. A stream that puts the tie on the old channel instead leaves the
+    table there, runs the recursion online from the stored prior and re-locks once its covariance
+    is back within relock_rtol: the estimate is the online filter's to a fraction of a percent."""
+    sched = PeriodicSchedule(CYC)
+    for old_channel in (False, True):
+        table_obs = SwitchedObserver(paper, ktable, "periodic", [CYC])
+        online = SwitchedObserver(paper, ktable, "periodic", [CYC], family="kalman-online")
+        sq = np.zeros(2)
+        served = ties = 0
+        for t, ch, y, x in _noisy(paper, sched, RATE, 30.0, seed=4):
+            if sched.channel_at(t - 1e-6) != ch:       # a switching instant
+                ties += 1
+                if old_channel and t > 0:
+                    ch = sched.channel_at(t - 1e-6)
+                    y = paper.C[ch - 1] @ x
+            a, b = table_obs.update(t, ch, y), online.update(t, ch, y)
+            served += table_obs.gains_source == "table"
+            if t >= 15.0:
+                sq += (np.sum((a - x) ** 2), np.sum((b - x) ** 2))
+        assert ties >= 25
+        if old_channel:
+            assert table_obs.kalman_departures >= 1
+            assert table_obs.kalman_relocks >= table_obs.kalman_departures - 1
+            assert sq[0] <= 1.005 * sq[1], np.sqrt(sq[0] / sq[1])
+        else:
+            assert table_obs.kalman_departures == 0 and served == int(30.0 * RATE)
+            assert sq[0] == pytest.approx(sq[1], rel=1e-6)
 
 
 def test_exact_bound_holds_with_kalman_gains(paper, ktable):
