@@ -1,7 +1,8 @@
 """Refusals of bad input by the tools and the estimator: huge input specifications, topic names ROS
 refuses, binary tables whose members lie, bags with nothing to estimate, channels no source feeds,
-a gain-table cache reached through links or that cannot be written. Every refusal is one line and a non-zero exit within 30 s and
-4 GB of address space (test/ros/refusals.py); an accepted input keeps the good data."""
+a gain-table cache reached through links or that cannot be written. Every refusal is one line and
+a non-zero exit within 30 s and 4 GB of address space (test/ros/refusals.py); an accepted input
+keeps the good data."""
 
 from __future__ import annotations
 
