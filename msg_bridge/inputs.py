@@ -180,6 +180,16 @@ class InputSpecs:
         """The rows of ``channel`` (1-based) fed by channel-independent (shared) sources, in source order."""
         return tuple(r for s in self.sources if s.shared for r in s.rows_for(channel))
 
+    def uncovered_warning(self) -> str:
+        """One line saying which channels no source feeds ('' if none): accepted, and said at
+        start-up (the node's log, ``switchobs_bag estimate``'s warning)."""
+        if not self.uncovered:
+            return ""
+        many = len(self.uncovered) > 1
+        return (f"no source feeds channel{'s' if many else ''} {', '.join(map(str, self.uncovered))} (the input "
+                f"specification): {'their' if many else 'its'} samples never arrive, so nothing is measured while "
+                f"{'they are' if many else 'it is'} active")
+
     def describe(self) -> str:
         """A few lines for logs and diagnostics."""
         lines = [f"inputs: {len(self.sources)} source(s), channel topic "

@@ -193,10 +193,8 @@ class EstimatorPipeline(Counters):
         pipe.publish_covariance = conf.publish_covariance
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
-        if pipe.uncovered:        # accepted, and said at start-up (the node's log, the bag tool's warning)
-            c = ", ".join(map(str, pipe.uncovered))
-            log.warn(f"no source feeds channel{'s' if len(pipe.uncovered) > 1 else ''} {c} (the input specification): "
-                     "nothing is measured while it is active")
+        if pipe.uncovered:
+            log.warn(conf.inputs.uncovered_warning())
         return pipe
 
     # ------------------------------------------------------------------ the parts' state

@@ -75,6 +75,7 @@ class EstimateResult:
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
     uncovered: tuple = ()              # channels that no source feeds (msg_bridge.InputSpecs.uncovered)
+    uncovered_warning: str = ""        # the line that says so
     unordered: int = 0                 # parts whose side of a channel change the recording cannot tell (rejected)
     unproven_ties: int = 0             # log-time ties whose file order the stamps contradict
     out: str | None = None
@@ -251,7 +252,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
         seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
-        uncovered=tuple(pl.uncovered), unordered=len(ordering.unordered), unproven_ties=ordering.unproven)
+        uncovered=tuple(pl.uncovered), uncovered_warning=pl.config.inputs.uncovered_warning(),
+        unordered=len(ordering.unordered), unproven_ties=ordering.unproven)
     if csv is not None:
         write_csv(csv, res)
         res.csv = str(csv)

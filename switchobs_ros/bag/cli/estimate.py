@@ -65,10 +65,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
                    node=a.node, progress=False if a.json else a.progress)
     if res.uncovered:
-        many = len(res.uncovered) > 1
-        print(f"switchobs_bag: warning: no source feeds channel{'s' if many else ''} "
-              f"{', '.join(map(str, res.uncovered))} (the input specification): {'their' if many else 'its'} "
-              "samples never arrive, so nothing is measured while it is active", file=sys.stderr)
+        print(f"switchobs_bag: warning: {res.uncovered_warning}", file=sys.stderr)
     if not res.stamps.size:
         raise BagError(f"bag {a.bag}: no estimate: {nothing_estimated(res)}")
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
