@@ -32,6 +32,13 @@ def test_no_module_over_600_lines():
     assert not long, long
 
 
+def test_test_file_names_are_unique():
+    """pytest imports test files by their base name (no packages under test/): two files of one
+    name in two folders stop the collection."""
+    names = [p.name for p in (REPO / "test").rglob("*.py") if p.name != "conftest.py" and p.name != "__init__.py"]
+    assert len(names) == len(set(names)), sorted(n for n in set(names) if names.count(n) > 1)
+
+
 def test_at_most_15_loose_core_modules():
     loose = sorted(p.name for p in (REPO / "switchobs_core").glob("*.py"))
     assert len(loose) <= MAX_LOOSE_CORE_MODULES, loose

@@ -363,7 +363,7 @@ def test_executable_is_installed():
     # the installed distribution (a stale egg-info in the work tree may shadow it on sys.path)
     eps = {e.name: e.value for d in distributions() if d.metadata["Name"] == "switchobs_ros"
            for e in d.entry_points if e.group == "console_scripts"}
-    assert eps.get("switchobs_bag") == "switchobs_ros.bag.cli:main"
+    assert eps.get("switchobs_bag") == "switchobs_ros.entry:switchobs_bag"
     exe = Path(sys.executable).parent / "switchobs_bag"
     assert exe.exists()
     out = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
