@@ -17,8 +17,8 @@ is carried to the phases where it is smallest. Its span over the period,
 
     D = \\frac{\\max_k \\lambda_{\\max}(P^-_k)}{\\min_k \\lambda_{\\min}(P^-_k)},
 
-taken in the balanced coordinates of ``(A, C)`` (:func:`state_scale`; the rigorous bound's), so
-that the units of the state do not change it,
+taken in the balanced coordinates of ``(A, C)`` (:func:`state_scale`; the rigorous bound's, which
+take out most of a badly scaled state's units),
 must stay within :data:`PRECISION_RANGE` (:func:`check_covariance`). The camera model with 32
 agents whose modes reach 1/s, every residence 1 s, needs ``D`` about 1e29: its table's
 covariance form lost positive definiteness after 21 s at run time (``S`` with an eigenvalue
@@ -189,9 +189,10 @@ def cycles_label(cycles: Sequence[Any]) -> str:
 
 def state_scale(system: Any) -> np.ndarray:
     """The balancing ``d`` of ``(A, C)`` (powers of two, :func:`~switchobs_core.numerics.scaling.balance`):
-    spans and growths are measured in the coordinates ``D^-1 x``, so that the units of the state
-    (a diagonal change of coordinates, which floating point carries without loss) do not change
-    them; the rigorous bound works in the same coordinates."""
+    spans and growths are measured in the coordinates ``D^-1 x``, the rigorous bound's. The balancing
+    takes out most of a badly scaled state's units, not all: it is not equivariant under a diagonal
+    change of units (the paper model's span, 2.7e4, reads 1.7e9 with its states rescaled by
+    2^-6..2^9)."""
     return balance(np.asarray(system.A, dtype=float), np.vstack([np.asarray(Ci, dtype=float) for Ci in system.C]))
 
 

@@ -75,10 +75,10 @@ def _coarse(ns: int) -> int:
 @pytest.mark.parametrize("how", ["bunched", "coarse"])
 def test_tied_log_times_keep_the_recorders_order(clean, paper_tables, tmp_path, how, storage):
     """Every message logged between 1.0 and 2.5 s rewritten to log time 2.5 s (the switch at 2.2 s
-    inside), or log times rounded to 70 ms groups, file order unchanged: ties were broken by topic
-    (the channel first), so the switch was processed before poses sent earlier: 54 estimates above
-    the published exact bound, off by up to 6.79 m (bunched), 1.91 m (coarse), nothing counted.
-    Now ties keep the file's order, which the stamps confirm: the clean run's estimates, bit for bit."""
+    inside), or log times rounded to 70 ms groups, file order unchanged: ties keep the file's order,
+    which the stamps confirm, so no switch is processed before poses sent earlier (breaking ties by
+    topic would put 54 estimates above the published bound, off by up to 6.79 m): the clean run's
+    estimates, bit for bit."""
     src, truth = clean
     ref = estimate(src, _params(paper_tables))
     assert above_valid_bound(ref, truth) == 0 and ref.stamps.size == 601 and not ref.rejected
@@ -107,10 +107,10 @@ def test_a_tie_whose_file_order_contradicts_the_stamps_is_not_guessed(clean, pap
 
 def test_log_times_that_contradict_the_stamps_around_a_switch_are_not_guessed(clean, paper_tables, tmp_path):
     """Distinct log times that lie around a switch: the target poses of 2.15-2.2 s logged late, at
-    2.205 s, after the switch message of 2.2 s (a recorder that served one topic late). The log
-    order put five of them on the new channel: estimates above the published bound. Now the stamps
-    logged before the switch (camera 2.19 s) are newer than some logged after it (target 2.15 s),
-    so the targets between them are rejected and counted, never guessed."""
+    2.205 s, after the switch message of 2.2 s (a recorder that served one topic late); the log
+    order alone would put five of them on the new channel. The stamps logged before the switch
+    (camera 2.19 s) are newer than some logged after it (target 2.15 s), so the targets between
+    them are rejected and counted, never guessed."""
     src, truth = clean
 
     def late(m):

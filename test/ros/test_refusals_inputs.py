@@ -41,9 +41,9 @@ def _label(k: int) -> str:
     ("sources_9k", "9000 sources; the system's channels have 8 rows in all, so at most 8 sources"),
 ])
 def test_huge_specifications_are_one_line_in_the_tool_and_the_node(case, needle, bag, tmp_path, paper_tables):
-    """A 0.9 MB specification (100 000 labels and rows in one labelled array; 9 000 sources) ran
-    past 30 s in the bag tool, and the estimator ignored SIGTERM while checking it (a quadratic
-    count). Now both refuse it in one line; what time they take is reading the YAML."""
+    """A 0.9 MB specification (100 000 labels and rows in one labelled array; 9 000 sources): the
+    tool and the node refuse it in one line, their checks linear in its size (what time they take
+    is reading the YAML), and the node stops on SIGTERM."""
     if case == "labels_100k":
         section = {"channel_topic": "camera/active_channel", "sources": [
             {"topic": "t", "type": "std_msgs/Float64MultiArray", "fields": [_label(k) for k in range(100_000)],
@@ -151,9 +151,9 @@ def cart_bag(tmp_path_factory):
 
 
 def test_nothing_estimated_is_a_non_zero_exit_for_any_system(bag, cart_bag, tmp_path, paper_tables):
-    """Exit 0 with nothing estimated: a channel topic with 0 messages (0 estimates, 122 rejected
-    no_channel), a cart_pair bag whose point topics are empty, a channel topic whose every message
-    is invalid. Now one line naming why, exit 2."""
+    """Nothing to estimate, for any system: a channel topic with 0 messages, a cart_pair bag whose
+    point topics are empty, a channel topic whose every message is invalid: one line naming why,
+    exit 2."""
     from rclpy.serialization import serialize_message
     from std_msgs.msg import UInt8
 
@@ -177,9 +177,9 @@ def test_nothing_estimated_is_a_non_zero_exit_for_any_system(bag, cart_bag, tmp_
 
 
 def test_a_channel_no_source_feeds_is_reported(cart_bag, tmp_path):
-    """cart_pair read with a source for channel 1 only: accepted, and the bag tool said nothing of
-    the samples of channel 2 it never sees (the docs promise such a channel "is reported, not
-    refused"). Now the tool warns on stderr and in --json; the node logs it at start-up."""
+    """cart_pair read with a source for channel 1 only: accepted, and the channel no source feeds
+    is reported (the docs promise it "is reported, not refused"): the tool warns on stderr and in
+    --json; the node logs it at start-up."""
     import json
 
     from switchobs_ros.counters import PipelineLog
@@ -239,10 +239,9 @@ def cache_case(paper_tables, tmp_path, monkeypatch):
 
 
 def test_the_cache_trust_check_follows_links_safely(cache_case, tmp_path):
-    """The cached table a symlink into a world-writable folder: only the target file was checked,
-    and trusted. A symlink to /dev/zero: refused as "writable by group and others" (the wrong
-    reason). Now every link on the way and the folder that finally holds the table are checked,
-    and a target that is not a regular file is named as such."""
+    """The cached table a symlink into a world-writable folder, or to /dev/zero: every link on the
+    way and the folder that finally holds the table are checked (not just the target file), and a
+    target that is not a regular file is named as such."""
     import os
 
     from switchobs_ros.params import ConfigError
@@ -281,10 +280,9 @@ def test_the_cache_trust_check_follows_links_safely(cache_case, tmp_path):
 
 @pytest.mark.parametrize("how", ["read_only", "full", "loop"])
 def test_a_cache_that_cannot_be_written_is_reported_once(cache_case, monkeypatch, how):
-    """A cache write that fails (read-only or full filesystem, a symlink loop) was silent (or, for a
-    loop, refused the start-up): the table was designed again at every start without a word.
-    Now the start-up goes on with the designed table and says once, as a warning, why the cache
-    was not written and what it costs."""
+    """A cache write that fails (read-only or full filesystem, a symlink loop): the start-up goes on
+    with the designed table and says once, as a warning, why the cache was not written and what it
+    costs (the table is designed again at every start)."""
     import errno
     import os
 

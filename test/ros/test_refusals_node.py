@@ -242,8 +242,8 @@ def managed(paper_tables, ros_node, tmp_path):
 
 
 def test_invalid_transitions_fail_and_the_node_stays(managed):
-    """activate while unconfigured, and two requests at once: RCLError 'Transition is not
-    registered', exit 1 with a traceback. Now FAILURE with the reason; the node stays."""
+    """activate while unconfigured, and two requests at once: FAILURE with the reason (not an
+    RCLError traceback and exit 1); the node stays."""
     proc, node, get, change, log = managed
     assert _state(node, get) == State.PRIMARY_STATE_UNCONFIGURED
     assert not _change(node, change, Transition.TRANSITION_ACTIVATE)

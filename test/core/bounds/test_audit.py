@@ -291,7 +291,7 @@ def _params(loose: bool = False) -> list:
 
 
 #: Why the LMI family's bound on ``unstable15`` is not within six orders of the error (measured: 5.7e5
-#: at 17.5 s for an error of 3.7e-3, ||x|| = 2.7e11; it was 6.7e46 with an isotropic allowance).
+#: at 17.5 s for an error of 3.7e-3, ||x|| = 2.7e11; an isotropic allowance gives 6.7e46).
 LOOSE_LMI = ("channel 2's LMI gain makes ||E|| = 4.65e3 per sample: the rounding of a 2.7e11 state, "
              "u ||x|| = 3e-5 per step, passes through it before the cycle contracts, so the bound settles "
              "at 1.5e8 times the error, above the test's 1e6")

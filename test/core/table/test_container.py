@@ -145,10 +145,9 @@ def test_size_limit_from_n_and_phases(saved, tmp_path):
 @pytest.mark.parametrize("member", ["k0_E.npy", "header.npy"])
 @pytest.mark.parametrize("deflate", [True, False])
 def test_a_member_header_that_lies_is_refused_before_allocating(saved, tmp_path, member, deflate):
-    """A ``.npy`` header claiming 2^33 elements (64 GiB of float64) in a DEFLATE member was read by
-    numpy, which allocated first (``Unable to allocate 64.0 GiB``); only stored members were
-    checked. Now every member's header is checked against the member's size before anything is
-    allocated: one line, at once, whatever the compression."""
+    """A ``.npy`` header claiming 2^33 elements (64 GiB of float64), in a stored or a DEFLATE
+    member: every member's header is checked against the member's size before anything is
+    allocated (numpy alone would allocate first): one line, at once, whatever the compression."""
     import resource
     import time
     p = tmp_path / "lying.npz"
