@@ -2,6 +2,8 @@
 
 import os
 import stat
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -28,6 +30,38 @@ def device(tmp_path):
     p = tmp_path / "dev"
     os.mknod(p, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
     return p
+
+
+@pytest.fixture(scope="session")
+def run_cache(tmp_path_factory) -> Callable[[str, Callable[[Path], None]], Path]:
+    """``run_cache(name, make)``: the folder ``name`` of this test run's cache, made by
+    ``make(folder)`` once per run. The pytest-xdist workers of one run share it (their base
+    temporary folders have one parent; a lock file makes the others wait for the first), so an
+    SDP design that several workers need is solved once. A folder ``make`` failed to fill is
+    made again by the next caller."""
+    import fcntl
+    import shutil
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent
+    root = base / "run-cache"
+    root.mkdir(exist_ok=True)
+
+    def cached(name: str, make: Callable[[Path], None]) -> Path:
+        folder = root / name
+        with open(root / f"{name}.lock", "a") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+            try:
+                if not (folder / ".done").exists():
+                    shutil.rmtree(folder, ignore_errors=True)
+                    folder.mkdir()
+                    make(folder)
+                    (folder / ".done").touch()
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+        return folder
+    return cached
 
 
 # ---- the full run under pytest-xdist (scripts/test.sh: two workers) -------------------------------
@@ -86,12 +120,17 @@ def _serial_lock_path(uid: str) -> str:
 
 
 def pytest_configure(config):
-    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end."""
-    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None) \
-            and config.getoption("testrunuid", None) is None:
-        import uuid
+    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end,
+    and hands the tests out one at a time (``--maxschedchunk 1``): ``--dist load`` otherwise
+    gives each worker a first chunk of an eighth of the tests in a row, and so all of
+    LONG_FIRST to the first worker."""
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None):
+        if config.getoption("testrunuid", None) is None:
+            import uuid
 
-        config.option.testrunuid = uuid.uuid4().hex
+            config.option.testrunuid = uuid.uuid4().hex
+        if config.getoption("maxschedchunk", None) is None:
+            config.option.maxschedchunk = 1
 
 
 def pytest_unconfigure(config):
