@@ -50,13 +50,22 @@ def assert_refused(res: subprocess.CompletedProcess, *needles: str, code: int | 
     return ours[0]
 
 
-def node_main(node: str, args: list[str]) -> subprocess.CompletedProcess:
+def node_main(node: str, args: list[str], timeout: float = TIMEOUT_S) -> subprocess.CompletedProcess:
     """``switchobs_ros.<node>.main`` called in this process with ``[node, *args]`` for its
     ``sys.argv``: what ``python -m switchobs_ros.<node> <args>`` exits with (its ``__main__`` is
     ``sys.exit(main())``) and writes, both the Python and the C side (rcl, rcutils logging) of
     stdout and stderr. An exception out of ``main`` (a traceback in a fresh process) is raised
-    here. The fresh process's own exit path is checked once per node (test_startup_failures.py)."""
+    here. A node that starts instead of refusing is shut down after ``timeout`` seconds (exit code
+    0, which no refusal check accepts). The fresh process's own exit path is checked once per node
+    (test_startup_failures.py)."""
+    import threading
+
+    import rclpy
+
     mod = importlib.import_module(f"switchobs_ros.{node}")
+    watchdog = threading.Timer(timeout, rclpy.try_shutdown)
+    watchdog.daemon = True
+    watchdog.start()
     hook = sys.unraisablehook                           # run_node wraps it: put it back after
     sys.stdout.flush()
     sys.stderr.flush()
@@ -74,6 +83,7 @@ def node_main(node: str, args: list[str]) -> subprocess.CompletedProcess:
             os.close(saved[0])
             os.close(saved[1])
             sys.unraisablehook = hook
+            watchdog.cancel()
         c_out.seek(0)
         c_err.seek(0)
         out, err = py_out.getvalue() + c_out.read(), c_err.read() + py_err.getvalue()
