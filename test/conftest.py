@@ -66,33 +66,48 @@ def run_cache(tmp_path_factory) -> Callable[[str, Callable[[Path], None]], Path]
 
 # ---- the full run under pytest-xdist (scripts/test.sh: two workers) -------------------------------
 
-#: Tests known to take long (seconds on a quiet 2-core machine, roughly): they are handed out
+#: Tests known to take long, longest first (from ``pytest --durations``): they are handed out
 #: first, so that the two workers end together instead of one of them finishing a 2-minute test
 #: alone at the end. Only an order: a test missing here just runs in its place.
 LONG_FIRST = (
-    "test/ros/test_bound_long_bag.py::test_ten_minutes_published_exact_bound_never_below_the_error",
-    "test/core/runtime/test_kalman_table_cache.py::test_monte_carlo_every_disturbance",
+    "test/ros/test_bound_long_bag.py::test_long_bag_published_exact_bound_never_below_the_error[periodic",
+    "test/ros/test_colcon_package.py::test_colcon_build_and_ament_index_run",      # builds colcon_workspace
+    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si_jitter-kalman-300s]",
+    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si_jitter-kalman-online",
     "test/ros/test_fail_node.py::test_random_stream_over_dds_node_stays_up_every_valid_answered",
+    "test/core/runtime/test_online_sqrt.py::test_long_stiff_run_stays_positive_definite",
     "test/ros/test_fail_inputs.py::test_fuzz_100k_messages_every_valid_one_answered",
-    "test/ros/test_typed_msgs.py::test_colcon_builds_the_package_in_a_workspace",
+    "test/ros/test_bound_long_bag.py",
     "test/ros/test_attribution.py::test_demo_under_load_publishes_no_false_bound",
-    "test/core/test_docs_numbers.py::test_docs_block",
-    "test/ros/test_bound_long_bag.py::test_declared_noise_bound",
     "test/ros/test_dds_convergence.py::test_converges_over_dds",
-    "test/ros/test_bag_live.py::test_looped_live_replay_sqlite",
-    "test/core/sim/test_simulate.py::test_ten_minutes_without_a_violation",
-    "test/ros/test_tutorial_clone.py::test_own_system_tutorial_from_a_fresh_clone",
+    "test/ros/test_own_robot_tutorial.py",
     "test/ros/test_consistency.py",
-    "test/core/bounds/test_audit.py::test_bounds_never_below_the_error",
-    "test/core/runtime/test_observer.py::test_innovation_hold_exact_bound_is_exact_for_samples",
-    "test/ros/test_fail_faults.py",
+    "test/core/runtime/test_kalman_table_cache.py::test_monte_carlo_every_disturbance",
+    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si-kalman-300s]",
+    "test/core/sim/test_simulate.py::test_ten_minutes_without_a_violation",
+    "test/ros/test_behaviour_preserved.py",
     "test/ros/test_bag_live.py",
+    "test/ros/test_refusals_inputs.py",
+    "test/ros/test_tutorial_clone.py::test_own_system_tutorial_from_a_fresh_clone",
+    "test/core/runtime/test_observer.py::test_innovation_hold_exact_bound_is_exact_for_samples",
+    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[sparse40-kalman-300s]",
     "test/ros/test_refusals_tools.py",
-    "test/ros/test_docs.py",
-    "test/ros/test_clock_jump.py",
-    "test/ros/test_tool_inputs.py",
+    "test/ros/test_fail_node.py",
+    "test/ros/test_fail_faults.py",
     "test/core/design/test_conditioning.py",
-    "test/ros/test_startup_failures.py",
+    "test/core/bounds/test_units_audit.py",
+    "test/core/test_docs_numbers.py::test_docs_block",
+    "test/ros/test_typed_msgs.py::test_colcon_builds_the_package_in_a_workspace",  # once colcon_workspace is built
+    "test/ros/test_lifecycle.py",
+    "test/ros/test_kalman_ros.py",
+    "test/core/design/test_precision.py",
+    "test/ros/test_tool_inputs.py",
+    "test/ros/test_docs.py",
+    "test/core/bounds/test_audit.py::test_bounds_never_below_the_error",
+    "test/ros/test_control_input.py",
+    "test/core/runtime/test_kalman_late_start.py",
+    "test/core/numerics/test_rounding.py",
+    "test/ros/test_clock_jump.py",
 )
 
 
