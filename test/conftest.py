@@ -1,5 +1,6 @@
 """Test-session setup shared by the core and ROS tests, and the fixtures both use."""
 
+import itertools
 import os
 import stat
 from collections.abc import Callable
@@ -120,12 +121,36 @@ def _long_rank(nodeid: str) -> int:
 
 def pytest_collection_modifyitems(config, items):
     """Under xdist: the long tests first (LONG_FIRST), the ``serial`` ones last (each worker
-    collects and sorts alike: the order is a function of the node ids alone)."""
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
+    collects and sorts alike: the order is a function of the node ids alone).
+
+    ``--dist load`` gives each of the W workers a first chunk of ``n // W // 4`` tests in a row
+    (xdist's LoadScheduling), then the rest as they finish. The long tests are dealt out over
+    those first chunks (the 1st, (W+1)th, ... long test to the first chunk, the 2nd, (W+2)th, ...
+    to the second), so that each worker starts with its share of them instead of the first
+    worker getting them all."""
+    workerinput = getattr(config, "workerinput", None)
+    if workerinput is None:
         return
     order = {item.nodeid: i for i, item in enumerate(items)}
     items.sort(key=lambda it: (it.get_closest_marker("serial") is not None, _long_rank(it.nodeid),
                                order[it.nodeid]))
+    workers = int(workerinput.get("workercount", 1))
+    if config.getoption("dist", "load") != "load" or workers < 2 or len(items) < 2 * workers:
+        return
+    chunk = max(min(len(items) // workers // 4, config.getoption("maxschedchunk", None) or len(items)), 2)
+    is_long = [_long_rank(it.nodeid) < len(LONG_FIRST) and it.get_closest_marker("serial") is None
+               for it in items]
+    long = [it for it, x in zip(items, is_long) if x]
+    rest = [it for it, x in zip(items, is_long) if not x]
+    shares = [long[w::workers] for w in range(workers)]
+    head = []
+    for share in shares:
+        mine = share[:chunk]
+        head += mine + rest[:chunk - len(mine)]
+        rest = rest[chunk - len(mine):]
+    overflow = [it for group in itertools.zip_longest(*(share[chunk:] for share in shares)) for it in group
+                if it is not None]
+    items[:] = head + overflow + rest
 
 
 def _serial_lock_path(uid: str) -> str:
@@ -135,17 +160,12 @@ def _serial_lock_path(uid: str) -> str:
 
 
 def pytest_configure(config):
-    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end,
-    and hands the tests out one at a time (``--maxschedchunk 1``): ``--dist load`` otherwise
-    gives each worker a first chunk of an eighth of the tests in a row, and so all of
-    LONG_FIRST to the first worker."""
-    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None):
-        if config.getoption("testrunuid", None) is None:
-            import uuid
+    """The xdist controller fixes the run's id itself, to remove the run's lock file at the end."""
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None) \
+            and config.getoption("testrunuid", None) is None:
+        import uuid
 
-            config.option.testrunuid = uuid.uuid4().hex
-        if config.getoption("maxschedchunk", None) is None:
-            config.option.maxschedchunk = 1
+        config.option.testrunuid = uuid.uuid4().hex
 
 
 def pytest_unconfigure(config):
