@@ -135,9 +135,9 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=lambda it: (it.get_closest_marker("serial") is not None, _long_rank(it.nodeid),
                                order[it.nodeid]))
     workers = int(workerinput.get("workercount", 1))
-    if config.getoption("dist", "load") != "load" or workers < 2 or len(items) < 2 * workers:
+    if workerinput.get("switchobs_dist") != "load" or workers < 2 or len(items) < 2 * workers:
         return
-    chunk = max(min(len(items) // workers // 4, config.getoption("maxschedchunk", None) or len(items)), 2)
+    chunk = max(min(len(items) // workers // 4, workerinput.get("switchobs_maxschedchunk") or len(items)), 2)
     is_long = [_long_rank(it.nodeid) < len(LONG_FIRST) and it.get_closest_marker("serial") is None
                for it in items]
     long = [it for it, x in zip(items, is_long) if x]
@@ -151,6 +151,14 @@ def pytest_collection_modifyitems(config, items):
     overflow = [it for group in itertools.zip_longest(*(share[chunk:] for share in shares)) for it in group
                 if it is not None]
     items[:] = head + overflow + rest
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """(pytest-xdist, on the controller) The workers learn the distribution mode and chunk limit
+    (their own options say ``--dist no``) for pytest_collection_modifyitems."""
+    node.workerinput["switchobs_dist"] = node.config.getoption("dist", None)
+    node.workerinput["switchobs_maxschedchunk"] = node.config.getoption("maxschedchunk", None)
 
 
 def _serial_lock_path(uid: str) -> str:
