@@ -39,8 +39,9 @@ from .core_config import (
     noise_from_params,
 )
 from .params import ConfigError, Param
+from .params_files import matching_sections, unmatched_files
 
-__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
+__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "body_frame_prefix", "params_from_file"]
 
 #: Values of the ``consistency.check`` parameter (switchobs_ros.screening).
 CONSISTENCY = ("auto", "always", "never")
@@ -91,6 +92,9 @@ PARAMS = [
           "position (and orientation) in such a frame is mapped before it is checked and used.", str),
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
+    Param("frame_prefix", "auto", "Prefix of every body frame id (child_frame_id of the odometry): 'auto' derives it "
+          "from the node's namespace (/robot1 -> robot1/agent1; none at the root), '' none, any other value is "
+          "used as is (e.g. 'robot1/'). One estimator per robot of a fleet then publishes frames of its own."),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
     Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
           "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
@@ -172,16 +176,29 @@ def check_runtime_value(name: str, value: Any) -> str:
     return ""
 
 
+def body_frame_prefix(value: str, namespace: str) -> str:
+    """The prefix of the body frame ids for parameter ``frame_prefix`` = ``value`` in ``namespace``:
+    ``auto`` gives ``robot1/`` in ``/robot1`` (``fleet/robot1/`` in ``/fleet/robot1``, '' at the root)."""
+    if value != "auto":
+        return value
+    ns = namespace.strip("/")
+    return f"{ns}/" if ns else ""
+
+
 def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | None = None,
                      node_name: str = "estimator") -> dict:
     """The estimator's parameter values: defaults, then params files (ROS 2 YAML), then overrides.
 
-    A params file is ``<node>: ros__parameters: {...}`` (or ``/**:``), nested keys joined with
-    ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names or values of the
-    wrong type raise :class:`~switchobs_ros.params.ConfigError`, as the node does.
+    A params file is ``<node key>: ros__parameters: {...}``; the sections whose keys match the
+    node ``node_name`` (a fully qualified name, or a name at the root) apply as rcl applies them
+    (:mod:`switchobs_ros.params_files`: ``/**``, ``/**/estimator``, ``estimator``), nested keys joined
+    with ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names, values of the wrong
+    type, or a file with no section for the node raise :class:`~switchobs_ros.params.ConfigError`,
+    as the node does.
     """
     known = {p.name: p for p in PARAMS}
     cfg = {p.name: p.default for p in PARAMS}
+    fqn = node_name if node_name.startswith("/") else "/" + node_name
 
     def flat(d, prefix=""):
         for k, v in d.items():
@@ -228,11 +245,12 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
             doc = load_yaml(f, exc=ConfigError, what="params file") or {}
         except FileNotFoundError:
             raise ConfigError(f"params file {f} does not exist") from None
-        for key in (node_name, "/" + node_name, "/**"):
-            sect = doc.get(key) if isinstance(doc, dict) else None
-            if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
-                for name, v in flat(sect["ros__parameters"]):
-                    put(name, v, f"params file {f}")
+        sections = matching_sections(doc, fqn)
+        if not sections:
+            raise ConfigError(unmatched_files([f], fqn))
+        for sect in sections:
+            for name, v in flat(sect):
+                put(name, v, f"params file {f}")
     for name, v in (overrides or {}).items():
         put(name, v, "parameter override")
     return cfg
@@ -332,6 +350,9 @@ class EstimatorConfig:
         if frames and len(frames) != len(bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
+        if values["frame_prefix"].startswith("/"):
+            raise ConfigError(f"parameter 'frame_prefix' must not start with '/' (tf2 frame ids do not); got "
+                              f"{values['frame_prefix']!r}")
         try:
             transforms = parse_transforms(values["input_transforms"], values["input_frame_id"])
         except InvalidArgument as err:
