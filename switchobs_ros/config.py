@@ -41,10 +41,14 @@ from .core_config import (
 from .params import ConfigError, Param
 from .params_files import matching_sections, unmatched_files
 
-__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "body_frame_prefix", "params_from_file"]
+__all__ = ["CONSISTENCY", "PARAMS", "UNCHECKED", "EstimatorConfig", "body_frame_prefix", "params_from_file"]
 
-#: Values of the ``consistency.check`` parameter (switchobs_ros.screening).
+#: Values of the ``consistency.check`` parameter (switchobs_ros.screening): ``auto`` and ``always`` test every
+#: sample while a bound is published, ``never`` does not.
 CONSISTENCY = ("auto", "always", "never")
+
+#: The start-up warning of ``consistency.check: never``.
+UNCHECKED = "consistency.check is 'never': the published bounds are not tested against the data"
 
 #: The estimator node's parameters (the documentation's parameter reference is generated from it: tools/docs_gen.py).
 PARAMS = [
@@ -67,9 +71,11 @@ PARAMS = [
           "Kalman families (< 0: the system's noise: section, or 1 mm)."),
     Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
           "section, or 0.01)."),
-    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row (< 0: none). With it "
-          "~/envelope gets a last element noise_bound, a guarantee under any noise within the bound; without it "
-          "exact_bound is the noise-free bound (a guarantee only for noise-free measurements)."),
+    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row; 0 declares noise-free "
+          "samples (< 0: none declared). With it ~/envelope gets a last element noise_bound, a guarantee under any "
+          "noise within the bound; without it exact_bound is the noise-free bound (a guarantee only for noise-free "
+          "measurements) and the consistency test holds every sample to it: noise withdraws the bounds at the first "
+          "sample the bound cannot explain."),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
@@ -110,8 +116,9 @@ PARAMS = [
           "(0: off; in [0, 0.5]). Needs a covariance (publish_covariance, or the Kalman families)."),
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
-          "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
-          "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
+          "explains it, else rejected and every bound withdrawn): auto and always (the same) test whenever a bound "
+          "is published: against noise_bound with noise.max, else against exact_bound as noise-free samples; never "
+          "publishes bounds that nothing checks (a warning at start-up)."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "

@@ -113,3 +113,20 @@ def test_an_estimator_given_a_file_for_another_name_refuses_to_start(tmp_path, m
             EstimatorNode(namespace="/robot1", context=ctx)
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.parametrize("name,table", [("estimator.yaml", "periodic"), ("estimator_sequence.yaml", "sequence"),
+                                        ("robot_template.yaml", "periodic")])
+def test_every_shipped_estimator_config_tests_its_bound(paper_tables, name, table):
+    """No shipped configuration publishes a bound that nothing checks: the consistency test is on;
+    the files for camera_sim's noise-free data declare it (noise.max 0: a sample the bound cannot
+    explain is rejected), the robot template, whose noise is the user's, holds samples to the
+    noise-free bound until it declares one (watch only: such a sample withdraws the bounds)."""
+    from switchobs_ros.config import EstimatorConfig
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    conf = EstimatorConfig.from_files([REPO / "config" / name], {"gain_table": paper_tables[table]})
+    pl = EstimatorPipeline.from_params(conf)
+    assert pl.check and pl.screening.testing
+    declared = name != "robot_template.yaml"
+    assert (pl.observer.noise_max == (0.0, 0.0)) == declared and pl.screening.watch_only != declared
