@@ -1,0 +1,62 @@
+"""Outputs on demand: an optional output of the estimator is built and published only while a
+subscription is matched to its publisher.
+
+A DDS writer sends a sample only to the readers it has matched (the outputs are volatile: a reader
+that joins later never gets what was sent before it), so skipping an output that no reader is
+matched to loses nothing that a subscriber could have received. At 32 agents (n = 132) the
+per-body odometries, the 139 KB covariance and the typed messages cost several milliseconds per
+estimate to build and serialise, and the covariance itself (``P``, n^3 to form from a Kalman
+table's stored prior) as much again; none of it is spent while nobody listens.
+
+:class:`Demand` answers two questions:
+
+* ``listened(pub)``: is a subscription matched to ``pub`` now? (rcl's matched count, about 2 us:
+  asked at every publication, so a new subscriber gets the very next estimate);
+* ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before an
+  input is handled (the estimate's ``P`` is formed with it). A yes is kept for
+  :attr:`Demand.period` seconds (a subscriber that leaves costs at most that long of covariances
+  nobody reads); a no is asked again at the next input, so the first estimate after a subscriber
+  appears carries ``P``, as when ``publish_covariance`` is true and everything is published.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["Demand", "listened"]
+
+
+def listened(pub: Any) -> bool:
+    """Is a subscription matched to the publisher ``pub`` (None: no such output)?"""
+    return pub is not None and pub.get_subscription_count() > 0
+
+
+class Demand:
+    """Which optional outputs have subscribers (module docstring).
+
+    ``Demand(carriers, period=0.1)``: ``carriers()`` returns the publishers whose messages carry
+    ``P`` (re-read at every refresh: the node may recreate its publishers).
+    """
+
+    def __init__(self, carriers: Callable[[], Sequence[Any]], period: float = 0.1,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._carriers = carriers
+        self.period = float(period)
+        self._clock = clock
+        self._until = -math.inf
+        self._wanted = False
+
+    def covariance_wanted(self) -> bool:
+        """Whether an output that carries ``P`` has a subscriber (a yes kept for :attr:`period` s)."""
+        now = self._clock()
+        if now >= self._until:
+            self._wanted = any(listened(p) for p in self._carriers())
+            self._until = now + self.period if self._wanted else -math.inf
+        return self._wanted
+
+    def expire(self) -> None:
+        """Ask the publishers again at the next :meth:`covariance_wanted` (e.g. after a parameter change)."""
+        self._until = -math.inf
