@@ -12,11 +12,13 @@ table's stored prior) as much again; none of it is spent while nobody listens.
 
 * ``listened(pub)``: is a subscription matched to ``pub`` now? (rcl's matched count, about 2 us:
   asked at every publication, so a new subscriber gets the very next estimate);
-* ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before an
-  input is handled (the estimate's ``P`` is formed with it). A yes is kept for
-  :attr:`Demand.period` seconds (a subscriber that leaves costs at most that long of covariances
-  nobody reads); a no is asked again at the next input, so the first estimate after a subscriber
-  appears carries ``P``, as when ``publish_covariance`` is true and everything is published.
+* ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before
+  every input is handled (the estimate's ``P`` is formed with it), of up to 36 publishers at 32
+  agents, so the answer is kept: a yes for :attr:`Demand.period` seconds (a subscriber that
+  leaves costs at most that long of covariances nobody reads), a no for :attr:`Demand.period_no`
+  seconds (for at most that long after the first subscriber to an output carrying ``P`` appears,
+  its messages go out without the covariance: the odometry's unknown, the typed estimate's
+  empty, as with ``publish_covariance`` false).
 """
 
 from __future__ import annotations
@@ -37,24 +39,26 @@ def listened(pub: Any) -> bool:
 class Demand:
     """Which optional outputs have subscribers (module docstring).
 
-    ``Demand(carriers, period=0.1)``: ``carriers()`` returns the publishers whose messages carry
+    ``Demand(carriers, period=0.1, period_no=0.02)``: ``carriers()`` returns the publishers whose messages carry
     ``P`` (re-read at every refresh: the node may recreate its publishers).
     """
 
-    def __init__(self, carriers: Callable[[], Sequence[Any]], period: float = 0.1,
+    def __init__(self, carriers: Callable[[], Sequence[Any]], period: float = 0.1, period_no: float = 0.02,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self._carriers = carriers
         self.period = float(period)
+        self.period_no = float(period_no)
         self._clock = clock
         self._until = -math.inf
         self._wanted = False
 
     def covariance_wanted(self) -> bool:
-        """Whether an output that carries ``P`` has a subscriber (a yes kept for :attr:`period` s)."""
+        """Whether an output that carries ``P`` has a subscriber (kept for :attr:`period` s, a no
+        for :attr:`period_no` s)."""
         now = self._clock()
         if now >= self._until:
             self._wanted = any(listened(p) for p in self._carriers())
-            self._until = now + self.period if self._wanted else -math.inf
+            self._until = now + (self.period if self._wanted else self.period_no)
         return self._wanted
 
     def expire(self) -> None:

@@ -28,18 +28,21 @@ class _Pub:
         return self.n
 
 
-def test_demand_keeps_a_yes_for_its_period_and_asks_again_after_a_no():
+def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     now = [0.0]
     pubs = [_Pub(), _Pub()]
-    d = Demand(lambda: pubs, period=0.1, clock=lambda: now[0])
+    d = Demand(lambda: pubs, period=0.1, period_no=0.02, clock=lambda: now[0])
     assert not d.covariance_wanted() and not d.covariance_wanted()
-    assert [p.asked for p in pubs] == [2, 2]              # a no is asked again at every call
+    assert [p.asked for p in pubs] == [1, 1]              # a no is kept for period_no
     pubs[1].n = 1
-    assert d.covariance_wanted()
+    now[0] = 0.01
+    assert not d.covariance_wanted()
+    now[0] = 0.02
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2]
     pubs[1].n = 0
-    now[0] = 0.05
+    now[0] = 0.07
     assert d.covariance_wanted()                          # a yes kept for the period
-    now[0] = 0.1
+    now[0] = 0.13
     assert not d.covariance_wanted()                      # then asked again
     pubs[0].n = 1
     d.expire()
