@@ -50,6 +50,7 @@ class NodeState:
     last_prediction: Any
     predictions: int
     ignored_inactive: int = 0
+    published: dict | None = None       # messages published per output (switchobs_ros.demand)
 
 
 class EstimatorDiagnostics:
@@ -124,6 +125,9 @@ class EstimatorDiagnostics:
               kv("clock jumps back (resets)", node.clock_jumps_back),
               kv("clock jumps forward", node.clock_jumps_forward),
               kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
+        if getattr(node, "published", None):
+            ob.append(kv("messages published (optional outputs only while subscribed)",
+                         ", ".join(f"{k} {v}" for k, v in node.published.items())))
         if obs.gains.paper_envelope:
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
                    kv("current gain norms |L_i|", gain_norms(d.L))]
