@@ -12,7 +12,12 @@ One owner of the two ellipsoids the observer keeps (the argument is in
   (:meth:`RoundingBound.rho_step`, :meth:`RoundingBound.rho_correct`);
 * the *noise bound* (a declared ``|v_j| <= v_max``): the same with the noise's image ``G v`` added
   to every step (``G = Gamma_A L`` for the held innovation of LMI gains, ``G = K`` for a Kalman
-  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``.
+  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``; and with a declared disturbance
+  (``x' = A x + B_w w``, ``|w_j| <= max_j``, :mod:`switchobs_core.model.disturbance`) the ball of
+  its reachable set over every step, ``||D^-1 d(dt)|| <= R(dt)``
+  (:class:`~switchobs_core.numerics.disturbance_reach.DisturbanceReach`, its own term of the
+  step's residual: :meth:`RoundingBound.rho_disturbance`). The exact bound stays the model's
+  (noise-free samples, no disturbance).
 
 The observer steps it with the error maps of every sample
 (:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
@@ -34,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
@@ -49,13 +55,15 @@ class RoundingBound:
 
     ``b = RoundingBound(A, p_max, e0, noise_max, B=B, scale=d)``; ``b.reset()`` restarts at
     ``S = e0^2 I``. ``noise_max`` is one bound per channel (None: no noise ellipsoid); ``B`` the
-    input matrix (None: no input); ``scale`` the balancing of ``A``
+    input matrix (None: no input); ``disturbance`` a
+    :class:`~switchobs_core.model.disturbance.Disturbance` entering the noise ellipsoid (None: none;
+    needs ``noise_max``); ``scale`` the balancing of ``A``
     (:func:`~switchobs_core.numerics.scaling.balance`, computed when not given; the ZOH cache
     entries stepped here must carry the same one).
     """
 
     def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, *,
-                 B: np.ndarray | None = None, scale: np.ndarray | None = None) -> None:
+                 B: np.ndarray | None = None, scale: np.ndarray | None = None, disturbance: Any = None) -> None:
         self.n = A.shape[0]
         self.e0 = e0
         self.noise_max = noise_max
@@ -65,6 +73,9 @@ class RoundingBound:
         self.nA = nu2(balanced(A, self.d))
         self.g_n = gamma(self.n + 2)
         self.g_p = gamma(p_max + 2)
+        #: The reachable set of the declared disturbance per step (None: none declared).
+        self.reach = (DisturbanceReach(A, disturbance.B_w, disturbance.w_max, self.d)
+                      if disturbance is not None and disturbance.active and noise_max else None)
         self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
@@ -137,7 +148,12 @@ class RoundingBound:
         if u is not None:
             un = math.sqrt(float(u @ u))
             rho += (e.epsG * self.fB + self.g_m * e.fGB) * un
-        return rho * (1.0 + 8.0 * _U)
+        return (rho + self.rho_disturbance(dt, ell)) * (1.0 + 8.0 * _U)
+
+    def rho_disturbance(self, dt: float, ell: ErrorEllipsoid) -> float:
+        """The disturbance's term of a step over ``dt`` for the ellipsoid ``ell``: ``R(dt)`` for the
+        noise ellipsoid (module docstring), 0 for the exact one or with no disturbance declared."""
+        return self.reach.radius(dt) if self.reach is not None and ell is self.ellv else 0.0
 
     def rho_input(self, e: Any, dt: float, d: np.ndarray, x: np.ndarray) -> float:
         """Residual bound (balanced) of adding an input change's exact ZOH to the estimate,
