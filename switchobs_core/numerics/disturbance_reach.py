@@ -39,6 +39,15 @@ Each integral ``int_0^h ||e^{A_b r} X|| dr`` (``X`` a column or ``B_b``) is boun
   exact worst case up to the trapezoid's ``O(h^2)``;
 * growth: ``||e^{A_b r}|| <= e^{a r}`` gives ``||X|| (e^{a h} - 1) / a`` (long steps).
 
+The observer keeps its error in ellipsoids (:mod:`switchobs_core.numerics.rounding`, step 7), and a
+ball in balanced units covers every direction, also those ``B_w`` cannot reach (positions, for
+accelerations: ``h^2 / 2`` of the velocities' ``h``). :meth:`DisturbanceReach.shaped` splits
+``d = h B_w wbar + int_0^h (e^{A r} - I) B_w w dr`` (``wbar`` the step's mean of ``w``, in the box):
+the first term lies in the degenerate ellipsoid ``E(G G')``, ``G = h sqrt(q) B_w diag(m)``
+(``||diag(m)^-1 wbar||^2 <= q``), the second in a ball of radius
+``h^2 g(Y) / 2 + sum_j m_j ||A_b^2 b_j|| h^3 e^{a h} / 6`` (or ``g(B_b) ((e^{a h} - 1) / a - h)``), of
+second order in ``h``.
+
 Rounding. The products ``Y = fl(A_b X)`` and ``Z = fl(A_b Y)`` err by at most
 ``gamma_n |A_b| |X|`` entrywise (Higham, eq. 3.11), so ``||A_b X - Y|| <= gamma_n a ||X||``; the
 axpy ``fl(X + h Y)`` by ``gamma_2 (|X| + h |Y|)``; a computed norm is a sum of nonnegative terms
@@ -92,9 +101,11 @@ class DisturbanceReach:
         n = A.shape[0]
         d = np.ones(n) if scale is None else np.asarray(scale, dtype=float)
         self.w_max = np.asarray(w_max, dtype=float).reshape(-1)
-        Bb = np.asarray(B_w, dtype=float).reshape(n, -1) / d[:, None]        # exact: powers of two
+        Bw = np.asarray(B_w, dtype=float).reshape(n, -1)
         keep = self.w_max > 0.0
-        self.w_max, Bb = self.w_max[keep], Bb[:, keep]
+        self.w_max, Bw = self.w_max[keep], Bw[:, keep]
+        Bb = Bw / d[:, None]        # exact: powers of two
+        self._Bw, self._id = Bw, 1.0 / d
         self.q = Bb.shape[1]
         Ab = A * (1.0 / d)[:, None] * d[None, :]
         self.a = nu(Ab)
@@ -170,6 +181,29 @@ class DisturbanceReach:
             self._cache.clear()
         self._cache[dt] = r
         return r
+
+
+    def shaped(self, dt: float) -> tuple[np.ndarray, float]:
+        """``(G, r)``: ``d(dt)`` lies in ``E(G G') + `` the ball of radius ``r`` (balanced units), with
+        ``G = dt sqrt(q) B_w diag(m)`` as computed (its rounding, relative ``4 u``, and the step's
+        within ``u dt``, are in ``r``; module docstring)."""
+        if self.q == 0 or not dt > 0.0:
+            return np.zeros((self._B.shape[0], 0)), 0.0
+        h = dt * (1.0 + 2.0 * _U)
+        if not math.isfinite(h) or self.a * h > 700.0:
+            return np.zeros((self._B.shape[0], 0)), math.inf
+        a, ah = self.a, self.a * h
+        taylor = (h * h * self._gY / 2.0 + self._gZ * h ** 3 * math.exp(ah) / 6.0) * _UP * _UP
+        if ah > 1.0:
+            taylor = min(taylor, self._gB * (math.expm1(ah) / a - h) * _UP * _UP)
+        G = self._Bw * ((dt * math.sqrt(self.q)) * self.w_max)[None, :]
+        r = (taylor + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP
+        return G, r
+
+
+def _mat_fro_up(X: np.ndarray) -> float:
+    """``>= ||X||_F`` (rounded up)."""
+    return math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP if X.size else 0.0
 
 
 def brute_force_reach(A: np.ndarray, B_w: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
