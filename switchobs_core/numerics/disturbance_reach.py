@@ -41,12 +41,12 @@ Each integral ``int_0^h ||e^{A_b r} X|| dr`` (``X`` a column or ``B_b``) is boun
 
 The observer keeps its error in ellipsoids (:mod:`switchobs_core.numerics.rounding`, step 7), and a
 ball in balanced units covers every direction, also those ``B_w`` cannot reach (positions, for
-accelerations: ``h^2 / 2`` of the velocities' ``h``). :meth:`DisturbanceReach.shaped` splits
-``d = h B_w wbar + int_0^h (e^{A r} - I) B_w w dr`` (``wbar`` the step's mean of ``w``, in the box):
-the first term lies in the degenerate ellipsoid ``E(G G')``, ``G = h sqrt(q) B_w diag(m)``
-(``||diag(m)^-1 wbar||^2 <= q``), the second in a ball of radius
-``h^2 g(Y) / 2 + sum_j m_j ||A_b^2 b_j|| h^3 e^{a h} / 6`` (or ``g(B_b) ((e^{a h} - 1) / a - h)``), of
-second order in ``h``.
+accelerations: ``h^2 / 2`` of the velocities' ``h``), and a map that expands some directions (a
+Kalman correction's ``I - K H``, 200 in the balanced 2-norm for the paper's gains) expands the ball
+in all of them. :meth:`DisturbanceReach.shaped` keeps the first two Taylor terms of ``d`` as a
+degenerate ellipsoid ``E(G G')`` in the directions ``B_w`` and ``A B_w`` reach (a box of ``q``
+inputs lies in the ellipsoid ``q diag(m^2)``) and only the third-order remainder,
+``sum_j m_j ||A_b^2 b_j|| h^3 e^{a h} / 6``, as a ball.
 
 Rounding. The products ``Y = fl(A_b X)`` and ``Z = fl(A_b Y)`` err by at most
 ``gamma_n |A_b| |X|`` entrywise (Higham, eq. 3.11), so ``||A_b X - Y|| <= gamma_n a ||X||``; the
@@ -105,7 +105,7 @@ class DisturbanceReach:
         keep = self.w_max > 0.0
         self.w_max, Bw = self.w_max[keep], Bw[:, keep]
         Bb = Bw / d[:, None]        # exact: powers of two
-        self._Bw, self._id = Bw, 1.0 / d
+        self._Bw, self._id, self._d = Bw, 1.0 / d, d
         self.q = Bb.shape[1]
         Ab = A * (1.0 / d)[:, None] * d[None, :]
         self.a = nu(Ab)
@@ -184,20 +184,29 @@ class DisturbanceReach:
 
 
     def shaped(self, dt: float) -> tuple[np.ndarray, float]:
-        """``(G, r)``: ``d(dt)`` lies in ``E(G G') + `` the ball of radius ``r`` (balanced units), with
-        ``G = dt sqrt(q) B_w diag(m)`` as computed (its rounding, relative ``4 u``, and the step's
-        within ``u dt``, are in ``r``; module docstring)."""
+        """``(G, r)``: ``d(dt)`` lies in ``E(G G')`` plus the ball of radius ``r`` (balanced units;
+        module docstring). With ``wbar = (1/h) int w`` and ``wtil = (2/h^2) int_0^h r w(h - r) dr``,
+        both in the box, ``d = h B_w wbar + (h^2/2) A B_w wtil + int R(r) B_w w``: the first two lie in
+        ``E(q (1 + a) G1 G1') + E(q (1 + 1/a) G2 G2')`` (``G1 = h B_w diag(m)``, ``G2 = (h^2/2) A B_w
+        diag(m)``, ``a`` from their balanced traces), so ``G = [sqrt(q (1 + a)) G1, sqrt(q (1 + 1/a)) G2]``;
+        the remainder, ``Y``'s rounding and ``G``'s own (relative ``8 u``, the step's ``u dt`` included)
+        are the ball. For ``a h > 1`` (a long step) ``G`` is empty and ``r`` is :meth:`radius`."""
+        n = self._B.shape[0]
         if self.q == 0 or not dt > 0.0:
-            return np.zeros((self._B.shape[0], 0)), 0.0
+            return np.zeros((n, 0)), 0.0
         h = dt * (1.0 + 2.0 * _U)
-        if not math.isfinite(h) or self.a * h > 700.0:
-            return np.zeros((self._B.shape[0], 0)), math.inf
-        a, ah = self.a, self.a * h
-        taylor = (h * h * self._gY / 2.0 + self._gZ * h ** 3 * math.exp(ah) / 6.0) * _UP * _UP
-        if ah > 1.0:
-            taylor = min(taylor, self._gB * (math.expm1(ah) / a - h) * _UP * _UP)
-        G = self._Bw * ((dt * math.sqrt(self.q)) * self.w_max)[None, :]
-        r = (taylor + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP
+        if not math.isfinite(h) or self.a * h > 1.0:
+            return np.zeros((n, 0)), self.radius(dt)
+        G1 = self._Bw * (dt * self.w_max)[None, :]
+        G2 = (self._Y * self._d[:, None]) * ((dt * dt / 2.0) * self.w_max)[None, :]
+        t1 = _mat_fro_up(G1 * self._id[:, None])
+        t2 = _mat_fro_up(G2 * self._id[:, None])
+        a = min(max(t2 / t1, 1e-12), 1e12) if t1 > 0.0 else 1e12
+        s1 = math.sqrt(self.q * (1.0 + a)) * (1.0 + 4.0 * _U)
+        s2 = math.sqrt(self.q * (1.0 + 1.0 / a)) * (1.0 + 4.0 * _U)
+        G = np.hstack([G1 * s1, G2 * s2])
+        rem = (self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self.w_max @ self._ey)) * _UP
+        r = (rem + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
         return G, r
 
 

@@ -53,3 +53,19 @@ def test_an_undeclared_manoeuvre_is_caught_by_the_consistency_test(paper, paper_
 def test_a_disturbance_needs_noise_max(paper, paper_table):
     with pytest.raises(so.InvalidArgument, match="noise_max"):
         so.SwitchedObserver(paper, paper_table, "periodic", PER, disturbance=load_disturbance("paper", paper, w_max=1))
+
+
+def test_the_kalman_bound_under_a_constant_corner_is_within_20x(paper):
+    """Kalman gains (Q_c from the disturbance), no initial error, noise-free samples, every velocity
+    at +0.2 m/s^2: the bound holds the disturbance alone and stays within 20x of the error it
+    causes (13x measured; the disturbance's second-order part is shaped too, so the correction's
+    ``||I - K H||`` (about 200 balanced) does not multiply a ball)."""
+    from switchobs_core.model.scenarios import load_noise
+
+    dist = load_disturbance("paper", paper, w_max=0.2)
+    table = so.kalman_table(paper, [so.design_kalman(paper, PER, 50.0, noise=load_noise("paper", paper,
+                                                                                         disturbance=dist))])
+    obs = so.SwitchedObserver(paper, table, "periodic", PER, x0=X0, e0=0.0, noise_max=0.0, disturbance=dist)
+    r = disturbed_run(paper, obs, PeriodicSchedule(PER[0]), 50.0, 6.0, X0, dist.B_w, lambda t: np.full(6, 0.2))
+    assert math.isnan(r.withdrawn_at) and r.false_samples() == 0
+    assert r.error[-1] <= r.bound[-1] <= 20 * r.error[-1]
