@@ -74,7 +74,7 @@ class Plant:
         Bw = np.zeros((self.n, 0)) if B_w is None else np.asarray(B_w, dtype=float).reshape(self.n, -1)
         self.q = Bw.shape[1]
         self.B = B
-        self._BB = np.hstack([B, Bw])       # [B, B_w]: one ZOH for the known and the unknown input
+        self._BB = np.hstack([B, Bw]) if self.q else B      # [B, B_w]: one ZOH for the known and the unknown input
         self.C = tuple(np.asarray(Ci, dtype=float) for Ci in system.C)
         self._x = np.zeros(self.n) if x0 is None else np.array(x0, dtype=float).reshape(-1)
         if self._x.size != self.n or not np.isfinite(self._x).all():
