@@ -64,6 +64,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.linalg import expm
 
 from .expm_bound import nu
 from .rounding import UNIT_ROUNDOFF, gamma
@@ -219,8 +220,6 @@ def brute_force_reach(A: np.ndarray, B_w: np.ndarray, w: np.ndarray, dt: float) 
     """``d(dt)`` for the piecewise-constant ``w`` (rows: equal pieces of ``[0, dt]``), integrated
     exactly piece by piece with the augmented exponential ``e^{[[A, B_w], [0, 0]] tau}`` (the
     reference of the tests and the bench's search for the worst case)."""
-    from scipy.linalg import expm
-
     n, q = B_w.shape
     K = w.shape[0]
     J = np.zeros((n + q, n + q))
