@@ -29,3 +29,28 @@ def test_accelerations_within_the_declared_disturbance_keep_a_valid_true_bound(t
     res, p = _estimate(tmp_path, paper_tables, "declared", **{"disturbance.max": 0.2})
     assert res.inconsistent == 0 and res.bound_valid
     assert len(p.t) == 301 and np.all(p.noise >= 0) and p.violations(p.noise) == 0
+
+
+def test_diagnostics_name_the_declared_disturbance(paper_tables):
+    """The node's bound line says under which declarations noise_bound holds."""
+    import time as _time
+
+    from std_msgs.msg import UInt8
+
+    import msg_bridge as mb
+    from switchobs_ros.config import params_from_file
+    from switchobs_ros.diagnostics import EstimatorDiagnostics, NodeState
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    pl = EstimatorPipeline.from_params(params_from_file(overrides={
+        "gain_table": paper_tables["periodic"], "reorder_window_ms": 0.0, "e0": 10.0, "noise.max": 3e-3,
+        "disturbance.max": 0.2}))
+    pl.on_channel(UInt8(data=1))
+    s, now = _time.time_ns() - 10**9, _time.time_ns()
+    pl.on_pose("camera", mb.xy_to_pose((0.0, 0.0), s, "map"), now)
+    pl.on_pose("target", mb.xy_to_pose((3.0, 1.0), s, "map"), now)
+    assert pl.updates == 1 and pl.bound_valid
+    clock = type("T", (), {"nanoseconds": now, "to_msg": lambda self: mb.ns_to_stamp(now)})()
+    arr = EstimatorDiagnostics("/estimator", pl, now).array(clock, NodeState(0, 0, "", 1.0, None, 0))
+    keys = [kv.key for st in arr.status for kv in st.values]
+    assert "noise bound (|v| <= 0.003 per row, disturbance |w| <= 0.2)" in keys, keys
