@@ -13,7 +13,8 @@ manoeuvring bodies.
    node's consistency test (:mod:`switchobs_core.sim.disturbed`): with ``disturbance.max = 0.2``
    and with none declared.
 
-``python bench/bench_disturbance.py [--seconds 60] [--search 40]``; results in bench/RESULTS.md.
+``python bench/bench_disturbance.py [--seconds 60] [--search 40]``; ``--cost``: the CPU time per
+sample without and with a declared disturbance. Results in bench/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -124,12 +125,53 @@ def manoeuvre_paper(table, seconds: float) -> dict:
     return out
 
 
+def cost(agents: int, rounds: int = 5, seconds: float = 20.0) -> dict:
+    """CPU time per sample (``update`` and ``envelope()``, the node's per-sample work) of a Kalman
+    table on ``camera_agents(agents)`` with noise.max declared, without and with a disturbance on
+    every velocity, interleaved rounds, medians (us)."""
+    import statistics
+    import time
+
+    from switchobs_core.sim.plant import Plant
+
+    sys_ = camera_agents(agents) if agents > 2 else paper_system()
+    cyc = [Cycle((1.0,) * sys_.N)]
+    dist = load_disturbance("camera_agents", sys_, w_max=0.2)
+    table = so.kalman_table(sys_, [so.design_kalman(sys_, cyc, 50.0, noise=load_noise("camera_agents", sys_))])
+    sched = PeriodicSchedule(cyc[0])
+    plant = Plant(sys_, np.ones(sys_.n))
+    samples = []
+    for k in range(round(seconds * 50)):
+        t = k / 50.0
+        plant.advance(t)
+        rho = int(sched.channel_at(t))
+        samples.append((t, rho, plant.measure(rho)))
+    times: dict[str, list[float]] = {"none": [], "disturbance": []}
+    for _ in range(rounds):
+        for name, d in (("none", None), ("disturbance", dist)):
+            obs = so.SwitchedObserver(sys_, table, "periodic", cyc, x0=np.ones(sys_.n), e0=1.0, noise_max=3e-3,
+                                      disturbance=d)
+            t0 = time.process_time()
+            for t, rho, y in samples:
+                obs.update(t, rho, y)
+                obs.envelope()
+            times[name].append((time.process_time() - t0) / len(samples) * 1e6)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    return {"n": sys_.n, **{k: round(v, 1) for k, v in med.items()},
+            "ratio": round(med["disturbance"] / med["none"], 2)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--search", type=int, default=40)
+    ap.add_argument("--cost", action="store_true", help="only the CPU time per sample, without and with")
     a = ap.parse_args(argv)
     single_threaded_blas()
+    if a.cost:
+        for agents in (2, 8):
+            print("cost per sample (us, Kalman table, update + envelope):", cost(agents))
+        return 0
     tmp = Path(tempfile.mkdtemp())
     table = design_table(paper_system(), cycles=PER, delta=0.99)
     table.save(tmp / "t.json")

@@ -131,6 +131,7 @@ class DisturbanceReach:
         self._gY = (self._gram(Y, gn) + float(self.w_max @ self._ey)) * _UP
         self._gZ = float(self.w_max @ self._nz) * (1.0 + gamma(self.q + 2)) * _UP
         self._cache: dict[float, float] = {}
+        self._shaped: dict[float, tuple[np.ndarray, float]] = {}
 
     def _gram(self, X: np.ndarray, gn: float) -> float:
         """``>= sqrt(m' |X'X| m)`` (the product's rounding ``gamma_n |X|'|X|`` added)."""
@@ -195,6 +196,9 @@ class DisturbanceReach:
         n = self._B.shape[0]
         if self.q == 0 or not dt > 0.0:
             return np.zeros((n, 0)), 0.0
+        hit = self._shaped.get(dt)
+        if hit is not None:
+            return hit
         h = dt * (1.0 + 2.0 * _U)
         if not math.isfinite(h) or self.a * h > 1.0:
             return np.zeros((n, 0)), self.radius(dt)
@@ -208,6 +212,10 @@ class DisturbanceReach:
         G = np.hstack([G1 * s1, G2 * s2])
         rem = (self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self.w_max @ self._ey)) * _UP
         r = (rem + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
+        G.setflags(write=False)
+        if len(self._shaped) >= _CACHE:
+            self._shaped.clear()
+        self._shaped[dt] = (G, r)
         return G, r
 
 
