@@ -57,10 +57,13 @@ def disturbance_from_params(cfg: dict, system: LTISystem) -> Disturbance | None:
     """The declared disturbance: the system's ``disturbance:`` section (built-in scenarios: unit
     accelerations on the velocity states, no bound), then the parameter ``disturbance.max``
     (empty: keep); None when the system has no disturbance input and none is asked for."""
+    w_max = cfg.get("disturbance.max", ())
     try:
-        dist = load_disturbance(cfg["system"], system, w_max=tuple(cfg.get("disturbance.max", ())))
+        dist = load_disturbance(cfg["system"], system, w_max=tuple(w_max) if isinstance(w_max, (list, tuple)) else
+                                (w_max,))
     except SwitchobsError as err:
-        raise ConfigError(f"parameter 'disturbance.max': {err}") from None
+        raise ConfigError(f"parameter {err}" if str(err).startswith("disturbance.max") else
+                          f"parameter 'disturbance.max': {err}") from None
     return dist if dist.q else None
 
 

@@ -37,8 +37,9 @@ __all__ = ["Disturbance", "DISTURBANCE_KEYS", "MAX_DISTURBANCE", "velocity_input
 
 #: Keys of the ``disturbance:`` mapping.
 DISTURBANCE_KEYS = ("B_w", "max")
-#: Largest accepted bound of one input (its square enters a covariance).
-MAX_DISTURBANCE = 1e50
+#: Largest accepted bound of one input (its square enters a covariance, whose entries stay below
+#: :data:`~switchobs_core.model.noise.MAX_ABS_ENTRY`).
+MAX_DISTURBANCE = 1e49
 #: State label endings that name a velocity (the built-in scenarios' ``<body>.v_x``).
 VELOCITY_SUFFIXES = ("v_x", "v_y", "v_z")
 
@@ -78,11 +79,11 @@ class Disturbance:
     B_w: np.ndarray
     w_max: np.ndarray
 
-    def __init__(self, B_w: Any, w_max: Any) -> None:
+    def __init__(self, B_w: Any, w_max: Any, *, where: str = "disturbance max") -> None:
         B = np.array(B_w, dtype=float)
         if B.ndim != 2 or not np.all(np.isfinite(B)):
             raise InvalidSystem(f"disturbance B_w must be a finite n x q matrix; got shape {B.shape}")
-        m = parse_max(w_max, B.shape[1], "disturbance max")
+        m = parse_max(w_max, B.shape[1], where)
         for M in (B, m):
             M.setflags(write=False)
         object.__setattr__(self, "B_w", B)
@@ -107,9 +108,9 @@ class Disturbance:
         except InvalidSystem as err:
             raise InvalidSystem(f"{source}: {err}") from None
 
-    def with_max(self, w_max: Any) -> Disturbance:
-        """The same ``B_w`` with the bounds ``w_max`` (one number or q)."""
-        return Disturbance(self.B_w, w_max)
+    def with_max(self, w_max: Any, where: str = "disturbance.max") -> Disturbance:
+        """The same ``B_w`` with the bounds ``w_max`` (one number or q; ``where`` names them in errors)."""
+        return Disturbance(self.B_w, w_max, where=where)
 
     @property
     def q(self) -> int:

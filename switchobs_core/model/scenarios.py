@@ -206,10 +206,7 @@ def load_disturbance(spec: str | Path, system: LTISystem, *, w_max: Any = None) 
     if dist.q == 0:
         raise InvalidSystem(f"disturbance.max is given but the system declares no disturbance input: add "
                             f"'disturbance: {{B_w: <n x q>}}' to {spec} (no state is labelled as a velocity)")
-    try:
-        return dist.with_max(w_max)
-    except InvalidSystem as err:
-        raise InvalidSystem(f"disturbance.max: {err}") from None
+    return dist.with_max(w_max)
 
 
 def load_system(spec: str | Path) -> LTISystem:
