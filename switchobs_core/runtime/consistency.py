@@ -21,8 +21,9 @@ relative error is a few ``n u``), so a model that holds never fails it.
 
 A sample that fails it is therefore a *proof* that the model is broken for that sample: the
 sample was attributed to the wrong channel, is in the wrong frame, comes from a faulty sensor,
-or the bodies do not move as ``A`` says (a manoeuvre, a collision), or the noise exceeds the
-declared bound. Nothing can then be guaranteed about the estimate: the callers withdraw every
+or the bodies do not move as ``A`` says (a manoeuvre beyond the declared disturbance, a
+collision), or the noise exceeds the declared bound (:func:`likely_causes` orders these by the
+evidence for a diagnostic). Nothing can then be guaranteed about the estimate: the callers withdraw every
 bound they publish. When the sample is consistent with exactly one other channel, that channel
 is the only one the model allows, and the sample can be re-attributed to it
 (:func:`consistent_channels`). :class:`InnovationTest` runs the test for a system's channels
