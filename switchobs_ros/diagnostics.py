@@ -178,7 +178,8 @@ class EstimatorDiagnostics:
                  env.exact_bound if pl.bound_valid else "none (withdrawn)"),
               kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
         if env.noise_bound is not None:
-            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
+            dist = "" if obs.disturbance is None else f", disturbance |w| <= {max(obs.disturbance.w_max):g}"
+            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row{dist})",
                          env.noise_bound if pl.bound_valid else "none (withdrawn)"))
         return ob
 

@@ -178,7 +178,7 @@ class EstimatorPipeline(Counters):
                                         e0=conf["e0"], bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         mode_check = conf["consistency.check"]

@@ -20,7 +20,7 @@ import numpy as np
 
 from msg_bridge import Reason, Rejection
 from switchobs_core.model.measurement import Measurement
-from switchobs_core.runtime.consistency import Consistency, InnovationTest, consistent_channels
+from switchobs_core.runtime.consistency import Consistency, InnovationTest, consistent_channels, likely_causes
 from switchobs_core.runtime.gate import ChiSquareGate
 
 from .counters import Counters
@@ -116,12 +116,10 @@ class Screening:
         ctr.inconsistent += 1
         ctr.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
         ctr.reject(self.pairing.topic(pend), Rejection(Reason.INCONSISTENT, "innovation", first.describe()))
-        if t == 0.0:        # the first sample: its prior is x_hat(t0) with the ball of radius e0
-            why = (f"at the first sample the initial error exceeds e0 = {self.observer.e0:g}: parameter e0 must bound "
-                   "||x_hat(t0) - x(t0)|| (raise it, or give an initial_estimate closer to the truth)")
-        else:
-            why = ("the model does not hold for the data (wrong channel or frame, a faulty sensor, a body off the "
-                   "model, noise beyond noise.max, or an initial error above e0)")
+        obs = self.observer         # the first sample (t = 0): its prior is x_hat(t0) with the ball of radius e0
+        dist = None if obs.disturbance is None else float(max(obs.disturbance.w_max))
+        why = likely_causes(t == 0.0, first.ratio, e0=obs.e0, noise_max=max(obs.noise_max or (0.0,)) if
+                            obs.noise_max is not None else None, disturbance_max=dist)
         ctr.withdraw(f"inconsistent sample at stamp {pend.stamp_ns} ({first.describe()}): {why}")
         return None
 

@@ -32,14 +32,15 @@ __all__ = ["ErrorBounds"]
 class ErrorBounds:
     """The observer's published error bounds (module docstring).
 
-    ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi)``; :attr:`rigorous` is the
+    ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi, disturbance=d)`` (``d`` a declared
+    :class:`~switchobs_core.model.disturbance.Disturbance` or None); :attr:`rigorous` is the
     :class:`~switchobs_core.bounds.rigorous.RoundingBound` the error maps step (None when not kept).
     """
 
     def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, hold: str,
                  rounding_bound: bool, phi: Transition, *, B: np.ndarray | None = None,
-                 scale: np.ndarray | None = None) -> None:
-        self.rigorous = (RoundingBound(A, p_max, e0, noise_max, B=B, scale=scale)
+                 scale: np.ndarray | None = None, disturbance: Any = None) -> None:
+        self.rigorous = (RoundingBound(A, p_max, e0, noise_max, B=B, scale=scale, disturbance=disturbance)
                          if hold == "innovation" and rounding_bound else None)
         self.n = A.shape[0]
         self._e0 = e0

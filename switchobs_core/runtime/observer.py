@@ -28,18 +28,16 @@ extra inactive interval: ``x_hat`` is propagated open loop, ``L = 0``), whatever
 The Kalman families correct with the rows the sample holds (the shared rows while blind), with
 the stored gain of that blind phase.
 
-Both coincide with the continuous-output observer as the sample rate grows (first order
-in the step). A change of channel is a switching instant (e:switching_instants). The gains of
-a gain family (:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`,
-one design per cycle by the mode (``periodic``, ``sequence``, ``robust``:
-:mod:`switchobs_core.runtime.sequence`, which also keeps a :class:`CycleRecord` of every cycle).
-The observer propagates, hands each sample to its family and applies what the family returns
-(the estimate, the error maps into ``Phi`` and the rigorous bound;
+Both coincide with the continuous-output observer as the sample rate grows (first order in the step). A
+change of channel is a switching instant (e:switching_instants). The gains of a gain family
+(:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`, one design per
+cycle by the mode (``periodic``, ``sequence``, ``robust``: :mod:`switchobs_core.runtime.sequence`, which also
+keeps a :class:`CycleRecord` of every cycle). The observer propagates, hands each sample to its family and
+applies what the family returns (the estimate, the error maps into ``Phi`` and the rigorous bound;
 :mod:`switchobs_core.runtime.families.base`); it never names a family.
 
-Channel numbers are 1-based, as in the paper and docs/api.md.
-
-Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
+Channel numbers are 1-based, as in the paper and docs/api.md; paper labels (``e:...``, ``t:...``)
+resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations
@@ -64,6 +62,7 @@ from .arguments import (
     HOLDS,
     MAX_ABS_SAMPLE,
     MODES,
+    check_disturbance,
     check_hold,
     check_noise_max,
     check_options,
@@ -150,6 +149,9 @@ class SwitchedObserver:
         image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
         :mod:`switchobs_core.numerics.rounding`; about as much work again per sample). Needs
         ``rounding_bound`` and innovation hold.
+    disturbance : Disturbance, optional
+        A declared ``x' = A x + B_w w``, ``|w_j| <= max_j`` (:mod:`switchobs_core.model.disturbance`): ``noise_bound``
+        holds for every such ``w`` (:mod:`switchobs_core.numerics.disturbance_reach`). Needs ``noise_max``.
     transition : bool, optional
         Keep the error transition :attr:`Phi` (an n x n product per sample): True from the
         start, False never, None (default) from its first read if that comes within a budget of
@@ -180,7 +182,7 @@ class SwitchedObserver:
                  family: str | None = None, noise: NoiseModel | None = None,
                  track_covariance: bool | None = None, relock_rtol: float = 1e-3,
                  rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
-                 transition: bool | None = None):
+                 transition: bool | None = None, disturbance: Any = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -203,6 +205,7 @@ class SwitchedObserver:
         self.family = entry.name
         self.rounding_bound = bool(rounding_bound)
         self.noise_max = check_noise_max(noise_max, self.N, self.rounding_bound, hold)
+        self.disturbance = check_disturbance(disturbance, self.n, self.noise_max)
         self.relock_rtol = nonnegative("relock_rtol", relock_rtol, repr(relock_rtol))
         # 2. the family (designs of the mode, gains, covariance): it reads the observer through its
         #    context only (switchobs_core.runtime.families.base)
@@ -233,7 +236,7 @@ class SwitchedObserver:
                                "held" if transition is None else "off")
         # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
         self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
-                                   self._phi, B=self.B, scale=self._scale)
+                                   self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
         self._bound = self._bounds.rigorous
         self._x0_init = x0
         self._t0_init = t0
@@ -241,10 +244,8 @@ class SwitchedObserver:
 
     # ------------------------------------------------------------------ state
     def reset(self, x0: Any = None, t0: float | None = None) -> None:
-        """Restart at ``x_hat(t0) = x0`` (zeros if None; ``t0`` defaults to the constructor's).
-
-        The ZOH cache is kept; cycle records, envelopes and ``Phi`` are cleared.
-        """
+        """Restart at ``x_hat(t0) = x0`` (zeros if None; ``t0`` defaults to the constructor's): the ZOH
+        cache is kept; cycle records, envelopes and ``Phi`` are cleared."""
         self._x, t0 = initial_state(x0, self._t0_init if t0 is None else t0, self.n)
         self._t = self._ts = t0          # the observer's time; the last sample's (or t0)
         self.t0 = t0
@@ -318,11 +319,9 @@ class SwitchedObserver:
 
     @property
     def Phi(self) -> np.ndarray:
-        """Error transition ``Phi(t, t0)``: the product of the steps' error maps ``E``.
-
-        With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
-        with no noise and a known input); with measurement hold it is the error-to-error part.
-        """
+        """Error transition ``Phi(t, t0)``, the product of the steps' error maps ``E``: with innovation hold
+        exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)`` with no noise and a known input); with
+        measurement hold the error-to-error part."""
         return self._phi.read().copy()
 
     def apply_map(self, E: np.ndarray) -> None:

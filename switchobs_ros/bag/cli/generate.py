@@ -24,6 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--process-noise", type=float, default=0.0)
     p.add_argument("--noise-max", type=float, default=-1.0,
                    help="clip the measurement noise to +-NOISE_MAX per row (bounded noise; default: no clip)")
+    p.add_argument("--accel-max", type=float, default=0.0, metavar="A",
+                   help="drive every velocity state with an unknown acceleration of +-A (bang-bang, signs switching "
+                        "at random, seeded; the disturbance a declared disturbance.max >= A covers; default 0)")
     p.add_argument("--extended-truth", action="store_true",
                    help="simulate the plant in extended precision: /sim/truth is the exact state rounded once "
                         "(the reference for long checks of the exact bound)")
@@ -42,7 +45,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     cfg = GenerateConfig(schedule=a.schedule, rate=a.rate, duration=a.duration, noise_std=a.noise,
                          process_noise=a.process_noise, seed=a.seed, noise_max=a.noise_max,
                          extended=a.extended_truth, initial_state=x0, system=a.system,
-                         clock_start=a.clock_start, dead_time=a.dead_time)
+                         clock_start=a.clock_start, dead_time=a.dead_time, accel_max=a.accel_max)
     res = generate(a.out, cfg, a.storage, progress=a.progress)
     print(f"wrote {res['path']} ({res['storage']}): {res['ticks']} ticks, {res['messages']} messages, "
           f"{(res['end_ns'] - res['start_ns']) * 1e-9:.2f} s")
