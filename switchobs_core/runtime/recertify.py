@@ -79,6 +79,11 @@ class Certificate:
     sigma: float
     rows: int
     samples: int
+    variances: np.ndarray | None = None     # diag((R' R)^-1): the fit's variances for noise of std v_max
+
+    def __post_init__(self) -> None:
+        if self.variances is not None and not np.all(np.isfinite(self.variances)):
+            object.__setattr__(self, "variances", None)
 
     def bound(self, x_hat: np.ndarray) -> float:
         """``>= ||x(t) - x_hat||``: ``||x_hat - x_ls||`` rounded up plus the radius."""
@@ -173,7 +178,7 @@ class DataWindow:
         self.ey = np.concatenate([self.ey, 2.0 * _U * np.abs(yw) + UNDERFLOW])
         self.t_row = np.concatenate([self.t_row, np.full(y.size, t)])
         self.ch_row = np.concatenate([self.ch_row, np.full(y.size, int(channel))])
-        keep = self.t_row >= t - self.keep * self.span
+        keep = self.t_row >= t - self.keep * self.span * (1.0 + 1e-9)
         if not keep.all():
             self.R, self.y, self.delta = self.R[keep], self.y[keep], self.delta[keep]
             self.ey, self.t_row, self.ch_row = self.ey[keep], self.t_row[keep], self.ch_row[keep]
@@ -236,5 +241,9 @@ class DataWindow:
                 return None
         if not math.isfinite(radius):
             return None
+        try:
+            var = np.maximum(np.diagonal(np.linalg.inv(G)), 0.0)
+        except np.linalg.LinAlgError:
+            var = None
         return Certificate(float(self.t), float(self.t_row[0]), x_c, float(radius), float(s), int(m),
-                           int(np.unique(self.t_row).size))
+                           int(np.unique(self.t_row).size), var)
