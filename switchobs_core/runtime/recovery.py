@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from .bias import H, K_REF, BiasDetector
+from .bias import K_REF, BiasDetector, H
 from .consistency import output_rows
 from .recertify import Certificate, DataWindow
 
@@ -205,7 +205,7 @@ class Recovery:
             return ""
         self._run[i] = 0
         states = body_states(self.obs.A, self.C, channel)
-        names = "the body only channel %d sees" % channel
+        names = f"the body only channel {channel} sees"
         why = (f"the chi-square gate rejected {self.starve} consecutive samples of channel {channel}: a model failure "
                f"of {names} (it does not move as A says), not outliers")
         if self.reinit and states and self._reinit(t, channel, states):

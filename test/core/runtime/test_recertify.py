@@ -40,9 +40,9 @@ def test_the_certified_radius_holds_for_noise_within_the_bound(paper, seed, corn
     rng = np.random.default_rng(seed)
     x0 = rng.normal(scale=3.0, size=paper.n)
     if corner:      # the extreme case: every row at +-v_max
-        noise = lambda k, p: VMAX * rng.choice([-1.0, 1.0], size=p)     # noqa: E731
+        noise = lambda k, p: VMAX * rng.choice([-1.0, 1.0], size=p)
     else:
-        noise = lambda k, p: rng.uniform(-VMAX, VMAX, size=p)           # noqa: E731
+        noise = lambda k, p: rng.uniform(-VMAX, VMAX, size=p)
     w, x = _fill(paper, x0, 2.0, noise)
     cert = w.certificate([1, 2])
     assert cert is not None
