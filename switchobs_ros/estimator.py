@@ -397,7 +397,7 @@ class EstimatorMixin:
                     pl = self.pipeline
                     self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
                     self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                  pl.bound_invalid_why))
+                                                                  pl.bound_invalid_why, pl.bound_note))
                 if self.pub_markers is not None and ev["markers"] and k % ev["markers"] == 0:
                     g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
                     self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
