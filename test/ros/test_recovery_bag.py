@@ -69,3 +69,39 @@ def test_e0_minus_one_is_the_only_negative_value_accepted():
     assert EstimatorConfig.from_values({"e0": 2.5}).e0 == 2.5
     with pytest.raises(ConfigError, match="e0"):
         EstimatorConfig.from_values({"e0": -2.0})
+
+
+@pytest.mark.parametrize("reinit", [True, False])
+def test_a_body_the_gate_starves_is_reinitialised_not_coasted(tmp_path, reinit):
+    """Gaussian noise, no declared bound, the chi-square gate on: agent 1 starts accelerating at
+    4 m/s^2 (its target poses, from 6 s on). The gate rejects its samples in a row: a model failure,
+    said so, and (``consistency.reinit``) agent 1 re-initialised from its samples instead of coasted."""
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import UInt8
+
+    from switchobs_ros.bag.io import deserialize
+    from switchobs_ros.pipeline import EstimatorPipeline
+
+    generate(tmp_path / "g", GenerateConfig(rate=50.0, duration=9.0, noise_std=0.01, seed=4), "mcap")
+    over = {**PARAMS, "noise.max": -1.0, "gain_table_cache_dir": str(tmp_path / "cache"),
+            "consistency.chi2_alpha": 0.01, "consistency.reinit": reinit, "e0": 10.0}
+    pl = EstimatorPipeline.from_params(estimator_params(overrides=over))
+    channel, last_x, est = 0, None, None
+    with BagIn(tmp_path / "g") as b:
+        msgs = b.messages(["/camera/active_channel", "/camera/pose", "/target/pose"])
+    for m in msgs:
+        msg = deserialize(m, UInt8 if m.topic.endswith("channel") else PoseStamped)
+        t = (m.log_ns - msgs[0].log_ns) * 1e-9
+        if m.topic.endswith("channel"):
+            channel = msg.data
+        elif m.topic == "/target/pose" and channel == 1 and t >= 6.0:
+            msg.pose.position.x += 2.0 * (t - 6.0) ** 2
+            last_x = msg.pose.position.x
+        for e in pl.on_message(m.topic[1:], msg, m.log_ns):
+            if e.channel == 1:
+                est = e.x_hat[4]        # agent1.p_x
+    assert pl.model_failures >= 1 and "model failure" in pl.last_alarm
+    if reinit:
+        assert abs(est - last_x) < 0.1      # re-initialised from its own samples (measured: 3 mm)
+    else:
+        assert abs(est - last_x) > 5.0      # coasting on the model it left (measured: 17.7 m)
