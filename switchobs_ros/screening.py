@@ -64,6 +64,8 @@ class Screening:
         self.gate = ChiSquareGate(system.C, chi2_alpha)
         self.labels = getattr(system, "output_labels", None)
         self.recovery = Recovery(observer, labels=self.labels)
+        if observer.e0 is None:     # no initial error bound: no bound until the data certify one
+            counters.bound_valid, counters.bound_invalid_why = False, observer.bounds_withdrawn
 
     def options(self, recertify: bool, bias: bool, reinit: bool) -> None:
         """Switch the recovery's parts (``consistency.recertify``, ``.bias``, ``.reinit``)."""
