@@ -106,7 +106,7 @@ class Counters:
         self.log.error(f"{where}: {type(err).__name__}: {err}{at}", throttle=True)
 
     def withdraw(self, why: str) -> None:
-        """No bound can be guaranteed any more: publish :data:`NO_BOUND` until a reset."""
+        """No bound can be guaranteed any more: publish :data:`NO_BOUND` until :meth:`recertify` or a reset."""
         if self.bound_valid:
             self.log.error(f"bounds withdrawn: {why}")
         self.bound_valid = False

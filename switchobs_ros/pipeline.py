@@ -15,7 +15,7 @@ For every message the pipeline orchestrates:
    from the publisher's source timestamps and sequence numbers, never guessed;
 4. screening (:mod:`switchobs_ros.screening`): the model against the data, with the core's
    innovation test against the published bound (a sample it refuses is re-attributed, or
-   rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
+   rejected and every bound withdrawn: :data:`NO_BOUND` until re-certified) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
    :class:`~switchobs_core.model.measurement.Measurement`, and an :class:`Estimate` with the envelope
    (the paper's envelopes and bound, the exact bound).
@@ -307,7 +307,7 @@ class EstimatorPipeline(Counters):
         ``now_ns``. The observer propagates to its stamp and takes the values
         (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
         the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
-        error is unknown) until the next reset. A bad message is rejected and counted; True when
+        error is unknown) until re-certified from data. A bad message is rejected and counted; True when
         applied."""
         topic = SET_STATE_TOPIC
         try:

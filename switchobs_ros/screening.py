@@ -4,7 +4,8 @@ With the consistency test on (``consistency.check``), every sample is tested aga
 the estimator publishes (:class:`switchobs_core.runtime.consistency.InnovationTest`): a sample whose
 innovation exceeds what the bound allows proves the model broken for it. When exactly one other
 channel explains it, it is re-attributed to that channel (``reattributed``); else it is rejected
-(``inconsistent``) and every bound is withdrawn until a reset, with the reason. A published
+(``inconsistent``) and every bound is withdrawn, with the reason, until a window of data
+re-certifies them (below) or a reset. A published
 guarantee is never silently false.
 
 With noise and no declared bound there is no guarantee to test against; the chi-square gate
