@@ -2,8 +2,10 @@
 
 A sample of channel ``c`` gives the innovation ``nu = y - C_r x_hat^-`` (the prior) with, when the
 noise model holds, zero mean and the covariance ``S = C_r P^- C_r' + R`` (:mod:`switchobs_core.runtime.gate`).
-Each row ``j`` is normalised, ``s_j = nu_j / sqrt(S_jj)`` (without a covariance: by ``v_max / 3``,
-the declared bound read as three standard deviations), and fed to Page's CUSUM in both directions,
+Each row ``j`` is normalised, ``s_j = nu_j / sqrt(S_jj)`` (at least ``v_max / 3`` with a declared
+bound, read as three standard deviations, so a noise model tighter than the declared noise does
+not alarm on the noise itself; without a covariance ``v_max / 3`` alone), and fed to Page's CUSUM
+in both directions,
 
 .. math::
 

@@ -129,6 +129,8 @@ class Recovery:
             if P is not None and obs.noise is not None:
                 S = C_r @ P @ C_r.T + obs.noise.R(channel, rows)
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
+                if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
+                    sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread
             elif self.vmax is not None:
                 sd = np.full(nu.size, self.vmax[channel - 1] / 3.0)
             else:
