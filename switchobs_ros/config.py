@@ -89,7 +89,9 @@ PARAMS = [
     Param("schedule.h_min", 0.0, "Robust mode: shortest residence time h_min of assumption A2 (s)."),
     Param("schedule.h_max", 0.0, "Robust mode: longest residence time h_max of assumption A2 (s)."),
     Param("initial_estimate", (), "Initial estimate x_hat(t0), n values in state order (empty: zeros).", float),
-    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound."),
+    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound. "
+          "-1: not known; no bound until a window of one switching cycle of consistent data certifies one "
+          "(needs noise.max; consistency.recertify)."),
     Param("world_frame", "map", "frame_id of the published odometry (and of the expected input poses)."),
     Param("input_frame_id", "map", "Expected header.frame_id of camera/pose and target/pose ('' accepts any)."),
     Param("input_transforms", (), "Fixed transforms into input_frame_id of the frames inputs may come in, one per "
@@ -115,6 +117,16 @@ PARAMS = [
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
           "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
           "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
+    Param("consistency.recertify", True, "After a withdrawal (and with e0 = -1 at start-up), certify the bounds "
+          "again from a window of one switching cycle of data: a least-squares fit whose radius holds for every "
+          "noise within noise.max, rounding included (needs noise.max). Labelled re-certified in diagnostics and "
+          "in ~/error_bounds."),
+    Param("consistency.bias", True, "A CUSUM per output row on the normalised innovations: a persistent bias beyond "
+          "the noise model (about 2 samples of delay for 5 sigma) withdraws the bounds (needs noise.max or a "
+          "covariance)."),
+    Param("consistency.reinit", True, "When the chi-square gate rejects 25 consecutive samples of one channel (a "
+          "model failure of the body only it sees, not outliers), re-initialise that body's states from its "
+          "last samples instead of coasting; the bounds are withdrawn (re-certification brings them back)."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
@@ -268,6 +280,11 @@ class EstimatorConfig:
     transforms: dict[str, FrameTransform] | None = None     # input_transforms by frame
     disturbance: Disturbance | None = None      # disturbance.max (switchobs_core.model.disturbance)
 
+    @property
+    def e0(self) -> float | None:
+        """The initial error bound for the observer (None: ``e0`` is -1, not known)."""
+        return None if self.values["e0"] == -1.0 else float(self.values["e0"])
+
     def __getitem__(self, name: str) -> Any:
         """The raw value of parameter ``name``."""
         return self.values[name]
@@ -307,7 +324,8 @@ class EstimatorConfig:
         v = values["delta"]             # the runtime parameters: check_runtime_value below
         if not (math.isfinite(v) and v > 0):
             raise ConfigError(f"parameter 'delta' must be a finite number > 0; got {v}")
-        check_range(values["e0"], "e0", exc=ConfigError)
+        if values["e0"] != -1.0:       # -1: not known (no bound until the data certify one)
+            check_range(values["e0"], "e0", exc=ConfigError)
         for v in values["initial_estimate"]:
             check_range(v, "initial_estimate", exc=ConfigError)
         x0 = values["initial_estimate"]

@@ -46,7 +46,11 @@ from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_no
 from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
 
-__all__ = ["RoundingBound"]
+__all__ = ["NO_E0", "RoundingBound"]
+
+#: Why the bounds are withdrawn from the start when no initial error bound is given (``e0`` None).
+NO_E0 = ("e0 is not known (e0 = -1): no bound until the data certify one (a window of one switching cycle "
+         "of consistent samples, switchobs_core.runtime.recertify)")
 
 _U = UNIT_ROUNDOFF
 
@@ -63,7 +67,7 @@ class RoundingBound:
     entries stepped here must carry the same one).
     """
 
-    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, *,
+    def __init__(self, A: np.ndarray, p_max: int, e0: float | None, noise_max: Sequence[float] | None, *,
                  B: np.ndarray | None = None, scale: np.ndarray | None = None, disturbance: Any = None) -> None:
         self.n = A.shape[0]
         self.e0 = e0
@@ -87,12 +91,22 @@ class RoundingBound:
         self.reset()
 
     def reset(self) -> None:
-        """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn."""
-        self.ell = ErrorEllipsoid(self.n, self.e0, self.d)
-        self.ellv = ErrorEllipsoid(self.n, self.e0, self.d) if self.noise_max else None
-        self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
+        """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn (with
+        ``e0`` None: withdrawn until :meth:`restart`, no initial error being known)."""
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
+        self.restart(self.e0)
+        if self.e0 is None:
+            self.withdrawn = NO_E0
+
+    def restart(self, e: float | None) -> None:
+        """Both ellipsoids the ball ``S = e^2 I`` from now on (a bound ``||x - x_hat|| <= e`` that holds
+        now: a re-certification, :mod:`switchobs_core.runtime.recertify`); the held innovation's
+        residuals are kept; the bound no longer withdrawn."""
+        r = 0.0 if e is None else float(e)
+        self.ell = ErrorEllipsoid(self.n, r, self.d)
+        self.ellv = ErrorEllipsoid(self.n, r, self.d) if self.noise_max else None
+        self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
 

@@ -87,7 +87,6 @@ __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "Sc
 
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
-
 #: Gain families (:data:`switchobs_core.families.REGISTRY`): LMI gains, Kalman tables, online Riccati.
 FAMILIES = FAMILY_NAMES
 
@@ -112,8 +111,8 @@ class SwitchedObserver:
         Initial estimate ``x_hat(t0)`` (zeros by default).
     t0 : float
         Initial time in seconds.
-    e0 : float
-        Initial error bound ``||x_tilde(t0)|| <= e0``, used by :meth:`envelope`.
+    e0 : float or None
+        Initial error bound ``||x_tilde(t0)|| <= e0`` (None: unknown, no bound until :meth:`recertify`).
     bounds : (float, float), optional
         ``(h_min, h_max)`` of A2 for robust mode; default ``table.robust.h_bounds``.
     match_tol : float
@@ -175,7 +174,7 @@ class SwitchedObserver:
 
     def __init__(self, system: Any, table: Any, mode: str = "periodic",
                  cycles: Sequence[Any] | None = None, x0: Any = None, t0: float = 0.0,
-                 e0: float = 1.0, *, bounds: tuple[float, float] | None = None,
+                 e0: float | None = 1.0, *, bounds: tuple[float, float] | None = None,
                  match_tol: float = 0.05, cache_size: int = 64,
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
                  max_records: int = 100_000, hold: str = "innovation",
@@ -202,8 +201,7 @@ class SwitchedObserver:
             entry = family_entry(entry.robust)
         Family = entry.type()
         check_hold(hold, entry.name, Family.holds)
-        self.family = entry.name
-        self.rounding_bound = bool(rounding_bound)
+        self.family, self.rounding_bound = entry.name, bool(rounding_bound)
         self.noise_max = check_noise_max(noise_max, self.N, self.rounding_bound, hold)
         self.disturbance = check_disturbance(disturbance, self.n, self.noise_max)
         self.relock_rtol = nonnegative("relock_rtol", relock_rtol, repr(relock_rtol))
@@ -222,7 +220,7 @@ class SwitchedObserver:
             self.alpha = float(system.alpha)
         except AttributeError:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
-        self.e0 = nonnegative("e0", e0, float(e0))
+        self.e0 = None if e0 is None else nonnegative("e0", e0, float(e0))
         # balanced coordinates of A: the bound's norms and proven expm errors are taken there
         self._scale = balance(self.A, np.vstack(self.C))
         self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
@@ -238,8 +236,7 @@ class SwitchedObserver:
         self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
                                    self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
         self._bound = self._bounds.rigorous
-        self._x0_init = x0
-        self._t0_init = t0
+        self._x0_init, self._t0_init = x0, t0
         self.reset(x0, t0)
 
     # ------------------------------------------------------------------ state
@@ -254,7 +251,7 @@ class SwitchedObserver:
         self._phi.reset()
         self._bounds.reset()
         self._seq.reset(t0)
-        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
+        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0 or 0.0, t0) if self._gains.paper_envelope else None
         self._gains.reset()     # covariance P0, nothing held: the family's own
         self._lost = ""
 
@@ -281,6 +278,10 @@ class SwitchedObserver:
         """Why the rigorous bounds are ``inf`` until :meth:`reset` ("" while they hold): they could no
         longer be computed; the estimate is kept (:mod:`switchobs_core.bounds.rigorous`)."""
         return self._bounds.withdrawn
+
+    def recertify(self, e: float) -> bool:
+        """Restart the rigorous bounds from ``||x - x_hat|| <= e`` now (:mod:`~switchobs_core.runtime.recertify`)."""
+        return self._bounds.restart(float(e))
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -591,7 +592,7 @@ class SwitchedObserver:
         key, v = self._held()
         step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
         exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
-        if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
+        if self._tracker is None or self.e0 is None:    # Kalman gains (the envelope is the LMI gains'), no e0
             return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)
         z = self._tracker.z(float(t))

@@ -24,7 +24,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.model.disturbance import velocity_inputs
-from switchobs_core.model.schedule import RandomSchedule, parse_schedule
+from switchobs_core.model.schedule import RandomSchedule, common_rows, parse_schedule
 from switchobs_core.ranges import MAX_RATE_HZ, MAX_STAMP_S, OUTPUT_BUDGET_BYTES, check_size
 from switchobs_core.sim.disturbed import bang_bang
 from switchobs_core.sim.plant import Plant
@@ -69,6 +69,9 @@ class GenerateConfig:
     #: (:func:`switchobs_core.sim.disturbed.bang_bang`, seeded by ``seed``; the built-in scenarios'
     #: disturbance inputs, :mod:`switchobs_core.model.disturbance`), held over each tick
     accel_max: float = 0.0
+    #: generator only: a sensor fault ``(t0, t1, offset)``: ``offset`` added to every output row that
+    #: not all channels share (the target poses) at the ticks in ``[t0, t1)`` s (a bias; empty: none)
+    bias: tuple = ()
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -126,6 +129,9 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
     except (SwitchobsError, ConfigError) as err:
         raise BagError(str(err)) from None
     rng = np.random.default_rng(cfg.seed + 1)
+    if cfg.bias and len(cfg.bias) != 3:
+        raise BagError(f"bias needs three values T0,T1,OFFSET; got {cfg.bias}")
+    shared = set(common_rows(sys_.C))
     labels = tuple(sys_.state_labels)
     period_ns = round(1e9 / cfg.rate)
     epoch_ns = round(cfg.clock_start * 1e9)
@@ -140,6 +146,8 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         if cfg.noise_std > 0:
             v = cfg.noise_std * rng.standard_normal(y.shape)
             y = y + (np.clip(v, -cfg.noise_max, cfg.noise_max) if cfg.noise_max >= 0 else v)
+        if cfg.bias and cfg.bias[0] <= t < cfg.bias[1]:
+            y = y + np.array([0.0 if j in shared else float(cfg.bias[2]) for j in range(y.size)])
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
