@@ -40,6 +40,8 @@ from scipy.linalg import expm
 
 from .bias import K_REF, BiasDetector, H
 from .consistency import output_rows
+from ..numerics.disturbance_reach import DisturbanceReach
+from ..numerics.rounding import gamma
 from .recertify import Certificate, DataWindow
 
 __all__ = ["Recovery", "body_states", "cycle_span"]
@@ -74,6 +76,35 @@ def body_states(A: np.ndarray, C: tuple[np.ndarray, ...], channel: int) -> list[
     return [int(j) for j in np.flatnonzero(mine & ~other)]
 
 
+#: Resolution (s) to which a sample's age in the window is rounded up for the disturbance's reach.
+REACH_STEP = 1e-3
+
+
+def window_disturbance(observer: Any) -> Any:
+    """The :class:`~switchobs_core.runtime.recertify.DataWindow` hook of a declared disturbance
+    (None when none is active): ``(t_i - t, rows) -> b`` with ``b >= |C_row d| / v_max`` for every
+    row of every channel, ``d`` what the disturbance moved the state between ``t_i`` and the
+    window's time ``t``: the state at ``t_i`` is ``e^{A (t_i - t)} x(t) - int_0^tau e^{-A u} B_w
+    w(t_i + u) du`` with ``tau = t - t_i``, whose norm is at most the reach of ``(-A, B_w)`` over
+    ``tau`` (:class:`~switchobs_core.numerics.disturbance_reach.DisturbanceReach`, rounding
+    included). ``tau`` is rounded up to :data:`REACH_STEP` (the reach grows with ``tau``: ``w = 0``
+    after ``tau`` is allowed), which bounds the reach's cache."""
+    dist = getattr(observer, "disturbance", None)
+    if dist is None or not dist.active:
+        return None
+    reach = DisturbanceReach(-observer.A, dist.B_w, dist.w_max)
+    row = 0.0
+    for Ci, v in zip(observer.C, observer.noise_max):
+        norms = np.sqrt(np.sum(Ci * Ci, axis=1)) * (1.0 + gamma(Ci.shape[1] + 1))
+        row = max(row, float(np.max(norms, initial=0.0)) / v if v > 0 else np.inf)
+    row *= 1.0 + 4 * np.finfo(float).eps
+
+    def bound(dt: float, rows: int) -> float:
+        tau = np.ceil(max(-dt, 0.0) / REACH_STEP) * REACH_STEP
+        return row * reach.radius(float(tau)) * (1.0 + 4 * np.finfo(float).eps)
+    return bound
+
+
 class Recovery:
     """The recovery of the module docstring for ``observer``.
 
@@ -101,7 +132,8 @@ class Recovery:
         vmax = observer.noise_max
         self.vmax = None if vmax is None else tuple(float(v) for v in vmax)
         can = recertify and self.vmax is not None and all(v > 0 for v in self.vmax)
-        self.window = DataWindow(observer.A, cycle_span(observer) if span is None else span, keep=1.0) if can else None
+        self.window = (DataWindow(observer.A, cycle_span(observer) if span is None else span, keep=1.0,
+                                  disturbance=window_disturbance(observer)) if can else None)
         self.bias = BiasDetector(observer.p, k_ref, h) if bias else None
         self.reinit = bool(reinit)
         self.starve = int(starve)
