@@ -38,10 +38,10 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from .bias import K_REF, BiasDetector, H
-from .consistency import output_rows
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.rounding import gamma
+from .bias import K_REF, BiasDetector, H
+from .consistency import output_rows
 from .recertify import Certificate, DataWindow
 
 __all__ = ["Recovery", "body_states", "cycle_span"]
