@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import subprocess
 import sys
@@ -83,17 +82,19 @@ with BagIn(sys.argv[1]) as bag, open(sys.argv[3], "w") as out:
             IKH = I - K @ H
             P = IKH @ P @ IKH.T + K @ R @ K.T
             P = 0.5 * (P + P.T)
-            out.write(f"{tgt.header.stamp.sec * 1000000000 + tgt.header.stamp.nanosec}," + ",".join(map(repr, x.tolist())) + "\n")
+            ns = tgt.header.stamp.sec * 1000000000 + tgt.header.stamp.nanosec
+            out.write(f"{ns}," + ",".join(map(repr, x.tolist())) + "\n")
 """
 
 
-def peak(cmd: list[str]) -> tuple[float, float]:
+def peak(cmd: list[str], repo: Path = REPO) -> tuple[float, float]:
     """(CPU seconds, peak RSS MiB) measured in a wrapper process of its own (``ru_maxrss`` of
     RUSAGE_CHILDREN is the largest over all children so far, so each measurement gets a fresh parent)."""
     code = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:]); "
             "u = resource.getrusage(resource.RUSAGE_CHILDREN); "
             "print(u.ru_utime + u.ru_stime, u.ru_maxrss / 1024.0); sys.exit(r.returncode)")
-    r = subprocess.run([sys.executable, "-c", code, *cmd], env=ENV, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", code, *cmd], env=dict(ENV, PYTHONPATH=str(repo)), capture_output=True,
+                       text=True)
     if r.returncode:
         raise SystemExit(f"{cmd[:4]} failed: {r.stderr[-2000:]}")
     cpu, rss = r.stdout.split()[-2:]
@@ -105,6 +106,8 @@ def main() -> None:
     ap.add_argument("--durations", type=float, nargs="+", default=[10.0, 20.0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--agents", type=int, default=32)
+    ap.add_argument("--before", type=Path, default=None,
+                    help="also run the estimate command of another checkout (e.g. the main branch), same bags")
     a = ap.parse_args()
     sys.path.insert(0, str(REPO))
     from switchobs_core.threads import single_threaded_blas
@@ -130,30 +133,47 @@ def main() -> None:
     exe = [sys.executable, "-m", "switchobs_ros.bag"]
     ours: dict = {d: [] for d in a.durations}
     alt: dict = {d: [] for d in a.durations}
+    before: dict = {d: [] for d in a.durations}
+
+    def est(d, r, tag):
+        return [*exe, "estimate", str(bags[d]), "-o", str(work / f"{tag}{d:g}_{r}"), "--csv",
+                str(work / f"{tag}{d:g}_{r}.csv"), "--gain-table", str(table), "--system", str(sysf),
+                "-p", f"schedule.h:={[1.0] * M}", "--no-progress"]
+
     for r in range(a.rounds):
         for d in a.durations:
-            ours[d].append(peak([*exe, "estimate", str(bags[d]), "-o", str(work / f"out{d:g}_{r}"),
-                                 "--csv", str(work / f"o{d:g}_{r}.csv"), "--gain-table", str(table),
-                                 "--system", str(sysf), "-p", f"schedule.h:={[1.0] * M}", "--no-progress"]))
+            ours[d].append(peak(est(d, r, "o")))
+            if a.before is not None:
+                before[d].append(peak(est(d, r, "b"), a.before))
             alt[d].append(peak([sys.executable, "-c", KF_SCRIPT, str(bags[d]), str(sysf),
                                 str(work / f"k{d:g}_{r}.csv")]))
     print(f"### Replay of a {M}-agent bag (n = {system.n}), 50 Hz: `switchobs_bag estimate` against a numpy "
           "Kalman filter script\n")
     print(f"`python bench/bench_replay.py --durations {' '.join(f'{d:g}' for d in a.durations)} --rounds "
-          f"{a.rounds} --agents {M}`; load average at the end {os.getloadavg()[0]:.1f}.\n")
-    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) |")
-    print("|---|---|---|---|---|---|")
+          f"{a.rounds} --agents {M}{f' --before {a.before}' if a.before else ''}`; load average at the end "
+          f"{os.getloadavg()[0]:.1f}.\n")
+    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) |"
+          + (" --before: CPU | peak RSS |" if a.before else ""))
+    print("|---|---|---|---|---|---|" + ("---|---|" if a.before else ""))
     med = {}
     for d in a.durations:
         oc, om = statistics.median(x[0] for x in ours[d]), statistics.median(x[1] for x in ours[d])
         kc, km = statistics.median(x[0] for x in alt[d]), statistics.median(x[1] for x in alt[d])
         med[d] = (oc, om, kc, km)
-        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x |")
+        extra = ""
+        if a.before:
+            extra = (f" {statistics.median(x[0] for x in before[d]):.2f} s | "
+                     f"{statistics.median(x[1] for x in before[d]):.0f} MiB |")
+        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x |" + extra)
     if len(a.durations) > 1:
         d0, d1 = min(a.durations), max(a.durations)
         g = (med[d1][1] - med[d0][1]) / (d1 - d0)
         gk = (med[d1][3] - med[d0][3]) / (d1 - d0)
-        print(f"\nMemory growth per simulated second: estimate {g:.2f} MiB/s, script {gk:.2f} MiB/s.")
+        gb = ""
+        if a.before:
+            b0, b1 = (statistics.median(x[1] for x in before[d]) for d in (d0, d1))
+            gb = f", --before {(b1 - b0) / (d1 - d0):.2f} MiB/s"
+        print(f"\nMemory growth per simulated second: estimate {g:.2f} MiB/s, script {gk:.2f} MiB/s{gb}.")
 
 
 if __name__ == "__main__":
