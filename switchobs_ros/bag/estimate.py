@@ -178,7 +178,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                 sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
                 if w_cov is not None:
                     if writer is not None and e.P is not None and due("covariance", k):
-                        writer.write(t_cov, log_ns, w_cov.bytes(array=[sec, nsec, *e.P.ravel().tolist()]))
+                        writer.write(t_cov, log_ns, w_cov.bytes(array=np.concatenate(((sec, nsec), e.P.ravel()))))
                 if writer is not None:
                     x = e.x_hat.tolist()
                     writer.write(t_state, log_ns, w_state.bytes(array=[sec, nsec, *x]))

@@ -10,6 +10,8 @@ import json
 import numpy as np
 import pytest
 
+import msg_bridge as mb
+from switchobs_ros.bag import cdr
 from switchobs_ros.bag.cli import main as bag_main
 from switchobs_ros.bag.estimate import estimate, estimator_params, write_csv
 from switchobs_ros.bag.generate import GenerateConfig, generate
@@ -65,3 +67,17 @@ def test_command_counts_what_it_streamed(bag, paper_tables, tmp_path, capsys):
     info = json.loads(capsys.readouterr().out)
     rows = (tmp_path / "e.csv").read_text().splitlines()
     assert info["estimates"] == len(rows) - 1 > 50
+
+
+def test_array_template_takes_a_float_array_in_one_copy():
+    """A covariance's doubles as a float64 array: the bytes of the same values as a list; a wrong
+    length is refused."""
+    n = 7
+    labels = tuple(f"s{i}" for i in range(n))
+    w = cdr.Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(labels), 0), array=("data",))
+    P = np.random.default_rng(0).standard_normal((n, n))
+    as_list = w.bytes(array=[3, 456, *P.ravel().tolist()])
+    assert w.bytes(array=np.concatenate(((3, 456), P.ravel()))) == as_list
+    assert w.bytes(array=np.concatenate(((3, 456), P.T.ravel()))) != as_list
+    with pytest.raises(ValueError):
+        w.bytes(array=P.ravel())
