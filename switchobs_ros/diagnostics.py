@@ -50,6 +50,7 @@ class NodeState:
     last_prediction: Any
     predictions: int
     ignored_inactive: int = 0
+    published: dict | None = None       # messages published per output (switchobs_ros.demand)
 
 
 class EstimatorDiagnostics:
@@ -124,6 +125,9 @@ class EstimatorDiagnostics:
               kv("clock jumps back (resets)", node.clock_jumps_back),
               kv("clock jumps forward", node.clock_jumps_forward),
               kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
+        if getattr(node, "published", None):
+            ob.append(kv("messages published (optional outputs only while subscribed)",
+                         ", ".join(f"{k} {v}" for k, v in node.published.items())))
         if obs.gains.paper_envelope:
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
                    kv("current gain norms |L_i|", gain_norms(d.L))]
@@ -133,6 +137,8 @@ class EstimatorDiagnostics:
                    kv("kalman gains now", obs.gains_source)]
             if obs.kalman_fallback:
                 ob.append(kv("last kalman departure", obs.kalman_fallback))
+        if obs.covariance_withdrawn:
+            ob.append(kv("covariance withdrawn (not published, no chi-square gate)", obs.covariance_withdrawn))
         if node.last_clock_jump:
             ob.append(kv("last clock jump", node.last_clock_jump))
         return ob + self._cycles()
@@ -213,6 +219,9 @@ class EstimatorDiagnostics:
         if recs and not recs[-1].matched:
             level = max(level, DiagnosticStatus.WARN)
             msg += "; last cycle did not match the schedule"
+        if pl.observer.covariance_withdrawn:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += "; covariance withdrawn: the Riccati recursion ran out of digits"
         res = pl.residence()
         if res is not None and res.problem:
             level = max(level, DiagnosticStatus.WARN)
