@@ -16,7 +16,7 @@ system) and its peak resident memory (``ru_maxrss``), medians over the rounds:
   Kalman filter in standard form in numpy (discretisation cached, Joseph update), a CSV row of the
   estimate per tick.
 
-Goal (issue 33): CPU <= 2x the script's; memory flat in the recording's length (the growth per
+Goal: CPU <= 2x the script's; memory flat in the recording's length (the growth per
 simulated second is printed). A script, not a test: nothing is asserted.
 """
 
