@@ -177,8 +177,11 @@ class EstimatorDiagnostics:
               kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
                  env.exact_bound if pl.bound_valid else "none (withdrawn)"),
               kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
+        if pl.bound_note:       # the bounds hold again, certified from data (switchobs_core.runtime.recovery)
+            ob.append(kv("bounds", pl.bound_note))
         if env.noise_bound is not None:
-            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
+            dist = "" if obs.disturbance is None else f", disturbance |w| <= {max(obs.disturbance.w_max):g}"
+            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row{dist})",
                          env.noise_bound if pl.bound_valid else "none (withdrawn)"))
         return ob
 
@@ -190,9 +193,14 @@ class EstimatorDiagnostics:
               kv("late channel messages", pl.late_channel),
               kv("lost channel messages", pl.lost_channel),
               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
-              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
+              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off"),
+              kv("bias alarms (CUSUM)", pl.bias_alarms),
+              kv("model failures (a body the gate starved)", pl.model_failures),
+              kv("re-certifications from data", pl.recertifications)]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
+        if pl.last_alarm:
+            ob.append(kv("last alarm", pl.last_alarm))
         return ob
 
     def _observer_status(self, now_ns: int, node: NodeState, ob: list[KeyValue]) -> tuple[int, str]:
@@ -212,7 +220,8 @@ class EstimatorDiagnostics:
                     and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
-        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel or pl.bias_alarms
+                                   or pl.model_failures):
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         recs = pl.observer.completed_cycles

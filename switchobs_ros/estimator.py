@@ -424,7 +424,7 @@ class EstimatorMixin:
                         n["typed"] += 1
                     if listened(self.pub_typed[1]):
                         self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                      pl.bound_invalid_why))
+                                                                      pl.bound_invalid_why, pl.bound_note))
                         n["typed"] += 1
                 if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
                     g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound

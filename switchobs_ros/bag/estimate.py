@@ -76,6 +76,10 @@ class EstimateResult:
     reattributed: int = 0              # samples it moved to the only channel that explains them
     bound_valid: bool = True           # False: the bounds were withdrawn (bound_invalid_why says why)
     bound_invalid_why: str = ""
+    recertifications: int = 0          # bounds certified again from data (switchobs_core.runtime.recovery)
+    recertified: str = ""              # the latest one: since when, from which window
+    bias_alarms: int = 0               # the CUSUM bias test's alarms
+    model_failures: int = 0            # channels the chi-square gate starved (a body off the model)
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
     uncovered: tuple = ()              # channels that no source feeds (msg_bridge.InputSpecs.uncovered)
@@ -189,8 +193,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                             writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
                     if due("typed", k):
                         writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
-                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns,
-                                                                              pl.bound_valid, pl.bound_invalid_why)))
+                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                              pl.bound_invalid_why, pl.bound_note)))
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
@@ -245,7 +249,11 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                      KeyValue(key="re-attributed samples", value=str(pl.reattributed)),
                      KeyValue(key="unordered samples (recording)", value=str(len(ordering.unordered))),
                      KeyValue(key="bounds valid", value=str(pl.bound_valid).lower()
-                              + ("" if pl.bound_valid else f" ({pl.bound_invalid_why})"))]
+                              + (f" ({pl.bound_note})" if pl.bound_note else "" if pl.bound_valid
+                                 else f" ({pl.bound_invalid_why})")),
+                     KeyValue(key="re-certifications", value=str(pl.recertifications)),
+                     KeyValue(key="bias alarms", value=str(pl.bias_alarms)),
+                     KeyValue(key="model failures (gate)", value=str(pl.model_failures))]
             arr = DiagnosticArray()
             arr.header.stamp = mb.ns_to_stamp(last_ns)
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",
@@ -269,6 +277,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
+        recertifications=pl.recertifications, recertified=pl.recertified, bias_alarms=pl.bias_alarms,
+        model_failures=pl.model_failures,
         seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
         uncovered=tuple(pl.uncovered), uncovered_warning=pl.config.inputs.uncovered_warning(),
         unordered=len(ordering.unordered), unproven_ties=ordering.unproven, count=count,

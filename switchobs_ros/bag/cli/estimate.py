@@ -87,6 +87,9 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
         if res.unordered:
             print(f"samples whose channel the recording cannot tell: {res.unordered} (log times that tie or contradict "
                   f"the stamps around a channel change; rejected as ambiguous_channel, never guessed)")
+        if res.recertifications or res.bias_alarms or res.model_failures:
+            print(f"re-certifications {res.recertifications} (latest: {res.recertified or 'none'}); bias alarms "
+                  f"{res.bias_alarms}; model failures (gate) {res.model_failures}")
         if not res.bound_valid:
             print(f"bounds withdrawn: {res.bound_invalid_why}")
         for what in ("out", "csv"):
