@@ -61,6 +61,7 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from . import qos
 from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
+from .demand import Demand, listened
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import ConfigError, declare_all, unknown_parameters
 from .pipeline import Estimate, EstimatorPipeline, PipelineLog
@@ -174,6 +175,11 @@ class EstimatorMixin:
         self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance", "typed",
                                                                   "markers")}
         self.n_published = 0
+        # optional outputs only while someone listens (switchobs_ros.demand); P only if an output
+        # that carries it is listened to, and the parameter allows it
+        self.covariance_allowed = pl.publish_covariance
+        self.demand = Demand(self._covariance_carriers)
+        self.published = dict.fromkeys(("state", "envelope", "covariance", "odometry", "typed", "markers"), 0)
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
 
@@ -307,6 +313,7 @@ class EstimatorMixin:
             if not self.answering:
                 self.ignored_inactive += 1
                 return
+            pipeline.publish_covariance = self.covariance_allowed and self.demand.covariance_wanted()
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
@@ -380,29 +387,51 @@ class EstimatorMixin:
             return
         self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
 
+    def _covariance_carriers(self) -> list:
+        """The publishers whose messages carry ``P`` (for :class:`~switchobs_ros.demand.Demand`)."""
+        ev = self.every
+        return [p for p, on in ((getattr(self, "pub_cov", None), ev["covariance"]),
+                                (self.pub_typed[0] if getattr(self, "pub_typed", ()) else None, ev["typed"]),
+                                (getattr(self, "pub_markers", None), ev["markers"]),
+                                *((p, ev["odometry"]) for p in getattr(self, "pub_odom", []))) if on and p is not None]
+
     def _publish_all(self, estimates: list[Estimate]) -> None:
+        """Publish each estimate: ``~/state`` always, the other outputs at their decimation
+        (``output.*_every``) and only while a subscription is matched to them (:mod:`switchobs_ros.demand`)."""
+        if not estimates:
+            return
         try:
-            ev = self.every
+            ev, n = self.every, self.published
             for e in estimates:
                 k = self.n_published
                 self.n_published = k + 1
                 self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
-                if ev["envelope"] and k % ev["envelope"] == 0:
+                n["state"] += 1
+                if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
                     self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
-                if self.pub_cov is not None and e.P is not None and ev["covariance"] and k % ev["covariance"] == 0:
+                    n["envelope"] += 1
+                if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
                     self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    n["covariance"] += 1
                 if ev["odometry"] and k % ev["odometry"] == 0:
                     for pub, w in zip(self.pub_odom, self.w_odom):
-                        pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                        if listened(pub):
+                            pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                            n["odometry"] += 1
                 if ev["typed"] and k % ev["typed"] == 0:
                     pl = self.pipeline
-                    self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
-                    self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                  pl.bound_invalid_why))
-                if self.pub_markers is not None and ev["markers"] and k % ev["markers"] == 0:
+                    if listened(self.pub_typed[0]):
+                        self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        n["typed"] += 1
+                    if listened(self.pub_typed[1]):
+                        self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                      pl.bound_invalid_why, pl.bound_note))
+                        n["typed"] += 1
+                if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
                     g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
                     self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
                                                                 self.body_in_view.get(e.channel)))
+                    n["markers"] += 1
         except Exception as err:
             self.pipeline.internal_error("publish", err)
 
@@ -434,6 +463,7 @@ class EstimatorMixin:
             self.cfg[p.name] = p.value
             if p.name.startswith("output."):
                 self.every[p.name[len("output."):-len("_every")]] = int(p.value)
+                self.demand.expire()
             elif p.name == "sensor_timeout":
                 self.sensor_timeout = float(p.value)
             elif p.name == "future_tolerance":

@@ -15,7 +15,7 @@ For every message the pipeline orchestrates:
    from the publisher's source timestamps and sequence numbers, never guessed;
 4. screening (:mod:`switchobs_ros.screening`): the model against the data, with the core's
    innovation test against the published bound (a sample it refuses is re-attributed, or
-   rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
+   rejected and every bound withdrawn: :data:`NO_BOUND` until re-certified) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
    :class:`~switchobs_core.model.measurement.Measurement`, and an :class:`Estimate` with the envelope
    (the paper's envelopes and bound, the exact bound).
@@ -120,9 +120,7 @@ class EstimatorPipeline(Counters):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
-        self.table_path = table_path
-        self.mode = mode
-        self.cycles = list(cycles or [])
+        self.table_path, self.mode, self.cycles = table_path, mode, list(cycles or [])
         self.observer = observer
         self.x0 = np.array(x0, dtype=float)
         self.sources = tuple(sources)
@@ -175,10 +173,10 @@ class EstimatorPipeline(Counters):
             # only if published (the Kalman families always keep theirs)
             own_noise = family_entry(family or family_of_table(table)).rate
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
-                                        e0=conf["e0"], bounds=conf.robust, family=family or None,
+                                        e0=conf.e0, bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         check = conf["consistency.check"] != "never"      # on whenever a bound is published (auto, always)
@@ -191,6 +189,7 @@ class EstimatorPipeline(Counters):
                    control=conf.inputs.control, transforms=conf.transforms)
         pipe.publish_covariance = conf.publish_covariance
         pipe.screening.watch_only = conf["consistency.check"] == "auto" and conf.noise_max is None
+        pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
         for why in ([conf.inputs.uncovered_warning()] if pipe.uncovered else []) + ([] if check else [UNCHECKED]):
@@ -308,7 +307,7 @@ class EstimatorPipeline(Counters):
         ``now_ns``. The observer propagates to its stamp and takes the values
         (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
         the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
-        error is unknown) until the next reset. A bad message is rejected and counted; True when
+        error is unknown) until re-certified from data. A bad message is rejected and counted; True when
         applied."""
         topic = SET_STATE_TOPIC
         try:
@@ -487,6 +486,7 @@ class EstimatorPipeline(Counters):
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
+            self.screening.taken(pend, t, m)        # the recovery: a window may re-certify the bounds
             self.obs_ns = pend.stamp_ns
             self.updates += 1
             self.parts_used += len(pend.parts)
