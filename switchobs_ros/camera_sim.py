@@ -160,7 +160,7 @@ class CameraSimNode(Node):
         self.pubs = {}
         if self.specs.channel_topic:
             self.pubs[self.specs.channel_topic] = self.create_publisher(UInt8, self.specs.channel_topic,
-                                                                        qos.CHANNEL_PUB)
+                                                                        qos.channel_pub(cfg["rate"]))
         for src in self.specs.sources:
             self.pubs[src.topic] = self.create_publisher(mb.message_class(src.type), src.topic, qos.SENSOR)
         self.pub_target = self.pubs[next((s.topic for s in self.specs.sources if not s.shared),

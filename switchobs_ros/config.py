@@ -41,11 +41,16 @@ from .core_config import (
     noise_from_params,
 )
 from .params import ConfigError, Param
+from .params_files import matching_sections, unmatched_files
 
-__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
+__all__ = ["CONSISTENCY", "PARAMS", "UNCHECKED", "EstimatorConfig", "body_frame_prefix", "params_from_file"]
 
-#: Values of the ``consistency.check`` parameter (switchobs_ros.screening).
+#: Values of the ``consistency.check`` parameter (switchobs_ros.screening): ``auto`` and ``always`` test every
+#: sample while a bound is published, ``never`` does not.
 CONSISTENCY = ("auto", "always", "never")
+
+#: The start-up warning of ``consistency.check: never``.
+UNCHECKED = "consistency.check is 'never': the published bounds are not tested against the data"
 
 #: The estimator node's parameters (the documentation's parameter reference is generated from it: tools/docs_gen.py).
 PARAMS = [
@@ -68,9 +73,11 @@ PARAMS = [
           "Kalman families (< 0: the system's noise: section, or 1 mm)."),
     Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
           "section, or 0.01)."),
-    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row (< 0: none). With it "
-          "~/envelope gets a last element noise_bound, a guarantee under any noise within the bound; without it "
-          "exact_bound is the noise-free bound (a guarantee only for noise-free measurements)."),
+    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row; 0 declares noise-free "
+          "samples (< 0: none declared). With it ~/envelope gets a last element noise_bound, a guarantee under any "
+          "noise within the bound; without it exact_bound is the noise-free bound (a guarantee only for noise-free "
+          "measurements) and the consistency test holds every sample to it: noise withdraws the bounds at the first "
+          "sample the bound cannot explain."),
     Param("disturbance.max", (), "Bounds |w_j| <= max_j (m/s^2 for the built-in scenarios' unit accelerations on every "
           "velocity state; one value for all or one per column of the system's disturbance B_w) of a bounded unknown "
           "input x' = A x + B_w w: noise_bound then holds for every such input (needs noise.max), and a Kalman table "
@@ -100,6 +107,9 @@ PARAMS = [
           "position (and orientation) in such a frame is mapped before it is checked and used.", str),
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
+    Param("frame_prefix", "auto", "Prefix of every body frame id (child_frame_id of the odometry): 'auto' derives it "
+          "from the node's namespace (/robot1 -> robot1/agent1; none at the root), '' none, any other value is "
+          "used as is (e.g. 'robot1/'). One estimator per robot of a fleet then publishes frames of its own."),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
     Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
           "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
@@ -115,8 +125,9 @@ PARAMS = [
           "(0: off; in [0, 0.5]). Needs a covariance (publish_covariance, or the Kalman families)."),
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
-          "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
-          "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
+          "explains it, else rejected and every bound withdrawn): auto and always (the same) test whenever a bound "
+          "is published: against noise_bound with noise.max, else against exact_bound as noise-free samples; never "
+          "publishes bounds that nothing checks (a warning at start-up)."),
     Param("consistency.recertify", True, "After a withdrawal (and with e0 = -1 at start-up), certify the bounds "
           "again from a window of one switching cycle of data: a least-squares fit whose radius holds for every "
           "noise within noise.max, rounding included (needs noise.max). Labelled re-certified in diagnostics and "
@@ -191,16 +202,29 @@ def check_runtime_value(name: str, value: Any) -> str:
     return ""
 
 
+def body_frame_prefix(value: str, namespace: str) -> str:
+    """The prefix of the body frame ids for parameter ``frame_prefix`` = ``value`` in ``namespace``:
+    ``auto`` gives ``robot1/`` in ``/robot1`` (``fleet/robot1/`` in ``/fleet/robot1``, '' at the root)."""
+    if value != "auto":
+        return value
+    ns = namespace.strip("/")
+    return f"{ns}/" if ns else ""
+
+
 def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | None = None,
                      node_name: str = "estimator") -> dict:
     """The estimator's parameter values: defaults, then params files (ROS 2 YAML), then overrides.
 
-    A params file is ``<node>: ros__parameters: {...}`` (or ``/**:``), nested keys joined with
-    ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names or values of the
-    wrong type raise :class:`~switchobs_ros.params.ConfigError`, as the node does.
+    A params file is ``<node key>: ros__parameters: {...}``; the sections whose keys match the
+    node ``node_name`` (a fully qualified name, or a name at the root) apply as rcl applies them
+    (:mod:`switchobs_ros.params_files`: ``/**``, ``/**/estimator``, ``estimator``), nested keys joined
+    with ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names, values of the wrong
+    type, or a file with no section for the node raise :class:`~switchobs_ros.params.ConfigError`,
+    as the node does.
     """
     known = {p.name: p for p in PARAMS}
     cfg = {p.name: p.default for p in PARAMS}
+    fqn = node_name if node_name.startswith("/") else "/" + node_name
 
     def flat(d, prefix=""):
         for k, v in d.items():
@@ -249,11 +273,12 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
             doc = load_yaml(f, exc=ConfigError, what="params file") or {}
         except FileNotFoundError:
             raise ConfigError(f"params file {f} does not exist") from None
-        for key in (node_name, "/" + node_name, "/**"):
-            sect = doc.get(key) if isinstance(doc, dict) else None
-            if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
-                for name, v in flat(sect["ros__parameters"]):
-                    put(name, v, f"params file {f}")
+        sections = matching_sections(doc, fqn)
+        if not sections:
+            raise ConfigError(unmatched_files([f], fqn))
+        for sect in sections:
+            for name, v in flat(sect):
+                put(name, v, f"params file {f}")
     for name, v in (overrides or {}).items():
         put(name, v, "parameter override")
     return cfg
@@ -364,6 +389,9 @@ class EstimatorConfig:
         if frames and len(frames) != len(bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
+        if values["frame_prefix"].startswith("/"):
+            raise ConfigError(f"parameter 'frame_prefix' must not start with '/' (tf2 frame ids do not); got "
+                              f"{values['frame_prefix']!r}")
         try:
             transforms = parse_transforms(values["input_transforms"], values["input_frame_id"])
         except InvalidArgument as err:

@@ -60,7 +60,7 @@ import msg_bridge as mb
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from . import qos
-from .config import PARAMS, EstimatorConfig, check_runtime_value
+from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
 from .demand import Demand, listened
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import ConfigError, declare_all, unknown_parameters
@@ -155,7 +155,8 @@ class EstimatorMixin:
         self.observer = pl.observer
         self.bodies = mb.bodies(sys_.state_labels)
         self.get_logger().info(mb.describe_bodies(sys_.state_labels))
-        self.child_frames = list(conf.child_frames)
+        prefix = body_frame_prefix(cfg["frame_prefix"], self.get_namespace())     # one set of frames per robot
+        self.child_frames = [prefix + c for c in conf.child_frames]
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
         self.frame = cfg["world_frame"]

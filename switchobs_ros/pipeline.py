@@ -48,7 +48,7 @@ from switchobs_core.runtime.cycles import Residence
 from switchobs_core.runtime.observer import SwitchedObserver
 
 from .attribution import ChannelAttribution, Resolution, Verdict
-from .config import EstimatorConfig
+from .config import UNCHECKED, EstimatorConfig
 from .control import ControlInput
 from .core_config import load_or_design_table
 from .counters import NO_BOUND, Counters, PipelineLog
@@ -179,8 +179,7 @@ class EstimatorPipeline(Counters):
                                         noise_max=conf.noise_max, disturbance=conf.disturbance)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
-        mode_check = conf["consistency.check"]
-        check = mode_check == "always" or (mode_check == "auto" and conf.noise_max is not None)
+        check = conf["consistency.check"] != "never"      # on whenever a bound is published (auto, always)
         pipe = cls(sys_, table, observer, x0=conf.x0, sources=sources_from_specs(conf.inputs, sys_),
                    channel_topic=conf.inputs.channel_topic, input_frame_id=conf["input_frame_id"],
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
@@ -189,11 +188,12 @@ class EstimatorPipeline(Counters):
                    specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"],
                    control=conf.inputs.control, transforms=conf.transforms)
         pipe.publish_covariance = conf.publish_covariance
+        pipe.screening.watch_only = conf["consistency.check"] == "auto" and conf.noise_max is None
         pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
-        if pipe.uncovered:
-            log.warn(conf.inputs.uncovered_warning())
+        for why in ([conf.inputs.uncovered_warning()] if pipe.uncovered else []) + ([] if check else [UNCHECKED]):
+            log.warn(why)
         return pipe
 
     # ------------------------------------------------------------------ the parts' state
@@ -445,7 +445,7 @@ class EstimatorPipeline(Counters):
                 res = Resolution(Verdict.UNCERTAIN)
         if res.verdict is not Verdict.LOST:
             return res
-        if self.screening.testing and self.origin_ns is not None:
+        if self.screening.names and self.origin_ns is not None:
             fits = self.screening.fitting_channels(pend, (pend.stamp_ns - self.origin_ns) * 1e-9)
             if len(fits) == 1:
                 self.lost_channel_named += 1
@@ -471,7 +471,7 @@ class EstimatorPipeline(Counters):
                 self.control.start(self.observer, self.origin_ns)
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         guessed = self.attribution.guessed(pend)
-        if guessed and self.screening.testing and len(self.screening.fitting_channels(pend, t)) == 1:
+        if guessed and self.screening.names and len(self.screening.fitting_channels(pend, t)) == 1:
             guessed = False       # named by the consistency test (re-attributed below if not `channel`)
         m = self.screening.admit(pend, t, m)
         if m is None:

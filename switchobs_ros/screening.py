@@ -1,12 +1,19 @@
 """Screening: the model against the data, before the observer takes a sample.
 
-With the consistency test on (``consistency.check``), every sample is tested against the bound
+With the consistency test on (``consistency.check``: ``auto``, the default, whenever a bound is
+published), every sample is tested against the bound
 the estimator publishes (:class:`switchobs_core.runtime.consistency.InnovationTest`): a sample whose
 innovation exceeds what the bound allows proves the model broken for it. When exactly one other
 channel explains it, it is re-attributed to that channel (``reattributed``); else it is rejected
 (``inconsistent``) and every bound is withdrawn, with the reason, until a window of data
 re-certifies them (below) or a reset. A published
 guarantee is never silently false.
+
+Without a declared noise bound (``noise.max``) the published bound is the noise-free one: with
+``consistency.check: auto`` the test watches it (``watch_only``): a sample it cannot explain
+withdraws the bounds (the data are noisy, or the model is off) and is still used, as the noise it
+may hold was never excluded; with ``always`` (noise-free samples asserted) or a declared
+``noise.max`` (0: noise-free) such a sample is rejected.
 
 With noise and no declared bound there is no guarantee to test against; the chi-square gate
 (:class:`switchobs_core.runtime.gate.ChiSquareGate`, ``consistency.chi2_alpha``) then rejects samples
@@ -61,6 +68,9 @@ class Screening:
         self.N = system.N
         self.C = system.C
         self.check = bool(check)
+        #: Test without rejecting: a sample the bound cannot explain withdraws the bounds and is used all the same
+        #: (``consistency.check: auto`` without ``noise.max``: noise is then not excluded, only undeclared).
+        self.watch_only = False
         self.innovation = InnovationTest(system.C, observer.noise_max)
         self.gate = ChiSquareGate(system.C, chi2_alpha)
         self.labels = getattr(system, "output_labels", None)
@@ -86,6 +96,13 @@ class Screening:
     def testing(self) -> bool:
         """Whether the consistency test runs now (on, and the bounds not withdrawn)."""
         return self.check and self.counters.bound_valid
+
+    @property
+    def names(self) -> bool:
+        """Whether the test may name a sample's channel (re-attribution, samples sent in a loss of channel
+        messages): it runs, and noise is excluded (declared, or noise-free samples asserted: not
+        ``watch_only``, where a noisy sample could fit another channel's noise-free reading by chance)."""
+        return self.testing and not self.watch_only
 
     def admit(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
         """The measurement to use at ``t`` (``m``, or another channel's reading of the sample), or
@@ -137,7 +154,7 @@ class Screening:
             return m
         ctr = self.counters
         srcs = self.pairing.sources
-        if any(srcs[i].channel is None and not srcs[i].shared for i in pend.parts):
+        if not self.watch_only and any(srcs[i].channel is None and not srcs[i].shared for i in pend.parts):
             fits = [mc for mc in (self.pairing.measurement(pend, c) for c in range(1, self.N + 1) if c != m.channel)
                     if self._test(prior, mc).ok]
             if len(fits) == 1:
@@ -146,6 +163,12 @@ class Screening:
                              f"{fits[0].channel}, the only channel consistent with it ({first.describe()})",
                              throttle=True)
                 return fits[0]
+        if self.watch_only:
+            ctr.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
+            ctr.withdraw(f"sample at stamp {pend.stamp_ns} beyond the noise-free exact_bound ({first.describe()}): "
+                         "noisy samples while noise.max is not declared (declare it: 0 for noise-free sensors), or "
+                         "the model does not hold for the data; the sample is used")
+            return m
         ctr.inconsistent += 1
         ctr.last_inconsistency = f"stamp {pend.stamp_ns}: {first.describe()}"
         ctr.reject(self.pairing.topic(pend), Rejection(Reason.INCONSISTENT, "innovation", first.describe()))
