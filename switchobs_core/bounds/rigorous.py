@@ -12,7 +12,12 @@ One owner of the two ellipsoids the observer keeps (the argument is in
   (:meth:`RoundingBound.rho_step`, :meth:`RoundingBound.rho_correct`);
 * the *noise bound* (a declared ``|v_j| <= v_max``): the same with the noise's image ``G v`` added
   to every step (``G = Gamma_A L`` for the held innovation of LMI gains, ``G = K`` for a Kalman
-  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``.
+  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``;
+* a declared clock tolerance ``d`` (:meth:`RoundingBound.clock`: the largest error of a sample's
+  stamp): each sample carries a measurement error of at most ``w`` of
+  :class:`~switchobs_core.bounds.stamp.StampError`, bounded from the estimate and the sets' own
+  bound before the sample, which enters both sets through the gain (``||D^-1 G||_F w``) as the
+  innovation's rounding does: neither set assumes exact stamps.
 
 The observer steps it with the error maps of every sample
 (:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
@@ -38,6 +43,7 @@ from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
+from .stamp import StampError
 
 __all__ = ["RoundingBound"]
 
@@ -68,6 +74,9 @@ class RoundingBound:
         self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
+        self._AB = (A, B)
+        self.tolerance = 0.0            # the clock tolerance d (s; :meth:`clock`)
+        self.stamp: StampError | None = None
         # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
         # per component of a step's result, in balanced units
         self._uf = (self.n + p_max + (0 if B is None else B.shape[1]) + 4) * UNDERFLOW * math.sqrt(
@@ -83,6 +92,30 @@ class RoundingBound:
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
+
+    def clock(self, tolerance: float) -> None:
+        """Declare the largest stamp error ``d`` (s) of any sample: from then on every sample's
+        measurement error of :class:`~switchobs_core.bounds.stamp.StampError` enters both sets
+        (0: exact stamps)."""
+        self.tolerance = max(float(tolerance), 0.0)
+        if self.tolerance > 0.0 and self.stamp is None:
+            self.stamp = StampError(self._AB[0], self._AB[1], scale=self.d)
+
+    def beta(self) -> float:
+        """``>= ||D^-1 e||`` over both sets (the larger: one allowance serves both)."""
+        b = self.ell.lam_scaled()
+        if self.ellv is not None:
+            b = max(b, self.ellv.lam_scaled())
+        return math.sqrt(b) * (1.0 + 2.0 * _U)
+
+    def stamp_error(self, C: np.ndarray, x: np.ndarray, beta: float | None = None,
+                    u: np.ndarray | None = None) -> float:
+        """``w``: the measurement error a stamp error within the tolerance makes in a sample of
+        rows ``C`` taken where the estimate is ``x`` and the balanced error at most ``beta``
+        (default :meth:`beta`, the sets now); 0 without a tolerance."""
+        if self.stamp is None or self.tolerance <= 0.0:
+            return 0.0
+        return self.stamp.bound(C, x, self.beta() if beta is None else beta, self.tolerance, u)
 
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
@@ -110,10 +143,15 @@ class RoundingBound:
         return fro_norm(Ks), fro_norm(Hs), kappa
 
     # ------------------------------------------------------------------ residuals
-    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int) -> None:
-        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, and its noise's norm."""
+    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int,
+             u: np.ndarray | None = None) -> None:
+        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding and the stamp error's
+        measurement error (:meth:`stamp_error`, the sets at the sample; ``u`` the held input),
+        and its noise's norm."""
         self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
                        + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
+        if self.tolerance:
+            self.nu_err += self.stamp_error(C, x, u=u)
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
@@ -155,14 +193,24 @@ class RoundingBound:
         return rho * (1.0 + 8.0 * _U)
 
     def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
-                    x_plus: np.ndarray) -> float:
+                    x_plus: np.ndarray, stamp: float = 0.0) -> float:
         """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
-        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
+        ||y||``), with the sample's stamp error ``stamp`` (:meth:`stamp_error`) through ``K``;
+        ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
         uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
-        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
+        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf + stamp) + self.g_p * fK * nun
                 + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
+
+    def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
+        """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
+        both sets: ``||Phi~||_D beta + rho`` (the step's residual, :meth:`rho_step`)."""
+        worst = 0.0
+        for ell in (self.ell, self.ellv):
+            if ell is not None:
+                worst = max(worst, e.nPhi * math.sqrt(ell.lam_scaled()) + self.rho_step(e, dt, x0, xm, ell, None, u))
+        return worst * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ steps
     def _check(self) -> None:
