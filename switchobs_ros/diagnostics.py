@@ -184,7 +184,13 @@ class EstimatorDiagnostics:
               kv("late channel messages", pl.late_channel),
               kv("lost channel messages", pl.lost_channel),
               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
-              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
+              kv("samples near a switching instant (channel rows dropped)", pl.near_switch),
+              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off"),
+              kv("clock tolerance (ms)", pl.clocks.tol * 1e-6)]
+        # each source's least receive - stamp over its recent messages: negative proves its clock
+        # ahead of the estimator's (switchobs_ros.clocks)
+        ob += [kv(f"clock: {t} least latency (ms; negative: ahead)", v) for t, v in pl.clocks.offsets_ms().items()]
+        ob += [kv(f"clock: {t} ahead beyond the tolerance (ms)", v * 1e-6) for t, v in pl.clocks.skewed.items()]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
         return ob
@@ -206,7 +212,7 @@ class EstimatorDiagnostics:
                     and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
-        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel or pl.clocks.skewed):
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         recs = pl.observer.completed_cycles

@@ -53,11 +53,11 @@ from rclpy.node import Node
 from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64MultiArray, UInt8
 from std_srvs.srv import Trigger
-from switchobs_msgs.msg import ErrorBounds, StateEstimate
+from switchobs_msgs.msg import ActiveChannel, ErrorBounds, StateEstimate
 from visualization_msgs.msg import MarkerArray
 
 import msg_bridge as mb
-from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
+from msg_bridge.typed import ACTIVE_CHANNEL, ErrorBoundsWriter, StateEstimateWriter
 
 from . import qos
 from .config import PARAMS, EstimatorConfig, check_runtime_value
@@ -229,10 +229,8 @@ class EstimatorMixin:
         # (attribution does not depend on it: source timestamps, switchobs_ros.attribution)
         self._input_subs = []
         hot = []
-        if pl.channel_topic:
-            handle = self._input_handler(None)
-            self.sub_channel = sub(UInt8, pl.channel_topic, self._with_drain(handle), qos.CHANNEL_SUB)
-            hot.append((self.sub_channel, handle))
+        self.sub_channel = None
+        self._sub = sub
         for src in pl.sources:
             handle = self._input_handler(src.index)
             s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB)
@@ -246,8 +244,7 @@ class EstimatorMixin:
         self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
         self._hot_inputs = tuple(hot)
         self._input_types = {s.topic: s.type for s in pl.sources}      # what each input topic must carry
-        if pl.channel_topic:
-            self._input_types[pl.channel_topic] = "std_msgs/msg/UInt8"
+        self._channel_subscription()
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -260,6 +257,29 @@ class EstimatorMixin:
         # sim clock that stops (a replay's end) must not hold the last samples back
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback, clock=self._steady)
+
+    def _channel_subscription(self) -> None:
+        """The channel topic's subscription, of the type ``channel_type`` names; ``auto``: the type
+        its publishers offer in the ROS graph (``switchobs_msgs/msg/ActiveChannel`` when one does),
+        none until a publisher appears (the pairing timer asks again). The channel comes first among
+        the hot inputs, so that, when a channel message and a pose are ready together, the channel
+        is taken first (attribution does not depend on it: switchobs_ros.attribution)."""
+        topic = self.pipeline.channel_topic
+        if not topic or self.sub_channel is not None:
+            return
+        kind = self.cfg["channel_type"]
+        if kind == "auto":
+            offered = {i.topic_type for i in self.get_publishers_info_by_topic(self.resolve_topic_name(topic))}
+            kind = next((k for k in (ACTIVE_CHANNEL, "std_msgs/msg/UInt8") if k in offered), "")
+            if not kind:        # publishers of another type are reported (_check_input_types)
+                self._input_types[topic] = f"std_msgs/msg/UInt8 or {ACTIVE_CHANNEL}"
+                return
+        handle = self._input_handler(None)
+        self.sub_channel = self._sub(ActiveChannel if kind == ACTIVE_CHANNEL else UInt8, topic,
+                                     self._with_drain(handle), qos.CHANNEL_SUB)
+        self._hot_inputs = ((self.sub_channel, handle), *self._hot_inputs)
+        self._input_types[topic] = kind
+        self.get_logger().info(f"channel topic '{topic}': {kind}")
 
     def _destroy_interfaces(self) -> None:
         """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
@@ -375,6 +395,8 @@ class EstimatorMixin:
         return max(min(self.pair_timeout, window) / 2, 0.005)
 
     def pairing_callback(self) -> None:
+        if self.sub_channel is None and self.pipeline.channel_topic:
+            self._channel_subscription()        # channel_type auto: waiting for a publisher
         if not self.answering:
             return
         self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
