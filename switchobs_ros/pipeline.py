@@ -136,7 +136,7 @@ class EstimatorPipeline(Counters):
         self.future_ns = int(future_tolerance_ns)
         self.N = system.N
         # the parts: pairing, attribution, the dead time, the model against the data
-        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p))
+        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p), clock_tolerance_ns)
         self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns, clock_tolerance_ns)
         self.clocks = ClockWatch(clock_tolerance_ns)    # each source's stamps against the receive clock
         if clock_tolerance_ns and observer.rounding is not None:    # stamp errors in the bounds
@@ -358,7 +358,7 @@ class EstimatorPipeline(Counters):
             res = self.attribution.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
-                self.pairing.settle(stamp_ns)       # older samples will not be completed now
+                self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
             for s in self.pairing.overflow():       # the oldest one's partners are overdue
                 self._flush(s, out, now_mono)
             self._advance(out, now_mono)

@@ -16,8 +16,9 @@ One owner of the two ellipsoids the observer keeps (the argument is in
 * a declared clock tolerance ``d`` (:meth:`RoundingBound.clock`: the largest error of a sample's
   stamp): each sample carries a measurement error of at most ``w`` of
   :class:`~switchobs_core.bounds.stamp.StampError`, bounded from the estimate and the sets' own
-  bound before the sample, which enters both sets through the gain (``||D^-1 G||_F w``) as the
-  innovation's rounding does: neither set assumes exact stamps.
+  bound before the sample (their largest axis in balanced units), which enters both sets through
+  the gain as the noise does (the degenerate ellipsoid ``E(w^2 G G')``; ``(sqrt(p) v_max + w)^2``
+  in the noise set, ``||v + w|| <= ||v|| + ||w||``): neither set assumes exact stamps.
 
 The observer steps it with the error maps of every sample
 (:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
@@ -89,6 +90,7 @@ class RoundingBound:
         self.ellv = ErrorEllipsoid(self.n, self.e0, self.d) if self.noise_max else None
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
+        self.w = 0.0        # the held sample's stamp error (its measurement error's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
@@ -102,10 +104,13 @@ class RoundingBound:
             self.stamp = StampError(self._AB[0], self._AB[1], scale=self.d)
 
     def beta(self) -> float:
-        """``>= ||D^-1 e||`` over both sets (the larger: one allowance serves both)."""
-        b = self.ell.lam_scaled()
+        """``>= ||D^-1 e||`` over both sets (the larger: one allowance serves both): the largest
+        eigenvalue of ``D^-1 S D^-1``, the solver's error included
+        (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`)."""
+        scale = np.outer(self._id, self._id)
+        b = self.ell.lam_upper(self.ell.S * scale)
         if self.ellv is not None:
-            b = max(b, self.ellv.lam_scaled())
+            b = max(b, self.ellv.lam_upper(self.ellv.S * scale))
         return math.sqrt(b) * (1.0 + 2.0 * _U)
 
     def stamp_error(self, C: np.ndarray, x: np.ndarray, beta: float | None = None,
@@ -145,13 +150,11 @@ class RoundingBound:
     # ------------------------------------------------------------------ residuals
     def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int,
              u: np.ndarray | None = None) -> None:
-        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding and the stamp error's
-        measurement error (:meth:`stamp_error`, the sets at the sample; ``u`` the held input),
-        and its noise's norm."""
+        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, its noise's norm and
+        its stamp error's (:meth:`stamp_error`, from the sets at the sample; ``u`` the held input)."""
         self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
                        + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
-        if self.tolerance:
-            self.nu_err += self.stamp_error(C, x, u=u)
+        self.w = self.stamp_error(C, x, u=u) if self.tolerance else 0.0
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
@@ -193,24 +196,20 @@ class RoundingBound:
         return rho * (1.0 + 8.0 * _U)
 
     def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
-                    x_plus: np.ndarray, stamp: float = 0.0) -> float:
+                    x_plus: np.ndarray) -> float:
         """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
-        ||y||``), with the sample's stamp error ``stamp`` (:meth:`stamp_error`) through ``K``;
-        ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
+        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
         uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
-        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf + stamp) + self.g_p * fK * nun
+        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
                 + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
     def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
         """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
-        both sets: ``||Phi~||_D beta + rho`` (the step's residual, :meth:`rho_step`)."""
-        worst = 0.0
-        for ell in (self.ell, self.ellv):
-            if ell is not None:
-                worst = max(worst, e.nPhi * math.sqrt(ell.lam_scaled()) + self.rho_step(e, dt, x0, xm, ell, None, u))
-        return worst * (1.0 + 4.0 * _U)
+        both sets: ``||Phi~||_D beta + rho`` (:meth:`beta`; the step's residual, :meth:`rho_step`)."""
+        rho = max(self.rho_step(e, dt, x0, xm, ell, None, u) for ell in (self.ell, self.ellv) if ell is not None)
+        return (e.nPhi * self.beta() + rho) * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ steps
     def _check(self) -> None:
@@ -220,14 +219,17 @@ class RoundingBound:
                               "the bounds are withdrawn until the next reset")
 
     def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool, absE: tuple | None = None) -> tuple | None:
-        """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
-        (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
-        if GL is not None and self.vn > 0.0:
+               keep: bool, absE: tuple | None = None, vn: float | None = None) -> tuple | None:
+        """A step of an ellipsoid with a held innovation: its noise (``vn``, default the held
+        ``sqrt(p) v_max``; 0 for the exact set) and its stamp error ``w`` enter through ``Gamma L``
+        (``||v + w|| <= vn + w``); open-loop steps and Kalman prediction steps add none."""
+        vn = self.vn if vn is None else vn
+        c = vn ** 2 if not self.w else (vn + self.w) ** 2 * (1.0 + 4.0 * _U)
+        if GL is not None and c > 0.0:
             if keep:
-                ell.step_shaped(E, rho, GL, self.vn ** 2, absM=absE)
+                ell.step_shaped(E, rho, GL, c, absM=absE)
                 return None
-            return ell.propagate_shaped(E, rho, GL, self.vn ** 2, absM=absE)
+            return ell.propagate_shaped(E, rho, GL, c, absM=absE)
         if keep:
             ell.step(E, rho, absE)
             return None
@@ -241,7 +243,8 @@ class RoundingBound:
             return
         absE = e.abs_E() if hasattr(e, "abs_E") else None
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra, absE)
+            self._noise(self.ell, e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
+                        e.GL if nu is not None and self.w else None, True, absE, 0.0)
             if self.ellv is not None:
                 self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
                             e.GL if nu is not None else None, True, absE)
@@ -252,7 +255,8 @@ class RoundingBound:
         """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
         (``extra`` as in :meth:`step`)."""
         with np.errstate(over="ignore", invalid="ignore"):
-            S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra)
+            S, _ = self._noise(self.ell, e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
+                               e.GL if nu is not None and self.w else None, False, None, 0.0)
             Sv = None
             if self.ellv is not None:
                 Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
@@ -267,10 +271,13 @@ class RoundingBound:
             return
         emap = gamma(H.shape[0] + 1) * self.gain_norms(K, H)[2]
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
-            if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
+            if self.w:      # e^+ = (I - K H) e^- + K w: the stamp error
+                self.ell.step_shaped(M, rho + emap * math.sqrt(self.ell.lam_scaled()), K, self._wc(0, 0.0))
+            else:
+                self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
+            if self.ellv is not None:      # e^+ = (I - K H) e^- + K (v + w)
                 self.ellv.step_shaped(M, rho + emap * math.sqrt(self.ellv.lam_scaled()), K,
-                                      p * self.noise_max[channel - 1] ** 2)
+                                      self._wc(p, self.noise_max[channel - 1]))
         self._check()
 
     def fused(self, e: Any, dt: float, m: Any, x0: np.ndarray, xm: np.ndarray, rc: float,
@@ -288,12 +295,19 @@ class RoundingBound:
                 rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
                        + m.emap * math.sqrt(ell.lam_scaled()))
                 Z, w, c, mn = m.sandwich(ell)
-                if noisy:       # e^+ = (I - K H) e^- + K v
-                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K,
-                                                                 p * self.noise_max[channel - 1] ** 2)
+                if noisy or self.w:     # e^+ = (I - K H) e^- + K (v + w)
+                    ell.S, ell.tr = ell.propagate_shaped_product(
+                        Z, w, c, rho, mn, K, self._wc(p, self.noise_max[channel - 1] if noisy else 0.0))
                 else:
                     ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
+
+    def _wc(self, p: int, v_max: float) -> float:
+        """``(sqrt(p) v_max + w)^2`` rounded up: the squared norm bound of a sample's noise
+        (``p`` rows within ``v_max``) plus its stamp error (``p v_max^2`` without one)."""
+        if not self.w:
+            return p * v_max ** 2
+        return (math.sqrt(p) * v_max * (1.0 + 2.0 * _U) + self.w) ** 2 * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ bounds
     def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,

@@ -12,7 +12,7 @@ from scipy.linalg import expm
 from switchobs_core.model.schedule import PeriodicSchedule
 from switchobs_core.runtime.observer import SwitchedObserver
 
-#: the default scene with bodies ten times faster (2 m/s: a 50 ms stamp error is a 10 cm error)
+#: the default scene with bodies ten times faster (2 m/s: a 5 ms stamp error is a 1 cm error)
 X0 = np.array([0.0, 0.0, 2.0, 1.0, 3.0, 1.0, -1.0, 0.0, -2.0, 2.0, 1.0, 0.0])
 
 
@@ -21,15 +21,15 @@ def table(paper):
     return paper_table(paper)
 
 
-def _ratios(paper, table, tolerance, offset, seconds=8.0, rate=100.0, seed=0):
+def _ratios(paper, table, tolerance, offset, seconds=12.0, rate=100.0, seed=0):
     """Largest error / exact bound over a run whose samples are taken ``offset`` s (plus a
-    uniform jitter within the rest of the tolerance) after their stamps."""
+    uniform jitter within the rest of the tolerance) after their stamps, and the last bound."""
     rng = np.random.default_rng(seed)
     sched = PeriodicSchedule(PERIODIC)
     obs = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC], x0=X0 + 0.25, e0=1.0)
     if tolerance:
         obs.rounding.clock(tolerance)
-    worst = 0.0
+    worst = bound = 0.0
     for k in range(1, int(seconds * rate)):
         t = k / rate
         c = int(sched.channel_at(t))
@@ -38,14 +38,18 @@ def _ratios(paper, table, tolerance, offset, seconds=8.0, rate=100.0, seed=0):
         x_hat = obs.update(t, c, y)
         bound = obs.envelope().exact_bound
         worst = max(worst, float(np.linalg.norm(x_hat - expm(paper.A * t) @ X0)) / bound)
-    return worst
+    return worst, bound
 
 
 def test_stamp_errors_within_the_declared_tolerance_stay_within_the_bound(paper, table):
-    assert _ratios(paper, table, 0.05, 0.05) <= 1.0
-    assert _ratios(paper, table, 0.05, -0.03, seed=1) <= 1.0
+    """5 ms: the bound holds and stays finite (it grows with the tolerance: 0.6 at 2 ms, 38 at 5 ms
+    after 12 s here, against 0.014 with exact stamps; bench/RESULTS.md)."""
+    for offset, seed in ((0.005, 0), (-0.003, 1)):
+        worst, bound = _ratios(paper, table, 0.005, offset, seed=seed)
+        assert worst <= 1.0
+        assert 0.0 < bound < 1e3
 
 
 def test_the_same_stamp_errors_undeclared_break_the_bound(paper, table):
-    """The test above can fail: a 50 ms offset not declared puts the error above the exact bound."""
-    assert _ratios(paper, table, 0.0, 0.05) > 1.0
+    """The test above can fail: a 5 ms offset not declared puts the error above the exact bound."""
+    assert _ratios(paper, table, 0.0, 0.005)[0] > 1.0
