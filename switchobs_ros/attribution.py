@@ -245,6 +245,8 @@ class ChannelAttribution:
             src = [p.src_ns for p in dep]
             verdict, c, certain = self.stamped.resolve(pend.stamp_ns, None if None in src else max(src),
                                                        force or self._expired(pend, now_mono))
+            if verdict == "near_switch" and c and all(srcs[i].shared for i in pend.parts):
+                verdict = "channel"     # shared rows read the same in every channel: they wait for a partner
             if verdict == "channel":
                 return Resolution.of(c, certain)
             named = {"near_switch": Verdict.NEAR_SWITCH, "lost": Verdict.LOST}

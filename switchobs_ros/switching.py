@@ -86,14 +86,15 @@ class SwitchHistory:
     def resolve(self, stamp_ns: int, src_ns: int | None, expired: bool) -> tuple[str, int, bool]:
         """``(verdict, channel, certain)`` of a sample at header stamp ``stamp_ns`` (sent at
         ``src_ns``; ``expired``: its reorder window has passed). ``verdict`` is ``"channel"``,
-        ``"near_switch"``, ``"lost"`` or ``"none"`` (no switching instant before it)."""
+        ``"near_switch"`` (``channel``: the one by the stamps as they are), ``"lost"`` or ``"none"``
+        (no switching instant before it)."""
         k = bisect.bisect_right(self.at, stamp_ns) - 1
         nxt = self.at[k + 1] if k + 1 < len(self.at) else None
         certain = expired or (nxt is not None and nxt > stamp_ns + self.tol) or (
             src_ns is not None and self.latest_src is not None and self.latest_src > src_ns + 2 * self.tol)
         near = (k >= 0 and stamp_ns - self.at[k] <= self.tol) or (nxt is not None and nxt - stamp_ns <= self.tol)
         if near and self.tol:
-            return "near_switch", 0, True
+            return "near_switch", self.ch[k] if k >= 0 else 0, True
         if any(lo <= stamp_ns < hi for lo, hi in self.lost):
             return "lost", 0, True
         if k < 0:
