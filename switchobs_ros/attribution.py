@@ -223,6 +223,8 @@ class ChannelAttribution:
         or it waits for its channel): no channel received yet when arrival order decides (no
         source timestamp, or no reorder window), or, without source timestamps, stamped at or
         before the switch (taken while the previous channel was active)."""
+        if self.stamped:        # by the sensors' stamps: neither arrival order nor the switch's camera stamp
+            return rej
         if rej is None and src.channel is None and self.channel_topic and not self.channel \
                 and (src_ns is None or not self.window_ns):
             rej = Rejection(Reason.NO_CHANNEL, self.channel_topic, "no active channel received yet")
