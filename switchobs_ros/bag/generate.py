@@ -120,12 +120,15 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
     period_ns = round(1e9 / cfg.rate)
     epoch_ns = round(cfg.clock_start * 1e9)
     k_end = round(cfg.duration * cfg.rate)
+    switch = (0, 0)         # (channel, its switching instant: the first tick stamp on it)
     for k in range(k_end + 1):
         # camera_sim.CameraSimNode.publish_tick, step for step
         t = k * period_ns * 1e-9
         stamp_ns = epoch_ns + k * period_ns
         plant.advance(t)
         rho = int(schedule.channel_at(t))
+        if rho != switch[0]:
+            switch = (rho, stamp_ns)
         y = plant.measure(rho, noise_std=0.0)
         if cfg.noise_std > 0:
             v = cfg.noise_std * rng.standard_normal(y.shape)
@@ -133,7 +136,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
-                                                                  schedule.blind_at(t))]
+                                                                  schedule.blind_at(t), switch[1])]
         msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 

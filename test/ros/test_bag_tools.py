@@ -68,7 +68,7 @@ def test_generate_is_camera_sims_model(ros_node):
     for (t1, a), (t2, b) in zip(got, ours):
         assert t1 == t2
         assert a == b, (t1, a, b)        # rclpy messages compare field by field, exactly
-    channels = {m.data for t, m in ours if t == "/camera/active_channel"}
+    channels = {mb.channel_value(m) for t, m in ours if t == "/camera/active_channel"}
     assert channels == {1, 2}
 
 
@@ -105,8 +105,9 @@ def test_generated_bag_is_rosbag2_v9_readable_by_rosbags_and_mcap(bags):
                     assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t
                 elif conn.topic == "/sim/truth":
                     assert np.array_equal(msg.data, np.asarray(want.data))
-                elif conn.topic == "/camera/active_channel":
-                    assert msg.data == want.data
+                elif conn.topic == "/camera/active_channel":    # stamped: the channel and its switching instant
+                    assert (msg.channel, msg.header.stamp.sec, msg.header.stamp.nanosec) == \
+                        (want.channel, want.header.stamp.sec, want.header.stamp.nanosec)
                 n += 1
         assert n == len(ref)
     # the mcap library's own reader with the ros2 profile (decodes from the schemas in the file)
@@ -323,7 +324,8 @@ def test_missing_topic_wrong_type_and_missing_bag_are_one_line_errors(bags, pape
     assert err[0].startswith("switchobs_bag: error: bag ") and "topic /target/pose is missing" in err[0]
     rc, err = _cli(["estimate", str(tmp_path / "wrong_type"), "--csv", str(tmp_path / "x.csv"), *gt], capsys)
     assert rc == 2 and len(err) == 1
-    assert "topic /camera/active_channel has type std_msgs/msg/Float64MultiArray; expected std_msgs/msg/UInt8" \
+    assert "topic /camera/active_channel has type std_msgs/msg/Float64MultiArray; expected " \
+           "switchobs_msgs/msg/ActiveChannel or std_msgs/msg/UInt8" \
         in err[0]
     rc, err = _cli(["estimate", str(tmp_path / "nope"), "--csv", str(tmp_path / "x.csv"), *gt], capsys)
     assert rc == 2 and len(err) == 1 and str(tmp_path / "nope") in err[0] and "no such file" in err[0]
