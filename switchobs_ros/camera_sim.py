@@ -89,6 +89,9 @@ PARAMS = [
           "channel is then sent before its channel message)."),
     Param("wait_for_subscribers", 0, "Before tick 0, wait until target/pose has this many subscribers."),
     Param("wait_for_truth_subscribers", 0, "Before tick 0, wait until sim/truth has this many subscribers."),
+    Param("stamp_at_send", False, "Stamp each tick with the node clock when it is sent, as a sensor stamping "
+          "with its own clock does (the timer's jitter in every stamp), the plant advanced to that stamp; "
+          "default: the tick's nominal time epoch + k / rate. Not with publish_clock."),
 ]
 
 
@@ -160,6 +163,7 @@ class CameraSimNode(Node):
         self.k = -1
         self.started = False
         self.epoch_ns = 0
+        self.last_stamp_ns = -1
         self.t_wait = time.monotonic()
         self.k_end = round(cfg["duration"] * cfg["rate"]) if cfg["duration"] > 0 else None
 
@@ -229,8 +233,11 @@ class CameraSimNode(Node):
         self.publish_tick(k)
 
     def publish_tick(self, k: int) -> None:
-        t = k * self.period_ns * 1e-9
         stamp_ns = self.epoch_ns + k * self.period_ns
+        if self.cfg["stamp_at_send"] and not self.cfg["publish_clock"]:   # the clock now, never back
+            stamp_ns = max(self.get_clock().now().nanoseconds, self.last_stamp_ns + 1)
+        self.last_stamp_ns = stamp_ns
+        t = (stamp_ns - self.epoch_ns) * 1e-9
         stamp = mb.ns_to_stamp(stamp_ns)
         if self.pub_clock is not None:
             self.pub_clock.publish(ClockMsg(clock=stamp))

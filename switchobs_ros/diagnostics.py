@@ -133,6 +133,8 @@ class EstimatorDiagnostics:
                    kv("kalman gains now", obs.gains_source)]
             if obs.kalman_fallback:
                 ob.append(kv("last kalman departure", obs.kalman_fallback))
+        if obs.covariance_withdrawn:
+            ob.append(kv("covariance withdrawn (not published, no chi-square gate)", obs.covariance_withdrawn))
         if node.last_clock_jump:
             ob.append(kv("last clock jump", node.last_clock_jump))
         return ob + self._cycles()
@@ -219,6 +221,9 @@ class EstimatorDiagnostics:
         if recs and not recs[-1].matched:
             level = max(level, DiagnosticStatus.WARN)
             msg += "; last cycle did not match the schedule"
+        if pl.observer.covariance_withdrawn:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += "; covariance withdrawn: the Riccati recursion ran out of digits"
         res = pl.residence()
         if res is not None and res.problem:
             level = max(level, DiagnosticStatus.WARN)

@@ -61,12 +61,13 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
     ``schedule_params`` (``schedule.mode/tau/s``) replaces the named ``schedule``;
     ``process_noise`` is camera_sim's plant noise q (Qc = q^2 I). ``system`` is any system
     (a scenario or a YAML file with an ``inputs:`` section): both nodes use it, camera_sim
-    starting from ``initial_state`` (default: the paper's scene). ``extra_estimator`` and
-    ``extra_camera`` add or override the two nodes' parameters."""
+    starting from ``initial_state`` (default: the paper's scene). ``extra_camera`` overrides
+    camera_sim's parameters (``publish_clock: False`` runs both nodes on the system clock)."""
     stop = _InterruptFlag()
     try:
         return _run(stop, schedule, duration, time_scale, rate, init, seed, out, gain_table, quiet,
-                    extra_estimator, noise_std, schedule_params, process_noise, system, initial_state, extra_camera)
+                    extra_estimator, noise_std, schedule_params, process_noise, system, initial_state,
+                    extra_camera)
     finally:
         stop.restore()
 
@@ -101,6 +102,8 @@ def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float
                       wait_for_subscribers=1, wait_for_truth_subscribers=1, seed=seed, noise_std=float(noise_std),
                       process_noise=float(process_noise), system=system, initial_state=list(map(float, x0)))
     cam_params.update(extra_camera or {})
+    if not cam_params["publish_clock"]:
+        est_params["use_sim_time"] = False
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Collector(["/estimator/state", "/estimator/envelope", "/sim/truth"], name="switchobs_demo")
     est = cam = None

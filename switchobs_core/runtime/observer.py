@@ -255,26 +255,25 @@ class SwitchedObserver:
         self._seq.reset(t0)
         self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
         self._gains.reset()     # covariance P0, nothing held: the family's own
+        self._lost = ""
 
     @property
     def gains(self) -> Any:
         """The gain family in use (:mod:`switchobs_core.families`)."""
         return self._gains
 
-    @property
-    def kalman_fallback(self) -> str:
-        """Why the Kalman table last left its cache ("" if it has not since the reset)."""
-        return getattr(self._gains, "fallback", "")
+    kalman_fallback = property(lambda self: getattr(self._gains, "fallback", ""),
+                               doc="Why the Kalman table last left its cache (\"\" if it has not since the reset).")
+    kalman_departures = property(lambda self: getattr(self._gains, "departures", 0),
+                                 doc="Departures of the Kalman table from its cache since the reset (0 for others).")
+    kalman_relocks = property(lambda self: getattr(self._gains, "relocks", 0),
+                              doc="Returns of the Kalman table to its cache since the reset (0 for other families).")
 
     @property
-    def kalman_departures(self) -> int:
-        """Departures of the Kalman table from its cache since the reset (0 for other families)."""
-        return getattr(self._gains, "departures", 0)
-
-    @property
-    def kalman_relocks(self) -> int:
-        """Returns of the Kalman table to its cache since the reset (0 for other families)."""
-        return getattr(self._gains, "relocks", 0)
+    def covariance_withdrawn(self) -> str:
+        """Why :attr:`P` is None until :meth:`reset` ("" while the family's covariance holds): the
+        recursion ran out of digits (:class:`~switchobs_core.runtime.families.base.Correction` ``lost``)."""
+        return self._lost
 
     @property
     def bounds_withdrawn(self) -> str:
@@ -398,10 +397,9 @@ class SwitchedObserver:
         if channel != self.channel:
             self._switch(t, channel)
         # 3. hold the new sample's input from t on; the family takes the sample (holds its
-        #    innovation, or corrects)
+        #    innovation, or corrects) and the observer applies what it returns (x, Phi, the bound)
         if u is not None:
             self._in.u = u if u.any() else None
-        #    and the observer applies what it returns (the estimate, Phi, the bound's steps)
         self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, t - self._ts, channel, y, rows,
                                               self.design_index, t < self._blind_until, self._in.u)),
                     channel)
@@ -430,6 +428,7 @@ class SwitchedObserver:
         for m in c.maps:
             m.apply(self._phi, b, channel)
         self._x = c.x
+        self._lost = self._lost or c.lost
 
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
         """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
@@ -497,8 +496,9 @@ class SwitchedObserver:
         prior of the phase with the Joseph update, which is the real one while locked; after a
         departure the recursion's own, :mod:`switchobs_core.runtime.families.kalman`). LMI gains: the
         covariance propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
+        None also once the covariance is withdrawn (:attr:`covariance_withdrawn`).
         """
-        return self._gains.covariance()
+        return None if self._lost else self._gains.covariance()
 
     def _switch(self, t: float, channel: int) -> None:
         """Bookkeeping at a switching instant (e:switching_instants): the design sequence, and for
