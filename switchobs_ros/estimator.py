@@ -130,6 +130,7 @@ class EstimatorMixin:
 
     answering = True
     ignored_inactive = 0
+    _channel_tentative = False
     _hot_inputs: tuple = ()
 
     def _ready_log(self) -> None:
@@ -261,19 +262,23 @@ class EstimatorMixin:
     def _channel_subscription(self) -> None:
         """The channel topic's subscription, of the type ``channel_type`` names; ``auto``: the type
         its publishers offer in the ROS graph (``switchobs_msgs/msg/ActiveChannel`` when one does),
-        none until a publisher appears (the pairing timer asks again). The channel comes first among
+        ``std_msgs/msg/UInt8`` while none is known, asked again by the pairing timer until a
+        channel message has arrived (a publisher that starts later). The channel comes first among
         the hot inputs, so that, when a channel message and a pose are ready together, the channel
         is taken first (attribution does not depend on it: switchobs_ros.attribution)."""
         topic = self.pipeline.channel_topic
-        if not topic or self.sub_channel is not None:
+        if not topic:
             return
         kind = self.cfg["channel_type"]
+        self._channel_tentative = kind == "auto"
         if kind == "auto":
             offered = {i.topic_type for i in self.get_publishers_info_by_topic(self.resolve_topic_name(topic))}
-            kind = next((k for k in (ACTIVE_CHANNEL, "std_msgs/msg/UInt8") if k in offered), "")
-            if not kind:        # publishers of another type are reported (_check_input_types)
-                self._input_types[topic] = f"std_msgs/msg/UInt8 or {ACTIVE_CHANNEL}"
+            kind = next((k for k in (ACTIVE_CHANNEL, "std_msgs/msg/UInt8") if k in offered), "std_msgs/msg/UInt8")
+        if self.sub_channel is not None:
+            if self._input_types.get(topic) == kind:
                 return
+            self._hot_inputs = tuple(h for h in self._hot_inputs if h[0] is not self.sub_channel)
+            self.destroy_subscription(self.sub_channel)
         handle = self._input_handler(None)
         self.sub_channel = self._sub(ActiveChannel if kind == ACTIVE_CHANNEL else UInt8, topic,
                                      self._with_drain(handle), qos.CHANNEL_SUB)
@@ -395,8 +400,11 @@ class EstimatorMixin:
         return max(min(self.pair_timeout, window) / 2, 0.005)
 
     def pairing_callback(self) -> None:
-        if self.sub_channel is None and self.pipeline.channel_topic:
-            self._channel_subscription()        # channel_type auto: waiting for a publisher
+        if self._channel_tentative and self.sub_channel is not None:     # channel_type auto
+            if self.pipeline.accepted[self.pipeline.channel_topic]:
+                self._channel_tentative = False
+            else:
+                self._channel_subscription()
         if not self.answering:
             return
         self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
