@@ -23,10 +23,14 @@ WINDOW = 200
 
 class ClockWatch:
     """The minimum of ``receive - stamp`` per source (module docstring); ``tolerance_ns`` the
-    declared clock tolerance (checked only when > 0: 0 declares one clock for every stamp)."""
+    declared clock tolerance. ``check``: whether an offset beyond it withdraws the bounds (default:
+    with a tolerance; the node also checks a tolerance of 0 on the system clock, where the stamps
+    and the receive clock are one clock; under sim time or in a recording the receive clock may
+    lag the stamps by a tick of ``/clock``)."""
 
-    def __init__(self, tolerance_ns: int):
+    def __init__(self, tolerance_ns: int, check: bool | None = None):
         self.tol = int(tolerance_ns)
+        self.check = self.tol > 0 if check is None else bool(check)
         self._recent: dict[str, deque] = {}
         self.least: dict[str, int] = {}        # over the whole run
         self.skewed: dict[str, int] = {}       # sources whose stamps proved an offset beyond the tolerance
@@ -41,7 +45,7 @@ class ClockWatch:
         q.append(lat)
         if lat < self.least.get(topic, lat + 1):
             self.least[topic] = lat
-        if self.tol > 0 and -lat > self.tol:
+        if self.check and -lat > self.tol:
             first = topic not in self.skewed
             self.skewed[topic] = max(self.skewed.get(topic, 0), -lat)
             if first:
