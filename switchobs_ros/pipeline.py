@@ -196,6 +196,8 @@ class EstimatorPipeline(Counters):
                    control=conf.inputs.control, transforms=conf.transforms,
                    clock_tolerance_ns=int(round(conf["clock_tolerance_ms"] * 1e6)))
         pipe.publish_covariance = conf.publish_covariance
+        h_min = min((min(c.h) for c in cycles), default=conf.robust[0] if conf.robust else 0.0)
+        pipe.attribution.stamped.horizon_ns = int(0.9 * h_min * 1e9)     # stamped channel: certain at once
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
         if pipe.uncovered:

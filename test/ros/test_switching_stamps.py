@@ -38,22 +38,22 @@ def exact(paper_tables):
 
 
 def test_first_pose_of_a_new_channel_before_its_switching_message(exact):
-    """Channel 1 from t0; the target pose of channel 2's first tick arrives before the switching
-    message (stamped at that tick): it waits, then is read as channel 2 by its stamp, although
-    the channel message's source timestamp (another clock, 40 ms behind) is older than the pose's."""
+    """Channel 1 for its 1.2 s, t0 its last tick (beyond the horizon: it waits); the target pose of
+    channel 2's first tick arrives before the switching message (stamped at that tick): it waits,
+    then is read as channel 2 by its stamp, although the channel message's source timestamp
+    (another clock, 40 ms behind) is older than the pose's."""
     pl = exact
     t0 = NOW - 10 * S
     src_cam = 1_000 * S                 # the channel publisher's clock
     src_tgt = src_cam + 40 * MS         # the target publisher's, 40 ms ahead
-    pl.on_channel(active_channel(1, t0), src_ns=src_cam, seq=1)
+    pl.on_channel(active_channel(1, t0 - 1190 * MS), src_ns=src_cam, seq=1)     # 1.2 s residence ending
     out = _tick(pl, t0, (3.0, 1.0), 0.0, src_tgt)
     t1 = t0 + 10 * MS
     out += _tick(pl, t1, (-2.0, 2.0), 0.001, src_tgt + 10 * MS)
     assert out == []                                 # no later switching instant yet: both wait
     out = pl.on_channel(active_channel(2, t1), src_ns=src_cam + 10 * MS, now_mono=0.002, seq=2)
-    assert [(e.stamp_ns, e.channel) for e in out] == [(t0, 1)]     # before the new instant: certain
-    out = pl.flush_overdue(1.0, 0.2)                 # no later switching message: the window decides
-    assert [(e.stamp_ns, e.channel) for e in out] == [(t1, 2)]
+    # t0 is before the new instant, t1 within the new channel's horizon: both certain now
+    assert [(e.stamp_ns, e.channel) for e in out] == [(t0, 1), (t1, 2)]
     assert sum(pl.rejected.values()) == 0 and pl.late_channel == 0 and pl.bound_valid
 
 
@@ -126,3 +126,28 @@ def test_the_tolerance_enters_the_bound(paper_tables):
         out += pl.flush_overdue(100.0, 0.2)
         bounds.append(out[-1].envelope[-1])
     assert 0.0 < bounds[0] < bounds[1]
+
+
+def test_within_the_horizon_a_sample_is_answered_at_once(exact):
+    """Channel 1 from t0, the paper's cycle (2 s, 0.6): no switch before 0.9 x 0.8 s: a sample
+    100 ms after the instant is certain at once (no later channel message needed); one 1 s after
+    it waits for its channel."""
+    pl = exact
+    assert pl.attribution.stamped.horizon_ns == int(0.9 * 0.8 * S)
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    assert [e.stamp_ns for e in _tick(pl, t0 + 100 * MS, (3.0, 1.0), 0.0, S)] == [t0 + 100 * MS]
+    assert _tick(pl, t0 + S, (3.0, 1.0), 0.1, S + 10 * MS) == []
+
+
+def test_a_switch_sooner_than_the_schedule_withdraws_the_bounds(exact):
+    """A switch 200 ms after the last (the schedule broken): the samples answered at once on the
+    old channel were wrong, and the switching message that says so withdraws the bounds."""
+    pl = exact
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    _tick(pl, t0 + 200 * MS, (3.0, 1.0), 0.0, S)
+    assert pl.bound_valid
+    pl.on_channel(active_channel(2, t0 + 200 * MS), src_ns=S + 200 * MS, now_mono=0.1, seq=2)
+    assert not pl.bound_valid and pl.late_channel == 1
+    assert "arrived after samples it governs were answered" in pl.bound_invalid_why
