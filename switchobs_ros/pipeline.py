@@ -196,8 +196,8 @@ class EstimatorPipeline(Counters):
                    control=conf.inputs.control, transforms=conf.transforms,
                    clock_tolerance_ns=int(round(conf["clock_tolerance_ms"] * 1e6)))
         pipe.publish_covariance = conf.publish_covariance
-        h_min = min((min(c.h) for c in cycles), default=conf.robust[0] if conf.robust else 0.0)
-        pipe.attribution.stamped.horizon_ns = int(0.9 * h_min * 1e9)     # stamped channel: certain at once
+        h_min = [min((cy.h[c] for cy in cycles), default=conf.robust[0] if conf.robust else 0.0) for c in range(sys_.N)]
+        pipe.attribution.stamped.horizon = {c + 1: int(0.9 * h * 1e9) for c, h in enumerate(h_min)}   # at once
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
         if pipe.uncovered:

@@ -13,8 +13,8 @@ channel rows and counts them.
 A sample is *certain* once a later switching instant ``S > s + d`` is known, or a channel message
 sent ``2 d`` after it (source timestamps: a switch is published when it happens, so none before
 ``s + d`` can follow it), or its reorder window has passed, or at once when it lies within the
-*horizon* after the latest switching instant (:attr:`SwitchHistory.horizon_ns`: 0.9 of the shortest
-residence the gains were designed for, less ``d``): no switch can come sooner while the schedule
+*horizon* after the latest switching instant (:attr:`SwitchHistory.horizon`: 0.9 of the shortest
+residence of its channel the gains were designed for, less ``d``): no switch can come sooner while the schedule
 holds, and a switch that does come sooner arrives as a switching message for samples already
 answered, which withdraws the bounds. A switching message that arrives after
 samples it governs were answered withdraws the bounds (:meth:`SwitchHistory.remember`). A gap in
@@ -42,7 +42,7 @@ class SwitchHistory:
 
     def __init__(self, tolerance_ns: int):
         self.tol = int(tolerance_ns)
-        self.horizon_ns = 0             # certain at once up to this after the latest instant (0: never)
+        self.horizon: dict[int, int] = {}   # per channel: certain at once up to this after its instant (ns)
         self.at: list[int] = []         # switching instants (sorted)
         self.ch: list[int] = []         # the channel from each instant on
         self.lost: list[tuple[int, int]] = []     # (from, to): channel unknown in between
@@ -97,7 +97,7 @@ class SwitchHistory:
         nxt = self.at[k + 1] if k + 1 < len(self.at) else None
         certain = expired or (nxt is not None and nxt > stamp_ns + self.tol) or (
             src_ns is not None and self.latest_src is not None and self.latest_src > src_ns + 2 * self.tol) or (
-            nxt is None and k >= 0 and stamp_ns < self.at[k] + self.horizon_ns - self.tol)
+            nxt is None and k >= 0 and stamp_ns < self.at[k] + self.horizon.get(self.ch[k], 0) - self.tol)
         near = (k >= 0 and stamp_ns - self.at[k] <= self.tol) or (nxt is not None and nxt - stamp_ns <= self.tol)
         if near and self.tol:
             return "near_switch", self.ch[k] if k >= 0 else 0, True

@@ -129,15 +129,15 @@ def test_the_tolerance_enters_the_bound(paper_tables):
 
 
 def test_within_the_horizon_a_sample_is_answered_at_once(exact):
-    """Channel 1 from t0, the paper's cycle (2 s, 0.6): no switch before 0.9 x 0.8 s: a sample
-    100 ms after the instant is certain at once (no later channel message needed); one 1 s after
-    it waits for its channel."""
+    """Channel 1 from t0, the paper's cycle (2 s, 0.6): channel 1 is active 1.2 s, no switch before
+    0.9 x 1.2 s: a sample 1 s after the instant is certain at once (no later channel message
+    needed); one 1.1 s after it waits for its channel."""
     pl = exact
-    assert pl.attribution.stamped.horizon_ns == int(0.9 * 0.8 * S)
+    assert pl.attribution.stamped.horizon == {1: int(0.9 * 1.2 * S), 2: int(0.9 * 0.8 * S)}
     t0 = NOW - 10 * S
     pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
-    assert [e.stamp_ns for e in _tick(pl, t0 + 100 * MS, (3.0, 1.0), 0.0, S)] == [t0 + 100 * MS]
-    assert _tick(pl, t0 + S, (3.0, 1.0), 0.1, S + 10 * MS) == []
+    assert [e.stamp_ns for e in _tick(pl, t0 + S, (3.0, 1.0), 0.0, S)] == [t0 + S]
+    assert _tick(pl, t0 + 1100 * MS, (3.0, 1.0), 0.1, S + 10 * MS) == []
 
 
 def test_a_switch_sooner_than_the_schedule_withdraws_the_bounds(exact):
