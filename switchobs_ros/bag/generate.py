@@ -63,6 +63,9 @@ class GenerateConfig:
     dead_time: float = 0.0
     #: camera_sim's ``inputs``: a YAML file whose ``inputs:`` section overrides the system's
     inputs: str = ""
+    #: camera_sim's ``channel_type``; the generator's default is the unstamped ``std_msgs/msg/UInt8``
+    #: (a recording's order attributes it), ``switchobs_msgs/msg/ActiveChannel`` the stamped one
+    channel_type: str = "std_msgs/msg/UInt8"
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -121,6 +124,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
     epoch_ns = round(cfg.clock_start * 1e9)
     k_end = round(cfg.duration * cfg.rate)
     switch = (0, 0)         # (channel, its switching instant: the first tick stamp on it)
+    stamped = cfg.channel_type == "switchobs_msgs/msg/ActiveChannel"
     for k in range(k_end + 1):
         # camera_sim.CameraSimNode.publish_tick, step for step
         t = k * period_ns * 1e-9
@@ -136,7 +140,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
-                                                                  schedule.blind_at(t), switch[1])]
+                                                                  schedule.blind_at(t), switch[1] if stamped else None)]
         msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 
