@@ -326,9 +326,11 @@ class EstimatorMixin:
 
     def _input_handler(self, index: int | None):
         """The handler of one input: ``handle(msg, info)`` with rclpy's MessageInfo ``info`` (its
-        ``source_timestamp``, the publisher's clock, attributes samples to channels); ``index``
-        None is the channel topic."""
+        ``source_timestamp``, the publisher's clock, attributes ``UInt8`` channels to samples, and is
+        watched against ``received_timestamp``, ours: :mod:`switchobs_ros.clocks`); ``index`` None
+        is the channel topic."""
         pipeline, clock = self.pipeline, self.get_clock()
+        dds = f"{pipeline.channel_topic if index is None else pipeline.sources[index].topic} (DDS source timestamp)"
 
         def handle(msg, info) -> None:
             if not self.answering:
@@ -336,6 +338,11 @@ class EstimatorMixin:
                 return
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
+            recv = info.get("received_timestamp") if info else None
+            if src_ns and recv:     # the sender's system clock against ours (switchobs_ros.clocks)
+                skew = pipeline.clocks.seen(dds, src_ns, int(recv))
+                if skew:
+                    pipeline.withdraw(skew)
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
             seq = info.get("publication_sequence_number") if info else None
             if index is None:
