@@ -24,9 +24,9 @@ WINDOW = 200
 class ClockWatch:
     """The minimum of ``receive - stamp`` per source (module docstring); ``tolerance_ns`` the
     declared clock tolerance. ``check``: whether an offset beyond it withdraws the bounds (default:
-    with a tolerance; the node also checks a tolerance of 0 on the system clock, where the stamps
-    and the receive clock are one clock; under sim time or in a recording the receive clock may
-    lag the stamps by a tick of ``/clock``)."""
+    with a tolerance. A tolerance of 0 declares every stamp on the estimator's own clock and is not
+    checked: under sim time or in a recording the receive clock lags the stamps by a tick of
+    ``/clock``, and test and bench publishers stamp bursts ahead of it)."""
 
     def __init__(self, tolerance_ns: int, check: bool | None = None):
         self.tol = int(tolerance_ns)

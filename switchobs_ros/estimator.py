@@ -144,9 +144,6 @@ class EstimatorMixin:
         # the input handling (validation, pairing, observer, counters) is the pipeline's
         conf = EstimatorConfig.from_values(cfg)     # every check of the values, in one place
         self.pipeline = pl = EstimatorPipeline.from_params(conf, _NodeLog(self.get_logger()))
-        # stamps ahead of the node clock prove a clock offset; on the system clock also with no
-        # tolerance declared (under sim time the node clock may lag a tick: switchobs_ros.clocks)
-        pl.clocks.check = pl.clocks.tol > 0 or not self.get_parameter("use_sim_time").value
         for topic in (pl.channel_topic, *(s.topic for s in pl.sources)):    # in this node's namespace
             why = mb.ros_topic_error(topic, self.get_namespace()) if topic else None
             if why:
