@@ -138,6 +138,7 @@ class ChannelAttribution:
                  tolerance_ns: int = 0):
         self.sources = sources
         self.stamped = SwitchHistory(tolerance_ns)    # switching instants (stamped channel messages)
+        self._stamped_seq: int | None = None          # the newest stamped message's sequence number
         self.channel_topic = channel_topic
         self.window_ns = int(window_ns)
         self.channel = 0
@@ -199,10 +200,8 @@ class ChannelAttribution:
         (:meth:`SwitchHistory.remember <switchobs_ros.switching.SwitchHistory.remember>`). Returns
         why the bounds must be withdrawn."""
         seq = sequence(seq)
-        prev = self._seq[-1] if self._seq else None
-        self._seq.append(seq)
-        del self._seq[:-CHANNEL_HISTORY]
-        lost = lost_between(prev, seq) if self._seq[:-1] else 0
+        lost = lost_between(self._stamped_seq, seq) if self.stamped else 0
+        self._stamped_seq = seq
         late0, lost0 = self.stamped.late, self.stamped.lost_messages
         why = self.stamped.remember(int(switch_ns), channel, src_ns, seq, lost)
         self.late += self.stamped.late - late0

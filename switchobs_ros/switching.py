@@ -19,7 +19,8 @@ holds, and a switch that does come sooner arrives as a switching message for sam
 answered, which withdraws the bounds. A switching message that arrives after
 samples it governs were answered withdraws the bounds (:meth:`SwitchHistory.remember`). A gap in
 the publisher's sequence numbers between two messages with different instants leaves the channel
-between them unknown (:attr:`~switchobs_ros.attribution.Verdict.LOST`); a repeated message (same
+between them unknown (:attr:`~switchobs_ros.attribution.Verdict.LOST`; from the horizon after the
+earlier instant on, as no switch comes sooner while the schedule holds); a repeated message (same
 instant and channel) makes a lost repetition harmless.
 """
 
@@ -36,8 +37,9 @@ HISTORY = 256
 class SwitchHistory:
     """The switching instants received (module docstring), ``tolerance_ns`` the clock tolerance.
 
-    ``near_switch`` counts the samples found within the tolerance of a switching instant;
-    ``late`` the switching messages that arrived after samples they govern were answered.
+    ``horizon`` (per channel, ns): how long after its switching instant a sample is certain at
+    once; ``late`` counts the switching messages that arrived after samples they govern were
+    answered, ``lost_messages`` those missing across a change of instant.
     """
 
     def __init__(self, tolerance_ns: int):
@@ -65,6 +67,9 @@ class SwitchHistory:
         if lost and self._last is not None and self._last[0] != switch_ns:
             self.lost_messages += lost
             lo, hi = sorted((self._last[0], switch_ns))
+            j = bisect.bisect_right(self.at, lo) - 1      # no switch within the horizon of the one before
+            if j >= 0 and self.at[j] == lo:
+                lo = min(hi, lo + self.horizon.get(self.ch[j], 0))
             self.lost.append((lo, hi))
             del self.lost[:-HISTORY]
             if self.answered >= lo:

@@ -176,3 +176,19 @@ def test_a_recording_of_either_channel_type_gives_the_same_estimates(paper_table
     truth = {s: np.asarray(m.data[2:]) for s, msgs in scenario_ticks(cfg) for t, m in msgs if t == "/sim/truth"}
     err = np.array([np.linalg.norm(x - truth[s]) for s, x in zip(a.stamps.tolist(), a.x_hat)])
     assert (err <= a.envelope[:, -1] * (1 + 1e-9)).all()
+
+
+def test_a_lost_first_switching_message_leaves_only_the_end_of_the_residence_unknown(exact):
+    """camera_sim repeats the switching message each tick: the first message of channel 2 lost,
+    its repetition says channel 2 from t1. The samples of channel 1's residence before its horizon
+    (0.9 x 1.2 s) stay attributed and the bounds valid; one after it, before t1, is unknown (its
+    target pose dropped, counted as lost)."""
+    pl = exact
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    out = _tick(pl, t0 + S, (3.0, 1.0), 0.0, S)                    # within the horizon: at once
+    out += _tick(pl, t0 + 1100 * MS, (3.0, 1.0), 0.1, S + 10 * MS)   # after it: waits
+    t1 = t0 + 1200 * MS
+    pl.on_channel(active_channel(2, t1), src_ns=S + 20 * MS, now_mono=0.2, seq=3)   # seq 2 lost
+    assert [e.stamp_ns for e in out] == [t0 + S] and pl.bound_valid
+    assert pl.lost_channel == 1 and pl.rejected[("target/pose", "ambiguous_channel")] == 1
