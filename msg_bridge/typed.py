@@ -102,7 +102,9 @@ class ErrorBoundsWriter:
     followed by ``noise_bound`` when ``noise_declared``. The values are written as given; a bound
     is *valid* only when ``valid`` is true and the bound is >= 0 (-1 means withdrawn or not
     available). ``why_invalid`` is ``why`` (or :data:`NO_BOUND_WHY` when empty) whenever a bound
-    is not valid, and '' otherwise. Raises :class:`~msg_bridge.validate.BridgeError` on a layout
+    is not valid, and ``note`` otherwise: '' for bounds from the declared ``e0``, or how and since
+    when they were re-certified from data (e.g. ``re-certified from data at stamp ...``; the validity
+    flags, not this text, say whether a bound holds). Raises :class:`~msg_bridge.validate.BridgeError` on a layout
     of another length.
     """
 
@@ -118,7 +120,8 @@ class ErrorBoundsWriter:
         if not self.noise_declared:
             self._msg.noise_bound = -1.0
 
-    def msg(self, envelope_values: Sequence[float], stamp_ns: int, valid: bool, why: str = "") -> ErrorBounds:
+    def msg(self, envelope_values: Sequence[float], stamp_ns: int, valid: bool, why: str = "",
+            note: str = "") -> ErrorBounds:
         v = envelope_values
         if len(v) != self.size:
             raise BridgeError(f"envelope has {len(v)} values; expected {self.size} "
@@ -135,7 +138,7 @@ class ErrorBoundsWriter:
             m.noise_bound = float(v[N + 2])
             m.noise_bound_valid = bool(valid) and m.noise_bound >= 0.0
             ok = ok and m.noise_bound_valid
-        m.why_invalid = "" if ok else (why or NO_BOUND_WHY)
+        m.why_invalid = note if ok else (why or NO_BOUND_WHY)
         return m
 
 

@@ -24,6 +24,7 @@ import msg_bridge as mb
 from msg_bridge import InputSpecs, SpecError, load_inputs
 from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.loading import load_yaml
+from switchobs_core.model.disturbance import Disturbance
 from switchobs_core.model.frames import FrameTransform, parse_transforms
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.schedule import Cycle
@@ -35,6 +36,7 @@ from .core_config import (
     GAIN_FAMILY_PARAM,
     cache_dir_param,
     cycles_from_params,
+    disturbance_from_params,
     load_system_param,
     noise_from_params,
 )
@@ -69,6 +71,11 @@ PARAMS = [
     Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row (< 0: none). With it "
           "~/envelope gets a last element noise_bound, a guarantee under any noise within the bound; without it "
           "exact_bound is the noise-free bound (a guarantee only for noise-free measurements)."),
+    Param("disturbance.max", (), "Bounds |w_j| <= max_j (m/s^2 for the built-in scenarios' unit accelerations on every "
+          "velocity state; one value for all or one per column of the system's disturbance B_w) of a bounded unknown "
+          "input x' = A x + B_w w: noise_bound then holds for every such input (needs noise.max), and a Kalman table "
+          "designed at start-up takes Q_c = B_w diag(max^2) B_w' (empty: the system's disturbance: section, or none).",
+          float),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
@@ -82,7 +89,9 @@ PARAMS = [
     Param("schedule.h_min", 0.0, "Robust mode: shortest residence time h_min of assumption A2 (s)."),
     Param("schedule.h_max", 0.0, "Robust mode: longest residence time h_max of assumption A2 (s)."),
     Param("initial_estimate", (), "Initial estimate x_hat(t0), n values in state order (empty: zeros).", float),
-    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound."),
+    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound. "
+          "-1: not known; no bound until a window of one switching cycle of consistent data certifies one "
+          "(needs noise.max; consistency.recertify)."),
     Param("world_frame", "map", "frame_id of the published odometry (and of the expected input poses)."),
     Param("input_frame_id", "map", "Expected header.frame_id of camera/pose and target/pose ('' accepts any)."),
     Param("input_transforms", (), "Fixed transforms into input_frame_id of the frames inputs may come in, one per "
@@ -117,6 +126,16 @@ PARAMS = [
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
           "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
           "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
+    Param("consistency.recertify", True, "After a withdrawal (and with e0 = -1 at start-up), certify the bounds "
+          "again from a window of one switching cycle of data: a least-squares fit whose radius holds for every "
+          "noise within noise.max, rounding included (needs noise.max). Labelled re-certified in diagnostics and "
+          "in ~/error_bounds."),
+    Param("consistency.bias", True, "A CUSUM per output row on the normalised innovations: a persistent bias beyond "
+          "the noise model (about 2 samples of delay for 5 sigma) withdraws the bounds (needs noise.max or a "
+          "covariance)."),
+    Param("consistency.reinit", True, "When the chi-square gate rejects 25 consecutive samples of one channel (a "
+          "model failure of the body only it sees, not outliers), re-initialise that body's states from its "
+          "last samples instead of coasting; the bounds are withdrawn (re-certification brings them back)."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
@@ -221,9 +240,11 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
             raise ConfigError(f"{where}: unknown estimator parameter '{name}' (known: {', '.join(sorted(known))})")
         d = known[name].default
         if isinstance(d, tuple):
+            item = known[name].item or (type(d[0]) if d else float)
+            if item is float and isinstance(num(v, True), float):
+                v = [v]         # one number for a list of doubles: as the node takes it (params.py)
             if not isinstance(v, (list, tuple)):
                 raise ConfigError(f"{where}: parameter '{name}' must be a list")
-            item = known[name].item or (type(d[0]) if d else float)
             v = tuple(num(x, item is float) for x in v)
             if d and not v:
                 raise ConfigError(f"{where}: parameter '{name}' is empty; give at least one value, or leave it out "
@@ -270,6 +291,12 @@ class EstimatorConfig:
     publish_covariance: bool
     child_frames: tuple[str, ...]
     transforms: dict[str, FrameTransform] | None = None     # input_transforms by frame
+    disturbance: Disturbance | None = None      # disturbance.max (switchobs_core.model.disturbance)
+
+    @property
+    def e0(self) -> float | None:
+        """The initial error bound for the observer (None: ``e0`` is -1, not known)."""
+        return None if self.values["e0"] == -1.0 else float(self.values["e0"])
 
     def __getitem__(self, name: str) -> Any:
         """The raw value of parameter ``name``."""
@@ -310,7 +337,8 @@ class EstimatorConfig:
         v = values["delta"]             # the runtime parameters: check_runtime_value below
         if not (math.isfinite(v) and v > 0):
             raise ConfigError(f"parameter 'delta' must be a finite number > 0; got {v}")
-        check_range(values["e0"], "e0", exc=ConfigError)
+        if values["e0"] != -1.0:       # -1: not known (no bound until the data certify one)
+            check_range(values["e0"], "e0", exc=ConfigError)
         for v in values["initial_estimate"]:
             check_range(v, "initial_estimate", exc=ConfigError)
         x0 = values["initial_estimate"]
@@ -336,7 +364,8 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
                               f"got {family!r}")
         rate = check_range(values["rate"], "rate", exc=ConfigError)
-        noise = noise_from_params(values, sys_)
+        dist = disturbance_from_params(values, sys_)
+        noise = noise_from_params(values, sys_, dist)
         for name in RUNTIME_PARAMS:
             why = check_runtime_value(name, values[name])
             if why:
@@ -344,6 +373,9 @@ class EstimatorConfig:
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
         vmax = check_range(values["noise.max"], "noise.max", exc=ConfigError)
+        if dist is not None and dist.active and vmax < 0:
+            raise ConfigError("parameter 'disturbance.max' declares a disturbance, which enters noise_bound: declare "
+                              "noise.max too (0: noise-free samples)")
         bodies = [b.name for b in mb.bodies(sys_.state_labels)]
         frames = values["body_frames"]
         if frames and len(frames) != len(bodies):
@@ -356,4 +388,5 @@ class EstimatorConfig:
         return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
                    inputs=inputs, family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
-                   child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms)
+                   child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms,
+                   disturbance=dist if dist is not None and dist.active else None)

@@ -95,6 +95,8 @@ def _coerce_override(overrides: dict, p: Param) -> None:
         overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(ov.value))
     elif p.type == ParameterType.PARAMETER_DOUBLE_ARRAY and ov.type_ == Parameter.Type.INTEGER_ARRAY:
         overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in ov.value])
+    elif p.type == ParameterType.PARAMETER_DOUBLE_ARRAY and ov.type_ in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
+        overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(ov.value)])   # one number: [it]
 
 
 def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict[str, Any]:

@@ -15,7 +15,7 @@ For every message the pipeline orchestrates:
    from the publisher's source timestamps and sequence numbers, never guessed;
 4. screening (:mod:`switchobs_ros.screening`): the model against the data, with the core's
    innovation test against the published bound (a sample it refuses is re-attributed, or
-   rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
+   rejected and every bound withdrawn: :data:`NO_BOUND` until re-certified) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
    :class:`~switchobs_core.model.measurement.Measurement`, and an :class:`Estimate` with the envelope
    (the paper's envelopes and bound, the exact bound).
@@ -121,9 +121,7 @@ class EstimatorPipeline(Counters):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
-        self.table_path = table_path
-        self.mode = mode
-        self.cycles = list(cycles or [])
+        self.table_path, self.mode, self.cycles = table_path, mode, list(cycles or [])
         self.observer = observer
         self.x0 = np.array(x0, dtype=float)
         self.sources = tuple(sources)
@@ -179,10 +177,10 @@ class EstimatorPipeline(Counters):
             # only if published (the Kalman families always keep theirs)
             own_noise = family_entry(family or family_of_table(table)).rate
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
-                                        e0=conf["e0"], bounds=conf.robust, family=family or None,
+                                        e0=conf.e0, bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         mode_check = conf["consistency.check"]
@@ -196,6 +194,7 @@ class EstimatorPipeline(Counters):
                    control=conf.inputs.control, transforms=conf.transforms,
                    clock_tolerance_ns=int(round(conf["clock_tolerance_ms"] * 1e6)))
         pipe.publish_covariance = conf.publish_covariance
+        pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
         h_min = [min((cy.h[c] for cy in cycles), default=conf.robust[0] if conf.robust else 0.0) for c in range(sys_.N)]
         pipe.attribution.stamped.horizon = {c + 1: int(0.9 * h * 1e9) for c, h in enumerate(h_min)}   # at once
         pipe.config = conf
@@ -472,6 +471,7 @@ class EstimatorPipeline(Counters):
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
+            self.screening.taken(pend, t, m)        # the recovery: a window may re-certify the bounds
             self.obs_ns = pend.stamp_ns
             self.updates += 1
             self.parts_used += len(pend.parts)

@@ -65,7 +65,7 @@ def apply_set_state(pipe: Any, msg: Any, now_ns: int) -> bool:
     ``now_ns``. The observer propagates to its stamp and takes the values
     (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
     the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
-    error is unknown) until the next reset. A bad message is rejected and counted; True when
+    error is unknown) until re-certified from data. A bad message is rejected and counted; True when
     applied."""
     topic = SET_STATE_TOPIC
     try:

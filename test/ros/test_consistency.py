@@ -201,6 +201,5 @@ def test_a_first_sample_beyond_e0_names_e0(paper_tables):
     pl.on_pose("camera", _mb.xy_to_pose((0.0, 0.0), s, "map"), _time.time_ns())
     out = pl.on_pose("target", _mb.xy_to_pose((3.0, 1.0), s, "map"), _time.time_ns())
     assert out == [] and pl.inconsistent == 1 and not pl.bound_valid
-    assert pl.bound_invalid_why.endswith("at the first sample the initial error exceeds e0 = 0.1: parameter e0 must "
-                                         "bound ||x_hat(t0) - x(t0)|| (raise it, or give an initial_estimate closer "
-                                         "to the truth)"), pl.bound_invalid_why
+    assert "likely causes, most likely first: e0 (the initial error ||x_hat(t0) - x(t0)|| exceeds e0 = 0.1: raise " \
+           "e0 or give an initial_estimate closer to the truth); channel" in pl.bound_invalid_why, pl.bound_invalid_why
