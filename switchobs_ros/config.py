@@ -119,6 +119,15 @@ PARAMS = [
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
           "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "
           "sends it only on change makes them wait the whole window. 0: the latest channel received (arrival order)."),
+    Param("clock_tolerance_ms", 0.0, "The largest error of any source's stamps against the estimator's clock (ms; "
+          "clocks of several computers: their synchronisation's budget, chrony or PTP). It enters the bounds: a stamp "
+          "error d is a measurement error of at most sup_{|s|<=d} ||C (e^{A s} - I) x|| "
+          "(switchobs_core.bounds.stamp); a sample stamped within it of a switching instant is ambiguous; a stamp "
+          "that proves a larger offset (ahead of the receive clock by more) withdraws the bounds. 0: exact stamps."),
+    Param("channel_type", "auto", "The channel topic's message type: switchobs_msgs/msg/ActiveChannel (the "
+          "switching instant in its stamp: samples attributed by their stamps), std_msgs/msg/UInt8 (attributed by "
+          "the publishers' source timestamps; for one publisher of the channel and the samples), or auto (the type "
+          "the channel's publishers offer in the ROS graph)."),
     Param("consistency.chi2_alpha", 0.0, "With noise and no declared bound: a chi-square gate on each sample's "
           "normalised innovation nu' (C P C' + R)^-1 nu; a sample above chi2.ppf(1 - alpha, rows) is rejected "
           "(outlier) and counted. alpha is the gate's false-alarm rate per sample when the noise model holds "
@@ -166,6 +175,10 @@ PARAMS = [
 
 #: Largest output decimation ``output.*_every`` (an int64 parameter; beyond it nothing is ever published).
 MAX_EVERY = 1_000_000_000
+
+#: The channel topic's message types (parameter channel_type).
+CHANNEL_TYPES = ("auto", "switchobs_msgs/msg/ActiveChannel", "std_msgs/msg/UInt8")
+
 
 #: Parameters that can change while the node runs (the others need a restart: they shape the
 #: observer, its gain table or the topics), and the check of a value: (ok, what it must be). The
@@ -366,6 +379,10 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "
                               f"got {values['consistency.check']!r}")
         check_range(values["reorder_window_ms"], "reorder_window_ms", exc=ConfigError)
+        check_range(values["clock_tolerance_ms"], "clock_tolerance_ms", exc=ConfigError)
+        if values["channel_type"] not in CHANNEL_TYPES:
+            raise ConfigError(f"parameter 'channel_type' must be one of {', '.join(CHANNEL_TYPES)}; got "
+                              f"'{values['channel_type']}'")
         check_range(values["consistency.chi2_alpha"], "consistency.chi2_alpha", exc=ConfigError)
         family = values["gain_family"]
         if family not in GAIN_FAMILY_PARAM:

@@ -193,10 +193,16 @@ class EstimatorDiagnostics:
               kv("late channel messages", pl.late_channel),
               kv("lost channel messages", pl.lost_channel),
               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
+              kv("samples near a switching instant (channel rows dropped)", pl.near_switch),
               kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off"),
               kv("bias alarms (CUSUM)", pl.bias_alarms),
               kv("model failures (a body the gate starved)", pl.model_failures),
-              kv("re-certifications from data", pl.recertifications)]
+              kv("re-certifications from data", pl.recertifications),
+              kv("clock tolerance (ms)", pl.clocks.tol * 1e-6)]
+        # each source's least receive - stamp over its recent messages: negative proves its clock
+        # ahead of the estimator's (switchobs_ros.clocks)
+        ob += [kv(f"clock: {t} least latency (ms; negative: ahead)", v) for t, v in pl.clocks.offsets_ms().items()]
+        ob += [kv(f"clock: {t} ahead beyond the tolerance (ms)", v * 1e-6) for t, v in pl.clocks.skewed.items()]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
         if pl.last_alarm:
@@ -221,7 +227,7 @@ class EstimatorDiagnostics:
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
         if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel or pl.bias_alarms
-                                   or pl.model_failures):
+                                   or pl.model_failures or pl.clocks.skewed):
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         recs = pl.observer.completed_cycles

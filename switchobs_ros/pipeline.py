@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
-from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
@@ -48,6 +47,7 @@ from switchobs_core.runtime.cycles import Residence
 from switchobs_core.runtime.observer import SwitchedObserver
 
 from .attribution import ChannelAttribution, Resolution, Verdict
+from .clocks import ClockWatch
 from .config import UNCHECKED, EstimatorConfig
 from .control import ControlInput
 from .core_config import load_or_design_table
@@ -56,7 +56,7 @@ from .loss import SequenceLoss
 from .pairing import MAX_PENDING, DeadTime, Pairing, Pending
 from .params import ConfigError
 from .screening import Screening
-from .set_state import SET_STATE_TOPIC, read_set_state
+from .set_state import apply_set_state
 from .sources import Source, sources_from_specs
 
 __all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate",
@@ -116,7 +116,8 @@ class EstimatorPipeline(Counters):
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
                  reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = "",
-                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None):
+                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None,
+                 clock_tolerance_ns: int = 0):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
@@ -133,8 +134,11 @@ class EstimatorPipeline(Counters):
         self.future_ns = int(future_tolerance_ns)
         self.N = system.N
         # the parts: pairing, attribution, the dead time, the model against the data
-        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p))
-        self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns)
+        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p), clock_tolerance_ns)
+        self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns, clock_tolerance_ns)
+        self.clocks = ClockWatch(clock_tolerance_ns)    # each source's stamps against the receive clock
+        if clock_tolerance_ns and observer.rounding is not None:    # stamp errors in the bounds
+            observer.rounding.clock(clock_tolerance_ns * 1e-9)
         self.dead_time = DeadTime(int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9)),
                                   next((s.index for s in self.sources if s.shared), None))
         self.screening = Screening(system, observer, self.pairing, self, check=check, chi2_alpha=chi2_alpha)
@@ -186,10 +190,13 @@ class EstimatorPipeline(Counters):
                    log=log, table_path=table_path, mode=mode, cycles=cycles,
                    reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
                    specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"],
-                   control=conf.inputs.control, transforms=conf.transforms)
+                   control=conf.inputs.control, transforms=conf.transforms,
+                   clock_tolerance_ns=int(round(conf["clock_tolerance_ms"] * 1e6)))
         pipe.publish_covariance = conf.publish_covariance
         pipe.screening.watch_only = conf["consistency.check"] == "auto" and conf.noise_max is None
         pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
+        h_min = [min((cy.h[c] for cy in cycles), default=conf.robust[0] if conf.robust else 0.0) for c in range(sys_.N)]
+        pipe.attribution.stamped.horizon = {c + 1: int(0.9 * h * 1e9) for c, h in enumerate(h_min)}   # at once
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
         for why in ([conf.inputs.uncovered_warning()] if pipe.uncovered else []) + ([] if check else [UNCHECKED]):
@@ -258,11 +265,13 @@ class EstimatorPipeline(Counters):
             return []
         return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns, seq)
 
-    def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None,
+    def on_channel(self, msg: Any, src_ns: int | None = None, now_mono: float | None = None,
                    seq: int | None = None) -> list[Estimate]:
-        """A channel-topic message: validate, count, remember the channel (by its source timestamp
-        ``src_ns`` when given, with the publisher's sequence number ``seq`` when known,
-        :mod:`~switchobs_ros.attribution`); returns the pending samples it makes certain, answered."""
+        """A channel-topic message (``std_msgs/UInt8``, or ``switchobs_msgs/ActiveChannel`` with its
+        switching instant, attributed by stamps: :mod:`~switchobs_ros.switching`): validate, count,
+        remember the channel (by its source timestamp ``src_ns`` when given, with the publisher's
+        sequence number ``seq`` when known, :mod:`~switchobs_ros.attribution`); returns the pending
+        samples it makes certain, answered."""
         out: list[Estimate] = []
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
@@ -272,13 +281,15 @@ class EstimatorPipeline(Counters):
                 self._withdraw_all(self.attribution.remember_invalid(src_ns, seq))
                 return out
             self.accepted[topic] += 1
-            c = int(msg.data)
+            c = mb.channel_value(msg)
             if c != self.attribution.channel:
                 if self.attribution.channel:
                     self.switches += 1
                 self.attribution.switch(c, self.last_ns)
                 self.dead_time.switched()
-            if src_ns is not None:
+            if hasattr(msg, "header"):      # stamped: the switching instant (switchobs_ros.switching)
+                self._withdraw_all(self.attribution.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq))
+            elif src_ns is not None:
                 self._withdraw_all(self.attribution.remember(int(src_ns), c, seq))
             self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
@@ -303,41 +314,9 @@ class EstimatorPipeline(Counters):
             return False
 
     def on_set_state(self, msg: Any, now_ns: int) -> bool:
-        """A ``~/set_state`` message (:mod:`switchobs_ros.set_state`) received at node-clock
-        ``now_ns``. The observer propagates to its stamp and takes the values
-        (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
-        the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
-        error is unknown) until re-certified from data. A bad message is rejected and counted; True when
-        applied."""
-        topic = SET_STATE_TOPIC
-        try:
-            st = read_set_state(msg, self.system.state_labels, self.max_abs)
-            if not isinstance(st, Rejection) and st.stamp_ns - now_ns > self.future_ns:
-                st = Rejection(Reason.FUTURE_STAMP, "stamp", f"{(st.stamp_ns - now_ns) * 1e-9:.3g} s ahead of the "
-                               "node clock")
-            if not isinstance(st, Rejection) and self.origin_ns is not None and self.obs_ns is not None \
-                    and st.stamp_ns < self.obs_ns:
-                st = Rejection(Reason.OLD_STAMP, "stamp", "before the last estimate (the past cannot be set)")
-            if isinstance(st, Rejection):
-                self.reject(topic, st)
-                return False
-            if self.origin_ns is None:          # before the first sample: the initial estimate
-                for i, v in st.values.items():
-                    self.x0[i] = v
-                self.observer.reset(self.x0, 0.0)
-            else:
-                self.observer.set_estimate((st.stamp_ns - self.origin_ns) * 1e-9, st.values, st.variances)
-                self.obs_ns = st.stamp_ns
-            self.accepted[topic] += 1
-            self.states_set += 1
-            self.bound_valid = False
-            self.bound_invalid_why = "state set by ~/set_state"
-            self.log.info(f"state set at stamp {st.stamp_ns} ({', '.join(st.labels)}); exact_bound is "
-                          f"{NO_BOUND:g} (no bound known) from now on")
-            return True
-        except Exception as err:
-            self.internal_error(topic, err)
-            return False
+        """A ``~/set_state`` message received at node-clock ``now_ns``
+        (:func:`~switchobs_ros.set_state.apply_set_state`); True when applied."""
+        return apply_set_state(self, msg, now_ns)
 
     def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None,
                 src_ns: int | None = None) -> list[Estimate]:
@@ -370,6 +349,9 @@ class EstimatorPipeline(Counters):
                 self.reject(topic, rej)
                 return out
             self.accepted[topic] += 1
+            skew = self.clocks.seen(topic, stamp_ns, now_ns)
+            if skew:
+                self.withdraw(skew)
             self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
@@ -377,7 +359,7 @@ class EstimatorPipeline(Counters):
             res = self.attribution.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
-                self.pairing.settle(stamp_ns)       # older samples will not be completed now
+                self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
             for s in self.pairing.overflow():       # the oldest one's partners are overdue
                 self._flush(s, out, now_mono)
             self._advance(out, now_mono)
@@ -435,25 +417,28 @@ class EstimatorPipeline(Counters):
         self._answer(pend, res.channel, out)
 
     def _attribute(self, pend: Pending, now_mono: float, res: Resolution | None) -> Resolution:
-        """The channel a sample is answered on. A sample sent while channel messages were lost
-        takes the one channel the consistency test allows, if exactly one; else its shared parts
+        """The channel a sample is answered on. A sample sent while channel messages were lost, or
+        stamped within the clock tolerance of a switching instant, takes the one channel the
+        consistency test allows, if exactly one; else its shared parts
         (the same rows in every channel) are used alone, on the observer's channel (no switching
         instant on an unknown channel), and its channel parts are rejected."""
         if res is None:
             res = self.attribution.resolve(pend, now_mono)
             if not res.certain:          # pushed out of the window before its channel was certain
                 res = Resolution(Verdict.UNCERTAIN)
-        if res.verdict is not Verdict.LOST:
+        if res.verdict not in (Verdict.LOST, Verdict.NEAR_SWITCH):
             return res
         if self.screening.names and self.origin_ns is not None:
             fits = self.screening.fitting_channels(pend, (pend.stamp_ns - self.origin_ns) * 1e-9)
             if len(fits) == 1:
                 self.lost_channel_named += 1
                 return Resolution.of(fits[0])
+        if res.verdict is Verdict.NEAR_SWITCH:
+            self.near_switch += 1
         if not any(self.sources[i].shared for i in pend.parts):
             return res
         dropped = [i for i in pend.parts if not self.sources[i].shared]
-        reason, detail = Verdict.LOST.rejection
+        reason, detail = res.verdict.rejection
         self.reject_all([self.sources[i].topic for i in dropped],
                         Rejection(reason, self.channel_topic or "channel", detail))
         for i in dropped:

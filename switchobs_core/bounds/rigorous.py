@@ -18,7 +18,13 @@ One owner of the two ellipsoids the observer keeps (the argument is in
   (:class:`~switchobs_core.numerics.disturbance_reach.DisturbanceReach`): the degenerate ellipsoid
   ``E(G_d G_d')`` of its first-order part joined to the noise's shaped term and the ball of its
   second-order part joined to the step's residual (:meth:`RoundingBound.disturbed`, a term of its
-  own). The exact bound stays the model's (noise-free samples, no disturbance).
+  own). The exact bound stays the model's (noise-free samples, no disturbance);
+* a declared clock tolerance ``d`` (:meth:`RoundingBound.clock`: the largest error of a sample's
+  stamp): each sample carries a measurement error of at most ``w`` of
+  :class:`~switchobs_core.bounds.stamp.StampError`, bounded from the estimate and the sets' own
+  bound before the sample (their largest axis in balanced units), which enters both sets through
+  the gain as the noise does (the degenerate ellipsoid ``E(w^2 G G')``; ``(sqrt(p) v_max + w)^2``
+  in the noise set, ``||v + w|| <= ||v|| + ||w||``): neither set assumes exact stamps.
 
 The observer steps it with the error maps of every sample
 (:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
@@ -45,6 +51,7 @@ from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
+from .stamp import StampError
 
 __all__ = ["NO_E0", "RoundingBound"]
 
@@ -84,6 +91,9 @@ class RoundingBound:
         self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
+        self._AB = (A, B)
+        self.tolerance = 0.0            # the clock tolerance d (s; :meth:`clock`)
+        self.stamp: StampError | None = None
         # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
         # per component of a step's result, in balanced units
         self._uf = (self.n + p_max + (0 if B is None else B.shape[1]) + 4) * UNDERFLOW * math.sqrt(
@@ -94,6 +104,7 @@ class RoundingBound:
         """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn (with
         ``e0`` None: withdrawn until :meth:`restart`, no initial error being known)."""
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
+        self.w = 0.0        # the held sample's stamp error (its measurement error's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
         self.restart(self.e0)
         if self.e0 is None:
@@ -109,6 +120,33 @@ class RoundingBound:
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
+
+    def clock(self, tolerance: float) -> None:
+        """Declare the largest stamp error ``d`` (s) of any sample: from then on every sample's
+        measurement error of :class:`~switchobs_core.bounds.stamp.StampError` enters both sets
+        (0: exact stamps)."""
+        self.tolerance = max(float(tolerance), 0.0)
+        if self.tolerance > 0.0 and self.stamp is None:
+            self.stamp = StampError(self._AB[0], self._AB[1], scale=self.d)
+
+    def beta(self) -> float:
+        """``>= ||D^-1 e||`` over both sets (the larger: one allowance serves both): the largest
+        eigenvalue of ``D^-1 S D^-1``, the solver's error included
+        (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`)."""
+        scale = np.outer(self._id, self._id)
+        b = self.ell.lam_upper(self.ell.S * scale)
+        if self.ellv is not None:
+            b = max(b, self.ellv.lam_upper(self.ellv.S * scale))
+        return math.sqrt(b) * (1.0 + 2.0 * _U)
+
+    def stamp_error(self, C: np.ndarray, x: np.ndarray, beta: float | None = None,
+                    u: np.ndarray | None = None) -> float:
+        """``w``: the measurement error a stamp error within the tolerance makes in a sample of
+        rows ``C`` taken where the estimate is ``x`` and the balanced error at most ``beta``
+        (default :meth:`beta`, the sets now); 0 without a tolerance."""
+        if self.stamp is None or self.tolerance <= 0.0:
+            return 0.0
+        return self.stamp.bound(C, x, self.beta() if beta is None else beta, self.tolerance, u)
 
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
@@ -136,10 +174,13 @@ class RoundingBound:
         return fro_norm(Ks), fro_norm(Hs), kappa
 
     # ------------------------------------------------------------------ residuals
-    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int) -> None:
-        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, and its noise's norm."""
+    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int,
+             u: np.ndarray | None = None) -> None:
+        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, its noise's norm and
+        its stamp error's (:meth:`stamp_error`, from the sets at the sample; ``u`` the held input)."""
         self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
                        + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
+        self.w = self.stamp_error(C, x, u=u) if self.tolerance else 0.0
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
@@ -222,6 +263,12 @@ class RoundingBound:
         return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
                 + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
+    def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
+        """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
+        both sets: ``||Phi~||_D beta + rho`` (:meth:`beta`; the step's residual, :meth:`rho_step`)."""
+        rho = max(self.rho_step(e, dt, x0, xm, ell, None, u) for ell in (self.ell, self.ellv) if ell is not None)
+        return (e.nPhi * self.beta() + rho) * (1.0 + 4.0 * _U)
+
     # ------------------------------------------------------------------ steps
     def _check(self) -> None:
         """Withdraw the bound (module docstring) once a set is no longer finite."""
@@ -230,11 +277,14 @@ class RoundingBound:
                               "the bounds are withdrawn until the next reset")
 
     def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool, absE: tuple | None = None, dt: float = 0.0) -> tuple | None:
-        """A step of the noise ellipsoid over ``dt``: the held innovation's noise enters through
-        ``Gamma L`` (``||v||^2 <= p v_max^2``; open-loop steps and Kalman prediction steps add none),
-        a declared disturbance as :meth:`disturbed` says."""
-        G, c = (GL, self.vn ** 2) if GL is not None and self.vn > 0.0 else (None, 0.0)
+               keep: bool, absE: tuple | None = None, dt: float = 0.0, vn: float | None = None) -> tuple | None:
+        """A step of an ellipsoid over ``dt`` with a held innovation: its noise (``vn``, default the
+        held ``sqrt(p) v_max``; 0 for the exact set) and its stamp error ``w`` enter through
+        ``Gamma L`` (``||v + w|| <= vn + w``; open-loop steps and Kalman prediction steps add
+        none), a declared disturbance as :meth:`disturbed` says (``dt`` 0 for the exact set: none)."""
+        vn = self.vn if vn is None else vn
+        c = vn ** 2 if not self.w else (vn + self.w) ** 2 * (1.0 + 4.0 * _U)
+        G, c = (GL, c) if GL is not None and c > 0.0 else (None, 0.0)
         G, c, r = self.disturbed(dt, G, c)
         rho += r
         if G is not None:
@@ -255,7 +305,8 @@ class RoundingBound:
             return
         absE = e.abs_E() if hasattr(e, "abs_E") else None
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra, absE)
+            self._noise(self.ell, e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
+                        e.GL if nu is not None and self.w else None, True, absE, 0.0, 0.0)
             if self.ellv is not None:
                 self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
                             e.GL if nu is not None else None, True, absE, dt)
@@ -266,7 +317,8 @@ class RoundingBound:
         """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
         (``extra`` as in :meth:`step`)."""
         with np.errstate(over="ignore", invalid="ignore"):
-            S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra)
+            S, _ = self._noise(self.ell, e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
+                               e.GL if nu is not None and self.w else None, False, None, 0.0, 0.0)
             Sv = None
             if self.ellv is not None:
                 Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
@@ -281,10 +333,13 @@ class RoundingBound:
             return
         emap = gamma(H.shape[0] + 1) * self.gain_norms(K, H)[2]
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
-            if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
+            if self.w:      # e^+ = (I - K H) e^- + K w: the stamp error
+                self.ell.step_shaped(M, rho + emap * math.sqrt(self.ell.lam_scaled()), K, self._wc(0, 0.0))
+            else:
+                self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
+            if self.ellv is not None:      # e^+ = (I - K H) e^- + K (v + w)
                 self.ellv.step_shaped(M, rho + emap * math.sqrt(self.ellv.lam_scaled()), K,
-                                      p * self.noise_max[channel - 1] ** 2)
+                                      self._wc(p, self.noise_max[channel - 1]))
         self._check()
 
     def fused(self, e: Any, dt: float, m: Any, x0: np.ndarray, xm: np.ndarray, rc: float,
@@ -302,12 +357,21 @@ class RoundingBound:
                 rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
                        + m.emap * math.sqrt(ell.lam_scaled()))
                 Z, w, c, mn = m.sandwich(ell)
-                if noisy:       # e^+ = (I - K H) (e^- + d) + K v
-                    G, cg, r = self.disturbed(dt, K, p * self.noise_max[channel - 1] ** 2, K, m.H, m.nIKH)
+                if noisy:       # e^+ = (I - K H) (e^- + d) + K (v + w)
+                    G, cg, r = self.disturbed(dt, K, self._wc(p, self.noise_max[channel - 1]), K, m.H, m.nIKH)
                     ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho + r, mn, G, cg)
+                elif self.w:    # e^+ = (I - K H) e^- + K w: the stamp error
+                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K, self._wc(0, 0.0))
                 else:
                     ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
+
+    def _wc(self, p: int, v_max: float) -> float:
+        """``(sqrt(p) v_max + w)^2`` rounded up: the squared norm bound of a sample's noise
+        (``p`` rows within ``v_max``) plus its stamp error (``p v_max^2`` without one)."""
+        if not self.w:
+            return p * v_max ** 2
+        return (math.sqrt(p) * v_max * (1.0 + 2.0 * _U) + self.w) ** 2 * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ bounds
     def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,

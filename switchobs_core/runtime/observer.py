@@ -235,7 +235,7 @@ class SwitchedObserver:
         # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
         self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
                                    self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
-        self._bound = self._bounds.rigorous
+        self._bound = self.rounding = self._bounds.rigorous   # public: RoundingBound.clock (stamp errors)
         self._x0_init, self._t0_init = x0, t0
         self.reset(x0, t0)
 
@@ -424,7 +424,7 @@ class SwitchedObserver:
         b = self._bound
         h = c.held
         if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-            b.hold(h.C, c.x, h.y, channel, h.y.size)
+            b.hold(h.C, c.x, h.y, channel, h.y.size, self._in.u)
         for m in c.maps:
             m.apply(self._phi, b, channel)
         self._x = c.x

@@ -35,7 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
-from std_msgs.msg import Float64MultiArray, UInt8
+from std_msgs.msg import Float64MultiArray
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
@@ -44,8 +44,8 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, decode_pose, decode_uint8, header_stamp
-from .io import BagError, BagIn, BagOut, deserialize, type_name
+from .cdr import Template, decode_pose, header_stamp
+from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 
 __all__ = ["EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
@@ -101,7 +101,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
         if pl.channel_topic:
-            needed["/" + pl.channel_topic] = "std_msgs/msg/UInt8"
+            needed["/" + pl.channel_topic] = CHANNEL_TYPES
         bag.require(needed, " (the estimator's inputs)")
         check_estimable(bag, pl)
         msgs = bag.messages(order="file")     # ordered below (switchobs_ros.bag.order)
@@ -230,7 +230,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
             elif m.topic == channel_topic:
                 n_inputs += 1
-                emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
+                emit(pl.on_channel(channel_message(m)), m.log_ns)
             elif m.topic == ctl_topic:
                 n_inputs += 1
                 pl.on_control(deserialize(m, mb.message_class(ctl.spec.type)), m.log_ns)
@@ -313,8 +313,8 @@ def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_to
                 stamp[i] = st[0] * 1_000_000_000 + st[1]
         elif m.topic == channel_topic:
             is_channel[i] = True
-            c = decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8)).data
-            channel[i] = int(c) if 1 <= int(c) <= pl.N else None
+            c = mb.channel_value(channel_message(m))
+            channel[i] = c if 1 <= c <= pl.N else None
         elif m.topic == control_topic:          # a command: taken in stamp order in a tie the file does not prove
             st = header_stamp(m.data)
             if st is not None and st[0] >= 0 and 0 <= st[1] < 1_000_000_000:

@@ -72,6 +72,9 @@ class GenerateConfig:
     #: generator only: a sensor fault ``(t0, t1, offset)``: ``offset`` added to every output row that
     #: not all channels share (the target poses) at the ticks in ``[t0, t1)`` s (a bias; empty: none)
     bias: tuple = ()
+    #: camera_sim's ``channel_type``; the generator's default is the unstamped ``std_msgs/msg/UInt8``
+    #: (a recording's order attributes it), ``switchobs_msgs/msg/ActiveChannel`` the stamped one
+    channel_type: str = "std_msgs/msg/UInt8"
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -136,12 +139,16 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
     period_ns = round(1e9 / cfg.rate)
     epoch_ns = round(cfg.clock_start * 1e9)
     k_end = round(cfg.duration * cfg.rate)
+    switch = (0, 0)         # (channel, its switching instant: the first tick stamp on it)
+    stamped = cfg.channel_type == "switchobs_msgs/msg/ActiveChannel"
     for k in range(k_end + 1):
         # camera_sim.CameraSimNode.publish_tick, step for step
         t = k * period_ns * 1e-9
         stamp_ns = epoch_ns + k * period_ns
         plant.advance(t, w=None if accel is None or not k else accel((k - 1) * period_ns * 1e-9))
         rho = int(schedule.channel_at(t))
+        if rho != switch[0]:
+            switch = (rho, stamp_ns)
         y = plant.measure(rho, noise_std=0.0)
         if cfg.noise_std > 0:
             v = cfg.noise_std * rng.standard_normal(y.shape)
@@ -151,7 +158,7 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
-                                                                  schedule.blind_at(t))]
+                                                                  schedule.blind_at(t), switch[1] if stamped else None)]
         msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 

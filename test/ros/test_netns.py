@@ -107,12 +107,6 @@ def test_jitter_and_loss_on_the_links(tmp_path, ros_domain, paper_tables):
     (s,) = _run(tmp_path, ros_domain, paper_tables["periodic"], ["robot1"], links).values()
     _no_false_bound(s)
     assert s["checked"] > 0.5 * s["truth"], s
-    # A valid bound on >= 90 % of the samples after the first 5 s: a target pose that the detector forwards
-    # after a switch can be attributed, by its DDS source timestamp (the detector's computer), to the new
-    # channel; the consistency test finds it inconsistent and withdraws the bounds (no false bound; valid on
-    # 0 % after 5 s without re-certification, 100 % with it when the withdrawal comes early enough). With
-    # attribution by sensor stamps (the stamped channel message) the cause is gone: after that merge, drop
-    # this condition and keep the assertion.
-    if s["valid_after_5s"] < 0.9:
-        pytest.xfail("attribution by sensor stamps: branch clock")
+    # A valid bound on >= 90 % of the samples after the first 5 s: attribution by sensor stamps (the
+    # stamped channel message camera_sim publishes) never compares the detector's clock with the camera's
     assert s["valid_after_5s"] >= 0.9, s
