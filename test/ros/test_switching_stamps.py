@@ -19,7 +19,8 @@ NOW = 100_000 * S
 
 def _pipe(paper_tables, tolerance_ms):
     c = {p.name: p.default for p in PARAMS}
-    c.update(gain_table=paper_tables["periodic"], clock_tolerance_ms=tolerance_ms)
+    # e0 covers the scene: the consistency test (on whenever a bound is published) holds the samples to it
+    c.update(gain_table=paper_tables["periodic"], clock_tolerance_ms=tolerance_ms, e0=20.0)
     return EstimatorPipeline.from_params(c)
 
 
