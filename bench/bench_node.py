@@ -23,7 +23,10 @@ Latency = arrival - the measurement's header stamp (both this machine's system c
 "answered in full" when every measurement gets its answer. ``--soak S`` runs the estimator at
 500 Hz for S seconds and reports the largest latency.
 
-Configurations (``--configs``, ``--soak-config``): the estimator's ``default``, ``no-gc-freeze``,
+Configurations (``--configs``, ``--soak-config``): ``on-change-uint8`` and ``on-change-stamped``
+(the sender switches channels by the paper's cycle and publishes the channel only on a change, as
+``UInt8`` or as the stamped ``ActiveChannel``; otherwise it publishes channel 1 once), the
+estimator's ``default``, ``no-gc-freeze``,
 ``state-only``, ``lean-loop``, ``traced``, ``rt`` (its process under ``chrt -f 40``), ``udp``
 (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``), and ``bare`` (the republisher) for soaks. ``--load K``
 runs K busy loops throughout: a busy machine.
@@ -57,6 +60,11 @@ CONFIGS = {
     "traced": {"_trace": True},
     "rt": {"_chrt": 40},        # the node's process under SCHED_FIFO 40 (`chrt -f 40`, every thread)
     "udp": {"_env": {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}},       # no shared-memory transport
+    # the sender switches by the paper's cycle (2 s, 0.6) and publishes the channel only when it
+    # changes, before that tick's poses (camera_sim's order): std_msgs/UInt8, or the stamped
+    # switchobs_msgs/ActiveChannel (its switching instant: the first tick on the channel)
+    "on-change-uint8": {"_channel": "uint8"},
+    "on-change-stamped": {"_channel": "stamped"},
 }
 #: The soak's goal: no answer later than this (ms).
 LATE_MS = 20.0
@@ -80,7 +88,9 @@ def republisher_main() -> None:
     pub = node.create_publisher(PoseStamped, "~/out", qos.OUTPUT)
     node.create_subscription(PoseStamped, "target/pose", pub.publish, qos.SENSOR_SUB)
     node.create_subscription(PoseStamped, "camera/pose", lambda m: None, qos.SENSOR_SUB)
-    node.create_subscription(UInt8, "camera/active_channel", lambda m: None, qos.CHANNEL_SUB)
+    from switchobs_msgs.msg import ActiveChannel
+    node.create_subscription(ActiveChannel if os.environ.get("BENCH_CHANNEL") == "stamped" else UInt8,
+                             "camera/active_channel", lambda m: None, qos.CHANNEL_SUB)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -151,20 +161,28 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
     from std_msgs.msg import UInt8
 
     import msg_bridge as mb
+    from msg_bridge.typed import active_channel
+    from switchobs_core.model.schedule import Cycle, PeriodicSchedule
     from switchobs_ros import qos
 
+    pattern = os.environ.get("BENCH_CHANNEL", "")       # '' (channel 1 once), uint8, stamped (on change)
+    sched = PeriodicSchedule(Cycle.from_ts(2.0, 0.6))
     rclpy.init()
     node = rclpy.create_node("bench_sender")
     cam = node.create_publisher(PoseStamped, f"/{ns}/camera/pose", qos.SENSOR)
     tgt = node.create_publisher(PoseStamped, f"/{ns}/target/pose", qos.SENSOR)
-    ch = node.create_publisher(UInt8, f"/{ns}/camera/active_channel", qos.CHANNEL_PUB)
+    kind = type(active_channel(1, 0)) if pattern == "stamped" else UInt8
+    ch = node.create_publisher(kind, f"/{ns}/camera/active_channel",
+                               qos.CHANNEL_PUB)
     end = time.monotonic() + 60
     while (tgt.get_subscription_count() < 1 or cam.get_subscription_count() < 1 or ch.get_subscription_count() < 1):
         time.sleep(0.01)
         if time.monotonic() > end:
             raise SystemExit("sender: the node did not subscribe within 60 s")
-    ch.publish(UInt8(data=1))
+    if not pattern:
+        ch.publish(UInt8(data=1))
     time.sleep(0.2)
+    current = 0
     n = int(rate * seconds)
     period = 1.0 / rate
     sent = np.zeros(n, dtype=np.int64)
@@ -174,6 +192,10 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
         if d > 0:
             time.sleep(d)       # no spinning: the sender must not compete with the node for a core
         s = time.time_ns()
+        c = int(sched.channel_at(k * period))
+        if pattern and c != current:
+            current = c
+            ch.publish(active_channel(c, s) if pattern == "stamped" else UInt8(data=c))
         cam.publish(mb.xy_to_pose((0.001 * k, 0.0), s, "map"))
         tgt.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
         sent[k] = s
@@ -435,7 +457,11 @@ def main(argv=None) -> int:
             return measure("estimator", {}, rate, seconds, table, tmp, env={"PYTHONPATH": str(Path(a.base).resolve())})
         params = dict(CONFIGS[c])
         env = params.pop("_env", None)
-        return measure("estimator", params, rate, seconds, table, tmp, env=env)
+        os.environ["BENCH_CHANNEL"] = params.pop("_channel", "")      # the sender's channel pattern
+        try:
+            return measure("estimator", params, rate, seconds, table, tmp, env=env)
+        finally:
+            os.environ["BENCH_CHANNEL"] = ""
 
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(a.load)]
     names = {c: f"estimator ({c})" for c in configs}

@@ -1,4 +1,5 @@
-"""The typed outputs ``switchobs_msgs/StateEstimate`` and ``switchobs_msgs/ErrorBounds`` <-> numpy.
+"""The typed messages of ``switchobs_msgs`` <-> numpy: the outputs ``StateEstimate`` and
+``ErrorBounds``, and the stamped channel input ``ActiveChannel``.
 
 The interface package ``switchobs_msgs`` is built from ``interfaces/switchobs_msgs`` by
 ``scripts/bootstrap.sh`` (``scripts/build_msgs.sh``) into the environment's prefix; this module
@@ -11,6 +12,10 @@ Writers reuse one message per output (as :class:`~msg_bridge.convert.LabelledArr
 * :class:`ErrorBoundsWriter` ``.msg(envelope_values, stamp_ns, valid, why)`` from the
   ``~/envelope`` layout ``[z_1..z_N, paper_bound, exact_bound(, noise_bound)]``
   (:func:`~msg_bridge.convert.envelope_labels`), where -1 means withdrawn or not applicable.
+
+The channel input ``ActiveChannel`` (the active channel and its switching instant, the header
+stamp on the sensor's clock): :func:`active_channel` writes one, :func:`read_active_channel` gives
+``(channel, switch_ns)``.
 
 Readers (:func:`read_state_estimate`, :func:`read_error_bounds`) give numpy back, for tests and
 tools. :func:`register_rosbags_types` adds both types to a ``rosbags`` type store, so the bag tools
@@ -26,12 +31,15 @@ from pathlib import Path
 
 import numpy as np
 import switchobs_msgs
-from switchobs_msgs.msg import ErrorBounds, StateEstimate
+from switchobs_msgs.msg import ActiveChannel, ErrorBounds, StateEstimate
 
 from .stamps import stamp_to_ns
 from .validate import BridgeError
 
 __all__ = [
+    "ACTIVE_CHANNEL",
+    "active_channel",
+    "read_active_channel",
     "MSG_TYPES",
     "NO_BOUND_WHY",
     "BoundsReading",
@@ -46,6 +54,8 @@ __all__ = [
 
 #: ROS 2 type names of the typed outputs, as the bag tools and rosbags name them.
 MSG_TYPES = ("switchobs_msgs/msg/StateEstimate", "switchobs_msgs/msg/ErrorBounds")
+#: The stamped channel input's type name.
+ACTIVE_CHANNEL = "switchobs_msgs/msg/ActiveChannel"
 
 #: ``why_invalid`` of a bound that is -1 while the caller gave no reason (e.g. after a reset).
 NO_BOUND_WHY = "no bound known (-1): the estimate was reset or the bound is not available"
@@ -92,7 +102,9 @@ class ErrorBoundsWriter:
     followed by ``noise_bound`` when ``noise_declared``. The values are written as given; a bound
     is *valid* only when ``valid`` is true and the bound is >= 0 (-1 means withdrawn or not
     available). ``why_invalid`` is ``why`` (or :data:`NO_BOUND_WHY` when empty) whenever a bound
-    is not valid, and '' otherwise. Raises :class:`~msg_bridge.validate.BridgeError` on a layout
+    is not valid, and ``note`` otherwise: '' for bounds from the declared ``e0``, or how and since
+    when they were re-certified from data (e.g. ``re-certified from data at stamp ...``; the validity
+    flags, not this text, say whether a bound holds). Raises :class:`~msg_bridge.validate.BridgeError` on a layout
     of another length.
     """
 
@@ -108,7 +120,8 @@ class ErrorBoundsWriter:
         if not self.noise_declared:
             self._msg.noise_bound = -1.0
 
-    def msg(self, envelope_values: Sequence[float], stamp_ns: int, valid: bool, why: str = "") -> ErrorBounds:
+    def msg(self, envelope_values: Sequence[float], stamp_ns: int, valid: bool, why: str = "",
+            note: str = "") -> ErrorBounds:
         v = envelope_values
         if len(v) != self.size:
             raise BridgeError(f"envelope has {len(v)} values; expected {self.size} "
@@ -125,7 +138,7 @@ class ErrorBoundsWriter:
             m.noise_bound = float(v[N + 2])
             m.noise_bound_valid = bool(valid) and m.noise_bound >= 0.0
             ok = ok and m.noise_bound_valid
-        m.why_invalid = "" if ok else (why or NO_BOUND_WHY)
+        m.why_invalid = note if ok else (why or NO_BOUND_WHY)
         return m
 
 
@@ -189,6 +202,22 @@ def read_error_bounds(msg: ErrorBounds) -> BoundsReading:
     )
 
 
+# --- the stamped channel ------------------------------------------------------------------------
+
+def active_channel(channel: int, switch_ns: int, frame_id: str = "") -> ActiveChannel:
+    """An ``ActiveChannel``: ``channel`` holds from ``switch_ns`` (the switching instant, ns on the
+    sensor's clock) on."""
+    m = ActiveChannel(channel=int(channel))
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(switch_ns), 1_000_000_000)
+    m.header.frame_id = frame_id
+    return m
+
+
+def read_active_channel(msg: ActiveChannel) -> tuple[int, int]:
+    """``(channel, switch_ns)`` of an ``ActiveChannel``."""
+    return int(msg.channel), stamp_to_ns(msg.header.stamp)
+
+
 # --- rosbags -----------------------------------------------------------------------------------
 
 def msg_dir() -> Path:
@@ -212,6 +241,6 @@ def register_rosbags_types(typestore) -> None:
 
     d = msg_dir()
     types: dict = {}
-    for name in MSG_TYPES:
+    for name in (*MSG_TYPES, ACTIVE_CHANNEL):
         types.update(get_types_from_msg((d / f"{name.rsplit('/', 1)[1]}.msg").read_text(), name))
     typestore.register(types)

@@ -11,6 +11,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
@@ -20,8 +21,8 @@ from switchobs_core.exceptions import SwitchobsError
 
 from .stamps import stamp_to_ns
 
-__all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "check_after_switch", "check_channel", "check_pose",
-           "check_stamp", "check_values"]
+__all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
+           "check_pose", "check_stamp", "check_values"]
 
 
 class Reason(enum.Enum):
@@ -156,10 +157,19 @@ def check_after_switch(stamp_ns: int, switch_ns: int | None, field: str = "heade
     return None
 
 
+def channel_value(msg: Any) -> int:
+    """The channel of a channel-topic message: ``std_msgs/UInt8`` (``data``) or
+    ``switchobs_msgs/ActiveChannel`` (``channel``, with the switching instant in its stamp)."""
+    return int(msg.channel) if hasattr(msg, "channel") else int(msg.data)
+
+
 def check_channel(msg: UInt8, N: int) -> Rejection | None:
-    """An active channel must be one of the system's channels 1..N."""
-    if not 1 <= int(msg.data) <= N:
-        return Rejection(Reason.BAD_CHANNEL, "data", f"channel {int(msg.data)} is not in 1..{N}")
+    """An active channel must be one of the system's channels 1..N (either channel type,
+    :func:`channel_value`)."""
+    c = channel_value(msg)
+    if not 1 <= c <= N:
+        return Rejection(Reason.BAD_CHANNEL, "channel" if hasattr(msg, "channel") else "data",
+                         f"channel {c} is not in 1..{N}")
     return None
 
 

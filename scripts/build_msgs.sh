@@ -52,5 +52,5 @@ if [ -f "$MANIFEST" ]; then
 fi
 cmake --install "$WORK" >> "$LOG" 2>&1 || fail "cmake install"
 cp "$WORK/install_manifest.txt" "$MANIFEST"
-"$PYBIN" -c "from switchobs_msgs.msg import ErrorBounds, StateEstimate" >> "$LOG" 2>&1 \
+"$PYBIN" -c "from switchobs_msgs.msg import ActiveChannel, ErrorBounds, StateEstimate" >> "$LOG" 2>&1 \
     || fail "import switchobs_msgs"

@@ -81,10 +81,11 @@ class CovarianceError(RiccatiError):
     """The online Riccati recursion lost positive definiteness (or finiteness) of its covariance:
     the arithmetic ran out of digits at run time.
 
-    ``correction``: what the family did with the sample after restarting its recursion from the
-    noise model's ``P0`` (a :class:`~switchobs_core.runtime.families.base.Correction`, or None), so
-    that a caller can keep answering with it while it withdraws the covariance and the bounds
-    that rest on it (:mod:`switchobs_core.runtime.families.online`).
+    Raised inside a family's step (:mod:`switchobs_core.runtime.families.online`), which restarts
+    its recursion from the noise model's ``P0``, corrects with that gain and returns the message
+    as its correction's ``lost``: the observer keeps answering and withdraws its covariance with
+    that reason (``SwitchedObserver.covariance_withdrawn``). ``correction``: optional, for a
+    caller that raises it with the correction already made.
     """
 
     def __init__(self, message: str, correction: object = None) -> None:

@@ -90,6 +90,7 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "noise std": (0.0, MAX_MAGNITUDE, False, "a standard deviation, squared into a covariance"),
     "rate": (0.0, MAX_RATE_HZ, False, "Hz (0: not set); samples per period also bounded by memory"),
     "reorder_window_ms": (0.0, 1000.0, False, "ms a sample waits for its channel: a wait, and up to 1024 samples held"),
+    "clock_tolerance_ms": (0.0, 1000.0, False, "ms of clock error; beyond a second a sample's time is unknown"),
     "consistency.chi2_alpha": (0.0, 0.5, False, "a false-alarm probability per sample (0: off)"),
 }
 

@@ -22,6 +22,11 @@ the pipeline withdraws the bounds.
 
 Without source timestamps (a bag's messages in the order the recorder wrote them) the latest
 channel received is the channel: that order is the publishing order.
+
+Stamped channel messages (``switchobs_msgs/ActiveChannel``, the switching instant in the header
+stamp) replace all of this by a comparison of sensor stamps (:mod:`switchobs_ros.switching`): once
+one has arrived, a sample is attributed by its header stamp against the switching instants, within
+the declared clock tolerance (:attr:`Verdict.NEAR_SWITCH`).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from msg_bridge import Reason, Rejection
 
 from .pairing import Pending
 from .sources import Source
+from .switching import SwitchHistory
 
 __all__ = ["CHANNEL_HISTORY", "ChannelAttribution", "Resolution", "Verdict", "lost_between", "sequence"]
 
@@ -57,6 +63,8 @@ class Verdict(enum.Enum):
     UNCERTAIN = "uncertain"
     #: Sent while channel messages were lost (a gap in the publisher's sequence numbers).
     LOST = "lost"
+    #: Stamped within the clock tolerance of a switching instant (stamped channel messages).
+    NEAR_SWITCH = "near_switch"
 
     @property
     def rejection(self) -> tuple[Reason, str]:
@@ -71,6 +79,8 @@ _REJECTIONS = {
     Verdict.UNCERTAIN: (Reason.AMBIGUOUS_CHANNEL, "its channel was not certain within the reorder window"),
     Verdict.LOST: (Reason.AMBIGUOUS_CHANNEL,
                    "sent while channel messages were lost (a gap in the publisher's sequence numbers)"),
+    Verdict.NEAR_SWITCH: (Reason.AMBIGUOUS_CHANNEL,
+                          "stamped within clock_tolerance_ms of a switching instant (clocks of two computers)"),
 }
 
 
@@ -124,8 +134,11 @@ class ChannelAttribution:
     from the publisher's sequence.
     """
 
-    def __init__(self, sources: tuple[Source, ...], channel_topic: str | None, window_ns: int):
+    def __init__(self, sources: tuple[Source, ...], channel_topic: str | None, window_ns: int,
+                 tolerance_ns: int = 0):
         self.sources = sources
+        self.stamped = SwitchHistory(tolerance_ns)    # switching instants (stamped channel messages)
+        self._stamped_seq: int | None = None          # the newest stamped message's sequence number
         self.channel_topic = channel_topic
         self.window_ns = int(window_ns)
         self.channel = 0
@@ -182,6 +195,19 @@ class ChannelAttribution:
             self._truncated = True
         return why
 
+    def remember_switch(self, switch_ns: int, channel: int, src_ns: int | None, seq: Any = None) -> list[str]:
+        """A stamped channel message: ``channel`` from the switching instant ``switch_ns`` on
+        (:meth:`SwitchHistory.remember <switchobs_ros.switching.SwitchHistory.remember>`). Returns
+        why the bounds must be withdrawn."""
+        seq = sequence(seq)
+        lost = lost_between(self._stamped_seq, seq) if self.stamped else 0
+        self._stamped_seq = seq
+        late0, lost0 = self.stamped.late, self.stamped.lost_messages
+        why = self.stamped.remember(int(switch_ns), channel, src_ns, seq, lost)
+        self.late += self.stamped.late - late0
+        self.lost += self.stamped.lost_messages - lost0
+        return why
+
     def remember_invalid(self, src_ns: int | None, seq: Any) -> list[str]:
         """A channel message with an invalid value: received, not lost, so with a sequence number
         it enters the history with the channel then active (:meth:`remember`)."""
@@ -196,6 +222,8 @@ class ChannelAttribution:
         or it waits for its channel): no channel received yet when arrival order decides (no
         source timestamp, or no reorder window), or, without source timestamps, stamped at or
         before the switch (taken while the previous channel was active)."""
+        if self.stamped:        # by the sensors' stamps: neither arrival order nor the switch's camera stamp
+            return rej
         if rej is None and src.channel is None and self.channel_topic and not self.channel \
                 and (src_ns is None or not self.window_ns):
             rej = Rejection(Reason.NO_CHANNEL, self.channel_topic, "no active channel received yet")
@@ -213,6 +241,17 @@ class ChannelAttribution:
             return Resolution.of(fixed.pop()) if len(fixed) == 1 else Resolution(Verdict.CONFLICT)
         if not self.channel_topic:          # shared rows only, one-channel sources elsewhere
             return Resolution.of(self._last_fixed)
+        if self.stamped:                    # by the sensors' stamps (switchobs_ros.switching)
+            dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
+            src = [p.src_ns for p in dep]
+            verdict, c, certain = self.stamped.resolve(pend.stamp_ns, None if None in src else max(src),
+                                                       force or self._expired(pend, now_mono))
+            if verdict == "near_switch" and c and all(srcs[i].shared for i in pend.parts):
+                verdict = "channel"     # shared rows read the same in every channel: they wait for a partner
+            if verdict == "channel":
+                return Resolution.of(c, certain)
+            named = {"near_switch": Verdict.NEAR_SWITCH, "lost": Verdict.LOST}
+            return Resolution(named.get(verdict, Verdict.NO_CHANNEL), certain=certain)
         dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
         stamps = [p.src_ns for p in dep]
         if any(s is None for s in stamps) or not self._src:
@@ -236,6 +275,9 @@ class ChannelAttribution:
         """Whether the history does not prove the channel of a sample that depends on it: no
         channel message sent after it has arrived (answered on the window's expiry)."""
         srcs = self.sources
+        if self.stamped and self.channel_topic and not any(srcs[i].channel is not None for i in pend.parts):
+            src = [p.src_ns for p in pend.parts.values()]
+            return self.stamped.guessed(pend.stamp_ns, None if None in src else max(src))
         if not self.channel_topic or not self._src or all(srcs[i].shared for i in pend.parts) \
                 or any(srcs[i].channel is not None for i in pend.parts):
             return False
@@ -250,6 +292,7 @@ class ChannelAttribution:
 
     def answered(self, pend: Pending, guessed: bool) -> None:
         """The sample was answered (``guessed``: on the window's expiry, :meth:`guessed`)."""
+        self.stamped.answered_at(pend.stamp_ns)
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))

@@ -9,10 +9,16 @@ diag(0, 0.2), D_2 = diag(0, 0.1)). The camera switches between agents by a sched
 box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
 
 1. ``/clock`` (only with ``publish_clock``),
-2. ``camera/active_channel`` (std_msgs/UInt8, the channel rho(t_k); reliable, transient local),
+2. ``camera/active_channel`` (``switchobs_msgs/ActiveChannel``: the channel rho(t_k) stamped with
+   its switching instant, the first tick on it; or std_msgs/UInt8 with ``channel_type``; reliable,
+   transient local),
 3. ``camera/pose`` and ``target/pose`` (PoseStamped, same stamp ``t_k``, sensor-data QoS; no
    ``target/pose`` in the first ``schedule.dead_time`` seconds after a switch, while the camera turns),
 4. ``sim/truth`` (the true state x(t_k), a labelled Float64MultiArray stamped t_k; reliable).
+
+``stamp_offset_ms`` shifts the stamps of the camera's own pose and of the switching instants (a
+camera computer whose clock runs that far ahead of the targets'); ``channel_last`` publishes the
+channel message after the poses (the first pose of a new channel sent before it).
 
 Time: tick k is at plant time ``k / rate`` and stamp ``epoch + k / rate``. Without
 ``publish_clock`` the epoch is the node clock at start and ticks follow the node clock
@@ -32,6 +38,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Float64MultiArray, UInt8
+from switchobs_msgs.msg import ActiveChannel
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
@@ -74,8 +81,17 @@ PARAMS = [
     Param("publish_clock", False, "Publish /clock and run on that simulated clock (see time_scale)."),
     Param("time_scale", 1.0, "With publish_clock: simulated seconds per wall-clock second."),
     Param("clock_start", 1.0, "With publish_clock: the simulated clock's value at tick 0 (s, > 0)."),
+    Param("channel_type", "switchobs_msgs/msg/ActiveChannel", "The channel message: switchobs_msgs/msg/ActiveChannel "
+          "(stamped with the switching instant) or std_msgs/msg/UInt8 (the channel alone)."),
+    Param("stamp_offset_ms", 0.0, "Milliseconds added to the stamps of the camera's own pose and of the switching "
+          "instants: a camera clock ahead of the targets' (a test of clocks across computers)."),
+    Param("channel_last", False, "Publish the channel message after the tick's poses (the first pose of a new "
+          "channel is then sent before its channel message)."),
     Param("wait_for_subscribers", 0, "Before tick 0, wait until target/pose has this many subscribers."),
     Param("wait_for_truth_subscribers", 0, "Before tick 0, wait until sim/truth has this many subscribers."),
+    Param("stamp_at_send", False, "Stamp each tick with the node clock when it is sent, as a sensor stamping "
+          "with its own clock does (the timer's jitter in every stamp), the plant advanced to that stamp; "
+          "default: the tick's nominal time epoch + k / rate. Not with publish_clock."),
 ]
 
 
@@ -147,6 +163,7 @@ class CameraSimNode(Node):
         self.k = -1
         self.started = False
         self.epoch_ns = 0
+        self.last_stamp_ns = -1
         self.t_wait = time.monotonic()
         self.k_end = round(cfg["duration"] * cfg["rate"]) if cfg["duration"] > 0 else None
 
@@ -154,9 +171,18 @@ class CameraSimNode(Node):
         # one publisher per input topic of the system's specification (the paper's: the channel,
         # camera/pose, target/pose); the channel first
         self.pubs = {}
+        if cfg["channel_type"] not in ("switchobs_msgs/msg/ActiveChannel", "std_msgs/msg/UInt8"):
+            raise ConfigError("parameter 'channel_type' must be switchobs_msgs/msg/ActiveChannel or "
+                              f"std_msgs/msg/UInt8; got '{cfg['channel_type']}'")
+        self.stamped = cfg["channel_type"] == "switchobs_msgs/msg/ActiveChannel"
+        if not math.isfinite(cfg["stamp_offset_ms"]) or abs(cfg["stamp_offset_ms"]) > 1000.0:
+            raise ConfigError(f"parameter 'stamp_offset_ms' must be within [-1000, 1000]; got {cfg['stamp_offset_ms']}")
+        self.offset_ns = round(cfg["stamp_offset_ms"] * 1e6)
+        self.switch = (0, 0)        # (channel, its switching instant: the first tick stamp on it)
         if self.specs.channel_topic:
-            self.pubs[self.specs.channel_topic] = self.create_publisher(UInt8, self.specs.channel_topic,
-                                                                        qos.CHANNEL_PUB)
+            self.pubs[self.specs.channel_topic] = self.create_publisher(ActiveChannel if self.stamped else UInt8,
+                                                                        self.specs.channel_topic,
+                                                                        qos.channel_pub(cfg["rate"]))
         for src in self.specs.sources:
             self.pubs[src.topic] = self.create_publisher(mb.message_class(src.type), src.topic, qos.SENSOR)
         self.pub_target = self.pubs[next((s.topic for s in self.specs.sources if not s.shared),
@@ -208,8 +234,11 @@ class CameraSimNode(Node):
         self.publish_tick(k)
 
     def publish_tick(self, k: int) -> None:
-        t = k * self.period_ns * 1e-9
         stamp_ns = self.epoch_ns + k * self.period_ns
+        if self.cfg["stamp_at_send"] and not self.cfg["publish_clock"]:   # the clock now, never back
+            stamp_ns = max(self.get_clock().now().nanoseconds, self.last_stamp_ns + 1)
+        self.last_stamp_ns = stamp_ns
+        t = (stamp_ns - self.epoch_ns) * 1e-9
         stamp = mb.ns_to_stamp(stamp_ns)
         if self.pub_clock is not None:
             self.pub_clock.publish(ClockMsg(clock=stamp))
@@ -218,8 +247,14 @@ class CameraSimNode(Node):
         y = self.plant.measure(rho, noise_std=0.0)
         if self.cfg["noise_std"] > 0:
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
+        if rho != self.switch[0]:
+            self.switch = (rho, stamp_ns)
         # while the camera turns (dead time) only the shared sources (its own pose) publish
-        for topic, msg in self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t)):
+        msgs = self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t),
+                                     self.switch[1] if self.stamped else None, self.offset_ns)
+        if self.cfg["channel_last"] and self.specs.channel_topic:
+            msgs = msgs[1:] + msgs[:1]
+        for topic, msg in msgs:
             self.pubs[topic].publish(msg)
         self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))
 

@@ -24,6 +24,7 @@ import msg_bridge as mb
 from msg_bridge import InputSpecs, SpecError, load_inputs
 from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.loading import load_yaml
+from switchobs_core.model.disturbance import Disturbance
 from switchobs_core.model.frames import FrameTransform, parse_transforms
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.schedule import Cycle
@@ -35,15 +36,21 @@ from .core_config import (
     GAIN_FAMILY_PARAM,
     cache_dir_param,
     cycles_from_params,
+    disturbance_from_params,
     load_system_param,
     noise_from_params,
 )
 from .params import ConfigError, Param
+from .params_files import matching_sections, unmatched_files
 
-__all__ = ["CONSISTENCY", "PARAMS", "EstimatorConfig", "params_from_file"]
+__all__ = ["CONSISTENCY", "PARAMS", "UNCHECKED", "EstimatorConfig", "body_frame_prefix", "params_from_file"]
 
-#: Values of the ``consistency.check`` parameter (switchobs_ros.screening).
+#: Values of the ``consistency.check`` parameter (switchobs_ros.screening): ``auto`` and ``always`` test every
+#: sample while a bound is published, ``never`` does not.
 CONSISTENCY = ("auto", "always", "never")
+
+#: The start-up warning of ``consistency.check: never``.
+UNCHECKED = "consistency.check is 'never': the published bounds are not tested against the data"
 
 #: The estimator node's parameters (the documentation's parameter reference is generated from it: tools/docs_gen.py).
 PARAMS = [
@@ -66,9 +73,16 @@ PARAMS = [
           "Kalman families (< 0: the system's noise: section, or 1 mm)."),
     Param("noise.process_std", -1.0, "Process noise q on every state, intensity q^2 I (< 0: the system's noise: "
           "section, or 0.01)."),
-    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row (< 0: none). With it "
-          "~/envelope gets a last element noise_bound, a guarantee under any noise within the bound; without it "
-          "exact_bound is the noise-free bound (a guarantee only for noise-free measurements)."),
+    Param("noise.max", -1.0, "A declared bound |v| <= noise.max (m) on every measurement row; 0 declares noise-free "
+          "samples (< 0: none declared). With it ~/envelope gets a last element noise_bound, a guarantee under any "
+          "noise within the bound; without it exact_bound is the noise-free bound (a guarantee only for noise-free "
+          "measurements) and the consistency test holds every sample to it: noise withdraws the bounds at the first "
+          "sample the bound cannot explain."),
+    Param("disturbance.max", (), "Bounds |w_j| <= max_j (m/s^2 for the built-in scenarios' unit accelerations on every "
+          "velocity state; one value for all or one per column of the system's disturbance B_w) of a bounded unknown "
+          "input x' = A x + B_w w: noise_bound then holds for every such input (needs noise.max), and a Kalman table "
+          "designed at start-up takes Q_c = B_w diag(max^2) B_w' (empty: the system's disturbance: section, or none).",
+          float),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
@@ -82,7 +96,9 @@ PARAMS = [
     Param("schedule.h_min", 0.0, "Robust mode: shortest residence time h_min of assumption A2 (s)."),
     Param("schedule.h_max", 0.0, "Robust mode: longest residence time h_max of assumption A2 (s)."),
     Param("initial_estimate", (), "Initial estimate x_hat(t0), n values in state order (empty: zeros).", float),
-    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound."),
+    Param("e0", 1.0, "Bound on the initial error ||x_hat(t0) - x(t0)|| used by the envelopes and the exact bound. "
+          "-1: not known; no bound until a window of one switching cycle of consistent data certifies one "
+          "(needs noise.max; consistency.recertify)."),
     Param("world_frame", "map", "frame_id of the published odometry (and of the expected input poses)."),
     Param("input_frame_id", "map", "Expected header.frame_id of camera/pose and target/pose ('' accepts any)."),
     Param("input_transforms", (), "Fixed transforms into input_frame_id of the frames inputs may come in, one per "
@@ -91,6 +107,9 @@ PARAMS = [
           "position (and orientation) in such a frame is mapped before it is checked and used.", str),
     Param("body_frames", (), "child_frame_id of each body's odometry, in body order (empty: the body names "
           "camera, agent1, ...).", str),
+    Param("frame_prefix", "auto", "Prefix of every body frame id (child_frame_id of the odometry): 'auto' derives it "
+          "from the node's namespace (/robot1 -> robot1/agent1; none at the root), '' none, any other value is "
+          "used as is (e.g. 'robot1/'). One estimator per robot of a fleet then publishes frames of its own."),
     Param("camera_body", "camera", "Name of the camera body in the system's state and output labels."),
     Param("inputs", "", "Path of a YAML file with an `inputs:` section (topics, message types, fields -> output "
           "rows, channel topic) that overrides the system's (''). Default: the system file's `inputs:` section, "
@@ -100,14 +119,34 @@ PARAMS = [
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
           "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "
           "sends it only on change makes them wait the whole window. 0: the latest channel received (arrival order)."),
+    Param("clock_tolerance_ms", 0.0, "The largest error of any source's stamps against the estimator's clock (ms; "
+          "clocks of several computers: their synchronisation's budget, chrony or PTP). It enters the bounds: a stamp "
+          "error d is a measurement error of at most sup_{|s|<=d} ||C (e^{A s} - I) x|| "
+          "(switchobs_core.bounds.stamp); a sample stamped within it of a switching instant is ambiguous; a stamp "
+          "that proves a larger offset (ahead of the receive clock by more) withdraws the bounds. 0: exact stamps."),
+    Param("channel_type", "auto", "The channel topic's message type: switchobs_msgs/msg/ActiveChannel (the "
+          "switching instant in its stamp: samples attributed by their stamps), std_msgs/msg/UInt8 (attributed by "
+          "the publishers' source timestamps; for one publisher of the channel and the samples), or auto (the type "
+          "the channel's publishers offer in the ROS graph)."),
     Param("consistency.chi2_alpha", 0.0, "With noise and no declared bound: a chi-square gate on each sample's "
           "normalised innovation nu' (C P C' + R)^-1 nu; a sample above chi2.ppf(1 - alpha, rows) is rejected "
           "(outlier) and counted. alpha is the gate's false-alarm rate per sample when the noise model holds "
           "(0: off; in [0, 0.5]). Needs a covariance (publish_covariance, or the Kalman families)."),
     Param("consistency.check", "auto", "Test every sample's innovation against the published bound before it is "
           "used (a sample the bound cannot explain proves the model broken: re-attributed when exactly one channel "
-          "explains it, else rejected and every bound withdrawn): auto (when noise.max is declared; 0 declares "
-          "noise-free samples), always (also without noise.max: noise-free samples against exact_bound), never."),
+          "explains it, else rejected and every bound withdrawn): auto and always (the same) test whenever a bound "
+          "is published: against noise_bound with noise.max, else against exact_bound as noise-free samples; never "
+          "publishes bounds that nothing checks (a warning at start-up)."),
+    Param("consistency.recertify", True, "After a withdrawal (and with e0 = -1 at start-up), certify the bounds "
+          "again from a window of one switching cycle of data: a least-squares fit whose radius holds for every "
+          "noise within noise.max, rounding included (needs noise.max). Labelled re-certified in diagnostics and "
+          "in ~/error_bounds."),
+    Param("consistency.bias", True, "A CUSUM per output row on the normalised innovations: a persistent bias beyond "
+          "the noise model (about 2 samples of delay for 5 sigma) withdraws the bounds (needs noise.max or a "
+          "covariance)."),
+    Param("consistency.reinit", True, "When the chi-square gate rejects 25 consecutive samples of one channel (a "
+          "model failure of the body only it sees, not outliers), re-initialise that body's states from its "
+          "last samples instead of coasting; the bounds are withdrawn (re-certification brings them back)."),
     Param("sensor_timeout", 0.5, "Seconds without an accepted measurement after which diagnostics turn WARN. "
           "Changeable at run time."),
     Param("future_tolerance", 0.5, "Seconds a stamp may lie ahead of the node clock before it is rejected. "
@@ -136,6 +175,10 @@ PARAMS = [
 
 #: Largest output decimation ``output.*_every`` (an int64 parameter; beyond it nothing is ever published).
 MAX_EVERY = 1_000_000_000
+
+#: The channel topic's message types (parameter channel_type).
+CHANNEL_TYPES = ("auto", "switchobs_msgs/msg/ActiveChannel", "std_msgs/msg/UInt8")
+
 
 #: Parameters that can change while the node runs (the others need a restart: they shape the
 #: observer, its gain table or the topics), and the check of a value: (ok, what it must be). The
@@ -172,16 +215,29 @@ def check_runtime_value(name: str, value: Any) -> str:
     return ""
 
 
+def body_frame_prefix(value: str, namespace: str) -> str:
+    """The prefix of the body frame ids for parameter ``frame_prefix`` = ``value`` in ``namespace``:
+    ``auto`` gives ``robot1/`` in ``/robot1`` (``fleet/robot1/`` in ``/fleet/robot1``, '' at the root)."""
+    if value != "auto":
+        return value
+    ns = namespace.strip("/")
+    return f"{ns}/" if ns else ""
+
+
 def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | None = None,
                      node_name: str = "estimator") -> dict:
     """The estimator's parameter values: defaults, then params files (ROS 2 YAML), then overrides.
 
-    A params file is ``<node>: ros__parameters: {...}`` (or ``/**:``), nested keys joined with
-    ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names or values of the
-    wrong type raise :class:`~switchobs_ros.params.ConfigError`, as the node does.
+    A params file is ``<node key>: ros__parameters: {...}``; the sections whose keys match the
+    node ``node_name`` (a fully qualified name, or a name at the root) apply as rcl applies them
+    (:mod:`switchobs_ros.params_files`: ``/**``, ``/**/estimator``, ``estimator``), nested keys joined
+    with ``.`` (``schedule: {mode: ...}`` is ``schedule.mode``). Unknown names, values of the wrong
+    type, or a file with no section for the node raise :class:`~switchobs_ros.params.ConfigError`,
+    as the node does.
     """
     known = {p.name: p for p in PARAMS}
     cfg = {p.name: p.default for p in PARAMS}
+    fqn = node_name if node_name.startswith("/") else "/" + node_name
 
     def flat(d, prefix=""):
         for k, v in d.items():
@@ -208,9 +264,11 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
             raise ConfigError(f"{where}: unknown estimator parameter '{name}' (known: {', '.join(sorted(known))})")
         d = known[name].default
         if isinstance(d, tuple):
+            item = known[name].item or (type(d[0]) if d else float)
+            if item is float and isinstance(num(v, True), float):
+                v = [v]         # one number for a list of doubles: as the node takes it (params.py)
             if not isinstance(v, (list, tuple)):
                 raise ConfigError(f"{where}: parameter '{name}' must be a list")
-            item = known[name].item or (type(d[0]) if d else float)
             v = tuple(num(x, item is float) for x in v)
             if d and not v:
                 raise ConfigError(f"{where}: parameter '{name}' is empty; give at least one value, or leave it out "
@@ -228,11 +286,12 @@ def params_from_file(params_files: Sequence[str | Path] = (), overrides: dict | 
             doc = load_yaml(f, exc=ConfigError, what="params file") or {}
         except FileNotFoundError:
             raise ConfigError(f"params file {f} does not exist") from None
-        for key in (node_name, "/" + node_name, "/**"):
-            sect = doc.get(key) if isinstance(doc, dict) else None
-            if isinstance(sect, dict) and isinstance(sect.get("ros__parameters"), dict):
-                for name, v in flat(sect["ros__parameters"]):
-                    put(name, v, f"params file {f}")
+        sections = matching_sections(doc, fqn)
+        if not sections:
+            raise ConfigError(unmatched_files([f], fqn))
+        for sect in sections:
+            for name, v in flat(sect):
+                put(name, v, f"params file {f}")
     for name, v in (overrides or {}).items():
         put(name, v, "parameter override")
     return cfg
@@ -257,6 +316,12 @@ class EstimatorConfig:
     publish_covariance: bool
     child_frames: tuple[str, ...]
     transforms: dict[str, FrameTransform] | None = None     # input_transforms by frame
+    disturbance: Disturbance | None = None      # disturbance.max (switchobs_core.model.disturbance)
+
+    @property
+    def e0(self) -> float | None:
+        """The initial error bound for the observer (None: ``e0`` is -1, not known)."""
+        return None if self.values["e0"] == -1.0 else float(self.values["e0"])
 
     def __getitem__(self, name: str) -> Any:
         """The raw value of parameter ``name``."""
@@ -297,7 +362,8 @@ class EstimatorConfig:
         v = values["delta"]             # the runtime parameters: check_runtime_value below
         if not (math.isfinite(v) and v > 0):
             raise ConfigError(f"parameter 'delta' must be a finite number > 0; got {v}")
-        check_range(values["e0"], "e0", exc=ConfigError)
+        if values["e0"] != -1.0:       # -1: not known (no bound until the data certify one)
+            check_range(values["e0"], "e0", exc=ConfigError)
         for v in values["initial_estimate"]:
             check_range(v, "initial_estimate", exc=ConfigError)
         x0 = values["initial_estimate"]
@@ -313,13 +379,18 @@ class EstimatorConfig:
             raise ConfigError(f"parameter 'consistency.check' must be one of {', '.join(CONSISTENCY)}; "
                               f"got {values['consistency.check']!r}")
         check_range(values["reorder_window_ms"], "reorder_window_ms", exc=ConfigError)
+        check_range(values["clock_tolerance_ms"], "clock_tolerance_ms", exc=ConfigError)
+        if values["channel_type"] not in CHANNEL_TYPES:
+            raise ConfigError(f"parameter 'channel_type' must be one of {', '.join(CHANNEL_TYPES)}; got "
+                              f"'{values['channel_type']}'")
         check_range(values["consistency.chi2_alpha"], "consistency.chi2_alpha", exc=ConfigError)
         family = values["gain_family"]
         if family not in GAIN_FAMILY_PARAM:
             raise ConfigError(f"parameter 'gain_family' must be one of {', '.join(map(repr, GAIN_FAMILY_PARAM))}; "
                               f"got {family!r}")
         rate = check_range(values["rate"], "rate", exc=ConfigError)
-        noise = noise_from_params(values, sys_)
+        dist = disturbance_from_params(values, sys_)
+        noise = noise_from_params(values, sys_, dist)
         for name in RUNTIME_PARAMS:
             why = check_runtime_value(name, values[name])
             if why:
@@ -327,11 +398,17 @@ class EstimatorConfig:
         if not values["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty (the frame_id of the published odometry)")
         vmax = check_range(values["noise.max"], "noise.max", exc=ConfigError)
+        if dist is not None and dist.active and vmax < 0:
+            raise ConfigError("parameter 'disturbance.max' declares a disturbance, which enters noise_bound: declare "
+                              "noise.max too (0: noise-free samples)")
         bodies = [b.name for b in mb.bodies(sys_.state_labels)]
         frames = values["body_frames"]
         if frames and len(frames) != len(bodies):
             raise ConfigError(f"parameter 'body_frames' has {len(frames)} names for {len(bodies)} bodies "
                               f"({', '.join(bodies)})")
+        if values["frame_prefix"].startswith("/"):
+            raise ConfigError(f"parameter 'frame_prefix' must not start with '/' (tf2 frame ids do not); got "
+                              f"{values['frame_prefix']!r}")
         try:
             transforms = parse_transforms(values["input_transforms"], values["input_frame_id"])
         except InvalidArgument as err:
@@ -339,4 +416,5 @@ class EstimatorConfig:
         return cls(values=values, system=sys_, mode=mode, cycles=tuple(cycles), robust=robust, x0=x0,
                    inputs=inputs, family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
-                   child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms)
+                   child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms,
+                   disturbance=dist if dist is not None and dist.active else None)

@@ -17,8 +17,9 @@ from switchobs_core import __version__
 from switchobs_core.exceptions import SwitchobsError, one_line
 from switchobs_core.families import FAMILY_NAMES, design_family_table, family_entry
 from switchobs_core.files import check_private, kind_of
+from switchobs_core.model.disturbance import Disturbance
 from switchobs_core.model.noise import NoiseModel
-from switchobs_core.model.scenarios import load_noise, load_system
+from switchobs_core.model.scenarios import load_disturbance, load_noise, load_system
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
 from switchobs_core.ranges import MAX_CYCLES
@@ -32,6 +33,7 @@ __all__ = [
     "SensorOutputs",
     "GAIN_FAMILY_PARAM",
     "noise_from_params",
+    "disturbance_from_params",
     "cycles_from_params",
     "load_or_design_table",
     "load_system_param",
@@ -51,14 +53,29 @@ DEFAULT_X0 = (0.0, 0.0, 0.2, 0.1, 3.0, 1.0, -0.1, 0.0, -2.0, 2.0, 0.1, 0.0)
 GAIN_FAMILY_PARAM = ("", *FAMILY_NAMES)
 
 
-def noise_from_params(cfg: dict, system: LTISystem) -> NoiseModel:
+def disturbance_from_params(cfg: dict, system: LTISystem) -> Disturbance | None:
+    """The declared disturbance: the system's ``disturbance:`` section (built-in scenarios: unit
+    accelerations on the velocity states, no bound), then the parameter ``disturbance.max``
+    (empty: keep); None when the system has no disturbance input and none is asked for."""
+    w_max = cfg.get("disturbance.max", ())
+    try:
+        dist = load_disturbance(cfg["system"], system, w_max=tuple(w_max) if isinstance(w_max, (list, tuple)) else
+                                (w_max,))
+    except SwitchobsError as err:
+        raise ConfigError(f"parameter {err}" if str(err).startswith("disturbance.max") else
+                          f"parameter 'disturbance.max': {err}") from None
+    return dist if dist.q else None
+
+
+def noise_from_params(cfg: dict, system: LTISystem, disturbance: Disturbance | None = None) -> NoiseModel:
     """The noise model: the system's ``noise:`` section (or the defaults), then the parameters
-    ``noise.measurement_std`` / ``noise.process_std`` where they are >= 0."""
+    ``noise.measurement_std`` / ``noise.process_std`` where they are >= 0; with an active
+    ``disturbance`` and no process noise given, ``Q_c = B_w diag(max^2) B_w'``."""
     meas = cfg.get("noise.measurement_std", -1.0)
     proc = cfg.get("noise.process_std", -1.0)
     try:
         return load_noise(cfg["system"], system, meas_std=None if meas < 0 else meas,
-                          process_q=None if proc < 0 else proc)
+                          process_q=None if proc < 0 else proc, disturbance=disturbance)
     except SwitchobsError as err:
         raise ConfigError(f"parameters 'noise.*': {err}") from None
 
@@ -188,16 +205,25 @@ class SensorOutputs:
         self.specs = specs
         self.writers = [mb.FieldWriter(s.type, s.fields) for s in specs.sources]
 
-    def messages(self, channel: int, y, stamp_ns: int, frame_id: str, blind: bool = False) -> list[tuple[str, object]]:
-        """``[(topic, message), ...]`` of one tick on ``channel`` with output ``y`` (relative topics)."""
-        from std_msgs.msg import UInt8
-
+    def messages(self, channel: int, y, stamp_ns: int, frame_id: str, blind: bool = False,
+                 switch_ns: int | None = None, shared_offset_ns: int = 0) -> list[tuple[str, object]]:
+        """``[(topic, message), ...]`` of one tick on ``channel`` with output ``y`` (relative topics).
+        With ``switch_ns`` (the channel's switching instant) the channel message is a stamped
+        ``switchobs_msgs/ActiveChannel``, else a ``std_msgs/UInt8``; ``shared_offset_ns`` shifts the
+        stamps of the shared sources and of the switching instant (a camera computer whose clock is
+        that far ahead of the targets')."""
         out: list[tuple[str, object]] = []
         if self.specs.channel_topic:
-            out.append((self.specs.channel_topic, UInt8(data=int(channel))))
+            if switch_ns is None:
+                from std_msgs.msg import UInt8
+                out.append((self.specs.channel_topic, UInt8(data=int(channel))))
+            else:
+                from msg_bridge.typed import active_channel
+                out.append((self.specs.channel_topic, active_channel(channel, switch_ns + shared_offset_ns)))
         for src, w in zip(self.specs.sources, self.writers):
             if src.serves(channel) and (src.shared or not blind):
-                out.append((src.topic, w.msg([y[r] for r in src.rows_for(channel)], stamp_ns, frame_id)))
+                at = stamp_ns + (shared_offset_ns if src.shared else 0)
+                out.append((src.topic, w.msg([y[r] for r in src.rows_for(channel)], at, frame_id)))
         return out
 
 

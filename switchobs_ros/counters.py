@@ -48,10 +48,14 @@ class Counters:
     (accepted messages an update consumed), ``switches``, ``resets``, ``states_set``, ``errors``,
     ``nonfinite`` (estimates withheld because not finite, each followed by a reset),
     ``inconsistent``, ``reattributed``, ``lost_channel_named`` (samples sent while channel
-    messages were lost whose channel the consistency test named), ``outliers`` (the chi-square
+    messages were lost whose channel the consistency test named), ``near_switch`` (samples stamped within
+    the clock tolerance of a switching instant whose channel rows were dropped), ``outliers`` (the chi-square
     gate); ``last_rejection`` and ``last_inconsistency`` are the latest texts. ``bound_valid`` is
     False once the bounds are withdrawn (:data:`NO_BOUND` is published), ``bound_invalid_why``
-    says why.
+    says why; ``recertifications`` counts the bounds certified again from data
+    (:mod:`switchobs_core.runtime.recovery`), ``bound_note`` says since when while they hold;
+    ``bias_alarms`` and ``model_failures`` (bodies the chi-square gate starved) count the recovery's
+    alarms, ``last_alarm`` is the latest one's text.
     """
 
     def __init__(self, log: PipelineLog):
@@ -70,11 +74,17 @@ class Counters:
         self.inconsistent = 0
         self.reattributed = 0
         self.lost_channel_named = 0
+        self.near_switch = 0
         self.outliers = 0
         self.last_rejection = ""
         self.last_inconsistency = ""
         self.bound_valid = True
         self.bound_invalid_why = ""
+        self.recertifications = 0
+        self.recertified = ""       # how and since when the bounds were last certified from data
+        self.bias_alarms = 0
+        self.model_failures = 0
+        self.last_alarm = ""
 
     def reject(self, topic: str, rej: Rejection) -> None:
         """Count a rejected message under ``(topic, reason)``."""
@@ -98,8 +108,21 @@ class Counters:
         self.log.error(f"{where}: {type(err).__name__}: {err}{at}", throttle=True)
 
     def withdraw(self, why: str) -> None:
-        """No bound can be guaranteed any more: publish :data:`NO_BOUND` until a reset."""
+        """No bound can be guaranteed any more: publish :data:`NO_BOUND` until :meth:`recertify` or a reset."""
         if self.bound_valid:
             self.log.error(f"bounds withdrawn: {why}")
         self.bound_valid = False
         self.bound_invalid_why = why
+
+    @property
+    def bound_note(self) -> str:
+        """While the bounds hold after a re-certification: how and since when (else "")."""
+        return self.recertified if self.bound_valid else ""
+
+    def recertify(self, text: str) -> None:
+        """The bounds hold again, certified from data (``text``: since when, from which window)."""
+        self.recertifications += 1
+        self.recertified = text
+        self.bound_valid = True
+        self.bound_invalid_why = ""
+        self.log.info(f"bounds {text}")

@@ -50,6 +50,7 @@ class NodeState:
     last_prediction: Any
     predictions: int
     ignored_inactive: int = 0
+    published: dict | None = None       # messages published per output (switchobs_ros.demand)
 
 
 class EstimatorDiagnostics:
@@ -124,6 +125,9 @@ class EstimatorDiagnostics:
               kv("clock jumps back (resets)", node.clock_jumps_back),
               kv("clock jumps forward", node.clock_jumps_forward),
               kv("measurements ignored while inactive (lifecycle)", node.ignored_inactive)]
+        if getattr(node, "published", None):
+            ob.append(kv("messages published (optional outputs only while subscribed)",
+                         ", ".join(f"{k} {v}" for k, v in node.published.items())))
         if obs.gains.paper_envelope:
             ob += [kv("current eta", d.eta), kv("current kappa", d.kappa),
                    kv("current gain norms |L_i|", gain_norms(d.L))]
@@ -133,6 +137,8 @@ class EstimatorDiagnostics:
                    kv("kalman gains now", obs.gains_source)]
             if obs.kalman_fallback:
                 ob.append(kv("last kalman departure", obs.kalman_fallback))
+        if obs.covariance_withdrawn:
+            ob.append(kv("covariance withdrawn (not published, no chi-square gate)", obs.covariance_withdrawn))
         if node.last_clock_jump:
             ob.append(kv("last clock jump", node.last_clock_jump))
         return ob + self._cycles()
@@ -171,8 +177,11 @@ class EstimatorDiagnostics:
               kv("exact bound" if env.noise_bound is not None else "exact bound (noise-free measurements)",
                  env.exact_bound if pl.bound_valid else "none (withdrawn)"),
               kv("exact bound valid", pl.bound_valid if pl.bound_valid else f"false ({pl.bound_invalid_why})")]
+        if pl.bound_note:       # the bounds hold again, certified from data (switchobs_core.runtime.recovery)
+            ob.append(kv("bounds", pl.bound_note))
         if env.noise_bound is not None:
-            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row)",
+            dist = "" if obs.disturbance is None else f", disturbance |w| <= {max(obs.disturbance.w_max):g}"
+            ob.append(kv(f"noise bound (|v| <= {max(obs.noise_max):g} per row{dist})",
                          env.noise_bound if pl.bound_valid else "none (withdrawn)"))
         return ob
 
@@ -184,9 +193,20 @@ class EstimatorDiagnostics:
               kv("late channel messages", pl.late_channel),
               kv("lost channel messages", pl.lost_channel),
               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
-              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off")]
+              kv("samples near a switching instant (channel rows dropped)", pl.near_switch),
+              kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off"),
+              kv("bias alarms (CUSUM)", pl.bias_alarms),
+              kv("model failures (a body the gate starved)", pl.model_failures),
+              kv("re-certifications from data", pl.recertifications),
+              kv("clock tolerance (ms)", pl.clocks.tol * 1e-6)]
+        # each source's least receive - stamp over its recent messages: negative proves its clock
+        # ahead of the estimator's (switchobs_ros.clocks)
+        ob += [kv(f"clock: {t} least latency (ms; negative: ahead)", v) for t, v in pl.clocks.offsets_ms().items()]
+        ob += [kv(f"clock: {t} ahead beyond the tolerance (ms)", v * 1e-6) for t, v in pl.clocks.skewed.items()]
         if pl.last_inconsistency:
             ob.append(kv("last inconsistency", pl.last_inconsistency))
+        if pl.last_alarm:
+            ob.append(kv("last alarm", pl.last_alarm))
         return ob
 
     def _observer_status(self, now_ns: int, node: NodeState, ob: list[KeyValue]) -> tuple[int, str]:
@@ -206,13 +226,17 @@ class EstimatorDiagnostics:
                     and node.last_prediction.stamp_ns > (pl.obs_ns or 0):
                 ob += [kv("outage: predicting (last innovation held), exact bound", node.last_prediction.exact_bound),
                        kv("outage predictions published", node.predictions)]
-        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel):
+        if not pl.bound_valid and (pl.inconsistent or pl.late_channel or pl.lost_channel or pl.bias_alarms
+                                   or pl.model_failures or pl.clocks.skewed):
             level = max(level, DiagnosticStatus.WARN)
             msg += f"; bounds withdrawn: {pl.bound_invalid_why}"
         recs = pl.observer.completed_cycles
         if recs and not recs[-1].matched:
             level = max(level, DiagnosticStatus.WARN)
             msg += "; last cycle did not match the schedule"
+        if pl.observer.covariance_withdrawn:
+            level = max(level, DiagnosticStatus.WARN)
+            msg += "; covariance withdrawn: the Riccati recursion ran out of digits"
         res = pl.residence()
         if res is not None and res.problem:
             level = max(level, DiagnosticStatus.WARN)

@@ -51,7 +51,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import qos_policy_name_from_kind
-from std_msgs.msg import Float64MultiArray, UInt8
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 from visualization_msgs.msg import MarkerArray
@@ -60,7 +60,9 @@ import msg_bridge as mb
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from . import qos
-from .config import PARAMS, EstimatorConfig, check_runtime_value
+from .channel_input import CHANNEL_MSG, channel_type
+from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
+from .demand import Demand, listened
 from .diagnostics import EstimatorDiagnostics, NodeState
 from .params import ConfigError, declare_all, unknown_parameters
 from .pipeline import Estimate, EstimatorPipeline, PipelineLog
@@ -154,7 +156,8 @@ class EstimatorMixin:
         self.observer = pl.observer
         self.bodies = mb.bodies(sys_.state_labels)
         self.get_logger().info(mb.describe_bodies(sys_.state_labels))
-        self.child_frames = list(conf.child_frames)
+        prefix = body_frame_prefix(cfg["frame_prefix"], self.get_namespace())     # one set of frames per robot
+        self.child_frames = [prefix + c for c in conf.child_frames]
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
         self.frame = cfg["world_frame"]
@@ -173,6 +176,10 @@ class EstimatorMixin:
         self.every = {k: int(cfg[f"output.{k}_every"]) for k in ("envelope", "odometry", "covariance", "typed",
                                                                   "markers")}
         self.n_published = 0
+        # optional outputs, and P, only while someone listens (switchobs_ros.demand)
+        self.covariance_allowed = pl.publish_covariance
+        self.demand = Demand(self._covariance_carriers)
+        self.published = dict.fromkeys(("state", "envelope", "covariance", "odometry", "typed", "markers"), 0)
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
 
@@ -229,10 +236,7 @@ class EstimatorMixin:
         # (attribution does not depend on it: source timestamps, switchobs_ros.attribution)
         self._input_subs = []
         hot = []
-        if pl.channel_topic:
-            handle = self._input_handler(None)
-            self.sub_channel = sub(UInt8, pl.channel_topic, self._with_drain(handle), qos.CHANNEL_SUB)
-            hot.append((self.sub_channel, handle))
+        self.sub_channel, self._sub = None, sub     # the channel's: _channel_subscription
         for src in pl.sources:
             handle = self._input_handler(src.index)
             s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB)
@@ -246,8 +250,7 @@ class EstimatorMixin:
         self.sub_set_state = sub(Float64MultiArray, "~/set_state", self.set_state_callback, qos.CHANNEL_SUB)
         self._hot_inputs = tuple(hot)
         self._input_types = {s.topic: s.type for s in pl.sources}      # what each input topic must carry
-        if pl.channel_topic:
-            self._input_types[pl.channel_topic] = "std_msgs/msg/UInt8"
+        self._channel_subscription()
         self.clock_jumps_back = 0
         self.clock_jumps_forward = 0
         self.last_clock_jump = ""
@@ -260,6 +263,26 @@ class EstimatorMixin:
         # sim clock that stops (a replay's end) must not hold the last samples back
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback, clock=self._steady)
+
+    def _channel_subscription(self) -> None:
+        """The channel topic's subscription, of the type :func:`~switchobs_ros.channel_input.channel_type`
+        gives, first among the hot inputs (taken first when a channel message and a pose are ready)."""
+        topic = self.pipeline.channel_topic
+        if not topic or (self.sub_channel is not None and self.pipeline.accepted[topic]):
+            self._channel_tentative = False         # a channel message arrived: the type is settled
+            return
+        self._channel_tentative = self.cfg["channel_type"] == "auto"
+        kind = channel_type(self, topic, self.cfg["channel_type"])
+        if self.sub_channel is not None:
+            if self._input_types.get(topic) == kind:
+                return
+            self._hot_inputs = tuple(h for h in self._hot_inputs if h[0] is not self.sub_channel)
+            self.destroy_subscription(self.sub_channel)
+        handle = self._input_handler(None)
+        self.sub_channel = self._sub(CHANNEL_MSG[kind], topic, self._with_drain(handle), qos.CHANNEL_SUB)
+        self._hot_inputs = ((self.sub_channel, handle), *self._hot_inputs)
+        self._input_types[topic] = kind
+        self.get_logger().info(f"channel topic '{topic}': {kind}")
 
     def _destroy_interfaces(self) -> None:
         """Undo :meth:`_create_interfaces` (managed node: cleanup and shutdown)."""
@@ -298,16 +321,21 @@ class EstimatorMixin:
 
     def _input_handler(self, index: int | None):
         """The handler of one input: ``handle(msg, info)`` with rclpy's MessageInfo ``info`` (its
-        ``source_timestamp``, the publisher's clock, attributes samples to channels); ``index``
-        None is the channel topic."""
+        ``source_timestamp``, the publisher's clock: :mod:`switchobs_ros.attribution`,
+        :mod:`switchobs_ros.clocks`); ``index`` None is the channel topic."""
         pipeline, clock = self.pipeline, self.get_clock()
+        dds = f"{pipeline.channel_topic if index is None else pipeline.sources[index].topic} (DDS source timestamp)"
 
         def handle(msg, info) -> None:
             if not self.answering:
                 self.ignored_inactive += 1
                 return
+            pipeline.publish_covariance = self.covariance_allowed and self.demand.covariance_wanted()
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
+            if src_ns and info.get("received_timestamp") and (    # the sender's system clock against ours
+                    why := pipeline.clocks.seen(dds, src_ns, int(info["received_timestamp"]))):
+                pipeline.withdraw(why)
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
             seq = info.get("publication_sequence_number") if info else None
             if index is None:
@@ -375,33 +403,57 @@ class EstimatorMixin:
         return max(min(self.pair_timeout, window) / 2, 0.005)
 
     def pairing_callback(self) -> None:
+        if self._channel_tentative:         # channel_type auto: until a channel message arrives
+            self._channel_subscription()
         if not self.answering:
             return
         self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
 
+    def _covariance_carriers(self) -> list:
+        """The publishers whose messages carry ``P`` (for :class:`~switchobs_ros.demand.Demand`)."""
+        ev = self.every     # (the node may recreate its publishers: read them each time)
+        return [p for p, on in ((getattr(self, "pub_cov", None), ev["covariance"]),
+                                (self.pub_typed[0] if getattr(self, "pub_typed", ()) else None, ev["typed"]),
+                                (getattr(self, "pub_markers", None), ev["markers"]),
+                                *((p, ev["odometry"]) for p in getattr(self, "pub_odom", []))) if on and p is not None]
+
     def _publish_all(self, estimates: list[Estimate]) -> None:
+        """Publish each estimate: ``~/state`` always, the other outputs at their decimation
+        (``output.*_every``) and only while a subscription is matched to them (:mod:`switchobs_ros.demand`)."""
+        if not estimates:
+            return
         try:
-            ev = self.every
+            ev, n = self.every, self.published
             for e in estimates:
                 k = self.n_published
                 self.n_published = k + 1
                 self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
-                if ev["envelope"] and k % ev["envelope"] == 0:
+                n["state"] += 1
+                if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
                     self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
-                if self.pub_cov is not None and e.P is not None and ev["covariance"] and k % ev["covariance"] == 0:
+                    n["envelope"] += 1
+                if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
                     self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    n["covariance"] += 1
                 if ev["odometry"] and k % ev["odometry"] == 0:
                     for pub, w in zip(self.pub_odom, self.w_odom):
-                        pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                        if listened(pub):
+                            pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
+                            n["odometry"] += 1
                 if ev["typed"] and k % ev["typed"] == 0:
                     pl = self.pipeline
-                    self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
-                    self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                  pl.bound_invalid_why))
-                if self.pub_markers is not None and ev["markers"] and k % ev["markers"] == 0:
+                    if listened(self.pub_typed[0]):
+                        self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        n["typed"] += 1
+                    if listened(self.pub_typed[1]):
+                        self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                      pl.bound_invalid_why, pl.bound_note))
+                        n["typed"] += 1
+                if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
                     g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
                     self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
                                                                 self.body_in_view.get(e.channel)))
+                    n["markers"] += 1
         except Exception as err:
             self.pipeline.internal_error("publish", err)
 
@@ -433,6 +485,7 @@ class EstimatorMixin:
             self.cfg[p.name] = p.value
             if p.name.startswith("output."):
                 self.every[p.name[len("output."):-len("_every")]] = int(p.value)
+                self.demand.expire()
             elif p.name == "sensor_timeout":
                 self.sensor_timeout = float(p.value)
             elif p.name == "future_tolerance":

@@ -1,8 +1,12 @@
-"""Pairing: the sources' messages with one header stamp form one sample.
+"""Pairing: the sources' messages with one header stamp (within the clock tolerance) form one sample.
 
 An input source (:class:`~switchobs_ros.sources.Source`, from the system's input
 specification) feeds some rows of a channel's output ``y_i = C_i x`` (e:outputs).
-Its messages with the same header stamp are the parts of one sample (:class:`Pending`); a sample
+Its messages with the same header stamp are the parts of one sample (:class:`Pending`); with a
+clock tolerance ``d`` (``clock_tolerance_ms``: the sources' clocks disagree by up to it) a part
+joins the nearest sample stamped within ``d`` that lacks its source, and the sample carries the
+stamp of its channel-specific part (the shared part's stamp is off by at most ``d``, an error the
+bounds include: :mod:`switchobs_core.bounds.stamp`). A sample
 is *complete* when every source its channel needs has arrived. :class:`Pairing` keeps the
 samples by stamp (at most :data:`MAX_PENDING`) until the pipeline answers them, and reads a
 sample as a :class:`~switchobs_core.model.measurement.Measurement` of a channel. A part whose partners
@@ -63,8 +67,9 @@ class Pairing:
     any more and is due with the parts it has.
     """
 
-    def __init__(self, sources: tuple[Source, ...], p: tuple[int, ...]):
+    def __init__(self, sources: tuple[Source, ...], p: tuple[int, ...], tolerance_ns: int = 0):
         self.sources = sources
+        self.tol = int(tolerance_ns)
         self._p = p
         # the sources every sample of channel c needs (its own and the shared ones)
         self._required = tuple(tuple(s.index for s in sources if s.channel in (None, c))
@@ -76,9 +81,26 @@ class Pairing:
             now_mono: float) -> Pending:
         """Add source ``index``'s part to the sample at ``stamp_ns`` (a new one waits from ``now_mono``)."""
         pend = self.pending.get(stamp_ns)
+        if pend is None and self.tol:
+            pend = self._near(index, stamp_ns)
         if pend is None:
             pend = self.pending[stamp_ns] = Pending(stamp_ns, now_mono)
         pend.parts[index] = Part(values, None if src_ns is None else int(src_ns), arrival_channel)
+        return pend
+
+    def _near(self, index: int, stamp_ns: int) -> Pending | None:
+        """The pending sample stamped nearest ``stamp_ns`` within the tolerance that lacks source
+        ``index`` (None: none); re-stamped with ``stamp_ns`` when the part is the first
+        channel-specific one."""
+        near = [p for s, p in self.pending.items() if abs(s - stamp_ns) <= self.tol and index not in p.parts]
+        if not near:
+            return None
+        pend = min(near, key=lambda p: abs(p.stamp_ns - stamp_ns))
+        if not self.sources[index].shared and all(self.sources[i].shared for i in pend.parts) \
+                and stamp_ns not in self.pending:
+            del self.pending[pend.stamp_ns]
+            pend.stamp_ns = stamp_ns
+            self.pending[stamp_ns] = pend
         return pend
 
     def complete(self, pend: Pending, channel: int) -> bool:

@@ -4,7 +4,9 @@ A node's parameters are listed as :class:`Param` entries (name, default, descrip
 table is the single source of the parameter reference of the documentation site
 (``tools/docs_gen.py`` renders it). :func:`declare_all` declares them on a node with a
 ``ParameterDescriptor`` and returns their values; a wrong type or a parameter in the params
-file that the node does not know raises :class:`ConfigError` (the node refuses to start).
+file that the node does not know raises :class:`ConfigError` (the node refuses to start), and so
+does a params file of the process's ROS arguments that has no section for the node
+(:func:`switchobs_ros.params_files.unmatched_files`: rcl would ignore it silently).
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from switchobs_core.exceptions import SwitchobsError
+
+from . import params_files
 
 __all__ = ["ConfigError", "Param", "declare_all", "unknown_parameters"]
 
@@ -95,6 +99,8 @@ def _coerce_override(overrides: dict, p: Param) -> None:
         overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(ov.value))
     elif p.type == ParameterType.PARAMETER_DOUBLE_ARRAY and ov.type_ == Parameter.Type.INTEGER_ARRAY:
         overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in ov.value])
+    elif p.type == ParameterType.PARAMETER_DOUBLE_ARRAY and ov.type_ in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
+        overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(ov.value)])   # one number: [it]
 
 
 def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict[str, Any]:
@@ -108,8 +114,11 @@ def declare_all(node: Node, params: list[Param], *, gated: bool = False) -> dict
     ConfigError
         A parameter of the wrong type in the params file or on the command line, or a
         parameter override that the node does not declare (a typo would otherwise be
-        ignored silently).
+        ignored silently), or a params file with no section for the node.
     """
+    why = params_files.unmatched_files(params_files.GLOBAL_FILES, node.get_fully_qualified_name())
+    if why:
+        raise ConfigError(why)
     values: dict[str, Any] = {}
     overrides = getattr(node, "_parameter_overrides", None) or {}
     for p in params:

@@ -15,7 +15,7 @@ For every message the pipeline orchestrates:
    from the publisher's source timestamps and sequence numbers, never guessed;
 4. screening (:mod:`switchobs_ros.screening`): the model against the data, with the core's
    innovation test against the published bound (a sample it refuses is re-attributed, or
-   rejected and every bound withdrawn: :data:`NO_BOUND` until a reset) or its chi-square gate;
+   rejected and every bound withdrawn: :data:`NO_BOUND` until re-certified) or its chi-square gate;
 5. the switched observer (e:switched_observer): ``SwitchedObserver.update`` with the sample's
    :class:`~switchobs_core.model.measurement.Measurement`, and an :class:`Estimate` with the envelope
    (the paper's envelopes and bound, the exact bound).
@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
-from std_msgs.msg import UInt8
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
@@ -48,7 +47,8 @@ from switchobs_core.runtime.cycles import Residence
 from switchobs_core.runtime.observer import SwitchedObserver
 
 from .attribution import ChannelAttribution, Resolution, Verdict
-from .config import EstimatorConfig
+from .clocks import ClockWatch
+from .config import UNCHECKED, EstimatorConfig
 from .control import ControlInput
 from .core_config import load_or_design_table
 from .counters import NO_BOUND, Counters, PipelineLog
@@ -56,7 +56,7 @@ from .loss import SequenceLoss
 from .pairing import MAX_PENDING, DeadTime, Pairing, Pending
 from .params import ConfigError
 from .screening import Screening
-from .set_state import SET_STATE_TOPIC, read_set_state
+from .set_state import apply_set_state
 from .sources import Source, sources_from_specs
 
 __all__ = ["CHANNEL_TOPIC", "INPUT_TOPICS", "MAX_PENDING", "NO_BOUND", "POSE_TOPICS", "Estimate",
@@ -116,13 +116,12 @@ class EstimatorPipeline(Counters):
                  max_abs: float = 1.0e6, future_tolerance_ns: int = 500_000_000, log: PipelineLog | None = None,
                  table_path: Any = None, mode: str = "periodic", cycles: list | None = None,
                  reorder_window_ns: int = 50_000_000, check: bool = False, specs_text: str = "",
-                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None):
+                 chi2_alpha: float = 0.0, control: Any = None, transforms: dict | None = None,
+                 clock_tolerance_ns: int = 0):
         super().__init__(log or PipelineLog())
         self.system = system
         self.table = table
-        self.table_path = table_path
-        self.mode = mode
-        self.cycles = list(cycles or [])
+        self.table_path, self.mode, self.cycles = table_path, mode, list(cycles or [])
         self.observer = observer
         self.x0 = np.array(x0, dtype=float)
         self.sources = tuple(sources)
@@ -135,8 +134,11 @@ class EstimatorPipeline(Counters):
         self.future_ns = int(future_tolerance_ns)
         self.N = system.N
         # the parts: pairing, attribution, the dead time, the model against the data
-        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p))
-        self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns)
+        self.pairing = Pairing(self.sources, tuple(int(p) for p in system.p), clock_tolerance_ns)
+        self.attribution = ChannelAttribution(self.sources, channel_topic, reorder_window_ns, clock_tolerance_ns)
+        self.clocks = ClockWatch(clock_tolerance_ns)    # each source's stamps against the receive clock
+        if clock_tolerance_ns and observer.rounding is not None:    # stamp errors in the bounds
+            observer.rounding.clock(clock_tolerance_ns * 1e-9)
         self.dead_time = DeadTime(int(round(max((c.dead_time for c in self.cycles), default=0.0) * 1e9)),
                                   next((s.index for s in self.sources if s.shared), None))
         self.screening = Screening(system, observer, self.pairing, self, check=check, chi2_alpha=chi2_alpha)
@@ -175,26 +177,30 @@ class EstimatorPipeline(Counters):
             # only if published (the Kalman families always keep theirs)
             own_noise = family_entry(family or family_of_table(table)).rate
             observer = SwitchedObserver(sys_, table, mode=mode, cycles=cycles or None, x0=conf.x0, t0=0.0,
-                                        e0=conf["e0"], bounds=conf.robust, family=family or None,
+                                        e0=conf.e0, bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
-        mode_check = conf["consistency.check"]
-        check = mode_check == "always" or (mode_check == "auto" and conf.noise_max is not None)
+        check = conf["consistency.check"] != "never"      # on whenever a bound is published (auto, always)
         pipe = cls(sys_, table, observer, x0=conf.x0, sources=sources_from_specs(conf.inputs, sys_),
                    channel_topic=conf.inputs.channel_topic, input_frame_id=conf["input_frame_id"],
                    max_abs=conf["max_abs_value"], future_tolerance_ns=int(conf["future_tolerance"] * 1e9),
                    log=log, table_path=table_path, mode=mode, cycles=cycles,
                    reorder_window_ns=int(round(conf["reorder_window_ms"] * 1e6)), check=check,
                    specs_text=conf.inputs.describe(), chi2_alpha=conf["consistency.chi2_alpha"],
-                   control=conf.inputs.control, transforms=conf.transforms)
+                   control=conf.inputs.control, transforms=conf.transforms,
+                   clock_tolerance_ns=int(round(conf["clock_tolerance_ms"] * 1e6)))
         pipe.publish_covariance = conf.publish_covariance
+        pipe.screening.watch_only = conf["consistency.check"] == "auto" and conf.noise_max is None
+        pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
+        h_min = [min((cy.h[c] for cy in cycles), default=conf.robust[0] if conf.robust else 0.0) for c in range(sys_.N)]
+        pipe.attribution.stamped.horizon = {c + 1: int(0.9 * h * 1e9) for c, h in enumerate(h_min)}   # at once
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
-        if pipe.uncovered:
-            log.warn(conf.inputs.uncovered_warning())
+        for why in ([conf.inputs.uncovered_warning()] if pipe.uncovered else []) + ([] if check else [UNCHECKED]):
+            log.warn(why)
         return pipe
 
     # ------------------------------------------------------------------ the parts' state
@@ -259,11 +265,13 @@ class EstimatorPipeline(Counters):
             return []
         return self.on_input(self.by_topic[topic].index, msg, now_ns, now_mono, src_ns, seq)
 
-    def on_channel(self, msg: UInt8, src_ns: int | None = None, now_mono: float | None = None,
+    def on_channel(self, msg: Any, src_ns: int | None = None, now_mono: float | None = None,
                    seq: int | None = None) -> list[Estimate]:
-        """A channel-topic message: validate, count, remember the channel (by its source timestamp
-        ``src_ns`` when given, with the publisher's sequence number ``seq`` when known,
-        :mod:`~switchobs_ros.attribution`); returns the pending samples it makes certain, answered."""
+        """A channel-topic message (``std_msgs/UInt8``, or ``switchobs_msgs/ActiveChannel`` with its
+        switching instant, attributed by stamps: :mod:`~switchobs_ros.switching`): validate, count,
+        remember the channel (by its source timestamp ``src_ns`` when given, with the publisher's
+        sequence number ``seq`` when known, :mod:`~switchobs_ros.attribution`); returns the pending
+        samples it makes certain, answered."""
         out: list[Estimate] = []
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
@@ -273,13 +281,15 @@ class EstimatorPipeline(Counters):
                 self._withdraw_all(self.attribution.remember_invalid(src_ns, seq))
                 return out
             self.accepted[topic] += 1
-            c = int(msg.data)
+            c = mb.channel_value(msg)
             if c != self.attribution.channel:
                 if self.attribution.channel:
                     self.switches += 1
                 self.attribution.switch(c, self.last_ns)
                 self.dead_time.switched()
-            if src_ns is not None:
+            if hasattr(msg, "header"):      # stamped: the switching instant (switchobs_ros.switching)
+                self._withdraw_all(self.attribution.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq))
+            elif src_ns is not None:
                 self._withdraw_all(self.attribution.remember(int(src_ns), c, seq))
             self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
@@ -304,41 +314,9 @@ class EstimatorPipeline(Counters):
             return False
 
     def on_set_state(self, msg: Any, now_ns: int) -> bool:
-        """A ``~/set_state`` message (:mod:`switchobs_ros.set_state`) received at node-clock
-        ``now_ns``. The observer propagates to its stamp and takes the values
-        (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
-        the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
-        error is unknown) until the next reset. A bad message is rejected and counted; True when
-        applied."""
-        topic = SET_STATE_TOPIC
-        try:
-            st = read_set_state(msg, self.system.state_labels, self.max_abs)
-            if not isinstance(st, Rejection) and st.stamp_ns - now_ns > self.future_ns:
-                st = Rejection(Reason.FUTURE_STAMP, "stamp", f"{(st.stamp_ns - now_ns) * 1e-9:.3g} s ahead of the "
-                               "node clock")
-            if not isinstance(st, Rejection) and self.origin_ns is not None and self.obs_ns is not None \
-                    and st.stamp_ns < self.obs_ns:
-                st = Rejection(Reason.OLD_STAMP, "stamp", "before the last estimate (the past cannot be set)")
-            if isinstance(st, Rejection):
-                self.reject(topic, st)
-                return False
-            if self.origin_ns is None:          # before the first sample: the initial estimate
-                for i, v in st.values.items():
-                    self.x0[i] = v
-                self.observer.reset(self.x0, 0.0)
-            else:
-                self.observer.set_estimate((st.stamp_ns - self.origin_ns) * 1e-9, st.values, st.variances)
-                self.obs_ns = st.stamp_ns
-            self.accepted[topic] += 1
-            self.states_set += 1
-            self.bound_valid = False
-            self.bound_invalid_why = "state set by ~/set_state"
-            self.log.info(f"state set at stamp {st.stamp_ns} ({', '.join(st.labels)}); exact_bound is "
-                          f"{NO_BOUND:g} (no bound known) from now on")
-            return True
-        except Exception as err:
-            self.internal_error(topic, err)
-            return False
+        """A ``~/set_state`` message received at node-clock ``now_ns``
+        (:func:`~switchobs_ros.set_state.apply_set_state`); True when applied."""
+        return apply_set_state(self, msg, now_ns)
 
     def on_pose(self, part: str, msg: PoseStamped, now_ns: int, now_mono: float | None = None,
                 src_ns: int | None = None) -> list[Estimate]:
@@ -371,6 +349,9 @@ class EstimatorPipeline(Counters):
                 self.reject(topic, rej)
                 return out
             self.accepted[topic] += 1
+            skew = self.clocks.seen(topic, stamp_ns, now_ns)
+            if skew:
+                self.withdraw(skew)
             self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
@@ -378,7 +359,7 @@ class EstimatorPipeline(Counters):
             res = self.attribution.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
-                self.pairing.settle(stamp_ns)       # older samples will not be completed now
+                self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
             for s in self.pairing.overflow():       # the oldest one's partners are overdue
                 self._flush(s, out, now_mono)
             self._advance(out, now_mono)
@@ -436,25 +417,28 @@ class EstimatorPipeline(Counters):
         self._answer(pend, res.channel, out)
 
     def _attribute(self, pend: Pending, now_mono: float, res: Resolution | None) -> Resolution:
-        """The channel a sample is answered on. A sample sent while channel messages were lost
-        takes the one channel the consistency test allows, if exactly one; else its shared parts
+        """The channel a sample is answered on. A sample sent while channel messages were lost, or
+        stamped within the clock tolerance of a switching instant, takes the one channel the
+        consistency test allows, if exactly one; else its shared parts
         (the same rows in every channel) are used alone, on the observer's channel (no switching
         instant on an unknown channel), and its channel parts are rejected."""
         if res is None:
             res = self.attribution.resolve(pend, now_mono)
             if not res.certain:          # pushed out of the window before its channel was certain
                 res = Resolution(Verdict.UNCERTAIN)
-        if res.verdict is not Verdict.LOST:
+        if res.verdict not in (Verdict.LOST, Verdict.NEAR_SWITCH):
             return res
-        if self.screening.testing and self.origin_ns is not None:
+        if self.screening.names and self.origin_ns is not None:
             fits = self.screening.fitting_channels(pend, (pend.stamp_ns - self.origin_ns) * 1e-9)
             if len(fits) == 1:
                 self.lost_channel_named += 1
                 return Resolution.of(fits[0])
+        if res.verdict is Verdict.NEAR_SWITCH:
+            self.near_switch += 1
         if not any(self.sources[i].shared for i in pend.parts):
             return res
         dropped = [i for i in pend.parts if not self.sources[i].shared]
-        reason, detail = Verdict.LOST.rejection
+        reason, detail = res.verdict.rejection
         self.reject_all([self.sources[i].topic for i in dropped],
                         Rejection(reason, self.channel_topic or "channel", detail))
         for i in dropped:
@@ -472,7 +456,7 @@ class EstimatorPipeline(Counters):
                 self.control.start(self.observer, self.origin_ns)
         t = (pend.stamp_ns - self.origin_ns) * 1e-9
         guessed = self.attribution.guessed(pend)
-        if guessed and self.screening.testing and len(self.screening.fitting_channels(pend, t)) == 1:
+        if guessed and self.screening.names and len(self.screening.fitting_channels(pend, t)) == 1:
             guessed = False       # named by the consistency test (re-attributed below if not `channel`)
         m = self.screening.admit(pend, t, m)
         if m is None:
@@ -487,6 +471,7 @@ class EstimatorPipeline(Counters):
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
+            self.screening.taken(pend, t, m)        # the recovery: a window may re-certify the bounds
             self.obs_ns = pend.stamp_ns
             self.updates += 1
             self.parts_used += len(pend.parts)

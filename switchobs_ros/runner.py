@@ -21,6 +21,7 @@ from rclpy.executors import ExternalShutdownException
 from switchobs_core.exceptions import one_line
 from switchobs_core.threads import single_threaded_blas
 
+from . import params_files
 from .params import ConfigError
 from .ros_args import with_float_lists
 
@@ -48,7 +49,9 @@ def run_node(node_cls, prog: str, args=None) -> int:
     sys.unraisablehook = _quiet_interrupt_in_finalizers(sys.unraisablehook)
     try:
         single_threaded_blas()  # small matrices; see switchobs_core.threads (loads BLAS: a Ctrl-C may land here)
-        rclpy.init(args=with_float_lists(sys.argv if args is None else args))   # [1, 0.8]: doubles
+        argv = sys.argv if args is None else args
+        params_files.GLOBAL_FILES[:] = params_files.params_files(argv)      # checked by declare_all
+        rclpy.init(args=with_float_lists(argv))   # [1, 0.8]: doubles
     except KeyboardInterrupt:
         return 0
     except Exception as err:

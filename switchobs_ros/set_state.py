@@ -17,7 +17,7 @@ import numpy as np
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
 
-__all__ = ["SET_STATE_TOPIC", "SetState", "read_set_state"]
+__all__ = ["SET_STATE_TOPIC", "SetState", "apply_set_state", "read_set_state"]
 
 #: The set-state input's name in the counters.
 SET_STATE_TOPIC = "~/set_state"
@@ -58,3 +58,41 @@ def read_set_state(msg: Any, state_labels: Sequence[str], max_abs: float) -> Set
     if not values and not variances:
         return Rejection(Reason.BAD_LAYOUT, "labels", "names no state entry")
     return SetState(arr.stamp_ns, tuple(arr.labels), values, variances)
+
+
+def apply_set_state(pipe: Any, msg: Any, now_ns: int) -> bool:
+    """A ``~/set_state`` message received by the pipeline ``pipe`` at node-clock
+    ``now_ns``. The observer propagates to its stamp and takes the values
+    (:meth:`SwitchedObserver.set_estimate`); before the first sample they replace entries of
+    the initial estimate. The exact bound is withdrawn (:data:`NO_BOUND`: the set entries'
+    error is unknown) until re-certified from data. A bad message is rejected and counted; True when
+    applied."""
+    topic = SET_STATE_TOPIC
+    try:
+        st = read_set_state(msg, pipe.system.state_labels, pipe.max_abs)
+        if not isinstance(st, Rejection) and st.stamp_ns - now_ns > pipe.future_ns:
+            st = Rejection(Reason.FUTURE_STAMP, "stamp", f"{(st.stamp_ns - now_ns) * 1e-9:.3g} s ahead of the "
+                           "node clock")
+        if not isinstance(st, Rejection) and pipe.origin_ns is not None and pipe.obs_ns is not None \
+                and st.stamp_ns < pipe.obs_ns:
+            st = Rejection(Reason.OLD_STAMP, "stamp", "before the last estimate (the past cannot be set)")
+        if isinstance(st, Rejection):
+            pipe.reject(topic, st)
+            return False
+        if pipe.origin_ns is None:          # before the first sample: the initial estimate
+            for i, v in st.values.items():
+                pipe.x0[i] = v
+            pipe.observer.reset(pipe.x0, 0.0)
+        else:
+            pipe.observer.set_estimate((st.stamp_ns - pipe.origin_ns) * 1e-9, st.values, st.variances)
+            pipe.obs_ns = st.stamp_ns
+        pipe.accepted[topic] += 1
+        pipe.states_set += 1
+        pipe.bound_valid = False
+        pipe.bound_invalid_why = "state set by ~/set_state"
+        pipe.log.info(f"state set at stamp {st.stamp_ns} ({', '.join(st.labels)}); exact_bound is "
+                      f"{-1:g} (no bound known) from now on")
+        return True
+    except Exception as err:
+        pipe.internal_error(topic, err)
+        return False

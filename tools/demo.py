@@ -55,17 +55,19 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
         init: str = "paper", seed: int = 0, out: Path | None = None, gain_table: str = "",
         quiet: bool = False, extra_estimator: dict | None = None, noise_std: float = 0.0,
         schedule_params: dict | None = None, process_noise: float = 0.0, system: str = "paper",
-        initial_state: tuple | None = None) -> dict:
+        initial_state: tuple | None = None, extra_camera: dict | None = None) -> dict:
     """Run the demo; return the collected series (stamps in s from the first tick).
 
     ``schedule_params`` (``schedule.mode/tau/s``) replaces the named ``schedule``;
     ``process_noise`` is camera_sim's plant noise q (Qc = q^2 I). ``system`` is any system
     (a scenario or a YAML file with an ``inputs:`` section): both nodes use it, camera_sim
-    starting from ``initial_state`` (default: the paper's scene)."""
+    starting from ``initial_state`` (default: the paper's scene). ``extra_camera`` overrides
+    camera_sim's parameters (``publish_clock: False`` runs both nodes on the system clock)."""
     stop = _InterruptFlag()
     try:
         return _run(stop, schedule, duration, time_scale, rate, init, seed, out, gain_table, quiet,
-                    extra_estimator, noise_std, schedule_params, process_noise, system, initial_state)
+                    extra_estimator, noise_std, schedule_params, process_noise, system, initial_state,
+                    extra_camera)
     finally:
         stop.restore()
 
@@ -73,7 +75,7 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
 def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float, rate: float, init: str,
          seed: int, out: Path | None, gain_table: str, quiet: bool, extra_estimator: dict | None,
          noise_std: float, schedule_params: dict | None, process_noise: float, system: str = "paper",
-         initial_state: tuple | None = None) -> dict:
+         initial_state: tuple | None = None, extra_camera: dict | None = None) -> dict:
     lease = None
     if "ROS_DOMAIN_ID" not in os.environ or os.environ.get("SWITCHOBS_CLAIM_DOMAIN", "1") == "1":
         lease = claim_domain()
@@ -99,6 +101,9 @@ def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float
     cam_params = dict(sched, rate=rate, duration=duration, publish_clock=True, time_scale=time_scale,
                       wait_for_subscribers=1, wait_for_truth_subscribers=1, seed=seed, noise_std=float(noise_std),
                       process_noise=float(process_noise), system=system, initial_state=list(map(float, x0)))
+    cam_params.update(extra_camera or {})
+    if not cam_params["publish_clock"]:
+        est_params["use_sim_time"] = False
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Collector(["/estimator/state", "/estimator/envelope", "/sim/truth"], name="switchobs_demo")
     est = cam = None

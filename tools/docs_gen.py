@@ -125,9 +125,11 @@ def parameters_reference() -> str:
     out = ["# Node parameters", "",
            "Generated from the parameter tables the nodes declare (`switchobs_ros.config.PARAMS`, "
            "`switchobs_ros.camera_sim.PARAMS`) at every build of this site. A params file is "
-           "`<node>: ros__parameters: {...}` with nested keys joined by `.`; `config/estimator.yaml` and "
-           "`config/camera_sim.yaml` list every parameter with its default. An unknown name or a value of "
-           "the wrong type stops start-up with one line and exit code 2 "
+           "`<node key>: ros__parameters: {...}` with nested keys joined by `.`; `config/estimator.yaml` and "
+           "`config/camera_sim.yaml` list every parameter with its default, keyed `/**` (any node, in any "
+           "namespace: one file for every robot of a fleet). An unknown name, a value of the wrong type, or "
+           "a params file with no section for the node (`estimator:` under `/robot1`) stops start-up with "
+           "one line and exit code 2 "
            "([Troubleshooting](../troubleshooting.md)).", ""]
     for title, params, runtime in (("estimator", config.PARAMS, config.RUNTIME_PARAMS),
                                    ("camera_sim", camera_sim.PARAMS, {})):

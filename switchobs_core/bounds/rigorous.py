@@ -12,7 +12,19 @@ One owner of the two ellipsoids the observer keeps (the argument is in
   (:meth:`RoundingBound.rho_step`, :meth:`RoundingBound.rho_correct`);
 * the *noise bound* (a declared ``|v_j| <= v_max``): the same with the noise's image ``G v`` added
   to every step (``G = Gamma_A L`` for the held innovation of LMI gains, ``G = K`` for a Kalman
-  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``.
+  correction), the degenerate ellipsoid ``E(p v_max^2 G G')``; and with a declared disturbance
+  (``x' = A x + B_w w``, ``|w_j| <= max_j``, :mod:`switchobs_core.model.disturbance`) the ball of
+  its reachable set over every step, ``||D^-1 d(dt)|| <= R(dt)``
+  (:class:`~switchobs_core.numerics.disturbance_reach.DisturbanceReach`): the degenerate ellipsoid
+  ``E(G_d G_d')`` of its first-order part joined to the noise's shaped term and the ball of its
+  second-order part joined to the step's residual (:meth:`RoundingBound.disturbed`, a term of its
+  own). The exact bound stays the model's (noise-free samples, no disturbance);
+* a declared clock tolerance ``d`` (:meth:`RoundingBound.clock`: the largest error of a sample's
+  stamp): each sample carries a measurement error of at most ``w`` of
+  :class:`~switchobs_core.bounds.stamp.StampError`, bounded from the estimate and the sets' own
+  bound before the sample (their largest axis in balanced units), which enters both sets through
+  the gain as the noise does (the degenerate ellipsoid ``E(w^2 G G')``; ``(sqrt(p) v_max + w)^2``
+  in the noise set, ``||v + w|| <= ||v|| + ||w||``): neither set assumes exact stamps.
 
 The observer steps it with the error maps of every sample
 (:mod:`switchobs_core.runtime.error_maps`): :meth:`RoundingBound.step` for a propagation step,
@@ -34,12 +46,18 @@ from typing import Any
 
 import numpy as np
 
+from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
 from .read import AnchoredBound
+from .stamp import StampError
 
-__all__ = ["RoundingBound"]
+__all__ = ["NO_E0", "RoundingBound"]
+
+#: Why the bounds are withdrawn from the start when no initial error bound is given (``e0`` None).
+NO_E0 = ("e0 is not known (e0 = -1): no bound until the data certify one (a window of one switching cycle "
+         "of consistent samples, switchobs_core.runtime.recertify)")
 
 _U = UNIT_ROUNDOFF
 
@@ -49,13 +67,15 @@ class RoundingBound:
 
     ``b = RoundingBound(A, p_max, e0, noise_max, B=B, scale=d)``; ``b.reset()`` restarts at
     ``S = e0^2 I``. ``noise_max`` is one bound per channel (None: no noise ellipsoid); ``B`` the
-    input matrix (None: no input); ``scale`` the balancing of ``A``
+    input matrix (None: no input); ``disturbance`` a
+    :class:`~switchobs_core.model.disturbance.Disturbance` entering the noise ellipsoid (None: none;
+    needs ``noise_max``); ``scale`` the balancing of ``A``
     (:func:`~switchobs_core.numerics.scaling.balance`, computed when not given; the ZOH cache
     entries stepped here must carry the same one).
     """
 
-    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, *,
-                 B: np.ndarray | None = None, scale: np.ndarray | None = None) -> None:
+    def __init__(self, A: np.ndarray, p_max: int, e0: float | None, noise_max: Sequence[float] | None, *,
+                 B: np.ndarray | None = None, scale: np.ndarray | None = None, disturbance: Any = None) -> None:
         self.n = A.shape[0]
         self.e0 = e0
         self.noise_max = noise_max
@@ -65,9 +85,15 @@ class RoundingBound:
         self.nA = nu2(balanced(A, self.d))
         self.g_n = gamma(self.n + 2)
         self.g_p = gamma(p_max + 2)
+        #: The reachable set of the declared disturbance per step (None: none declared).
+        self.reach = (DisturbanceReach(A, disturbance.B_w, disturbance.w_max, self.d)
+                      if disturbance is not None and disturbance.active and noise_max else None)
         self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
+        self._AB = (A, B)
+        self.tolerance = 0.0            # the clock tolerance d (s; :meth:`clock`)
+        self.stamp: StampError | None = None
         # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
         # per component of a step's result, in balanced units
         self._uf = (self.n + p_max + (0 if B is None else B.shape[1]) + 4) * UNDERFLOW * math.sqrt(
@@ -75,14 +101,52 @@ class RoundingBound:
         self.reset()
 
     def reset(self) -> None:
-        """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn."""
-        self.ell = ErrorEllipsoid(self.n, self.e0, self.d)
-        self.ellv = ErrorEllipsoid(self.n, self.e0, self.d) if self.noise_max else None
-        self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
+        """``S = e0^2 I`` for both ellipsoids; nothing held; the bound no longer withdrawn (with
+        ``e0`` None: withdrawn until :meth:`restart`, no initial error being known)."""
         self.vn = 0.0       # sqrt(p) v_max of the held sample (the noise's largest norm)
+        self.w = 0.0        # the held sample's stamp error (its measurement error's largest norm)
         self.nu_err = 0.0   # rounding of the held innovation nu = y - C x_hat (and of y itself)
+        self.restart(self.e0)
+        if self.e0 is None:
+            self.withdrawn = NO_E0
+
+    def restart(self, e: float | None) -> None:
+        """Both ellipsoids the ball ``S = e^2 I`` from now on (a bound ``||x - x_hat|| <= e`` that holds
+        now: a re-certification, :mod:`switchobs_core.runtime.recertify`); the held innovation's
+        residuals are kept; the bound no longer withdrawn."""
+        r = 0.0 if e is None else float(e)
+        self.ell = ErrorEllipsoid(self.n, r, self.d)
+        self.ellv = ErrorEllipsoid(self.n, r, self.d) if self.noise_max else None
+        self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
+
+    def clock(self, tolerance: float) -> None:
+        """Declare the largest stamp error ``d`` (s) of any sample: from then on every sample's
+        measurement error of :class:`~switchobs_core.bounds.stamp.StampError` enters both sets
+        (0: exact stamps)."""
+        self.tolerance = max(float(tolerance), 0.0)
+        if self.tolerance > 0.0 and self.stamp is None:
+            self.stamp = StampError(self._AB[0], self._AB[1], scale=self.d)
+
+    def beta(self) -> float:
+        """``>= ||D^-1 e||`` over both sets (the larger: one allowance serves both): the largest
+        eigenvalue of ``D^-1 S D^-1``, the solver's error included
+        (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper`)."""
+        scale = np.outer(self._id, self._id)
+        b = self.ell.lam_upper(self.ell.S * scale)
+        if self.ellv is not None:
+            b = max(b, self.ellv.lam_upper(self.ellv.S * scale))
+        return math.sqrt(b) * (1.0 + 2.0 * _U)
+
+    def stamp_error(self, C: np.ndarray, x: np.ndarray, beta: float | None = None,
+                    u: np.ndarray | None = None) -> float:
+        """``w``: the measurement error a stamp error within the tolerance makes in a sample of
+        rows ``C`` taken where the estimate is ``x`` and the balanced error at most ``beta``
+        (default :meth:`beta`, the sets now); 0 without a tolerance."""
+        if self.stamp is None or self.tolerance <= 0.0:
+            return 0.0
+        return self.stamp.bound(C, x, self.beta() if beta is None else beta, self.tolerance, u)
 
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
@@ -110,10 +174,13 @@ class RoundingBound:
         return fro_norm(Ks), fro_norm(Hs), kappa
 
     # ------------------------------------------------------------------ residuals
-    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int) -> None:
-        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, and its noise's norm."""
+    def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int,
+             u: np.ndarray | None = None) -> None:
+        """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, its noise's norm and
+        its stamp error's (:meth:`stamp_error`, from the sets at the sample; ``u`` the held input)."""
         self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
                        + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
+        self.w = self.stamp_error(C, x, u=u) if self.tolerance else 0.0
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
 
@@ -138,6 +205,38 @@ class RoundingBound:
             un = math.sqrt(float(u @ u))
             rho += (e.epsG * self.fB + self.g_m * e.fGB) * un
         return rho * (1.0 + 8.0 * _U)
+
+    def disturbed(self, dt: float, G1: np.ndarray | None, c1: float, K: np.ndarray | None = None,
+                  H: np.ndarray | None = None, nIKH: float = 1.0) -> tuple[np.ndarray | None, float, float]:
+        """The noise ellipsoid's shaped term ``(G, c)`` with the disturbance of a step over ``dt``
+        joined, and the ball it adds (balanced): ``(G, c, r)``. The disturbance's ``E(G_d G_d')``
+        (:meth:`~switchobs_core.numerics.disturbance_reach.DisturbanceReach.shaped`; through
+        ``I - K H`` for a Kalman sample's fused map, ``nIKH >= ||I - K H||`` on its ball) and the noise's
+        ``E(c1 G1 G1')`` lie in ``E(G G')``, ``G = [sqrt(c1 (1 + a)) G1, sqrt(1 + 1/a) G_d]`` for any
+        ``a > 0`` (``a`` balances their balanced traces; the scalings are rounded up, the products'
+        rounding, relative ``u``, and that of ``(I - K H) G_d`` are in ``r``)."""
+        if self.reach is None or not dt > 0.0:
+            return G1, c1, 0.0
+        Gd, r = self.reach.shaped(dt)
+        r *= nIKH
+        idc = self._id[:, None]
+        if K is not None:       # (I - K H) G_d = G_d - K (H G_d), entrywise error below
+            HG = H @ Gd
+            KHG = K @ HG
+            err = (gamma(self.n + 2) + gamma(H.shape[0] + 2) + _U) * (np.abs(K) @ (np.abs(H) @ np.abs(Gd))) \
+                + _U * (np.abs(Gd) + np.abs(KHG))
+            Gd = Gd - KHG
+            r += 2.0 * fro_norm(err * idc)
+        fd = fro_norm(Gd * idc)
+        if G1 is None or not c1 > 0.0 or G1.size == 0:
+            return Gd, 1.0, r * (1.0 + 8.0 * _U)
+        f1 = fro_norm(G1 * idc) * math.sqrt(c1)
+        a = min(max(fd / f1, 1e-8), 1e8) if f1 > 0.0 else 1e8
+        s1 = math.sqrt(c1 * (1.0 + a)) * (1.0 + 4.0 * _U)
+        s2 = math.sqrt(1.0 + 1.0 / a) * (1.0 + 4.0 * _U)
+        G = np.hstack([G1 * s1, Gd * s2])
+        r += 2.0 * _U * (f1 * s1 / math.sqrt(c1) + fd * s2)
+        return G, 1.0, r * (1.0 + 8.0 * _U)
 
     def rho_input(self, e: Any, dt: float, d: np.ndarray, x: np.ndarray) -> float:
         """Residual bound (balanced) of adding an input change's exact ZOH to the estimate,
@@ -164,6 +263,12 @@ class RoundingBound:
         return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
                 + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
+    def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
+        """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
+        both sets: ``||Phi~||_D beta + rho`` (:meth:`beta`; the step's residual, :meth:`rho_step`)."""
+        rho = max(self.rho_step(e, dt, x0, xm, ell, None, u) for ell in (self.ell, self.ellv) if ell is not None)
+        return (e.nPhi * self.beta() + rho) * (1.0 + 4.0 * _U)
+
     # ------------------------------------------------------------------ steps
     def _check(self) -> None:
         """Withdraw the bound (module docstring) once a set is no longer finite."""
@@ -172,14 +277,21 @@ class RoundingBound:
                               "the bounds are withdrawn until the next reset")
 
     def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool, absE: tuple | None = None) -> tuple | None:
-        """A step of the noise ellipsoid: the held innovation's noise enters through ``Gamma L``
-        (``||v||^2 <= p v_max^2``); open-loop steps and Kalman prediction steps add none."""
-        if GL is not None and self.vn > 0.0:
+               keep: bool, absE: tuple | None = None, dt: float = 0.0, vn: float | None = None) -> tuple | None:
+        """A step of an ellipsoid over ``dt`` with a held innovation: its noise (``vn``, default the
+        held ``sqrt(p) v_max``; 0 for the exact set) and its stamp error ``w`` enter through
+        ``Gamma L`` (``||v + w|| <= vn + w``; open-loop steps and Kalman prediction steps add
+        none), a declared disturbance as :meth:`disturbed` says (``dt`` 0 for the exact set: none)."""
+        vn = self.vn if vn is None else vn
+        c = vn ** 2 if not self.w else (vn + self.w) ** 2 * (1.0 + 4.0 * _U)
+        G, c = (GL, c) if GL is not None and c > 0.0 else (None, 0.0)
+        G, c, r = self.disturbed(dt, G, c)
+        rho += r
+        if G is not None:
             if keep:
-                ell.step_shaped(E, rho, GL, self.vn ** 2, absM=absE)
+                ell.step_shaped(E, rho, G, c, absM=absE)
                 return None
-            return ell.propagate_shaped(E, rho, GL, self.vn ** 2, absM=absE)
+            return ell.propagate_shaped(E, rho, G, c, absM=absE)
         if keep:
             ell.step(E, rho, absE)
             return None
@@ -193,10 +305,11 @@ class RoundingBound:
             return
         absE = e.abs_E() if hasattr(e, "abs_E") else None
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra, absE)
+            self._noise(self.ell, e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
+                        e.GL if nu is not None and self.w else None, True, absE, 0.0, 0.0)
             if self.ellv is not None:
                 self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
-                            e.GL if nu is not None else None, True, absE)
+                            e.GL if nu is not None else None, True, absE, dt)
         self._check()
 
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
@@ -204,11 +317,12 @@ class RoundingBound:
         """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
         (``extra`` as in :meth:`step`)."""
         with np.errstate(over="ignore", invalid="ignore"):
-            S, _ = self.ell.propagate(e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra)
+            S, _ = self._noise(self.ell, e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
+                               e.GL if nu is not None and self.w else None, False, None, 0.0, 0.0)
             Sv = None
             if self.ellv is not None:
                 Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
-                                    e.GL if nu is not None else None, False)
+                                    e.GL if nu is not None else None, False, dt=dt)
         return S, Sv
 
     def correct(self, M: np.ndarray, rho: float, K: np.ndarray, H: np.ndarray, p: int, channel: int) -> None:
@@ -219,10 +333,13 @@ class RoundingBound:
             return
         emap = gamma(H.shape[0] + 1) * self.gain_norms(K, H)[2]
         with np.errstate(over="ignore", invalid="ignore"):
-            self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
-            if self.ellv is not None:      # e^+ = (I - K H) e^- + K v
+            if self.w:      # e^+ = (I - K H) e^- + K w: the stamp error
+                self.ell.step_shaped(M, rho + emap * math.sqrt(self.ell.lam_scaled()), K, self._wc(0, 0.0))
+            else:
+                self.ell.step(M, rho + emap * math.sqrt(self.ell.lam_scaled()))
+            if self.ellv is not None:      # e^+ = (I - K H) e^- + K (v + w)
                 self.ellv.step_shaped(M, rho + emap * math.sqrt(self.ellv.lam_scaled()), K,
-                                      p * self.noise_max[channel - 1] ** 2)
+                                      self._wc(p, self.noise_max[channel - 1]))
         self._check()
 
     def fused(self, e: Any, dt: float, m: Any, x0: np.ndarray, xm: np.ndarray, rc: float,
@@ -240,12 +357,21 @@ class RoundingBound:
                 rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
                        + m.emap * math.sqrt(ell.lam_scaled()))
                 Z, w, c, mn = m.sandwich(ell)
-                if noisy:       # e^+ = (I - K H) e^- + K v
-                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K,
-                                                                 p * self.noise_max[channel - 1] ** 2)
+                if noisy:       # e^+ = (I - K H) (e^- + d) + K (v + w)
+                    G, cg, r = self.disturbed(dt, K, self._wc(p, self.noise_max[channel - 1]), K, m.H, m.nIKH)
+                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho + r, mn, G, cg)
+                elif self.w:    # e^+ = (I - K H) e^- + K w: the stamp error
+                    ell.S, ell.tr = ell.propagate_shaped_product(Z, w, c, rho, mn, K, self._wc(0, 0.0))
                 else:
                     ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
+
+    def _wc(self, p: int, v_max: float) -> float:
+        """``(sqrt(p) v_max + w)^2`` rounded up: the squared norm bound of a sample's noise
+        (``p`` rows within ``v_max``) plus its stamp error (``p v_max^2`` without one)."""
+        if not self.w:
+            return p * v_max ** 2
+        return (math.sqrt(p) * v_max * (1.0 + 2.0 * _U) + self.w) ** 2 * (1.0 + 4.0 * _U)
 
     # ------------------------------------------------------------------ bounds
     def bounds(self, S: np.ndarray | None = None, Sv: np.ndarray | None = None, *,

@@ -13,7 +13,7 @@ from ..exceptions import InvalidArgument
 from ..families import DESIGNABLE, family_entry
 from ..files import check_output
 from ..loading import MAX_FILE_BYTES
-from ..model.scenarios import load_noise, load_system
+from ..model.scenarios import load_disturbance, load_noise, load_system
 from ..model.schedule import Cycle
 from ..model.system import LTISystem
 from ..ranges import MAX_CYCLES, check_count
@@ -196,7 +196,8 @@ def run_kalman(args: argparse.Namespace, system: LTISystem, cycles: list[Cycle])
     if args.robust is not None:
         raise InvalidArgument("--robust designs LMI gains for any schedule in a box; Kalman gains need a known "
                               "schedule (without one the estimator runs the Riccati recursion online: mode robust)")
-    noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise)
+    noise = load_noise(args.config, system, meas_std=args.meas_noise, process_q=args.process_noise,
+                       disturbance=load_disturbance(args.config, system))
     kd = design_kalman(system, cycles, args.rate, noise, progress=args.progress)
     table = kalman_table(system, [kd])
     args.output = save(table, args.output)

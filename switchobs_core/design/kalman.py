@@ -35,6 +35,15 @@ before the doubling from the growth of the directions only that channel sees ove
 unseen stretch, after it from the span of the priors themselves. A table is never written for a
 filter that no float64 filter can run.
 
+Process noise and a declared disturbance. ``Q_c`` is the spectral density of continuous-time white
+noise, discretised exactly per sample step (van Loan, ``Q_d = int_0^dt e^{A s} Q_c e^{A's} ds``). A
+system that declares a bounded disturbance ``x' = A x + B_w w``, ``|w_j| <= max_j``
+(:mod:`switchobs_core.model.disturbance`) and no process noise of its own gets
+``Q_c = B_w diag(max^2) B_w'`` (:func:`switchobs_core.model.scenarios.load_noise`): the same ``B_w``
+read as a spectral density with ``max_j^2`` per input (a white acceleration of intensity
+``0.04 m^2/s^3`` for ``max = 0.2 m/s^2``), not the discretised equivalent. It tunes the gains only;
+the guarantee under the disturbance is the noise bound's, whatever the gains.
+
 The result is a :class:`~switchobs_core.table.kalman.KalmanDesign` (the stored data and its lookup by
 sample phase, :mod:`switchobs_core.table.kalman`), which a gain table holds
 (:func:`~switchobs_core.table.gains.kalman_table`).

@@ -89,6 +89,11 @@ def _array(x: Any, where: str) -> np.ndarray:
             return _array(x.tolist(), where)
         return x.astype(float)
     if isinstance(x, (list, tuple)):
+        if _plain_numbers(x):       # the common case (a table's P0 at n = 132: 17 424 entries) at C speed
+            try:
+                return np.array(x, dtype=float)
+            except ValueError:
+                pass                # ragged: the element-wise path below says so
         rows = [_array(v, where) for v in x]
         try:
             return np.array(rows, dtype=float)
@@ -97,6 +102,15 @@ def _array(x: Any, where: str) -> np.ndarray:
                 f"{where} is a ragged nested list; give a scalar, a vector or a square matrix"
             ) from None
     return np.array(_number(x, where))
+
+
+def _plain_numbers(x: list | tuple) -> bool:
+    """``x`` is a list of ints and floats or a list of such lists (no booleans, strings or deeper
+    nesting): :func:`_array` may convert it at once."""
+    plain = (int, float)
+    if all(type(v) in plain for v in x):
+        return True
+    return all(type(r) in (list, tuple) and all(type(v) in plain for v in r) for r in x)
 
 
 def _std(x: Any, where: str) -> float:

@@ -22,11 +22,12 @@ import numpy as np
 
 from ..exceptions import InvalidSystem
 from ..loading import as_number
+from .disturbance import Disturbance
 from .noise import NoiseModel
 from .system import LTISystem, read_spec
 
 __all__ = ["paper_system", "camera_agents", "SCENARIOS", "build_scenario", "system_from_dict", "load_system",
-           "load_noise", "PAPER_D"]
+           "load_noise", "load_disturbance", "PAPER_D"]
 
 #: Most agents :func:`camera_agents` builds (n = 4 (M + 1) states): bounds what a file asks for.
 MAX_AGENTS = 200
@@ -152,9 +153,10 @@ def build_scenario(name: str, /, **params: Any) -> LTISystem:
 def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
     """A system from a parsed YAML mapping: ``scenario: name`` with the scenario's
     parameters, or the explicit schema of :meth:`LTISystem.from_dict`."""
-    if isinstance(spec, dict) and ("noise" in spec or "inputs" in spec):
-        # the noise model is read by load_noise, the input specifications by msg_bridge.inputs
-        spec = {k: v for k, v in spec.items() if k not in ("noise", "inputs")}
+    if isinstance(spec, dict) and ("noise" in spec or "inputs" in spec or "disturbance" in spec):
+        # the noise model is read by load_noise, the disturbance by load_disturbance, the input
+        # specifications by msg_bridge.inputs
+        spec = {k: v for k, v in spec.items() if k not in ("noise", "inputs", "disturbance")}
     if isinstance(spec, dict) and "scenario" in spec:
         params = {k: v for k, v in spec.items() if k != "scenario"}
         if any(not isinstance(k, str) for k in params):
@@ -169,19 +171,42 @@ def system_from_dict(spec: Any, *, source: str = "<dict>") -> LTISystem:
     return LTISystem.from_dict(spec, source=source)
 
 
-def load_noise(spec: str | Path, system: LTISystem, *, meas_std: Any = None,
-               process_q: float | None = None) -> NoiseModel:
-    """The noise model of a system: the ``noise:`` mapping of its YAML file (defaults for a
-    built-in scenario or a file without one, :func:`switchobs_core.model.noise.default_noise`),
-    then the command-line overrides ``meas_std`` (``--meas-noise``) and ``process_q``
-    (``--process-noise``); see :meth:`NoiseModel.from_mapping`."""
+def _section(spec: str | Path, key: str) -> tuple[Any, str]:
+    """The ``key:`` mapping of a system file and its name for messages (None for a built-in scenario)."""
     s = str(spec)
-    mapping, source = None, "noise"
     if s not in SCENARIOS:
         data = read_spec(Path(s))
         if isinstance(data, dict):
-            mapping, source = data.get("noise"), f"{s}: noise"
+            return data.get(key), f"{s}: {key}"
+    return None, key
+
+
+def load_noise(spec: str | Path, system: LTISystem, *, meas_std: Any = None,
+               process_q: float | None = None, disturbance: Disturbance | None = None) -> NoiseModel:
+    """The noise model of a system: the ``noise:`` mapping of its YAML file (defaults for a
+    built-in scenario or a file without one, :func:`switchobs_core.model.noise.default_noise`),
+    then the command-line overrides ``meas_std`` (``--meas-noise``) and ``process_q``
+    (``--process-noise``); see :meth:`NoiseModel.from_mapping`. With an active ``disturbance`` and
+    no process noise given, ``Q_c`` is its :meth:`~switchobs_core.model.disturbance.Disturbance.intensity`."""
+    mapping, source = _section(spec, "noise")
+    if (disturbance is not None and disturbance.active and process_q is None
+            and not (isinstance(mapping, dict) and ({"process_std", "process_intensity"} & set(mapping)))):
+        mapping = {**(mapping if isinstance(mapping, dict) else {}), "process_intensity": disturbance.intensity()}
     return NoiseModel.from_mapping(mapping, system, meas_std=meas_std, process_q=process_q, source=source)
+
+
+def load_disturbance(spec: str | Path, system: LTISystem, *, w_max: Any = None) -> Disturbance:
+    """The declared disturbance of a system: the ``disturbance:`` mapping of its YAML file (a
+    built-in scenario or a file without one: unit accelerations on the velocity states, no bound),
+    then the override ``w_max`` (``disturbance.max``: one number or q; None or empty: keep)."""
+    mapping, source = _section(spec, "disturbance")
+    dist = Disturbance.from_mapping(mapping, system, source=source)
+    if w_max is None or (isinstance(w_max, (list, tuple)) and not w_max):
+        return dist
+    if dist.q == 0:
+        raise InvalidSystem(f"disturbance.max is given but the system declares no disturbance input: add "
+                            f"'disturbance: {{B_w: <n x q>}}' to {spec} (no state is labelled as a velocity)")
+    return dist.with_max(w_max)
 
 
 def load_system(spec: str | Path) -> LTISystem:

@@ -88,6 +88,8 @@ import math
 
 import numpy as np
 
+from .extended import expm_extended
+
 try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without its wrapper's 3 us)
     from numpy.linalg._umath_linalg import eigvalsh_lo as _eigvalsh_lo
 except ImportError:     # pragma: no cover - another numpy layout: the public function
@@ -107,28 +109,6 @@ def gamma(m: int) -> float:
     """``gamma_m = m u / (1 - m u)``: the relative error of a length-m dot product (standard model)."""
     mu = m * UNIT_ROUNDOFF
     return mu / (1.0 - mu)
-
-
-def expm_extended(M: np.ndarray, dt: float) -> np.ndarray:
-    """``e^{M dt}`` in extended precision (``np.longdouble``): scaling and squaring of a Taylor
-    series summed to below the extended precision's unit roundoff (a reference for tests and
-    :func:`verify_against_extended`; the bound itself never uses it)."""
-    X = np.asarray(M, dtype=np.longdouble) * np.longdouble(dt)
-    nrm = float(np.abs(X).sum(axis=0).max()) if X.size else 0.0
-    s = max(0, int(math.ceil(math.log2(nrm))) + 1) if nrm > 0.5 else 0
-    X = X / np.longdouble(2.0**s)
-    n = X.shape[0]
-    E = np.eye(n, dtype=np.longdouble)
-    T = np.eye(n, dtype=np.longdouble)
-    tiny = np.finfo(np.longdouble).eps / 16
-    for k in range(1, 40):
-        T = T @ X / np.longdouble(k)
-        E = E + T
-        if float(np.abs(T).max()) <= tiny * float(np.abs(E).max()):
-            break
-    for _ in range(s):
-        E = E @ E
-    return E
 
 
 def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:

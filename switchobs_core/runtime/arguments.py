@@ -14,8 +14,8 @@ import numpy as np
 
 from ..exceptions import InvalidArgument
 
-__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "check_hold", "check_noise_max", "check_options", "check_rows",
-           "check_input", "check_sample", "check_set", "check_time", "check_transition", "initial_state",
+__all__ = ["HOLDS", "MAX_ABS_SAMPLE", "MODES", "check_disturbance", "check_hold", "check_noise_max", "check_options",
+           "check_rows", "check_input", "check_sample", "check_set", "check_time", "check_transition", "initial_state",
            "input_change", "nonnegative"]
 
 #: Schedule modes accepted by :class:`~switchobs_core.runtime.observer.SwitchedObserver`.
@@ -61,6 +61,20 @@ def check_transition(transition: Any) -> None:
     """``transition`` is True, False or None."""
     if transition is not None and not isinstance(transition, (bool, np.bool_)):
         raise InvalidArgument(f"transition must be True, False or None; got {transition!r}")
+
+
+def check_disturbance(disturbance: Any, n: int, noise_max: Any) -> Any:
+    """A declared :class:`~switchobs_core.model.disturbance.Disturbance` (or None) for ``n`` states;
+    an active one enters ``noise_bound``, so it needs ``noise_max`` (0 declares noise-free samples)."""
+    if disturbance is None:
+        return None
+    B_w, w_max = getattr(disturbance, "B_w", None), getattr(disturbance, "w_max", None)
+    if not isinstance(B_w, np.ndarray) or not isinstance(w_max, np.ndarray) or B_w.ndim != 2 or B_w.shape[0] != n:
+        raise InvalidArgument(f"disturbance must be a Disturbance with an n x q B_w (n = {n}); got {disturbance!r:.80}")
+    if disturbance.active and noise_max is None:
+        raise InvalidArgument("a declared disturbance enters noise_bound: declare noise_max too "
+                              "(0: noise-free samples)")
+    return disturbance
 
 
 def check_noise_max(noise_max: Any, N: int, rounding_bound: bool, hold: str) -> tuple[float, ...] | None:

@@ -21,8 +21,9 @@ relative error is a few ``n u``), so a model that holds never fails it.
 
 A sample that fails it is therefore a *proof* that the model is broken for that sample: the
 sample was attributed to the wrong channel, is in the wrong frame, comes from a faulty sensor,
-or the bodies do not move as ``A`` says (a manoeuvre, a collision), or the noise exceeds the
-declared bound. Nothing can then be guaranteed about the estimate: the callers withdraw every
+or the bodies do not move as ``A`` says (a manoeuvre beyond the declared disturbance, a
+collision), or the noise exceeds the declared bound (:func:`likely_causes` orders these by the
+evidence for a diagnostic). Nothing can then be guaranteed about the estimate: the callers withdraw every
 bound they publish. When the sample is consistent with exactly one other channel, that channel
 is the only one the model allows, and the sample can be re-attributed to it
 (:func:`consistent_channels`). :class:`InnovationTest` runs the test for a system's channels
@@ -46,7 +47,7 @@ import numpy as np
 from ..numerics.rounding import UNIT_ROUNDOFF, gamma
 
 __all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
-           "innovation_allowance", "output_rows", "projected_bound", "spectral_norm"]
+           "innovation_allowance", "likely_causes", "output_rows", "projected_bound", "spectral_norm"]
 
 #: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
 #: products and sums of non-negative numbers: far below 1e-12 relative).
@@ -151,6 +152,36 @@ def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: floa
     else:
         b = float(bound)
     return Consistency(channel, inn, allow, b)
+
+
+#: An innovation this many times its allowance points at a gross fault (a wrong channel or frame,
+#: a faulty sensor) before a small excess of the declared bounds (a manoeuvre, the noise's tail).
+GROSS_RATIO = 10.0
+
+
+def likely_causes(first: bool, ratio: float, *, e0: float, noise_max: float | None,
+                  disturbance_max: float | None) -> str:
+    """The assumptions an inconsistent sample breaks, most likely first, as one short line.
+
+    ``first``: the first sample (its prior is ``x_hat(t0)`` with the ball of radius ``e0``: ``e0``
+    leads); ``ratio``: innovation / allowance (:attr:`Consistency.ratio`); above
+    :data:`GROSS_RATIO` a channel, a bias or a clock fault leads, below it a disturbance or the
+    noise beyond what was declared (``noise_max``, ``disturbance_max``: the largest declared
+    bounds, None: none)."""
+    dist = ("disturbance (a body accelerating beyond disturbance.max = "
+            f"{disturbance_max:g})" if disturbance_max else "disturbance (a body off the model: no disturbance.max "
+            "declared)")
+    noise = f"noise (beyond noise.max = {noise_max:g})" if noise_max is not None else "noise (none declared)"
+    gross = ["channel (a wrong channel or frame)", "bias (a sensor offset beyond noise.max)",
+             "clock (stamps off the sensor's time)"]
+    if first:
+        causes = [f"e0 (the initial error ||x_hat(t0) - x(t0)|| exceeds e0 = {e0:g}: raise e0 or give an "
+                  "initial_estimate closer to the truth)", gross[0], noise, gross[1]]
+    elif ratio >= GROSS_RATIO:
+        causes = [*gross, dist, noise]
+    else:
+        causes = [dist, noise, gross[1], gross[2], gross[0]]
+    return "likely causes, most likely first: " + "; ".join(causes)
 
 
 def consistent_channels(tests: list[Consistency]) -> list[int]:

@@ -16,6 +16,7 @@ square-root form of :mod:`switchobs_core.runtime.families.online`).
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,7 @@ from ..design.riccati import DiscretizationCache
 from ..numerics.kalman_step import psd_sqrt, symmetrize
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION
 
-__all__ = ["CovarianceStep", "set_entries", "CHOLESKY_RCOND"]
+__all__ = ["CovarianceStep", "PendingSteps", "set_entries", "CHOLESKY_RCOND"]
 
 #: Smallest reciprocal condition (LAPACK's 1-norm estimate) of the Cholesky factor of a predicted
 #: covariance that :meth:`CovarianceStep.factor_step` keeps (the covariance's condition is its square:
@@ -84,6 +85,10 @@ class CovarianceStep:
             hit = self._qs[id(Q_d)] = (Q_d, psd_sqrt(Q_d) if np.any(Q_d) else None)
         return EL if hit[1] is None else np.hstack([EL, hit[1]])
 
+    def q_d(self, dt: float) -> np.ndarray:
+        """``Q_d(dt)`` (the cached array: the same object for the same quantised step)."""
+        return self._dcache.get(dt)[2]
+
     def prior(self, P: np.ndarray, e: Any, dt: float, held_noise: np.ndarray | None = None) -> np.ndarray:
         """The same with dense products (the prior a consistency test reads)."""
         _, _, Q_d = self._dcache.get(dt)
@@ -91,6 +96,91 @@ class CovarianceStep:
         if held_noise is not None:
             P += held_noise
         return symmetrize(P)
+
+
+class PendingSteps:
+    """The steps of :meth:`CovarianceStep.step` taken when the covariance is read, not at every sample.
+
+    ``push(e, dt, R)`` records a step (``R`` the held measurement noise, driven through the entry's
+    ``Gamma L``; None: nothing held) in O(1): a step equal to the previous one (the same cached ZOH
+    entry, ``Q_d`` and ``R``: a residence at a fixed rate) lengthens its run. ``apply(P)`` takes
+    the runs in order: a run of one or a few steps by :meth:`CovarianceStep.step` itself (the same
+    arithmetic as at every sample), a run of ``m >= MIN_DOUBLING`` steps by binary powers,
+    ``P <- E^{2^i} P E^{2^i}' + S_i`` for each bit ``i`` of ``m``, with ``S_0 = Q``,
+    ``S_{i+1} = E^{2^i} S_i E^{2^i}' + S_i`` and ``Q = Q_d + Gamma L R (Gamma L)'``: about
+    ``2 log2 m`` products of n x n matrices instead of ``2 m`` (the powers are kept per step, up to
+    :data:`POWER_BYTES`), the same covariance up to rounding. :meth:`push` returns True when
+    :data:`MAX_RUNS` runs wait (the caller applies them: the work is then what it was).
+    """
+
+    #: Runs kept before :meth:`push` asks for them to be applied.
+    MAX_RUNS = 64
+    #: Shortest run taken by powers.
+    MIN_DOUBLING = 4
+    #: Bytes of powers kept (least recently used dropped first).
+    POWER_BYTES = 64 << 20
+
+    def __init__(self, cov: CovarianceStep) -> None:
+        self._cov = cov
+        self._runs: list[list] = []             # [e, dt, Q_d, R, count]
+        self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i)])
+        self._bytes = 0
+
+    def __len__(self) -> int:
+        return len(self._runs)
+
+    def clear(self) -> None:
+        self._runs.clear()
+
+    def push(self, e: Any, dt: float, R: np.ndarray | None) -> bool:
+        Q_d = self._cov.q_d(dt)
+        last = self._runs[-1] if self._runs else None
+        if last is not None and last[0] is e and last[2] is Q_d and last[3] is R:
+            last[4] += 1
+            return False
+        self._runs.append([e, dt, Q_d, R, 1])
+        return len(self._runs) > self.MAX_RUNS
+
+    def apply(self, P: np.ndarray) -> np.ndarray:
+        """``P`` through every pending step (then none is pending)."""
+        for e, dt, Q_d, R, m in self._runs:
+            if m < self.MIN_DOUBLING:
+                held = None if R is None else e.GL @ R @ e.GL.T
+                for _ in range(m):
+                    P = self._cov.step(P, e, dt, held)
+                continue
+            levels = self._levels(e, Q_d, R, m.bit_length())
+            for i in range(m.bit_length()):
+                if m >> i & 1:
+                    Ei, Si = levels[i]
+                    P = symmetrize(Ei @ P @ Ei.T + Si)
+        self._runs.clear()
+        return P
+
+    def _levels(self, e: Any, Q_d: np.ndarray, R: np.ndarray | None, k: int) -> list:
+        """``[(E^{2^i}, S_i)]`` for ``i < k`` (class docstring), kept."""
+        key = (id(e), id(Q_d), id(R))
+        hit = self._powers.get(key)
+        if hit is None or hit[0] is not e or hit[1] is not Q_d or hit[2] is not R:
+            if hit is not None:
+                self._drop(key)
+            Q = Q_d if R is None else Q_d + e.GL @ R @ e.GL.T
+            hit = (e, Q_d, R, [(e.E, symmetrize(Q))])
+            self._powers[key] = hit
+            self._bytes += 2 * Q.nbytes
+        self._powers.move_to_end(key)
+        levels = hit[3]
+        while len(levels) < k:
+            Ei, Si = levels[-1]
+            levels.append((Ei @ Ei, symmetrize(Ei @ Si @ Ei.T + Si)))
+            self._bytes += 2 * Si.nbytes
+        while self._bytes > self.POWER_BYTES and len(self._powers) > 1:
+            self._drop(next(iter(self._powers)))
+        return levels
+
+    def _drop(self, key: Any) -> None:
+        _, _, _, levels = self._powers.pop(key)
+        self._bytes -= sum(E.nbytes + S.nbytes for E, S in levels)
 
 
 def set_entries(P: np.ndarray, indices: Any, variances: dict) -> np.ndarray:

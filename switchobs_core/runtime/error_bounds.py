@@ -32,14 +32,15 @@ __all__ = ["ErrorBounds"]
 class ErrorBounds:
     """The observer's published error bounds (module docstring).
 
-    ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi)``; :attr:`rigorous` is the
+    ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi, disturbance=d)`` (``d`` a declared
+    :class:`~switchobs_core.model.disturbance.Disturbance` or None); :attr:`rigorous` is the
     :class:`~switchobs_core.bounds.rigorous.RoundingBound` the error maps step (None when not kept).
     """
 
-    def __init__(self, A: np.ndarray, p_max: int, e0: float, noise_max: Sequence[float] | None, hold: str,
+    def __init__(self, A: np.ndarray, p_max: int, e0: float | None, noise_max: Sequence[float] | None, hold: str,
                  rounding_bound: bool, phi: Transition, *, B: np.ndarray | None = None,
-                 scale: np.ndarray | None = None) -> None:
-        self.rigorous = (RoundingBound(A, p_max, e0, noise_max, B=B, scale=scale)
+                 scale: np.ndarray | None = None, disturbance: Any = None) -> None:
+        self.rigorous = (RoundingBound(A, p_max, e0, noise_max, B=B, scale=scale, disturbance=disturbance)
                          if hold == "innovation" and rounding_bound else None)
         self.n = A.shape[0]
         self._e0 = e0
@@ -52,6 +53,15 @@ class ErrorBounds:
         if self.rigorous is not None:
             self.rigorous.reset()
         self._last = None
+
+    def restart(self, e: float) -> bool:
+        """The rigorous sets restart as the ball of radius ``e`` (a bound that holds at the last
+        sample's time, :mod:`switchobs_core.runtime.recertify`); False when no rigorous set is kept."""
+        if self.rigorous is None:
+            return False
+        self.rigorous.restart(e)
+        self._last = None
+        return True
 
     def changed(self) -> None:
         """The sets changed (a sample, a step): their bounds are read again."""
@@ -75,6 +85,8 @@ class ErrorBounds:
             return b.bounds(*b.propagated(step, dt, x, xp, v, u, extra)) if not b.withdrawn else b.bounds()
         if self._measurement:   # the error-to-error part, exact arithmetic
             Phi = self._phi.read()
+            if self._e0 is None:    # no initial error bound: no bound (re-certification needs the ellipsoids)
+                return math.inf, None
             return float(np.linalg.norm(Phi if step is None else step.E @ Phi, 2) * self._e0), None
         return math.inf, None   # rounding_bound=False: no bound is kept
 

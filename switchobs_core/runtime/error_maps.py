@@ -93,6 +93,7 @@ class CorrectionMap(NamedTuple):
             M = self.identity - K @ H
             fK, fH, _ = bound.gain_norms(K, H)
             rho = bound.rho_correct(fK, fH, self.x_minus, y, nu, self.x_plus)
+            bound.w = bound.stamp_error(H, self.x_minus) if bound.tolerance else 0.0
             bound.correct(M, rho, K, H, y.size, channel)
 
 
@@ -116,5 +117,7 @@ class FusedMap(NamedTuple):
         m, y = self.m, self.y
         phi.hold(m)
         if bound is not None and not bound.withdrawn:
+            bound.w = bound.stamp_error(m.H, self.x_minus, bound.prior_beta(m.e, self.dt, self.x0, self.x_minus,
+                                                                              None)) if bound.tolerance else 0.0
             rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus)
             bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel)

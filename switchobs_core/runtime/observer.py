@@ -28,18 +28,16 @@ extra inactive interval: ``x_hat`` is propagated open loop, ``L = 0``), whatever
 The Kalman families correct with the rows the sample holds (the shared rows while blind), with
 the stored gain of that blind phase.
 
-Both coincide with the continuous-output observer as the sample rate grows (first order
-in the step). A change of channel is a switching instant (e:switching_instants). The gains of
-a gain family (:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`,
-one design per cycle by the mode (``periodic``, ``sequence``, ``robust``:
-:mod:`switchobs_core.runtime.sequence`, which also keeps a :class:`CycleRecord` of every cycle).
-The observer propagates, hands each sample to its family and applies what the family returns
-(the estimate, the error maps into ``Phi`` and the rigorous bound;
+Both coincide with the continuous-output observer as the sample rate grows (first order in the step). A
+change of channel is a switching instant (e:switching_instants). The gains of a gain family
+(:mod:`switchobs_core.families`) come from a :class:`switchobs_core.table.gains.GainTable`, one design per
+cycle by the mode (``periodic``, ``sequence``, ``robust``: :mod:`switchobs_core.runtime.sequence`, which also
+keeps a :class:`CycleRecord` of every cycle). The observer propagates, hands each sample to its family and
+applies what the family returns (the estimate, the error maps into ``Phi`` and the rigorous bound;
 :mod:`switchobs_core.runtime.families.base`); it never names a family.
 
-Channel numbers are 1-based, as in the paper and docs/api.md.
-
-Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
+Channel numbers are 1-based, as in the paper and docs/api.md; paper labels (``e:...``, ``t:...``)
+resolve to numbers in ``docs/equations.md``.
 """
 
 from __future__ import annotations
@@ -64,6 +62,7 @@ from .arguments import (
     HOLDS,
     MAX_ABS_SAMPLE,
     MODES,
+    check_disturbance,
     check_hold,
     check_noise_max,
     check_options,
@@ -88,7 +87,6 @@ __all__ = ["FAMILIES", "HOLDS", "MAX_ABS_SAMPLE", "MODES", "NOT_APPLICABLE", "Sc
 
 #: Value of the paper's envelopes z_i and bound for gains they do not apply to (Kalman families).
 NOT_APPLICABLE = -1.0
-
 #: Gain families (:data:`switchobs_core.families.REGISTRY`): LMI gains, Kalman tables, online Riccati.
 FAMILIES = FAMILY_NAMES
 
@@ -113,8 +111,8 @@ class SwitchedObserver:
         Initial estimate ``x_hat(t0)`` (zeros by default).
     t0 : float
         Initial time in seconds.
-    e0 : float
-        Initial error bound ``||x_tilde(t0)|| <= e0``, used by :meth:`envelope`.
+    e0 : float or None
+        Initial error bound ``||x_tilde(t0)|| <= e0`` (None: unknown, no bound until :meth:`recertify`).
     bounds : (float, float), optional
         ``(h_min, h_max)`` of A2 for robust mode; default ``table.robust.h_bounds``.
     match_tol : float
@@ -150,6 +148,9 @@ class SwitchedObserver:
         image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
         :mod:`switchobs_core.numerics.rounding`; about as much work again per sample). Needs
         ``rounding_bound`` and innovation hold.
+    disturbance : Disturbance, optional
+        A declared ``x' = A x + B_w w``, ``|w_j| <= max_j`` (:mod:`switchobs_core.model.disturbance`): ``noise_bound``
+        holds for every such ``w`` (:mod:`switchobs_core.numerics.disturbance_reach`). Needs ``noise_max``.
     transition : bool, optional
         Keep the error transition :attr:`Phi` (an n x n product per sample): True from the
         start, False never, None (default) from its first read if that comes within a budget of
@@ -173,14 +174,14 @@ class SwitchedObserver:
 
     def __init__(self, system: Any, table: Any, mode: str = "periodic",
                  cycles: Sequence[Any] | None = None, x0: Any = None, t0: float = 0.0,
-                 e0: float = 1.0, *, bounds: tuple[float, float] | None = None,
+                 e0: float | None = 1.0, *, bounds: tuple[float, float] | None = None,
                  match_tol: float = 0.05, cache_size: int = 64,
                  dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
                  max_records: int = 100_000, hold: str = "innovation",
                  family: str | None = None, noise: NoiseModel | None = None,
                  track_covariance: bool | None = None, relock_rtol: float = 1e-3,
                  rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
-                 transition: bool | None = None):
+                 transition: bool | None = None, disturbance: Any = None):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -200,9 +201,9 @@ class SwitchedObserver:
             entry = family_entry(entry.robust)
         Family = entry.type()
         check_hold(hold, entry.name, Family.holds)
-        self.family = entry.name
-        self.rounding_bound = bool(rounding_bound)
+        self.family, self.rounding_bound = entry.name, bool(rounding_bound)
         self.noise_max = check_noise_max(noise_max, self.N, self.rounding_bound, hold)
+        self.disturbance = check_disturbance(disturbance, self.n, self.noise_max)
         self.relock_rtol = nonnegative("relock_rtol", relock_rtol, repr(relock_rtol))
         # 2. the family (designs of the mode, gains, covariance): it reads the observer through its
         #    context only (switchobs_core.runtime.families.base)
@@ -219,7 +220,7 @@ class SwitchedObserver:
             self.alpha = float(system.alpha)
         except AttributeError:
             self.alpha = _alpha([observability_decomposition(self.A, Ci).T_o for Ci in self.C])
-        self.e0 = nonnegative("e0", e0, float(e0))
+        self.e0 = None if e0 is None else nonnegative("e0", e0, float(e0))
         # balanced coordinates of A: the bound's norms and proven expm errors are taken there
         self._scale = balance(self.A, np.vstack(self.C))
         self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
@@ -233,18 +234,15 @@ class SwitchedObserver:
                                "held" if transition is None else "off")
         # the published bounds: the rounding-aware ellipsoids (innovation hold), ||Phi|| e0 (measurement)
         self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
-                                   self._phi, B=self.B, scale=self._scale)
-        self._bound = self._bounds.rigorous
-        self._x0_init = x0
-        self._t0_init = t0
+                                   self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
+        self._bound = self.rounding = self._bounds.rigorous   # public: RoundingBound.clock (stamp errors)
+        self._x0_init, self._t0_init = x0, t0
         self.reset(x0, t0)
 
     # ------------------------------------------------------------------ state
     def reset(self, x0: Any = None, t0: float | None = None) -> None:
-        """Restart at ``x_hat(t0) = x0`` (zeros if None; ``t0`` defaults to the constructor's).
-
-        The ZOH cache is kept; cycle records, envelopes and ``Phi`` are cleared.
-        """
+        """Restart at ``x_hat(t0) = x0`` (zeros if None; ``t0`` defaults to the constructor's): the ZOH
+        cache is kept; cycle records, envelopes and ``Phi`` are cleared."""
         self._x, t0 = initial_state(x0, self._t0_init if t0 is None else t0, self.n)
         self._t = self._ts = t0          # the observer's time; the last sample's (or t0)
         self.t0 = t0
@@ -253,34 +251,37 @@ class SwitchedObserver:
         self._phi.reset()
         self._bounds.reset()
         self._seq.reset(t0)
-        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0, t0) if self._gains.paper_envelope else None
+        self._tracker = EnvelopeTracker(self.designs[0].mu, self.e0 or 0.0, t0) if self._gains.paper_envelope else None
         self._gains.reset()     # covariance P0, nothing held: the family's own
+        self._lost = ""
 
     @property
     def gains(self) -> Any:
         """The gain family in use (:mod:`switchobs_core.families`)."""
         return self._gains
 
-    @property
-    def kalman_fallback(self) -> str:
-        """Why the Kalman table last left its cache ("" if it has not since the reset)."""
-        return getattr(self._gains, "fallback", "")
+    kalman_fallback = property(lambda self: getattr(self._gains, "fallback", ""),
+                               doc="Why the Kalman table last left its cache (\"\" if it has not since the reset).")
+    kalman_departures = property(lambda self: getattr(self._gains, "departures", 0),
+                                 doc="Departures of the Kalman table from its cache since the reset (0 for others).")
+    kalman_relocks = property(lambda self: getattr(self._gains, "relocks", 0),
+                              doc="Returns of the Kalman table to its cache since the reset (0 for other families).")
 
     @property
-    def kalman_departures(self) -> int:
-        """Departures of the Kalman table from its cache since the reset (0 for other families)."""
-        return getattr(self._gains, "departures", 0)
-
-    @property
-    def kalman_relocks(self) -> int:
-        """Returns of the Kalman table to its cache since the reset (0 for other families)."""
-        return getattr(self._gains, "relocks", 0)
+    def covariance_withdrawn(self) -> str:
+        """Why :attr:`P` is None until :meth:`reset` ("" while the family's covariance holds): the
+        recursion ran out of digits (:class:`~switchobs_core.runtime.families.base.Correction` ``lost``)."""
+        return self._lost
 
     @property
     def bounds_withdrawn(self) -> str:
         """Why the rigorous bounds are ``inf`` until :meth:`reset` ("" while they hold): they could no
         longer be computed; the estimate is kept (:mod:`switchobs_core.bounds.rigorous`)."""
         return self._bounds.withdrawn
+
+    def recertify(self, e: float) -> bool:
+        """Restart the rigorous bounds from ``||x - x_hat|| <= e`` now (:mod:`~switchobs_core.runtime.recertify`)."""
+        return self._bounds.restart(float(e))
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -319,11 +320,9 @@ class SwitchedObserver:
 
     @property
     def Phi(self) -> np.ndarray:
-        """Error transition ``Phi(t, t0)``: the product of the steps' error maps ``E``.
-
-        With innovation hold it is exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``
-        with no noise and a known input); with measurement hold it is the error-to-error part.
-        """
+        """Error transition ``Phi(t, t0)``, the product of the steps' error maps ``E``: with innovation hold
+        exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)`` with no noise and a known input); with
+        measurement hold the error-to-error part."""
         return self._phi.read().copy()
 
     def apply_map(self, E: np.ndarray) -> None:
@@ -398,10 +397,9 @@ class SwitchedObserver:
         if channel != self.channel:
             self._switch(t, channel)
         # 3. hold the new sample's input from t on; the family takes the sample (holds its
-        #    innovation, or corrects)
+        #    innovation, or corrects) and the observer applies what it returns (x, Phi, the bound)
         if u is not None:
             self._in.u = u if u.any() else None
-        #    and the observer applies what it returns (the estimate, Phi, the bound's steps)
         self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, t - self._ts, channel, y, rows,
                                               self.design_index, t < self._blind_until, self._in.u)),
                     channel)
@@ -426,10 +424,11 @@ class SwitchedObserver:
         b = self._bound
         h = c.held
         if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
-            b.hold(h.C, c.x, h.y, channel, h.y.size)
+            b.hold(h.C, c.x, h.y, channel, h.y.size, self._in.u)
         for m in c.maps:
             m.apply(self._phi, b, channel)
         self._x = c.x
+        self._lost = self._lost or c.lost
 
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
         """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
@@ -497,8 +496,9 @@ class SwitchedObserver:
         prior of the phase with the Joseph update, which is the real one while locked; after a
         departure the recursion's own, :mod:`switchobs_core.runtime.families.kalman`). LMI gains: the
         covariance propagated under :attr:`noise` (``track_covariance``), exact for innovation hold.
+        None also once the covariance is withdrawn (:attr:`covariance_withdrawn`).
         """
-        return self._gains.covariance()
+        return None if self._lost else self._gains.covariance()
 
     def _switch(self, t: float, channel: int) -> None:
         """Bookkeeping at a switching instant (e:switching_instants): the design sequence, and for
@@ -592,7 +592,7 @@ class SwitchedObserver:
         key, v = self._held()
         step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
         exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
-        if self._tracker is None:      # Kalman gains: the paper's envelope is for its LMI gains
+        if self._tracker is None or self.e0 is None:    # Kalman gains (the envelope is the LMI gains'), no e0
             return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)
         z = self._tracker.z(float(t))

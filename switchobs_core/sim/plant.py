@@ -52,20 +52,29 @@ class Plant:
         :func:`~switchobs_core.numerics.rounding.expm_extended`): the reference against which the
         rounding-aware bounds are checked (``simulate`` uses it; about 10x slower per step).
         :attr:`x` is then the state rounded once to double, :attr:`x_extended` the state.
+    B_w : (n, q) array_like, optional
+        The matrix of a bounded unknown input ``w`` (:mod:`switchobs_core.model.disturbance`):
+        ``xdot = A x + B u + B_w w``, ``w`` given to :meth:`advance` and held over the step.
 
     Notes
     -----
     :meth:`advance` is exact: ``x <- e^{A dt} x + Gamma B u + w_d`` with ``w_d`` drawn
     from the exact discretised covariance ``Qd = int_0^dt e^{As} Qc e^{A's} ds``
-    (Van Loan), ``u`` held over the step.
+    (Van Loan), ``u`` (and ``w``) held over the step: ``Gamma B u + Gamma B_w w`` from one
+    augmented exponential ``e^{[[A, B, B_w], [0, 0, 0]] dt}``.
     """
 
     def __init__(self, system: Any, x0: Any = None, seed: int = 0,
-                 process_noise: Any = 0.0, *, t0: float = 0.0, extended: bool = False):
+                 process_noise: Any = 0.0, *, t0: float = 0.0, extended: bool = False, B_w: Any = None):
         self.A = np.asarray(system.A, dtype=float)
         self.n = self.A.shape[0]
         B = np.asarray(system.B, dtype=float)
-        self.B = B.reshape(self.n, -1) if B.size else np.zeros((self.n, 0))
+        B = B.reshape(self.n, -1) if B.size else np.zeros((self.n, 0))
+        self.m = B.shape[1]
+        Bw = np.zeros((self.n, 0)) if B_w is None else np.asarray(B_w, dtype=float).reshape(self.n, -1)
+        self.q = Bw.shape[1]
+        self.B = B
+        self._BB = np.hstack([B, Bw]) if self.q else B      # [B, B_w]: one ZOH for the known and the unknown input
         self.C = tuple(np.asarray(Ci, dtype=float) for Ci in system.C)
         self._x = np.zeros(self.n) if x0 is None else np.array(x0, dtype=float).reshape(-1)
         if self._x.size != self.n or not np.isfinite(self._x).all():
@@ -110,14 +119,14 @@ class Plant:
         s = self._steps.get(dt)
         if s is None:
             if self.extended:       # [[F, Gamma B], [0, I]] = e^{[[A, B], [0, 0]] dt}, extended
-                n, m = self.n, self.B.shape[1]
+                n, m = self.n, self._BB.shape[1]
                 J = np.zeros((n + m, n + m))
-                J[:n, :n], J[:n, n:] = self.A, self.B
+                J[:n, :n], J[:n, n:] = self.A, self._BB
                 X = expm_extended(J, dt)
                 F, GB = X[:n, :n], X[:n, n:]
             else:
                 F, G = zoh_pair(self.A, dt)
-                GB = G @ self.B
+                GB = G @ self._BB
             Lq = None
             if self._noisy:
                 _, Qd = van_loan(self.A, self.Qc, dt)
@@ -128,8 +137,9 @@ class Plant:
                 self._steps.pop(next(iter(self._steps)))
         return s
 
-    def advance(self, t: float, u: Any = None) -> np.ndarray:
-        """Advance exactly to ``t`` with ``u`` held over ``[plant.t, t]``; returns ``x(t)``."""
+    def advance(self, t: float, u: Any = None, w: Any = None) -> np.ndarray:
+        """Advance exactly to ``t`` with ``u`` (and the unknown input ``w``, ``B_w``) held over
+        ``[plant.t, t]``; returns ``x(t)``."""
         dt = float(t) - self._t
         if not dt >= 0 or not math.isfinite(dt):
             raise InvalidArgument(f"t = {t!r} must be a finite time >= the plant's time {self._t!r}")
@@ -138,9 +148,14 @@ class Plant:
             x = F @ (self._xl if self.extended else self._x)
             if u is not None:
                 u = np.asarray(u, dtype=float).reshape(-1)
-                if u.size != self.B.shape[1]:
-                    raise InvalidArgument(f"u must have m = {self.B.shape[1]} entries; got {u.size}")
-                x += GB @ u
+                if u.size != self.m:
+                    raise InvalidArgument(f"u must have m = {self.m} entries; got {u.size}")
+                x += GB[:, :self.m] @ u
+            if w is not None:
+                w = np.asarray(w, dtype=float).reshape(-1)
+                if w.size != self.q:
+                    raise InvalidArgument(f"w must have q = {self.q} entries (the columns of B_w); got {w.size}")
+                x += GB[:, self.m:] @ w
             if Lq is not None:
                 x += Lq @ self.rng.standard_normal(self.n)
             if self.extended:

@@ -7,7 +7,9 @@ of every sample ``t_k = k / f`` from the start of the cycle sequence, the tie ph
 samples of a dead time), the start-up samples (the recursion from ``P0`` until it meets the periodic
 solution) and the periodic ones, each a :class:`KalmanPhase` with its prior ``P^-`` and gain ``K``.
 A gain table (:mod:`switchobs_core.table.gains`) stores it with :meth:`KalmanDesign.to_dict` and
-rebuilds it with :meth:`KalmanDesign.from_dict`.
+rebuilds it with :meth:`KalmanDesign.from_dict`. Its ``noise`` is the model the gains were designed
+for, ``Q_c`` the continuous-time spectral density (for a system with a declared disturbance and no
+process noise of its own, ``B_w diag(max^2) B_w'``: :mod:`switchobs_core.design.kalman`).
 
 Dead time. The samples in the first ``d`` seconds of every residence are *blind*: they measure
 only the rows every channel shares (:func:`~switchobs_core.model.schedule.common_rows`: the

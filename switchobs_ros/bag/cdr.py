@@ -19,6 +19,8 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 __all__ = ["Template", "decode_pose", "decode_uint8", "header_stamp"]
 
 _HDR_LE = (b"\x00\x01", b"\x00\x03")     # CDR_LE, PL_CDR_LE (encapsulation id, big-endian u16)
@@ -73,7 +75,8 @@ class Template:
 
     ``Template(msg, stamp=("header", "stamp"), doubles=[("pose", "pose", "position", "x"), ...])``
     or, for a sequence of float64 (a Float64MultiArray's ``data`` of fixed length),
-    ``Template(msg, array=("data",))``. Offsets are found by serialising sentinel values.
+    ``Template(msg, array=("data",))`` (the values as a sequence, or a float64 array written in one
+    copy). Offsets are found by serialising sentinel values.
     """
 
     def __init__(self, msg, *, stamp: Sequence[str] | None = None, doubles: Sequence[Sequence[str]] = (),
@@ -119,7 +122,13 @@ class Template:
         for off, v in zip(self.double_offs, doubles):
             struct.pack_into("<d", b, off, v)
         if self.array_off is not None:
-            self._arr.pack_into(b, self.array_off, *array)
+            if isinstance(array, np.ndarray):       # the doubles' bytes at once (a covariance: 17 424 of them)
+                a = np.ascontiguousarray(array, dtype="<f8").reshape(-1)
+                if a.size != self.array_n:
+                    raise ValueError(f"template: {a.size} values for an array of {self.array_n}")
+                b[self.array_off:self.array_off + 8 * a.size] = a.tobytes()
+            else:
+                self._arr.pack_into(b, self.array_off, *array)
         return bytes(b)
 
 

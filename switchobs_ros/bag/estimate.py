@@ -18,6 +18,10 @@ every k-th estimate, 0 never; ``~/state`` always); log time = the log time of
 the input that produced the estimate), the input bag's other topics copied (unless
 ``inputs=False``), and one ``/diagnostics`` message at the end in the node's shape (accepted and
 rejected inputs). Optionally a CSV: ``stamp_ns``, the state labels, the envelope labels.
+
+Both are written as the estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory
+does not grow with the recording's length (the result then holds the counters and the number of
+estimates, not the estimates: at n = 132 a covariance is 139 KB, 7 MB per second of a 50 Hz bag).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
-from std_msgs.msg import Float64MultiArray, UInt8
+from std_msgs.msg import Float64MultiArray
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
@@ -40,8 +44,8 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, decode_pose, decode_uint8, header_stamp
-from .io import BagError, BagIn, BagOut, deserialize, type_name
+from .cdr import Template, decode_pose, header_stamp
+from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 
 __all__ = ["EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
@@ -53,7 +57,7 @@ estimator_params = params_from_file
 
 @dataclass
 class EstimateResult:
-    """What :func:`estimate` computed: the estimates in order, the counters, the timing."""
+    """What :func:`estimate` computed: the estimates in order (``keep``; else empty), the counters, the timing."""
 
     stamps: np.ndarray                 # (K,) int64 ns
     x_hat: np.ndarray                  # (K, n)
@@ -72,6 +76,10 @@ class EstimateResult:
     reattributed: int = 0              # samples it moved to the only channel that explains them
     bound_valid: bool = True           # False: the bounds were withdrawn (bound_invalid_why says why)
     bound_invalid_why: str = ""
+    recertifications: int = 0          # bounds certified again from data (switchobs_core.runtime.recovery)
+    recertified: str = ""              # the latest one: since when, from which window
+    bias_alarms: int = 0               # the CUSUM bias test's alarms
+    model_failures: int = 0            # channels the chi-square gate starved (a body off the model)
     seconds: float = 0.0               # wall time of the estimation loop (read to write)
     unanswered: dict = field(default_factory=dict)   # accepted samples without an estimate, by reason
     uncovered: tuple = ()              # channels that no source feeds (msg_bridge.InputSpecs.uncovered)
@@ -80,18 +88,20 @@ class EstimateResult:
     unproven_ties: int = 0             # log-time ties whose file order the stamps contradict
     out: str | None = None
     csv: str | None = None
+    count: int = 0                     # estimates made (those kept or not)
 
 
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
              storage: str | None = None, inputs: bool = True, node: str = "/estimator",
-             progress: bool | None = False) -> EstimateResult:
+             progress: bool | None = False, keep: bool = True) -> EstimateResult:
     """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring);
-    ``progress``: a bar of the messages on stderr (None: on a terminal)."""
+    ``progress``: a bar of the messages on stderr (None: on a terminal); ``keep``: the result holds
+    every estimate (False: only their number; the bag and the CSV are written as they come)."""
     with BagIn(bag_path) as bag:
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
         if pl.channel_topic:
-            needed["/" + pl.channel_topic] = "std_msgs/msg/UInt8"
+            needed["/" + pl.channel_topic] = CHANNEL_TYPES
         bag.require(needed, " (the estimator's inputs)")
         check_estimable(bag, pl)
         msgs = bag.messages(order="file")     # ordered below (switchobs_ros.bag.order)
@@ -128,6 +138,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         if pl.publish_covariance else None
 
     writer = BagOut(out, storage) if out is not None else None
+    table = CsvWriter(csv, state_labels, env_labels) if csv is not None else None
     try:
         if writer is not None:
             writer.add(t_state, type_name(Float64MultiArray))
@@ -143,6 +154,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                 for t, ty in in_topics.items():
                     if t not in outputs and t != "/diagnostics":
                         writer.add(t, ty)
+        count = 0
         stamps: list[int] = []
         xs: list[np.ndarray] = []
         envs: list[np.ndarray] = []
@@ -155,16 +167,22 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             return bool(every[name]) and k % every[name] == 0
 
         def emit(ests, log_ns):
+            nonlocal count
             for e in ests:
-                k = len(stamps)
-                stamps.append(e.stamp_ns)
-                xs.append(e.x_hat)
-                envs.append(e.envelope)
+                k = count
+                count += 1
+                if keep:
+                    stamps.append(e.stamp_ns)
+                    xs.append(e.x_hat)
+                    envs.append(e.envelope)
+                    if w_cov is not None:
+                        covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
+                if table is not None:
+                    table.row(e.stamp_ns, e.x_hat, e.envelope)
                 sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
                 if w_cov is not None:
-                    covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
                     if writer is not None and e.P is not None and due("covariance", k):
-                        writer.write(t_cov, log_ns, w_cov.bytes(array=[sec, nsec, *e.P.ravel().tolist()]))
+                        writer.write(t_cov, log_ns, w_cov.bytes(array=np.concatenate(((sec, nsec), e.P.ravel()))))
                 if writer is not None:
                     x = e.x_hat.tolist()
                     writer.write(t_state, log_ns, w_state.bytes(array=[sec, nsec, *x]))
@@ -175,8 +193,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                             writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
                     if due("typed", k):
                         writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
-                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns,
-                                                                              pl.bound_valid, pl.bound_invalid_why)))
+                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                              pl.bound_invalid_why, pl.bound_note)))
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
@@ -212,7 +230,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
             elif m.topic == channel_topic:
                 n_inputs += 1
-                emit(pl.on_channel(decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8))), m.log_ns)
+                emit(pl.on_channel(channel_message(m)), m.log_ns)
             elif m.topic == ctl_topic:
                 n_inputs += 1
                 pl.on_control(deserialize(m, mb.message_class(ctl.spec.type)), m.log_ns)
@@ -231,7 +249,11 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                      KeyValue(key="re-attributed samples", value=str(pl.reattributed)),
                      KeyValue(key="unordered samples (recording)", value=str(len(ordering.unordered))),
                      KeyValue(key="bounds valid", value=str(pl.bound_valid).lower()
-                              + ("" if pl.bound_valid else f" ({pl.bound_invalid_why})"))]
+                              + (f" ({pl.bound_note})" if pl.bound_note else "" if pl.bound_valid
+                                 else f" ({pl.bound_invalid_why})")),
+                     KeyValue(key="re-certifications", value=str(pl.recertifications)),
+                     KeyValue(key="bias alarms", value=str(pl.bias_alarms)),
+                     KeyValue(key="model failures (gate)", value=str(pl.model_failures))]
             arr = DiagnosticArray()
             arr.header.stamp = mb.ns_to_stamp(last_ns)
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",
@@ -240,23 +262,27 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     except BaseException:
         if writer is not None:
             writer.close()
+        if table is not None:
+            table.discard()
         raise
     if writer is not None:
         writer.close()
+    if table is not None:
+        table.close()
     res = EstimateResult(
         stamps=np.array(stamps, dtype=np.int64), x_hat=np.array(xs).reshape(-1, n),
         envelope=np.array(envs).reshape(-1, len(env_labels)), state_labels=state_labels,
-        P=np.array(covs).reshape(-1, n, n) if w_cov is not None else None,
+        P=np.array(covs).reshape(-1, n, n) if w_cov is not None and keep else None,
         envelope_labels=env_labels, messages_in=len(msgs), inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
+        recertifications=pl.recertifications, recertified=pl.recertified, bias_alarms=pl.bias_alarms,
+        model_failures=pl.model_failures,
         seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
         uncovered=tuple(pl.uncovered), uncovered_warning=pl.config.inputs.uncovered_warning(),
-        unordered=len(ordering.unordered), unproven_ties=ordering.unproven)
-    if csv is not None:
-        write_csv(csv, res)
-        res.csv = str(csv)
+        unordered=len(ordering.unordered), unproven_ties=ordering.unproven, count=count,
+        csv=str(csv) if csv is not None else None)
     return res
 
 
@@ -287,8 +313,8 @@ def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_to
                 stamp[i] = st[0] * 1_000_000_000 + st[1]
         elif m.topic == channel_topic:
             is_channel[i] = True
-            c = decode_uint8(m.data, lambda d, m=m: deserialize(m, UInt8)).data
-            channel[i] = int(c) if 1 <= int(c) <= pl.N else None
+            c = mb.channel_value(channel_message(m))
+            channel[i] = c if 1 <= c <= pl.N else None
         elif m.topic == control_topic:          # a command: taken in stamp order in a tie the file does not prove
             st = header_stamp(m.data)
             if st is not None and st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
@@ -345,11 +371,30 @@ def unanswered(pl: EstimatorPipeline) -> dict[str, int]:
     return {k: int(v) for k, v in out.items() if v}
 
 
+class CsvWriter:
+    """``stamp_ns, <state labels>, <envelope labels>``, one row per estimate, full precision, written
+    as the rows come (:meth:`close` when done; :meth:`discard` removes a run that failed)."""
+
+    def __init__(self, path: str | Path, state_labels: tuple, envelope_labels: tuple) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._f = self.path.open("w")
+        self._f.write(",".join(("stamp_ns", *state_labels, *envelope_labels)) + "\n")
+
+    def row(self, stamp_ns: int, x: np.ndarray, env: np.ndarray) -> None:
+        self._f.write(f"{int(stamp_ns)}," + ",".join(map(repr, x.tolist() + env.tolist())) + "\n")
+
+    def close(self) -> None:
+        self._f.close()
+
+    def discard(self) -> None:
+        self._f.close()
+        self.path.unlink(missing_ok=True)
+
+
 def write_csv(path: str | Path, res: EstimateResult) -> None:
-    """``stamp_ns, <state labels>, <envelope labels>``, one row per estimate, full precision."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w") as f:
-        f.write(",".join(("stamp_ns", *res.state_labels, *res.envelope_labels)) + "\n")
-        for s, x, e in zip(res.stamps, res.x_hat, res.envelope):
-            f.write(f"{int(s)}," + ",".join(repr(float(v)) for v in np.concatenate([x, e])) + "\n")
+    """The CSV of :class:`CsvWriter` from a result that kept its estimates."""
+    w = CsvWriter(path, res.state_labels, res.envelope_labels)
+    for s, x, e in zip(res.stamps, res.x_hat, res.envelope):
+        w.row(int(s), np.asarray(x, dtype=float), np.asarray(e, dtype=float))
+    w.close()

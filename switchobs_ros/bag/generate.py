@@ -23,8 +23,10 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
-from switchobs_core.model.schedule import RandomSchedule, parse_schedule
+from switchobs_core.model.disturbance import velocity_inputs
+from switchobs_core.model.schedule import RandomSchedule, common_rows, parse_schedule
 from switchobs_core.ranges import MAX_RATE_HZ, MAX_STAMP_S, OUTPUT_BUDGET_BYTES, check_size
+from switchobs_core.sim.disturbed import bang_bang
 from switchobs_core.sim.plant import Plant
 
 from ..core_config import DEFAULT_X0, SensorOutputs, load_system_param
@@ -63,6 +65,16 @@ class GenerateConfig:
     dead_time: float = 0.0
     #: camera_sim's ``inputs``: a YAML file whose ``inputs:`` section overrides the system's
     inputs: str = ""
+    #: generator only: every velocity state driven by an unknown acceleration of +-accel_max
+    #: (:func:`switchobs_core.sim.disturbed.bang_bang`, seeded by ``seed``; the built-in scenarios'
+    #: disturbance inputs, :mod:`switchobs_core.model.disturbance`), held over each tick
+    accel_max: float = 0.0
+    #: generator only: a sensor fault ``(t0, t1, offset)``: ``offset`` added to every output row that
+    #: not all channels share (the target poses) at the ticks in ``[t0, t1)`` s (a bias; empty: none)
+    bias: tuple = ()
+    #: camera_sim's ``channel_type``; the generator's default is the unstamped ``std_msgs/msg/UInt8``
+    #: (a recording's order attributes it), ``switchobs_msgs/msg/ActiveChannel`` the stamped one
+    channel_type: str = "std_msgs/msg/UInt8"
 
 
 def _schedule(cfg: GenerateConfig, N: int):
@@ -111,29 +123,42 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         x0 = cfg.initial_state or (DEFAULT_X0 if sys_.n == len(DEFAULT_X0) else (0.0,) * sys_.n)
         if len(x0) != sys_.n:
             raise BagError(f"initial state has {len(x0)} values; the system has n = {sys_.n}")
+        B_w = velocity_inputs(sys_) if cfg.accel_max > 0 else None
+        if B_w is not None and not B_w.shape[1]:
+            raise BagError(f"--accel-max: the system {cfg.system} has no velocity state to accelerate")
         plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg.seed, process_noise=cfg.process_noise,
-                      extended=cfg.extended)
+                      extended=cfg.extended, B_w=B_w)
+        accel = None if B_w is None else bang_bang(np.full(B_w.shape[1], cfg.accel_max), cfg.rate, cfg.seed + 2)
     except (SwitchobsError, ConfigError) as err:
         raise BagError(str(err)) from None
     rng = np.random.default_rng(cfg.seed + 1)
+    if cfg.bias and len(cfg.bias) != 3:
+        raise BagError(f"bias needs three values T0,T1,OFFSET; got {cfg.bias}")
+    shared = set(common_rows(sys_.C))
     labels = tuple(sys_.state_labels)
     period_ns = round(1e9 / cfg.rate)
     epoch_ns = round(cfg.clock_start * 1e9)
     k_end = round(cfg.duration * cfg.rate)
+    switch = (0, 0)         # (channel, its switching instant: the first tick stamp on it)
+    stamped = cfg.channel_type == "switchobs_msgs/msg/ActiveChannel"
     for k in range(k_end + 1):
         # camera_sim.CameraSimNode.publish_tick, step for step
         t = k * period_ns * 1e-9
         stamp_ns = epoch_ns + k * period_ns
-        plant.advance(t)
+        plant.advance(t, w=None if accel is None or not k else accel((k - 1) * period_ns * 1e-9))
         rho = int(schedule.channel_at(t))
+        if rho != switch[0]:
+            switch = (rho, stamp_ns)
         y = plant.measure(rho, noise_std=0.0)
         if cfg.noise_std > 0:
             v = cfg.noise_std * rng.standard_normal(y.shape)
             y = y + (np.clip(v, -cfg.noise_max, cfg.noise_max) if cfg.noise_max >= 0 else v)
+        if cfg.bias and cfg.bias[0] <= t < cfg.bias[1]:
+            y = y + np.array([0.0 if j in shared else float(cfg.bias[2]) for j in range(y.size)])
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
-                                                                  schedule.blind_at(t))]
+                                                                  schedule.blind_at(t), switch[1] if stamped else None)]
         msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 

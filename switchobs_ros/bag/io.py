@@ -32,7 +32,9 @@ from switchobs_core.loading import load_yaml
 from .. import qos
 
 __all__ = [
+    "CHANNEL_TYPES",
     "CONTRACT_TYPES",
+    "channel_message",
     "STORAGES",
     "TOPIC_RANK",
     "BagError",
@@ -51,11 +53,14 @@ STORAGES = ("mcap", "sqlite3")
 CONTRACT_TYPES = {
     "/camera/pose": "geometry_msgs/msg/PoseStamped",
     "/target/pose": "geometry_msgs/msg/PoseStamped",
-    "/camera/active_channel": "std_msgs/msg/UInt8",
+    "/camera/active_channel": "switchobs_msgs/msg/ActiveChannel",
     "/sim/truth": "std_msgs/msg/Float64MultiArray",
     "/clock": "rosgraph_msgs/msg/Clock",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
+
+#: The channel topic's types: stamped (the switching instant in the header) or the channel alone.
+CHANNEL_TYPES = ("switchobs_msgs/msg/ActiveChannel", "std_msgs/msg/UInt8")
 
 #: The topics of a paper-interface tick in camera_sim's publishing order (other topics rank 9): the
 #: player's channel topic is rank 1. Ties of log time are never broken by it (module docstring).
@@ -275,6 +280,17 @@ def deserialize(m: BagMessage, cls: type):
     except Exception as err:
         raise BagError(f"topic {m.topic}: cannot deserialise a {m.type} at log time {m.log_ns} ns "
                        f"({one_line(err, with_type=True)}); truncated or damaged message") from None
+
+
+def channel_message(m: BagMessage):
+    """A channel-topic message of either type (:data:`CHANNEL_TYPES`), as the pipeline takes it;
+    ``std_msgs/UInt8`` is read straight from its CDR bytes."""
+    if m.type == CHANNEL_TYPES[0]:
+        return deserialize(m, msg_class(m.type))
+    from std_msgs.msg import UInt8
+
+    from .cdr import decode_uint8
+    return decode_uint8(m.data, lambda d: deserialize(m, UInt8))
 
 
 # --------------------------------------------------------------------------------- writing

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from switchobs_core.ranges import check_seconds
 
-from .io import CONTRACT_TYPES, BagError, BagOut, msg_class, qos_kind
+from .io import CHANNEL_TYPES, CONTRACT_TYPES, BagError, BagOut, msg_class, qos_kind
 
 __all__ = ["RecordConfig", "default_topics", "record"]
 
@@ -80,9 +80,11 @@ def record(out_path, cfg: RecordConfig, *, node, log=print, should_stop=lambda: 
     known.update(CONTRACT_TYPES)
     types: dict[str, str] = {}
     deadline = time.monotonic() + cfg.discover_timeout
+    offered = dict(node.get_topic_names_and_types())
     for t in wanted:
-        if t in known:
-            types[t] = known[t]
+        if t in known:      # the contract's type, or the other channel type its publisher offers
+            types[t] = next((ty for ty in CHANNEL_TYPES if ty in offered.get(t, ())), known[t]) \
+                if known[t] in CHANNEL_TYPES else known[t]
             continue
         while True:
             graph = dict(node.get_topic_names_and_types())

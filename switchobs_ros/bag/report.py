@@ -36,7 +36,7 @@ import msg_bridge as mb
 from switchobs_core.files import write_with
 from switchobs_core.numerics.norms import error_norm
 
-from .io import BagError, BagIn, deserialize
+from .io import CHANNEL_TYPES, BagError, BagIn, channel_message, deserialize
 
 __all__ = ["PassSummary", "Report", "load_report", "plot_report"]
 
@@ -135,7 +135,7 @@ def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
     module docstring); None: the paper interface's channel topic.
     """
     from diagnostic_msgs.msg import DiagnosticArray
-    from std_msgs.msg import Float64MultiArray, UInt8
+    from std_msgs.msg import Float64MultiArray
 
     node = "/" + node.strip("/")
     t_state, t_env = f"{node}/state", f"{node}/envelope"
@@ -145,7 +145,7 @@ def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
         t_chan, per_channel = _channel_sources(inputs)
         opt = {"/sim/truth": "std_msgs/msg/Float64MultiArray", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
         if t_chan:
-            opt[t_chan] = "std_msgs/msg/UInt8"
+            opt[t_chan] = CHANNEL_TYPES
         present = [t for t in opt if t in bag.topics]
         bag.require({t: opt[t] for t in present})
         per_channel = {t: c for t, c in per_channel.items() if t in bag.topics}
@@ -154,7 +154,7 @@ def load_report(bag_path, node: str = "/estimator", inputs=None) -> Report:
     env_passes = _split_passes(_labelled(msgs, t_env, Float64MultiArray, ("paper_bound", "exact_bound", "noise_bound")))
     truth = {s: v for _, s, v in _labelled(msgs, "/sim/truth", Float64MultiArray)}
     has_channel = t_chan in present or bool(per_channel)
-    chan = [(m.log_ns, int(deserialize(m, UInt8).data) if m.topic == t_chan else per_channel[m.topic])
+    chan = [(m.log_ns, mb.channel_value(channel_message(m)) if m.topic == t_chan else per_channel[m.topic])
             for m in msgs if m.topic == t_chan or m.topic in per_channel]
     if not states:
         raise BagError(f"bag {bag_path}: topic {t_state} has no messages")

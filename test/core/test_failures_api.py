@@ -274,6 +274,8 @@ CASES = [
     ("kalman_table.foreign", "KalmanDesign", lambda s: kalman_table(s[0], [s[2]])),
     ("load_noise.meas", "measurement_std", lambda s: scn.load_noise("paper", s[0], meas_std=-1.0)),
     ("load_noise.process", "process_std", lambda s: scn.load_noise("paper", s[0], process_q=math.inf)),
+    ("load_disturbance.max", "disturbance.max", lambda s: scn.load_disturbance("paper", s[0], w_max=math.nan)),
+    ("load_disturbance.shape", "disturbance.max", lambda s: scn.load_disturbance("paper", s[0], w_max=[1.0, 2.0])),
     ("SwitchedObserver.mode", "mode", lambda s: SwitchedObserver(s[0], s[1], mode="weekly", cycles=[CYC])),
     ("SwitchedObserver.cycles", "cycles", lambda s: SwitchedObserver(s[0], s[1], mode="periodic")),
     ("SwitchedObserver.x0", "x0", lambda s: _obs(s, x0=np.zeros(3))),

@@ -20,7 +20,8 @@ S = 1_000_000_000
 def estimator(paper_tables, tmp_path_factory):
     log = tmp_path_factory.mktemp("jump") / "estimator.log"
     p = NodeProcess("estimator", ros_args(params={
-        "gain_table": paper_tables["periodic"], "use_sim_time": True, "diagnostics_period": 0.1}), log=log)
+        "gain_table": paper_tables["periodic"], "use_sim_time": True, "diagnostics_period": 0.1,
+        "e0": 5.0}), log=log)                     # the scene lies 2.2 m from the estimate 0: e0 covers it
     yield p
     assert p.stop() == 0, p.output()
 

@@ -115,7 +115,8 @@ _VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_f
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(values=st.dictionaries(st.sampled_from(_NUMERIC + ["initial_estimate"]), _VALUES, min_size=1, max_size=4))
+@given(values=st.dictionaries(st.sampled_from(_NUMERIC + ["initial_estimate", "disturbance.max"]), _VALUES, min_size=1,
+                              max_size=4))
 @example(values={"consistency.chi2_alpha": 0.5})
 def test_params_files_accepted_values_answer_every_valid_measurement(values, paper_tables):
     """Any numbers in a params file: refused with one ConfigError line, or accepted, and then every

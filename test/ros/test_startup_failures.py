@@ -59,7 +59,7 @@ def test_malformed_params_file(tmp_path):
 
 
 @pytest.mark.parametrize("params,needle", [
-    ({"schedule.tau": 2}, "schedule.tau"),                          # an integer where a double array goes
+    ({"schedule.tau": "two"}, "schedule.tau"),                      # a string where a double array goes
     ({"schedule.mode": "weekly"}, "schedule.mode"),
     ({"schedule.tua": [2.0]},
      "unknown parameter schedule.tua for node 'estimator' ('schedule.tua': did you mean 'schedule.tau'?)"),

@@ -97,3 +97,24 @@ def test_a_number_list_mixing_integers_and_decimals_is_read_as_doubles(tmp_path)
         finally:
             rclpy.shutdown(context=ctx)
     assert fixed[-3:] == ["schedule.tau:=[2, 3]", "-p", "max_abs_value:=1.0e6"]
+
+
+@pytest.mark.parametrize("value,expected", [(0.2, (0.2,)), (1, (1.0,)), ([0.1, 0.2], (0.1, 0.2)), (None, ())])
+def test_disturbance_max_takes_one_number_or_a_list(ros_node, value, expected):
+    """``-p disturbance.max:=0.2`` (a double, or an integer) is the one-entry list; a list stays a
+    list; unset is empty (the system's own declaration); the params-file reader does the same."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from switchobs_ros.config import params_from_file
+    from switchobs_ros.params import declare_all
+
+    over = [] if value is None else [Parameter("disturbance.max", value=value)]
+    node = Node("disturbance_max", context=ros_node.context, parameter_overrides=over)
+    try:
+        got = declare_all(node, [p for p in PARAMS if p.name == "disturbance.max"])
+    finally:
+        node.destroy_node()
+    assert got["disturbance.max"] == expected
+    if value is not None:
+        assert params_from_file(overrides={"disturbance.max": value})["disturbance.max"] == expected

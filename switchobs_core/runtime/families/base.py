@@ -196,11 +196,18 @@ class Correction:
         each enters ``Phi`` and, with its residual, the rigorous bound.
     held : Held or None
         What the family holds from this sample on (None: nothing newly held).
+    lost : str
+        Why the family's covariance no longer holds ("" while it does): its recursion ran out of
+        digits at this sample and restarted (:mod:`switchobs_core.runtime.families.online`). The
+        estimate and the maps are still exact for the gain applied, so the rigorous bound goes
+        on; the covariance, and what rests on it (the published ``P``, the chi-square gate), is
+        withdrawn until the observer's reset.
     """
 
     x: np.ndarray
     maps: tuple = ()
     held: Held | None = None
+    lost: str = ""
 
 
 def check_bounds(bounds: Any) -> tuple[float, float] | None:

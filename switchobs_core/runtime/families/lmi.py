@@ -7,7 +7,9 @@ it (e:switched_observer). A sample inside a design's dead time gets no gain. The
 returns the held innovation (:class:`~switchobs_core.runtime.families.base.Held`: the gain's ZOH
 key, ``nu``, the rows and the data) and changes no estimate at the sample. With a noise model it
 keeps the covariance, propagated through the exact error map of each step with the held noise
-driven through ``Gamma L`` (:mod:`switchobs_core.runtime.covariance`).
+driven through ``Gamma L`` (:mod:`switchobs_core.runtime.covariance`), when it is read: the steps
+wait until then (:class:`~switchobs_core.runtime.covariance.PendingSteps`, O(1) per sample; a run of
+equal steps by binary powers), so a sample costs no n x n product where no output reads ``P``.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
-from ..covariance import CovarianceStep
+from ..covariance import CovarianceStep, PendingSteps
 from .base import Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
 
 __all__ = ["LmiGains"]
@@ -73,7 +75,9 @@ class LmiGains:
         if noise is not None:
             noise.check_system(ctx.system)
             self._cov = CovarianceStep(ctx.A, ctx.B, noise, ctx.dt_resolution)
+            self._pending = PendingSteps(self._cov)
         self._keys: dict = {}       # (design, channel, rows) -> (ZOH key, C rows)
+        self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
         self._held: Held | None = None
         self._R_held = None
@@ -94,6 +98,8 @@ class LmiGains:
 
     def reset(self) -> None:
         self._P = self.noise.P0.copy() if self.track_covariance else None
+        if self.track_covariance:
+            self._pending.clear()
         self._held = None
         self._R_held = None
 
@@ -102,10 +108,16 @@ class LmiGains:
 
     def stepped(self, e: Any, dt: float) -> None:
         if self._P is not None:
-            self._P = self._cov.step(self._P, e, dt, self._held_noise(e))
+            held = self._R_held if self._held is not None else None
+            if self._pending.push(e, dt, held):
+                self._P = self._pending.apply(self._P)
 
     def covariance(self) -> np.ndarray | None:
-        return None if self._P is None else self._P.copy()
+        if self._P is None:
+            return None
+        if len(self._pending):
+            self._P = self._pending.apply(self._P)
+        return self._P.copy()
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         return self._cov.prior(P, e, dt, self._held_noise(e))
@@ -114,6 +126,8 @@ class LmiGains:
         return None
 
     def set_covariance(self, P: np.ndarray) -> None:
+        if self._P is not None:
+            self._pending.clear()
         self._P = P
 
     def _held_noise(self, e: Any) -> np.ndarray | None:
@@ -150,6 +164,10 @@ class LmiGains:
         key, Cr = self._gain_key(s.design, s.channel, rows)
         x = s.x
         self._held = held = Held(key, y - Cr @ x if self._ctx.hold == "innovation" else y, Cr, y)
-        if self._P is not None:
-            self._R_held = self.noise.R(s.channel, rows)
+        if self._P is not None:     # one array per (channel, rows): equal steps are seen as equal
+            rk = (s.channel, None if rows is None else tuple(rows))
+            R = self._Rs.get(rk)
+            if R is None:
+                R = self._Rs[rk] = self.noise.R(s.channel, rows)
+            self._R_held = R
         return Correction(x, (), held)

@@ -29,10 +29,12 @@ the last bits (an equivalent formula, rounded differently): at most 4.6e-14 of t
 
 Loss of positive definiteness. If even the factor runs out of digits (singular to working
 precision, or an overflow: :func:`~switchobs_core.numerics.kalman_step.check_factor`), the family
-restarts its recursion from the noise model's ``P0`` as the prior of this sample, corrects with
-that gain and raises :class:`~switchobs_core.exceptions.CovarianceError` carrying the
-:class:`~switchobs_core.runtime.families.base.Correction` it applied: a caller answers with it
-and withdraws, with the error's reason, what rests on the covariance.
+restarts its recursion from the noise model's ``P0`` as the prior of this sample and corrects with
+that gain; the :class:`~switchobs_core.runtime.families.base.Correction` it returns says why in
+``lost`` (the :class:`~switchobs_core.exceptions.CovarianceError` raised inside the step, one line).
+The observer answers with it and withdraws what rests on the covariance (its ``P`` and the
+chi-square gate) until its reset, with that reason; the rigorous bound goes on, since the error
+map of the gain applied is exact whatever covariance it came from.
 
 The correction :func:`kalman_correct` is the one place the Kalman step of the estimate is
 written: the table family (:mod:`switchobs_core.runtime.families.kalman`) uses it with stored gains.
@@ -203,8 +205,8 @@ class OnlineKalmanGains:
     def correct_online(self, channel: int, rows: tuple | None, H: np.ndarray, y: np.ndarray, x: np.ndarray,
                        prediction: tuple | None = None) -> Correction:
         """The square-root Riccati step on the prior's factor and the correction of ``x = x^-`` with
-        its gain; a factor out of digits restarts the recursion from ``P0`` and raises
-        :class:`~switchobs_core.exceptions.CovarianceError` with the correction made (module docstring)."""
+        its gain; a factor out of digits restarts the recursion from ``P0`` and corrects with that
+        gain, the :class:`Correction` saying why in ``lost`` (module docstring)."""
         Rs = self._R.get((channel, rows))
         if Rs is None:
             Rs = self._R[(channel, rows)] = psd_sqrt(self.noise.R(channel, rows))
@@ -214,8 +216,8 @@ class OnlineKalmanGains:
             K, L, _ = sqrt_correct(self._L0, H, Rs)
             self._L, self._Pc = L, None
             xp, m = kalman_correct(x, K, H, y, self._I, prediction)
-            raise CovarianceError(f"{err}; the recursion restarts from P0 (the covariance and what rests on it "
-                                  "no longer hold)", Correction(xp, (m,))) from None
+            return Correction(xp, (m,), lost=f"{err}; the recursion restarts from P0 (the covariance and what "
+                                             "rests on it no longer hold)")
         self._L, self._Pc = L, None
         xp, m = kalman_correct(x, K, H, y, self._I, prediction)
         return Correction(xp, (m,))

@@ -63,13 +63,13 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     if a.csv:
         check_output(a.csv, "--csv", exc=BagError)       # before the run, not after it
     res = estimate(a.bag, params_of(a), out=a.out, csv=a.csv, storage=a.storage, inputs=not a.estimates_only,
-                   node=a.node, progress=False if a.json else a.progress)
+                   node=a.node, progress=False if a.json else a.progress, keep=False)
     if res.uncovered:
         print(f"switchobs_bag: warning: {res.uncovered_warning}", file=sys.stderr)
-    if not res.stamps.size:
+    if not res.count:
         raise BagError(f"bag {a.bag}: no estimate: {nothing_estimated(res)}")
     rate = res.messages_in / res.seconds if res.seconds > 0 else float("inf")
-    info = {"estimates": int(res.stamps.size), "messages": res.messages_in, "inputs": res.inputs,
+    info = {"estimates": res.count, "messages": res.messages_in, "inputs": res.inputs,
             "seconds": res.seconds, "messages_per_s": rate, "updates": res.updates,
             "partial_updates": res.partial_updates, "rejected": res.rejected, "unanswered": res.unanswered,
             "inconsistent": res.inconsistent, "reattributed": res.reattributed, "bounds_valid": res.bound_valid,
@@ -79,7 +79,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     if a.json:
         print(json.dumps(info))
     else:
-        print(f"{res.stamps.size} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
+        print(f"{res.count} estimates from {res.messages_in} messages in {res.seconds:.3f} s "
               f"({rate:,.0f} messages/s); partial updates {res.partial_updates}; rejected "
               f"{sum(res.rejected.values())} {res.rejected or ''}".rstrip())
         if res.unanswered:
@@ -87,6 +87,9 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
         if res.unordered:
             print(f"samples whose channel the recording cannot tell: {res.unordered} (log times that tie or contradict "
                   f"the stamps around a channel change; rejected as ambiguous_channel, never guessed)")
+        if res.recertifications or res.bias_alarms or res.model_failures:
+            print(f"re-certifications {res.recertifications} (latest: {res.recertified or 'none'}); bias alarms "
+                  f"{res.bias_alarms}; model failures (gate) {res.model_failures}")
         if not res.bound_valid:
             print(f"bounds withdrawn: {res.bound_invalid_why}")
         for what in ("out", "csv"):

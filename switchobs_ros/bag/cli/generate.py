@@ -24,9 +24,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--process-noise", type=float, default=0.0)
     p.add_argument("--noise-max", type=float, default=-1.0,
                    help="clip the measurement noise to +-NOISE_MAX per row (bounded noise; default: no clip)")
+    p.add_argument("--accel-max", type=float, default=0.0, metavar="A",
+                   help="drive every velocity state with an unknown acceleration of +-A (bang-bang, signs switching "
+                        "at random, seeded; the disturbance a declared disturbance.max >= A covers; default 0)")
     p.add_argument("--extended-truth", action="store_true",
                    help="simulate the plant in extended precision: /sim/truth is the exact state rounded once "
                         "(the reference for long checks of the exact bound)")
+    p.add_argument("--bias", default="", metavar="T0,T1,OFFSET",
+                   help="a sensor fault: OFFSET (m) added to the target poses (the rows not all channels share) "
+                        "from T0 to T1 s (default: none)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--initial-state", default="", help="comma-separated x(0) (default: camera_sim's scene)")
     p.add_argument("--clock-start", type=float, default=1.0, help="stamp of tick 0 in seconds (default 1.0)")
@@ -39,10 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
     x0 = tuple(float(v) for v in a.initial_state.split(",")) if a.initial_state else ()
+    bias = tuple(float(v) for v in a.bias.split(",")) if a.bias else ()
     cfg = GenerateConfig(schedule=a.schedule, rate=a.rate, duration=a.duration, noise_std=a.noise,
                          process_noise=a.process_noise, seed=a.seed, noise_max=a.noise_max,
                          extended=a.extended_truth, initial_state=x0, system=a.system,
-                         clock_start=a.clock_start, dead_time=a.dead_time)
+                         clock_start=a.clock_start, dead_time=a.dead_time, accel_max=a.accel_max,
+                         bias=bias)
     res = generate(a.out, cfg, a.storage, progress=a.progress)
     print(f"wrote {res['path']} ({res['storage']}): {res['ticks']} ticks, {res['messages']} messages, "
           f"{(res['end_ns'] - res['start_ns']) * 1e-9:.2f} s")

@@ -132,3 +132,22 @@ def test_parser_random_bad_shapes_or_values(shape, v):
         return
     with pytest.raises(NoiseModelError):
         NoiseModel.from_mapping({"process_intensity": arr}, PAPER)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 6), st.data())
+def test_matrix_entries_read_at_once_equal_the_element_wise_reading(n, data):
+    """A P0 of plain ints and floats is converted in one call (the fast path): the same array as
+    entry by entry; one boolean or non-numeric string anywhere is still refused."""
+    from switchobs_core.model.noise import _array
+
+    entries = st.one_of(st.integers(-10**6, 10**6), st.floats(-1e6, 1e6, allow_nan=False))
+    rows = data.draw(st.lists(st.lists(entries, min_size=n, max_size=n), min_size=n, max_size=n))
+    got = _array(rows, "P0")
+    assert got.dtype == float and got.shape == (n, n)
+    assert np.array_equal(got, np.array([[float(v) for v in r] for r in rows]))
+    i, j = data.draw(st.integers(0, n - 1)), data.draw(st.integers(0, n - 1))
+    for bad in (True, "ten"):
+        rows[i][j] = bad
+        with pytest.raises(NoiseModelError):
+            _array(rows, "P0")

@@ -67,3 +67,21 @@ def test_output_rows():
     C = np.arange(12.0).reshape(3, 4)
     assert output_rows(C, None) is C
     np.testing.assert_array_equal(output_rows(C, (0, 2)), C[[0, 2]])
+
+
+def test_likely_causes_are_ordered_by_the_evidence():
+    """The first sample names e0 first; a gross excess a channel, bias or clock fault; a small one
+    the disturbance (with its declared bound, or none) and then the noise."""
+    from switchobs_core.runtime.consistency import GROSS_RATIO, likely_causes
+
+    def order(text):
+        return [c.split(" (")[0] for c in text.split(": ", 1)[1].split("; ")]
+
+    first = likely_causes(True, 1.5, e0=2.0, noise_max=0.01, disturbance_max=None)
+    assert order(first)[0] == "e0" and "exceeds e0 = 2" in first
+    small = likely_causes(False, 1.5, e0=2.0, noise_max=0.01, disturbance_max=0.2)
+    assert order(small) == ["disturbance", "noise", "bias", "clock", "channel"]
+    assert "disturbance.max = 0.2" in small and "noise.max = 0.01" in small
+    gross = likely_causes(False, GROSS_RATIO * 2, e0=2.0, noise_max=None, disturbance_max=None)
+    assert order(gross) == ["channel", "bias", "clock", "disturbance", "noise"]
+    assert "no disturbance.max declared" in gross and "noise (none declared)" in gross

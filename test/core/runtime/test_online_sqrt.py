@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.linalg.lapack import dtrcon
 
 import switchobs_core as so
-from switchobs_core.exceptions import CovarianceError, RiccatiError
+from switchobs_core.exceptions import RiccatiError
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.numerics.kalman_step import compress_factor
 from switchobs_core.runtime.families.base import Correction
@@ -138,27 +138,34 @@ def test_square_root_carries_a_covariance_the_joseph_form_cannot():
     assert d[-1] > 1e16 * 1e-6          # the covariance itself spans more than a double resolves
 
 
-def test_recursion_out_of_digits_raises_and_keeps_answering():
+def test_recursion_out_of_digits_withdraws_the_covariance_and_keeps_answering():
     """Agent 1 at 1.2/s unseen for 30 s: even the factor runs out of digits (condition past
-    1 / (n u)). The sample raises CovarianceError, one line naming the loss of positive
-    definiteness, carrying the correction made after the restart from P0; the next samples are
-    answered, and the loss recurs once a period."""
+    1 / (n u)). The family restarts from P0 and returns its correction with the reason, one line
+    naming the loss of positive definiteness; the observer answers every sample, its covariance
+    is withdrawn with that reason until the reset, and the loss recurs once a period."""
     system, noise, sch = _unseen_agent(1.2)
     rng = np.random.default_rng(5)
     obs = _online(system, noise)
-    errors = []
+    lost, family_sample = [], obs.gains.sample
+
+    def recording(s):
+        c = family_sample(s)
+        if c.lost:
+            lost.append((s.t, c))
+        return c
+
+    obs.gains.sample = recording
     for k in range(3 * 310):
         t = k / 10.0
-        c = sch.channel_at(t)
-        try:
-            x = obs.update(t, c, rng.normal(scale=1e-3, size=4))
-        except CovarianceError as err:
-            errors.append((t, err))
-            continue
+        x = obs.update(t, sch.channel_at(t), rng.normal(scale=1e-3, size=4))
         assert np.all(np.isfinite(x))
-    assert len(errors) == 3
-    assert [round(t2 - t1, 6) for (t1, _), (t2, _) in zip(errors, errors[1:])] == [31.0, 31.0]
-    err = errors[0][1]
-    assert "\n" not in str(err) and "lost positive definiteness" in str(err) and "restarts from P0" in str(err)
-    assert isinstance(err.correction, Correction) and np.all(np.isfinite(err.correction.x))
-    assert isinstance(err, RiccatiError) and _rcond(obs) > 12 * _U
+        assert (obs.P is None) == (len(lost) > 0)
+    assert len(lost) == 3
+    assert [round(t2 - t1, 6) for (t1, _), (t2, _) in zip(lost, lost[1:])] == [31.0, 31.0]
+    why = lost[0][1].lost
+    assert "\n" not in why and "lost positive definiteness" in why and "restarts from P0" in why
+    assert obs.covariance_withdrawn == why and obs.prior_covariance(obs.t + 0.1) is None
+    assert isinstance(lost[0][1], Correction) and np.all(np.isfinite(lost[0][1].x))
+    assert _rcond(obs) > 12 * _U
+    obs.reset()
+    assert obs.covariance_withdrawn == "" and obs.P is not None

@@ -1,0 +1,174 @@
+#!/usr/bin/env python
+"""The estimator node live at scale: 32 agents (n = 132) at 50 Hz over DDS against a bare rclpy
+republisher, side by side in one run.
+
+    python bench/bench_live_scale.py                       # 32 agents, 50 Hz, 60 s per node
+    python bench/bench_live_scale.py --agents 8 --seconds 20 --nodes kalman,bare
+
+Three processes per run, one role each: camera_sim (the built-in ``camera_agents`` model with M
+agents, every h_i = 1 s, stamping each tick on its grid) as the sender; the node under test: the
+estimator with the model's Kalman table (``kalman``) or LMI table (``lmi``), all outputs at their
+defaults, or the ceiling (``bare``), a bare rclpy node that republishes every target pose
+(``bench/bench_node.py --republisher``); and this process as the receiver, which only records the
+arrival of each answer (``/estimator/state``, or the republisher's ``~/out``) and of each truth
+message (one per tick: what was sent). Reported per node: ticks sent, answers, the fraction
+answered, latency (arrival - the tick's stamp, both this machine's system clock) p50 and p99, and
+the node process's CPU time per answer (user + system, from ``/proc``, from the first tick to the
+last answer). Ratios against ``bare`` in the same run.
+
+A script, not a test: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from bench_design import machine_info  # noqa: E402
+
+from switchobs_core.threads import single_threaded_blas  # noqa: E402
+
+single_threaded_blas()
+
+import rclpy  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+import msg_bridge as mb  # noqa: E402
+import switchobs_core as so  # noqa: E402
+from switchobs_ros import qos  # noqa: E402
+from tools.domain import claim_domain  # noqa: E402
+from tools.launch import NodeProcess, ros_args  # noqa: E402
+
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` (and its reaped children not counted)."""
+    f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(f[11]) + int(f[12])) / TICKS
+
+
+class Receiver(Node):
+    """Records the arrival time of every answer and every truth message, keyed by stamp."""
+
+    def __init__(self, answer_topic: str, pose: bool):
+        super().__init__("bench_live_receiver")
+        self.answers: dict[int, int] = {}
+        self.truth: dict[int, int] = {}
+        if pose:
+            self.create_subscription(PoseStamped, answer_topic, self._pose, qos.OUTPUT)
+        else:
+            self.create_subscription(Float64MultiArray, answer_topic, self._array, qos.OUTPUT)
+        self.create_subscription(Float64MultiArray, "/sim/truth", self._truth, qos.TRUTH)
+
+    def _pose(self, m: PoseStamped) -> None:
+        self.answers[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec] = time.time_ns()
+
+    def _array(self, m: Float64MultiArray) -> None:
+        self.answers[mb.unpack_labelled(m).stamp_ns] = time.time_ns()
+
+    def _truth(self, m: Float64MultiArray) -> None:
+        self.truth[mb.unpack_labelled(m).stamp_ns] = time.time_ns()
+
+
+def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path) -> dict:
+    sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * m}
+    if kind == "bare":
+        node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
+                           log=logs / "bare.log")
+        topic, pose = "/bare_republisher/out", True
+    else:
+        params = dict(sched, system=str(sys_path), gain_table=tables[kind], e0=1e3)
+        node = NodeProcess("estimator", ros_args(params=params), log=logs / f"{kind}.log")
+        topic, pose = "/estimator/state", False
+    rec = Receiver(topic, pose)
+    try:
+        end = time.monotonic() + 180
+        while rec.count_publishers(topic) == 0 and time.monotonic() < end:
+            rclpy.spin_once(rec, timeout_sec=0.1)
+        x0 = np.random.default_rng(1).uniform(-1.0, 1.0, 4 * (m + 1))
+        cam = NodeProcess("camera_sim", ros_args(params=dict(sched, system=str(sys_path), rate=rate,
+                                                             duration=seconds, wait_for_subscribers=1,
+                                                             wait_for_truth_subscribers=1,
+                                                             initial_state=list(map(float, x0)))),
+                          log=logs / f"camera_{kind}.log")
+        cpu0 = None
+        while cam.alive():
+            rclpy.spin_once(rec, timeout_sec=0.05)
+            if cpu0 is None and rec.truth:
+                cpu0 = cpu_seconds(node.pid)
+        t_end = time.monotonic() + 2.0
+        while time.monotonic() < t_end:
+            rclpy.spin_once(rec, timeout_sec=0.05)
+        cpu1 = cpu_seconds(node.pid)
+    finally:
+        node.stop()
+        rec.destroy_node()
+    sent = sorted(rec.truth)
+    answered = [s for s in sent if s in rec.answers]
+    lat = np.array([(rec.answers[s] - s) * 1e-6 for s in answered])
+    return {"node": kind, "sent": len(sent), "answered": len(answered),
+            "p50": float(np.median(lat)) if lat.size else float("nan"),
+            "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
+            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--agents", type=int, default=32)
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--rate", type=float, default=50.0)
+    ap.add_argument("--nodes", default="bare,kalman,lmi", help="comma-separated: bare, kalman, lmi")
+    a = ap.parse_args(argv)
+    info = machine_info()
+    lease = claim_domain()
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    kinds = a.nodes.split(",")
+    with tempfile.TemporaryDirectory(prefix="bench_live_scale_") as tmp:
+        d = Path(tmp)
+        sys_path = d / f"agents{a.agents}.yaml"
+        sys_path.write_text(yaml.safe_dump({"scenario": "camera_agents", "agents": a.agents}))
+        system = so.load_system(sys_path)
+        cycle = so.Cycle([1.0] * a.agents)
+        tables = {}
+        if "kalman" in kinds:
+            tables["kalman"] = str(so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)]).save(d / "k.npz"))
+        if "lmi" in kinds:
+            tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
+        rclpy.init()
+        try:
+            rows = [run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d) for k in kinds]
+        finally:
+            rclpy.try_shutdown()
+            lease.release()
+    print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
+          f"load average {info['load'][0]:.1f} before ({info['date']}).")
+    print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_live_scale.py --agents {a.agents} "
+          f"--seconds {a.seconds:g} --rate {a.rate:g} --nodes {a.nodes}`\n")
+    bare = next((r for r in rows if r["node"] == "bare"), None)
+    print("| node | ticks sent | answered | fraction | latency p50 | p99 | CPU per answer | p99 / bare | CPU / bare |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        rp = f"{r['p99'] / bare['p99']:.2f}x" if bare else "-"
+        rc = f"{r['cpu_ms'] / bare['cpu_ms']:.1f}x" if bare else "-"
+        print(f"| {r['node']} | {r['sent']} | {r['answered']} | {r['answered'] / max(r['sent'], 1):.4f} "
+              f"| {r['p50']:.1f} ms | {r['p99']:.1f} ms | {r['cpu_ms']:.2f} ms | {rp} | {rc} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

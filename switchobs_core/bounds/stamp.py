@@ -1,0 +1,110 @@
+"""The measurement error that a stamp error makes, bounded from the estimate and its bound.
+
+A measurement ``y = C x(t_true)`` (e:outputs) stamped ``t = t_true - s`` with a stamp error
+``|s| <= d`` (two computers' clocks that disagree by up to the declared clock tolerance) is read
+by the observer as a measurement at ``t``: it carries the error
+
+    ``w = C x(t + s) - C x(t) = C (e^{A s} - I) x(t) + C Gamma(s) B u``
+
+(e:system over ``[t, t + s]`` with the input ``u`` held; ``Gamma(s) = int_0^s e^{A r} dr``). The
+state is not known, the estimate and its error bound are: ``x = x_hat - x_tilde`` with
+``||x_tilde|| <= beta`` (e:est_error). With ``a >= ||A||_2``, ``phi_1(z) = e^z - 1`` and
+``phi_2(z) = e^z - 1 - z <= z^2 e^z / 2`` (the Taylor series of e:var_constants' exponential, term
+by term), for every ``|s| <= d``:
+
+    ``||w|| <= d ||C A x_hat|| + ||C|| ||x_hat|| phi_2(a d) + ||C|| beta phi_1(a d)
+    + ||C|| ||B u|| d e^{a d}``
+
+(``e^{A s} - I = A s + sum_{k >= 2} (A s)^k / k!``; the first term exactly for ``x_hat``, the
+series' norm for the rest, e:submult and e:triangle). Every norm is taken in the balanced
+coordinates of :mod:`switchobs_core.numerics.scaling` (``C D``, ``D^-1 A D``, ``D^-1 x``: the same
+``w``, so the bound does not depend on the state's units), and the floating-point evaluation is
+rounded up (``gamma`` factors of :mod:`switchobs_core.numerics.rounding` on the product
+``C A x_hat``, a relative margin on the sum). The bound is a measurement error of the sample: it
+joins the rounding of the innovation in the rigorous sets (:mod:`switchobs_core.bounds.rigorous`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numerics.expm_bound import nu as nu2
+from ..numerics.rounding import UNIT_ROUNDOFF, fro_norm, gamma
+from ..numerics.scaling import balance, balanced
+
+__all__ = ["StampError", "stamp_error_bound"]
+
+_U = UNIT_ROUNDOFF
+
+
+def _phi1(z: float) -> float:
+    """``>= e^z - 1`` for ``z >= 0`` (``expm1`` is faithful: one ulp, here four)."""
+    return math.expm1(z) * (1.0 + 4.0 * _U)
+
+
+def _phi2(z: float) -> float:
+    """``>= e^z - 1 - z`` for ``z >= 0``: ``z^2 e^z / 2`` (``sum_{k>=2} z^k / k! <= z^2 / 2 sum_j
+    z^j / j!``), rounded up."""
+    return 0.5 * z * z * math.exp(z) * (1.0 + 8.0 * _U)
+
+
+class StampError:
+    """The bound of the module docstring for one system ``A`` (``B`` the input matrix, None: no
+    input), in the balanced coordinates ``scale`` (computed when not given).
+
+    ``StampError(A).bound(C, x_hat, beta_d, d)``: ``beta_d`` bounds ``||D^-1 x_tilde||`` (the
+    balanced error bound, as :meth:`ErrorEllipsoid.lam_scaled
+    <switchobs_core.numerics.rounding.ErrorEllipsoid.lam_scaled>` gives it squared); returns an upper
+    bound of ``sup_{|s| <= d} ||w(s)||``, rounding included; 0 for ``d = 0``.
+    """
+
+    def __init__(self, A: np.ndarray, B: np.ndarray | None = None, scale: np.ndarray | None = None):
+        A = np.asarray(A, dtype=float)
+        self.n = A.shape[0]
+        self.d = balance(A) if scale is None else np.asarray(scale, dtype=float)
+        self._id = 1.0 / self.d
+        self.Ab = balanced(A, self.d)
+        self.a = nu2(self.Ab)                       # >= ||D^-1 A D||_2, rounded up
+        self.fA = fro_norm(self.Ab) * (1.0 + 2.0 * gamma(self.n))
+        self.B = None if B is None or np.asarray(B).size == 0 else np.asarray(B, dtype=float) * self._id[:, None]
+        self._CD: dict = {}
+
+    def _cd(self, C: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """``(C D, ||C D||_2 upper, ||C D||_F upper)``, kept per matrix."""
+        hit = self._CD.get(id(C))
+        if hit is None or hit[0] is not C:
+            if len(self._CD) > 256:
+                self._CD.clear()
+            Cb = np.asarray(C, dtype=float) * self.d[None, :]
+            hit = self._CD[id(C)] = (C, Cb, nu2(Cb), fro_norm(Cb) * (1.0 + 2.0 * gamma(Cb.shape[1])))
+        return hit[1], hit[2], hit[3]
+
+    def bound(self, C: np.ndarray, x_hat: np.ndarray, beta_d: float, d: float,
+              u: np.ndarray | None = None) -> float:
+        """``sup_{|s| <= d} ||C (e^{A s} - I) x + C Gamma(s) B u||`` over every ``x`` with
+        ``||D^-1 (x - x_hat)|| <= beta_d`` (module docstring), rounded up."""
+        if d <= 0.0:
+            return 0.0
+        Cb, nC, fC = self._cd(C)
+        xb = np.asarray(x_hat, dtype=float) * self._id
+        xn = math.sqrt(float(xb @ xb)) * (1.0 + 2.0 * gamma(self.n))
+        cax = Cb @ (self.Ab @ xb)
+        # |fl(C (A x)) - C A x| <= gamma_{2n} |C| |A| |x| entrywise (two products), in 2-norm
+        # at most gamma_{2n} ||C||_F ||A||_F ||x||
+        lin = math.sqrt(float(cax @ cax)) * (1.0 + 2.0 * gamma(cax.size)) + gamma(2 * self.n + 2) * fC * self.fA * xn
+        z = self.a * d * (1.0 + 2.0 * _U)
+        w = d * lin + nC * xn * _phi2(z) + nC * beta_d * _phi1(z)
+        if self.B is not None and u is not None:
+            bu = self.B @ np.asarray(u, dtype=float)
+            bun = math.sqrt(float(bu @ bu)) * (1.0 + 2.0 * gamma(bu.size + self.B.shape[1]))
+            w += nC * bun * d * math.exp(z) * (1.0 + 4.0 * _U)
+        return w * (1.0 + 16.0 * _U)
+
+
+def stamp_error_bound(A: np.ndarray, C: np.ndarray, x_hat: np.ndarray, beta: float, d: float) -> float:
+    """The bound of :class:`StampError` in the user's coordinates with ``||x_tilde||_2 <= beta``
+    (no balancing: ``D = I``), for one use."""
+    n = np.asarray(A).shape[0]
+    return StampError(A, scale=np.ones(n)).bound(C, x_hat, beta, d)

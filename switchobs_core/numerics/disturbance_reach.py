@@ -1,0 +1,240 @@
+"""A rigorous bound on what a bounded unknown input can add to the state over one step.
+
+The plant with a bounded unknown input (beyond the paper's e:system, which has none) is
+
+.. math::
+
+    \\dot x = A x + B u + B_w w, \\qquad |w_j(t)| \\le m_j ,
+
+so over a step of length ``h`` the state moves by the undisturbed step plus
+
+.. math::
+
+    d(h) = \\int_0^h e^{A (h - s)} B_w w(s) \\, ds = \\int_0^h e^{A r} B_w w(h - r) \\, dr ,
+
+whatever the (measurable) ``w`` inside the box. The observer does not see ``w``, so ``d(h)`` joins
+the error of every step (e:xtilde_dyn_piecewise gains the term ``-d``). :class:`DisturbanceReach`
+gives ``R(h) >= ||D^-1 d(h)||`` for every such ``w``, in the balanced units ``D`` of
+:mod:`switchobs_core.numerics.scaling` in which the rounding bound takes every residual
+(:mod:`switchobs_core.numerics.rounding`, step 5: the ball the residual lies in). Write
+``A_b = D^-1 A D`` and ``b_j = D^-1 B_w e_j`` (both exact: ``D`` holds powers of two), and
+``a >= ||A_b||_2`` (:func:`~switchobs_core.numerics.expm_bound.nu`). Two bounds, the smaller is taken:
+
+1. per column: ``||D^-1 d|| <= sum_j m_j int_0^h ||e^{A_b r} b_j|| dr``;
+2. joint: ``||D^-1 d|| <= ||m|| int_0^h ||e^{A_b r} B_b||_2 dr`` (``B_b = D^-1 B_w``; Cauchy-Schwarz
+   with ``||w|| <= ||m||``);
+3. Gram: with ``e^{A_b r} B_b = B_b + r Y + R(r)`` (``Y = A_b B_b``, ``R`` below) and
+   ``||X w||^2 = w' X'X w <= m' |X'X| m =: g(X)^2`` for ``|w| <= m``:
+   ``||D^-1 d|| <= h g(B_b) + h^2 g(Y) / 2 + sum_j m_j ||A_b^2 b_j|| h^3 e^{a h} / 6`` (or
+   ``g(B_b) (e^{a h} - 1) / a``). Exact up to ``O(h)`` relative when the columns act on orthogonal
+   directions (a unit acceleration on each of ``q`` velocities of different scales), where 1 is
+   ``sqrt(q)`` and 2 up to ``sqrt(q) max_j ||b_j|| / min_j ||b_j||`` times too large.
+
+Each integral ``int_0^h ||e^{A_b r} X|| dr`` (``X`` a column or ``B_b``) is bounded by the smaller of
+
+* Taylor: ``e^{A_b r} X = X + r A_b X + R(r)`` with ``||R(r)|| <= ||A_b^2 X|| (e^{a r} - 1 - a r) / a^2
+  <= ||A_b^2 X|| r^2 e^{a r} / 2``; the norm of the affine part is convex in ``r``, so its integral
+  is at most the trapezoid ``h (||X|| + ||X + h A_b X||) / 2``, and the remainder integrates to at
+  most ``||A_b^2 X|| h^3 e^{a h} / 6``. For a double integrator (``A_b^2 B_b = 0``) this is the
+  exact worst case up to the trapezoid's ``O(h^2)``;
+* growth: ``||e^{A_b r}|| <= e^{a r}`` gives ``||X|| (e^{a h} - 1) / a`` (long steps).
+
+The observer keeps its error in ellipsoids (:mod:`switchobs_core.numerics.rounding`, step 7), and a
+ball in balanced units covers every direction, also those ``B_w`` cannot reach (positions, for
+accelerations: ``h^2 / 2`` of the velocities' ``h``), and a map that expands some directions (a
+Kalman correction's ``I - K H``, 200 in the balanced 2-norm for the paper's gains) expands the ball
+in all of them. :meth:`DisturbanceReach.shaped` keeps the first two Taylor terms of ``d`` as a
+degenerate ellipsoid ``E(G G')`` in the directions ``B_w`` and ``A B_w`` reach (a box of ``q``
+inputs lies in the ellipsoid ``q diag(m^2)``) and only the third-order remainder,
+``sum_j m_j ||A_b^2 b_j|| h^3 e^{a h} / 6``, as a ball.
+
+Rounding. The products ``Y = fl(A_b X)`` and ``Z = fl(A_b Y)`` err by at most
+``gamma_n |A_b| |X|`` entrywise (Higham, eq. 3.11), so ``||A_b X - Y|| <= gamma_n a ||X||``; the
+axpy ``fl(X + h Y)`` by ``gamma_2 (|X| + h |Y|)``; a computed norm is a sum of nonnegative terms
+rounded up by ``1 + gamma_{n+2}``; a matrix's 2-norm is bounded by ``min(nu, ||.||_F)``, both
+rounded up; ``h`` is taken as ``dt (1 + 2u)`` (the true step is within ``u dt`` of the double
+``dt``), and every line of the bookkeeping is inflated by a relative ``8 u``. The result is an
+upper bound of the quantities above (``inf`` when a bound is ``inf``: the disturbance then makes
+the bound infinite and the caller withdraws it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.linalg import expm
+
+from .expm_bound import nu
+from .rounding import UNIT_ROUNDOFF, gamma
+
+__all__ = ["DisturbanceReach", "brute_force_reach"]
+
+_U = UNIT_ROUNDOFF
+_UP = 1.0 + 8.0 * _U
+#: Radii kept per step length (the observer's steps take a handful of lengths).
+_CACHE = 256
+
+
+def _norm_up(v: np.ndarray) -> float:
+    """``>= ||v||_2`` (a sum of squares rounded up)."""
+    return math.sqrt(float(v @ v)) * (1.0 + gamma(v.size + 2)) * _UP
+
+
+def _mat_norm_up(X: np.ndarray) -> float:
+    """``>= ||X||_2``: the smaller of ``nu(X)`` and ``||X||_F``, each rounded up."""
+    if X.size == 0:
+        return 0.0
+    fro = math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP
+    return min(nu(X), fro)
+
+
+class DisturbanceReach:
+    """``R(h) >= ||D^-1 d(h)||`` for every ``|w_j| <= m_j`` (module docstring).
+
+    ``r = DisturbanceReach(A, B_w, w_max, scale=d)``; ``r.radius(dt)``. ``scale`` is the balancing
+    of ``A`` (:func:`~switchobs_core.numerics.scaling.balance`; default none: ``D = I``).
+    """
+
+    def __init__(self, A: np.ndarray, B_w: np.ndarray, w_max: Sequence[float], scale: np.ndarray | None = None):
+        A = np.asarray(A, dtype=float)
+        n = A.shape[0]
+        d = np.ones(n) if scale is None else np.asarray(scale, dtype=float)
+        self.w_max = np.asarray(w_max, dtype=float).reshape(-1)
+        Bw = np.asarray(B_w, dtype=float).reshape(n, -1)
+        keep = self.w_max > 0.0
+        self.w_max, Bw = self.w_max[keep], Bw[:, keep]
+        Bb = Bw / d[:, None]        # exact: powers of two
+        self._Bw, self._id, self._d = Bw, 1.0 / d, d
+        self.q = Bb.shape[1]
+        Ab = A * (1.0 / d)[:, None] * d[None, :]
+        self.a = nu(Ab)
+        gn = gamma(n)
+        Y = Ab @ Bb
+        Z = Ab @ Y
+        self._B, self._Y = Bb, Y
+        # columns: ||b_j||, the error of y_j, ||A_b^2 b_j||
+        self._nb = np.array([_norm_up(Bb[:, j]) for j in range(self.q)])
+        ny = np.array([_norm_up(Y[:, j]) for j in range(self.q)])
+        self._ey = gn * self.a * self._nb * _UP
+        self._nz = np.array([_norm_up(Z[:, j]) + gn * self.a * ny[j] + self.a * self._ey[j]
+                             for j in range(self.q)]) * _UP
+        # the whole matrix: ||B_b||_2, the error of Y, ||A_b^2 B_b||_2 (upper bounds)
+        self._mB = _mat_norm_up(Bb)
+        mY = _mat_norm_up(Y)
+        self._meY = gn * self.a * self._mB * _UP
+        self._mZ = (_mat_norm_up(Z) + gn * self.a * mY + self.a * self._meY) * _UP
+        self._mnorm = _norm_up(self.w_max)
+        # Gram: g(B_b), g(Y) (its rounding and Y's error included), sum_j m_j ||A_b^2 b_j||
+        self._gB = self._gram(Bb, gn)
+        self._gY = (self._gram(Y, gn) + float(self.w_max @ self._ey)) * _UP
+        self._gZ = float(self.w_max @ self._nz) * (1.0 + gamma(self.q + 2)) * _UP
+        self._cache: dict[float, float] = {}
+        self._shaped: dict[float, tuple[np.ndarray, float]] = {}
+
+    def _gram(self, X: np.ndarray, gn: float) -> float:
+        """``>= sqrt(m' |X'X| m)`` (the product's rounding ``gamma_n |X|'|X|`` added)."""
+        aX = np.abs(X)
+        G = np.abs(X.T @ X) + gn * (aX.T @ aX) * _UP
+        return math.sqrt(float(self.w_max @ G @ self.w_max) * (1.0 + gamma(2 * self.q + 2)) * _UP) * _UP
+
+    @property
+    def active(self) -> bool:
+        """Whether any bound ``m_j`` is > 0 (else ``R = 0``)."""
+        return self.q > 0
+
+    def _integral(self, nX: float, nXh: float, eY: float, nZ: float, h: float) -> float:
+        """``>= int_0^h ||e^{A_b r} X|| dr`` from ``||X||``, ``||fl(X + h Y)||`` (its rounding
+        included), the error ``eY`` of ``Y`` and ``||A_b^2 X||``: the smaller of the Taylor and the
+        growth bounds."""
+        a = self.a
+        ah = a * h
+        taylor = (h * (nX + nXh) / 2.0 + h * h * eY / 2.0
+                  + (nZ * h ** 3 * math.exp(ah) / 6.0 if nZ > 0.0 else 0.0)) * _UP * _UP
+        growth = nX * (math.expm1(ah) / a if a > 0.0 else h) * _UP * _UP
+        return min(taylor, growth)
+
+    def radius(self, dt: float) -> float:
+        """``R(dt)`` (balanced units) for a step of length ``dt >= 0``."""
+        if self.q == 0 or not dt > 0.0:
+            return 0.0
+        r = self._cache.get(dt)
+        if r is not None:
+            return r
+        h = dt * (1.0 + 2.0 * _U)
+        g2 = gamma(2)
+        if not math.isfinite(h) or self.a * h > 700.0:
+            return math.inf
+        XhY = self._B + h * self._Y
+        # per column
+        per = 0.0
+        for j in range(self.q):
+            nxh = _norm_up(XhY[:, j]) + g2 * (self._nb[j] + h * _norm_up(self._Y[:, j])) * _UP
+            per += self.w_max[j] * self._integral(self._nb[j], nxh, self._ey[j], self._nz[j], h) * _UP
+        # joint
+        mxh = _mat_norm_up(XhY) + g2 * (self._mB + h * _mat_norm_up(self._Y)) * _UP
+        joint = self._mnorm * self._integral(self._mB, mxh, self._meY, self._mZ, h) * _UP
+        a, ah = self.a, self.a * h
+        gram = (h * self._gB + h * h * self._gY / 2.0 + self._gZ * h ** 3 * math.exp(ah) / 6.0) * _UP * _UP
+        gram = min(gram, self._gB * (math.expm1(ah) / a if a > 0.0 else h) * _UP * _UP)
+        r = min(per, joint, gram) * _UP
+        if len(self._cache) >= _CACHE:
+            self._cache.clear()
+        self._cache[dt] = r
+        return r
+
+
+    def shaped(self, dt: float) -> tuple[np.ndarray, float]:
+        """``(G, r)``: ``d(dt)`` lies in ``E(G G')`` plus the ball of radius ``r`` (balanced units;
+        module docstring). With ``wbar = (1/h) int w`` and ``wtil = (2/h^2) int_0^h r w(h - r) dr``,
+        both in the box, ``d = h B_w wbar + (h^2/2) A B_w wtil + int R(r) B_w w``: the first two lie in
+        ``E(q (1 + a) G1 G1') + E(q (1 + 1/a) G2 G2')`` (``G1 = h B_w diag(m)``, ``G2 = (h^2/2) A B_w
+        diag(m)``, ``a`` from their balanced traces), so ``G = [sqrt(q (1 + a)) G1, sqrt(q (1 + 1/a)) G2]``;
+        the remainder, ``Y``'s rounding and ``G``'s own (relative ``8 u``, the step's ``u dt`` included)
+        are the ball. For ``a h > 1`` (a long step) ``G`` is empty and ``r`` is :meth:`radius`."""
+        n = self._B.shape[0]
+        if self.q == 0 or not dt > 0.0:
+            return np.zeros((n, 0)), 0.0
+        hit = self._shaped.get(dt)
+        if hit is not None:
+            return hit
+        h = dt * (1.0 + 2.0 * _U)
+        if not math.isfinite(h) or self.a * h > 1.0:
+            return np.zeros((n, 0)), self.radius(dt)
+        G1 = self._Bw * (dt * self.w_max)[None, :]
+        G2 = (self._Y * self._d[:, None]) * ((dt * dt / 2.0) * self.w_max)[None, :]
+        t1 = _mat_fro_up(G1 * self._id[:, None])
+        t2 = _mat_fro_up(G2 * self._id[:, None])
+        a = min(max(t2 / t1, 1e-12), 1e12) if t1 > 0.0 else 1e12
+        s1 = math.sqrt(self.q * (1.0 + a)) * (1.0 + 4.0 * _U)
+        s2 = math.sqrt(self.q * (1.0 + 1.0 / a)) * (1.0 + 4.0 * _U)
+        G = np.hstack([G1 * s1, G2 * s2])
+        rem = (self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self.w_max @ self._ey)) * _UP
+        r = (rem + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
+        G.setflags(write=False)
+        if len(self._shaped) >= _CACHE:
+            self._shaped.clear()
+        self._shaped[dt] = (G, r)
+        return G, r
+
+
+def _mat_fro_up(X: np.ndarray) -> float:
+    """``>= ||X||_F`` (rounded up)."""
+    return math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP if X.size else 0.0
+
+
+def brute_force_reach(A: np.ndarray, B_w: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """``d(dt)`` for the piecewise-constant ``w`` (rows: equal pieces of ``[0, dt]``), integrated
+    exactly piece by piece with the augmented exponential ``e^{[[A, B_w], [0, 0]] tau}`` (the
+    reference of the tests and the bench's search for the worst case)."""
+    n, q = B_w.shape
+    K = w.shape[0]
+    J = np.zeros((n + q, n + q))
+    J[:n, :n], J[:n, n:] = A, B_w
+    X = expm(J * (dt / K))
+    F, GB = X[:n, :n], X[:n, n:]
+    x = np.zeros(n)
+    for k in range(K):
+        x = F @ x + GB @ w[k]
+    return x

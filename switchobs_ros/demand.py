@@ -1,0 +1,66 @@
+"""Outputs on demand: an optional output of the estimator is built and published only while a
+subscription is matched to its publisher.
+
+A DDS writer sends a sample only to the readers it has matched (the outputs are volatile: a reader
+that joins later never gets what was sent before it), so skipping an output that no reader is
+matched to loses nothing that a subscriber could have received. At 32 agents (n = 132) the
+per-body odometries, the 139 KB covariance and the typed messages cost several milliseconds per
+estimate to build and serialise, and the covariance itself (``P``, n^3 to form from a Kalman
+table's stored prior) as much again; none of it is spent while nobody listens.
+
+:class:`Demand` answers two questions:
+
+* ``listened(pub)``: is a subscription matched to ``pub`` now? (rcl's matched count, about 2 us:
+  asked at every publication, so a new subscriber gets the very next estimate);
+* ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before
+  every input is handled (the estimate's ``P`` is formed with it), of up to 36 publishers at 32
+  agents, so the answer is kept: a yes for :attr:`Demand.period` seconds (a subscriber that
+  leaves costs at most that long of covariances nobody reads), a no for :attr:`Demand.period_no`
+  seconds (for at most that long after the first subscriber to an output carrying ``P`` appears,
+  its messages go out without the covariance: the odometry's unknown, the typed estimate's
+  empty, as with ``publish_covariance`` false).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["Demand", "listened"]
+
+
+def listened(pub: Any) -> bool:
+    """Is a subscription matched to the publisher ``pub`` (None: no such output)?"""
+    return pub is not None and pub.get_subscription_count() > 0
+
+
+class Demand:
+    """Which optional outputs have subscribers (module docstring).
+
+    ``Demand(carriers, period=0.1, period_no=0.02)``: ``carriers()`` returns the publishers whose messages carry
+    ``P`` (re-read at every refresh: the node may recreate its publishers).
+    """
+
+    def __init__(self, carriers: Callable[[], Sequence[Any]], period: float = 0.1, period_no: float = 0.02,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._carriers = carriers
+        self.period = float(period)
+        self.period_no = float(period_no)
+        self._clock = clock
+        self._until = -math.inf
+        self._wanted = False
+
+    def covariance_wanted(self) -> bool:
+        """Whether an output that carries ``P`` has a subscriber (kept for :attr:`period` s, a no
+        for :attr:`period_no` s)."""
+        now = self._clock()
+        if now >= self._until:
+            self._wanted = any(listened(p) for p in self._carriers())
+            self._until = now + (self.period if self._wanted else self.period_no)
+        return self._wanted
+
+    def expire(self) -> None:
+        """Ask the publishers again at the next :meth:`covariance_wanted` (e.g. after a parameter change)."""
+        self._until = -math.inf

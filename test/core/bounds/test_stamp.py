@@ -1,0 +1,87 @@
+"""The stamp-error bound (switchobs_core.bounds.stamp) against a brute force: the exact error
+``C x(t + s) - C x(t)`` computed with scipy's expm on a grid of stamp errors and the worst error
+direction in the ball, for random systems (hypothesis)."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from switchobs_core.bounds.stamp import StampError, stamp_error_bound
+
+_F = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+def _achieved(A, C, x_hat, beta, d, B=None, u=None, k=41):
+    """The largest ``||C (e^{As} - I) x + C Gamma(s) B u||`` found over a grid of ``|s| <= d`` and,
+    per ``s``, the two ends of the ball's worst direction ``x = x_hat -/+ beta v``."""
+    n = A.shape[0]
+    worst = 0.0
+    for s in np.linspace(-d, d, k):
+        # [[A, I], [0, 0]] gives Gamma(s) in its corner block, and e^{As} - I = A Gamma(s)
+        # without the cancellation of expm(A s) - I
+        Z = np.zeros((2 * n, 2 * n))
+        Z[:n, :n], Z[:n, n:] = A, np.eye(n)
+        G = sla.expm(Z * s)[:n, n:]
+        M = A @ G
+        g = np.zeros(C.shape[0]) if B is None else C @ (G @ (B @ u))
+        CM = C @ M
+        v = np.linalg.svd(CM)[2][0] if CM.size else np.zeros(n)
+        for sign in (1.0, -1.0):
+            worst = max(worst, float(np.linalg.norm(CM @ (x_hat - sign * beta * v) + g)))
+    return worst
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 4), p=st.integers(1, 3), seed=st.integers(0, 2**31 - 1),
+       scale=st.floats(0.01, 3.0), beta=st.floats(0.0, 2.0), d=st.floats(1e-6, 0.3))
+def test_the_bound_holds_against_the_brute_force(n, p, seed, scale, beta, d):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n)) * scale
+    C = rng.normal(size=(p, n))
+    x_hat = rng.normal(size=n) * 10.0
+    got = stamp_error_bound(A, C, x_hat, beta, d)
+    want = _achieved(A, C, x_hat, beta, d)
+    assert got >= want * (1.0 - 1e-9), (got, want)     # the brute force's own rounding: 1e-9
+    # and within the crude bound nu(C) (||x|| + beta) (a d + (a d)^2 e^{a d} / 2), with the norm
+    # bounds the module uses (nu(X) = sqrt(||X||_1 ||X||_inf) >= ||X||_2)
+    a = np.sqrt(np.linalg.norm(A, 1) * np.linalg.norm(A, np.inf))
+    nC = np.sqrt(np.linalg.norm(C, 1) * np.linalg.norm(C, np.inf))
+    crude = nC * (np.linalg.norm(x_hat) + beta) * (a * d + (a * d) ** 2 * np.exp(a * d) / 2)
+    assert got <= crude * (1.0 + 1e-9) + 1e-300
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), d=st.floats(1e-5, 0.2), beta=st.floats(0.0, 1.0))
+def test_the_bound_holds_with_an_input_and_in_balanced_units(seed, d, beta):
+    """A camera-like system (positions in m beside velocities) with an input ``B u``, bounded in
+    the balanced coordinates: the error ball is the balanced one, the brute force samples it."""
+    rng = np.random.default_rng(seed)
+    A = np.zeros((4, 4))
+    A[0, 2] = A[1, 3] = 1.0
+    A[2:, 2:] = rng.normal(size=(2, 2)) * 0.5
+    B = rng.normal(size=(4, 1))
+    u = rng.normal(size=1)
+    C = np.hstack([np.eye(2), np.zeros((2, 2))])
+    x_hat = rng.normal(size=4) * 5.0
+    se = StampError(A, B)
+    got = se.bound(C, x_hat, beta, d, u)
+    # a balanced ball of radius beta contains the plain ball of radius beta * min(D)
+    want = _achieved(A, C, x_hat, beta * float(se.d.min()), d, B, u)
+    assert got >= want * (1.0 - 1e-9), (got, want)
+
+
+def test_no_stamp_error_no_measurement_error():
+    A = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    assert stamp_error_bound(A, np.eye(2), np.ones(2), 1.0, 0.0) == 0.0
+
+
+def test_a_constant_velocity_track_gives_speed_times_offset():
+    """x = (p, v): C = [1 0], a 50 ms stamp error of a body at 22 m/s is a 1.1 m error to first
+    order (docs: error >= speed x offset); the bound is that within its second-order terms."""
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    C = np.array([[1.0, 0.0]])
+    got = stamp_error_bound(A, C, np.array([3.0, 22.0]), 0.0, 0.05)
+    assert 1.1 <= got <= 1.1 * 1.2, got

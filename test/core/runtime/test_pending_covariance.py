@@ -1,0 +1,100 @@
+"""The LMI family's covariance taken when read (switchobs_core.runtime.covariance.PendingSteps): a run
+of equal steps by binary powers equals the steps one by one up to rounding, an observer read at
+every sample publishes the same numbers as before (the steps one by one), and one read rarely the
+same covariance up to rounding."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import switchobs_core as so
+from switchobs_core.model.noise import default_noise
+from switchobs_core.numerics.propagation import ZOHCache
+from switchobs_core.runtime.covariance import CovarianceStep, PendingSteps
+from switchobs_core.runtime.families.base import OPEN_LOOP
+
+CYCLE = so.Cycle.from_ts(2.0, 0.6)
+
+
+def _stream(system, seconds: float, rate: float = 50.0):
+    sched = so.PeriodicSchedule(CYCLE)
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-1, 1, system.n)
+    for k in range(int(seconds * rate)):
+        t = k / rate
+        ch = sched.channel_at(t)
+        H = np.asarray(system.C[ch - 1])
+        yield t, ch, H @ x + rng.normal(scale=0.01, size=H.shape[0])
+
+
+def _relative(P: np.ndarray, Q: np.ndarray) -> float:
+    return float(np.abs(P - Q).max() / np.abs(Q).max())
+
+
+@settings(max_examples=30, deadline=None)
+@given(m=st.integers(1, 300), seed=st.integers(0, 1000), held=st.booleans(), grow=st.floats(0.8, 1.05))
+def test_a_run_by_powers_is_the_steps_one_by_one(m, seed, held, grow):
+    """Property: ``m`` equal steps of a random map (contracting or slowly growing, a held noise or
+    none) by :class:`PendingSteps` within 1e-12 (relative to the largest entry) of the steps one by one."""
+    rng = np.random.default_rng(seed)
+    n, p = 5, 2
+    A = rng.standard_normal((n, n))
+    A = A - (np.max(np.linalg.eigvals(A).real) - np.log(grow) / 0.02) * np.eye(n)     # e^{A dt} grows by ~grow
+    C = rng.standard_normal((p, n))
+    L = rng.standard_normal((n, p)) * 0.1
+    cache = ZOHCache()
+    cache.register("g", A, L, None, C=C)
+    e = cache.step("g", 0.02)
+    cov = CovarianceStep(A, np.zeros((n, 0)), SimpleNamespace(Q_c=0.09 * np.eye(n)), None)
+    Rh = 0.01 * np.eye(p) if held else None
+    P0 = np.eye(n)
+    pend = PendingSteps(cov)
+    for _ in range(m):
+        assert not pend.push(e, 0.02, Rh)
+    assert len(pend) == 1
+    got = pend.apply(P0)
+    ref = P0
+    hn = None if Rh is None else e.GL @ Rh @ e.GL.T
+    for _ in range(m):
+        ref = cov.step(ref, e, 0.02, hn)
+    assert len(pend) == 0
+    assert _relative(got, ref) <= 1e-12
+    assert np.array_equal(got, got.T)
+
+
+def test_observer_read_at_every_sample_is_unchanged(paper, paper_table):
+    """Read at every sample, the published P is the steps one by one, as the family took them at
+    every sample: compared with CovarianceStep driven by hand over the observer's own steps."""
+    noise = default_noise(paper)
+    obs = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    cov = CovarianceStep(obs.A, obs.B, noise, None)
+    P = noise.P0.copy()
+    prev_t, prev_key, prev_R = None, None, None
+    for t, ch, y in _stream(paper, 6.0):
+        if prev_t is not None:
+            e = obs.cache.step(prev_key, t - prev_t)
+            P = cov.step(P, e, t - prev_t, None if prev_R is None else e.GL @ prev_R @ e.GL.T)
+        obs.update(t, ch, y)
+        np.testing.assert_array_equal(obs.P, P)
+        prev_t, prev_key, prev_R = t, obs.gains.held.key, noise.R(ch)
+    assert prev_key != OPEN_LOOP
+
+
+def test_observer_read_rarely_publishes_the_same_covariance(paper, paper_table):
+    """Read every 37th sample and at the end (runs of up to 37 equal steps by powers), P within
+    1e-12 of an observer read at every sample, over three cycles; the estimates are the same."""
+    noise = default_noise(paper)
+    every = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    rare = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    worst = 0.0
+    for k, (t, ch, y) in enumerate(_stream(paper, 6.0)):
+        np.testing.assert_array_equal(every.update(t, ch, y), rare.update(t, ch, y))
+        P = every.P
+        if k % 37 == 0:
+            worst = max(worst, _relative(rare.P, P))
+    worst = max(worst, _relative(rare.P, every.P))
+    assert worst <= 1e-12

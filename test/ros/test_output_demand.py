@@ -1,0 +1,103 @@
+"""Outputs on demand (switchobs_ros.demand): the estimator builds and publishes an optional output
+only while a subscription is matched to it, and forms the covariance only while an output that
+carries it is listened to; ~/state is always published."""
+
+from __future__ import annotations
+
+import time
+
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+from ros_harness import EstimatorIO, spin_until
+from std_msgs.msg import Float64MultiArray, UInt8
+
+import msg_bridge as mb
+from switchobs_ros import qos
+from switchobs_ros.demand import Demand
+from switchobs_ros.estimator import EstimatorNode
+
+
+class _Pub:
+    def __init__(self, n: int = 0):
+        self.n = n
+        self.asked = 0
+
+    def get_subscription_count(self) -> int:
+        self.asked += 1
+        return self.n
+
+
+def test_demand_keeps_a_yes_and_a_no_for_their_periods():
+    now = [0.0]
+    pubs = [_Pub(), _Pub()]
+    d = Demand(lambda: pubs, period=0.1, period_no=0.02, clock=lambda: now[0])
+    assert not d.covariance_wanted() and not d.covariance_wanted()
+    assert [p.asked for p in pubs] == [1, 1]              # a no is kept for period_no
+    pubs[1].n = 1
+    now[0] = 0.01
+    assert not d.covariance_wanted()
+    now[0] = 0.02
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2]
+    pubs[1].n = 0
+    now[0] = 0.07
+    assert d.covariance_wanted()                          # a yes kept for the period
+    now[0] = 0.13
+    assert not d.covariance_wanted()                      # then asked again
+    pubs[0].n = 1
+    d.expire()
+    assert d.covariance_wanted()
+
+
+def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
+    base = time.time_ns()
+    for k in range(k0, k0 + n):
+        s = base + k * 10_000_000
+        io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), s, "map"))
+        io.pub_target.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
+    end = time.monotonic() + 10
+    while est.pipeline.updates < k0 + n and time.monotonic() < end:
+        est._drain_inputs()
+        time.sleep(0.01)
+
+
+def test_node_publishes_optional_outputs_only_to_subscribers(paper_tables, ros_node):
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
+                                             Parameter("reorder_window_ms", value=0.0),
+                                             Parameter("noise.measurement_std", value=0.01)])
+    try:
+        # the test's inputs, and of the outputs only ~/state and agent1's odometry
+        io = EstimatorIO.__new__(EstimatorIO)
+        io.node = ros_node
+        io.pub_channel = ros_node.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
+        io.pub_camera = ros_node.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
+        io.pub_target = ros_node.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        got = {"state": [], "odom": []}
+        ros_node.create_subscription(Float64MultiArray, "/estimator/state", got["state"].append, qos.TRUTH)
+        odom = ros_node.create_subscription(Odometry, "/estimator/agent1/odom", got["odom"].append, qos.TRUTH)
+        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0 for p in
+                                                (io.pub_channel, io.pub_camera, io.pub_target))
+                          and est.pub_odom[1].get_subscription_count() > 0, 20.0)
+        pl = est.pipeline
+        io.pub_channel.publish(UInt8(data=1))
+        end = time.monotonic() + 10
+        while pl.channel != 1 and time.monotonic() < end:
+            est._drain_inputs()
+            time.sleep(0.01)
+        _feed(est, io, 1, 20)
+        n = est.published
+        assert pl.updates == 20 and n["state"] == 20
+        assert n["odometry"] == 20                   # one body of three is listened to
+        assert n["envelope"] == n["covariance"] == n["typed"] == n["markers"] == 0
+        assert pl.publish_covariance                 # the odometry carries P
+        assert spin_until(ros_node, lambda: len(got["odom"]) >= 20 and len(got["state"]) >= 20, 10.0)
+        assert all(any(c != 0.0 for c in m.pose.covariance) for m in got["odom"])
+        # nobody listens to an output carrying P any more: P is no longer formed, odometry not sent
+        ros_node.destroy_subscription(odom)
+        assert spin_until(ros_node, lambda: est.pub_odom[1].get_subscription_count() == 0, 20.0)
+        time.sleep(0.15)                             # past the period a yes is kept
+        _feed(est, io, 21, 10)
+        assert pl.updates == 30 and n["state"] == 30 and n["odometry"] == 20
+        assert not pl.publish_covariance
+    finally:
+        est.destroy_node()
