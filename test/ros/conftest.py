@@ -42,17 +42,33 @@ def ros_domain() -> int:
 
 
 @pytest.fixture(scope="session")
-def paper_tables(tmp_path_factory):
-    """Gain tables for the paper's periodic and sequence schedules, designed once per session."""
+def paper_tables(run_cache):
+    """Gain tables for the paper's periodic and sequence schedules, designed once per test run
+    (the pytest-xdist workers share them: test/conftest.py, ``run_cache``)."""
     from switchobs_core.design.lmi import design_table
     from switchobs_core.model.scenarios import load_system
     from switchobs_core.model.schedule import Cycle
 
-    d = tmp_path_factory.mktemp("tables")
-    sys_ = load_system("paper")
-    per = design_table(sys_, [Cycle.from_ts(2.0, 0.6)], delta=0.99)
-    seq = design_table(sys_, [Cycle.from_ts(4.0, 0.5), Cycle.from_ts(3.0, 0.6), Cycle.from_ts(2.0, 0.4)], delta=0.99)
-    return {"periodic": str(per.save(d / "periodic.json")), "sequence": str(seq.save(d / "sequence.json"))}
+    def make(d):
+        sys_ = load_system("paper")
+        design_table(sys_, [Cycle.from_ts(2.0, 0.6)], delta=0.99).save(d / "periodic.json")
+        design_table(sys_, [Cycle.from_ts(4.0, 0.5), Cycle.from_ts(3.0, 0.6), Cycle.from_ts(2.0, 0.4)],
+                     delta=0.99).save(d / "sequence.json")
+    d = run_cache("paper_tables", make)
+    return {"periodic": str(d / "periodic.json"), "sequence": str(d / "sequence.json")}
+
+
+@pytest.fixture(scope="session")
+def colcon_workspace(run_cache):
+    """The documented colcon build (docs/how-to/ros2.md) of a copy of the repository, made once per
+    test run (test_colcon_package.build_documented_workspace): (the workspace, the build's
+    ``{"returncode", "output"}``). test_colcon_package.py and test_typed_msgs.py check it."""
+    import json
+
+    from test_colcon_package import build_documented_workspace
+
+    ws = run_cache("colcon_ws", build_documented_workspace)
+    return ws, json.loads((ws / "build.json").read_text())
 
 
 @pytest.fixture

@@ -1,11 +1,17 @@
 """Helpers of the refusal tests: run a tool as a user would, inside
-the acceptance limits (30 s, 4 GB of address space), and check the one-line failure."""
+the acceptance limits (30 s, 4 GB of address space), and check the one-line failure; run a
+node's ``main`` in the test's own process (a start-up refusal without a fresh interpreter)."""
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+import io
+import os
 import resource
 import subprocess
 import sys
+import tempfile
 
 #: The acceptance limits: wall time and address space of every tool run.
 TIMEOUT_S = 30
@@ -42,3 +48,43 @@ def assert_refused(res: subprocess.CompletedProcess, *needles: str, code: int | 
     for n in needles:
         assert n in ours[0], ours[0]
     return ours[0]
+
+
+def node_main(node: str, args: list[str], timeout: float = TIMEOUT_S) -> subprocess.CompletedProcess:
+    """``switchobs_ros.<node>.main`` called in this process with ``[node, *args]`` for its
+    ``sys.argv``: what ``python -m switchobs_ros.<node> <args>`` exits with (its ``__main__`` is
+    ``sys.exit(main())``) and writes, both the Python and the C side (rcl, rcutils logging) of
+    stdout and stderr. An exception out of ``main`` (a traceback in a fresh process) is raised
+    here. A node that starts instead of refusing is shut down after ``timeout`` seconds (exit code
+    0, which no refusal check accepts). The fresh process's own exit path is checked once per node
+    (test_startup_failures.py)."""
+    import threading
+
+    import rclpy
+
+    mod = importlib.import_module(f"switchobs_ros.{node}")
+    watchdog = threading.Timer(timeout, rclpy.try_shutdown)
+    watchdog.daemon = True
+    watchdog.start()
+    hook = sys.unraisablehook                           # run_node wraps it: put it back after
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    py_out, py_err = io.StringIO(), io.StringIO()
+    with tempfile.TemporaryFile("w+") as c_out, tempfile.TemporaryFile("w+") as c_err:
+        try:
+            os.dup2(c_out.fileno(), 1)
+            os.dup2(c_err.fileno(), 2)
+            with contextlib.redirect_stdout(py_out), contextlib.redirect_stderr(py_err):
+                code = mod.main([node, *map(str, args)])
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            sys.unraisablehook = hook
+            watchdog.cancel()
+        c_out.seek(0)
+        c_err.seek(0)
+        out, err = py_out.getvalue() + c_out.read(), c_err.read() + py_err.getvalue()
+    return subprocess.CompletedProcess([node, *args], code, out, err)

@@ -47,8 +47,32 @@ def _copy_repository(dest: Path) -> None:
             shutil.copy2(src, dest / f)
 
 
+def _clean_env() -> dict[str, str]:
+    """What `. .venv/bin/activate` does; a clean environment otherwise (no sourced ROS, no PYTHONPATH)."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "CMAKE_PREFIX_PATH", "PYTHONPATH")}
+    env.update(VIRTUAL_ENV=sys.prefix, PATH=f"{Path(sys.executable).parent}:{env.get('PATH', '')}")
+    return env
+
+
+def build_documented_workspace(ws: Path) -> None:
+    """The page's build in ``ws``: a copy of the repository in ws/src/switchobs_ros (the clone), then
+    its export line and its colcon line; the build's exit code and output go to ws/build.json.
+    Done once per test run (``colcon_workspace`` in conftest.py): test_typed_msgs.py imports
+    switchobs_msgs from the same workspace."""
+    import json
+
+    lines, colcon_line = documented_recipe()
+    (ws / "src" / "switchobs_ros").mkdir(parents=True)
+    _copy_repository(ws / "src" / "switchobs_ros")           # the clone
+    script = "\n".join(["set -e", lines[1], f"cd {ws}", colcon_line + " --event-handlers console_direct-"])
+    build = subprocess.run(["bash", "-c", script], capture_output=True, text=True, env=_clean_env(), timeout=900)
+    (ws / "build.json").write_text(json.dumps({"returncode": build.returncode,
+                                               "output": build.stdout[-3000:] + build.stderr[-3000:]}))
+
+
 @pytest.mark.slow
-def test_colcon_build_and_ament_index_run(tmp_path, paper_tables):
+def test_colcon_build_and_ament_index_run(colcon_workspace, tmp_path, paper_tables):
     lines, colcon_line = documented_recipe()
     assert lines[0] == ". .venv/bin/activate"
     assert lines[1] == 'export AMENT_PREFIX_PATH="$VIRTUAL_ENV" CMAKE_PREFIX_PATH="$VIRTUAL_ENV"'
@@ -57,17 +81,9 @@ def test_colcon_build_and_ament_index_run(tmp_path, paper_tables):
     assert lines[4] == "source install/setup.bash"
     run = re.fullmatch(r'("\$\(python -c .*\)/lib/switchobs_ros/estimator") (--ros-args .*)', lines[5])
     assert run, lines[5]
-    ws = tmp_path / "ws"
-    (ws / "src" / "switchobs_ros").mkdir(parents=True)
-    _copy_repository(ws / "src" / "switchobs_ros")           # the clone
-    bindir = Path(sys.executable).parent
-    # what `. .venv/bin/activate` does; a clean environment otherwise (no sourced ROS, no PYTHONPATH)
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "CMAKE_PREFIX_PATH", "PYTHONPATH")}
-    env.update(VIRTUAL_ENV=sys.prefix, PATH=f"{bindir}:{env.get('PATH', '')}")
-    script = "\n".join(["set -e", lines[1], f"cd {ws}", colcon_line + " --event-handlers console_direct-"])
-    build = subprocess.run(["bash", "-c", script], capture_output=True, text=True, env=env, timeout=900)
-    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    ws, build = colcon_workspace
+    assert build["returncode"] == 0, build["output"]
+    env = _clean_env()
     install = ws / "install"
     for pkg in ("switchobs_msgs", "switchobs_ros"):
         assert (install / pkg / "share" / "ament_index" / "resource_index" / "packages" / pkg).exists(), pkg

@@ -2,10 +2,11 @@
 stays up, every output is finite, every valid message is answered (checked stamp by stamp), and
 the rejections are counted by reason. The same generator drives 100 000 messages through the
 node's input pipeline in test_fail_inputs.py; here DDS and the process are in the loop, so the
-stream is shorter (``SWITCHOBS_DDS_FUZZ`` messages, default 10 000) and sent in chunks that
-the best-effort sensor queues (depth 50) can hold. The sensor topics are best effort: a message
-the transport drops never reaches the node, so a stamp may go unanswered only if the node's own
-counters (accepted + rejected) show that many messages missing.
+stream is shorter (``SWITCHOBS_DDS_FUZZ`` messages, default 5 000) and sent in chunks that the
+best-effort sensor queues (depth 50) can hold, each chunk waiting for its answers (a longer
+stream repeats the same exchange). The sensor topics are best effort: a message the transport
+drops never reaches the node, so a stamp may go unanswered only if the node's own counters
+(accepted + rejected) show that many messages missing.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from test_fail_inputs import _stream
 import msg_bridge as mb
 from tools.launch import NodeProcess, ros_args
 
-N_MSGS = int(os.environ.get("SWITCHOBS_DDS_FUZZ", "10000"))
+N_MSGS = int(os.environ.get("SWITCHOBS_DDS_FUZZ", "5000"))
 
 
 @pytest.mark.slow

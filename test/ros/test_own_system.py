@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from refusals import node_main
 
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate
@@ -66,9 +67,8 @@ def test_bad_specification_stops_start_up_with_one_line(tmp_path, cart_table, so
 
     bad = tmp_path / "inputs.yaml"
     bad.write_text(f"inputs:\n  sources:\n    - {source}\n")
-    r = subprocess.run([sys.executable, "-m", "switchobs_ros.estimator",
-                        *ros_args(params={"system": SYSTEM, "gain_table": cart_table, "inputs": str(bad), **PERIODIC})],
-                       capture_output=True, text=True, timeout=120)
+    r = node_main("estimator", ros_args(params={"system": SYSTEM, "gain_table": cart_table, "inputs": str(bad),
+                                                **PERIODIC}), timeout=120)
     assert r.returncode != 0 and "Traceback" not in r.stderr, r.stderr
     ours = [ln for ln in r.stderr.splitlines() if ln.startswith("estimator: error:")]
     assert len(ours) == 1 and "input specification" in ours[0] and needle in ours[0], r.stderr

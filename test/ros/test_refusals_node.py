@@ -19,7 +19,7 @@ from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-from refusals import assert_refused, run
+from refusals import assert_refused, node_main
 from ros_harness import EstimatorIO, spin_until, start_feed
 from std_msgs.msg import UInt8
 from test_lifecycle import _change, _feed, _set, _state
@@ -56,7 +56,7 @@ def _planted(src: str, dst) -> str:
     ({"diagnostics_period": 1.0e12}, ("diagnostics_period", "timer")),
 ])
 def test_start_up_values_out_of_range_are_one_line(params, needles, paper_tables):
-    res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": paper_tables["periodic"], **params}))
+    res = node_main("estimator", ros_args(params={"gain_table": paper_tables["periodic"], **params}))
     assert_refused(res, "estimator: error:", *needles, code=2)
 
 
@@ -67,14 +67,14 @@ def test_start_up_values_out_of_range_are_one_line(params, needles, paper_tables
     ({"clock_start": 1.0e300}, ("clock_start", "int32")),
 ])
 def test_camera_sim_numbers_out_of_range_are_one_line(params, needles):
-    res = run("switchobs_ros.camera_sim", *ros_args(params=params))
+    res = node_main("camera_sim", ros_args(params=params))
     assert_refused(res, "camera_sim: error:", *needles, code=2)
 
 
 def test_planted_table_is_refused_explicit_or_cached(paper_tables, tmp_path):
     """Zero gains, checksum recomputed: loaded without a word before (open loop, off by 4.8)."""
     planted = _planted(paper_tables["periodic"], tmp_path / "planted.json")
-    res = run("switchobs_ros.estimator", *ros_args(params={"gain_table": planted}))
+    res = node_main("estimator", ros_args(params={"gain_table": planted}))
     assert_refused(res, "gain_table", "spectral radius", ">= 1", code=2)
     # the same table planted in a world-writable cache folder: refused for the folder, as ssh does
     cache = tmp_path / "cache"
@@ -83,7 +83,7 @@ def test_planted_table_is_refused_explicit_or_cached(paper_tables, tmp_path):
     conf = EstimatorConfig.from_values({"gain_table_cache_dir": str(cache)})
     where = table_cache_path(str(cache), conf.system, conf.mode, list(conf.cycles), None, conf["delta"])
     shutil.copy(planted, where)
-    res = run("switchobs_ros.estimator", *ros_args(params={"gain_table_cache_dir": str(cache)}))
+    res = node_main("estimator", ros_args(params={"gain_table_cache_dir": str(cache)}))
     assert_refused(res, "bad permissions", "gain_table_cache_dir", "writable by group and others",
                    "gain_table_cache_trusted", code=2)
 

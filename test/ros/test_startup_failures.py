@@ -1,4 +1,8 @@
-"""A bad configuration stops start-up: exit code != 0 and one line saying why (no traceback)."""
+"""A bad configuration stops start-up: exit code != 0 and one line saying why (no traceback).
+
+The refusals run the node's ``main`` in the test's process (refusals.node_main: its exit code and
+its output, C side included); a fresh ``python -m switchobs_ros.<node>`` per node checks that
+the process exits with that code and prints the same line (``fresh=True``)."""
 
 from __future__ import annotations
 
@@ -6,11 +10,14 @@ import subprocess
 import sys
 
 import pytest
+from refusals import node_main
 
 from tools.launch import ros_args
 
 
-def _run(node: str, args: list[str], timeout: float = 60.0) -> subprocess.CompletedProcess:
+def _run(node: str, args: list[str], timeout: float = 60.0, fresh: bool = False) -> subprocess.CompletedProcess:
+    if not fresh:
+        return node_main(node, args)
     return subprocess.run([sys.executable, "-m", f"switchobs_ros.{node}", *args], capture_output=True,
                           text=True, timeout=timeout)
 
@@ -25,9 +32,11 @@ def _assert_one_line_failure(res: subprocess.CompletedProcess, node: str, *needl
     return ours[0]
 
 
-def test_missing_table_file(tmp_path):
-    res = _run("estimator", ros_args(params={"gain_table": str(tmp_path / "nope.json")}))
+@pytest.mark.parametrize("fresh", [False, True], ids=["in_process", "fresh_process"])
+def test_missing_table_file(tmp_path, fresh):
+    res = _run("estimator", ros_args(params={"gain_table": str(tmp_path / "nope.json")}), fresh=fresh)
     _assert_one_line_failure(res, "estimator", "gain_table", "nope.json", "does not exist")
+    assert res.returncode == 2
 
 
 def test_table_for_another_system(paper_tables, tmp_path):
@@ -64,6 +73,8 @@ def test_bad_parameters(params, needle, paper_tables):
     _assert_one_line_failure(res, "estimator", needle)
 
 
-def test_camera_sim_bad_schedule():
-    res = _run("camera_sim", ros_args(params={"schedule.s": [1.5]}))
+@pytest.mark.parametrize("fresh", [False, True], ids=["in_process", "fresh_process"])
+def test_camera_sim_bad_schedule(fresh):
+    res = _run("camera_sim", ros_args(params={"schedule.s": [1.5]}), fresh=fresh)
     _assert_one_line_failure(res, "camera_sim", "schedule")
+    assert res.returncode == 2
