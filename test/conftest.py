@@ -73,7 +73,7 @@ def run_cache(tmp_path_factory) -> Callable[[str, Callable[[Path], None]], Path]
 LONG_FIRST = (
     "test/ros/test_bound_long_bag.py::test_long_bag_published_exact_bound_never_below_the_error[periodic",
     "test/ros/test_colcon_package.py::test_colcon_build_and_ament_index_run",      # builds colcon_workspace
-    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si_jitter-kalman-300s]",
+    "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si_jitter-kalman-120s]",
     "test/core/bounds/test_units_audit.py::test_bound_holds_and_says_something[oscillator_si_jitter-kalman-online",
     "test/ros/test_fail_node.py::test_random_stream_over_dds_node_stays_up_every_valid_answered",
     "test/core/runtime/test_online_sqrt.py::test_long_stiff_run_stays_positive_definite",
