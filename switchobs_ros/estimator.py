@@ -334,7 +334,7 @@ class EstimatorMixin:
             src_ns = info.get("source_timestamp") if info else None
             src_ns = int(src_ns) if src_ns else None
             if src_ns and info.get("received_timestamp") and (    # the sender's system clock against ours
-                    why := pipeline.clocks.seen(dds, src_ns, int(info["received_timestamp"]))):
+                    why := pipeline.clocks.seen(dds, src_ns, int(info["received_timestamp"]), system=True)):
                 pipeline.withdraw(why)
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
             seq = info.get("publication_sequence_number") if info else None
