@@ -42,8 +42,10 @@ from switchobs_msgs.msg import ActiveChannel
 
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
+from switchobs_core.model.disturbance import velocity_inputs
 from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
 from switchobs_core.ranges import MAX_DURATION_S, MAX_RATE_HZ, MAX_STAMP_S
+from switchobs_core.sim.disturbed import bang_bang
 from switchobs_core.sim.plant import Plant
 
 from . import qos
@@ -71,6 +73,9 @@ PARAMS = [
           "model, zeros otherwise).", float),
     Param("noise_std", 0.0, "Standard deviation of the measurement noise added to every position (m)."),
     Param("process_noise", 0.0, "Process noise intensity q (Qc = q^2 I) of the plant."),
+    Param("accel_max", 0.0, "Drive every velocity state with an unknown acceleration of +-accel_max (m/s^2; "
+          "bang-bang, signs switching at random, seeded by seed): bodies that manoeuvre within a declared "
+          "disturbance.max. 0: none."),
     Param("seed", 0, "Seed of all noise draws."),
     Param("world_frame", "map", "header.frame_id of the published poses."),
     Param("camera_body", "camera", "Name of the camera body in the system's output labels."),
@@ -133,7 +138,7 @@ class CameraSimNode(Node):
         except SwitchobsError as err:
             raise ConfigError(f"schedule: {err}") from None
         for name, lo in (("rate", "> 0"), ("duration", ">= 0"), ("noise_std", ">= 0"), ("process_noise", ">= 0"),
-                         ("time_scale", "> 0"), ("clock_start", "> 0")):
+                         ("accel_max", ">= 0"), ("time_scale", "> 0"), ("clock_start", "> 0")):
             v = cfg[name]
             ok = math.isfinite(v) and (v > 0 if lo == "> 0" else v >= 0)
             if not ok:
@@ -148,7 +153,13 @@ class CameraSimNode(Node):
         if len(x0) != sys_.n:
             raise ConfigError(f"parameter 'initial_state' has {len(x0)} values; the system has n = {sys_.n}")
         try:
-            self.plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg["seed"], process_noise=cfg["process_noise"])
+            B_w = velocity_inputs(sys_) if cfg["accel_max"] > 0 else None
+            if B_w is not None and not B_w.shape[1]:
+                raise ConfigError(f"parameter 'accel_max': the system {sys_.name} has no velocity state to accelerate")
+            self.plant = Plant(sys_, np.array(x0, dtype=float), seed=cfg["seed"], process_noise=cfg["process_noise"],
+                               B_w=B_w)
+            self.accel = (None if B_w is None else
+                          bang_bang(np.full(B_w.shape[1], cfg["accel_max"]), cfg["rate"], cfg["seed"] + 2))
         except SwitchobsError as err:
             raise ConfigError(f"plant: {err}") from None
         try:
@@ -242,7 +253,7 @@ class CameraSimNode(Node):
         stamp = mb.ns_to_stamp(stamp_ns)
         if self.pub_clock is not None:
             self.pub_clock.publish(ClockMsg(clock=stamp))
-        self.plant.advance(t)
+        self.plant.advance(t, w=None if self.accel is None else self.accel(self.plant.t))   # held over the step
         rho = int(self.schedule.channel_at(t))
         y = self.plant.measure(rho, noise_std=0.0)
         if self.cfg["noise_std"] > 0:
