@@ -13,8 +13,9 @@ from tools import demo
 
 @pytest.mark.slow
 def test_a_declared_disturbance_keeps_the_node_bound_true_on_manoeuvring_bodies(paper_tables):
-    res = demo.run("periodic", duration=10.0, time_scale=1.0, rate=50.0, init="paper", gain_table=paper_tables["periodic"],
-                   out=None, quiet=True, extra_camera={"accel_max": 0.2, "seed": 3},
+    res = demo.run("periodic", duration=10.0, time_scale=1.0, rate=50.0, init="paper",
+                   gain_table=paper_tables["periodic"], out=None, quiet=True,
+                   extra_camera={"accel_max": 0.2, "seed": 3},
                    extra_estimator={"noise.max": 0.0, "disturbance.max": [0.2]})
     t, err, bound = res["t"], res["err"], res["exact"]        # the last envelope entry: noise_bound here
     assert res["n_state"] >= 0.99 * res["n_truth"] and t[-1] >= 9.0
