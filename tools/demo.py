@@ -55,19 +55,21 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
         init: str = "paper", seed: int = 0, out: Path | None = None, gain_table: str = "",
         quiet: bool = False, extra_estimator: dict | None = None, noise_std: float = 0.0,
         schedule_params: dict | None = None, process_noise: float = 0.0, system: str = "paper",
-        initial_state: tuple | None = None, extra_camera: dict | None = None) -> dict:
+        initial_state: tuple | None = None, extra_camera: dict | None = None,
+        camera_env: dict | None = None) -> dict:
     """Run the demo; return the collected series (stamps in s from the first tick).
 
     ``schedule_params`` (``schedule.mode/tau/s``) replaces the named ``schedule``;
     ``process_noise`` is camera_sim's plant noise q (Qc = q^2 I). ``system`` is any system
     (a scenario or a YAML file with an ``inputs:`` section): both nodes use it, camera_sim
     starting from ``initial_state`` (default: the paper's scene). ``extra_camera`` overrides
-    camera_sim's parameters (``publish_clock: False`` runs both nodes on the system clock)."""
+    camera_sim's parameters (``publish_clock: False`` runs both nodes on the system clock);
+    ``camera_env`` adds to camera_sim's environment (e.g. a preloaded clock offset)."""
     stop = _InterruptFlag()
     try:
         return _run(stop, schedule, duration, time_scale, rate, init, seed, out, gain_table, quiet,
                     extra_estimator, noise_std, schedule_params, process_noise, system, initial_state,
-                    extra_camera)
+                    extra_camera, camera_env)
     finally:
         stop.restore()
 
@@ -75,7 +77,8 @@ def run(schedule: str = "periodic", duration: float = 30.0, time_scale: float = 
 def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float, rate: float, init: str,
          seed: int, out: Path | None, gain_table: str, quiet: bool, extra_estimator: dict | None,
          noise_std: float, schedule_params: dict | None, process_noise: float, system: str = "paper",
-         initial_state: tuple | None = None, extra_camera: dict | None = None) -> dict:
+         initial_state: tuple | None = None, extra_camera: dict | None = None,
+         camera_env: dict | None = None) -> dict:
     lease = None
     if "ROS_DOMAIN_ID" not in os.environ or os.environ.get("SWITCHOBS_CLAIM_DOMAIN", "1") == "1":
         lease = claim_domain()
@@ -118,7 +121,8 @@ def _run(stop: _InterruptFlag, schedule: str, duration: float, time_scale: float
                 raise RuntimeError(f"estimator exited with {est.proc.returncode}:\n{est.output()}")
             if time.monotonic() > deadline:
                 raise RuntimeError("estimator did not come up within 120 s")
-        cam = NodeProcess("camera_sim", ros_args(params=cam_params), log=logs / "camera_sim.log")
+        cam = NodeProcess("camera_sim", ros_args(params=cam_params), log=logs / "camera_sim.log",
+                          env=None if camera_env is None else {**os.environ, **camera_env})
         t_wall = time.monotonic()
         live = _LiveRows(sched, e0, quiet, noise_std)
         while cam.alive():
