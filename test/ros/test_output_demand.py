@@ -56,7 +56,7 @@ def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
         io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), s, "map"))
         io.pub_target.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
     end = time.monotonic() + 10
-    while est.pipeline.updates < k0 + n and time.monotonic() < end:
+    while est.pipeline.updates < k0 - 1 + n and time.monotonic() < end:
         est._drain_inputs()
         time.sleep(0.01)
 
