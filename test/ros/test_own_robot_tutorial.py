@@ -6,7 +6,8 @@ estimated, none above the exact bound, the error down by 1e3.
 Over DDS a sample or a command can arrive late under load (a best-effort sample delivered after a newer
 one, a reliable command repaired after the sample it precedes was answered): the estimator then rejects
 it (``old_stamp``) rather than use it out of order, and the block's check fails. Only such a run, named
-by the estimator's own rejection lines, is tried once more.
+by the estimator's own rejection lines, is tried again (at most three runs: two busy xdist workers
+made two in a row late).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ def _block() -> str:
 @pytest.mark.slow
 def test_the_own_robot_tutorial_runs(tmp_path):
     code = _block()
-    for attempt in (1, 2):
+    for attempt in (1, 2, 3):
         work = tmp_path / f"run{attempt}"
         work.mkdir()
         r = subprocess.run([sys.executable, "-c", code], cwd=work, capture_output=True, text=True, timeout=240)
@@ -38,7 +39,7 @@ def test_the_own_robot_tutorial_runs(tmp_path):
         if r.returncode == 0:
             break
         late = re.findall(r"rejected \S+: old_stamp", out)
-        assert late and attempt == 1, out[-4000:]
+        assert late and attempt < 3, out[-4000:]
     m = re.search(r"(\d+) of (\d+) samples estimated; error (\S+) -> (\S+); samples above the exact bound: 0", out)
     assert m, out[-3000:]
     assert int(m.group(2)) == 121 and int(m.group(1)) >= 109
