@@ -470,9 +470,9 @@ class EstimatorPipeline(Counters):
         dt = t - self.observer.t
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
-            self.observer.update(t, m.channel, m.y, rows=m.rows)
-            self.screening.taken(pend, t, m)        # the recovery: a window may re-certify the bounds
-            x_hat = self.observer.x_hat             # after it: a re-certification may restart the estimate
+            x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
+            if self.screening.taken(pend, t, m):    # re-certified from a window: the estimate may have
+                x_hat = self.observer.x_hat         # restarted from its fit, publish that one with the bound
             self.obs_ns = pend.stamp_ns
             self.updates += 1
             self.parts_used += len(pend.parts)

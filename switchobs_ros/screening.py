@@ -124,14 +124,16 @@ class Screening:
                 ctr.withdraw(f"at stamp {pend.stamp_ns}: {why}")
         return m
 
-    def taken(self, pend: Pending, t: float, m: Measurement) -> None:
+    def taken(self, pend: Pending, t: float, m: Measurement) -> bool:
         """The observer took ``m`` at ``t``: while the bounds are withdrawn it joins the window, and
-        a window that certifies a bound publishes the bounds again (labelled re-certified)."""
+        a window that certifies a bound publishes the bounds again (labelled re-certified). True
+        when it did: the estimate may then have restarted from the window's fit."""
         ctr = self.counters
         cert = self.recovery.after(t, m.channel, m.rows, m.y, ctr.bound_valid)
         if cert is not None:
             ctr.recertify(f"re-certified from data at stamp {pend.stamp_ns} (a window of "
                           f"{cert.t - cert.t_start:.3g} s, {cert.samples} samples; ||x - x_ls|| <= {cert.radius:.3g})")
+        return cert is not None
 
     def fitting_channels(self, pend: Pending, t: float) -> list[int]:
         """The channels whose reading of the pending sample passes the innovation test at ``t``."""
