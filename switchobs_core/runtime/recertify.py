@@ -52,6 +52,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linprog
 
 from ..numerics.expm_bound import certify_zoh, nu
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
@@ -110,7 +111,6 @@ def chebyshev(R: np.ndarray, r: np.ndarray, tol: np.ndarray) -> float:
     q = np.abs(r) / tol
     if not q.size or float(np.max(q)) <= 1.0:
         return float(np.max(q, initial=0.0))
-    from scipy.optimize import linprog
     m, n = R.shape
     scale = np.maximum(np.max(np.abs(R), axis=0), np.finfo(float).tiny)     # columns of unit size
     Rs = R / scale
