@@ -41,8 +41,12 @@ and propagate with their usual steps.
 What it assumes: the model held over the whole window (the plant followed ``x' = A x`` plus any
 declared disturbance, every sample's noise within ``noise_max``, the channel of every sample
 right). Data cannot prove that, only refute it: a window whose least residual exceeds what
-any noise within the bound allows (``||r|| > sqrt(m)``, allowances included) is refused, and a
-window is cleared whenever a test alarms (:mod:`switchobs_core.runtime.recovery`).
+any noise within the bound allows (``||r|| > sqrt(m)``, allowances included) is refused, and so
+is one that no state explains row by row (:func:`chebyshev`: every row within its own allowance
+``1 + epsilon_y,i + d_w,i + delta_i (||x_c|| + radius)``, the sharp test: a body that accelerated
+while the window saw it for part of its span bends its own rows away from every path of the
+model, which the norm over the whole window averages out); a window is cleared whenever a test
+alarms (:mod:`switchobs_core.runtime.recovery`).
 """
 
 from __future__ import annotations
