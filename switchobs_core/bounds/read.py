@@ -80,8 +80,11 @@ __all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "LOOSENESS", "p
 
 #: Fewest states from which :meth:`~switchobs_core.runtime.observer.SwitchedObserver.envelope` reads the
 #: bound amortised by default (below, the eigenvalue problem costs no more than this module's
-#: bookkeeping, and its bound is the tighter one).
-AMORTISED_MIN_N = 40
+#: bookkeeping, and its bound is the tighter one). Measured on ``camera_agents`` with a Kalman
+#: table, update + envelope() per sample (bench/RESULTS.md): equal at n = 28 (71 us), amortised
+#: 17 % cheaper at n = 36 (86 against 103 us), its bound at most 2.5 % above the eigenvalue
+#: problem's.
+AMORTISED_MIN_N = 32
 
 #: Extra allowance on the anchor's eigenvalue problem, in units of ``u ||S||_F``: ``lam_upper``'s
 #: model (``2 n u ||S||_F``) was measured short for n = 3 (LAPACK's error 10.4 u ||S||_F against

@@ -78,8 +78,8 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
 Cost: two n x n products per step (like the transition product itself) and O(n^2) for the
 allowances, one eigenvalue problem when the bound is read. A Kalman sample with a sparse
 ``e^{A dt}`` takes step 6's product in factors, O(n^2 p), with its own ``c`` and ``w``
-(:mod:`switchobs_core.bounds.kalman_map`), and from 40 states on the bound is read in O(n^2)
-between verified anchors (:mod:`switchobs_core.bounds.read`).
+(:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the bound is read in O(n^2)
+between anchors (:mod:`switchobs_core.bounds.read`).
 """
 
 from __future__ import annotations
