@@ -65,10 +65,12 @@ def dominates(a: float, P: np.ndarray, Q: np.ndarray, M: np.ndarray | None = Non
     # order, better conditioned for the test (Q and M alike: W M V^-1, V Q V)
     w = _pow2_scale(P)
     v = w if M is None else _pow2_scale(Q)      # the identity stays the identity under W (.) W
-    P = P * np.outer(w, w)
-    Q = Q * np.outer(v, v)
-    if M is not None:
-        M = (np.asarray(M, dtype=float) * w[:, None]) / v[None, :]
+    Ps, Qs = P * np.outer(w, w), Q * np.outer(v, v)
+    Mw = None if M is None else np.asarray(M, dtype=float) * w[:, None]
+    Ms = None if M is None else Mw / v[None, :]
+    # a scaling by powers of two is exact when its result is normal or zero: otherwise unscaled
+    if all(_normal(X) for X in (Ps, Qs, Mw, Ms) if X is not None):
+        P, Q, M = Ps, Qs, Ms
     if M is None:
         Z = Q.copy()
         F = np.zeros((n, n))
@@ -90,6 +92,12 @@ def dominates(a: float, P: np.ndarray, Q: np.ndarray, M: np.ndarray | None = Non
     r += 2.0 * _U * (td + r) * (1.0 + 16.0 * _U)
     T[np.arange(n), np.arange(n)] -= r
     return positive_definite(T)
+
+
+def _normal(X: np.ndarray) -> bool:
+    """Every entry finite and zero or normal (no entry in the subnormal range)."""
+    a = np.abs(X)
+    return bool(np.all(np.isfinite(a)) and not np.any((a > 0.0) & (a < np.finfo(float).tiny)))
 
 
 def _pow2_scale(P: np.ndarray) -> np.ndarray:

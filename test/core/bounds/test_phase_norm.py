@@ -132,3 +132,21 @@ def test_the_scalar_bound_holds_against_the_error_in_extended_precision(seed, n,
         beta = pn.step(beta, j, rho)
         assert float(np.sqrt(np.sum(e * e))) <= pn.bound(beta, j)
         assert float(np.sqrt(np.sum((e / d) ** 2))) <= pn.balanced(beta, j)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(2, 4), st.integers(0, 2**31), st.integers(0, 400))
+def test_units_far_apart_are_proved_and_hold_exactly(n, seed, span):
+    """States in units ``2^span`` apart (the shapes' diagonals over up to 240 decades): the factor is
+    still proved close to the generalised eigenvalue, and the proof holds in exact arithmetic."""
+    rng = np.random.default_rng(seed)
+    s = 2.0 ** rng.integers(-span // 2, span // 2 + 1, n).astype(float)
+    P, Q = _spd(rng, n, 1.0) * np.outer(s, s), _spd(rng, n, 1.0) * np.outer(s, s)
+    M = (rng.normal(size=(n, n)) * s[:, None]) / s[None, :]
+    Z = (M @ Q) @ M.T
+    lam = float(scipy.linalg.eigh(0.5 * (Z + Z.T), P, eigvals_only=True)[-1])
+    a = verified_factor(P, Q, M)
+    assert a <= lam * (1.0 + 1e-3)
+    Pe, Qe, Me = _exact(P), _exact(Q), _exact(M)
+    MQM = _mul(_mul(Me, Qe), [list(r) for r in zip(*Me, strict=True)])
+    assert _psd_exact([[Fraction(a) * Pe[i][j] - MQM[i][j] for j in range(n)] for i in range(n)])
