@@ -36,6 +36,8 @@ def conditions() -> dict[str, dict]:
                                                                   "detector": Link(20.0, 10.0, 0.0)}},
         "20 +- 10 ms jitter (camera, detector links), 2 % loss (camera link)": {
             "links": {"camera": Link(20.0, 10.0, 0.02), "detector": Link(20.0, 10.0, 0.0)}},
+        "20 +- 10 ms jitter (camera, detector links), 10 % loss (camera link)": {
+            "links": {"camera": Link(20.0, 10.0, 0.10), "detector": Link(20.0, 10.0, 0.0)}},
         "fleet /robot1 /robot2, clean": {"robots": ["robot1", "robot2"], "detector": ()},
         **{f"10 % loss (camera link), channel history {d}": {"links": cam, "camera_sim": (PY, "-c",
                                                                                          CAMERA_DEPTH.format(depth=d))}
