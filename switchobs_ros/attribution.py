@@ -26,7 +26,9 @@ channel received is the channel: that order is the publishing order.
 Stamped channel messages (``switchobs_msgs/ActiveChannel``, the switching instant in the header
 stamp) replace all of this by a comparison of sensor stamps (:mod:`switchobs_ros.switching`): once
 one has arrived, a sample is attributed by its header stamp against the switching instants, within
-the declared clock tolerance (:attr:`Verdict.NEAR_SWITCH`).
+the declared clock tolerance (:attr:`Verdict.NEAR_SWITCH`). There the window's expiry proves
+nothing: a sample the stamps have not proven by then is :attr:`Verdict.UNCERTAIN`, which the
+pipeline treats as ambiguous (named by the consistency test, or its channel rows dropped).
 """
 
 from __future__ import annotations
