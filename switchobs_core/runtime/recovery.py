@@ -28,7 +28,7 @@ estimator's screening, :mod:`switchobs_core.sim.faults`):
 
 Re-certification needs a declared ``noise_max`` (the radius is in its units) and the rigorous
 bounds (innovation hold); without them ``after`` never certifies. A noise-free declaration
-(``noise_max`` 0 for every channel, exact stamps) certifies too: a window is then read with the
+(``noise_max`` 0 for every channel, exact stamps, no declared disturbance) certifies too: a window is read with the
 allowance ``|v_j| <= NOISE_FREE ||y||_inf`` per sample (:data:`NOISE_FREE`, a rounding level),
 which holds wherever the declaration does (0 is within it), so a window whose residual is at the
 rounding level certifies a radius at that level, and one with more is refused.
@@ -142,7 +142,9 @@ class Recovery:
         self.N = observer.N
         vmax = observer.noise_max
         self.vmax = None if vmax is None else tuple(float(v) for v in vmax)
-        self.noise_free = self.vmax is not None and all(v == 0 for v in self.vmax)
+        dist = getattr(observer, "disturbance", None)
+        self.noise_free = self.vmax is not None and all(v == 0 for v in self.vmax) \
+            and not (dist is not None and dist.active)     # a disturbance's image needs a noise scale
         can = recertify and self.vmax is not None and (all(v > 0 for v in self.vmax) or self.noise_free)
         self.window = (DataWindow(observer.A, cycle_span(observer) if span is None else span, keep=1.0,
                                   disturbance=window_disturbance(observer)) if can else None)
