@@ -41,15 +41,16 @@ from bench_design import machine_info  # the one machine description of the benc
 from scipy.linalg import expm
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path[:0] = [str(REPO), str(REPO / "test" / "core")]
 
 from switchobs_core.threads import single_threaded_blas  # noqa: E402
 
 single_threaded_blas()
 
+from _systems import stiff_pair  # noqa: E402  (the stiff system test_online_sqrt.py checks)
+
 import switchobs_core as so  # noqa: E402
 from switchobs_core.design.precision import covariance_span  # noqa: E402
-from switchobs_core.model.noise import NoiseModel  # noqa: E402
 from switchobs_core.runtime.kalman_online import OnlineKalman  # noqa: E402
 
 M = 32
@@ -64,17 +65,6 @@ def growing(m: int):
 
 def slow(m: int):
     return so.camera_agents(m, D_agents=[(0.0, 0.05)] * m)
-
-
-def stiff():
-    A = np.diag([-200.0, -50.0, 0.3, 0.1, 0.0, -1.0])
-    A[4, 5], A[0, 2], A[2, 3] = 1.0, 5.0, 0.5
-    C1 = np.zeros((2, 6))
-    C1[0, 0], C1[1, 2], C1[1, 4] = 1.0, 1.0, 0.5
-    C2 = np.zeros((2, 6))
-    C2[0, 1], C2[1, 3], C2[0, 4], C2[1, 5] = 1.0, 1.0, 1.0, 0.2
-    system = so.LTISystem(A, None, [C1, C2], name="stiff")
-    return system, NoiseModel.for_system(system, measurement_std=1e-6, process_std=0.3)
 
 
 def refusals() -> list[dict]:
@@ -187,7 +177,7 @@ def main() -> None:
                 lines.append(f"| {name.split(',')[0]} | {family} | {stamps} | "
                              f"{r['exc'] or 'none'} | {r['e30']:.3g} ({r['x30']:.3g}) | {r['rel_last']:.3g} | "
                              f"{r['rms_last']:.4g} | {r['rms_last'] / runs[0.0]['rms_last']:.3f} |")
-    sysm, stiff_noise = stiff()
+    sysm, stiff_noise = stiff_pair()
     vj = {"paper, 50 Hz": versus_joseph(so.paper_system(), so.default_noise(so.paper_system()),
                                         so.Cycle.from_ts(2.0, 0.6), 50.0),
           "stiff, 100 Hz": versus_joseph(sysm, stiff_noise, so.Cycle.from_ts(2.0, 0.5), 100.0)}

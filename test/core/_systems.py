@@ -20,6 +20,19 @@ def oscillators(zeta: tuple[float, float] = (0.01, 0.01), hz: tuple[float, float
     return so.LTISystem(A, None, [C1, C2], name=f"oscillators_{zeta[0]:g}_{zeta[1]:g}_{hz[0]:g}_{hz[1]:g}")
 
 
+def stiff_pair() -> tuple[so.LTISystem, so.NoiseModel]:
+    """Fast stable modes (-200/s, -50/s) beside slow unstable ones, two channels, 1 um noise: Kalman
+    covariances whose condition reaches 1.6e14 (test_online_sqrt.py, bench/bench_precision.py)."""
+    A = np.diag([-200.0, -50.0, 0.3, 0.1, 0.0, -1.0])
+    A[4, 5], A[0, 2], A[2, 3] = 1.0, 5.0, 0.5
+    C1 = np.zeros((2, 6))
+    C1[0, 0], C1[1, 2], C1[1, 4] = 1.0, 1.0, 0.5
+    C2 = np.zeros((2, 6))
+    C2[0, 1], C2[1, 3], C2[0, 4], C2[1, 5] = 1.0, 1.0, 1.0, 0.2
+    system = so.LTISystem(A, None, [C1, C2], name="stiff")
+    return system, so.NoiseModel.for_system(system, measurement_std=1e-6, process_std=0.3)
+
+
 # ---------------------------------------------------------------------------------------------
 # Systems of the bound audit across units, stiffness and channel counts (test/core/bounds/test_units_audit.py,
 # bench/bench_units.py): each with its cycle, rate and a true initial state.

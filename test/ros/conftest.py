@@ -59,6 +59,19 @@ def paper_tables(run_cache):
 
 
 @pytest.fixture(scope="session")
+def bag(run_cache):
+    """A small input bag (2 s at 20 Hz) as the tool writes it (``switchobs_bag generate``), made once
+    per test run and only read (test_refusals_tools.py, test_refusals_inputs.py). A module's own
+    ``bag`` fixture replaces it there."""
+    from refusals import switchobs_bag
+
+    def make(d):
+        res = switchobs_bag("generate", d / "in", "--duration", "2", "--rate", "20")
+        assert res.returncode == 0, res.stderr
+    return run_cache("small_bag", make) / "in"
+
+
+@pytest.fixture(scope="session")
 def colcon_workspace(run_cache):
     """The documented colcon build (docs/how-to/ros2.md) of a copy of the repository, made once per
     test run (test_colcon_package.build_documented_workspace): (the workspace, the build's

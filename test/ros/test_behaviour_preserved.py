@@ -270,25 +270,39 @@ def _run(root: Path, tables: tuple[Path, ...], cases: tuple[str, ...], tmp: Path
 
 
 @pytest.fixture(scope="module")
-def tables(tmp_path_factory):
-    """One table file per family, designed once by this checkout and read by every tree."""
+def tables(run_cache):
+    """One table file per family, designed once per test run by this checkout and read by every tree."""
     import switchobs_core as so
 
-    tmp = tmp_path_factory.mktemp("tables")
-    sysm = so.paper_system()
-    cyc = so.Cycle.from_ts(2.0, 0.6)
-    return (so.design_table(sysm, cycles=[cyc], delta=0.99, progress=False).save(tmp / "lmi.json"),
-            so.kalman_table(sysm, [so.design_kalman(sysm, cyc, 48.0)]).save(tmp / "kalman.json"),
-            so.kalman_table(sysm, [so.design_kalman(sysm, cyc, 50.0)]).save(tmp / "kalman50.json"))
+    def make(d: Path) -> None:
+        sysm = so.paper_system()
+        cyc = so.Cycle.from_ts(2.0, 0.6)
+        so.design_table(sysm, cycles=[cyc], delta=0.99, progress=False).save(d / "lmi.json")
+        so.kalman_table(sysm, [so.design_kalman(sysm, cyc, 48.0)]).save(d / "kalman.json")
+        so.kalman_table(sysm, [so.design_kalman(sysm, cyc, 50.0)]).save(d / "kalman50.json")
+    d = run_cache("behaviour_tables", make)
+    return (d / "lmi.json", d / "kalman.json", d / "kalman50.json")
 
 
 @pytest.fixture(scope="module")
-def runs(tables, tmp_path_factory):
-    out = {}
-    for commit, cases in BASELINES.items():
-        tmp = tmp_path_factory.mktemp(f"before-{commit}")
-        out[commit] = (_run(_export(commit, tmp / "tree"), tables, cases, tmp), _run(REPO, tables, cases, tmp))
-    return out
+def runs(tables, run_cache):
+    """(streams at the commit, streams of this checkout) per baseline, each made once per test run
+    (``run_cache``: the pytest-xdist workers share them). This checkout runs once, with every case
+    of every baseline. The second worker takes the pieces in the opposite order, so that two
+    workers that both need them make half each."""
+    union = tuple(dict.fromkeys(k for ks in BASELINES.values() for k in ks))
+
+    def streams(name: str, tree, cases: tuple[str, ...]) -> dict:
+        def make(d: Path) -> None:
+            (d / "streams.json").write_text(json.dumps(_run(tree(d), tables, cases, d)))
+        return json.loads((run_cache(name, make) / "streams.json").read_text())
+
+    pieces = [("behaviour_after", lambda d: REPO, union)]
+    pieces += [(f"behaviour_{c}", lambda d, c=c: _export(c, d / "tree"), ks) for c, ks in BASELINES.items()]
+    if os.environ.get("PYTEST_XDIST_WORKER", "gw0") != "gw0":
+        pieces.reverse()
+    got = {name: streams(name, tree, cases) for name, tree, cases in pieces}
+    return {c: (got[f"behaviour_{c}"], got["behaviour_after"]) for c in BASELINES}
 
 
 @pytest.mark.slow

@@ -13,9 +13,12 @@ from tools import demo
 @pytest.mark.slow
 @pytest.mark.parametrize("schedule", ["periodic", "sequence"])
 def test_converges_over_dds(schedule, paper_tables, tmp_path):
-    # real time (time_scale 1): at 3x a loaded 2-core machine made the node drop best-effort samples
-    res = demo.run(schedule, duration=21.0, time_scale=1.0, init="zeros", gain_table=paper_tables[schedule],
-                   out=None, quiet=True)
+    # 50 Hz at twice real time: the node gets 100 samples per wall-clock second, as at 100 Hz in real
+    # time (at 3x and 100 Hz a loaded 2-core machine made it drop best-effort samples). The property
+    # is in simulated time and does not depend on the rate: the periodic table's error 20 s in is
+    # 3.3e-4 e0 at 100 Hz and 3.0e-4 e0 at 50 Hz (the same run in process, noise-free).
+    res = demo.run(schedule, duration=21.0, time_scale=2.0, rate=50.0, init="zeros",
+                   gain_table=paper_tables[schedule], out=None, quiet=True)
     t, err, e0 = res["t"], res["err"], res["e0"]
     assert e0 > 1.0                                           # zeros vs. the scene: ||x(0)|| ~ 4.3
     # every measurement answered (best-effort inputs on loopback: allow a rare loss)

@@ -25,14 +25,15 @@ PERIODIC = {"schedule.mode": "periodic", "schedule.tau": [2.0], "schedule.s": [0
 
 
 @pytest.fixture(scope="module")
-def cart_table(tmp_path_factory):
-    """``switchobs design config/cart_pair.yaml --cycle 2,0.6 --gains kalman --rate 50``, as a user runs it."""
-    out = tmp_path_factory.mktemp("cart") / "gains.json"
-    r = subprocess.run([sys.executable, "-m", "switchobs_core.cli", "design", SYSTEM, "--cycle", "2,0.6",
-                        "--gains", "kalman", "--rate", str(RATE), "-o", str(out)], capture_output=True, text=True,
-                       timeout=300)
-    assert r.returncode == 0, r.stderr
-    return str(out)
+def cart_table(run_cache):
+    """``switchobs design config/cart_pair.yaml --cycle 2,0.6 --gains kalman --rate 50``, as a user runs it,
+    once per test run (the workers share it)."""
+    def make(d):
+        r = subprocess.run([sys.executable, "-m", "switchobs_core.cli", "design", SYSTEM, "--cycle", "2,0.6",
+                            "--gains", "kalman", "--rate", str(RATE), "-o", str(d / "gains.json")],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+    return str(run_cache("cart_table", make) / "gains.json")
 
 
 def _converged(err, exact):

@@ -16,15 +16,6 @@ from refusals import assert_refused, run, switchobs_bag
 from tools.launch import ros_args
 
 
-@pytest.fixture(scope="module")
-def bag(tmp_path_factory):
-    """A small input bag (2 s at 20 Hz)."""
-    out = tmp_path_factory.mktemp("bags") / "in"
-    res = switchobs_bag("generate", out, "--duration", "2", "--rate", "20")
-    assert res.returncode == 0, res.stderr
-    return out
-
-
 def _inputs_file(path, section) -> str:
     path.write_text(yaml.safe_dump({"inputs": section}, default_flow_style=True, width=1 << 30))
     return str(path)
@@ -143,11 +134,12 @@ def _copy_bag(src, dst, *, drop=(), keep=None, edit=None) -> Path:
 
 
 @pytest.fixture(scope="module")
-def cart_bag(tmp_path_factory):
-    out = tmp_path_factory.mktemp("bags") / "cart"
-    res = switchobs_bag("generate", out, "--system", CART, "--duration", "3", "--rate", "20")
-    assert res.returncode == 0, res.stderr
-    return out
+def cart_bag(run_cache):
+    """A cart_pair bag (3 s at 20 Hz) by the tool, made once per test run (the workers share it) and only read."""
+    def make(d):
+        res = switchobs_bag("generate", d / "cart", "--system", CART, "--duration", "3", "--rate", "20")
+        assert res.returncode == 0, res.stderr
+    return run_cache("cart_bag", make) / "cart"
 
 
 def test_nothing_estimated_is_a_non_zero_exit_for_any_system(bag, cart_bag, tmp_path, paper_tables):

@@ -17,15 +17,6 @@ from refusals import assert_refused, switchobs, switchobs_bag
 from switchobs_core.cli import main as switchobs_main
 
 
-@pytest.fixture(scope="module")
-def bag(tmp_path_factory):
-    """A small input bag (2 s at 20 Hz)."""
-    out = tmp_path_factory.mktemp("bags") / "in"
-    res = switchobs_bag("generate", out, "--duration", "2", "--rate", "20")
-    assert res.returncode == 0, res.stderr
-    return out
-
-
 # ------------------------------------------------------------------ output files
 def test_design_output_that_is_not_a_regular_file_is_refused_untouched(tmp_path, fifo, device):
     """`design -o DIR` was an IsADirectoryError traceback (its temporary file created in DIR's

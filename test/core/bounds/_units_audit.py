@@ -3,8 +3,8 @@
 Shared by test_units_audit.py (short runs, and five simulated minutes marked ``slow``) and
 bench/bench_units.py (the figures of bench/RESULTS.md). The truth is the plant in ``np.longdouble``
 (x87 80-bit: unit roundoff 5.4e-20), propagated in the balanced coordinates of ``A`` (a power-of-two
-diagonal similarity, exact) with the Taylor series of test_audit.py's ``Truth``, twice (``m`` and
-``m + 1`` substeps) for its own error ``delta``; each output is ``C x`` rounded once to double.
+diagonal similarity, exact) by ``_extended_truth.Truth``, twice (``m`` and ``m + 1`` substeps) for its
+own error ``delta``; each output is ``C x`` rounded once to double.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from _extended_truth import Truth
 from _systems import chain, dense40, in_units, oscillator_si, sparse40, wide_units
 
 import switchobs_core as so
-from switchobs_core.numerics.scaling import balance, balanced
 
 LD = np.longdouble
 
@@ -64,45 +64,6 @@ def in_other_units(a: AuditSystem, T: np.ndarray) -> AuditSystem:
     return AuditSystem(in_units(a.system, T), a.cycle, a.rate, a.x0 * T, a.families, a.stamps, noise)
 
 
-class BalancedTruth:
-    """The plant in extended precision in balanced coordinates (module docstring)."""
-
-    def __init__(self, A: np.ndarray, x0: np.ndarray):
-        self.d = balance(A)
-        Ab = balanced(A, self.d)
-        self.A = np.asarray(Ab, dtype=LD)
-        self.h = 0.25 / max(float(np.abs(Ab).sum(axis=1).max()), 1e-12)
-        z0 = np.asarray(x0, dtype=LD) / np.asarray(self.d, dtype=LD)
-        self.z = [z0, z0.copy()]
-        self._tiny = float(np.finfo(LD).eps) / 16
-        self._dl = np.asarray(self.d, dtype=LD)
-
-    def _taylor(self, z: np.ndarray, dt: LD, extra: int = 0) -> np.ndarray:
-        m = max(1, math.ceil(float(dt) / self.h)) + extra
-        hs = dt / LD(m)
-        for _ in range(m):
-            term, out = z, z.copy()
-            for j in range(1, 60):
-                term = (self.A @ term) * (hs / LD(j))
-                out = out + term
-                if float(np.abs(term).max()) <= self._tiny * float(np.abs(out).max()):
-                    break
-            z = out
-        return z
-
-    def advance(self, dt: LD) -> None:
-        if dt > 0:
-            self.z = [self._taylor(self.z[0], dt), self._taylor(self.z[1], dt, 1)]
-
-    @property
-    def x(self) -> np.ndarray:
-        return self.z[0] * self._dl
-
-    @property
-    def delta(self) -> float:
-        return float(np.linalg.norm(((self.z[0] - self.z[1]) * self._dl).astype(float)))
-
-
 _TABLES: dict = {}
 
 
@@ -138,7 +99,7 @@ def audit(a: AuditSystem, family: str, seconds: float, *, every: int = 1, exact_
     kw = {"family": family} if family == "kalman-online" else {}
     obs = so.SwitchedObserver(system, table_for(a, family), "periodic", [a.cycle], e0=e0,
                               x0=a.x0 if exact_start else None, **kw)
-    truth = BalancedTruth(system.A, a.x0)
+    truth = Truth(system.A, a.x0, balanced_coordinates=True)
     C = [np.asarray(Ci, dtype=LD) for Ci in system.C]
     out = {"violations": 0, "checks": 0, "raised": "", "nonfinite": 0, "worst": 0.0, "delta_ratio": 0.0,
            "served": 0, "steady": 0}

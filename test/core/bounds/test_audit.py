@@ -18,11 +18,11 @@ At every sample the error ``||x_hat - x||`` against the true state is checked ag
 published after the update (``envelope()``), against the prior sets of ``prior(t)`` before it, and
 every 10th sample against ``envelope(t)`` and ``predict(t, hold=True)`` half-way to the next sample.
 
-The truth. ``np.longdouble`` on x86-64 (the x87 80-bit format, unit roundoff 5.4e-20, 2^11 times
-finer than double): the state is propagated between samples with a Taylor series of the vector
-(``x <- sum_j (A h)^j x / j!``, ``||A h|| <= 1/4``, summed until the terms fall below the unit
-roundoff), written here, independent of the library's exponentials; the plant starts from an exact
-double ``x0`` and each output is ``C x (+ v)`` rounded once to double. Why that is enough: the
+The truth (``_extended_truth.py``). ``np.longdouble`` on x86-64 (the x87 80-bit format, unit
+roundoff 5.4e-20, 2^11 times finer than double): the state is propagated between samples with
+Taylor polynomials of ``A h`` (``||A h|| <= 1/4``, the degree from a proven remainder bound below the
+unit roundoff), written there, independent of the library's exponentials; the plant starts from an
+exact double ``x0`` and each output is ``C x (+ v)`` rounded once to double. Why that is enough: the
 truth is computed twice, with two substep sizes, and their distance ``delta`` (the truth's own
 rounding, 1e-19 relative per substep) is asserted to be below 1e-3 of the bound at every sample,
 and added to the error before the comparison. The double-precision estimate's error is at least
@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from _extended_truth import Truth
 from _systems import oscillators
 
 import switchobs_core as so
@@ -116,45 +117,6 @@ CASES = [
 ]
 
 
-class Truth:
-    """The plant in extended precision (module docstring): two copies of the state, propagated over
-    each interval with ``m`` and ``m + 1`` equal substeps (``m`` the fewest of length <= ``h``), for
-    the truth and its own error ``delta``."""
-
-    def __init__(self, A: np.ndarray, x0: np.ndarray):
-        self.A = np.asarray(A, dtype=LD)
-        nA = float(np.abs(np.asarray(A, float)).sum(axis=1).max())       # ||A||_inf
-        self.h = 0.25 / max(nA, 1e-12)
-        self.x = [np.asarray(x0, dtype=LD), np.asarray(x0, dtype=LD)]
-        self._tiny = LD(np.finfo(LD).eps) / 16
-
-    def _taylor(self, x: np.ndarray, dt: LD, extra: int = 0) -> np.ndarray:
-        m = max(1, math.ceil(float(dt) / self.h)) + extra
-        hs = dt / LD(m)
-        for _ in range(m):
-            term, out = x, x.copy()
-            for j in range(1, 60):
-                term = (self.A @ term) * (hs / LD(j))
-                out = out + term
-                if float(np.abs(term).max()) <= float(self._tiny) * float(np.abs(out).max()):
-                    break
-            x = out
-        return x
-
-    def advance(self, dt: LD) -> None:
-        """Propagate both copies over ``dt`` (a longdouble: the exact difference of two stamps)."""
-        if dt > 0:
-            self.x = [self._taylor(self.x[0], dt), self._taylor(self.x[1], dt, 1)]
-
-    def at(self, dt: LD) -> np.ndarray:
-        """The state ``dt`` after the current time, without moving."""
-        return self._taylor(self.x[0], dt) if dt > 0 else self.x[0]
-
-    @property
-    def delta(self) -> float:
-        return float(np.linalg.norm((self.x[0] - self.x[1]).astype(float)))
-
-
 def stamps(case: Case, rng: np.random.Generator) -> tuple[float, list[float]]:
     """(observer t0, sample stamps) of a case, the plant starting at t0."""
     K = int(round(case.seconds * case.rate)) + 1
@@ -223,19 +185,19 @@ def audit(case: Case, family: str, table: so.GainTable) -> dict:
     t_prev, max_x = t0, float(np.linalg.norm(x0))
     for k, t in enumerate(ts):
         truth.advance(LD(t) - LD(t_prev))
-        max_x = max(max_x, float(np.linalg.norm(truth.x[0].astype(float))))
+        max_x = max(max_x, float(np.linalg.norm(truth.x.astype(float))))
         t_prev = t
         ch = sched.channel_at(t - t0)
         x_prior, S_exact, S_noise = obs.prior(t)
-        e_prior = np.asarray(x_prior, dtype=LD) - truth.x[0]
-        e_p = err_of(x_prior, truth.x[0])
+        e_prior = np.asarray(x_prior, dtype=LD) - truth.x
+        e_p = err_of(x_prior, truth.x)
         check(e_p, _prior_bound(S_noise if case.noise else S_exact), f"prior at t = {t!r}")
         v = _noise(case, t, system.C[ch - 1], e_prior.astype(float), corner)
-        y = np.asarray(C[ch - 1] @ truth.x[0] + np.asarray(v, dtype=LD), dtype=float)
+        y = np.asarray(C[ch - 1] @ truth.x + np.asarray(v, dtype=LD), dtype=float)
         xh = obs.update(t, ch, y)
         env = obs.envelope()
         bound = env.noise_bound if case.noise else env.exact_bound
-        check(err_of(xh, truth.x[0]), bound, f"sample {k} at t = {t!r}")
+        check(err_of(xh, truth.x), bound, f"sample {k} at t = {t!r}")
         if k % 10 == 0 and k + 1 < len(ts):
             tm = t + 0.5 * (ts[k + 1] - t)
             env_m = obs.envelope(tm)
@@ -248,8 +210,8 @@ def audit(case: Case, family: str, table: so.GainTable) -> dict:
                or any(isinstance(getattr(e, "sparse", None), SparseTransition) for e in obs._cache._lru.values()),
                verified=(b._readv if case.noise else b._read).verified,
                anchors=(b._readv if case.noise else b._read).anchors)
-    out.update(samples=len(ts), error=err_of(obs.x_hat, truth.x[0]), bound=bound, max_x=max_x,
-               norm_x=float(np.linalg.norm(truth.x[0].astype(float))), e0=e0,
+    out.update(samples=len(ts), error=err_of(obs.x_hat, truth.x), bound=bound, max_x=max_x,
+               norm_x=float(np.linalg.norm(truth.x.astype(float))), e0=e0,
                phi_bound=float(np.linalg.norm(obs.Phi, 2)) * e0)
     return out
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _systems import stiff_pair
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg.lapack import dtrcon
@@ -69,25 +70,12 @@ def test_square_root_recursion_gives_the_joseph_forms_numbers(case):
         np.linalg.cholesky(P)                     # symmetric positive definite
 
 
-def _stiff():
-    """Fast stable modes (-200/s, -50/s) beside slow unstable ones, two channels, 1 um noise: covariances
-    whose condition reaches 1.6e14."""
-    A = np.diag([-200.0, -50.0, 0.3, 0.1, 0.0, -1.0])
-    A[4, 5], A[0, 2], A[2, 3] = 1.0, 5.0, 0.5
-    C1 = np.zeros((2, 6))
-    C1[0, 0], C1[1, 2], C1[1, 4] = 1.0, 1.0, 0.5
-    C2 = np.zeros((2, 6))
-    C2[0, 1], C2[1, 3], C2[0, 4], C2[1, 5] = 1.0, 1.0, 1.0, 0.2
-    system = so.LTISystem(A, None, [C1, C2], name="stiff")
-    return system, NoiseModel.for_system(system, measurement_std=1e-6, process_std=0.3)
-
-
 @pytest.mark.slow
 def test_long_stiff_run_stays_positive_definite():
     """20 000 samples of the stiff system at random stamps (1-20 ms apart, random channels): every
     covariance is symmetric positive definite (Cholesky), the factor keeps its digits, and the
     estimate still equals the Joseph form's within 1e-9."""
-    system, noise = _stiff()
+    system, noise = stiff_pair()
     rng = np.random.default_rng(11)
     obs, ref = _online(system, noise), OnlineKalman(system, noise)
     t = 0.0
