@@ -101,6 +101,8 @@ LONG_FIRST = (
     "test/ros/test_clock_offsets.py",
     "test/ros/test_kalman_ros.py",
     "test/ros/test_disturbance_node.py",
+    "test/ros/test_bias_node.py",
+    "test/core/runtime/test_recertify_manoeuvre.py",
     "test/ros/test_tutorial_clone.py::test_own_system_tutorial_from_a_fresh_clone",
     "test/core/numerics/test_rounding.py",
     "test/ros/test_dead_time_ros.py",
