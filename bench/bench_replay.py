@@ -10,7 +10,9 @@ as a subprocess (``--rounds`` rounds, the two interleaved); per command the chil
 system) and its peak resident memory (``ru_maxrss``), medians over the rounds:
 
 * ``switchobs_bag estimate BAG -o OUT --csv FILE`` (the estimator's pipeline; the output bag with
-  the inputs copied, and the CSV; covariance published, its default);
+  the inputs copied, and the CSV; covariance published, its default; the outputs ``--outputs`` writes by
+  default: all but ``~/covariance``, whose numbers ``~/state_estimate`` carries);
+* the same with ``--outputs all`` (``~/covariance`` too: the command's default before ``--outputs``);
 * the alternative, a script of the usual kind (:data:`KF_SCRIPT`): read the bag
   (``switchobs_ros.bag.io.BagIn``), decode the channel and the poses (the same CDR fast path), a
   Kalman filter in standard form in numpy (discretisation cached, Joseph update), a CSV row of the
@@ -132,6 +134,7 @@ def main() -> None:
                                          noise_std=1e-3), "mcap")
     exe = [sys.executable, "-m", "switchobs_ros.bag"]
     ours: dict = {d: [] for d in a.durations}
+    ours_all: dict = {d: [] for d in a.durations}
     alt: dict = {d: [] for d in a.durations}
     before: dict = {d: [] for d in a.durations}
 
@@ -143,6 +146,7 @@ def main() -> None:
     for r in range(a.rounds):
         for d in a.durations:
             ours[d].append(peak(est(d, r, "o")))
+            ours_all[d].append(peak([*est(d, r, "a"), "--outputs", "all"]))
             if a.before is not None:
                 before[d].append(peak(est(d, r, "b"), a.before))
             alt[d].append(peak([sys.executable, "-c", KF_SCRIPT, str(bags[d]), str(sysf),
@@ -152,19 +156,21 @@ def main() -> None:
     print(f"`python bench/bench_replay.py --durations {' '.join(f'{d:g}' for d in a.durations)} --rounds "
           f"{a.rounds} --agents {M}{f' --before {a.before}' if a.before else ''}`; load average at the end "
           f"{os.getloadavg()[0]:.1f}.\n")
-    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) |"
-          + (" --before: CPU | peak RSS |" if a.before else ""))
-    print("|---|---|---|---|---|---|" + ("---|---|" if a.before else ""))
+    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) | "
+          "--outputs all: CPU | ratio |" + (" --before: CPU | peak RSS | ratio |" if a.before else ""))
+    print("|---|---|---|---|---|---|---|---|" + ("---|---|---|" if a.before else ""))
     med = {}
     for d in a.durations:
         oc, om = statistics.median(x[0] for x in ours[d]), statistics.median(x[1] for x in ours[d])
         kc, km = statistics.median(x[0] for x in alt[d]), statistics.median(x[1] for x in alt[d])
         med[d] = (oc, om, kc, km)
+        ac = statistics.median(x[0] for x in ours_all[d])
         extra = ""
         if a.before:
-            extra = (f" {statistics.median(x[0] for x in before[d]):.2f} s | "
-                     f"{statistics.median(x[1] for x in before[d]):.0f} MiB |")
-        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x |" + extra)
+            bc = statistics.median(x[0] for x in before[d])
+            extra = f" {bc:.2f} s | {statistics.median(x[1] for x in before[d]):.0f} MiB | {bc / kc:.2f}x |"
+        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x | {ac:.2f} s | "
+              f"{ac / kc:.2f}x |" + extra)
     if len(a.durations) > 1:
         d0, d1 = min(a.durations), max(a.durations)
         g = (med[d1][1] - med[d0][1]) / (d1 - d0)
