@@ -17,7 +17,9 @@ types and layouts the node publishes, decimated as the node decimates them (``ou
 every k-th estimate, 0 never; ``~/state`` always); log time = the log time of
 the input that produced the estimate), the input bag's other topics copied (unless
 ``inputs=False``), and one ``/diagnostics`` message at the end in the node's shape (accepted and
-rejected inputs). Optionally a CSV: ``stamp_ns``, the state labels, the envelope labels.
+rejected inputs). ``outputs`` selects among the outputs besides ``<node>/state`` (:data:`OUTPUTS`); a
+selected one is written as when all are. Optionally a CSV: ``stamp_ns``, the state labels, the envelope
+labels.
 
 Both are written as the estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory
 does not grow with the recording's length (the result then holds the counters and the number of
