@@ -71,11 +71,21 @@ def _module(dotted: str) -> _Any:
 
 
 def _load() -> None:
-    """Import every re-exported module and bind its public names and the module aliases here."""
-    global _loading, SUBPACKAGES, MODULES, __all__
+    """Import every re-exported module and bind its public names and the module aliases here (once;
+    a call made while the imports run, by one of them, returns at once)."""
+    global _loading
     if _loading:
         return
     _loading = True
+    try:
+        _bind()
+    except BaseException:
+        _loading = False        # an import failed: the next name read tries again (and raises again)
+        raise
+
+
+def _bind() -> None:
+    global SUBPACKAGES, MODULES, __all__
     names = globals()
     for sub in _SUBMODULES:
         names[sub] = _module(sub)
