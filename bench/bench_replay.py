@@ -33,7 +33,9 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1")
+#: PYTHONSAFEPATH: ``python -m`` and ``-c`` do not put the working directory first on ``sys.path``, so each
+#: command runs the checkout its PYTHONPATH names (``--before``), not the one the benchmark was started in.
+ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1")
 
 #: The alternative: a numpy Kalman filter over the bag's camera and target poses, CSV out.
 KF_SCRIPT = r"""

@@ -111,7 +111,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench_startup_") as tmp:
         d = Path(tmp)
         env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-        env.update(PYTHONPYCACHEPREFIX=str(d / "pyc"), OPENBLAS_NUM_THREADS="1")
+        # PYTHONSAFEPATH: `python -m` does not put the working directory first on sys.path (--before runs
+        # the other checkout's estimator, not this one's)
+        env.update(PYTHONPYCACHEPREFIX=str(d / "pyc"), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1",
+                   PYTHONPATH=str(REPO))
         setups = {}
         for name in a.systems.split(","):
             if name == "paper":
