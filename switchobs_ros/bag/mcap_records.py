@@ -44,7 +44,8 @@ def _write(self: Any, connection: Any, timestamp: int, data: bytes | memoryview)
         chunk.message_end_time = timestamp
     bio = chunk.bio
     chunk.msgs[cid].append((timestamp, bio.tell()))
-    bio.write(_MESSAGE.pack(_OP_MESSAGE, 22 + len(data), cid, 0, timestamp, timestamp))
+    size = data.nbytes if isinstance(data, memoryview) else len(data)
+    bio.write(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
     bio.write(data)
     if bio.tell() > _CHUNK_BYTES:
         self.close_chunk()
