@@ -23,7 +23,7 @@ ratio to ``bare`` of the same system and run. Every child writes its bytecode to
 ``PYTHONPYCACHEPREFIX`` (an installed package has its ``.pyc``; this checkout is run with
 ``PYTHONDONTWRITEBYTECODE``), warmed by one unmeasured start of each.
 
-Goal (issue 33, goal 6): the estimator with a cached table of any size <= 2x the bare node.
+Goal: the estimator with a cached table of any size <= 2x the bare node.
 A script, not a test: nothing is asserted.
 """
 
