@@ -26,7 +26,9 @@ channel received is the channel: that order is the publishing order.
 Stamped channel messages (``switchobs_msgs/ActiveChannel``, the switching instant in the header
 stamp) replace all of this by a comparison of sensor stamps (:mod:`switchobs_ros.switching`): once
 one has arrived, a sample is attributed by its header stamp against the switching instants, within
-the declared clock tolerance (:attr:`Verdict.NEAR_SWITCH`).
+the declared clock tolerance (:attr:`Verdict.NEAR_SWITCH`). There the window's expiry proves
+nothing: a sample the stamps have not proven by then is :attr:`Verdict.UNCERTAIN`, which the
+pipeline treats as ambiguous (named by the consistency test, or its channel rows dropped).
 """
 
 from __future__ import annotations
@@ -242,12 +244,11 @@ class ChannelAttribution:
         if not self.channel_topic:          # shared rows only, one-channel sources elsewhere
             return Resolution.of(self._last_fixed)
         if self.stamped:                    # by the sensors' stamps (switchobs_ros.switching)
-            dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
-            src = [p.src_ns for p in dep]
-            verdict, c, certain = self.stamped.resolve(pend.stamp_ns, None if None in src else max(src),
-                                                       force or self._expired(pend, now_mono))
+            verdict, c, certain = self._by_stamps(pend, force)
             if verdict == "near_switch" and c and all(srcs[i].shared for i in pend.parts):
                 verdict = "channel"     # shared rows read the same in every channel: they wait for a partner
+            if not certain and self._expired(pend, now_mono):   # never a guess: ambiguous
+                return Resolution(Verdict.NO_CHANNEL if verdict == "none" else Verdict.UNCERTAIN)
             if verdict == "channel":
                 return Resolution.of(c, certain)
             named = {"near_switch": Verdict.NEAR_SWITCH, "lost": Verdict.LOST}
@@ -268,6 +269,21 @@ class ChannelAttribution:
             return Resolution(Verdict.LOST)
         return Resolution.of(self._val[k], certain)
 
+    def _by_stamps(self, pend: Pending, force: bool = False) -> tuple[str, int, bool]:
+        """:meth:`SwitchHistory.resolve <switchobs_ros.switching.SwitchHistory.resolve>` for the
+        sample; without source timestamps a switching message received after its parts proves
+        its channel (the order of a recording is the publishing order)."""
+        sent = self._sent(pend)
+        ordered = sent is None and self.stamped.received > max(p.arrival for p in pend.parts.values())
+        return self.stamped.resolve(pend.stamp_ns, sent, force or ordered)
+
+    def _sent(self, pend: Pending) -> int | None:
+        """When the parts the sample's channel matters for were sent (the newest source timestamp of
+        its channel parts, or of all when it has none; None: unknown)."""
+        dep = [p for i, p in pend.parts.items() if not self.sources[i].shared] or list(pend.parts.values())
+        src = [p.src_ns for p in dep]
+        return None if None in src else max(src)
+
     def _expired(self, pend: Pending, now_mono: float) -> bool:
         return now_mono - pend.since >= self.window_ns * 1e-9
 
@@ -276,8 +292,7 @@ class ChannelAttribution:
         channel message sent after it has arrived (answered on the window's expiry)."""
         srcs = self.sources
         if self.stamped and self.channel_topic and not any(srcs[i].channel is not None for i in pend.parts):
-            src = [p.src_ns for p in pend.parts.values()]
-            return self.stamped.guessed(pend.stamp_ns, None if None in src else max(src))
+            return not self._by_stamps(pend)[2]
         if not self.channel_topic or not self._src or all(srcs[i].shared for i in pend.parts) \
                 or any(srcs[i].channel is not None for i in pend.parts):
             return False
@@ -292,7 +307,8 @@ class ChannelAttribution:
 
     def answered(self, pend: Pending, guessed: bool) -> None:
         """The sample was answered (``guessed``: on the window's expiry, :meth:`guessed`)."""
-        self.stamped.answered_at(pend.stamp_ns)
+        if self.stamped and self._by_stamps(pend)[::2] == ("channel", True):
+            self.stamped.answered_at(pend.stamp_ns)     # on a channel the stamps proved
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
         if srcs:
             self._answered_src = max(self._answered_src, max(srcs))

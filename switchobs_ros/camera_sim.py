@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -43,7 +44,7 @@ from switchobs_msgs.msg import ActiveChannel
 import msg_bridge as mb
 from switchobs_core.exceptions import SwitchobsError
 from switchobs_core.model.disturbance import velocity_inputs
-from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule
+from switchobs_core.model.schedule import PeriodicSchedule, RandomSchedule, SequenceSchedule, common_rows
 from switchobs_core.ranges import MAX_DURATION_S, MAX_RATE_HZ, MAX_STAMP_S
 from switchobs_core.sim.disturbed import bang_bang
 from switchobs_core.sim.plant import Plant
@@ -76,6 +77,13 @@ PARAMS = [
     Param("accel_max", 0.0, "Drive every velocity state with an unknown acceleration of +-accel_max (m/s^2; "
           "bang-bang, signs switching at random, seeded by seed): bodies that manoeuvre within a declared "
           "disturbance.max. 0: none."),
+    Param("bias.offset_m", 0.0, "A sensor fault: this offset (m) added to every target pose (the output rows not "
+          "every channel shares; the camera's own pose is untouched) published in [bias.start_s, bias.start_s + "
+          "bias.duration_s) of simulated time: a bias beyond a declared noise.max, which the estimator must "
+          "detect and recover from. 0: none."),
+    Param("bias.start_s", 0.0, "Simulated time (s, >= 0) at which the bias begins."),
+    Param("bias.duration_s", 0.0, "Seconds the bias lasts (> 0 when bias.offset_m is not 0)."),
+    Param("bias.channel", 0, "The channel whose samples carry the bias (1..N); 0: every channel."),
     Param("seed", 0, "Seed of all noise draws."),
     Param("world_frame", "map", "header.frame_id of the published poses."),
     Param("camera_body", "camera", "Name of the camera body in the system's output labels."),
@@ -114,6 +122,45 @@ def _check_ranges(cfg: dict) -> None:
                               "seconds)")
 
 
+@dataclass(frozen=True)
+class SensorBias:
+    """``offset`` (m) added to the output rows not in ``shared`` (the rows every channel measures:
+    the camera's own pose) of the samples of ``channel`` (0: every channel) at plant times in
+    ``[t0, t1)``."""
+
+    offset: float
+    shared: frozenset
+    t0: float
+    t1: float
+    channel: int
+
+    def add(self, t: float, channel: int, y: np.ndarray) -> np.ndarray:
+        """``y`` with the bias when it applies at ``t`` to ``channel``."""
+        if not (self.t0 <= t < self.t1 and self.channel in (0, channel)):
+            return y
+        return y + np.array([0.0 if j in self.shared else self.offset for j in range(y.size)])
+
+
+def _bias(cfg: dict, sys_) -> SensorBias | None:
+    """The ``bias.*`` parameters, checked (None: ``bias.offset_m`` is 0)."""
+    off, t0, dur, ch = cfg["bias.offset_m"], cfg["bias.start_s"], cfg["bias.duration_s"], cfg["bias.channel"]
+    if not math.isfinite(off) or abs(off) > MAX_STAMP_S:
+        raise ConfigError(f"parameter 'bias.offset_m' must be a finite number of metres; got {off}")
+    if not (math.isfinite(t0) and 0.0 <= t0 <= MAX_STAMP_S):
+        raise ConfigError(f"parameter 'bias.start_s' must be a finite time >= 0; got {t0}")
+    if not (math.isfinite(dur) and 0.0 <= dur <= MAX_STAMP_S) or (off != 0.0 and dur == 0.0):
+        raise ConfigError(f"parameter 'bias.duration_s' must be a finite number of seconds, > 0 with a bias; got {dur}")
+    if not 0 <= ch <= sys_.N:
+        raise ConfigError(f"parameter 'bias.channel' must be 0 (every channel) or a channel 1..{sys_.N}; got {ch}")
+    if off == 0.0:
+        return None
+    shared = frozenset(common_rows(sys_.C))
+    if all(set(range(Ci.shape[0])) <= shared for Ci in sys_.C):
+        raise ConfigError(f"parameter 'bias.offset_m': every output row of {sys_.name} is shared by all channels "
+                          "(no target pose to bias)")
+    return SensorBias(float(off), shared, float(t0), float(t0) + float(dur), int(ch))
+
+
 class CameraSimNode(Node):
     """Publishes the simulated camera measurements and the truth."""
 
@@ -145,6 +192,7 @@ class CameraSimNode(Node):
                 raise ConfigError(f"parameter '{name}' must be a finite number {lo}; got {v}"
                                   + (" (0 runs until stopped)" if name == "duration" else ""))
         _check_ranges(cfg)
+        self.bias = _bias(cfg, sys_)
         if not cfg["world_frame"]:
             raise ConfigError("parameter 'world_frame' must not be empty")
         x0 = cfg["initial_state"]
@@ -258,6 +306,8 @@ class CameraSimNode(Node):
         y = self.plant.measure(rho, noise_std=0.0)
         if self.cfg["noise_std"] > 0:
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
+        if self.bias is not None:
+            y = self.bias.add(t, rho, y)
         if rho != self.switch[0]:
             self.switch = (rho, stamp_ns)
         # while the camera turns (dead time) only the shared sources (its own pose) publish

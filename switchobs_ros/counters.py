@@ -49,7 +49,9 @@ class Counters:
     ``nonfinite`` (estimates withheld because not finite, each followed by a reset),
     ``inconsistent``, ``reattributed``, ``lost_channel_named`` (samples sent while channel
     messages were lost whose channel the consistency test named), ``near_switch`` (samples stamped within
-    the clock tolerance of a switching instant whose channel rows were dropped), ``outliers`` (the chi-square
+    the clock tolerance of a switching instant whose channel rows were dropped), ``uncertain`` and
+    ``uncertain_named`` (samples whose channel was not proven within the reorder window: channel rows
+    dropped, or the channel named by the consistency test), ``outliers`` (the chi-square
     gate); ``last_rejection`` and ``last_inconsistency`` are the latest texts. ``bound_valid`` is
     False once the bounds are withdrawn (:data:`NO_BOUND` is published), ``bound_invalid_why``
     says why; ``recertifications`` counts the bounds certified again from data
@@ -75,6 +77,8 @@ class Counters:
         self.reattributed = 0
         self.lost_channel_named = 0
         self.near_switch = 0
+        self.uncertain = 0
+        self.uncertain_named = 0
         self.outliers = 0
         self.last_rejection = ""
         self.last_inconsistency = ""

@@ -194,6 +194,8 @@ class EstimatorDiagnostics:
               kv("lost channel messages", pl.lost_channel),
               kv("samples in a loss named by the consistency test", pl.lost_channel_named),
               kv("samples near a switching instant (channel rows dropped)", pl.near_switch),
+              kv("samples not proven within the reorder window (channel rows dropped)", pl.uncertain),
+              kv("samples not proven within the reorder window, named by the consistency test", pl.uncertain_named),
               kv("outliers (chi-square gate)", pl.outliers if pl.chi2_alpha > 0 else "gate off"),
               kv("bias alarms (CUSUM)", pl.bias_alarms),
               kv("model failures (a body the gate starved)", pl.model_failures),

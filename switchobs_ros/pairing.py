@@ -38,14 +38,16 @@ MAX_PENDING = 1024
 
 class Part:
     """One source's message in a pending sample: its ``values``, its source timestamp
-    ``src_ns`` (None: unknown) and the latest channel received when it arrived."""
+    ``src_ns`` (None: unknown), the latest channel received when it arrived and ``arrival``, the
+    number of channel messages received before it."""
 
-    __slots__ = ("arrival_channel", "src_ns", "values")
+    __slots__ = ("arrival", "arrival_channel", "src_ns", "values")
 
-    def __init__(self, values: np.ndarray, src_ns: int | None, arrival_channel: int):
+    def __init__(self, values: np.ndarray, src_ns: int | None, arrival_channel: int, arrival: int = 0):
         self.values = values
         self.src_ns = src_ns
         self.arrival_channel = arrival_channel
+        self.arrival = arrival
 
 
 class Pending:
@@ -78,14 +80,15 @@ class Pairing:
         self.upto = -1
 
     def add(self, index: int, stamp_ns: int, values: np.ndarray, src_ns: int | None, arrival_channel: int,
-            now_mono: float) -> Pending:
-        """Add source ``index``'s part to the sample at ``stamp_ns`` (a new one waits from ``now_mono``)."""
+            now_mono: float, arrival: int = 0) -> Pending:
+        """Add source ``index``'s part to the sample at ``stamp_ns`` (a new one waits from ``now_mono``;
+        ``arrival``: the channel messages received before it)."""
         pend = self.pending.get(stamp_ns)
         if pend is None and self.tol:
             pend = self._near(index, stamp_ns)
         if pend is None:
             pend = self.pending[stamp_ns] = Pending(stamp_ns, now_mono)
-        pend.parts[index] = Part(values, None if src_ns is None else int(src_ns), arrival_channel)
+        pend.parts[index] = Part(values, None if src_ns is None else int(src_ns), arrival_channel, arrival)
         return pend
 
     def _near(self, index: int, stamp_ns: int) -> Pending | None:

@@ -355,7 +355,8 @@ class EstimatorPipeline(Counters):
             self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
-            pend = self.pairing.add(index, stamp_ns, values, src_ns, self.attribution.channel, now_mono)
+            pend = self.pairing.add(index, stamp_ns, values, src_ns, self.attribution.channel, now_mono,
+                                    self.attribution.stamped.received)
             res = self.attribution.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
@@ -417,24 +418,30 @@ class EstimatorPipeline(Counters):
         self._answer(pend, res.channel, out)
 
     def _attribute(self, pend: Pending, now_mono: float, res: Resolution | None) -> Resolution:
-        """The channel a sample is answered on. A sample sent while channel messages were lost, or
-        stamped within the clock tolerance of a switching instant, takes the one channel the
-        consistency test allows, if exactly one; else its shared parts
+        """The channel a sample is answered on. A sample sent while channel messages were lost,
+        stamped within the clock tolerance of a switching instant, or whose channel was not proven
+        within the reorder window, takes the one channel the consistency test allows, if exactly
+        one; else its shared parts
         (the same rows in every channel) are used alone, on the observer's channel (no switching
         instant on an unknown channel), and its channel parts are rejected."""
         if res is None:
             res = self.attribution.resolve(pend, now_mono)
             if not res.certain:          # pushed out of the window before its channel was certain
                 res = Resolution(Verdict.UNCERTAIN)
-        if res.verdict not in (Verdict.LOST, Verdict.NEAR_SWITCH):
+        if res.verdict not in (Verdict.LOST, Verdict.NEAR_SWITCH, Verdict.UNCERTAIN):
             return res
         if self.screening.names and self.origin_ns is not None:
             fits = self.screening.fitting_channels(pend, (pend.stamp_ns - self.origin_ns) * 1e-9)
             if len(fits) == 1:
-                self.lost_channel_named += 1
+                if res.verdict is Verdict.UNCERTAIN:
+                    self.uncertain_named += 1
+                else:
+                    self.lost_channel_named += 1
                 return Resolution.of(fits[0])
         if res.verdict is Verdict.NEAR_SWITCH:
             self.near_switch += 1
+        elif res.verdict is Verdict.UNCERTAIN:
+            self.uncertain += 1
         if not any(self.sources[i].shared for i in pend.parts):
             return res
         dropped = [i for i in pend.parts if not self.sources[i].shared]

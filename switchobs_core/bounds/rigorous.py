@@ -192,11 +192,15 @@ class RoundingBound:
         ||e||`` (``||e||`` from ``ell``, the ellipsoid being stepped), the stored map's rounding
         times ``||e||``, plus the rounding of the products. ``nu``: the held innovation (None: no
         gain held); ``u``: the held input (None: zero)."""
-        xs, xs1 = self.xn(x0), self.xn(x1)
+        return self._rho_step(e, dt, self.xn(x0), self.xn(x1), math.sqrt(ell.lam_scaled()), nu, u)
+
+    def _rho_step(self, e: Any, dt: float, xs: float, xs1: float, en: float, nu: np.ndarray | None,
+                  u: np.ndarray | None) -> float:
+        """:meth:`rho_step` from the norms ``xs = ||D^-1 x0||``, ``xs1 = ||D^-1 x1||`` and ``en``
+        (``||D^-1 e|| <= en``), computed once for both sets."""
         # the step quantum: the true step is dt (a difference of two doubles: within u dt of it)
         delta = abs(dt - e.dt) + _U * dt
         q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
-        en = math.sqrt(ell.lam_scaled())
         rho = (e.eps + q) * (xs + en) + e.emap * en + self.g_n * e.fPhi * xs + 2.0 * _U * xs1 + self._uf
         if nu is not None:
             nun = math.sqrt(float(nu @ nu))
@@ -254,13 +258,15 @@ class RoundingBound:
         return rho * (1.0 + 8.0 * _U)
 
     def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
-                    x_plus: np.ndarray) -> float:
+                    x_plus: np.ndarray, xm: float | None = None) -> float:
         """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
-        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``."""
+        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` is ``||D^-1 x^-||`` if the caller
+        has it."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
         uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
-        return (fK * (self.g_n * fH * self.xn(x_minus) + 2.0 * _U * yn + uf) + self.g_p * fK * nun
+        xm = self.xn(x_minus) if xm is None else xm
+        return (fK * (self.g_n * fH * xm + 2.0 * _U * yn + uf) + self.g_p * fK * nun
                 + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
 
     def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
@@ -343,19 +349,22 @@ class RoundingBound:
         self._check()
 
     def fused(self, e: Any, dt: float, m: Any, x0: np.ndarray, xm: np.ndarray, rc: float,
-              K: np.ndarray, p: int, channel: int, u: np.ndarray | None = None) -> None:
+              K: np.ndarray, p: int, channel: int, u: np.ndarray | None = None,
+              norms: tuple[float, float] | None = None) -> None:
         """Both ellipsoids through a Kalman sample's fused map ``M = (I - K H) e^{A dt}``
         (a :class:`~switchobs_core.bounds.kalman_map.KalmanMap`: ``M S M'`` dense or factored, with its
         rounding's ``(w, c)``): the prediction's residual (input ``u`` held, None: zero) through
-        ``||I - K H||_2`` plus the correction's ``rc`` and the dense map's own rounding."""
+        ``||I - K H||_2`` plus the correction's ``rc`` and the dense map's own rounding; ``norms``:
+        ``(||D^-1 x0||, ||D^-1 xm||)`` if the caller has them."""
         if self.withdrawn:
             return
+        xs, xs1 = (self.xn(x0), self.xn(xm)) if norms is None else norms
         with np.errstate(over="ignore", invalid="ignore"):
             for ell, noisy in ((self.ell, False), (self.ellv, True)):
                 if ell is None:
                     continue
-                rho = (m.nIKH * self.rho_step(e, dt, x0, xm, ell, None, u) + rc
-                       + m.emap * math.sqrt(ell.lam_scaled()))
+                en = math.sqrt(ell.lam_scaled())
+                rho = m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en
                 Z, w, c, mn = m.sandwich(ell)
                 if noisy:       # e^+ = (I - K H) (e^- + d) + K (v + w)
                     G, cg, r = self.disturbed(dt, K, self._wc(p, self.noise_max[channel - 1]), K, m.H, m.nIKH)

@@ -78,8 +78,8 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
 Cost: two n x n products per step (like the transition product itself) and O(n^2) for the
 allowances, one eigenvalue problem when the bound is read. A Kalman sample with a sparse
 ``e^{A dt}`` takes step 6's product in factors, O(n^2 p), with its own ``c`` and ``w``
-(:mod:`switchobs_core.bounds.kalman_map`), and from 40 states on the bound is read in O(n^2)
-between verified anchors (:mod:`switchobs_core.bounds.read`).
+(:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the bound is read in O(n^2)
+between anchors (:mod:`switchobs_core.bounds.read`).
 """
 
 from __future__ import annotations
@@ -148,11 +148,11 @@ class ErrorEllipsoid:
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
         """``>= lambda_max(D^-1 S D^-1)``: its trace (``S`` is PSD), O(n)."""
         S = self.S if S is None else S
-        return max(float(np.diagonal(S) @ self._id2), 0.0) * self._gsum
+        return max(float(S.diagonal() @ self._id2), 0.0) * self._gsum
 
     def image_bound(self, absM: np.ndarray) -> np.ndarray:
         """``w >= |M| s`` (``s = sqrt(diag S)``) for ``absM = |M|``: step 6's vector."""
-        s = np.sqrt(np.maximum(np.diagonal(self.S), 0.0))
+        s = np.sqrt(np.maximum(self.S.diagonal(), 0.0))
         return (absM @ s) * (self._gsum * (1.0 + 2.0 * _U))
 
     def _diag(self, w: np.ndarray, c: float) -> np.ndarray:
@@ -202,7 +202,7 @@ class ErrorEllipsoid:
         wd = w * self.d
         Wz = float(w @ self._id) * self._gsum
         rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
-        tz = max(float((np.diagonal(Z) + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
+        tz = max(float((Z.diagonal() + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
         Q, rq, wq, tq = None, None, None, 0.0
         if noise is not None:
             G, c, GGt = noise
@@ -216,7 +216,7 @@ class ErrorEllipsoid:
                 cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
                 wq = g * math.sqrt(c * (1.0 + cq))
                 rq = self._diag(g, cq * c)
-                tq = max(float((np.diagonal(Q) + rq) @ id2), 0.0) * self._gsum
+                tq = max(float((Q.diagonal() + rq) @ id2), 0.0) * self._gsum
                 if not tq > 0.0:
                     Q = None
         # the added set: E(Q + R_q) (+) E(rho^2 D^2) inside E(beta (Q + R_q) + kappa rho^2 D^2)
@@ -247,10 +247,17 @@ class ErrorEllipsoid:
             q += self._diag(wq, 3.0 * _U * theta * beta)
         # the diagonal's own addition: relative u of the result (and q's few operations); underflow
         # (step 8): the products' absolute errors, and those of c G G' and the scalings
-        dS = np.diagonal(S)
-        q += 2.0 * _U * np.abs(dS) + (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
+        dS = np.abs(S.diagonal())
+        dS *= 2.0 * _U
+        dS += (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
+        q += dS
         q *= 1.0 + 8.0 * _U
-        S[self._ii, self._ii] += q      # in place whatever S's layout (a reshape could copy)
+        if S.flags.c_contiguous or S.flags.f_contiguous:    # the diagonal in place: a strided view
+            dS = S.ravel(order="K")[:: n + 1]
+            dS += q
+        else:
+            S[self._ii, self._ii] += q
+            dS = S.diagonal()
         tr = max(float(dS.sum()), 0.0) * self._gsum
         return S, tr
 

@@ -119,5 +119,6 @@ class FusedMap(NamedTuple):
         if bound is not None and not bound.withdrawn:
             bound.w = bound.stamp_error(m.H, self.x_minus, bound.prior_beta(m.e, self.dt, self.x0, self.x_minus,
                                                                               None)) if bound.tolerance else 0.0
-            rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus)
-            bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel)
+            norms = (bound.xn(self.x0), bound.xn(self.x_minus))
+            rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus, norms[1])
+            bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel, norms=norms)

@@ -41,8 +41,12 @@ and propagate with their usual steps.
 What it assumes: the model held over the whole window (the plant followed ``x' = A x`` plus any
 declared disturbance, every sample's noise within ``noise_max``, the channel of every sample
 right). Data cannot prove that, only refute it: a window whose least residual exceeds what
-any noise within the bound allows (``||r|| > sqrt(m)``, allowances included) is refused, and a
-window is cleared whenever a test alarms (:mod:`switchobs_core.runtime.recovery`).
+any noise within the bound allows (``||r|| > sqrt(m)``, allowances included) is refused, and so
+is one that no state explains row by row (:func:`chebyshev`: every row within its own allowance
+``1 + epsilon_y,i + d_w,i + delta_i (||x_c|| + radius)``, the sharp test: a body that accelerated
+while the window saw it for part of its span bends its own rows away from every path of the
+model, which the norm over the whole window averages out); a window is cleared whenever a test
+alarms (:mod:`switchobs_core.runtime.recovery`).
 """
 
 from __future__ import annotations
@@ -52,11 +56,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linprog
 
 from ..numerics.expm_bound import certify_zoh, nu
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
 
-__all__ = ["Certificate", "DataWindow"]
+__all__ = ["Certificate", "DataWindow", "chebyshev"]
 
 _U = UNIT_ROUNDOFF
 _UP = 1.0 + 8.0 * _U
@@ -92,6 +97,39 @@ class Certificate:
         return (_norm(d) + rnd + self.radius) * _UP
 
 
+#: Share of the span after a window the row-by-row test refused during which no certificate is
+#: tried (the window then holds mostly the same data; each try is a linear program).
+HOLD_SHARE = 0.05
+
+#: Relative slack of the row-by-row test over the linear program's tolerances (a refusal is never
+#: unsound; the slack keeps a window the data fit from being refused by the solver's rounding).
+CHEBYSHEV_SLACK = 1e-6
+
+
+def chebyshev(R: np.ndarray, r: np.ndarray, tol: np.ndarray) -> float:
+    """``min_z max_i |r_i - R_i z| / tol_i``: the least share of its allowance ``tol_i`` the worst
+    row needs when the fit moves by any ``z`` (``r = y - R x_c``: the rows' residuals at the fit).
+    At most 1 iff some state explains every row within its allowance (infinity-norm
+    consistency). ``max |r_i| / tol_i`` when that is at most 1 (``z = 0``); else the linear
+    program ``min s`` subject to ``|r - R z| <= s tol`` (HiGHS); ``inf`` when it fails."""
+    q = np.abs(r) / tol
+    if not q.size or float(np.max(q)) <= 1.0:
+        return float(np.max(q, initial=0.0))
+    m, n = R.shape
+    scale = np.maximum(np.max(np.abs(R), axis=0), np.finfo(float).tiny)     # columns of unit size
+    Rs = R / scale
+    col = -tol[:, None]
+    A_ub = np.block([[-Rs, col], [Rs, col]])
+    b_ub = np.concatenate([-r, r])
+    cost = np.zeros(n + 1)
+    cost[-1] = 1.0
+    res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * n + [(0.0, None)], method="highs")
+    if res.status != 0 or res.x is None:
+        return math.inf
+    z = res.x[:n]
+    return float(np.max(np.abs(r - Rs @ z) / tol))
+
+
 class DataWindow:
     """The weighted rows of the recent samples, kept at the latest sample's time (module docstring).
 
@@ -115,6 +153,7 @@ class DataWindow:
         self._cache_size = int(cache)
         self.refused = 0        # windows refused by the residual test
         self.last_refusal = ""
+        self.hold = self.span * HOLD_SHARE
         self.clear()
 
     def clear(self) -> None:
@@ -126,6 +165,7 @@ class DataWindow:
         self.t_row = np.zeros(0)        # per row: its sample's time
         self.ch_row = np.zeros(0, dtype=int)
         self.t: float | None = None
+        self._quiet_until = -math.inf
 
     def __len__(self) -> int:
         return int(self.y.size)
@@ -192,7 +232,7 @@ class DataWindow:
     def certificate(self, channels: Sequence[int]) -> Certificate | None:
         """The certificate of the module docstring (None: not :meth:`ready`, not of full rank, or
         refused by the residual test, counted in ``refused`` with ``last_refusal``)."""
-        if not self.ready(channels):
+        if not self.ready(channels) or self.t < self._quiet_until:
             return None
         R, yw = self.R, self.y
         m, n = R.shape
@@ -225,9 +265,10 @@ class DataWindow:
             Rtr = R.T @ r
             Rtr_n = _norm(Rtr) + gamma(m + 2) * math.sqrt(fR2) * rn + math.sqrt(fR2) * er
             ey = _norm(self.ey)
-            dw = 0.0
+            dws = np.zeros(m)
             if self.disturbance is not None:
-                dw = math.sqrt(sum(self.disturbance(float(ti - self.t), 1) ** 2 for ti in self.t_row))
+                dws = np.array([self.disturbance(float(ti - self.t), 1) for ti in self.t_row])
+            dw = _norm(dws)
             xn = _norm(x_c)
             root_m = math.sqrt(m) * _UP
             radius = ((Rtr_n + Delta * (rn + er)) / (s * s) + (Delta * xn + root_m + ey + dw) / s) * _UP * _UP
@@ -238,6 +279,18 @@ class DataWindow:
                 self.last_refusal = (f"window [{self.t_row[0]:.6g}, {self.t:.6g}] s refused: weighted residual "
                                      f"{least:.4g} > {root_m + ey + dw:.4g} (the data do not fit the model within "
                                      "noise_max)")
+                return None
+            # the same row by row (the sharp test): some state must explain every row within its own
+            # allowance; a drift the norm over the window averages out (a manoeuvre seen for part of
+            # the window) does not fit any
+            tol = (1.0 + self.ey + dws + self.delta * (xn + radius)) * _UP
+            worst = chebyshev(R, r, tol)
+            if worst > 1.0 + CHEBYSHEV_SLACK:
+                self.refused += 1
+                self._quiet_until = self.t + self.hold
+                self.last_refusal = (f"window [{self.t_row[0]:.6g}, {self.t:.6g}] s refused: no state explains every "
+                                     f"sample within noise_max (the least worst row uses {worst:.4g} of its "
+                                     "allowance)")
                 return None
         if not math.isfinite(radius):
             return None

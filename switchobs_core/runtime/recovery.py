@@ -27,11 +27,16 @@ estimator's screening, :mod:`switchobs_core.sim.faults`):
     the bounds: re-certification brings them back).
 
 Re-certification needs a declared ``noise_max`` (the radius is in its units) and the rigorous
-bounds (innovation hold); without them ``after`` never certifies.
+bounds (innovation hold); without them ``after`` never certifies. A noise-free declaration
+(``noise_max`` 0 for every channel, exact stamps, no declared disturbance) certifies too: a window is read with the
+allowance ``|v_j| <= NOISE_FREE ||y||_inf`` per sample (:data:`NOISE_FREE`, a rounding level),
+which holds wherever the declaration does (0 is within it), so a window whose residual is at the
+rounding level certifies a radius at that level, and one with more is refused.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any
 
@@ -48,6 +53,12 @@ __all__ = ["Recovery", "body_states", "cycle_span"]
 
 #: Consecutive gate rejections of one channel that make a model failure (not outliers).
 STARVE = 25
+#: The noise allowance of a window under a noise-free declaration, relative to each sample's largest
+#: entry: far above the rounding of a simulated plant over a window (thousands of steps of ~1e-16),
+#: far below any noise a sensor has.
+NOISE_FREE = 2.0**-30
+#: The smallest entry the allowance is taken relative to (a sample of zeros).
+NOISE_FLOOR = 1e-150
 
 
 def cycle_span(observer: Any) -> float:
@@ -131,7 +142,10 @@ class Recovery:
         self.N = observer.N
         vmax = observer.noise_max
         self.vmax = None if vmax is None else tuple(float(v) for v in vmax)
-        can = recertify and self.vmax is not None and all(v > 0 for v in self.vmax)
+        dist = getattr(observer, "disturbance", None)
+        self.noise_free = self.vmax is not None and all(v == 0 for v in self.vmax) \
+            and not (dist is not None and dist.active)     # a disturbance's image needs a noise scale
+        can = recertify and self.vmax is not None and (all(v > 0 for v in self.vmax) or self.noise_free)
         self.window = (DataWindow(observer.A, cycle_span(observer) if span is None else span, keep=1.0,
                                   disturbance=window_disturbance(observer)) if can else None)
         self.bias = BiasDetector(observer.p, k_ref, h) if bias else None
@@ -203,7 +217,7 @@ class Recovery:
         if self._valid:                          # withdrawn since the last sample
             w.clear()
             self._valid = False
-        w.add(t, output_rows(self.C[channel - 1], rows), y, self.vmax[channel - 1], channel)
+        w.add(t, output_rows(self.C[channel - 1], rows), y, self._allowance(y, channel), channel)
         cert = w.certificate(range(1, self.N + 1))
         if cert is None:
             return None
@@ -222,6 +236,16 @@ class Recovery:
         if self.bias is not None:
             self.bias.reset()
         return cert
+
+    def _allowance(self, y: np.ndarray, channel: int) -> float:
+        """The noise allowance of a sample of ``channel`` in the window: the declared bound, or under a
+        noise-free declaration :data:`NOISE_FREE` times its largest entry (inf with a declared stamp
+        error, which a noise-free window does not carry: no certificate)."""
+        if not self.noise_free:
+            return self.vmax[channel - 1]
+        if getattr(getattr(self.obs, "rounding", None), "tolerance", 0.0):
+            return math.inf
+        return NOISE_FREE * max(float(np.max(np.abs(y), initial=0.0)), NOISE_FLOOR)
 
     # ------------------------------------------------------------------ a starved body
     def accepted(self, channel: int) -> None:

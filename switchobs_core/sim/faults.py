@@ -80,23 +80,27 @@ class FaultRun:
 
 def run_with_faults(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end: float, *, rate: float,
                     noise_std: float, noise_max: float, e0: float | None = None, faults: Sequence[Fault] = (),
-                    seed: int = 0, recovery: dict | None = None, noise: Any = None) -> FaultRun:
+                    seed: int = 0, recovery: dict | None = None, noise: Any = None, B_w: Any = None,
+                    w: Any = None, disturbance: Any = None) -> FaultRun:
     """Run the observer with the consistency test and :class:`~switchobs_core.runtime.recovery.Recovery`
     (options ``recovery``) on the plant from ``x0`` at ``rate`` Hz with Gaussian noise of ``noise_std``
-    clipped to ``noise_max`` plus the ``faults``; ``e0`` None: no initial bound (certified from data)."""
+    clipped to ``noise_max`` plus the ``faults``; ``e0`` None: no initial bound (certified from data).
+    ``B_w``, ``w``: an unknown input ``w(t)`` (held over each step from its start) through ``B_w``
+    drives the plant (a manoeuvre: :mod:`switchobs_core.sim.disturbed`); ``disturbance`` the
+    observer's declared one (None: undeclared)."""
     cycles = list(schedule.cycles)
     obs = SwitchedObserver(system, table, "periodic", cycles, x0=xhat0, t0=0.0, e0=e0, noise_max=noise_max,
-                           noise=noise)
+                           noise=noise, disturbance=disturbance)
     rec = Recovery(obs, labels=getattr(system, "output_labels", None), **(recovery or {}))
     test = InnovationTest(system.C, obs.noise_max)
-    plant = Plant(system, x0, seed=seed)
+    plant = Plant(system, x0, seed=seed, B_w=B_w)
     K = int(math.floor(t_end * rate + 1e-9))
     t = np.arange(K + 1) / rate
     err, bound, used = np.empty(K + 1), np.full(K + 1, -1.0), np.zeros(K + 1, dtype=bool)
     run = FaultRun(t, err, bound, used)
     valid = e0 is not None
     for k, tk in enumerate(t):
-        x = plant.advance(float(tk))
+        x = plant.advance(float(tk), w=None if w is None or not k else w(float(t[k - 1])))
         c = schedule.channel_at(float(tk))
         y = plant.measure(c, noise_std, noise_max=noise_max)
         for f in faults:

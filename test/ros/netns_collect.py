@@ -27,7 +27,9 @@ from tools.launch import Collector
 
 #: The diagnostics keys a summary keeps (the estimator's /diagnostics).
 KEYS = ("lost channel messages", "late channel messages", "inconsistent samples (rejected, bounds withdrawn)",
-        "partial updates", "updates", "exact bound valid", "e0")
+        "partial updates", "updates", "exact bound valid", "e0", "re-certifications from data",
+        "samples not proven within the reorder window (channel rows dropped)",
+        "samples not proven within the reorder window, named by the consistency test")
 
 
 def summary(data: dict, labels: dict, diag: dict, ns: str) -> dict:

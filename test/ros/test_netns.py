@@ -108,10 +108,7 @@ def test_jitter_and_loss_on_the_links(tmp_path, ros_domain, paper_tables):
     _no_false_bound(s)
     assert s["checked"] > 0.5 * s["truth"], s
     # A valid bound on >= 90 % of the samples after the first 5 s: attribution by sensor stamps (the
-    # stamped channel message camera_sim publishes) never compares the detector's clock with the camera's.
-    # Not yet in every run: a switching message lost on the lossy link, found after samples it governs
-    # were answered, withdraws the bounds, and with the shipped noise.max 0 no window re-certifies them
-    # (measured once in four runs).
-    if s["valid_after_5s"] < 0.9:
-        pytest.xfail("a lost switching message under jitter and loss withdrew the bounds for good (noise.max 0)")
+    # stamped channel message camera_sim publishes) never compares the detector's clock with the camera's,
+    # and a sample whose channel the stamps do not prove within the window is never guessed (its target
+    # pose dropped), so a switching message lost or late on the lossy link cannot void an answer
     assert s["valid_after_5s"] >= 0.9, s

@@ -105,3 +105,19 @@ def test_a_body_the_gate_starves_is_reinitialised_not_coasted(tmp_path, reinit):
         assert abs(est - last_x) < 0.1      # re-initialised from its own samples (measured: 3 mm)
     else:
         assert abs(est - last_x) > 5.0      # coasting on the model it left (measured: 17.7 m)
+
+
+def test_a_noise_free_declaration_certifies_a_bound_from_exact_data(tmp_path):
+    """A noise-free recording (the extended-precision plant, no noise), ``noise.max: 0`` and
+    ``e0: -1`` with an initial estimate metres off: no bound for the first cycle, then one certified
+    from the data at the rounding level that holds on every later sample."""
+    generate(tmp_path / "exact", GenerateConfig(rate=50.0, duration=5.0, noise_std=0.0, extended=True), "mcap")
+    x0 = list(np.array(DEFAULT_X0) + OFF)
+    params = {**PARAMS, "noise.max": 0.0, "e0": -1.0, "initial_estimate": x0,
+              "gain_table_cache_dir": str(tmp_path / "cache")}
+    res = estimate(tmp_path / "exact", estimator_params(overrides=params), out=tmp_path / "est")
+    (p,) = load_report(tmp_path / "est", "/estimator").passes
+    valid = p.noise > 0
+    assert not np.any(valid & (p.err > p.noise))
+    assert not valid[p.t < 2.0].any() and valid[p.t >= 2.1].all()
+    assert res.recertifications == 1 and np.max(p.noise[p.t >= 2.1]) < 1e-3

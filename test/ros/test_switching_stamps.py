@@ -193,3 +193,41 @@ def test_a_lost_first_switching_message_leaves_only_the_end_of_the_residence_unk
     pl.on_channel(active_channel(2, t1), src_ns=S + 20 * MS, now_mono=0.2, seq=3)   # seq 2 lost
     assert [e.stamp_ns for e in out] == [t0 + S] and pl.bound_valid
     assert pl.lost_channel == 1 and pl.rejected[("target/pose", "ambiguous_channel")] == 1
+
+
+def test_a_sample_not_proven_within_the_window_is_never_guessed(exact):
+    """Channel 1 from t0; a sample 1.1 s after it (beyond the horizon) whose window passes with no
+    later switching message: its target pose is dropped (counted), the camera pose used alone. The
+    switching message to channel 2 at that very stamp, arriving after the window, finds no answer
+    on a guessed channel: the bounds stay valid."""
+    pl = exact
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    t1 = t0 + 1100 * MS
+    out = _tick(pl, t1, (3.0, 1.0), 0.0, S + 10 * MS)
+    assert out == []                                     # waits for its channel
+    out = pl.flush_overdue(0.06, 0.2)                    # the 50 ms window passed
+    assert [e.stamp_ns for e in out] == [t1] and pl.partial_updates == 1
+    assert pl.uncertain == 1 and pl.rejected[("target/pose", "ambiguous_channel")] == 1
+    pl.on_channel(active_channel(2, t1), src_ns=S + 20 * MS, now_mono=0.1, seq=2)
+    assert pl.bound_valid and pl.late_channel == 0
+
+
+def test_a_lost_switching_message_after_proven_answers_keeps_the_bounds(exact):
+    """Channel 1 from t0; samples after the horizon are proven by the repetitions sent after them
+    and answered. The first message of channel 2 (seq 3) is lost and found missing at its
+    repetition (seq 4): the answers were proven, the bounds stay valid; a sample sent after the
+    last message ahead of the gap, stamped in it, has an unknown channel (target pose dropped)."""
+    pl = exact
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    t1 = t0 + 1100 * MS
+    out = _tick(pl, t1, (3.0, 1.0), 0.0, S + 10 * MS)
+    out += pl.on_channel(active_channel(1, t0), src_ns=S + 15 * MS, now_mono=0.005, seq=2)
+    assert [(e.stamp_ns, e.channel) for e in out] == [(t1, 1)] and pl.partial_updates == 0
+    out = _tick(pl, t1 + 10 * MS, (3.0, 1.0), 0.01, S + 20 * MS)      # sent after seq 2: waits
+    t2 = t1 + 20 * MS
+    out += pl.on_channel(active_channel(2, t2), src_ns=S + 40 * MS, now_mono=0.02, seq=4)   # seq 3 lost
+    assert [e.stamp_ns for e in out] == [t1 + 10 * MS]
+    assert pl.lost_channel == 1 and pl.rejected[("target/pose", "ambiguous_channel")] == 1
+    assert pl.bound_valid and pl.late_channel == 0

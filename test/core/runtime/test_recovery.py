@@ -144,3 +144,43 @@ def test_a_certificate_with_a_declared_disturbance_holds_on_manoeuvring_bodies(p
             worst = max(worst, np.linalg.norm(obs.x_hat - x) / nb)
     assert first is not None and first <= 2.0 + 1e-9
     assert worst <= 1.0, worst
+
+
+def _noise_free_run(paper, ktable, bias_at=None):
+    """4 s of noise-free samples, e0 unknown, noise_max 0; ``bias_at``: from that time on, +-1e-6 of
+    alternating sign on the camera's x row (no trajectory of the model reads so). Returns the time of
+    the first certificate, the final error and bound, and the recovery."""
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=X0 + 3.0, e0=None, noise_max=0.0)
+    rec = Recovery(obs, bias=False)
+    sched = PeriodicSchedule(CYC)
+    F = expm(paper.A / RATE)
+    x = X0.copy()
+    first = None
+    for k in range(int(4 * RATE) + 1):
+        t = k / RATE
+        if k:
+            x = F @ x
+        c = sched.channel_at(t)
+        y = paper.C[c - 1] @ x
+        if bias_at is not None and t >= bias_at:
+            y = y + np.array([1e-6 * (-1) ** k, 0, 0, 0])
+        obs.update(t, c, y)
+        if rec.after(t, c, None, y, first is not None) is not None:
+            first = t
+        if first is not None:
+            assert np.linalg.norm(obs.x_hat - x) <= obs.envelope().noise_bound
+    return first, np.linalg.norm(obs.x_hat - x), obs.envelope().noise_bound, rec
+
+
+def test_a_noise_free_declaration_certifies_a_rounding_level_bound(paper, ktable):
+    """noise_max 0: a cycle of exact samples (the plant in double) certifies a bound at the rounding
+    level (the allowance NOISE_FREE of each sample's largest entry), which holds from then on."""
+    first, err, bound, rec = _noise_free_run(paper, ktable)
+    assert first == 2.0 and rec.recertifications == 1
+    assert err <= bound < 1e-5 * np.linalg.norm(X0)
+
+
+def test_a_noise_free_window_with_micrometre_noise_is_refused(paper, ktable):
+    """noise_max 0: samples 1e-6 off the model (noise far above the rounding level) never certify."""
+    first, _, bound, rec = _noise_free_run(paper, ktable, bias_at=0.0)
+    assert first is None and math.isinf(bound) and rec.window.refused > 0
