@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -145,14 +146,23 @@ def main() -> None:
                 str(work / f"{tag}{d:g}_{r}.csv"), "--gain-table", str(table), "--system", str(sysf),
                 "-p", f"schedule.h:={[1.0] * M}", "--no-progress"]
 
+    def done(*names):           # an output measured is removed at once (100 s with every output: 3.4 GB)
+        for name in names:
+            shutil.rmtree(work / name, ignore_errors=True)
+            (work / name).unlink(missing_ok=True)
+
     for r in range(a.rounds):
         for d in a.durations:
             ours[d].append(peak(est(d, r, "o")))
+            done(f"o{d:g}_{r}", f"o{d:g}_{r}.csv")
             ours_all[d].append(peak([*est(d, r, "a"), "--outputs", "all"]))
+            done(f"a{d:g}_{r}", f"a{d:g}_{r}.csv")
             if a.before is not None:
                 before[d].append(peak(est(d, r, "b"), a.before))
+                done(f"b{d:g}_{r}", f"b{d:g}_{r}.csv")
             alt[d].append(peak([sys.executable, "-c", KF_SCRIPT, str(bags[d]), str(sysf),
                                 str(work / f"k{d:g}_{r}.csv")]))
+            done(f"k{d:g}_{r}.csv")
     print(f"### Replay of a {M}-agent bag (n = {system.n}), 50 Hz: `switchobs_bag estimate` against a numpy "
           "Kalman filter script\n")
     print(f"`python bench/bench_replay.py --durations {' '.join(f'{d:g}' for d in a.durations)} --rounds "
@@ -182,6 +192,7 @@ def main() -> None:
             b0, b1 = (statistics.median(x[1] for x in before[d]) for d in (d0, d1))
             gb = f", --before {(b1 - b0) / (d1 - d0):.2f} MiB/s"
         print(f"\nMemory growth per simulated second: estimate {g:.2f} MiB/s, script {gk:.2f} MiB/s{gb}.")
+    shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
