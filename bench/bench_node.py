@@ -91,6 +91,7 @@ def republisher_main() -> None:
     from switchobs_msgs.msg import ActiveChannel
     node.create_subscription(ActiveChannel if os.environ.get("BENCH_CHANNEL") == "stamped" else UInt8,
                              "camera/active_channel", lambda m: None, qos.CHANNEL_SUB)
+    print("bare_republisher ready", flush=True)     # bench_startup.py: its interfaces exist
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):

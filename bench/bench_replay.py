@@ -10,7 +10,9 @@ as a subprocess (``--rounds`` rounds, the two interleaved); per command the chil
 system) and its peak resident memory (``ru_maxrss``), medians over the rounds:
 
 * ``switchobs_bag estimate BAG -o OUT --csv FILE`` (the estimator's pipeline; the output bag with
-  the inputs copied, and the CSV; covariance published, its default);
+  the inputs copied, and the CSV; covariance published, its default; the outputs ``--outputs`` writes by
+  default: all but ``~/covariance``, whose numbers ``~/state_estimate`` carries);
+* the same with ``--outputs all`` (``~/covariance`` too: the command's default before ``--outputs``);
 * the alternative, a script of the usual kind (:data:`KF_SCRIPT`): read the bag
   (``switchobs_ros.bag.io.BagIn``), decode the channel and the poses (the same CDR fast path), a
   Kalman filter in standard form in numpy (discretisation cached, Joseph update), a CSV row of the
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -31,7 +34,9 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1")
+#: PYTHONSAFEPATH: ``python -m`` and ``-c`` do not put the working directory first on ``sys.path``, so each
+#: command runs the checkout its PYTHONPATH names (``--before``), not the one the benchmark was started in.
+ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1")
 
 #: The alternative: a numpy Kalman filter over the bag's camera and target poses, CSV out.
 KF_SCRIPT = r"""
@@ -132,6 +137,7 @@ def main() -> None:
                                          noise_std=1e-3), "mcap")
     exe = [sys.executable, "-m", "switchobs_ros.bag"]
     ours: dict = {d: [] for d in a.durations}
+    ours_all: dict = {d: [] for d in a.durations}
     alt: dict = {d: [] for d in a.durations}
     before: dict = {d: [] for d in a.durations}
 
@@ -140,31 +146,43 @@ def main() -> None:
                 str(work / f"{tag}{d:g}_{r}.csv"), "--gain-table", str(table), "--system", str(sysf),
                 "-p", f"schedule.h:={[1.0] * M}", "--no-progress"]
 
+    def done(*names):           # an output measured is removed at once (100 s with every output: 3.4 GB)
+        for name in names:
+            shutil.rmtree(work / name, ignore_errors=True)
+            (work / name).unlink(missing_ok=True)
+
     for r in range(a.rounds):
         for d in a.durations:
             ours[d].append(peak(est(d, r, "o")))
+            done(f"o{d:g}_{r}", f"o{d:g}_{r}.csv")
+            ours_all[d].append(peak([*est(d, r, "a"), "--outputs", "all"]))
+            done(f"a{d:g}_{r}", f"a{d:g}_{r}.csv")
             if a.before is not None:
                 before[d].append(peak(est(d, r, "b"), a.before))
+                done(f"b{d:g}_{r}", f"b{d:g}_{r}.csv")
             alt[d].append(peak([sys.executable, "-c", KF_SCRIPT, str(bags[d]), str(sysf),
                                 str(work / f"k{d:g}_{r}.csv")]))
+            done(f"k{d:g}_{r}.csv")
     print(f"### Replay of a {M}-agent bag (n = {system.n}), 50 Hz: `switchobs_bag estimate` against a numpy "
           "Kalman filter script\n")
     print(f"`python bench/bench_replay.py --durations {' '.join(f'{d:g}' for d in a.durations)} --rounds "
           f"{a.rounds} --agents {M}{f' --before {a.before}' if a.before else ''}`; load average at the end "
           f"{os.getloadavg()[0]:.1f}.\n")
-    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) |"
-          + (" --before: CPU | peak RSS |" if a.before else ""))
-    print("|---|---|---|---|---|---|" + ("---|---|" if a.before else ""))
+    print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) | "
+          "--outputs all: CPU | ratio |" + (" --before: CPU | peak RSS | ratio |" if a.before else ""))
+    print("|---|---|---|---|---|---|---|---|" + ("---|---|---|" if a.before else ""))
     med = {}
     for d in a.durations:
         oc, om = statistics.median(x[0] for x in ours[d]), statistics.median(x[1] for x in ours[d])
         kc, km = statistics.median(x[0] for x in alt[d]), statistics.median(x[1] for x in alt[d])
         med[d] = (oc, om, kc, km)
+        ac = statistics.median(x[0] for x in ours_all[d])
         extra = ""
         if a.before:
-            extra = (f" {statistics.median(x[0] for x in before[d]):.2f} s | "
-                     f"{statistics.median(x[1] for x in before[d]):.0f} MiB |")
-        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x |" + extra)
+            bc = statistics.median(x[0] for x in before[d])
+            extra = f" {bc:.2f} s | {statistics.median(x[1] for x in before[d]):.0f} MiB | {bc / kc:.2f}x |"
+        print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x | {ac:.2f} s | "
+              f"{ac / kc:.2f}x |" + extra)
     if len(a.durations) > 1:
         d0, d1 = min(a.durations), max(a.durations)
         g = (med[d1][1] - med[d0][1]) / (d1 - d0)
@@ -174,6 +192,7 @@ def main() -> None:
             b0, b1 = (statistics.median(x[1] for x in before[d]) for d in (d0, d1))
             gb = f", --before {(b1 - b0) / (d1 - d0):.2f} MiB/s"
         print(f"\nMemory growth per simulated second: estimate {g:.2f} MiB/s, script {gk:.2f} MiB/s{gb}.")
+    shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -40,10 +40,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.optimize import brentq
 
 from ..certificate import cycle_factor
 from ..exceptions import DesignError, InfeasibleDesign, InvalidArgument, ScheduleError
@@ -54,6 +53,9 @@ from ..table.gains import ChannelGain, CycleDesign, GainTable
 from ..validation import as_finite
 from .precision import check_unseen, cycle_stretches, cycles_label
 from .synthesis import KAPPA_GRID, THETA_SLACK, KappaCurve, LMISynthesizer
+
+if TYPE_CHECKING:
+    from scipy.interpolate import PchipInterpolator
 
 __all__ = [
     "Margin",
@@ -151,6 +153,7 @@ class ChannelDesigner:
             if val >= 0:
                 if prev is None:
                     return 0.0
+                from scipy.optimize import brentq  # only a design needs it: not imported at start-up
                 try:
                     return float(brentq(lambda e: self.g(e, active, inactive, delta), prev, eta, xtol=1e-9, rtol=1e-10))
                 except DesignError as err:
@@ -183,6 +186,9 @@ class ChannelDesigner:
             return float("nan")
         if prev is None:
             return 0.0
+        from scipy.interpolate import PchipInterpolator
+        from scipy.optimize import brentq
+
         e, k = self.curve.points()
         if self._interp is None or self._interp[0] != e.size:  # rebuilt only when the curve grew
             self._interp = (e.size, PchipInterpolator(e, np.log(k)))

@@ -56,7 +56,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 from ..numerics.expm_bound import certify_zoh, nu
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
@@ -123,6 +122,8 @@ def chebyshev(R: np.ndarray, r: np.ndarray, tol: np.ndarray) -> float:
     b_ub = np.concatenate([-r, r])
     cost = np.zeros(n + 1)
     cost[-1] = 1.0
+    from scipy.optimize import linprog  # only a re-certification needs it: not imported at start-up
+
     res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * n + [(0.0, None)], method="highs")
     if res.status != 0 or res.x is None:
         return math.inf

@@ -12,7 +12,10 @@ themselves and the system, never from the numbers the file claims about them:
   periodic schedule of that cycle converges; a robust design is checked on the cycle at the
   centre of its residence-time box;
 * Kalman designs: the period's error map ``prod_k (I - K_k H_k) Phi_k`` recomputed from the stored
-  gains has spectral radius < 1.
+  gains has spectral radius < 1. Each factor is applied as ``Phi_k M - K_k (H_k Phi_k M)`` (a rank-p
+  correction instead of an n x n product), with ``Phi_k`` as a sparse matrix when at most a quarter of
+  its entries are nonzero (a system of decoupled bodies): at n = 132 and 1 600 phases, 0.1 s instead
+  of 0.9 s, so the check runs at every load.
 
 A table whose gains were all set to zero (and its checksum recomputed) runs the observer open
 loop: for a system with an unstable mode its cycle map has spectral radius >= 1 and it is
@@ -26,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import expm
+from scipy.sparse import csr_array
 
 from ..certificate import cycle_transition
 from ..certificate.paper import design_dead_time
@@ -41,6 +45,8 @@ __all__ = ["RHO_MAX", "verify_table"]
 
 #: A design is refused when its cycle map's spectral radius is not below this.
 RHO_MAX = 1.0
+#: A Kalman design's sample transition is applied as a sparse matrix when at most this fraction of it is nonzero.
+SPARSE_DENSITY = 0.25
 
 
 def verify_table(table: GainTable, system: LTISystem, *, source: str = "gain table") -> None:
@@ -88,22 +94,36 @@ def _verify_kalman(d: dict, system: LTISystem, source: str) -> None:
         kd = KalmanDesign.from_dict(d, system)
     except SwitchobsError as err:
         raise GainTableError(f"{source}: stored Kalman design unusable: {err}") from None
+    with np.errstate(all="ignore"):
+        M = _period_map(kd, system, source)
+        rho = float(np.max(np.abs(np.linalg.eigvals(M)))) if np.isfinite(M).all() else float("inf")
+    _check_rho(rho, f"Kalman design at {kd.rate:g} Hz: the error map over one period", source)
+
+
+def _period_map(kd: KalmanDesign, system: LTISystem, source: str) -> np.ndarray:
+    """``prod_k (I - K_k H_k) Phi_k`` over the design's periodic phases, from its stored gains."""
     A = np.asarray(system.A, dtype=float)
     n = system.n
     M = np.eye(n)
-    steps: dict[float, np.ndarray] = {}
-    with np.errstate(all="ignore"):
-        for k, ph in enumerate(kd.periodic):
-            C = np.asarray(system.C[ph.channel - 1], dtype=float)
-            H = C if ph.rows is None else C[list(ph.rows)]
-            K = np.asarray(ph.K, dtype=float)
-            _shapes(K, n, H.shape[0], f"Kalman design {kd.rate:g} Hz, gain of sample {k}", source)
-            Phi = steps.get(ph.dt)
-            if Phi is None:
-                Phi = steps[ph.dt] = expm(A * ph.dt)
-            M = (np.eye(n) - K @ H) @ Phi @ M
-        rho = float(np.max(np.abs(np.linalg.eigvals(M)))) if np.isfinite(M).all() else float("inf")
-    _check_rho(rho, f"Kalman design at {kd.rate:g} Hz: the error map over one period", source)
+    steps: dict[float, np.ndarray | csr_array] = {}
+    for k, ph in enumerate(kd.periodic):
+        C = np.asarray(system.C[ph.channel - 1], dtype=float)
+        H = C if ph.rows is None else C[list(ph.rows)]
+        K = np.asarray(ph.K, dtype=float)
+        _shapes(K, n, H.shape[0], f"Kalman design {kd.rate:g} Hz, gain of sample {k}", source)
+        Phi = steps.get(ph.dt)
+        if Phi is None:
+            Phi = steps[ph.dt] = _transition(expm(A * ph.dt))
+        PM = Phi @ M
+        M = PM - K @ (H @ PM)       # (I - K H) Phi M
+    return M
+
+
+def _transition(Phi: np.ndarray) -> np.ndarray | csr_array:
+    """``Phi`` as it is applied: sparse when at most :data:`SPARSE_DENSITY` of it is nonzero and finite."""
+    if np.isfinite(Phi).all() and np.count_nonzero(Phi) <= SPARSE_DENSITY * Phi.size:
+        return csr_array(Phi)
+    return Phi
 
 
 def _check_rho(rho: float, what: str, source: str) -> None:

@@ -115,12 +115,21 @@ def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
     return P
 
 
+def _header_hash(header: dict[str, Any]) -> Any:
+    """The checksum's SHA-256 over the canonical JSON of the header (without ``payload_sha256``)."""
+    return hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False).encode())
+
+
+def _hash_array(h: Any, name: str, a: np.ndarray) -> None:
+    h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
+    h.update(np.ascontiguousarray(a).data)
+
+
 def _digest(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
-    h = hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False).encode())
+    """``payload_sha256``: the header's canonical JSON, then every array (name, dtype, shape, bytes) in name order."""
+    h = _header_hash(header)
     for name in sorted(arrays):
-        a = arrays[name]
-        h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
-        h.update(np.ascontiguousarray(a).data)
+        _hash_array(h, name, arrays[name])
     return h.hexdigest()
 
 
@@ -207,38 +216,57 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
         if size > limit:
             raise GainTableError(f"gain table {source} is {size / 2**20:.1f} MiB, larger than {limit / 2**20:.1f} MiB, "
                                  f"the limit for a table of n = {n} states and {phases} stored phases")
+        digest = header.pop("payload_sha256", None)
+        if digest is None:
+            raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written by "
+                                 "switchobs or was edited; design it again")
+        h = _header_hash(header)
         arrays: dict[str, np.ndarray] = {}
-        for name, shape in refs["shapes"].items():
+        nonfinite: list[str] = []
+        for name in sorted(refs["shapes"]):             # the checksum's order
+            shape = refs["shapes"][name]
             zi = info.get(f"{name}.npy")
             want = 8 * int(np.prod(shape))
             if zi is None or zi.file_size > want + 4096:
                 raise _refused(source, f"array {name} missing or larger than its {want} bytes")
             try:
-                a = _read_member(zf, zi)
+                a, finite = _read_member(zf, zi, name, shape, h)
+            except _WrongArray as err:
+                raise _refused(source, f"array {name} is {err}, not float64 {shape}") from None
             except (zipfile.BadZipFile, OSError, ValueError, EOFError, struct.error) as err:
                 raise _refused(source, f"array {name}: {err}") from None
-            if a.dtype != np.dtype("<f8") or a.shape != shape:
-                raise _refused(source, f"array {name} is {a.dtype} {a.shape}, not float64 {shape}")
             arrays[name] = a
-    digest = header.pop("payload_sha256", None)
-    if digest is None:
-        raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written by "
-                             "switchobs or was edited; design it again")
-    if digest != _digest(header, arrays):
+            if not finite:
+                nonfinite.append(name)
+    if digest != h.hexdigest():
         raise GainTableError(f"{source}: checksum mismatch: the file was modified or corrupted after it was written")
-    for name, a in arrays.items():
-        if not np.all(np.isfinite(a)):
-            raise GainTableError(f"{source}: non-finite number in {name}")
+    if nonfinite:
+        raise GainTableError(f"{source}: non-finite number in {nonfinite[0]}")
     return _inflate(header, arrays, n)
 
 
-def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
-    """The array of one ``.npy`` member, its header checked against the member's size before
-    anything is allocated (:func:`_npy_header`). A stored member (what :func:`encode` writes) is
-    read in place with one ``fromfile`` (integrity is the SHA-256's job); a compressed one is
-    decompressed to at most its ``file_size`` (which the caller bounded) and read from those bytes."""
+class _WrongArray(ValueError):
+    """A member whose ``.npy`` header is not the float64 array of the shape the table's header declares."""
+
+
+#: Bytes read, hashed and checked for non-finite numbers at a time (stays in the cache between the three).
+_CHUNK = 1 << 21
+
+
+def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo, name: str, shape: tuple[int, ...],
+                 h: Any) -> tuple[np.ndarray, bool]:
+    """The array of one ``.npy`` member and whether it is all finite; its name, dtype, shape and bytes
+    go into the checksum ``h`` (:func:`_digest`'s order). Its header is checked against the member's
+    size before anything is allocated (:func:`_npy_header`), and against ``shape`` (float64) before
+    anything is read (:class:`_WrongArray`). A stored member (what :func:`encode` writes) is read in
+    place, a slice of the array at a time, each slice hashed and checked while it is in the cache (one
+    pass over the data; integrity is the SHA-256's job); a compressed one is decompressed to at most its
+    ``file_size`` (which the caller bounded) and read from those bytes."""
     if zi.compress_type != zipfile.ZIP_STORED or zf.fp is None:
-        return _npy_from_bytes(zf.read(zi))
+        a = _npy_from_bytes(zf.read(zi))
+        _expect(a.dtype, a.shape, shape)
+        _hash_array(h, name, a)
+        return a, bool(np.isfinite(a).all())
     fh = zf.fp
     fh.seek(zi.header_offset)
     head = fh.read(30)
@@ -247,11 +275,25 @@ def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo) -> np.ndarray:
     name_len, extra_len = struct.unpack("<HH", head[26:30])
     start = zi.header_offset + 30 + name_len + extra_len
     fh.seek(start)
-    shape, dtype, count = _npy_header(fh, lambda: start + zi.file_size - fh.tell())
-    a = np.fromfile(fh, dtype=dtype, count=count)
-    if a.size != count:
-        raise ValueError("member shorter than its header says")
-    return a.reshape(shape)
+    got, dtype, count = _npy_header(fh, lambda: start + zi.file_size - fh.tell())
+    _expect(dtype, got, shape)
+    a = np.empty(count, dtype=dtype)
+    h.update(f"\n{name} {a.dtype.str} {tuple(got)}\n".encode())
+    raw = memoryview(a).cast("B")
+    step = _CHUNK // a.itemsize
+    finite = True
+    for lo in range(0, count, step):
+        part = raw[lo * a.itemsize:min(count, lo + step) * a.itemsize]
+        if fh.readinto(part) != len(part):
+            raise ValueError("member shorter than its header says")
+        h.update(part)
+        finite = finite and bool(np.isfinite(a[lo:lo + step]).all())
+    return a.reshape(got), finite
+
+
+def _expect(dtype: np.dtype, got: tuple[int, ...], shape: tuple[int, ...]) -> None:
+    if dtype != np.dtype("<f8") or tuple(got) != tuple(shape):
+        raise _WrongArray(f"{dtype} {tuple(got)}")
 
 
 def _npy_from_bytes(raw: bytes) -> np.ndarray:

@@ -17,7 +17,9 @@ types and layouts the node publishes, decimated as the node decimates them (``ou
 every k-th estimate, 0 never; ``~/state`` always); log time = the log time of
 the input that produced the estimate), the input bag's other topics copied (unless
 ``inputs=False``), and one ``/diagnostics`` message at the end in the node's shape (accepted and
-rejected inputs). Optionally a CSV: ``stamp_ns``, the state labels, the envelope labels.
+rejected inputs). ``outputs`` selects among the outputs besides ``<node>/state`` (:data:`OUTPUTS`); a
+selected one is written as when all are. Optionally a CSV: ``stamp_ns``, the state labels, the envelope
+labels.
 
 Both are written as the estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory
 does not grow with the recording's length (the result then holds the counters and the number of
@@ -27,6 +29,7 @@ estimates, not the estimates: at n = 132 a covariance is 139 KB, 7 MB per second
 from __future__ import annotations
 
 import time
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,7 +51,12 @@ from .cdr import Template, decode_pose, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 
-__all__ = ["EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
+__all__ = ["OUTPUTS", "EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
+
+#: The outputs besides ``<node>/state`` (always written) that :func:`estimate` can write, by the name of their
+#: ``output.<name>_every`` decimation: ``envelope``, the bodies' ``odometry``, ``covariance`` (``<node>/covariance``)
+#: and ``typed`` (``<node>/state_estimate`` and ``<node>/error_bounds``).
+OUTPUTS = ("envelope", "odometry", "covariance", "typed")
 
 #: The estimator's parameter values from params files (owned by switchobs_ros.config).
 estimator_params = params_from_file
@@ -93,10 +101,18 @@ class EstimateResult:
 
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
              storage: str | None = None, inputs: bool = True, node: str = "/estimator",
-             progress: bool | None = False, keep: bool = True) -> EstimateResult:
+             progress: bool | None = False, keep: bool = True,
+             outputs: Collection[str] | None = None) -> EstimateResult:
     """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring);
     ``progress``: a bar of the messages on stderr (None: on a terminal); ``keep``: the result holds
-    every estimate (False: only their number; the bag and the CSV are written as they come)."""
+    every estimate (False: only their number; the bag and the CSV are written as they come);
+    ``outputs``: the topics of :data:`OUTPUTS` written to the bag (None: all of them; ``<node>/state``
+    always), each with the content and decimation it has when all are written (the others' topics
+    are not in the bag)."""
+    if outputs is not None and set(outputs) - set(OUTPUTS):
+        raise BagError(f"unknown output(s) {', '.join(sorted(set(outputs) - set(OUTPUTS)))} (known: "
+                       f"{', '.join(OUTPUTS)})")
+    chosen = set(OUTPUTS if outputs is None else outputs)
     with BagIn(bag_path) as bag:
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
@@ -133,26 +149,30 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     t_se, t_eb = f"{node}/state_estimate", f"{node}/error_bounds"
     w_se = StateEstimateWriter(state_labels, cfg["world_frame"])
     w_eb = ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None)
-    outputs = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}
+    out_topics = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}     # never copied from the input
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
         if pl.publish_covariance else None
+    bag_cov = w_cov is not None and "covariance" in chosen      # <node>/covariance in the bag
 
     writer = BagOut(out, storage) if out is not None else None
     table = CsvWriter(csv, state_labels, env_labels) if csv is not None else None
     try:
         if writer is not None:
             writer.add(t_state, type_name(Float64MultiArray))
-            writer.add(t_env, type_name(Float64MultiArray))
-            if w_cov is not None:
+            if "envelope" in chosen:
+                writer.add(t_env, type_name(Float64MultiArray))
+            if bag_cov:
                 writer.add(t_cov, type_name(Float64MultiArray))
-            for t in t_odom:
-                writer.add(t, type_name(Odometry))
-            writer.add(t_se, type_name(StateEstimate))
-            writer.add(t_eb, type_name(ErrorBounds))
+            if "odometry" in chosen:
+                for t in t_odom:
+                    writer.add(t, type_name(Odometry))
+            if "typed" in chosen:
+                writer.add(t_se, type_name(StateEstimate))
+                writer.add(t_eb, type_name(ErrorBounds))
             writer.add("/diagnostics", type_name(DiagnosticArray))
             if inputs:
                 for t, ty in in_topics.items():
-                    if t not in outputs and t != "/diagnostics":
+                    if t not in out_topics and t != "/diagnostics":
                         writer.add(t, ty)
         count = 0
         stamps: list[int] = []
@@ -161,10 +181,10 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         covs: list[np.ndarray] = []
         # the node's output decimation (EstimatorNode._publish_all): the k-th estimate (from 0) goes out
         # on an output with output.<name>_every = m > 0 when k % m == 0; the result keeps every estimate
-        every = {k: int(cfg.get(f"output.{k}_every", 1)) for k in ("envelope", "odometry", "covariance", "typed")}
+        every = {k: int(cfg.get(f"output.{k}_every", 1)) for k in OUTPUTS}
 
         def due(name: str, k: int) -> bool:
-            return bool(every[name]) and k % every[name] == 0
+            return bool(every[name]) and k % every[name] == 0 and name in chosen
 
         def emit(ests, log_ns):
             nonlocal count
@@ -180,7 +200,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                 if table is not None:
                     table.row(e.stamp_ns, e.x_hat, e.envelope)
                 sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
-                if w_cov is not None:
+                if bag_cov:
                     if writer is not None and e.P is not None and due("covariance", k):
                         writer.write(t_cov, log_ns, w_cov.bytes(array=np.concatenate(((sec, nsec), e.P.ravel()))))
                 if writer is not None:
@@ -234,7 +254,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             elif m.topic == ctl_topic:
                 n_inputs += 1
                 pl.on_control(deserialize(m, mb.message_class(ctl.spec.type)), m.log_ns)
-            if writer is not None and inputs and m.topic not in outputs and m.topic != "/diagnostics":
+            if writer is not None and inputs and m.topic not in out_topics and m.topic != "/diagnostics":
                 writer.write(m.topic, m.log_ns, m.data)
         emit(pl.flush_all(), last_ns)
         seconds = time.perf_counter() - t0

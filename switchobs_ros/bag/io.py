@@ -30,6 +30,7 @@ from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
 
 from .. import qos
+from .mcap_records import fast_records
 
 __all__ = [
     "CHANNEL_TYPES",
@@ -319,7 +320,9 @@ class BagOut:
             self._w.open()
         except Exception as err:
             raise BagError(f"bag {self.path}: cannot create ({one_line(err, with_type=True)})") from None
+        fast_records(self._w)          # the same bytes, fewer copies (switchobs_ros.bag.mcap_records)
         self._conns: dict[str, object] = {}
+        self._defs: dict[str, tuple[str, str]] = {}     # per type: (message definition, RIHS01 hash)
         self.count = 0
 
     def __enter__(self) -> BagOut:
@@ -334,7 +337,11 @@ class BagOut:
         if type_name_ not in self._typestore.types:
             raise BagError(f"topic {topic}: type {type_name_} is not in the ROS 2 Jazzy type store")
         prof = qos if qos is not None else qos_for(topic)
-        self._conns[topic] = self._w.add_connection(topic, type_name_, typestore=self._typestore,
+        if type_name_ not in self._defs:        # 33 odometry topics share one type: its definition made once
+            self._defs[type_name_] = (self._typestore.generate_msgdef(type_name_, ros_version=2)[0],
+                                      self._typestore.hash_rihs01(type_name_))
+        msgdef, rihs01 = self._defs[type_name_]
+        self._conns[topic] = self._w.add_connection(topic, type_name_, msgdef=msgdef, rihs01=rihs01,
                                                     offered_qos_profiles=[_rosbags_qos(prof)])
 
     def write(self, topic: str, log_ns: int, data: bytes) -> None:

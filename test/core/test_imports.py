@@ -11,8 +11,10 @@ from pathlib import Path
 import switchobs_core
 
 PKG = Path(switchobs_core.__file__).parent
-#: Imports allowed inside functions: heavy or optional third-party dependencies.
-LAZY_OK = {"cvxpy", "matplotlib", "tqdm", "threadpoolctl", "yaml"}
+#: Imports allowed inside functions: heavy or optional third-party dependencies (a package, or a
+#: subpackage named in full: scipy's optimisers and interpolants, which only a design needs, cost an
+#: estimator that loads a cached table a tenth of a second of start-up).
+LAZY_OK = {"cvxpy", "matplotlib", "tqdm", "threadpoolctl", "yaml", "scipy.optimize", "scipy.interpolate"}
 
 
 def _modules() -> dict[str, Path]:
@@ -59,7 +61,7 @@ def _scan(mod: str, path: Path) -> tuple[set[str], list[str]]:
             f = in_func or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
             if isinstance(child, (ast.Import, ast.ImportFrom)):
                 names = _target(mod, is_pkg, child)
-                if f and names[0].split(".")[0] not in LAZY_OK:
+                if f and names[0].split(".")[0] not in LAZY_OK and names[0] not in LAZY_OK:
                     lazy.append(f"{mod}:{child.lineno} {names[0]}")
                 elif not f:
                     top.update(n for n in names if n.split(".")[0] == "switchobs_core")

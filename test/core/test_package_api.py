@@ -39,3 +39,17 @@ def test_import_does_not_load_cvxpy_or_matplotlib():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "[]"
+
+
+def test_a_submodule_imports_without_the_design_stack_and_names_come_on_first_use():
+    """``import switchobs_core.exceptions`` (what every module pays) imports neither the design nor the
+    certificate stack nor scipy's optimisers; the first top-level name read binds every re-export."""
+    code = ("import sys, switchobs_core.exceptions, switchobs_core.runtime.observer as o\n"
+            "heavy = ('switchobs_core.design.synthesis', 'switchobs_core.sim', 'scipy.optimize', 'scipy.interpolate')\n"
+            "print(sorted(m for m in heavy if m in sys.modules))\n"
+            "import switchobs_core as so\n"
+            "print(so.SwitchedObserver is o.SwitchedObserver, 'design_table' in so.__all__, "
+            "'switchobs_core.design.synthesis' in sys.modules)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split("\n")[:2] == ["[]", "True True True"]

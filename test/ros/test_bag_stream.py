@@ -1,6 +1,7 @@
 """``switchobs_bag estimate`` writes its outputs as the estimates come: the CSV and the bag of a run
 that keeps nothing in memory (``keep=False``, what the command runs) are those of a run that keeps
-every estimate, and its result holds only their number."""
+every estimate, and its result holds only their number; a selection of outputs writes those outputs as a
+full run does; the MCAP records are the bytes rosbags writes."""
 
 from __future__ import annotations
 
@@ -9,13 +10,17 @@ import json
 
 import numpy as np
 import pytest
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64MultiArray
 
 import msg_bridge as mb
-from switchobs_ros.bag import cdr
+from switchobs_ros.bag import cdr, mcap_records
+from switchobs_ros.bag import io as bag_io
 from switchobs_ros.bag.cli import main as bag_main
-from switchobs_ros.bag.estimate import estimate, estimator_params, write_csv
+from switchobs_ros.bag.cli.estimate import DEFAULT_OUTPUTS, outputs_of
+from switchobs_ros.bag.estimate import OUTPUTS, estimate, estimator_params, write_csv
 from switchobs_ros.bag.generate import GenerateConfig, generate
-from switchobs_ros.bag.io import BagIn, deserialize
+from switchobs_ros.bag.io import BagError, BagIn, BagOut, deserialize
 
 
 @pytest.fixture(scope="module")
@@ -81,3 +86,56 @@ def test_array_template_takes_a_float_array_in_one_copy():
     assert w.bytes(array=np.concatenate(((3, 456), P.T.ravel()))) != as_list
     with pytest.raises(ValueError):
         w.bytes(array=P.ravel())
+
+
+def test_selected_outputs_are_those_of_a_full_run(bag, paper_tables, tmp_path):
+    """A run writing some outputs writes exactly their topics (and ``~/state``, the inputs, the
+    diagnostics), each message for message as a run writing all of them; an unknown name is refused."""
+    p = _params(paper_tables)
+    estimate(bag, p, out=tmp_path / "all", keep=False)
+    estimate(bag, p, out=tmp_path / "some", keep=False, outputs=("typed", "envelope"))
+    full, some = _messages(tmp_path / "all"), _messages(tmp_path / "some")
+    dropped = {"/estimator/covariance"} | {t for t, _, _ in full if t.endswith("/odom")}
+    assert "/estimator/covariance" in {t for t, _, _ in full} and len(dropped) > 1
+    assert some == [m for m in full if m[0] not in dropped]
+    with pytest.raises(BagError, match="unknown output"):
+        estimate(bag, p, out=tmp_path / "bad", outputs=("covariances",))
+
+
+def test_outputs_option_names_the_outputs():
+    assert outputs_of("all") == OUTPUTS and outputs_of("none") == ()
+    assert outputs_of(" typed, covariance") == ("typed", "covariance")
+    assert set(DEFAULT_OUTPUTS) == set(OUTPUTS) - {"covariance"}
+    with pytest.raises(BagError, match="--outputs: unknown output odom "):
+        outputs_of("typed,odom")
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_fast_records_write_the_bytes_rosbags_writes(tmp_path, monkeypatch, storage):
+    """The MCAP records appended in one write (switchobs_ros.bag.mcap_records) are byte for byte those of
+    rosbags' own writer, over chunk boundaries and out-of-order log times; sqlite3 keeps rosbags' path."""
+    rng = np.random.default_rng(3)
+    topics = ["/a", "/b", "/c"]
+    msgs = [(topics[int(rng.integers(3))], int(1_000_000 + rng.integers(-5000, 5000) + 1000 * k),    # serialised once:
+             serialize_message(Float64MultiArray(data=rng.standard_normal(int(rng.integers(0, 3000))).tolist())))
+            for k in range(400)]                                    # CDR padding bytes are not deterministic
+    def write(path):
+        with BagOut(path, storage) as out:
+            for t in topics:
+                out.add(t, "std_msgs/msg/Float64MultiArray")
+            for t, ns, data in msgs:
+                out.write(t, ns, data)
+            return out
+
+    with BagOut(tmp_path / "probe", storage) as probe:     # the fast path is taken for mcap only
+        taken = getattr(probe._w.storage.write, "__func__", None) is mcap_records._write
+    assert taken == (storage == "mcap")
+    fast = write(tmp_path / "fast" / "b")          # the same name: the file's metadata record holds it
+    monkeypatch.setattr(bag_io, "fast_records", lambda w: False)
+    write(tmp_path / "slow" / "b")
+    if storage == "mcap":
+        a, b = (tmp_path / "fast" / "b" / "b.mcap").read_bytes(), (tmp_path / "slow" / "b" / "b.mcap").read_bytes()
+        assert len(a) > 3 * 2 ** 20 and a == b          # several chunks
+    assert fast.count == len(msgs)
+    got = [(m.topic, m.log_ns, m.data) for m in BagIn(tmp_path / "fast" / "b").messages(order="file")]
+    assert got == msgs

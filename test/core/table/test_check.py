@@ -1,6 +1,7 @@
 """Re-verification of loaded gain tables (switchobs_core.table.check): a table whose
 gains were zeroed and whose checksum was recomputed loads (the checksum is not a signature) but is
-refused before use; real tables of every family pass, cheaply."""
+refused before use; real tables of every family pass, cheaply; the Kalman check's period map is the
+dense product."""
 
 from __future__ import annotations
 
@@ -10,12 +11,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
+from switchobs_core.model.scenarios import camera_agents
 from switchobs_core.model.schedule import Cycle
-from switchobs_core.table.check import verify_table
+from switchobs_core.table.check import _period_map, _transition, verify_table
 from switchobs_core.table.gains import GainTable, kalman_table
+from switchobs_core.table.kalman import KalmanDesign
 
 
 def _replant(table: GainTable, edit) -> GainTable:
@@ -74,3 +78,34 @@ def test_gain_of_the_wrong_shape_or_not_finite_is_refused(paper, paper_table):
         bad = replace(d, channels=(replace(d.channels[0], L=L),) + d.channels[1:])
         with pytest.raises(GainTableError, match=needle):
             verify_table(replace(paper_table, designs=[bad]), paper)
+
+
+@pytest.fixture(scope="module")
+def agents():
+    """Three decoupled bodies (n = 12): a sparse sample transition."""
+    return camera_agents(2)
+
+
+def test_period_map_equals_the_dense_product(agents):
+    """The check's period map (rank-p corrections, the transition sparse) is the product
+    ``prod (I - K H) Phi`` formed densely, to 1e-12 relative; its transition was taken sparse."""
+    table = kalman_table(agents, [design_kalman(agents, Cycle([0.5, 0.5]), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], agents)
+    n = agents.n
+    A = np.asarray(agents.A)
+    assert not isinstance(_transition(expm(A * 0.05)), np.ndarray)
+    ref = np.eye(n)
+    for ph in kd.periodic:
+        C = np.asarray(agents.C[ph.channel - 1])
+        H = C if ph.rows is None else C[list(ph.rows)]
+        ref = (np.eye(n) - np.asarray(ph.K) @ H) @ expm(A * ph.dt) @ ref
+    got = _period_map(kd, agents, "t")
+    assert np.max(np.abs(got - ref)) <= 1e-12 * max(1.0, np.max(np.abs(ref)))
+    verify_table(table, agents)
+
+    def zero(data):
+        for k in data["kalman"]:
+            for part in ("periodic", "startup"):
+                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+    with pytest.raises(GainTableError, match="spectral radius"):
+        verify_table(_replant(table, zero), agents, source="planted.json")

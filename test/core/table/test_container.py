@@ -1,5 +1,6 @@
 """The binary gain-table container (.npz): bit-for-bit round trip, old JSON tables still load, edited
-and truncated files refused in one line, the size limit derived from n and the stored phases."""
+and truncated files refused in one line, every double hashed and checked however it is read, the size
+limit derived from n and the stored phases."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
 from switchobs_core.model.scenarios import paper_system
 from switchobs_core.model.schedule import Cycle
+from switchobs_core.table import container
 from switchobs_core.table.container import MAX_BINARY_BYTES, is_binary, size_limit
 from switchobs_core.table.gains import GainTable, kalman_table
 
@@ -66,6 +68,28 @@ def test_old_json_table_loads_bit_for_bit(table, tmp_path):
     assert loaded.to_json() == path.read_text()
     a, b = table.kalman_design(CYCLES[:1], PAPER), loaded.kalman_design(CYCLES[:1], PAPER)
     assert all(x.P_prior.tobytes() == y.P_prior.tobytes() for x, y in zip(_phases(a), _phases(b), strict=True))
+
+
+@pytest.mark.parametrize("chunk", [8, 24, 4096])
+@pytest.mark.parametrize("where", [0, -1])
+def test_read_in_slices_hashes_and_checks_every_double(table, tmp_path, monkeypatch, chunk, where):
+    """Members read a slice at a time (``chunk`` bytes: one double, three, many) load bit for bit, and a
+    NaN in the first or last double of a gain array, written with a checksum that matches, is found."""
+    monkeypatch.setattr(container, "_CHUNK", chunk)
+    saved = table.save(tmp_path / "k.npz")
+    assert GainTable.load(saved, system=PAPER).to_json() == table.to_json()
+    with np.load(saved) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(arrays.pop("header").tobytes())
+    header.pop("payload_sha256")
+    arrays["k0_periodic_K"] = arrays["k0_periodic_K"].copy()
+    arrays["k0_periodic_K"][where] = np.nan
+    header["payload_sha256"] = container._digest(header, arrays)     # a checksum that matches the NaN
+    bad = tmp_path / "nan.npz"
+    text = json.dumps(header, sort_keys=True).encode()
+    np.savez(bad, header=np.frombuffer(text, dtype=np.uint8), **arrays)
+    with pytest.raises(GainTableError, match="non-finite number in k0_periodic_K"):
+        GainTable.load(bad)
 
 
 def _rewrite(path, edit):

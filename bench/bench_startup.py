@@ -1,0 +1,190 @@
+#!/usr/bin/env python
+"""Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
+
+    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE]
+
+Per system a camera_sim publishes throughout (50 Hz, the system's periodic schedule, the channel
+stamped); in turn, interleaved over ``--rounds`` rounds, this process starts
+
+* ``bare``: the bare rclpy republisher of ``bench/bench_node.py`` (imports rclpy and numpy, one
+  subscription per input, republishes every target pose);
+* ``estimator``: ``python -m switchobs_ros.estimator`` with the system and its table already on disk
+  (``gain_table``): the paper's LMI table (JSON), or the 251 MiB Kalman table of ``camera_agents``
+  with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one),
+
+and, with ``--before DIR``, the same estimator from another checkout (``PYTHONPATH=DIR``), and measures
+the wall time from the start of the process to the node being ready (its log line once its publishers
+and subscriptions exist: ``estimator ready``, ``bare_republisher ready``) and the node's CPU time (user +
+system) then, and the wall time to the arrival here of its first answer (``/estimator/state`` or the
+republisher's ``~/out``). The first answer also waits for DDS discovery of camera_sim's endpoints,
+which varies from start to start (the same estimator start answered first after 1.1, 1.6, 3.6 and
+3.6 s in four tries here): the time to ready is the node's own start-up. Medians over the rounds; the
+ratio to ``bare`` of the same system and run. Every child writes its bytecode to a private
+``PYTHONPYCACHEPREFIX`` (an installed package has its ``.pyc``; this checkout is run with
+``PYTHONDONTWRITEBYTECODE``), warmed by one unmeasured start of each.
+
+Goal: the estimator with a cached table of any size <= 2x the bare node.
+A script, not a test: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from bench_design import machine_info  # noqa: E402
+from bench_live_scale import cpu_seconds  # noqa: E402
+
+from switchobs_core.threads import single_threaded_blas  # noqa: E402
+
+single_threaded_blas()
+
+import rclpy  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+import switchobs_core as so  # noqa: E402
+from switchobs_ros import qos  # noqa: E402
+from tools.domain import claim_domain  # noqa: E402
+from tools.launch import NodeProcess, ros_args  # noqa: E402
+
+
+class First(Node):
+    """Records when the first message arrives on one topic."""
+
+    def __init__(self, topic: str, kind: type):
+        super().__init__("startup_probe")
+        self.at: float | None = None
+        self.create_subscription(kind, topic, self._got, qos.OUTPUT)
+
+    def _got(self, _msg) -> None:
+        if self.at is None:
+            self.at = time.monotonic()
+
+
+#: The line each node writes once its subscriptions and publishers exist.
+READY = {"bare": "bare_republisher ready", "estimator": "estimator ready"}
+
+
+def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0) -> tuple[float, ...]:
+    """(wall seconds to ready, the node's CPU seconds then, wall seconds to the first answer, CPU then) of
+    one start."""
+    if kind == "bare":
+        topic, mtype = "/bare_republisher/out", PoseStamped
+        probe = First(topic, mtype)
+        t0 = time.monotonic()
+        node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
+                           log=log, env=env)
+    else:
+        topic, mtype = "/estimator/state", Float64MultiArray
+        probe = First(topic, mtype)
+        t0 = time.monotonic()
+        node = NodeProcess("estimator", ros_args(params=params), log=log, env=env)
+    ready = ready_cpu = float("nan")
+    try:
+        end = t0 + timeout
+        while probe.at is None and time.monotonic() < end and node.alive():
+            rclpy.spin_once(probe, timeout_sec=0.002)
+            if ready != ready and READY[kind] in log.read_text(errors="replace"):
+                ready, ready_cpu = time.monotonic() - t0, cpu_seconds(node.pid)
+        cpu = cpu_seconds(node.pid) if node.alive() else float("nan")
+        wall = (probe.at - t0) if probe.at is not None else float("nan")
+    finally:
+        node.stop()
+        probe.destroy_node()
+    return ready, ready_cpu, wall, cpu
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--systems", default="paper,agents32", help="comma-separated: paper, agents32")
+    ap.add_argument("--before", default="", help="another checkout whose estimator runs beside this one's")
+    ap.add_argument("--table32", default="", help="an existing 32-agent Kalman table (.npz) of camera_agents, "
+                                                  "every h = 1 s, 50 Hz (designed here if empty)")
+    a = ap.parse_args(argv)
+    info = machine_info()
+    lease = claim_domain()
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_startup_") as tmp:
+        d = Path(tmp)
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        # PYTHONSAFEPATH: `python -m` does not put the working directory first on sys.path (--before runs
+        # the other checkout's estimator, not this one's)
+        env.update(PYTHONPYCACHEPREFIX=str(d / "pyc"), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1",
+                   PYTHONPATH=str(REPO))
+        setups = {}
+        for name in a.systems.split(","):
+            if name == "paper":
+                system = so.load_system("paper")
+                table = so.design_table(system, [so.Cycle.from_ts(2.0, 0.6)]).save(d / "paper.json")
+                sched = {"schedule.mode": "periodic", "schedule.tau": [2.0], "schedule.s": [0.6]}
+                setups[name] = (dict(sched, system="paper"), dict(sched, system="paper", gain_table=str(table)))
+            elif name == "agents32":
+                sys_path = d / "agents32.yaml"
+                sys_path.write_text(yaml.safe_dump({"scenario": "camera_agents", "agents": 32}))
+                table = a.table32
+                if not table:
+                    system = so.load_system(sys_path)
+                    cycle = so.Cycle([1.0] * 32)
+                    table = str(so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)]).save(d / "k32.npz"))
+                sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * 32}
+                setups[name] = (dict(sched, system=str(sys_path)), dict(sched, system=str(sys_path), gain_table=table))
+            else:
+                raise SystemExit(f"unknown system {name!r}")
+        rclpy.init()
+        try:
+            for name, (cam_params, est_params) in setups.items():
+                cam = NodeProcess("camera_sim", ros_args(params=dict(cam_params, rate=50.0)), log=d / f"cam_{name}.log",
+                                  env=env)
+                try:
+                    size = Path(est_params["gain_table"]).stat().st_size
+                    kinds = {"bare": env, "estimator": env}
+                    if a.before:
+                        kinds["before"] = dict(env, PYTHONPATH=a.before, PYTHONPYCACHEPREFIX=str(d / "pyc_before"))
+                    times: dict[str, list[tuple[float, ...]]] = {k: [] for k in kinds}
+                    for r in range(a.rounds + 1):           # round 0 warms the bytecode and the page cache
+                        for kind, kind_env in kinds.items():
+                            res = one_start("bare" if kind == "bare" else "estimator", est_params, kind_env,
+                                            d / f"{name}_{kind}_{r}.log")
+                            if r:
+                                times[kind].append(res)
+                    rows.append((name, size, times))
+                finally:
+                    cam.stop()
+        finally:
+            rclpy.try_shutdown()
+            lease.release()
+    print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
+          f"load average {info['load'][0]:.1f} before ({info['date']}).")
+    before = f" --before {a.before}" if a.before else ""
+    print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_startup.py --rounds {a.rounds} --systems {a.systems}"
+          f"{before}`\n")
+    print("| system (table size) | node | wall to ready | CPU then | wall to ready / bare (goal <= 2) | CPU / bare | "
+          "wall to the first answer | / bare |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, size, times in rows:
+        med = {k: [statistics.median(r[i] for r in v) for i in range(4)] for k, v in times.items()}
+        b = med["bare"]
+        for kind, (rw, rc, fw, _) in med.items():
+            print(f"| {name} ({size / 2**20:.1f} MiB) | {kind} | {rw:.2f} s | {rc:.2f} s | {rw / b[0]:.2f}x "
+                  f"| {rc / b[1]:.2f}x | {fw:.2f} s | {fw / b[2]:.2f}x |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
