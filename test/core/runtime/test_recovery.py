@@ -24,6 +24,19 @@ VMAX = 0.03
 X0 = np.array([0, 0, 0.1, 0, 1, 2, 0.2, -0.1, -1, 3, 0, 0.2], float)
 
 
+def _paper_samples(paper, seconds: float):
+    """The paper's system from X0 at RATE on the (2 s, 0.6) schedule (the plant stepped by its exact
+    transition in double): ``(k, t, active channel, state)`` for each sample up to ``seconds``."""
+    sched = PeriodicSchedule(CYC)
+    F = expm(paper.A / RATE)
+    x = X0.copy()
+    for k in range(int(seconds * RATE) + 1):
+        if k:
+            x = F @ x
+        t = k / RATE
+        yield k, t, sched.channel_at(t), x
+
+
 @pytest.fixture(scope="module")
 def ktable(paper):
     nm = NoiseModel(meas_std=((0.01,) * 4,) * 2, Q_c=1e-4 * np.eye(12), P0=100 * np.eye(12))
@@ -42,16 +55,9 @@ def test_unknown_e0_gives_no_bound_until_the_data_certify_one(paper, ktable):
     assert math.isinf(env.exact_bound) and math.isinf(env.noise_bound) and env.paper_bound == -1.0
     rec = Recovery(obs)
     assert cycle_span(obs) == 2.0
-    sched = PeriodicSchedule(CYC)
     rng = np.random.default_rng(3)
-    F = expm(paper.A / RATE)
-    x = X0.copy()
     first = None
-    for k in range(int(4 * RATE) + 1):
-        t = k / RATE
-        if k:
-            x = F @ x
-        c = sched.channel_at(t)
+    for _k, t, c, x in _paper_samples(paper, 4.0):
         y = paper.C[c - 1] @ x + rng.uniform(-VMAX, VMAX, 4)
         assert rec.before(t, c, None, y) == ""
         obs.update(t, c, y)
@@ -152,15 +158,8 @@ def _noise_free_run(paper, ktable, bias_at=None):
     the first certificate, the final error and bound, and the recovery."""
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=X0 + 3.0, e0=None, noise_max=0.0)
     rec = Recovery(obs, bias=False)
-    sched = PeriodicSchedule(CYC)
-    F = expm(paper.A / RATE)
-    x = X0.copy()
     first = None
-    for k in range(int(4 * RATE) + 1):
-        t = k / RATE
-        if k:
-            x = F @ x
-        c = sched.channel_at(t)
+    for k, t, c, x in _paper_samples(paper, 4.0):
         y = paper.C[c - 1] @ x
         if bias_at is not None and t >= bias_at:
             y = y + np.array([1e-6 * (-1) ** k, 0, 0, 0])
