@@ -21,7 +21,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.rviz"))),
+        ("share/" + package_name + "/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.rviz"))
+         + sorted(glob("config/*.xml"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
