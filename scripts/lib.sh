@@ -8,6 +8,10 @@ export PATH="$VENV/bin:$PATH"
 # Localhost-only DDS discovery: without it, discovery multicasts out of the machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 unset ROS_LOCALHOST_ONLY ROS_STATIC_PEERS
+# Every participant announces itself every 0.5 s, not Fast DDS's 3 s: a node started after another
+# finds it within 0.5 s (config/fastdds_discovery.xml says what was measured). A profile the user
+# set is kept.
+export FASTRTPS_DEFAULT_PROFILES_FILE="${FASTRTPS_DEFAULT_PROFILES_FILE:-$REPO/config/fastdds_discovery.xml}"
 
 # Small matrices only: multi-threaded BLAS just contends for the cores (switchobs_core/threads.py).
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
