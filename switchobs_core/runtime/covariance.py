@@ -89,6 +89,11 @@ class CovarianceStep:
         """``Q_d(dt)`` (the cached array: the same object for the same quantised step)."""
         return self._dcache.get(dt)[2]
 
+    def prior_is_step(self, e: Any) -> bool:
+        """Whether :meth:`prior` and :meth:`step` through ``e`` are the same arithmetic (both dense:
+        ``e`` holds a gain, or its ``e^{A dt}`` is taken dense), hence the same numbers."""
+        return e.E is not e.Phi or sparse_transition(e) is None
+
     def prior(self, P: np.ndarray, e: Any, dt: float, held_noise: np.ndarray | None = None) -> np.ndarray:
         """The same with dense products (the prior a consistency test reads)."""
         _, _, Q_d = self._dcache.get(dt)

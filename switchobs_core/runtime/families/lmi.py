@@ -9,7 +9,10 @@ key, ``nu``, the rows and the data) and changes no estimate at the sample. With 
 keeps the covariance, propagated through the exact error map of each step with the held noise
 driven through ``Gamma L`` (:mod:`switchobs_core.runtime.covariance`), when it is read: the steps
 wait until then (:class:`~switchobs_core.runtime.covariance.PendingSteps`, O(1) per sample; a run of
-equal steps by binary powers), so a sample costs no n x n product where no output reads ``P``.
+equal steps by binary powers), so a sample costs no n x n product where no output reads ``P``. The
+prior a consistency test reads at a sample (:meth:`LmiGains.predict_covariance`) is the step the
+sample's update then takes, by the same arithmetic from the same covariance: it is kept and becomes the
+covariance (one propagation per sample where the test and an output both read it, the same numbers).
 """
 
 from __future__ import annotations
@@ -79,6 +82,7 @@ class LmiGains:
         self._keys: dict = {}       # (design, channel, rows) -> (ZOH key, C rows)
         self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
+        self._prior: tuple | None = None    # (P, e, Q_d, R, P through e): the last prior (predict_covariance)
         self._held: Held | None = None
         self._R_held = None
 
@@ -100,6 +104,7 @@ class LmiGains:
         self._P = self.noise.P0.copy() if self.track_covariance else None
         if self.track_covariance:
             self._pending.clear()
+        self._prior = None
         self._held = None
         self._R_held = None
 
@@ -109,6 +114,11 @@ class LmiGains:
     def stepped(self, e: Any, dt: float) -> None:
         if self._P is not None:
             held = self._R_held if self._held is not None else None
+            prior, self._prior = self._prior, None
+            if (prior is not None and prior[0] is self._P and prior[1] is e and prior[2] is self._cov.q_d(dt)
+                    and prior[3] is held and not len(self._pending) and self._cov.prior_is_step(e)):
+                self._P = prior[4]      # the prior of this step, computed as the step computes it
+                return
             if self._pending.push(e, dt, held):
                 self._P = self._pending.apply(self._P)
 
@@ -120,7 +130,12 @@ class LmiGains:
         return self._P.copy()
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
-        return self._cov.prior(P, e, dt, self._held_noise(e))
+        """The prior through ``e``; kept (a copy) for :meth:`stepped` when ``P`` is the covariance kept."""
+        prior = self._cov.prior(P, e, dt, self._held_noise(e))
+        if self._P is not None and not len(self._pending) and np.array_equal(P, self._P):
+            held = self._R_held if self._held is not None else None
+            self._prior = (self._P, e, self._cov.q_d(dt), held, prior.copy())
+        return prior
 
     def depart(self, why: str) -> None:
         return None
@@ -128,6 +143,7 @@ class LmiGains:
     def set_covariance(self, P: np.ndarray) -> None:
         if self._P is not None:
             self._pending.clear()
+        self._prior = None
         self._P = P
 
     def _held_noise(self, e: Any) -> np.ndarray | None:
