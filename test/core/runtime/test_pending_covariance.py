@@ -98,3 +98,42 @@ def test_observer_read_rarely_publishes_the_same_covariance(paper, paper_table):
             worst = max(worst, _relative(rare.P, P))
     worst = max(worst, _relative(rare.P, every.P))
     assert worst <= 1e-12
+
+
+def test_prior_read_before_each_sample_becomes_the_same_covariance(paper, paper_table, monkeypatch):
+    """The prior a consistency test reads before a sample is kept as the step's covariance: P after each
+    update is exactly that of an observer that never reads a prior (the same arithmetic), also when
+    another prior (another time, another step) was read in between, or the caller wrote into the prior
+    it was given; each prior is P through the step, computed by hand. The update then propagates nothing
+    where the step is the prior's (a held gain: every sample after the first few)."""
+    calls = [0]
+    step = CovarianceStep.step
+
+    def counted(self, *a, **k):
+        calls[0] += 1
+        return step(self, *a, **k)
+
+    monkeypatch.setattr(CovarianceStep, "step", counted)
+    noise = default_noise(paper)
+    obs = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    ref = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    cov = CovarianceStep(obs.A, obs.B, noise, None)
+    prev_t, prev_key, prev_R, kept = None, None, None, 0
+    for k, (t, ch, y) in enumerate(_stream(paper, 6.0)):
+        if prev_t is not None:
+            if k % 5 == 0:          # a prior read at another time first (a sample rejected, say)
+                obs.prior_covariance(t - 0.007)
+            prior = obs.prior_covariance(t)
+            e = obs.cache.step(prev_key, t - prev_t)
+            np.testing.assert_array_equal(prior, cov.prior(ref.P, e, t - prev_t,
+                                                           None if prev_R is None else e.GL @ prev_R @ e.GL.T))
+            if k % 3 == 0:
+                prior[:] = 0.0      # the caller's array: the kept prior is a copy
+        before = calls[0]
+        obs.update(t, ch, y)
+        assert obs.P is not None
+        kept += prev_t is not None and calls[0] == before
+        ref.update(t, ch, y)
+        np.testing.assert_array_equal(obs.P, ref.P)
+        prev_t, prev_key, prev_R = t, obs.gains.held.key, noise.R(ch)
+    assert kept >= 250
