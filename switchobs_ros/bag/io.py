@@ -31,6 +31,7 @@ from switchobs_core.loading import load_yaml
 
 from .. import qos
 from .mcap_records import fast_records
+from .metadata_yaml import install as fast_yaml
 
 __all__ = [
     "CHANNEL_TYPES",
@@ -315,12 +316,15 @@ class BagOut:
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
         register_rosbags_types(self._typestore)     # switchobs_msgs: the estimator's typed outputs
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        fast_yaml()         # the same YAML, written without ruamel's emitter (switchobs_ros.bag.metadata_yaml)
         self._w = Writer(self.path, version=9, storage_plugin=plugin)
         try:
             self._w.open()
         except Exception as err:
             raise BagError(f"bag {self.path}: cannot create ({one_line(err, with_type=True)})") from None
-        fast_records(self._w)          # the same bytes, fewer copies (switchobs_ros.bag.mcap_records)
+        # the same bytes, fewer copies (switchobs_ros.bag.mcap_records); then a message goes to the storage
+        # with the writer's own bookkeeping (Writer.write's, which also looks the connection up in a list)
+        self._direct = fast_records(self._w) and self._w.compression_mode.name == "NONE"
         self._conns: dict[str, object] = {}
         self._defs: dict[str, tuple[str, str]] = {}     # per type: (message definition, RIHS01 hash)
         self.count = 0
@@ -345,7 +349,18 @@ class BagOut:
                                                     offered_qos_profiles=[_rosbags_qos(prof)])
 
     def write(self, topic: str, log_ns: int, data: bytes) -> None:
-        self._w.write(self._conns[topic], int(log_ns), data)
+        conn = self._conns[topic]
+        w = self._w
+        if self._direct:
+            ts = int(log_ns)
+            w.storage.write(conn, ts, data)
+            w.counts[conn.id] += 1
+            if ts < w.min_timestamp:
+                w.min_timestamp = ts
+            if ts > w.max_timestamp:
+                w.max_timestamp = ts
+        else:
+            w.write(conn, int(log_ns), data)
         self.count += 1
 
     def close(self) -> None:

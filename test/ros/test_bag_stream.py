@@ -11,6 +11,8 @@ import json
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import writer as rosbags_writer
+from ruamel.yaml import YAML
 from std_msgs.msg import Float64MultiArray
 
 import msg_bridge as mb
@@ -112,8 +114,10 @@ def test_outputs_option_names_the_outputs():
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_fast_records_write_the_bytes_rosbags_writes(tmp_path, monkeypatch, storage):
-    """The MCAP records appended in one write (switchobs_ros.bag.mcap_records) are byte for byte those of
-    rosbags' own writer, over chunk boundaries and out-of-order log times; sqlite3 keeps rosbags' path."""
+    """The MCAP records appended in one write and the chunks closed with a struct per record
+    (switchobs_ros.bag.mcap_records), and the YAML written without ruamel (switchobs_ros.bag.metadata_yaml),
+    are byte for byte those of rosbags' own writer (the file and metadata.yaml), over chunk boundaries and
+    out-of-order log times; sqlite3 keeps rosbags' path for the records."""
     rng = np.random.default_rng(3)
     topics = ["/a", "/b", "/c"]
     msgs = [(topics[int(rng.integers(3))], int(1_000_000 + rng.integers(-5000, 5000) + 1000 * k),    # serialised once:
@@ -132,10 +136,14 @@ def test_fast_records_write_the_bytes_rosbags_writes(tmp_path, monkeypatch, stor
     assert taken == (storage == "mcap")
     fast = write(tmp_path / "fast" / "b")          # the same name: the file's metadata record holds it
     monkeypatch.setattr(bag_io, "fast_records", lambda w: False)
+    monkeypatch.setattr(bag_io, "fast_yaml", lambda: None)
+    monkeypatch.setattr(rosbags_writer, "YAML", YAML)
     write(tmp_path / "slow" / "b")
     if storage == "mcap":
         a, b = (tmp_path / "fast" / "b" / "b.mcap").read_bytes(), (tmp_path / "slow" / "b" / "b.mcap").read_bytes()
         assert len(a) > 3 * 2 ** 20 and a == b          # several chunks
+    meta = [(tmp_path / d / "b" / "metadata.yaml").read_bytes() for d in ("fast", "slow")]
+    assert meta[0] == meta[1] and b"offered_qos_profiles" in meta[0]
     assert fast.count == len(msgs)
     got = [(m.topic, m.log_ns, m.data) for m in BagIn(tmp_path / "fast" / "b").messages(order="file")]
     assert got == msgs
