@@ -76,11 +76,12 @@ class Template:
     ``Template(msg, stamp=("header", "stamp"), doubles=[("pose", "pose", "position", "x"), ...])``
     or, for a sequence of float64 (a Float64MultiArray's ``data`` of fixed length),
     ``Template(msg, array=("data",))`` (the values as a sequence, or a float64 array written in one
-    copy). Offsets are found by serialising sentinel values.
+    copy); ``arrays=[("x",), ("covariance",)]``: several float64 sequences of fixed lengths, each
+    given as a float64 array (``bytes(arrays=(x, P))``). Offsets are found by serialising sentinel values.
     """
 
     def __init__(self, msg, *, stamp: Sequence[str] | None = None, doubles: Sequence[Sequence[str]] = (),
-                 array: Sequence[str] | None = None):
+                 array: Sequence[str] | None = None, arrays: Sequence[Sequence[str]] = ()):
         from rclpy.serialization import serialize_message
 
         def setattr_path(obj, path, value):
@@ -106,6 +107,13 @@ class Template:
             setattr(obj, array[-1], [2.0e-300 * (k + 1.5) for k in range(n)])
             self.array_n = n
             self._arr = struct.Struct(f"<{n}d")
+        sizes = []
+        for j, path in enumerate(arrays):
+            obj = msg
+            for p in path[:-1]:
+                obj = getattr(obj, p)
+            sizes.append(len(getattr(obj, path[-1])))
+            setattr(obj, path[-1], [(4.0 + j) * 1.0e-300 * (k + 1.5) for k in range(sizes[-1])])
         blob = serialize_message(msg)
         if stamp is not None:
             self.stamp_off = _unique(blob, _STAMP.pack(0x5A3C5A3C, 0x3C5A3C5A), "stamp")
@@ -113,10 +121,20 @@ class Template:
             self.double_offs.append(_unique(blob, struct.pack("<d", v), "double"))
         if array is not None:
             self.array_off = _unique(blob, struct.pack("<d", 2.0e-300 * 1.5), "array")
+        self.arrays = [(_unique(blob, struct.pack("<d", (4.0 + j) * 1.0e-300 * 1.5), "array") if n else 0, n)
+                       for j, n in enumerate(sizes)]
         self.base = bytearray(blob)
 
-    def bytes(self, stamp_ns: int | None = None, doubles: Sequence[float] = (), array: Sequence[float] = ()) -> bytes:
+    def bytes(self, stamp_ns: int | None = None, doubles: Sequence[float] = (), array: Sequence[float] = (),
+              arrays: Sequence[np.ndarray] = ()) -> bytes:
         b = self.base
+        if len(arrays) != len(self.arrays):
+            raise ValueError(f"template: {len(arrays)} arrays for {len(self.arrays)}")
+        for (off, n), values in zip(self.arrays, arrays):
+            a = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
+            if a.size != n:
+                raise ValueError(f"template: {a.size} values for an array of {n}")
+            b[off:off + 8 * n] = a.tobytes()
         if stamp_ns is not None:
             _STAMP.pack_into(b, self.stamp_off, *divmod(int(stamp_ns), 1_000_000_000))
         for off, v in zip(self.double_offs, doubles):

@@ -147,7 +147,10 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
     # the typed outputs (switchobs_msgs), as the node publishes them
     t_se, t_eb = f"{node}/state_estimate", f"{node}/error_bounds"
-    w_se = StateEstimateWriter(state_labels, cfg["world_frame"])
+    # the typed estimate serialised once per shape (with P, without) and patched, as ~/state is
+    t_se_tmpl = {has_P: Template(StateEstimateWriter(state_labels, cfg["world_frame"]).msg(
+        np.zeros(n), 0, np.zeros((n, n)) if has_P else None), stamp=("header", "stamp"),
+        arrays=[("x",), ("covariance",)] if has_P else [("x",)]) for has_P in (True, False)}
     w_eb = ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None)
     out_topics = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}     # never copied from the input
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
@@ -212,7 +215,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                         for t, (w, idx) in zip(t_odom, w_odom):
                             writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
                     if due("typed", k):
-                        writer.write(t_se, log_ns, serialize_message(w_se.msg(e.x_hat, e.stamp_ns, e.P)))
+                        writer.write(t_se, log_ns, t_se_tmpl[e.P is not None].bytes(
+                            e.stamp_ns, arrays=(e.x_hat,) if e.P is None else (e.x_hat, e.P)))
                         writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
                                                                               pl.bound_invalid_why, pl.bound_note)))
 

@@ -90,6 +90,31 @@ def test_array_template_takes_a_float_array_in_one_copy():
         w.bytes(array=P.ravel())
 
 
+def test_typed_estimate_template_is_the_writers_message():
+    """The typed estimate patched into bytes serialised once (cdr.Template with two arrays, as
+    switchobs_bag estimate writes it) reads back as the message StateEstimateWriter makes, with a
+    covariance and without, at several stamps; a wrong length is refused."""
+    from rclpy.serialization import deserialize_message
+    from switchobs_msgs.msg import StateEstimate
+
+    from msg_bridge.typed import StateEstimateWriter
+
+    n = 9
+    labels = tuple(f"agent{i}.p_x" for i in range(n))
+    ref = StateEstimateWriter(labels, "world")
+    rng = np.random.default_rng(1)
+    for has_P in (True, False):
+        w = cdr.Template(StateEstimateWriter(labels, "world").msg(np.zeros(n), 0, np.zeros((n, n)) if has_P else None),
+                         stamp=("header", "stamp"), arrays=[("x",), ("covariance",)] if has_P else [("x",)])
+        for stamp in (0, 1_500_000_001, 2 * 10 ** 18 + 7):
+            x, P = rng.standard_normal(n), rng.standard_normal((n, n)) if has_P else None
+            got = deserialize_message(w.bytes(stamp, arrays=(x,) if P is None else (x, P)), StateEstimate)
+            assert got == deserialize_message(serialize_message(ref.msg(x, stamp, P)), StateEstimate)
+            assert list(got.x) == x.tolist() and len(got.covariance) == (n * n if has_P else 0)
+        with pytest.raises(ValueError):
+            w.bytes(0, arrays=(np.zeros(n + 1),) if not has_P else (np.zeros(n), np.zeros(n)))
+
+
 def test_selected_outputs_are_those_of_a_full_run(bag, paper_tables, tmp_path):
     """A run writing some outputs writes exactly their topics (and ``~/state``, the inputs, the
     diagnostics), each message for message as a run writing all of them; an unknown name is refused."""
