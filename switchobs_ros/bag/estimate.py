@@ -406,7 +406,8 @@ class CsvWriter:
         self._f.write(",".join(("stamp_ns", *state_labels, *envelope_labels)) + "\n")
 
     def row(self, stamp_ns: int, x: np.ndarray, env: np.ndarray) -> None:
-        self._f.write(f"{int(stamp_ns)}," + ",".join(map(repr, x.tolist() + env.tolist())) + "\n")
+        # repr of each float, as ",".join(map(repr, ...)) writes them, formatted by the list's own repr
+        self._f.write(f"{int(stamp_ns)},{str(x.tolist() + env.tolist())[1:-1].replace(', ', ',')}\n")
 
     def close(self) -> None:
         self._f.close()

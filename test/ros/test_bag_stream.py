@@ -10,6 +10,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import writer as rosbags_writer
 from ruamel.yaml import YAML
@@ -20,7 +22,7 @@ from switchobs_ros.bag import cdr, mcap_records
 from switchobs_ros.bag import io as bag_io
 from switchobs_ros.bag.cli import main as bag_main
 from switchobs_ros.bag.cli.estimate import DEFAULT_OUTPUTS, outputs_of
-from switchobs_ros.bag.estimate import OUTPUTS, estimate, estimator_params, write_csv
+from switchobs_ros.bag.estimate import OUTPUTS, CsvWriter, estimate, estimator_params, write_csv
 from switchobs_ros.bag.generate import GenerateConfig, generate
 from switchobs_ros.bag.io import BagError, BagIn, BagOut, deserialize
 
@@ -172,3 +174,18 @@ def test_fast_records_write_the_bytes_rosbags_writes(tmp_path, monkeypatch, stor
     assert fast.count == len(msgs)
     got = [(m.topic, m.log_ns, m.data) for m in BagIn(tmp_path / "fast" / "b").messages(order="file")]
     assert got == msgs
+
+
+@settings(max_examples=50, deadline=None)
+@given(values=st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=2, max_size=40),
+       stamp=st.integers(0, 2 ** 62))
+def test_csv_rows_are_the_floats_reprs(tmp_path_factory, values, stamp):
+    """Property: a CSV row is the stamp and each float's repr joined by commas (any doubles: signed
+    zeros, subnormals, infinities, NaN)."""
+    path = tmp_path_factory.mktemp("csv") / "e.csv"
+    k = len(values) // 2
+    w = CsvWriter(path, tuple(f"s{i}" for i in range(k)), tuple(f"e{i}" for i in range(len(values) - k)))
+    w.row(stamp, np.array(values[:k], dtype=float), np.array(values[k:], dtype=float))
+    w.close()
+    row = path.read_text().splitlines()[1]
+    assert row == f"{stamp}," + ",".join(map(repr, [float(v) for v in values]))
