@@ -83,6 +83,7 @@ class LmiGains:
         self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
         self._prior: tuple | None = None    # (P, e, Q_d, R, P through e): the last prior (predict_covariance)
+        self._noises: dict = {}             # id(e) -> (e, R, (Gamma L) R (Gamma L)'): per step and held R
         self._held: Held | None = None
         self._R_held = None
 
@@ -147,10 +148,17 @@ class LmiGains:
         self._P = P
 
     def _held_noise(self, e: Any) -> np.ndarray | None:
-        """``(Gamma L) R (Gamma L)'``: the held sample's noise over the step (innovation hold)."""
-        if self._held is not None and self._R_held is not None:
-            return e.GL @ self._R_held @ e.GL.T
-        return None
+        """``(Gamma L) R (Gamma L)'``: the held sample's noise over the step (innovation hold), kept
+        per step and ``R``."""
+        if self._held is None or self._R_held is None:
+            return None
+        R = self._R_held
+        hit = self._noises.get(id(e))
+        if hit is None or hit[0] is not e or hit[1] is not R:
+            if len(self._noises) >= 256:
+                self._noises.clear()
+            hit = self._noises[id(e)] = (e, R, e.GL @ R @ e.GL.T)
+        return hit[2]
 
     def _gain_key(self, design: int, channel: int, rows: Any) -> tuple:
         """ZOH cache key and output rows of channel ``channel`` with rows ``rows`` under design
