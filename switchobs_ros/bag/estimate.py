@@ -47,7 +47,7 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, decode_pose, header_stamp
+from .cdr import Template, TemplateBatch, decode_pose, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 
@@ -142,6 +142,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         return (Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
                          doubles=[p for p, _ in have]), tuple(i for _, i in have))
     w_odom = [odom_template(b, c) for b, c in zip(bodies, frames)]
+    b_odom = TemplateBatch([w for w, _ in w_odom], [idx for _, idx in w_odom])     # the bodies' odometries at once
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
@@ -212,8 +213,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     if due("envelope", k):
                         writer.write(t_env, log_ns, w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
                     if due("odometry", k):
-                        for t, (w, idx) in zip(t_odom, w_odom):
-                            writer.write(t, log_ns, w.bytes(e.stamp_ns, [x[i] for i in idx]))
+                        writer.write_many(t_odom, log_ns, b_odom.bytes(e.stamp_ns, e.x_hat))
                     if due("typed", k):
                         writer.write(t_se, log_ns, t_se_tmpl[e.P is not None].bytes(
                             e.stamp_ns, arrays=(e.x_hat,) if e.P is None else (e.x_hat, e.P)))

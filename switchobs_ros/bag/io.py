@@ -363,6 +363,25 @@ class BagOut:
             w.write(conn, int(log_ns), data)
         self.count += 1
 
+    def write_many(self, topics: list[str], log_ns: int, datas: list[bytes]) -> None:
+        """:meth:`write` of ``datas[k]`` on ``topics[k]`` in turn, all at ``log_ns`` (the same file)."""
+        if not self._direct:
+            for topic, data in zip(topics, datas):
+                self.write(topic, log_ns, data)
+            return
+        w = self._w
+        ts = int(log_ns)
+        conns = [self._conns[t] for t in topics]
+        w.storage.write_many(conns, ts, datas)
+        counts = w.counts
+        for conn in conns:
+            counts[conn.id] += 1
+        if ts < w.min_timestamp:
+            w.min_timestamp = ts
+        if ts > w.max_timestamp:
+            w.max_timestamp = ts
+        self.count += len(conns)
+
     def close(self) -> None:
         if self._w is not None:
             self._w.close()

@@ -7,7 +7,8 @@ time. :func:`fast_records` gives a writer's storage a ``write`` that packs the r
 header with one ``struct`` call and appends the message's bytes to the chunk once, and a
 ``close_chunk`` that writes the chunk and its message indexes (a chunk of about six ticks holds some
 40 channels' indexes) with one ``struct`` call per record instead of one small ``write`` per field:
-the chunk, its index and the file are byte for byte those of rosbags' own methods (tested), which
+the chunk, its index and the file are byte for byte those of rosbags' own methods (tested); ``write_many`` appends
+several messages of one log time (a tick's odometries) with one write, which
 still write the summary and ``metadata.yaml``.
 
 Only an uncompressed MCAP storage of the rosbags version whose record layout this reproduces
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import struct
 from collections import defaultdict
+from collections.abc import Sequence
 from io import BytesIO
 from itertools import chain
 from types import MethodType
@@ -57,6 +59,41 @@ def _write(self: Any, connection: Any, timestamp: int, data: bytes | memoryview)
     bio.write(data)
     if bio.tell() > _CHUNK_BYTES:
         self.close_chunk()
+
+
+def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Sequence[bytes]) -> None:
+    """:func:`_write` for each ``(connection, data)`` in turn at one ``timestamp``, the records of a chunk
+    appended with one write (the chunk closed after the record that takes it past its size, as there)."""
+    if timestamp < self.message_start_time:
+        self.message_start_time = timestamp
+    if timestamp > self.message_end_time:
+        self.message_end_time = timestamp
+    stats = self.channel_stats
+    chunk = self.chunk
+    bio = chunk.bio
+    pos = bio.tell()
+    parts: list = []
+    for connection, data in zip(connections, datas):
+        cid = connection.id
+        stats[cid] += 1
+        if timestamp < chunk.message_start_time:
+            chunk.message_start_time = timestamp
+        if timestamp > chunk.message_end_time:
+            chunk.message_end_time = timestamp
+        chunk.msgs[cid].append((timestamp, pos))
+        size = data.nbytes if isinstance(data, memoryview) else len(data)
+        parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
+        parts.append(data)
+        pos += _MESSAGE.size + size
+        if pos > _CHUNK_BYTES:
+            bio.write(b"".join(parts))
+            parts = []
+            self.close_chunk()
+            chunk = self.chunk
+            bio = chunk.bio
+            pos = bio.tell()
+    if parts:
+        bio.write(b"".join(parts))
 
 
 def _close_chunk(self: Any) -> None:
@@ -116,4 +153,5 @@ def fast_records(writer: Any) -> bool:
         return False
     storage.write = MethodType(_write, storage)
     storage.close_chunk = MethodType(_close_chunk, storage)
+    storage.write_many = MethodType(_write_many, storage)
     return True

@@ -92,6 +92,31 @@ def test_array_template_takes_a_float_array_in_one_copy():
         w.bytes(array=P.ravel())
 
 
+def test_template_batch_is_each_templates_bytes():
+    """The bodies' odometries patched at once (cdr.TemplateBatch) are byte for byte each template's
+    own bytes for the same stamp and state entries, at successive stamps; a template with an array
+    is refused."""
+    labels = ("camera.p_x", "camera.p_y", "camera.v_x", "camera.v_y", "agent1.p_x", "agent1.p_y", "agent1.v_x",
+              "agent1.v_y", "agent2.p_x", "agent2.p_y")           # agent2 without velocities: two doubles
+    x_n = len(labels)
+    paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
+             ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
+    templates, picks = [], []
+    for b in mb.bodies(labels):
+        have = [(p, i) for p, i in zip(paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
+        templates.append(cdr.Template(mb.body_odometry(np.zeros(x_n), b, 0, "world", f"{b.name}_frame"),
+                                      stamp=("header", "stamp"), doubles=[p for p, _ in have]))
+        picks.append(tuple(i for _, i in have))
+    batch = cdr.TemplateBatch(templates, picks)
+    rng = np.random.default_rng(5)
+    for stamp in (0, 1_000_000_007, 2 * 10 ** 18 + 3):
+        x = rng.standard_normal(x_n)
+        assert batch.bytes(stamp, x) == [t.bytes(stamp, [float(x[i]) for i in p]) for t, p in zip(templates, picks)]
+    arr = cdr.Template(mb.labelled_array(np.zeros(3), ("a", "b", "c"), 0), array=("data",))
+    with pytest.raises(ValueError):
+        cdr.TemplateBatch([arr], [()])
+
+
 def test_typed_estimate_template_is_the_writers_message():
     """The typed estimate patched into bytes serialised once (cdr.Template with two arrays, as
     switchobs_bag estimate writes it) reads back as the message StateEstimateWriter makes, with a
@@ -141,21 +166,32 @@ def test_outputs_option_names_the_outputs():
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_fast_records_write_the_bytes_rosbags_writes(tmp_path, monkeypatch, storage):
-    """The MCAP records appended in one write and the chunks closed with a struct per record
-    (switchobs_ros.bag.mcap_records), and the YAML written without ruamel (switchobs_ros.bag.metadata_yaml),
-    are byte for byte those of rosbags' own writer (the file and metadata.yaml), over chunk boundaries and
-    out-of-order log times; sqlite3 keeps rosbags' path for the records."""
+    """The MCAP records appended in one write (one message, or several at one log time: write_many) and
+    the chunks closed with a struct per record (switchobs_ros.bag.mcap_records), and the YAML written
+    without ruamel (switchobs_ros.bag.metadata_yaml), are byte for byte those of rosbags' own writer (the
+    file and metadata.yaml), over chunk boundaries and out-of-order log times; sqlite3 keeps rosbags' path
+    for the records."""
     rng = np.random.default_rng(3)
     topics = ["/a", "/b", "/c"]
     msgs = [(topics[int(rng.integers(3))], int(1_000_000 + rng.integers(-5000, 5000) + 1000 * k),    # serialised once:
              serialize_message(Float64MultiArray(data=rng.standard_normal(int(rng.integers(0, 3000))).tolist())))
             for k in range(400)]                                    # CDR padding bytes are not deterministic
+    groups, k = [], 0                       # runs of 1-6 messages at one log time: written with write_many
+    while k < len(msgs):
+        m = int(rng.integers(1, 7))
+        groups.append([(t, msgs[k][1], data) for t, _, data in msgs[k:k + m]])
+        k += m
+    msgs = [x for g in groups for x in g]
+
     def write(path):
         with BagOut(path, storage) as out:
             for t in topics:
                 out.add(t, "std_msgs/msg/Float64MultiArray")
-            for t, ns, data in msgs:
-                out.write(t, ns, data)
+            for g in groups:
+                if len(g) == 1:
+                    out.write(*g[0])
+                else:
+                    out.write_many([t for t, _, _ in g], g[0][1], [d for _, _, d in g])
             return out
 
     with BagOut(tmp_path / "probe", storage) as probe:     # the fast path is taken for mcap only
