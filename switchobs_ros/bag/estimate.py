@@ -204,21 +204,27 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                 if table is not None:
                     table.row(e.stamp_ns, e.x_hat, e.envelope)
                 sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
-                if bag_cov:
-                    if writer is not None and e.P is not None and due("covariance", k):
-                        writer.write(t_cov, log_ns, w_cov.bytes(array=np.concatenate(((sec, nsec), e.P.ravel()))))
-                if writer is not None:
-                    x = e.x_hat.tolist()
-                    writer.write(t_state, log_ns, w_state.bytes(array=[sec, nsec, *x]))
-                    if due("envelope", k):
-                        writer.write(t_env, log_ns, w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
-                    if due("odometry", k):
-                        writer.write_many(t_odom, log_ns, b_odom.bytes(e.stamp_ns, e.x_hat))
-                    if due("typed", k):
-                        writer.write(t_se, log_ns, t_se_tmpl[e.P is not None].bytes(
-                            e.stamp_ns, arrays=(e.x_hat,) if e.P is None else (e.x_hat, e.P)))
-                        writer.write(t_eb, log_ns, serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                              pl.bound_invalid_why, pl.bound_note)))
+                if writer is None:
+                    continue
+                topics, datas = [], []          # the estimate's messages, in this order, at one log time
+                if bag_cov and e.P is not None and due("covariance", k):
+                    topics.append(t_cov)
+                    datas.append(w_cov.bytes(array=np.concatenate(((sec, nsec), e.P.ravel()))))
+                topics.append(t_state)
+                datas.append(w_state.bytes(array=[sec, nsec, *e.x_hat.tolist()]))
+                if due("envelope", k):
+                    topics.append(t_env)
+                    datas.append(w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
+                if due("odometry", k):
+                    topics += t_odom
+                    datas += b_odom.bytes(e.stamp_ns, e.x_hat)
+                if due("typed", k):
+                    topics += (t_se, t_eb)
+                    datas.append(t_se_tmpl[e.P is not None].bytes(
+                        e.stamp_ns, arrays=(e.x_hat,) if e.P is None else (e.x_hat, e.P)))
+                    datas.append(serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                            pl.bound_invalid_why, pl.bound_note)))
+                writer.write_many(topics, log_ns, datas)
 
         sources = {"/" + s.topic: s for s in pl.sources}
         channel_topic = "/" + pl.channel_topic if pl.channel_topic else None
