@@ -51,9 +51,9 @@ class CovarianceStep:
         self._maps: dict[int, tuple] = {}     # id(e) -> (e, the sparse form of e.E or None)
 
     def step(self, P: np.ndarray, e: Any, dt: float, held_noise: np.ndarray | None = None) -> np.ndarray:
-        """``E P E' + Q_d(dt)`` (+ ``held_noise``) for the ZOH cache entry ``e``, symmetrised; the
-        open-loop map of a Kalman family in factors when ``e^{A dt}`` is sparse
-        (:func:`~switchobs_core.bounds.kalman_map.sparse_transition`)."""
+        """``E P E' + Q_d(dt)`` (+ ``held_noise``) for the ZOH cache entry ``e``, symmetrised; ``E`` in
+        factors when it is sparse: a held gain's error map (:meth:`sparse_map`), the open-loop map of a
+        Kalman family (:func:`~switchobs_core.bounds.kalman_map.sparse_transition`)."""
         _, _, Q_d = self._dcache.get(dt)
         sp = sparse_transition(e) if e.E is e.Phi else self.sparse_map(e)
         P = (sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T) + Q_d
