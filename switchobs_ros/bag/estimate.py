@@ -241,14 +241,16 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         n_inputs = 0
         last_ns = 0
         t0 = time.perf_counter()
-        from tqdm import tqdm
-
         ordering = recording_order(msgs, pl, sources, channel_topic, ctl_topic)
         unordered_why = Rejection(Reason.AMBIGUOUS_CHANNEL, pl.channel_topic or "channel",
                                   "the recording does not establish whether it was sent before or after a change of "
                                   "the channel (log times that tie or contradict the stamps)")
-        for i in tqdm(ordering.order, disable=None if progress is None else not progress, leave=False, unit="msg",
-                      desc="estimate"):
+        order = ordering.order
+        if progress is not False:       # a bar (None: on a terminal); tqdm is imported only for one
+            from tqdm import tqdm
+            order = tqdm(order, disable=None if progress is None else not progress, leave=False, unit="msg",
+                         desc="estimate")
+        for i in order:
             m = msgs[i]
             last_ns = m.log_ns
             src = sources.get(m.topic)
