@@ -218,6 +218,7 @@ class Recovery:
             w.clear()
             self._valid = False
         w.add(t, output_rows(self.C[channel - 1], rows), y, self._allowance(y, channel), channel)
+        w.clock = float(getattr(getattr(self.obs, "rounding", None), "tolerance", 0.0) or 0.0)
         cert = w.certificate(range(1, self.N + 1))
         if cert is None:
             return None
