@@ -11,9 +11,11 @@ stamped); in turn, interleaved over ``--rounds`` rounds, this process starts
   subscription per input, republishes every target pose);
 * ``estimator``: ``python -m switchobs_ros.estimator`` with the system and its table already on disk
   (``gain_table``): the paper's LMI table (JSON), or the 251 MiB Kalman table of ``camera_agents``
-  with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one),
+  with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
+  written here in the binary container's current version),
 
-and, with ``--before DIR``, the same estimator from another checkout (``PYTHONPATH=DIR``), and measures
+and, with ``--before DIR``, the same estimator from another checkout (``PYTHONPATH=DIR``; the same
+32-agent table written in version 3 of the container, which every checkout since it reads), and measures
 the wall time from the start of the process to the node being ready (its log line once its publishers
 and subscriptions exist: ``estimator ready``, ``bare_republisher ready``) and the node's CPU time (user +
 system) then, and the wall time to the arrival here of its first answer (``/estimator/state`` or the
@@ -52,6 +54,8 @@ sys.path.insert(0, str(REPO / "bench"))
 from bench_design import machine_info  # noqa: E402
 from bench_live_scale import cpu_seconds  # noqa: E402
 
+from switchobs_core.table.container import encode  # noqa: E402
+from switchobs_core.table.io import table_payload  # noqa: E402
 from switchobs_core.threads import single_threaded_blas  # noqa: E402
 
 single_threaded_blas()
@@ -139,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         env.update(PYTHONPYCACHEPREFIX=str(d / "pyc"), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1",
                    PYTHONPATH=str(REPO))
         setups = {}
+        tables_before: dict[str, str] = {}
         for name in a.systems.split(","):
             if name == "paper":
                 system = so.load_system("paper")
@@ -148,11 +153,16 @@ def main(argv: list[str] | None = None) -> int:
             elif name == "agents32":
                 sys_path = d / "agents32.yaml"
                 sys_path.write_text(yaml.safe_dump({"scenario": "camera_agents", "agents": 32}))
-                table = a.table32
-                if not table:
-                    system = so.load_system(sys_path)
-                    cycle = so.Cycle([1.0] * 32)
-                    table = str(so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)]).save(d / "k32.npz"))
+                system = so.load_system(sys_path)
+                if a.table32:
+                    k32 = so.GainTable.load(a.table32, system=system)
+                else:
+                    k32 = so.kalman_table(system, [so.design_kalman(system, so.Cycle([1.0] * 32), 50.0)])
+                table = str(k32.save(d / "k32.npz"))
+                with open(d / "k32_v3.npz", "wb") as fh:       # what a checkout before version 4 reads
+                    encode(table_payload(k32), fh, version=3)
+                tables_before[name] = str(d / "k32_v3.npz")
+                del k32
                 sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * 32}
                 setups[name] = (dict(sched, system=str(sys_path)), dict(sched, system=str(sys_path), gain_table=table))
             else:
@@ -172,7 +182,10 @@ def main(argv: list[str] | None = None) -> int:
                     times: dict[str, list[tuple[float, ...]]] = {k: [] for k in kinds}
                     for r in range(a.rounds + 1):           # round 0 warms the bytecode and the page cache
                         for kind, kind_env in kinds.items():
-                            res = one_start("bare" if kind == "bare" else "estimator", est_params, kind_env,
+                            params = est_params
+                            if kind == "before" and name in tables_before:
+                                params = dict(est_params, gain_table=tables_before[name])
+                            res = one_start("bare" if kind == "bare" else "estimator", params, kind_env,
                                             d / f"{name}_{kind}_{r}.log")
                             if r:
                                 times[kind].append(res)
