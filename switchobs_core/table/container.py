@@ -44,6 +44,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import stat
 import struct
 import zipfile
@@ -437,8 +438,11 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
     return {"n": n, "p_max": p_max, "phases": phases, "shapes": shapes, "digests": digests}
 
 
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
 def _is_sha256(x: Any) -> bool:
-    return isinstance(x, str) and len(x) == 64 and all(c in "0123456789abcdef" for c in x)
+    return isinstance(x, str) and _SHA256.fullmatch(x) is not None
 
 
 def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> dict[str, Any]:
