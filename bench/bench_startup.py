@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
 
-    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE]
+    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--before DIR]
                                   [--channel-type TYPE] [--discovery-profile FILE]
 
 Per system a camera_sim publishes throughout (50 Hz, the system's periodic schedule, the channel
