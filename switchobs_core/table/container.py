@@ -40,6 +40,7 @@ bytes the member holds): a header claiming 2^33 doubles is refused before anythi
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -126,13 +127,23 @@ def packed_size(m: int) -> int:
     return n
 
 
+@functools.lru_cache(maxsize=8)
+def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n)`` and the same entries' flat indices in the transpose (read-only, per n)."""
+    i, j = np.triu_indices(n)
+    flat, flat_t = i * n + j, j * n + i
+    flat.setflags(write=False)
+    flat_t.setflags(write=False)
+    return flat, flat_t
+
+
 def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
     """The symmetric (n, n) matrix of a packed upper triangle (row-major, ``np.triu_indices`` order)."""
-    P = np.empty((n, n))
-    iu = np.triu_indices(n)
-    P[iu] = packed
-    P.T[iu] = packed
-    return P
+    P = np.empty(n * n)
+    flat, flat_t = _triu(n)
+    P[flat] = packed
+    P[flat_t] = packed
+    return P.reshape(n, n)
 
 
 def _header_hash(header: dict[str, Any]) -> Any:
