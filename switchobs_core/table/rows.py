@@ -9,7 +9,9 @@ so it covers these row digests), and reads no prior. The first time a phase's pr
 replaced by a rename since then is not seen; one rewritten in place is caught below), into memory of
 its own (never a mapping of the file), computes the SHA-256 of the row's name, index, dtype, shape
 and bytes, and compares it with the row's digest; it also checks that every number is finite. Only
-then is the row returned (and kept: it is never read again). A mismatch raises
+then is the row returned. The rows are not kept here (the phase keeps its unpacked matrix:
+:class:`~switchobs_core.table.kalman.KalmanPhase`); a row asked for again is read and verified
+again. A mismatch raises
 :class:`~switchobs_core.exceptions.GainTableError` naming the file, the array and the phase, every time
 that row is asked for; the numbers are never returned. Rows already verified stay usable.
 """
@@ -18,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import threading
 import weakref
 from collections.abc import Iterator, Sequence
 from typing import Any, BinaryIO
@@ -48,7 +49,7 @@ class OpenFile:
 
 class LazyRows(Sequence):
     """The ``S`` rows of ``m`` float64 numbers of array ``name`` at byte ``offset`` of the open file
-    ``file``, each verified against ``digests[k]`` when first read (module docstring). Indexing gives a
+    ``file``, each verified against ``digests[k]`` whenever it is read (module docstring). Indexing gives a
     :class:`LazyRow` (nothing read); :meth:`row` the verified numbers; :attr:`packed` all of them
     (every row verified), for writing the table again."""
 
@@ -57,8 +58,7 @@ class LazyRows(Sequence):
         self._file = file
         self._offset, self.name, self._digests, self.m, self.n = offset, name, tuple(digests), m, n
         self.source = source
-        self._rows: dict[int, np.ndarray] = {}
-        self._lock = threading.Lock()
+        self._verified: set[int] = set()
 
     def __len__(self) -> int:
         return len(self._digests)
@@ -74,17 +74,7 @@ class LazyRows(Sequence):
         return (LazyRow(self, k) for k in range(len(self)))
 
     def row(self, k: int) -> np.ndarray:
-        """Row ``k``, read and verified on the first call (module docstring); read-only."""
-        got = self._rows.get(k)
-        if got is not None:
-            return got
-        with self._lock:
-            got = self._rows.get(k)
-            if got is None:
-                got = self._rows[k] = self._read(k)
-        return got
-
-    def _read(self, k: int) -> np.ndarray:
+        """Row ``k``, read and verified (module docstring); read-only."""
         size = 8 * self.m
         where = f"{self.source}: phase {k} of {self.name}"
         try:
@@ -100,6 +90,7 @@ class LazyRows(Sequence):
         a = np.frombuffer(raw, dtype="<f8")
         if not np.isfinite(a).all():
             raise GainTableError(f"{where}: non-finite number; the table is not used for this phase")
+        self._verified.add(k)
         return a
 
     @property
@@ -111,12 +102,12 @@ class LazyRows(Sequence):
         return out
 
     def verified(self) -> int:
-        """How many rows have been read and verified so far."""
-        return len(self._rows)
+        """How many distinct rows have been read and verified so far."""
+        return len(self._verified)
 
 
 class LazyRow:
-    """Row ``k`` of :class:`LazyRows`: :meth:`load` reads and verifies it (once)."""
+    """Row ``k`` of :class:`LazyRows`: :meth:`load` reads and verifies it."""
 
     __slots__ = ("rows", "k")
 
@@ -129,7 +120,7 @@ class LazyRow:
         return self.rows.n
 
     def load(self) -> np.ndarray:
-        """The verified numbers (:meth:`LazyRows.row`)."""
+        """The verified numbers (:meth:`LazyRows.row`), read now."""
         return self.rows.row(self.k)
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
