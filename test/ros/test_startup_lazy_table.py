@@ -1,6 +1,8 @@
 """The estimator's pipeline with a binary table whose priors are verified per phase on first use.
 
-One bit of one phase's prior flipped in a version-4 ``.npz``: the table loads (its header, gains and
+One bit of one phase's prior flipped in a version-4 ``.npz``. In the first periodic phase, whose prior
+the Kalman family reads when it is built: the estimator refuses to start, in one line naming the phase.
+In a later phase: the table loads (its header, gains and
 error transitions are verified at load, and its gains pass the check), the samples before that
 phase are answered with the numbers of the intact table, and from the sample of that phase on every
 sample is refused, counted and reported with why (the phase's checksum): the covariance after it,
@@ -28,25 +30,31 @@ MS = 1_000_000
 BAD = 5
 
 
-@pytest.fixture(scope="module")
-def tables(tmp_path_factory):
-    d = tmp_path_factory.mktemp("lazy")
-    system = paper_system()
-    table = kalman_table(system, [design_kalman(system, Cycle.from_ts(2.0, 0.6), RATE)])
-    good, bad = table.save(d / "good.npz"), table.save(d / "bad.npz")
-    with zipfile.ZipFile(bad) as z, open(bad, "r+b") as fh:
-        zi = z.getinfo("k0_startup_P.npy")
+def _corrupt(path, member: str, k: int, n: int) -> None:
+    """Flip one bit of phase ``k``'s prior in ``member`` of the archive at ``path``, in place."""
+    with zipfile.ZipFile(path) as z, open(path, "r+b") as fh:
+        zi = z.getinfo(member)
         fh.seek(zi.header_offset + 26)
         skip = int.from_bytes(fh.read(2), "little") + int.from_bytes(fh.read(2), "little")
         fh.seek(zi.header_offset + 30 + skip)
         np.lib.format.read_magic(fh)
         np.lib.format.read_array_header_1_0(fh)
-        at = fh.tell() + 8 * (system.n * (system.n + 1) // 2) * BAD + 17     # one byte of phase BAD's prior
+        at = fh.tell() + 8 * (n * (n + 1) // 2) * k + 17
         fh.seek(at)
         b = fh.read(1)
         fh.seek(at)
         fh.write(bytes([b[0] ^ 0x04]))
-    return good, bad
+
+
+@pytest.fixture(scope="module")
+def tables(tmp_path_factory):
+    d = tmp_path_factory.mktemp("lazy")
+    system = paper_system()
+    table = kalman_table(system, [design_kalman(system, Cycle.from_ts(2.0, 0.6), RATE)])
+    good, bad, first = table.save(d / "good.npz"), table.save(d / "bad.npz"), table.save(d / "first.npz")
+    _corrupt(bad, "k0_startup_P.npy", BAD, system.n)
+    _corrupt(first, "k0_periodic_P.npy", 0, system.n)
+    return good, bad, first
 
 
 def _run(table):
@@ -65,8 +73,20 @@ def _run(table):
     return pl, {e.stamp_ns: e for e in out}
 
 
+def test_a_corrupted_first_periodic_phase_refuses_the_start_in_one_line(tables):
+    from refusals import node_main
+
+    from tools.launch import ros_args
+
+    first = tables[2]
+    res = node_main("estimator", ros_args(params={"gain_table": str(first)}))
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    ours = [ln for ln in res.stderr.splitlines() if ln.startswith("estimator: error:")]
+    assert len(ours) == 1 and f"{first}: phase 0 of k0_periodic_P: checksum mismatch" in ours[0], res.stderr
+
+
 def test_a_corrupted_phase_is_refused_and_said_why_the_others_answered(tables):
-    good, bad = tables
+    good, bad, _ = tables
     ref, want = _run(good)
     pl, got = _run(bad)
     assert len(want) == 15 and ref.errors == 0
