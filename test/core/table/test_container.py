@@ -11,6 +11,8 @@ import zipfile
 import numpy as np
 import pytest
 from _binary_tables import lying_member
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
@@ -267,3 +269,31 @@ def test_version_3_still_read_and_verified_whole(table, tmp_path):
         assert json.loads(np.load(io.BytesIO(z.read("header.npy"))).tobytes())["format_version"] == 3
     again = GainTable.load(loaded.save(tmp_path / "v4.npz"))     # written again: version 4, the same table
     assert again.to_json() == table.to_json()
+
+
+@settings(max_examples=80, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(where=st.floats(0.0, 1.0, exclude_max=True), bit=st.integers(0, 7))
+def test_any_bit_flipped_never_gives_other_numbers(table, saved, tmp_path, where, bit):
+    """One bit flipped anywhere in a version-4 file: loading refuses it, or every gain and transition
+    is the stored one and every prior is the stored one or refused at its use (GainTableError).
+    No flip makes the table answer with numbers other than the ones written."""
+    data = bytearray(saved.read_bytes())
+    i = int(where * len(data))
+    data[i] ^= 1 << bit
+    p = tmp_path / "flipped.npz"
+    p.write_bytes(bytes(data))
+    try:
+        loaded = GainTable.load(p, system=PAPER)
+    except GainTableError:
+        return
+    for c in CYCLES:
+        a, b = table.kalman_design([c], PAPER), loaded.kalman_design([c], PAPER)
+        assert a.error_transition.tobytes() == b.error_transition.tobytes()
+        for x, y in zip(_phases(a), _phases(b), strict=True):
+            assert x.K.tobytes() == y.K.tobytes() and (x.channel, x.dt, x.rows) == (y.channel, y.dt, y.rows)
+            try:
+                P = y.P_prior
+            except GainTableError as err:
+                assert "checksum mismatch" in str(err)
+                continue
+            assert P.tobytes() == x.P_prior.tobytes()
