@@ -36,6 +36,8 @@ agents (n = 4 (M + 1), p = 4) that is about 4 n^2 = 64 (M + 1)^2 bytes per phase
 phase at M = 32, 5.9 KiB at M = 8. Every member, stored or compressed, is read only after its
 ``.npy`` header was checked against the member's size (the bytes the header claims must be the
 bytes the member holds): a header claiming 2^33 doubles is refused before anything is allocated.
+The header member itself is at most ``MAX_FILE_BYTES``; a version-4 header takes 68 bytes a phase
+more than version 3 (the phase's digest), 0.23 MiB for the 3 525 phases of the 32-agent table.
 """
 
 from __future__ import annotations
