@@ -1,0 +1,246 @@
+r"""The observer's rigorous bounds as scalars in a norm fixed per phase of a Kalman table: the
+``bound="phase"`` option of :class:`~switchobs_core.runtime.observer.SwitchedObserver`.
+
+On the periodic part of a Kalman table's grid every sample's error map is the phase's
+``M_j = (I - K_j H_j) Phi~`` (:mod:`switchobs_core.bounds.kalman_map`), so the ellipsoids of
+:class:`~switchobs_core.bounds.rigorous.RoundingBound` can be replaced by scalars in the norms
+``||e||_{P_j}`` of :mod:`switchobs_core.bounds.phase_norm` (``P_j`` the discounted periodic Lyapunov
+shapes, their constants proved in floating point). Per sample, with the same residual ``rho``
+(balanced) as the ellipsoid's fused step (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused`,
+its ``||D^-1 e^-||`` read from the scalar: ``sqrt(b_{j-1}) beta``):
+
+* the exact set: ``beta_k = c_j beta_{k-1} + h_j rho_k + g_j w`` (``w`` the stamp error of a
+  declared clock tolerance, 0 without one);
+* the noise set (a declared ``v_max``): ``beta_k = c_j beta_{k-1} + h_j rho_k + g_j (sqrt(p) v_max +
+  w)``, with ``g_j >= ||P_j^-1/2 K_j||_2`` proved (``g_j^2 P_j >= K_j K_j'``);
+
+each rounded up, and the published bound ``sqrt(t_j) beta`` (``t_j >= lambda_max(P_j)``). The
+constants ``c_j`` are proved for the computed dense map ``E~_j = fl(fl(I - K H) Phi~)``, whose
+distance to the exact ``(I - K H) Phi~`` (:attr:`PhaseBound.emap`, the dense form's
+``gamma_{p+1} kappa nu(Phi~) + gamma_n nu(I - K H) nu(Phi~)``) joins the residual on either path.
+
+Entering and leaving (the option is sound wherever it is not on the periodic grid):
+
+* the start-up phases, a departure, a sample off the design's step (its map is another one) and
+  any other sample keep the ellipsoids;
+* at a periodic sample whose map is its phase's, once the ellipsoid's step is taken, the ellipsoid
+  ``S`` enters as ``beta = sqrt(a)`` with ``a P_j >= S`` proved
+  (:func:`~switchobs_core.bounds.phase_norm.verified_factor`);
+* the next sample that is not the next phase's (a missing sample, a departure, a jittered step), a
+  read at a later time, a restart or any other use of the ellipsoids first puts them back: ``S =
+  fl(s P_j)`` with ``S >= beta^2 P_j`` proved (``a S >= P_j`` with ``a <= 1 / beta^2``,
+  :func:`~switchobs_core.bounds.phase_norm.dominates`), else the ball ``||e|| <= sqrt(t_j) beta``.
+
+A declared disturbance is not covered (the option refuses it).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..numerics.expm_bound import nu
+from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
+from .phase_norm import PhaseNorms, dominates, lyapunov_shapes, verified_factor
+
+__all__ = ["NOISE_FLOOR", "NOISE_SLACK", "PhaseBound", "SLACK", "dense_map_error", "driven_shapes"]
+
+_U = UNIT_ROUNDOFF
+#: ``lambda = 1 - SLACK (1 - r)`` of the shapes, ``r`` the period's per-step contraction.
+SLACK = 0.5
+#: Relative margins of ``S = fl(s P_j)`` over ``beta^2``, tried in turn when the ellipsoid is put back.
+_BACK = (1e-9, 1e-6, 1e-3)
+#: The noise set's shapes: ``D^2`` times this fraction of the gain's balanced trace joins ``K_j K_j'``.
+NOISE_FLOOR = 1e-5
+#: The noise set's ``lambda`` (its shapes' slack, as :data:`SLACK`): looser discounting fits the
+#: noise's sum better (camera_agents(2): the bound 6.1x the ellipsoid's at 0.75, 8.0x at 0.5).
+NOISE_SLACK = 0.75
+#: Work (``N n^3``) above which the constants' computation prints a progress line.
+_SLOW = 2e8
+
+
+def driven_shapes(maps: Sequence[np.ndarray], drive: Sequence[np.ndarray], lam: float,
+                  rounds: int = 4) -> list[np.ndarray]:
+    """``P_j = M_j P_{j-1} M_j' / lam^2 + Q_j`` over the period (as
+    :func:`~switchobs_core.bounds.phase_norm.lyapunov_shapes` with a drive per phase), each exactly
+    symmetric."""
+    P = [np.array(Q, dtype=float) for Q in drive]
+    for _ in range(rounds):
+        for j, Mj in enumerate(maps):
+            Pj = (Mj @ P[j - 1]) @ Mj.T
+            Pj /= lam * lam
+            Pj += drive[j]
+            P[j] = 0.5 * (Pj + Pj.T)
+    return P
+
+
+def _gain_factors(pn: PhaseNorms, maps: Sequence[Any]) -> np.ndarray:
+    """``g_j >= ||P_j^-1/2 K_j||_2`` proved (``g_j^2 P_j >= K_j K_j'``), rounded up."""
+    return np.array([math.sqrt(verified_factor(P, np.eye(m.K.shape[1]), m.K)) * (1.0 + 8.0 * _U)
+                     for P, m in zip(pn.shapes, maps, strict=True)])
+
+
+def _check(pn: PhaseNorms, g: np.ndarray) -> None:
+    for name, v in (("c", pn.c), ("h", pn.h), ("t", pn.t), ("b", pn.b), ("g", g)):
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"the phase bound's constant {name}_j could not be proved for every phase")
+
+
+def dense_map_error(m: Any) -> float:
+    """``>= ||E~ - (I - K H) Phi~||_2`` (balanced) of the dense ``E~ = fl(fl(I - K H) Phi~)`` of a
+    :class:`~switchobs_core.bounds.kalman_map.KalmanMap` (the formula of its dense path's ``emap``)."""
+    d = m.e.scale
+    ikh = m._I - m.K @ m.H
+    nI = nu((ikh / d[:, None]) * d[None, :])
+    nP = m.e.nPhi
+    return (gamma(m.H.shape[0] + 1) * m.kappa * nP + gamma(m.Phi.shape[0]) * nI * nP) * (1.0 + 8.0 * gamma(1))
+
+
+class PhaseBound:
+    """The scalars of the module docstring for one Kalman table's periodic phases.
+
+    ``PhaseBound(maps, scale, noisy)``: ``maps[j]`` the :class:`~switchobs_core.bounds.kalman_map.KalmanMap`
+    of periodic phase ``j`` at the design's step (the family's own objects: a sample is on the
+    option's path when its map *is* its phase's), ``scale`` the balancing ``D``, ``noisy`` whether a
+    noise set is kept. Raises ValueError when a constant cannot be proved. ``progress`` receives a
+    line when the computation is slow (default: standard error).
+
+    State: :attr:`j` the phase of the last sample while the scalars hold (-1: the ellipsoids hold),
+    :attr:`beta`, :attr:`betav`; counts :attr:`entered`, :attr:`left`.
+    """
+
+    def __init__(self, maps: Sequence[Any], scale: np.ndarray, noisy: bool, *, slack: float = SLACK,
+                 progress: Callable[[str], None] | None = None) -> None:
+        t0 = time.process_time()
+        self.maps = list(maps)
+        N, n = len(self.maps), self.maps[0].Phi.shape[0]
+        say = progress or (lambda s: print(s, file=sys.stderr, flush=True))
+        if N * n ** 3 > _SLOW:
+            say(f"phase bound: proving the norms of {N} phases at n = {n} (a few seconds)")
+        d = np.asarray(scale, dtype=float)
+        Es = [m.E for m in self.maps]
+        mono = np.eye(n)
+        for j in range(1, N + 1):
+            mono = Es[j % N] @ mono
+        rate = float(np.max(np.abs(np.linalg.eigvals(mono)))) ** (1.0 / N)
+        if not rate < 1.0:
+            raise ValueError(f"the Kalman table's period does not contract (per-step rate {rate:.6g})")
+        self.lam = 1.0 - slack * (1.0 - rate)
+        self.lamv = 1.0 - NOISE_SLACK * (1.0 - rate)
+        self.norms = pn = PhaseNorms(Es, lyapunov_shapes(Es, d, self.lam), d)
+        self.g = _gain_factors(pn, self.maps)
+        self.emap = np.array([dense_map_error(m) for m in self.maps])
+        _check(pn, self.g)
+        # the noise set: shapes driven by the gain's image (the noise's directions) and a little of D^2
+        self.normsv, self.gv = pn, self.g
+        if noisy:
+            D2 = np.diag(d * d)
+            drive = []
+            for m in self.maps:
+                KK = (m.K @ m.K.T) / np.outer(d, d)
+                Q = (m.K @ m.K.T) + (NOISE_FLOOR * max(float(np.trace(KK)), 1e-300) / n) * D2
+                drive.append(0.5 * (Q + Q.T))
+            self.normsv = PhaseNorms(Es, driven_shapes(Es, drive, self.lamv), d)
+            self.gv = _gain_factors(self.normsv, self.maps)
+            _check(self.normsv, self.gv)
+        self.N, self.n, self.noisy = N, n, bool(noisy)
+        self.seconds = time.process_time() - t0
+        if N * n ** 3 > _SLOW:
+            say(f"phase bound: {N} phases proved in {self.seconds:.1f} s CPU")
+        self.entered = self.left = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """The ellipsoids hold (nothing entered)."""
+        self.j = -1
+        self.beta = self.betav = math.inf
+
+    # ------------------------------------------------------------------ samples
+    def sample(self, b: Any, f: Any, channel: int) -> bool:
+        """Step the scalars through the fused map ``f`` (a :class:`~switchobs_core.runtime.error_maps.FusedMap`
+        of periodic phase ``f.phase``, -1 for the start-up) of the bound ``b``; False when the sample is
+        not the next phase's (the ellipsoids are put back first if the scalars held: the caller steps them)."""
+        j = f.phase
+        if self.j < 0:
+            return False
+        m = f.m
+        if j != (self.j + 1) % self.N or m is not self.maps[j]:
+            self.leave(b)
+            return False
+        pn, pj = self.norms, self.j
+        xs, xs1 = b.xn(f.x0), b.xn(f.x_minus)
+        rc = b.rho_correct(m.fK, m.fH, f.x_minus, f.y, f.nu, f.x_plus, xs1)
+        en = pn.balanced(self.beta, pj)
+        env = self.normsv.balanced(self.betav, pj) if self.noisy else 0.0
+        e, dt, nIKH, emap = m.e, f.dt, m.nIKH, self.emap[j]
+        w = 0.0
+        if b.tolerance:     # the prior's balanced bound over both sets (RoundingBound.prior_beta)
+            enm = max(en, env)
+            prior = (e.nPhi * enm + b._rho_step(e, dt, xs, xs1, enm, None, None)) * (1.0 + 4.0 * _U)
+            w = b.stamp_error(m.H, f.x_minus, prior)
+        b.w = w
+        c, h, g = pn.c[j], pn.h[j], self.g[j]
+        rho = (nIKH * b._rho_step(e, dt, xs, xs1, en, None, None) + rc + emap * en) * (1.0 + 4.0 * _U)
+        beta = float(c * self.beta + h * rho + g * w) * (1.0 + 8.0 * _U)
+        betav = math.inf
+        if self.noisy:
+            rhov = (nIKH * b._rho_step(e, dt, xs, xs1, env, None, None) + rc + emap * env) * (1.0 + 4.0 * _U)
+            vn = math.sqrt(b._wc(f.y.size, b.noise_max[channel - 1])) * (1.0 + 2.0 * _U)
+            pv = self.normsv
+            betav = float(pv.c[j] * self.betav + pv.h[j] * rhov + self.gv[j] * vn) * (1.0 + 8.0 * _U)
+        if not (math.isfinite(beta) and (not self.noisy or math.isfinite(betav))):
+            b.withdrawn = b.withdrawn or ("the phase bound is no longer finite; the bounds are withdrawn until "
+                                          "the next reset")
+            self.j = -1
+            return True
+        self.beta, self.betav, self.j = beta, betav, j
+        return True
+
+    def enter(self, b: Any, f: Any) -> None:
+        """After the ellipsoids' step through ``f``: the scalars from them when ``f`` is its periodic
+        phase's map (``a P_j >= S`` proved, ``beta = sqrt(a)``)."""
+        j = f.phase
+        if j < 0 or self.j >= 0 or b.withdrawn or f.m is not self.maps[j]:
+            return
+        beta = self.norms.start(b._ell.S, j)
+        betav = self.normsv.start(b._ellv.S, j) if self.noisy else 0.0
+        if math.isfinite(beta) and math.isfinite(betav):
+            self.beta, self.betav, self.j = beta, (betav if self.noisy else math.inf), j
+            self.entered += 1
+
+    def leave(self, b: Any) -> None:
+        """The ellipsoids back from the scalars (module docstring); the scalars no longer hold."""
+        j = self.j
+        if j < 0:
+            return
+        self.j = -1
+        self.left += 1
+        b._ell.S, b._ell.tr = self._ellipsoid(self.norms, self.beta, j, b.d)
+        if self.noisy:
+            b._ellv.S, b._ellv.tr = self._ellipsoid(self.normsv, self.betav, j, b.d)
+
+    def _ellipsoid(self, pn: PhaseNorms, beta: float, j: int, d: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(S, >= trace S)`` with ``S >= beta^2 P_j`` proved (``P_j`` of ``pn``), else the ball of
+        radius ``sqrt(t_j) beta``."""
+        P = pn.shapes[j]
+        b2 = beta * beta
+        a = (1.0 / b2) * (1.0 - 4.0 * _U) if b2 > 0.0 else math.inf    # <= 1 / beta^2
+        if math.isfinite(a) and math.isfinite(b2):
+            for margin in _BACK:
+                S = P * (b2 * (1.0 + margin))
+                if dominates(a, S, P):
+                    return S, float(np.trace(S)) * (1.0 + 2.0 * gamma(self.n + 2))
+        ball = ErrorEllipsoid(self.n, pn.bound(beta, j) * (1.0 + 4.0 * _U), d)
+        return ball.S, ball.tr * (1.0 + 2.0 * gamma(self.n + 2))
+
+    # ------------------------------------------------------------------ reads
+    def bounds(self) -> tuple[float, float | None]:
+        """``(exact, noise)`` while the scalars hold: ``sqrt(t_j) beta`` of each (noise None without a
+        noise set)."""
+        pn, j = self.norms, self.j
+        return pn.bound(self.beta, j), (self.normsv.bound(self.betav, j) if self.noisy else None)
