@@ -229,6 +229,20 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
 
     tab, nob, env, onl = observer(), observer(rounding_bound=False), observer(), observer(family="kalman-online")
     amo = observer()
+    c0 = time.process_time()
+    pha = observer(bound="phase")       # the bound's constants proved here (untimed)
+    pha.constants_cpu = time.process_time() - c0
+    bounds: dict = {"node": {}, "phase": {}, "on": {}}
+
+    def node(k):
+        env.update(stream[k][0], stream[k][1], stream[k][3])
+        bounds["node"][k] = env.envelope().exact_bound
+
+    def phase(k):
+        pha.update(stream[k][0], stream[k][1], stream[k][3])
+        bounds["phase"][k] = pha.envelope().exact_bound
+        bounds["on"][k] = pha.rounding.phase.j >= 0
+
     ref = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
     # the floor's gains: the reference recursion's, run once over the stream beforehand
     pre = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
@@ -248,8 +262,8 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
     out = {
         "kalman table, exact bound": lambda k: tab.update(stream[k][0], stream[k][1], stream[k][3]),
         "kalman table, rounding_bound=False": lambda k: nob.update(stream[k][0], stream[k][1], stream[k][3]),
-        "kalman table + envelope() (the node)": lambda k: (env.update(stream[k][0], stream[k][1], stream[k][3]),
-                                                           env.envelope()),
+        "kalman table + envelope() (the node)": node,
+        "kalman table + envelope(), bound='phase'": phase,
         "kalman table + envelope(amortised=False)": lambda k: (amo.update(stream[k][0], stream[k][1], stream[k][3]),
                                                                amo.envelope(amortised=False)),
         "kalman-online, exact bound": lambda k: onl.update(stream[k][0], stream[k][1], stream[k][3]),
@@ -270,7 +284,8 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
 
         out["filterpy KalmanFilter"] = fpy
     out["bare floor x = F x + K (y - H x)"] = floor
-    return out, [tab, nob, env, amo]
+    pha.bounds = bounds
+    return out, [tab, nob, env, amo, pha]
 
 
 def _steady_from(system, cycle, table) -> int:
@@ -307,7 +322,13 @@ def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = 
             times[name].append((time.process_time_ns() - c) / block / 1e3)
     # the table observers must have stayed on the table (a departure would time the online recursion)
     departures = [getattr(o, "kalman_departures", None) for o in tables]
+    bd = tables[-1].bounds           # the phase bound over the node's (the ellipsoid), the timed samples
+    timed = range(warm, warm + samples)
+    ratio = [bd["phase"][k] / bd["node"][k] for k in timed if k in bd["phase"] and k in bd["node"]]
     return {"n": system.n, "median_us": {k: float(np.median(v[2:])) for k, v in times.items()},
+            "phase_ratio": (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan),
+            "phase_on": float(np.mean([bd["on"][k] for k in timed if k in bd["on"]])),
+            "phase_constants_cpu": tables[-1].constants_cpu,
             "blocks": len(times[names[0]]) - 2, "departures": departures,
             "source": [getattr(o, "gains_source", "?") for o in tables]}
 
@@ -339,6 +360,20 @@ def cost_report(rows: list[dict], label: str) -> str:
                  f"{last['kalman table + envelope(amortised=False)'] / ref:.2f} | - |")
     lines.append(f"| (table with the exact bound / reference) | "
                  f"{last['kalman table, exact bound'] / ref:.2f} | - |")
+    # the node pattern against the reference at every n, the ellipsoid and bound='phase'
+    node, pha = "kalman table + envelope() (the node)", "kalman table + envelope(), bound='phase'"
+    refn = "reference Kalman filter (standard form, numpy)"
+    lines += ["", "| node pattern over the reference | " + " | ".join(f"n = {n}" for n in ns) + " |",
+              "|---|" + "---|" * len(ns)]
+    for name in (node, pha):
+        lines.append(f"| {name} | " + " | ".join(f"{r['median_us'][name] / r['median_us'][refn]:.2f}" for r in rows)
+                     + " |")
+    lines.append("| bound='phase' / the ellipsoid's exact bound: median (max) | "
+                 + " | ".join(f"{r['phase_ratio'][0]:.2f} ({r['phase_ratio'][1]:.2f})" for r in rows) + " |")
+    lines.append("| timed samples on the phase path | " + " | ".join(f"{100 * r['phase_on']:.0f} %" for r in rows)
+                 + " |")
+    lines.append("| bound='phase': constants proved at construction (CPU) | "
+                 + " | ".join(f"{r['phase_constants_cpu']:.2f} s" for r in rows) + " |")
     return "\n".join(lines) + "\n"
 
 

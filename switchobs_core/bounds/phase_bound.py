@@ -153,12 +153,17 @@ class PhaseBound:
         if N * n ** 3 > _SLOW:
             say(f"phase bound: {N} phases proved in {self.seconds:.1f} s CPU")
         self.entered = self.left = 0
+        # per-sample reads as Python floats (a numpy scalar's arithmetic costs more)
+        self._c, self._h, self._g, self._emap = (pn.c.tolist(), pn.h.tolist(), self.g.tolist(), self.emap.tolist())
+        self._cv, self._hv, self._gv = self.normsv.c.tolist(), self.normsv.h.tolist(), self.gv.tolist()
+        self._sb, self._sbv = pn._sqrt_b.tolist(), self.normsv._sqrt_b.tolist()
         self.reset()
 
     def reset(self) -> None:
         """The ellipsoids hold (nothing entered)."""
         self.j = -1
         self.beta = self.betav = math.inf
+        self._xlast: tuple = (None, 0.0)     # the last estimate and its balanced norm (the next x0's)
 
     # ------------------------------------------------------------------ samples
     def sample(self, b: Any, f: Any, channel: int) -> bool:
@@ -172,27 +177,28 @@ class PhaseBound:
         if j != (self.j + 1) % self.N or m is not self.maps[j]:
             self.leave(b)
             return False
-        pn, pj = self.norms, self.j
-        xs, xs1 = b.xn(f.x0), b.xn(f.x_minus)
-        rc = b.rho_correct(m.fK, m.fH, f.x_minus, f.y, f.nu, f.x_plus, xs1)
-        en = pn.balanced(self.beta, pj)
-        env = self.normsv.balanced(self.betav, pj) if self.noisy else 0.0
-        e, dt, nIKH, emap = m.e, f.dt, m.nIKH, self.emap[j]
+        pj = self.j
+        xl = self._xlast
+        xs = xl[1] if f.x0 is xl[0] else b.xn(f.x0)
+        xs1, xsp = b.xn(f.x_minus), b.xn(f.x_plus)
+        self._xlast = (f.x_plus, xsp)
+        rc = b.rho_correct(m.fK, m.fH, f.x_minus, f.y, f.nu, None, xs1, xsp)
+        en = self._sb[pj] * self.beta * (1.0 + 4.0 * _U)        # PhaseNorms.balanced
+        env = self._sbv[pj] * self.betav * (1.0 + 4.0 * _U) if self.noisy else 0.0
+        e, dt, nIKH, emap = m.e, f.dt, m.nIKH, self._emap[j]
         w = 0.0
         if b.tolerance:     # the prior's balanced bound over both sets (RoundingBound.prior_beta)
             enm = max(en, env)
             prior = (e.nPhi * enm + b._rho_step(e, dt, xs, xs1, enm, None, None)) * (1.0 + 4.0 * _U)
             w = b.stamp_error(m.H, f.x_minus, prior)
         b.w = w
-        c, h, g = pn.c[j], pn.h[j], self.g[j]
         rho = (nIKH * b._rho_step(e, dt, xs, xs1, en, None, None) + rc + emap * en) * (1.0 + 4.0 * _U)
-        beta = float(c * self.beta + h * rho + g * w) * (1.0 + 8.0 * _U)
+        beta = (self._c[j] * self.beta + self._h[j] * rho + self._g[j] * w) * (1.0 + 8.0 * _U)
         betav = math.inf
         if self.noisy:
             rhov = (nIKH * b._rho_step(e, dt, xs, xs1, env, None, None) + rc + emap * env) * (1.0 + 4.0 * _U)
             vn = math.sqrt(b._wc(f.y.size, b.noise_max[channel - 1])) * (1.0 + 2.0 * _U)
-            pv = self.normsv
-            betav = float(pv.c[j] * self.betav + pv.h[j] * rhov + self.gv[j] * vn) * (1.0 + 8.0 * _U)
+            betav = (self._cv[j] * self.betav + self._hv[j] * rhov + self._gv[j] * vn) * (1.0 + 8.0 * _U)
         if not (math.isfinite(beta) and (not self.noisy or math.isfinite(betav))):
             b.withdrawn = b.withdrawn or ("the phase bound is no longer finite; the bounds are withdrawn until "
                                           "the next reset")

@@ -278,16 +278,16 @@ class RoundingBound:
         return rho * (1.0 + 8.0 * _U)
 
     def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
-                    x_plus: np.ndarray, xm: float | None = None) -> float:
+                    x_plus: np.ndarray | None, xm: float | None = None, xp: float | None = None) -> float:
         """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
-        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` is ``||D^-1 x^-||`` if the caller
-        has it."""
+        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
+        and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
         uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
         xm = self.xn(x_minus) if xm is None else xm
         return (fK * (self.g_n * fH * xm + 2.0 * _U * yn + uf) + self.g_p * fK * nun
-                + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
+                + _U * (self.xn(x_plus) if xp is None else xp) + self._uf) * (1.0 + 8.0 * _U)
 
     def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
         """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
