@@ -164,6 +164,7 @@ class PhaseBound:
         self.j = -1
         self.beta = self.betav = math.inf
         self._xlast: tuple = (None, 0.0)     # the last estimate and its balanced norm (the next x0's)
+        self._nus: dict = {}
 
     # ------------------------------------------------------------------ samples
     def sample(self, b: Any, f: Any, channel: int) -> bool:
@@ -245,6 +246,43 @@ class PhaseBound:
         return ball.S, ball.tr * (1.0 + 2.0 * gamma(self.n + 2))
 
     # ------------------------------------------------------------------ reads
+    def later(self, b: Any, e: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
+              u: np.ndarray | None, extra: float = 0.0) -> tuple[float, float | None]:
+        """``(exact, noise)`` norm bounds of the sets ``dt`` after the last sample, stepped by the ZOH
+        entry ``e`` (``x`` the estimate at the sample, ``xp`` at ``t``, ``v`` and ``u`` what is held,
+        ``extra`` an input change's residual), the scalars kept: ``e^- = Phi~ e + r`` with ``||D^-1 r||
+        <= rho`` (the ellipsoid's residual, :meth:`~switchobs_core.bounds.rigorous.RoundingBound.rho_step`),
+        so ``||e^-|| <= nu(Phi~) sqrt(t_j) beta + max(D) rho`` (``nu`` of the entry's map in the user's
+        units, :func:`~switchobs_core.numerics.expm_bound.nu`). Looser than the ellipsoid's step (no shape
+        kept) but O(n^2), for the reads at a later time and the innovation test's prior."""
+        j = self.j
+        nE = self._nu_map(e)
+        dmax = self._dmax(b)
+        xs, xs1 = b.xn(x), b.xn(xp)
+        out = []
+        for pn, beta, on in ((self.norms, self.beta, True), (self.normsv, self.betav, self.noisy)):
+            if not on:
+                out.append(None)
+                continue
+            en = pn.balanced(beta, j)
+            rho = b._rho_step(e, dt, xs, xs1, en, v, u) + extra
+            out.append((nE * pn.bound(beta, j) + dmax * rho) * (1.0 + 8.0 * _U))
+        return out[0], out[1]
+
+    def _nu_map(self, e: Any) -> float:
+        """``>= ||Phi~||_2`` of a ZOH entry's error map in the user's units (kept per entry)."""
+        got = self._nus.get(id(e))
+        if got is None or got[0] is not e:
+            if len(self._nus) > 64:
+                self._nus.clear()
+            got = self._nus[id(e)] = (e, nu(e.E))
+        return got[1]
+
+    @staticmethod
+    def _dmax(b: Any) -> float:
+        """``max(D)`` (powers of two: ``||D x|| <= max(D) ||x||`` exactly)."""
+        return float(np.max(b.d))
+
     def bounds(self) -> tuple[float, float | None]:
         """``(exact, noise)`` while the scalars hold: ``sqrt(t_j) beta`` of each (noise None without a
         noise set)."""
