@@ -157,6 +157,7 @@ class PhaseBound:
         self._c, self._h, self._g, self._emap = (pn.c.tolist(), pn.h.tolist(), self.g.tolist(), self.emap.tolist())
         self._cv, self._hv, self._gv = self.normsv.c.tolist(), self.normsv.h.tolist(), self.gv.tolist()
         self._sb, self._sbv = pn._sqrt_b.tolist(), self.normsv._sqrt_b.tolist()
+        self._st, self._stv = pn._sqrt_t.tolist(), self.normsv._sqrt_t.tolist()
         self.reset()
 
     def reset(self) -> None:
@@ -181,9 +182,13 @@ class PhaseBound:
         pj = self.j
         xl = self._xlast
         xs = xl[1] if f.x0 is xl[0] else b.xn(f.x0)
-        xs1, xsp = b.xn(f.x_minus), b.xn(f.x_plus)
-        self._xlast = (f.x_plus, xsp)
-        rc = b.rho_correct(m.fK, m.fH, f.x_minus, f.y, f.nu, None, xs1, xsp)
+        y, nu_ = f.y, f.nu
+        xs1, yn, nun = b.xn(f.x_minus), math.sqrt(float(y @ y)), math.sqrt(float(nu_ @ nu_))
+        fK = m.fK
+        # ||D^-1 x^+|| <= (||D^-1 x^-|| + (1 + gamma_p) ||D^-1 K||_F ||nu||) (1 + u), x^+ = fl(x^- + fl(K nu))
+        xsp = (xs1 + fK * nun * (1.0 + b.g_p)) * (1.0 + 2.0 * _U)
+        self._xlast = (f.x_plus, xsp)       # the next sample's ||D^-1 x0|| (an upper bound serves)
+        rc = b.rho_correct_norms(fK, m.fH, xs1, yn, nun, xsp, y.size)
         en = self._sb[pj] * self.beta * (1.0 + 4.0 * _U)        # PhaseNorms.balanced
         env = self._sbv[pj] * self.betav * (1.0 + 4.0 * _U) if self.noisy else 0.0
         e, dt, nIKH, emap = m.e, f.dt, m.nIKH, self._emap[j]
@@ -286,5 +291,5 @@ class PhaseBound:
     def bounds(self) -> tuple[float, float | None]:
         """``(exact, noise)`` while the scalars hold: ``sqrt(t_j) beta`` of each (noise None without a
         noise set)."""
-        pn, j = self.norms, self.j
-        return pn.bound(self.beta, j), (self.normsv.bound(self.betav, j) if self.noisy else None)
+        j, up = self.j, 1.0 + 4.0 * _U        # PhaseNorms.bound: sqrt(t_j) beta, rounded up
+        return self._st[j] * self.beta * up, (self._stv[j] * self.betav * up if self.noisy else None)

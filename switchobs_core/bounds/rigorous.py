@@ -284,10 +284,15 @@ class RoundingBound:
         ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
         and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
-        uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
-        xm = self.xn(x_minus) if xm is None else xm
+        return self.rho_correct_norms(fK, fH, self.xn(x_minus) if xm is None else xm, yn, nun,
+                                      self.xn(x_plus) if xp is None else xp, y.size)
+
+    def rho_correct_norms(self, fK: float, fH: float, xm: float, yn: float, nun: float, xp: float, p: int) -> float:
+        """:meth:`rho_correct` from the norms ``||D^-1 x^-||``, ``||y||``, ``||nu||`` and ``||D^-1 x^+||``
+        (or upper bounds of them) of a sample of ``p`` rows."""
+        uf = (self.n + 2) * math.sqrt(p) * UNDERFLOW       # H x^- and y's own underflow
         return (fK * (self.g_n * fH * xm + 2.0 * _U * yn + uf) + self.g_p * fK * nun
-                + _U * (self.xn(x_plus) if xp is None else xp) + self._uf) * (1.0 + 8.0 * _U)
+                + _U * xp + self._uf) * (1.0 + 8.0 * _U)
 
     def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
         """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for

@@ -241,7 +241,7 @@ class SwitchedObserver:
                                    self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
         self._bound = self.rounding = self._bounds.rigorous   # public: RoundingBound.clock (stamp errors)
         self.bound_form = bound_form(bound, self.family, self._gains, self._bound, self.disturbance, self._scale)
-        self._x0_init, self._t0_init = x0, t0
+        self._x0_init, self._t0_init, self._na = x0, t0, np.full(self.N, NOT_APPLICABLE)   # _na: copied per envelope
         self.reset(x0, t0)
 
     # ------------------------------------------------------------------ state
@@ -593,7 +593,7 @@ class SwitchedObserver:
         step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
         exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
         if self._tracker is None or self.e0 is None:    # Kalman gains (the envelope is the LMI gains'), no e0
-            return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
+            return Envelope(z=self._na.copy(), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)
         z = self._tracker.z(float(t))
         return Envelope(z=z, paper_bound=float(self.alpha * z.sum()), exact_bound=exact, t=float(t),
