@@ -36,7 +36,10 @@ as subprocesses, so that every number includes nothing of the others):
    squares of log cost on log n) and the cost goals at n = 132 as ratios. The table's first
    ``len(startup) + K`` samples visit each of its phases for the first time (671 at n = 12, 2351
    at n = 36, 3525 at n = 132: a map's norms are taken at its first visit); ``--steady`` runs
-   every estimator over them untimed first, so that the timed samples revisit phases.
+   every estimator over them untimed first, so that the timed samples revisit phases. The node
+   pattern is timed with ``bound='phase'`` too (:mod:`switchobs_core.runtime.bound_option`), and its
+   exact bound (and, in a second untimed pass with ``noise_max`` 1 mm, its noise bound) is compared
+   with the ellipsoid's on the same samples.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
@@ -297,6 +300,24 @@ def _steady_from(system, cycle, table) -> int:
     return len(kd.startup) + kd.pattern.K
 
 
+def noise_tightness(system, cycle, table, stream, warm: int, noise_max: float = 1e-3) -> tuple[float, float]:
+    """The noise bound (a declared ``noise_max``) of ``bound='phase'`` over the ellipsoid's on the same
+    samples ``warm`` on, once the scalars hold: (median, max)."""
+    import switchobs_core as so
+
+    obs = [so.SwitchedObserver(system, table, "periodic", [cycle], noise_max=noise_max, bound=b)
+           for b in ("ellipsoid", "phase")]
+    ratio = []
+    for k, (t, ch, _, y) in enumerate(stream):
+        nb = []
+        for o in obs:
+            o.update(t, ch, y)
+            nb.append(o.envelope().noise_bound)
+        if k >= warm and obs[1].rounding.phase.j >= 0:
+            ratio.append(nb[1] / nb[0])
+    return (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan)
+
+
 def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = False) -> dict:
     """Median CPU time per sample of each estimator (interleaved blocks; module docstring, item 4);
     ``steady``: every estimator first runs untimed over the table's start-up phases and one period
@@ -328,6 +349,7 @@ def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = 
     return {"n": system.n, "median_us": {k: float(np.median(v[2:])) for k, v in times.items()},
             "phase_ratio": (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan),
             "phase_on": float(np.mean([bd["on"][k] for k in timed if k in bd["on"]])),
+            "phase_noise_ratio": noise_tightness(system, cycle, table, stream, warm),
             "phase_constants_cpu": tables[-1].constants_cpu,
             "blocks": len(times[names[0]]) - 2, "departures": departures,
             "source": [getattr(o, "gains_source", "?") for o in tables]}
@@ -370,6 +392,9 @@ def cost_report(rows: list[dict], label: str) -> str:
                      + " |")
     lines.append("| bound='phase' / the ellipsoid's exact bound: median (max) | "
                  + " | ".join(f"{r['phase_ratio'][0]:.2f} ({r['phase_ratio'][1]:.2f})" for r in rows) + " |")
+    lines.append("| its noise bound (noise_max 1 mm) / the ellipsoid's: median (max) | "
+                 + " | ".join(f"{r['phase_noise_ratio'][0]:.2f} ({r['phase_noise_ratio'][1]:.2f})" for r in rows)
+                 + " |")
     lines.append("| timed samples on the phase path | " + " | ".join(f"{100 * r['phase_on']:.0f} %" for r in rows)
                  + " |")
     lines.append("| bound='phase': constants proved at construction (CPU) | "
