@@ -85,9 +85,10 @@ PARAMS = [
           "designed at start-up takes Q_c = B_w diag(max^2) B_w' (empty: the system's disturbance: section, or none).",
           float),
     Param("bound", "ellipsoid", "Form of the rigorous bounds: 'ellipsoid' (default) or, for a Kalman table, 'phase': "
-          "scalars in a norm fixed per phase of the table's periodic grid (about 3x cheaper per sample at n = 12-36, "
-          "the bound about 3x looser, 8-11x at n = 132; its constants are proved at start-up, about 6 s at n = 132; "
-          "no declared disturbance). Off the grid the ellipsoids take over, converted with a proof."),
+          "scalars in a norm fixed per phase of the table's periodic grid (3-4x cheaper per sample at n = 12-36, "
+          "10x at n = 132; the exact bound about 3x looser, 8x at n = 132, the noise bound 6-27x; its constants "
+          "are proved at start-up, about 8 s at n = 132; no declared disturbance). Off the grid the ellipsoids "
+          "take over, converted with a proof."),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "
