@@ -64,17 +64,17 @@ NOISE_SLACK = 0.75
 _SLOW = 2e8
 
 
-def driven_shapes(maps: Sequence[np.ndarray], drive: Sequence[np.ndarray], lam: float,
+def driven_shapes(maps: Sequence[np.ndarray], drive: Callable[[int], np.ndarray], lam: float,
                   rounds: int = 4) -> list[np.ndarray]:
     """``P_j = M_j P_{j-1} M_j' / lam^2 + Q_j`` over the period (as
-    :func:`~switchobs_core.bounds.phase_norm.lyapunov_shapes` with a drive per phase), each exactly
-    symmetric."""
-    P = [np.array(Q, dtype=float) for Q in drive]
+    :func:`~switchobs_core.bounds.phase_norm.lyapunov_shapes` with a drive ``Q_j = drive(j)`` per
+    phase, formed when needed), each exactly symmetric."""
+    P = [drive(j) for j in range(len(maps))]
     for _ in range(rounds):
         for j, Mj in enumerate(maps):
             Pj = (Mj @ P[j - 1]) @ Mj.T
             Pj /= lam * lam
-            Pj += drive[j]
+            Pj += drive(j)
             P[j] = 0.5 * (Pj + Pj.T)
     return P
 
@@ -123,7 +123,7 @@ class PhaseBound:
         if N * n ** 3 > _SLOW:
             say(f"phase bound: proving the norms of {N} phases at n = {n} (a few seconds)")
         d = np.asarray(scale, dtype=float)
-        Es = [m.E for m in self.maps]
+        Es = [m.dense() for m in self.maps]
         mono = np.eye(n)
         for j in range(1, N + 1):
             mono = Es[j % N] @ mono
@@ -140,11 +140,13 @@ class PhaseBound:
         self.normsv, self.gv = pn, self.g
         if noisy:
             D2 = np.diag(d * d)
-            drive = []
-            for m in self.maps:
-                KK = (m.K @ m.K.T) / np.outer(d, d)
-                Q = (m.K @ m.K.T) + (NOISE_FLOOR * max(float(np.trace(KK)), 1e-300) / n) * D2
-                drive.append(0.5 * (Q + Q.T))
+
+            def drive(j: int) -> np.ndarray:
+                K = self.maps[j].K
+                KK = K @ K.T
+                Q = KK + (NOISE_FLOOR * max(float(np.trace(KK / np.outer(d, d))), 1e-300) / n) * D2
+                return 0.5 * (Q + Q.T)
+
             self.normsv = PhaseNorms(Es, driven_shapes(Es, drive, self.lamv), d)
             self.gv = _gain_factors(self.normsv, self.maps)
             _check(self.normsv, self.gv)
