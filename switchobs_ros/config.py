@@ -88,7 +88,7 @@ PARAMS = [
           "scalars in a norm fixed per phase of the table's periodic grid (3-4x cheaper per sample at n = 12-36, "
           "10x at n = 132; the exact bound about 3x looser, 8x at n = 132, the noise bound 6-27x; its constants "
           "are proved at start-up, about 8 s at n = 132; no declared disturbance). Off the grid the ellipsoids "
-          "take over, converted with a proof."),
+          "take over, converted with a proof (stamps jittered within the table's tolerance stay on the scalars)."),
     Param("publish_covariance", True, "Publish ~/covariance and fill the odometry covariances from the error "
           "covariance P (for the LMI family P is propagated under the noise model: about n^3 flops per sample)."),
     Param("schedule.mode", "periodic", "periodic (one cycle), sequence (cycles repeated in order) or robust "

@@ -18,18 +18,21 @@ each rounded up, and the published bound ``sqrt(t_j) beta`` (``t_j >= lambda_max
 constants ``c_j`` are proved for the computed dense map ``E~_j = fl(fl(I - K H) Phi~)``, whose
 distance to the exact ``(I - K H) Phi~`` (:attr:`PhaseBound.emap`, the dense form's
 ``gamma_{p+1} kappa nu(Phi~) + gamma_n nu(I - K H) nu(Phi~)``) joins the residual on either path.
+A stamp off the grid by less than the table's ``dt_tol`` (still locked) has the phase's gain over
+its own step, ``Phi~_a`` of another ZOH entry: its map is ``M_j + (I - K H) (Phi~_a - Phi~_d)``, so
+``||I - K H|| nu(D^-1 (Phi~_a - Phi~_d) D) ||D^-1 e||`` (the computed difference, relative ``u`` per
+entry, :meth:`PhaseBound._gap`) joins the residual, whose prediction part is that entry's own.
 
 Entering and leaving (the option is sound wherever it is not on the periodic grid):
 
-* the start-up phases, a departure, a sample off the design's step (its map is another one) and
-  any other sample keep the ellipsoids;
-* at a periodic sample whose map is its phase's, once the ellipsoid's step is taken, the ellipsoid
-  ``S`` enters as ``beta = sqrt(a)`` with ``a P_j >= S`` proved
-  (:func:`~switchobs_core.bounds.phase_norm.verified_factor`);
-* the next sample that is not the next phase's (a missing sample, a departure, a jittered step), a
-  read at a later time, a restart or any other use of the ellipsoids first puts them back: ``S =
-  fl(s P_j)`` with ``S >= beta^2 P_j`` proved (``a S >= P_j`` with ``a <= 1 / beta^2``,
-  :func:`~switchobs_core.bounds.phase_norm.dominates`), else the ball ``||e|| <= sqrt(t_j) beta``.
+* the start-up phases, a departure and any other sample keep the ellipsoids;
+* at a periodic sample, once the ellipsoid's step is taken, the ellipsoid ``S`` enters as ``beta =
+  sqrt(a)`` with ``a P_j >= S`` proved (:func:`~switchobs_core.bounds.phase_norm.verified_factor`);
+* the next sample that is not the next phase's (a missing sample, a departure), a restart or any
+  other use of the ellipsoids first puts them back: ``S = fl(s P_j)`` with ``S >= beta^2 P_j``
+  proved (``a S >= P_j`` with ``a <= 1 / beta^2``, :func:`~switchobs_core.bounds.phase_norm.dominates`),
+  else the ball ``||e|| <= sqrt(t_j) beta``; a read at a later time and the innovation test's prior
+  take norm bounds from the scalars (:meth:`PhaseBound.later`) instead.
 
 A declared disturbance is not covered (the option refuses it).
 """
@@ -168,6 +171,7 @@ class PhaseBound:
         self.beta = self.betav = math.inf
         self._xlast: tuple = (None, 0.0)     # the last estimate and its balanced norm (the next x0's)
         self._nus: dict = {}
+        self._gaps: dict = {}
 
     # ------------------------------------------------------------------ samples
     def sample(self, b: Any, f: Any, channel: int) -> bool:
@@ -177,10 +181,17 @@ class PhaseBound:
         j = f.phase
         if self.j < 0:
             return False
-        m = f.m
-        if j != (self.j + 1) % self.N or m is not self.maps[j]:
+        m, mj = f.m, self.maps[j if j >= 0 else 0]
+        gap = 0.0
+        if j != (self.j + 1) % self.N or m.K is not mj.K or m.H is not mj.H:
             self.leave(b)
             return False
+        if m is not mj:     # the phase's gain over another step (a stamp off the grid within dt_tol)
+            gap = self._gap(m.e, mj.e)
+            if not math.isfinite(gap):
+                self.leave(b)
+                return False
+            m = mj          # the same K, H and balancing: the same norms of the gain
         pj = self.j
         xl = self._xlast
         xs = xl[1] if f.x0 is xl[0] else b.xn(f.x0)
@@ -193,18 +204,19 @@ class PhaseBound:
         rc = b.rho_correct_norms(fK, m.fH, xs1, yn, nun, xsp, y.size)
         en = self._sb[pj] * self.beta * (1.0 + 4.0 * _U)        # PhaseNorms.balanced
         env = self._sbv[pj] * self.betav * (1.0 + 4.0 * _U) if self.noisy else 0.0
-        e, dt, nIKH, emap = m.e, f.dt, m.nIKH, self._emap[j]
+        e, dt, nIKH, emap = f.m.e, f.dt, m.nIKH, self._emap[j]
         w = 0.0
         if b.tolerance:     # the prior's balanced bound over both sets (RoundingBound.prior_beta)
             enm = max(en, env)
             prior = (e.nPhi * enm + b._rho_step(e, dt, xs, xs1, enm, None, None)) * (1.0 + 4.0 * _U)
             w = b.stamp_error(m.H, f.x_minus, prior)
         b.w = w
-        rho = (nIKH * b._rho_step(e, dt, xs, xs1, en, None, None) + rc + emap * en) * (1.0 + 4.0 * _U)
+        rho = (nIKH * (b._rho_step(e, dt, xs, xs1, en, None, None) + gap * en) + rc + emap * en) * (1.0 + 4.0 * _U)
         beta = (self._c[j] * self.beta + self._h[j] * rho + self._g[j] * w) * (1.0 + 8.0 * _U)
         betav = math.inf
         if self.noisy:
-            rhov = (nIKH * b._rho_step(e, dt, xs, xs1, env, None, None) + rc + emap * env) * (1.0 + 4.0 * _U)
+            rhov = (nIKH * (b._rho_step(e, dt, xs, xs1, env, None, None) + gap * env) + rc + emap * env) \
+                * (1.0 + 4.0 * _U)
             vn = math.sqrt(b._wc(f.y.size, b.noise_max[channel - 1])) * (1.0 + 2.0 * _U)
             betav = (self._cv[j] * self.betav + self._hv[j] * rhov + self._gv[j] * vn) * (1.0 + 8.0 * _U)
         if not (math.isfinite(beta) and (not self.noisy or math.isfinite(betav))):
@@ -215,11 +227,24 @@ class PhaseBound:
         self.beta, self.betav, self.j = beta, betav, j
         return True
 
+    def _gap(self, ea: Any, ed: Any) -> float:
+        """``>= ||D^-1 (Phi~_a - Phi~_d) D||_2`` of two ZOH entries' transitions (kept per entry):
+        ``nu`` of the computed difference, whose rounding is relative ``u`` per entry."""
+        got = self._gaps.get(id(ea))
+        if got is None or got[0] is not ea:
+            if len(self._gaps) > 256:
+                self._gaps.clear()
+            d = ea.scale
+            G = (ea.Phi - ed.Phi) / d[:, None] * d[None, :]         # powers of two: exact
+            got = self._gaps[id(ea)] = (ea, nu(G) / (1.0 - _U) * (1.0 + 2.0 * _U))
+        return got[1]
+
     def enter(self, b: Any, f: Any) -> None:
-        """After the ellipsoids' step through ``f``: the scalars from them when ``f`` is its periodic
-        phase's map (``a P_j >= S`` proved, ``beta = sqrt(a)``)."""
+        """After the ellipsoids' step through ``f``: the scalars from them when ``f`` is a sample of a
+        periodic phase (``a P_j >= S`` proved, ``beta = sqrt(a)``; the norm of any phase may hold any
+        set: the phase's constants serve the steps after it)."""
         j = f.phase
-        if j < 0 or self.j >= 0 or b.withdrawn or f.m is not self.maps[j]:
+        if j < 0 or self.j >= 0 or b.withdrawn:
             return
         beta = self.norms.start(b._ell.S, j)
         betav = self.normsv.start(b._ellv.S, j) if self.noisy else 0.0

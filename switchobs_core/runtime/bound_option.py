@@ -7,9 +7,10 @@
 ``"phase"``
     Kalman tables only: on the table's periodic grid, scalars in a norm fixed per phase
     (:mod:`switchobs_core.bounds.phase_bound`), O(1) per sample after the residual's O(n) norms; the
-    ellipsoids everywhere else (the start-up, departures, jittered steps, reads at a later time,
-    restarts), converted both ways with proofs. Its constants are proved when the observer is
-    built (a progress line on standard error when that takes seconds: about 6 s at n = 132), from
+    ellipsoids everywhere else (the start-up, departures, restarts), converted both ways with
+    proofs; stamps jittered within the table's ``dt_tol`` stay on the scalars. Its constants are
+    proved when the observer is built (a progress line on standard error when that takes seconds:
+    about 8 s at n = 132), from
     the table's own maps: nothing is stored in the table, and a table file of any version can use
     it. Measured (``bench/bench_scale.py --cost --steady``, bench/RESULTS.md): the node pattern
     (update and ``envelope()``) at 0.84x / 0.54x / 0.04x a reference Kalman filter at n = 12 / 36 /

@@ -38,21 +38,27 @@ def _table(name: str, rate: float = 50.0) -> so.GainTable:
 
 
 def run(name: str, seconds: float, *, noisy: bool, drop: int = -1, restart: int = -1, jitter: int = -1,
-        later_every: int = 97, seed: int = 7, tolerance: float = 0.0) -> dict:
+        later_every: int = 97, seed: int = 7, tolerance: float = 0.0, wobble: float = 0.0) -> dict:
     """The table observer with ``bound="phase"`` against the extended-precision plant: every
     sample's published bound (the noise bound with ``noisy``: the adversary's noise the sign of
     ``C e^-`` at ``NOISE_MAX``) and, every ``later_every`` samples, the bound read half a step later
     and the prior's set; ``drop`` a sample left out (a departure), ``restart`` a sample after which
     the bounds restart from the published bound (re-certification), ``jitter`` a sample moved by a
-    third of a step. Returns the worst ratio (error + 4 delta) / bound, the checks, the phase path's
-    counts and the ellipsoid observer's bounds alongside."""
+    third of a step, ``wobble`` a jitter of every stamp after the first, uniform within that many seconds (within
+    the table's ``dt_tol``: no departure). Returns the worst ratio (error + 4 delta) / bound, the checks, the phase
+    path's counts and the ellipsoid observer's bounds alongside.
+    """
     system, cycle, x0 = SYSTEMS[name]
     rate = 50.0
     ts = [k / rate for k in range(int(seconds * rate) + 1)]
+    grid = list(ts)         # the channel is the grid time's (a jittered stamp at a switch keeps its phase)
+    if wobble:
+        jit = np.random.default_rng(seed).uniform(-wobble, wobble, len(ts))
+        ts = [ts[0]] + [t + float(w) for t, w in zip(ts[1:], jit[1:], strict=True)]
     if jitter > 0:
         ts[jitter] += 0.3 / rate
     if drop > 0:
-        del ts[drop]
+        del ts[drop], grid[drop]
     sched = so.PeriodicSchedule(cycle)
     e0 = float(np.linalg.norm(x0)) * (1 + 1e-12)
     kw = {"e0": e0, "noise_max": NOISE_MAX if noisy else None}
@@ -77,7 +83,7 @@ def run(name: str, seconds: float, *, noisy: bool, drop: int = -1, restart: int 
     for k, t in enumerate(ts):
         truth.advance(LD(t) - LD(t_prev))
         t_prev = t
-        ch = sched.channel_at(t)
+        ch = sched.channel_at(grid[k])
         e_prior = (np.asarray(obs.predict(t, hold=True), dtype=LD) - truth.x).astype(float)
         v = NOISE_MAX * np.sign(system.C[ch - 1] @ e_prior) if noisy else np.zeros(system.p[ch - 1])
         if k % later_every == 50:       # the prior's set at the sample's time (before it)
@@ -179,3 +185,18 @@ def test_what_the_option_refuses():
         so.SwitchedObserver(system, table, "periodic", [cycle], noise_max=1e-3, disturbance=dist, bound="phase")
     obs = so.SwitchedObserver(system, table, "periodic", [cycle], bound="ellipsoid")
     assert obs.bound_form == "ellipsoid" and obs.rounding.phase is None
+
+
+@pytest.mark.parametrize("name,noisy", [("osc", True), ("stiff", False)])
+def test_stamps_jittered_within_the_tables_tolerance_stay_on_the_phase_path(name, noisy):
+    """Every stamp off the grid by up to a quarter of the table's ``dt_tol`` (each sample's step a map of
+    its own, the difference from the phase's map in the residual): no bound below the error, and the
+    scalars used from the first periodic sample on, entered once."""
+    system, cycle, _ = SYSTEMS[name]
+    obs = so.SwitchedObserver(system, _table(name), "periodic", [cycle], bound="phase")
+    kd = obs.gains.kalman
+    r = run(name, (len(kd.startup) + 3 * kd.pattern.K) / 50.0, noisy=noisy, wobble=0.25 * obs.gains.dt_tol,
+            later_every=10_000)
+    assert r["worst"] <= 1.0, r["worst"]
+    assert r["departures"] == 0 and r["entered"] == 1 and r["left"] == 0
+    assert r["on"] >= r["samples"] - len(kd.startup) - 1
