@@ -180,7 +180,7 @@ class EstimatorPipeline(Counters):
                                         e0=conf.e0, bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance, bound=conf["bound"])
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         check = conf["consistency.check"] != "never"      # on whenever a bound is published (auto, always)
