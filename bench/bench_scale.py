@@ -36,7 +36,10 @@ as subprocesses, so that every number includes nothing of the others):
    squares of log cost on log n) and the cost goals at n = 132 as ratios. The table's first
    ``len(startup) + K`` samples visit each of its phases for the first time (671 at n = 12, 2351
    at n = 36, 3525 at n = 132: a map's norms are taken at its first visit); ``--steady`` runs
-   every estimator over them untimed first, so that the timed samples revisit phases.
+   every estimator over them untimed first, so that the timed samples revisit phases. The node
+   pattern is timed with ``bound='phase'`` too (:mod:`switchobs_core.runtime.bound_option`), and its
+   exact bound (and, in a second untimed pass with ``noise_max`` 1 mm, its noise bound) is compared
+   with the ellipsoid's on the same samples.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
@@ -229,6 +232,20 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
 
     tab, nob, env, onl = observer(), observer(rounding_bound=False), observer(), observer(family="kalman-online")
     amo = observer()
+    c0 = time.process_time()
+    pha = observer(bound="phase")       # the bound's constants proved here (untimed)
+    pha.constants_cpu = time.process_time() - c0
+    bounds: dict = {"node": {}, "phase": {}, "on": {}}
+
+    def node(k):
+        env.update(stream[k][0], stream[k][1], stream[k][3])
+        bounds["node"][k] = env.envelope().exact_bound
+
+    def phase(k):
+        pha.update(stream[k][0], stream[k][1], stream[k][3])
+        bounds["phase"][k] = pha.envelope().exact_bound
+        bounds["on"][k] = pha.rounding.phase.j >= 0
+
     ref = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
     # the floor's gains: the reference recursion's, run once over the stream beforehand
     pre = ReferenceKF(A, noise.Q_c, noise.P0, noise.R(1))
@@ -248,8 +265,8 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
     out = {
         "kalman table, exact bound": lambda k: tab.update(stream[k][0], stream[k][1], stream[k][3]),
         "kalman table, rounding_bound=False": lambda k: nob.update(stream[k][0], stream[k][1], stream[k][3]),
-        "kalman table + envelope() (the node)": lambda k: (env.update(stream[k][0], stream[k][1], stream[k][3]),
-                                                           env.envelope()),
+        "kalman table + envelope() (the node)": node,
+        "kalman table + envelope(), bound='phase'": phase,
         "kalman table + envelope(amortised=False)": lambda k: (amo.update(stream[k][0], stream[k][1], stream[k][3]),
                                                                amo.envelope(amortised=False)),
         "kalman-online, exact bound": lambda k: onl.update(stream[k][0], stream[k][1], stream[k][3]),
@@ -270,7 +287,8 @@ def _estimators(system, cycle, table, stream) -> tuple[dict, list]:
 
         out["filterpy KalmanFilter"] = fpy
     out["bare floor x = F x + K (y - H x)"] = floor
-    return out, [tab, nob, env, amo]
+    pha.bounds = bounds
+    return out, [tab, nob, env, amo, pha]
 
 
 def _steady_from(system, cycle, table) -> int:
@@ -280,6 +298,24 @@ def _steady_from(system, cycle, table) -> int:
 
     kd = so.SwitchedObserver(system, table, "periodic", [cycle], rounding_bound=False)._gains.kalman
     return len(kd.startup) + kd.pattern.K
+
+
+def noise_tightness(system, cycle, table, stream, warm: int, noise_max: float = 1e-3) -> tuple[float, float]:
+    """The noise bound (a declared ``noise_max``) of ``bound='phase'`` over the ellipsoid's on the same
+    samples ``warm`` on, once the scalars hold: (median, max)."""
+    import switchobs_core as so
+
+    obs = [so.SwitchedObserver(system, table, "periodic", [cycle], noise_max=noise_max, bound=b)
+           for b in ("ellipsoid", "phase")]
+    ratio = []
+    for k, (t, ch, _, y) in enumerate(stream):
+        nb = []
+        for o in obs:
+            o.update(t, ch, y)
+            nb.append(o.envelope().noise_bound)
+        if k >= warm and obs[1].rounding.phase.j >= 0:
+            ratio.append(nb[1] / nb[0])
+    return (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan)
 
 
 def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = False) -> dict:
@@ -307,7 +343,14 @@ def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = 
             times[name].append((time.process_time_ns() - c) / block / 1e3)
     # the table observers must have stayed on the table (a departure would time the online recursion)
     departures = [getattr(o, "kalman_departures", None) for o in tables]
+    bd = tables[-1].bounds           # the phase bound over the node's (the ellipsoid), the timed samples
+    timed = range(warm, warm + samples)
+    ratio = [bd["phase"][k] / bd["node"][k] for k in timed if k in bd["phase"] and k in bd["node"]]
     return {"n": system.n, "median_us": {k: float(np.median(v[2:])) for k, v in times.items()},
+            "phase_ratio": (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan),
+            "phase_on": float(np.mean([bd["on"][k] for k in timed if k in bd["on"]])),
+            "phase_noise_ratio": noise_tightness(system, cycle, table, stream, warm),
+            "phase_constants_cpu": tables[-1].constants_cpu,
             "blocks": len(times[names[0]]) - 2, "departures": departures,
             "source": [getattr(o, "gains_source", "?") for o in tables]}
 
@@ -339,6 +382,23 @@ def cost_report(rows: list[dict], label: str) -> str:
                  f"{last['kalman table + envelope(amortised=False)'] / ref:.2f} | - |")
     lines.append(f"| (table with the exact bound / reference) | "
                  f"{last['kalman table, exact bound'] / ref:.2f} | - |")
+    # the node pattern against the reference at every n, the ellipsoid and bound='phase'
+    node, pha = "kalman table + envelope() (the node)", "kalman table + envelope(), bound='phase'"
+    refn = "reference Kalman filter (standard form, numpy)"
+    lines += ["", "| node pattern over the reference | " + " | ".join(f"n = {n}" for n in ns) + " |",
+              "|---|" + "---|" * len(ns)]
+    for name in (node, pha):
+        lines.append(f"| {name} | " + " | ".join(f"{r['median_us'][name] / r['median_us'][refn]:.2f}" for r in rows)
+                     + " |")
+    lines.append("| bound='phase' / the ellipsoid's exact bound: median (max) | "
+                 + " | ".join(f"{r['phase_ratio'][0]:.2f} ({r['phase_ratio'][1]:.2f})" for r in rows) + " |")
+    lines.append("| its noise bound (noise_max 1 mm) / the ellipsoid's: median (max) | "
+                 + " | ".join(f"{r['phase_noise_ratio'][0]:.2f} ({r['phase_noise_ratio'][1]:.2f})" for r in rows)
+                 + " |")
+    lines.append("| timed samples on the phase path | " + " | ".join(f"{100 * r['phase_on']:.0f} %" for r in rows)
+                 + " |")
+    lines.append("| bound='phase': constants proved at construction (CPU) | "
+                 + " | ".join(f"{r['phase_constants_cpu']:.2f} s" for r in rows) + " |")
     return "\n".join(lines) + "\n"
 
 

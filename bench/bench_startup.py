@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
 
-    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE]
+    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--before DIR]
                                   [--channel-type TYPE] [--discovery-profile FILE]
 
 Per system a camera_sim publishes throughout (50 Hz, the system's periodic schedule, the channel
@@ -11,9 +11,15 @@ stamped); in turn, interleaved over ``--rounds`` rounds, this process starts
   subscription per input, republishes every target pose);
 * ``estimator``: ``python -m switchobs_ros.estimator`` with the system and its table already on disk
   (``gain_table``): the paper's LMI table (JSON), or the 251 MiB Kalman table of ``camera_agents``
-  with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one),
+  with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
+  written here in the binary container's current version),
 
-and, with ``--before DIR``, the same estimator from another checkout (``PYTHONPATH=DIR``), and measures
+with ``--floor``, ``floor``: the same bare republisher that first imports what every estimator start
+needs of scipy (``scipy.linalg``, ``scipy.sparse``, ``scipy.special``: the runtime's BLAS/LAPACK
+wrappers, matrix exponentials, sparse transitions, chi-square quantiles), the least any estimator
+start built on scipy takes; and, with ``--before DIR``, the same estimator from another checkout
+(``PYTHONPATH=DIR``; the same 32-agent table written in version 3 of the container, which every
+checkout since it reads), and measures
 the wall time from the start of the process to the node being ready (its log line once its publishers
 and subscriptions exist: ``estimator ready``, ``bare_republisher ready``) and the node's CPU time (user +
 system) then, and the wall time to the arrival here of its first answer (``/estimator/state`` or the
@@ -52,6 +58,8 @@ sys.path.insert(0, str(REPO / "bench"))
 from bench_design import machine_info  # noqa: E402
 from bench_live_scale import cpu_seconds  # noqa: E402
 
+from switchobs_core.table.container import encode  # noqa: E402
+from switchobs_core.table.io import table_payload  # noqa: E402
 from switchobs_core.threads import single_threaded_blas  # noqa: E402
 
 single_threaded_blas()
@@ -80,19 +88,24 @@ class First(Node):
             self.at = time.monotonic()
 
 
+#: The bare republisher after importing the scipy modules every estimator start needs (``--floor``).
+FLOOR = ("import sys; sys.path.insert(0, {bench!r}); import scipy.linalg, scipy.sparse, scipy.special; "
+         "from bench_node import republisher_main; republisher_main()")
+
 #: The line each node writes once its subscriptions and publishers exist.
-READY = {"bare": "bare_republisher ready", "estimator": "estimator ready"}
+READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "estimator": "estimator ready"}
 
 
 def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0) -> tuple[float, ...]:
     """(wall seconds to ready, the node's CPU seconds then, wall seconds to the first answer, CPU then) of
     one start."""
-    if kind == "bare":
+    if kind in ("bare", "floor"):
         topic, mtype = "/bare_republisher/out", PoseStamped
         probe = First(topic, mtype)
         t0 = time.monotonic()
-        node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
-                           log=log, env=env)
+        cmd = [sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"] if kind == "bare" else \
+            [sys.executable, "-c", FLOOR.format(bench=str(REPO / "bench"))]
+        node = NodeProcess(kind, cmd=cmd, log=log, env=env)
     else:
         topic, mtype = "/estimator/state", Float64MultiArray
         probe = First(topic, mtype)
@@ -117,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--systems", default="paper,agents32", help="comma-separated: paper, agents32")
+    ap.add_argument("--floor", action="store_true", help="also the bare republisher after scipy's imports")
     ap.add_argument("--before", default="", help="another checkout whose estimator runs beside this one's")
     ap.add_argument("--channel-type", default="", help="the estimator's channel_type (default: its own default)")
     ap.add_argument("--discovery-profile", default="", help="a Fast DDS XML profile for this process and every "
@@ -139,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         env.update(PYTHONPYCACHEPREFIX=str(d / "pyc"), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1",
                    PYTHONPATH=str(REPO))
         setups = {}
+        tables_before: dict[str, str] = {}
         for name in a.systems.split(","):
             if name == "paper":
                 system = so.load_system("paper")
@@ -148,11 +163,16 @@ def main(argv: list[str] | None = None) -> int:
             elif name == "agents32":
                 sys_path = d / "agents32.yaml"
                 sys_path.write_text(yaml.safe_dump({"scenario": "camera_agents", "agents": 32}))
-                table = a.table32
-                if not table:
-                    system = so.load_system(sys_path)
-                    cycle = so.Cycle([1.0] * 32)
-                    table = str(so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)]).save(d / "k32.npz"))
+                system = so.load_system(sys_path)
+                if a.table32:
+                    k32 = so.GainTable.load(a.table32, system=system)
+                else:
+                    k32 = so.kalman_table(system, [so.design_kalman(system, so.Cycle([1.0] * 32), 50.0)])
+                table = str(k32.save(d / "k32.npz"))
+                with open(d / "k32_v3.npz", "wb") as fh:       # what a checkout before version 4 reads
+                    encode(table_payload(k32), fh, version=3)
+                tables_before[name] = str(d / "k32_v3.npz")
+                del k32
                 sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * 32}
                 setups[name] = (dict(sched, system=str(sys_path)), dict(sched, system=str(sys_path), gain_table=table))
             else:
@@ -167,12 +187,17 @@ def main(argv: list[str] | None = None) -> int:
                 try:
                     size = Path(est_params["gain_table"]).stat().st_size
                     kinds = {"bare": env, "estimator": env}
+                    if a.floor:
+                        kinds["floor"] = env
                     if a.before:
                         kinds["before"] = dict(env, PYTHONPATH=a.before, PYTHONPYCACHEPREFIX=str(d / "pyc_before"))
                     times: dict[str, list[tuple[float, ...]]] = {k: [] for k in kinds}
                     for r in range(a.rounds + 1):           # round 0 warms the bytecode and the page cache
                         for kind, kind_env in kinds.items():
-                            res = one_start("bare" if kind == "bare" else "estimator", est_params, kind_env,
+                            params = est_params
+                            if kind == "before" and name in tables_before:
+                                params = dict(est_params, gain_table=tables_before[name])
+                            res = one_start(kind if kind in ("bare", "floor") else "estimator", params, kind_env,
                                             d / f"{name}_{kind}_{r}.log")
                             if r:
                                 times[kind].append(res)
@@ -184,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
             lease.release()
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
           f"load average {info['load'][0]:.1f} before ({info['date']}).")
-    before = f" --before {a.before}" if a.before else ""
+    before = " --floor" if a.floor else ""
+    before += f" --before {a.before}" if a.before else ""
     before += f" --channel-type {a.channel_type}" if a.channel_type else ""
     before += f" --discovery-profile {a.discovery_profile}" if a.discovery_profile else ""
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_startup.py --rounds {a.rounds} --systems {a.systems}"

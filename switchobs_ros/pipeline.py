@@ -180,7 +180,7 @@ class EstimatorPipeline(Counters):
                                         e0=conf.e0, bounds=conf.robust, family=family or None,
                                         noise=None if own_noise else conf.noise,
                                         track_covariance=conf.publish_covariance,
-                                        noise_max=conf.noise_max, disturbance=conf.disturbance)
+                                        noise_max=conf.noise_max, disturbance=conf.disturbance, bound=conf["bound"])
         except SwitchobsError as err:
             raise ConfigError(f"observer: {err}") from None
         check = conf["consistency.check"] != "never"      # on whenever a bound is published (auto, always)
@@ -305,6 +305,9 @@ class EstimatorPipeline(Counters):
                                          obs_ns=self.obs_ns)
             if rej is not None:
                 self.reject(c.topic, rej)
+                if rej.reason == Reason.OLD_STAMP and c.changed_the_past(stamp_ns, u, self.obs_ns):
+                    self.withdraw(f"a command for stamp {stamp_ns} arrived after samples it governs were answered: "
+                                  "the estimates since then used another input than the plant's")
                 return False
             self.accepted[c.topic] += 1
             c.accept(stamp_ns, u, self.observer, self.origin_ns)

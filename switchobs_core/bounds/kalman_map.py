@@ -233,6 +233,13 @@ class KalmanMap:
             self._E = self._ikh() @ self.Phi
         return self._E
 
+    def dense(self) -> np.ndarray:
+        """``M`` as a dense matrix ``fl(fl(I - K H) Phi~)``: :attr:`E` if it is kept, else formed and not
+        kept (the factored path stays factored, and no n x n matrix stays with the map)."""
+        if self._E is not None:
+            return self._E
+        return (self._I - self.K @ self.H) @ self.Phi
+
     @property
     def nIKH(self) -> float:
         """An upper bound of ``||I - K H||_2`` (balanced): ``||I - K H||_F`` there on the dense path,

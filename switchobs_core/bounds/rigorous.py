@@ -92,6 +92,10 @@ class RoundingBound:
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
         self._AB = (A, B)
+        #: The scalars of :class:`~switchobs_core.bounds.phase_bound.PhaseBound` (the observer's
+        #: ``bound="phase"``; None: the ellipsoids only). While they hold, any use of :attr:`ell` or
+        #: :attr:`ellv` first puts the ellipsoids back.
+        self.phase: Any = None
         self.tolerance = 0.0            # the clock tolerance d (s; :meth:`clock`)
         self.stamp: StampError | None = None
         # underflow (rounding.py, step 8): absolute eta / 2 per product, at most n + p + m + 4 of them
@@ -115,11 +119,27 @@ class RoundingBound:
         now: a re-certification, :mod:`switchobs_core.runtime.recertify`); the held innovation's
         residuals are kept; the bound no longer withdrawn."""
         r = 0.0 if e is None else float(e)
-        self.ell = ErrorEllipsoid(self.n, r, self.d)
-        self.ellv = ErrorEllipsoid(self.n, r, self.d) if self.noise_max else None
+        self._ell = ErrorEllipsoid(self.n, r, self.d)
+        self._ellv = ErrorEllipsoid(self.n, r, self.d) if self.noise_max else None
+        if self.phase is not None:
+            self.phase.reset()
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
+
+    @property
+    def ell(self) -> ErrorEllipsoid:
+        """The exact set's ellipsoid (put back from the phase bound's scalar if that holds)."""
+        if self.phase is not None and self.phase.j >= 0:
+            self.phase.leave(self)
+        return self._ell
+
+    @property
+    def ellv(self) -> ErrorEllipsoid | None:
+        """The noise set's ellipsoid (None without a declared ``noise_max``; put back like :attr:`ell`)."""
+        if self.phase is not None and self.phase.j >= 0:
+            self.phase.leave(self)
+        return self._ellv
 
     def clock(self, tolerance: float) -> None:
         """Declare the largest stamp error ``d`` (s) of any sample: from then on every sample's
@@ -258,16 +278,21 @@ class RoundingBound:
         return rho * (1.0 + 8.0 * _U)
 
     def rho_correct(self, fK: float, fH: float, x_minus: np.ndarray, y: np.ndarray, nu: np.ndarray,
-                    x_plus: np.ndarray, xm: float | None = None) -> float:
+                    x_plus: np.ndarray | None, xm: float | None = None, xp: float | None = None) -> float:
         """Residual bound (balanced) of a Kalman correction ``x^+ = x^- + K (y - H x^-)`` in floating
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
-        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` is ``||D^-1 x^-||`` if the caller
-        has it."""
+        ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
+        and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
         yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
-        uf = (self.n + 2) * math.sqrt(y.size) * UNDERFLOW       # H x^- and y's own underflow
-        xm = self.xn(x_minus) if xm is None else xm
+        return self.rho_correct_norms(fK, fH, self.xn(x_minus) if xm is None else xm, yn, nun,
+                                      self.xn(x_plus) if xp is None else xp, y.size)
+
+    def rho_correct_norms(self, fK: float, fH: float, xm: float, yn: float, nun: float, xp: float, p: int) -> float:
+        """:meth:`rho_correct` from the norms ``||D^-1 x^-||``, ``||y||``, ``||nu||`` and ``||D^-1 x^+||``
+        (or upper bounds of them) of a sample of ``p`` rows."""
+        uf = (self.n + 2) * math.sqrt(p) * UNDERFLOW       # H x^- and y's own underflow
         return (fK * (self.g_n * fH * xm + 2.0 * _U * yn + uf) + self.g_p * fK * nun
-                + _U * self.xn(x_plus) + self._uf) * (1.0 + 8.0 * _U)
+                + _U * xp + self._uf) * (1.0 + 8.0 * _U)
 
     def prior_beta(self, e: Any, dt: float, x0: np.ndarray, xm: np.ndarray, u: np.ndarray | None) -> float:
         """``>= ||D^-1 e^-||`` after the open-loop step ``e`` over ``dt`` from the sets now, for
@@ -389,9 +414,11 @@ class RoundingBound:
         the current ones): the eigenvalue problem's, or with ``amortised`` (current sets only)
         :mod:`switchobs_core.bounds.read`'s (a verified upper bound per anchor, O(n^2) in between,
         within the factor that module states); ``inf`` for a withdrawn bound (never raises)."""
-        noisy0 = None if self.ellv is None else math.inf
+        noisy0 = None if self._ellv is None else math.inf
         if self.withdrawn:
             return math.inf, noisy0
+        if self.phase is not None and self.phase.j >= 0 and S is None and Sv is None:
+            return self.phase.bounds()      # finite while it holds (PhaseBound.sample withdraws otherwise)
         with np.errstate(over="ignore", invalid="ignore"):
             if amortised and S is None and Sv is None:
                 exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)

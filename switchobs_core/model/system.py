@@ -152,7 +152,8 @@ class LTISystem:
         object.__setattr__(self, "channel_names", cnames)
         object.__setattr__(self, "output_labels", olabels)
         object.__setattr__(self, "rtol", float(rtol))
-        decomp = tuple(observability_decomposition(A, Ci, rtol=rtol) for Ci in C)
+        norm_a = float(np.linalg.norm(A, 2))         # one SVD of A for every channel
+        decomp = tuple(observability_decomposition(A, Ci, rtol=rtol, norm_a=norm_a) for Ci in C)
         for i, d in enumerate(decomp):
             if d.r == 0:
                 raise InvalidSystem(f"channel {i + 1} ({cnames[i]}) observes no direction of the state (r_{i + 1} = 0)")

@@ -4,7 +4,8 @@ A sample of channel ``c`` gives the innovation ``nu = y - C_r x_hat^-`` (the pri
 noise model holds, zero mean and the covariance ``S = C_r P^- C_r' + R`` (:mod:`switchobs_core.runtime.gate`).
 Each row ``j`` is normalised, ``s_j = nu_j / sqrt(S_jj)`` (at least ``v_max / 3`` with a declared
 bound, read as three standard deviations, so a noise model tighter than the declared noise does
-not alarm on the noise itself; without a covariance ``v_max / 3`` alone), and fed to Page's CUSUM
+not alarm on the noise itself; the covariance is needed: :class:`~switchobs_core.runtime.recovery.Recovery`
+runs no CUSUM without one), and fed to Page's CUSUM
 in both directions,
 
 .. math::

@@ -82,7 +82,11 @@ class ErrorBounds:
                 if self._last is None or self._last[0] != amortised:
                     self._last = (amortised, b.bounds(amortised=amortised))
                 return self._last[1]
-            return b.bounds(*b.propagated(step, dt, x, xp, v, u, extra)) if not b.withdrawn else b.bounds()
+            if b.withdrawn:
+                return b.bounds()
+            if b.phase is not None and b.phase.j >= 0:      # the phase bound's scalars stay (bound_option)
+                return b.phase.later(b, step, dt, x, xp, v, u, extra)
+            return b.bounds(*b.propagated(step, dt, x, xp, v, u, extra))
         if self._measurement:   # the error-to-error part, exact arithmetic
             Phi = self._phi.read()
             if self._e0 is None:    # no initial error bound: no bound (re-certification needs the ellipsoids)
@@ -102,6 +106,8 @@ class ErrorBounds:
         b = self.rigorous
         if b.withdrawn:         # no set is kept any more: the norm bounds say so
             return math.inf, None if b.ellv is None else math.inf
+        if b.phase is not None and b.phase.j >= 0:      # norm bounds: the phase bound's scalars stay
+            return b.phase.bounds() if step is None else b.phase.later(b, step, dt, x, xp, v, u, extra)
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
         return b.propagated(step, dt, x, xp, v, u, extra)

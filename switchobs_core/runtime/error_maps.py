@@ -109,16 +109,24 @@ class FusedMap(NamedTuple):
     x_plus: np.ndarray
     y: np.ndarray
     nu: np.ndarray
+    phase: int = -1
 
     def apply(self, phi: Any, bound: Any, channel: int) -> None:
         """``Phi <- m Phi`` (``m`` formed only if ``Phi`` or the bound reads it); the bound's fused
         step: the prediction's residual through ``||I - K H||`` plus the correction's
-        (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused`)."""
+        (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused`), or with the phase bound
+        (:mod:`switchobs_core.bounds.phase_bound`; ``phase`` the table's periodic phase, -1 for the
+        start-up) its scalars where they hold."""
         m, y = self.m, self.y
         phi.hold(m)
+        pb = None if bound is None else bound.phase
+        if pb is not None and not bound.withdrawn and pb.sample(bound, self, channel):
+            return
         if bound is not None and not bound.withdrawn:
             bound.w = bound.stamp_error(m.H, self.x_minus, bound.prior_beta(m.e, self.dt, self.x0, self.x_minus,
                                                                               None)) if bound.tolerance else 0.0
             norms = (bound.xn(self.x0), bound.xn(self.x_minus))
             rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus, norms[1])
             bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel, norms=norms)
+            if pb is not None:
+                pb.enter(bound, self)

@@ -74,6 +74,7 @@ from .arguments import (
     input_change,
     nonnegative,
 )
+from .bound_option import bound_form
 from .covariance import set_entries
 from .cycles import CycleRecord, Residence
 from .error_bounds import ErrorBounds
@@ -155,6 +156,9 @@ class SwitchedObserver:
         Keep the error transition :attr:`Phi` (an n x n product per sample): True from the
         start, False never, None (default) from its first read if that comes within a budget of
         samples after the reset (:meth:`apply_map`).
+    bound : {"ellipsoid", "phase"}
+        The rigorous bounds' form: ellipsoids (default), or for a Kalman table scalars in a norm fixed
+        per phase on the table's periodic grid (:mod:`switchobs_core.runtime.bound_option`: cheaper, looser).
 
     Raises
     ------
@@ -181,7 +185,7 @@ class SwitchedObserver:
                  family: str | None = None, noise: NoiseModel | None = None,
                  track_covariance: bool | None = None, relock_rtol: float = 1e-3,
                  rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
-                 transition: bool | None = None, disturbance: Any = None):
+                 transition: bool | None = None, disturbance: Any = None, bound: str = "ellipsoid"):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -236,7 +240,8 @@ class SwitchedObserver:
         self._bounds = ErrorBounds(self.A, max(self.p), self.e0, self.noise_max, hold, self.rounding_bound,
                                    self._phi, B=self.B, scale=self._scale, disturbance=self.disturbance)
         self._bound = self.rounding = self._bounds.rigorous   # public: RoundingBound.clock (stamp errors)
-        self._x0_init, self._t0_init = x0, t0
+        self.bound_form = bound_form(bound, self.family, self._gains, self._bound, self.disturbance, self._scale)
+        self._x0_init, self._t0_init, self._na = x0, t0, np.full(self.N, NOT_APPLICABLE)   # _na: copied per envelope
         self.reset(x0, t0)
 
     # ------------------------------------------------------------------ state
@@ -313,10 +318,8 @@ class SwitchedObserver:
         """The completed cycles, oldest first (at most ``max_records``)."""
         return list(self._seq.records)
 
-    @property
-    def resyncs(self) -> int:
-        """Re-syncs of sequence mode since the reset (:mod:`switchobs_core.runtime.sequence`)."""
-        return self._seq.resyncs
+    resyncs = property(lambda self: self._seq.resyncs,
+                       doc="Re-syncs of sequence mode since the reset (:mod:`switchobs_core.runtime.sequence`).")
 
     @property
     def Phi(self) -> np.ndarray:
@@ -331,10 +334,7 @@ class SwitchedObserver:
         then kept at every step; :class:`~switchobs_core.runtime.transition.Transition`)."""
         self._phi.hold(E)
 
-    @property
-    def cache(self) -> ZOHCache:
-        """The ZOH step cache (``hits``, ``misses``)."""
-        return self._cache
+    cache: ZOHCache = property(lambda self: self._cache, doc="The ZOH step cache (``hits``, ``misses``).")
 
     # ------------------------------------------------------------------ the family's context
     def _register(self, key: Any, M: np.ndarray, L: np.ndarray | None = None, B: np.ndarray | None = None, *,
@@ -593,7 +593,7 @@ class SwitchedObserver:
         step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
         exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
         if self._tracker is None or self.e0 is None:    # Kalman gains (the envelope is the LMI gains'), no e0
-            return Envelope(z=np.full(self.N, NOT_APPLICABLE), paper_bound=NOT_APPLICABLE,
+            return Envelope(z=self._na.copy(), paper_bound=NOT_APPLICABLE,
                             exact_bound=exact, t=float(t), noise_bound=noisy)
         z = self._tracker.z(float(t))
         return Envelope(z=z, paper_bound=float(self.alpha * z.sum()), exact_bound=exact, t=float(t),

@@ -33,7 +33,32 @@ solver's and the rows' errors; the residual, ``R' r`` and the weights' rounding 
           + \\frac{\\Delta \\|x_c\\| + \\sqrt{m} + \\epsilon_y + d_w}{s}
 
 where ``epsilon_y`` is the weighted data's rounding and ``d_w`` the hook for a declared bounded
-disturbance (the norm of its weighted image over the window; 0 when none is declared). The
+disturbance (the norm of its weighted image over the window; 0 when none is declared).
+
+A declared clock tolerance ``d`` (:attr:`DataWindow.clock`: every sample was taken at ``t_i +
+delta_i``, ``|delta_i| <= d``, not at its stamp ``t_i``) adds to each weighted row the error
+``R_i (e^{A delta_i} - I) x(t)`` (the exact row commutes with ``e^{A delta_i}``). With
+``e^{A delta} - I = A delta + E_2``, ``||E_2|| <= c_2 = e^{nu(A) d} - 1 - nu(A) d``, and ``x(t) = x_c +
+z``, it is at most ``a_i + b_i ||z||``:
+
+.. math::
+
+    a_i = d |R_i A x_c| + (d \\delta_i \\nu + (\\|R_i\\| + \\delta_i) c_2) \\|x_c\\|, \\qquad
+    b_i = d (\\|R_i A\\| + \\delta_i \\nu) + (\\|R_i\\| + \\delta_i) c_2
+
+(``delta_i`` the row's distance to the exact row, the products' rounding added to ``a_i`` and
+``||R_i A||``). So the bound above gains ``(||a|| + ||b|| ||z||) / s`` and, solved for ``||z||``
+(``||b|| < s``),
+
+.. math::
+
+    \\|z\\| \\le \\frac{\\rho_0 + \\|a\\| / s}{1 - \\|b\\| / s}
+
+with ``rho_0`` the bound without it. ``a`` is first order in ``d`` times the state's rate seen by
+each row (``R_i A x_c``), so a body at rest costs little. A window whose rows a clock error of ``d``
+could move by as much as they fix the state (``||b|| >= s``) certifies nothing. The residual and
+row-by-row tests allow the same term. A constant offset of every stamp is invisible in the data
+(the samples of ``x(t + delta)`` fit the model exactly): only this term covers it. The
 observer's error at ``t`` is then at most ``||x_hat(t) - x_c|| + ||z||``: a ball that the observer's
 rigorous ellipsoids restart from (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.recertify`)
 and propagate with their usual steps.
@@ -140,6 +165,8 @@ class DataWindow:
     window is refused); ``w.clear()`` after any alarm. Samples older than ``keep * span`` are
     dropped. ``disturbance`` (optional): ``(t_i - t, rows) -> bound`` of the weighted disturbance
     image of a row block, summed in quadrature into ``d_w`` (the hook of the module docstring).
+    ``clock``: the declared clock tolerance ``d`` in seconds (module docstring; 0: exact stamps),
+    read at each :meth:`certificate`; with a declared disturbance too, no certificate is given.
     """
 
     def __init__(self, A: np.ndarray, span: float, *, keep: float = 1.25, cache: int = 64,
@@ -149,6 +176,7 @@ class DataWindow:
         self.span = float(span)
         self.keep = float(keep)
         self.disturbance = disturbance
+        self.clock = 0.0
         self._nA = nu(self.A)
         self._cache: dict[int, tuple[np.ndarray, float, float]] = {}
         self._cache_size = int(cache)
@@ -224,6 +252,25 @@ class DataWindow:
             self.R, self.y, self.delta = self.R[keep], self.y[keep], self.delta[keep]
             self.ey, self.t_row, self.ch_row = self.ey[keep], self.t_row[keep], self.ch_row[keep]
 
+    def _clock_rows(self, R: np.ndarray, x_c: np.ndarray, xn: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(a, b)`` of the module docstring (zeros when no clock tolerance is declared): the
+        weighted stamp error of row ``i`` is at most ``a_i + b_i ||x(t) - x_c||``, rounding included."""
+        m = R.shape[0]
+        if not self.clock:
+            return np.zeros(m), np.zeros(m)
+        d, nA = float(self.clock), self._nA
+        c2 = max(math.expm1(nA * d * _UP) - nA * d, 0.0) * _UP + 4.0 * _U * nA * d
+        absA = np.abs(self.A)
+        RA = R @ self.A
+        # |fl(fl(R A) x_c) - R A x_c| <= gamma_{2n} |R| |A| |x_c|; ||fl(R A)_i - (R A)_i|| <= gamma_n ||R_i|| nu
+        g = gamma(2 * self.n + 2)
+        rax = np.abs(RA @ x_c) + g * (np.abs(R) @ (absA @ np.abs(x_c)))
+        rows = np.sqrt(np.einsum("ij,ij->i", R, R)) * (1.0 + gamma(self.n + 2))
+        ra = np.sqrt(np.einsum("ij,ij->i", RA, RA)) * (1.0 + gamma(self.n + 2)) + gamma(self.n) * rows * nA
+        a = (d * rax + (d * self.delta * nA + (rows + self.delta) * c2) * xn) * _UP * _UP
+        b = (d * (ra + self.delta * nA) + (rows + self.delta) * c2) * _UP * _UP
+        return a, b
+
     def ready(self, channels: Sequence[int]) -> bool:
         """Whether the window spans ``span`` seconds and holds a sample of every channel in ``channels``."""
         if self.t is None or not self.t_row.size or self.t - self.t_row[0] < self.span * (1.0 - 1e-9):
@@ -234,6 +281,10 @@ class DataWindow:
         """The certificate of the module docstring (None: not :meth:`ready`, not of full rank, or
         refused by the residual test, counted in ``refused`` with ``last_refusal``)."""
         if not self.ready(channels) or self.t < self._quiet_until:
+            return None
+        if self.clock and self.disturbance is not None:
+            self.last_refusal = ("a declared clock tolerance with a declared disturbance: the window's stamp "
+                                 "errors are not bounded with the disturbance's reach (no certificate)")
             return None
         R, yw = self.R, self.y
         m, n = R.shape
@@ -273,18 +324,29 @@ class DataWindow:
             xn = _norm(x_c)
             root_m = math.sqrt(m) * _UP
             radius = ((Rtr_n + Delta * (rn + er)) / (s * s) + (Delta * xn + root_m + ey + dw) / s) * _UP * _UP
-            # the window's data against the model: the least weighted residual is at most ||v_w||
+            a, b = self._clock_rows(R, x_c, xn)
+            na, nb = _norm(a), _norm(b)
+            if nb:
+                q = nb / s * _UP
+                if not q < 1.0:
+                    self.last_refusal = (f"window [{self.t_row[0]:.6g}, {self.t:.6g}] s: a stamp error of the declared "
+                                         f"clock tolerance moves its rows as much as they fix the state ({q:.3g})")
+                    return None
+                radius = (radius + na / s * _UP) / ((1.0 - q) / _UP) * _UP
+            clock = (na + nb * radius) * _UP
+            # the window's data against the model: the least weighted residual is at most ||v_w|| (and
+            # the stamps' errors)
             least = (rn - er - Delta * xn) / _UP
-            if least > root_m + ey + dw:
+            if least > root_m + ey + dw + clock:
                 self.refused += 1
                 self.last_refusal = (f"window [{self.t_row[0]:.6g}, {self.t:.6g}] s refused: weighted residual "
-                                     f"{least:.4g} > {root_m + ey + dw:.4g} (the data do not fit the model within "
-                                     "noise_max)")
+                                     f"{least:.4g} > {root_m + ey + dw + clock:.4g} (the data do not fit the model "
+                                     "within noise_max)")
                 return None
             # the same row by row (the sharp test): some state must explain every row within its own
             # allowance; a drift the norm over the window averages out (a manoeuvre seen for part of
             # the window) does not fit any
-            tol = (1.0 + self.ey + dws + self.delta * (xn + radius)) * _UP
+            tol = (1.0 + self.ey + dws + self.delta * (xn + radius) + a + b * radius) * _UP
             worst = chebyshev(R, r, tol)
             if worst > 1.0 + CHEBYSHEV_SLACK:
                 self.refused += 1

@@ -5,7 +5,12 @@ estimator's screening, :mod:`switchobs_core.sim.faults`):
 
 ``before(t, channel, rows, y)``
     the CUSUM of :mod:`switchobs_core.runtime.bias` on the sample's normalised innovations against
-    the prior; returns the alarm's text (the caller withdraws the bounds) or "".
+    the prior; returns the alarm's text (the caller withdraws the bounds) or "". It needs the
+    observer's covariance (a Kalman table, or any family given a noise model): the innovations
+    carry the estimate's error ``C e`` as well as the noise, and only the covariance says how large
+    it is (fixed gains without one: their transients, after a start or each unseen stretch of a
+    channel, are many times the noise and alarmed at once). Without one the test is off
+    (``bias_off`` says why).
 ``after(t, channel, rows, y, valid)``
     once the sample is taken: while the caller's bounds are withdrawn (``valid`` False), the
     sample joins the window of :mod:`switchobs_core.runtime.recertify` (cleared at the withdrawal,
@@ -148,7 +153,10 @@ class Recovery:
         can = recertify and self.vmax is not None and (all(v > 0 for v in self.vmax) or self.noise_free)
         self.window = (DataWindow(observer.A, cycle_span(observer) if span is None else span, keep=1.0,
                                   disturbance=window_disturbance(observer)) if can else None)
-        self.bias = BiasDetector(observer.p, k_ref, h) if bias else None
+        #: Why the bias test is off although asked for ("" when it runs or was not asked for).
+        self.bias_off = ("no covariance of the estimate (give the observer a noise model): the innovations' "
+                         "spread is unknown" if bias and getattr(observer, "P", None) is None else "")
+        self.bias = BiasDetector(observer.p, k_ref, h) if bias and not self.bias_off else None
         self.reinit = bool(reinit)
         self.starve = int(starve)
         self.labels = labels
@@ -177,8 +185,6 @@ class Recovery:
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
                 if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
                     sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread
-            elif self.vmax is not None:
-                sd = np.full(nu.size, self.vmax[channel - 1] / 3.0)
             else:
                 return ""
             s = nu / sd
@@ -218,6 +224,7 @@ class Recovery:
             w.clear()
             self._valid = False
         w.add(t, output_rows(self.C[channel - 1], rows), y, self._allowance(y, channel), channel)
+        w.clock = float(getattr(getattr(self.obs, "rounding", None), "tolerance", 0.0) or 0.0)
         cert = w.certificate(range(1, self.N + 1))
         if cert is None:
             return None

@@ -176,7 +176,8 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
              rate: float | None = None, noise_std: float = 0.0, process_noise: Any = 0.0,
              seed: int = 0, mode: str | None = None, dt_out: float = 0.01,
              u: Any = None, e0: float | None = None, t0: float | None = None,
-             hold: str = "innovation", noise_max: Any = None, progress: bool | None = False) -> SimulationResult:
+             hold: str = "innovation", noise_max: Any = None, progress: bool | None = False,
+             bound: str = "ellipsoid") -> SimulationResult:
     """Simulate plant and switched observer exactly (e:system, e:switched_observer).
 
     ``res = simulate(system, table, schedule, x0, xhat0, t_end, rate=None)``
@@ -221,6 +222,9 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
         ``noise_bound`` (innovation hold and the Kalman families).
     progress : bool or None
         A progress bar on stderr over the simulated samples (None: on a terminal only; default off).
+    bound : {"ellipsoid", "phase"}
+        The form of the observer's rigorous bounds (sampled outputs;
+        :mod:`switchobs_core.runtime.bound_option`: ``"phase"`` for a Kalman table, cheaper and looser).
 
     Returns
     -------
@@ -270,7 +274,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
                               "(--rate HZ, --hold innovation)")
     if rate is not None or not paper_gains(family_of_table(table)):
         return _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode, u,
-                        e0, noise_max, hold, progress)
+                        e0, noise_max, hold, progress, bound)
     mode, designs = designs_for(table, schedule, mode)
     segments = schedule_segments(schedule, designs, t_end)
     T_o = [system.decomposition(i + 1).T_o for i in range(N)]
@@ -294,7 +298,7 @@ def simulate(system: Any, table: Any, schedule: Any, x0: Any, xhat0: Any, t_end:
 
 
 def _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, process_noise, seed, mode, u, e0,
-             noise_max, hold, progress=False) -> SimulationResult:
+             noise_max, hold, progress=False, bound="ellipsoid") -> SimulationResult:
     """Sampled outputs through :class:`SwitchedObserver` itself, the code the node runs (module docstring).
 
     With innovation hold and the Kalman families the plant is :class:`Plant` with ``extended=True``
@@ -316,7 +320,8 @@ def _sampled(system, table, schedule, x0, xhat0, t0, t_end, rate, noise_std, pro
     if not paper_gains(family_of_table(table)):
         hold = "innovation"         # a Kalman family corrects at the sample: there is nothing to hold
     held = hold == "measurement"
-    obs = SwitchedObserver(system, table, mode, cycles, x0=xhat0, t0=t0, e0=e0, noise_max=noise_max, hold=hold)
+    obs = SwitchedObserver(system, table, mode, cycles, x0=xhat0, t0=t0, e0=e0, noise_max=noise_max, hold=hold,
+                           bound=bound)
     plant = Plant(system, x0, seed=seed, process_noise=process_noise, t0=t0, extended=not held)
     vmax = None if noise_max is None else np.broadcast_to(np.asarray(noise_max, dtype=float), (system.N,))
     K = int(math.floor((t_end - t0) * rate + 1e-9))

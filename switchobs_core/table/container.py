@@ -1,7 +1,7 @@
 """The binary gain-table container: a ``.npz`` file holding the JSON header and the Kalman arrays.
 
 A gain table (:mod:`switchobs_core.table.gains`) is written as JSON text, or, when its file name ends in ``.npz``, as
-an uncompressed numpy ``.npz`` archive (``format_version = 3``) with the members
+an uncompressed numpy ``.npz`` archive (``format_version = 4``; version 3 is still read) with the members
 
 * ``header``: the UTF-8 JSON of the table's payload (the JSON format's keys, the same format
   name and checks), in which the large matrices of every Kalman design are replaced by
@@ -12,10 +12,21 @@ an uncompressed numpy ``.npz`` archive (``format_version = 3``) with the members
   flattened (row-major) one after the other, their column counts listed in the header
   (``K_cols``); and ``k{i}_E``, the period's error transition (n x n).
 
-All arrays are float64, little-endian. The header's ``payload_sha256`` is the SHA-256 of the
-canonical JSON of the header without it, followed by every array (name, dtype, shape, bytes, in
-name order): an edited or truncated file is refused in one line, as a JSON table is. Floats are
-stored as their 8 bytes, so a table round-trips bit for bit.
+All arrays are float64, little-endian. Floats are stored as their 8 bytes, so a table round-trips
+bit for bit.
+
+What is verified when. The header's ``payload_sha256`` is the SHA-256 of the canonical JSON of the
+header without it, followed by every array the load reads whole (name, dtype, shape, bytes, in name
+order). In version 3 that is every array: loading reads and hashes the whole file, and an edited
+or truncated file is refused in one line, as a JSON table is. In version 4 it is every array but the
+priors ``k{i}_{s}_P``: the header lists, per segment, one SHA-256 per phase (``P_sha256``, covered by
+``payload_sha256``), and a phase's prior is read from the file and verified against its own digest
+the first time it is used (:mod:`switchobs_core.table.rows`; a mismatch raises
+:class:`~switchobs_core.exceptions.GainTableError` naming the phase and the numbers are never used).
+So at load a version-4 table has its header, gains ``K``, error transitions ``E`` and the shape of
+every member checked; the gains and transitions are all the load-time re-verification
+(:mod:`switchobs_core.table.check`) reads, so a table whose gains do not converge is refused at load
+either way. Every number the software uses has been verified before its first use.
 
 Size limit. Before reading an array, the file's size is checked against
 :func:`size_limit`: ``MAX_FILE_BYTES`` (16 MiB, for the header and the LMI part) plus, per
@@ -25,14 +36,18 @@ agents (n = 4 (M + 1), p = 4) that is about 4 n^2 = 64 (M + 1)^2 bytes per phase
 phase at M = 32, 5.9 KiB at M = 8. Every member, stored or compressed, is read only after its
 ``.npy`` header was checked against the member's size (the bytes the header claims must be the
 bytes the member holds): a header claiming 2^33 doubles is refused before anything is allocated.
+The header member itself is at most ``MAX_FILE_BYTES``; a version-4 header takes 68 bytes a phase
+more than version 3 (the phase's digest), 0.23 MiB for the 3 525 phases of the 32-agent table.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
 import os
+import re
 import stat
 import struct
 import zipfile
@@ -44,17 +59,25 @@ import numpy as np
 
 from ..exceptions import GainTableError
 from ..loading import MAX_FILE_BYTES, parse_json
+from .rows import LazyRows, OpenFile, row_digest
 
-__all__ = ["MAGIC", "BINARY_VERSION", "MAX_BINARY_BYTES", "is_binary", "size_limit", "encode", "decode", "jsonable",
-           "packed_size", "unpack_symmetric", "PackedRows"]
+__all__ = ["MAGIC", "BINARY_VERSION", "READ_VERSIONS", "MAX_BINARY_BYTES", "is_binary", "size_limit", "encode",
+           "decode", "jsonable", "packed_size", "unpack_symmetric", "PackedRows"]
 
 #: The first bytes of a zip archive (an ``.npz`` file).
 MAGIC = b"PK\x03\x04"
-#: ``format_version`` of the binary container.
-BINARY_VERSION = 3
+#: ``format_version`` of the binary container written (priors verified per phase on first use).
+BINARY_VERSION = 4
+#: Versions of the binary container read (3: every array verified at load).
+READ_VERSIONS = (3, 4)
 #: Largest binary table read (bytes), whatever its header says.
 MAX_BINARY_BYTES = 4 * 1024 ** 3
 _SEGMENTS = ("periodic", "startup")
+
+
+def _lazy(header: dict[str, Any], name: str) -> bool:
+    """Whether array ``name`` of a container with ``header`` is verified per row on first use, not at load."""
+    return header.get("format_version") == 4 and name.endswith("_P")
 
 
 class PackedRows(Sequence):
@@ -75,7 +98,7 @@ def jsonable(obj: Any) -> Any:
     """``json.dumps`` hook: an array as nested lists (the same doubles); packed priors unpacked."""
     if isinstance(obj, np.ndarray):
         return obj.tolist()
-    if isinstance(obj, PackedRows):
+    if isinstance(obj, (PackedRows, LazyRows)):
         return [unpack_symmetric(row, obj.n).tolist() for row in obj.packed]
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
@@ -106,13 +129,23 @@ def packed_size(m: int) -> int:
     return n
 
 
+@functools.lru_cache(maxsize=8)
+def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n)`` and the same entries' flat indices in the transpose (read-only, per n)."""
+    i, j = np.triu_indices(n)
+    flat, flat_t = i * n + j, j * n + i
+    flat.setflags(write=False)
+    flat_t.setflags(write=False)
+    return flat, flat_t
+
+
 def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
     """The symmetric (n, n) matrix of a packed upper triangle (row-major, ``np.triu_indices`` order)."""
-    P = np.empty((n, n))
-    iu = np.triu_indices(n)
-    P[iu] = packed
-    P.T[iu] = packed
-    return P
+    P = np.empty(n * n)
+    flat, flat_t = _triu(n)
+    P[flat] = packed
+    P[flat_t] = packed
+    return P.reshape(n, n)
 
 
 def _header_hash(header: dict[str, Any]) -> Any:
@@ -126,17 +159,31 @@ def _hash_array(h: Any, name: str, a: np.ndarray) -> None:
 
 
 def _digest(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
-    """``payload_sha256``: the header's canonical JSON, then every array (name, dtype, shape, bytes) in name order."""
+    """``payload_sha256``: the header's canonical JSON, then every array read at load (name, dtype, shape,
+    bytes) in name order (version 4: all but the priors, which have one digest per row in the header)."""
     h = _header_hash(header)
     for name in sorted(arrays):
-        _hash_array(h, name, arrays[name])
+        if not _lazy(header, name):
+            _hash_array(h, name, arrays[name])
     return h.hexdigest()
 
 
-def encode(payload: dict[str, Any], fh: BinaryIO) -> None:
-    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring); ``payload`` is
-    not modified."""
-    header = dict(payload, format_version=BINARY_VERSION, container="npz")
+def _packed(Ps: Any, iu: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The priors of a segment as packed upper triangles, one row per phase."""
+    if isinstance(Ps, (PackedRows, LazyRows)):
+        return Ps.packed
+    packed = np.empty((len(Ps), iu[0].size))
+    for k, P in enumerate(Ps):
+        packed[k] = np.asarray(P, dtype=float)[iu]
+    return packed
+
+
+def encode(payload: dict[str, Any], fh: BinaryIO, *, version: int = BINARY_VERSION) -> None:
+    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring; ``version`` 3 or 4);
+    ``payload`` is not modified."""
+    if version not in READ_VERSIONS:
+        raise ValueError(f"binary container version {version} (written: {', '.join(map(str, READ_VERSIONS))})")
+    header = dict(payload, format_version=version, container="npz")
     arrays: dict[str, np.ndarray] = {}
     n = int(payload["system"]["n"])
     iu = np.triu_indices(n)
@@ -147,16 +194,13 @@ def encode(payload: dict[str, Any], fh: BinaryIO) -> None:
             ph = dict(d[seg])
             Ps = ph.pop("P_prior")
             Ks = [np.asarray(K, dtype=float).reshape(n, -1) for K in ph.pop("K")]
-            if isinstance(Ps, PackedRows):
-                packed = Ps.packed
-            else:
-                packed = np.empty((len(Ps), iu[0].size))
-                for k, P in enumerate(Ps):
-                    packed[k] = np.asarray(P, dtype=float)[iu]
-            arrays[f"k{i}_{seg}_P"] = packed
+            name = f"k{i}_{seg}_P"
+            packed = arrays[name] = _packed(Ps, iu)
             arrays[f"k{i}_{seg}_K"] = np.concatenate([K.ravel() for K in Ks]) if Ks else np.zeros(0)
-            ph.update(P_prior={"$array": f"k{i}_{seg}_P"}, K={"$array": f"k{i}_{seg}_K"},
+            ph.update(P_prior={"$array": name}, K={"$array": f"k{i}_{seg}_K"},
                       K_cols=[int(K.shape[1]) for K in Ks])
+            if _lazy(header, name):
+                ph["P_sha256"] = [row_digest(name, k, row, packed.shape[1]) for k, row in enumerate(packed)]
             d[seg] = ph
         arrays[f"k{i}_E"] = np.asarray(d.pop("error_transition"), dtype=float)
         d["error_transition"] = {"$array": f"k{i}_E"}
@@ -177,7 +221,9 @@ def _refused(source: str, why: str) -> GainTableError:
 
 def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
     """The checked payload of a binary table (the JSON format's dict, with arrays where it has
-    matrices: the priors as packed upper triangles, the gains, the error transition).
+    matrices: the priors as packed upper triangles, the gains, the error transition). In a version-4
+    file the priors are :class:`~switchobs_core.table.rows.LazyRows`: read and verified per phase on
+    first use, from the file handle opened here (module docstring).
 
     Raises
     ------
@@ -187,11 +233,26 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
     """
     source = str(path) if source is None else source
     try:
-        size = os.stat(path).st_size
+        fh = open(path, "rb")       # kept open by the lazily read rows of a version-4 file
+    except OSError as err:
+        raise _refused(source, str(err) or type(err).__name__) from None
+    keep = False
+    try:
+        payload, keep = _decode(fh, source)
+        return payload
+    finally:
+        if not keep:
+            fh.close()
+
+
+def _decode(fh: BinaryIO, source: str) -> tuple[dict[str, Any], bool]:
+    """:func:`decode` from the open file ``fh``; and whether rows read later need ``fh`` open."""
+    try:
+        size = os.fstat(fh.fileno()).st_size
         if size > MAX_BINARY_BYTES:
             raise GainTableError(f"gain table {source} is {size / 2**20:.1f} MiB, larger than "
                                  f"{MAX_BINARY_BYTES / 2**20:.0f} MiB, the limit for any binary table")
-        zf = zipfile.ZipFile(path)
+        zf = zipfile.ZipFile(fh)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as err:
         raise _refused(source, str(err) or type(err).__name__) from None
     with zf:
@@ -207,7 +268,7 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
         except (zipfile.BadZipFile, OSError, ValueError, EOFError, UnicodeDecodeError) as err:
             raise _refused(source, f"header: {err}") from None
         header = parse_json(text, exc=GainTableError, source=source)
-        if not isinstance(header, dict) or header.get("format_version") != BINARY_VERSION:
+        if not isinstance(header, dict) or header.get("format_version") not in READ_VERSIONS:
             raise _refused(source, f"format version {header.get('format_version')!r} in a binary container"
                            if isinstance(header, dict) else "header is not an object")
         refs = _array_refs(header, source)
@@ -221,7 +282,8 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
             raise GainTableError(f"{source}: the checksum (payload_sha256) is missing: the file was not written by "
                                  "switchobs or was edited; design it again")
         h = _header_hash(header)
-        arrays: dict[str, np.ndarray] = {}
+        file = OpenFile(fh)
+        arrays: dict[str, Any] = {}
         nonfinite: list[str] = []
         for name in sorted(refs["shapes"]):             # the checksum's order
             shape = refs["shapes"][name]
@@ -230,6 +292,9 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
             if zi is None or zi.file_size > want + 4096:
                 raise _refused(source, f"array {name} missing or larger than its {want} bytes")
             try:
+                if _lazy(header, name):
+                    arrays[name] = _lazy_member(zf, zi, name, shape, refs["digests"][name], n, source, file)
+                    continue
                 a, finite = _read_member(zf, zi, name, shape, h)
             except _WrongArray as err:
                 raise _refused(source, f"array {name} is {err}, not float64 {shape}") from None
@@ -242,7 +307,31 @@ def decode(path: str | Path, *, source: str | None = None) -> dict[str, Any]:
         raise GainTableError(f"{source}: checksum mismatch: the file was modified or corrupted after it was written")
     if nonfinite:
         raise GainTableError(f"{source}: non-finite number in {nonfinite[0]}")
-    return _inflate(header, arrays, n)
+    return _inflate(header, arrays, n), any(isinstance(a, LazyRows) for a in arrays.values())
+
+
+def _lazy_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo, name: str, shape: tuple[int, ...],
+                 digests: list[str], n: int, source: str, file: OpenFile) -> LazyRows | np.ndarray:
+    """The rows of a member verified per row on first use: its ``.npy`` header checked now (as
+    :func:`_read_member` does), nothing of its data read. A compressed member (not what :func:`encode`
+    writes) is read whole and every row verified now."""
+    S, m = shape
+    if zi.compress_type != zipfile.ZIP_STORED or zf.fp is None:
+        a = _npy_from_bytes(zf.read(zi))
+        _expect(a.dtype, a.shape, shape)
+        for k in range(S):
+            if row_digest(name, k, a[k], m) != digests[k]:
+                raise GainTableError(f"{source}: phase {k} of {name}: checksum mismatch: the file was modified "
+                                     "or corrupted after it was written")
+        if not np.isfinite(a).all():
+            raise GainTableError(f"{source}: non-finite number in {name}")
+        return a
+    fh = zf.fp
+    start = _data_start(fh, zi)
+    fh.seek(start)
+    got, dtype, _ = _npy_header(fh, lambda: start + zi.file_size - fh.tell())
+    _expect(dtype, got, shape)
+    return LazyRows(file, fh.tell(), name, digests, m, n, source)
 
 
 class _WrongArray(ValueError):
@@ -268,12 +357,7 @@ def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo, name: str, shape: tup
         _hash_array(h, name, a)
         return a, bool(np.isfinite(a).all())
     fh = zf.fp
-    fh.seek(zi.header_offset)
-    head = fh.read(30)
-    if len(head) != 30 or head[:4] != b"PK\x03\x04":
-        raise ValueError("bad local header")
-    name_len, extra_len = struct.unpack("<HH", head[26:30])
-    start = zi.header_offset + 30 + name_len + extra_len
+    start = _data_start(fh, zi)
     fh.seek(start)
     got, dtype, count = _npy_header(fh, lambda: start + zi.file_size - fh.tell())
     _expect(dtype, got, shape)
@@ -289,6 +373,16 @@ def _read_member(zf: zipfile.ZipFile, zi: zipfile.ZipInfo, name: str, shape: tup
         h.update(part)
         finite = finite and bool(np.isfinite(a[lo:lo + step]).all())
     return a.reshape(got), finite
+
+
+def _data_start(fh: BinaryIO, zi: zipfile.ZipInfo) -> int:
+    """The offset in the archive of a stored member's first byte (after its local header)."""
+    fh.seek(zi.header_offset)
+    head = fh.read(30)
+    if len(head) != 30 or head[:4] != b"PK\x03\x04":
+        raise ValueError("bad local header")
+    name_len, extra_len = struct.unpack("<HH", head[26:30])
+    return zi.header_offset + 30 + name_len + extra_len
 
 
 def _expect(dtype: np.dtype, got: tuple[int, ...], shape: tuple[int, ...]) -> None:
@@ -334,6 +428,7 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
         if not (1 <= n <= 100_000 and 1 <= p_max <= 100_000):
             raise ValueError("n or p out of range")
         shapes: dict[str, tuple[int, ...]] = {}
+        digests: dict[str, list[str]] = {}
         phases = 0
         for i, d in enumerate(header.get("kalman", [])):
             for seg in _SEGMENTS:
@@ -344,11 +439,23 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
                     raise ValueError(f"kalman[{i}].{seg}.K_cols")
                 phases += S
                 shapes[f"k{i}_{seg}_P"] = (S, n * (n + 1) // 2)
+                if _lazy(header, f"k{i}_{seg}_P"):
+                    dg = ph["P_sha256"]
+                    if not (isinstance(dg, list) and len(dg) == S and all(_is_sha256(x) for x in dg)):
+                        raise ValueError(f"kalman[{i}].{seg}.P_sha256")
+                    digests[f"k{i}_{seg}_P"] = dg
                 shapes[f"k{i}_{seg}_K"] = (n * sum(cols),)
             shapes[f"k{i}_E"] = (n, n)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise _refused(source, f"header: bad or missing {err}") from None
-    return {"n": n, "p_max": p_max, "phases": phases, "shapes": shapes}
+    return {"n": n, "p_max": p_max, "phases": phases, "shapes": shapes, "digests": digests}
+
+
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+def _is_sha256(x: Any) -> bool:
+    return isinstance(x, str) and _SHA256.fullmatch(x) is not None
 
 
 def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> dict[str, Any]:
@@ -360,13 +467,14 @@ def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> d
         d = dict(d)
         for seg in _SEGMENTS:
             ph = dict(d[seg])
-            packed = arrays[f"k{i}_{seg}_P"]      # rows stay packed: KalmanPhase unpacks on use
+            packed = arrays[f"k{i}_{seg}_P"]      # rows stay packed (or unread): KalmanPhase unpacks on use
             flat = arrays[f"k{i}_{seg}_K"]
             Ks, off = [], 0
             for c in ph.pop("K_cols"):
                 Ks.append(flat[off:off + n * c].reshape(n, c))
                 off += n * c
-            ph.update(P_prior=PackedRows(packed, n), K=Ks)
+            ph.pop("P_sha256", None)
+            ph.update(P_prior=packed if isinstance(packed, LazyRows) else PackedRows(packed, n), K=Ks)
             d[seg] = ph
         d["error_transition"] = arrays[f"k{i}_E"]
         kalman.append(d)

@@ -40,6 +40,7 @@ from ..model.noise import NoiseModel
 from ..model.schedule import Cycle, common_rows
 from ..numerics.kalman_step import gain, joseph
 from .container import packed_size, unpack_symmetric
+from .rows import LazyRow
 
 __all__ = ["SamplePattern", "KalmanPhase", "Phase", "KalmanDesign"]
 
@@ -85,20 +86,24 @@ class KalmanPhase:
     """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain
     ``K``, and the ``rows`` of ``C_channel`` it measures (None: all; the common rows when blind).
 
-    The prior is given (``P_stored``) either as the (n, n) matrix or as its packed upper triangle
-    (what a binary table file holds, :mod:`switchobs_core.table.container`); :attr:`P_prior` is the matrix, unpacked
-    on first use (the same doubles), so loading a large table does not unpack every phase."""
+    The prior is given (``P_stored``) as the (n, n) matrix, as its packed upper triangle (what a binary
+    table file holds, :mod:`switchobs_core.table.container`), or as a row of a version-4 file not read yet
+    (:class:`~switchobs_core.table.rows.LazyRow`); :attr:`P_prior` is the matrix, read, verified and unpacked on
+    first use (the same doubles), so loading a large table neither reads nor unpacks every phase."""
 
     channel: int
     dt: float
-    P_stored: np.ndarray
+    P_stored: np.ndarray | LazyRow
     K: np.ndarray
     rows: tuple[int, ...] | None = None
 
     @property
     def P_prior(self) -> np.ndarray:
-        """The prior covariance ``P^-`` of this sample (n x n)."""
+        """The prior covariance ``P^-`` of this sample (n x n); raises
+        :class:`~switchobs_core.exceptions.GainTableError` when its stored row fails its checksum."""
         P = self.P_stored
+        if isinstance(P, LazyRow):
+            P = P.load()
         if P.ndim == 1:
             P = unpack_symmetric(P, self.K.shape[0])
             object.__setattr__(self, "P_stored", P)
@@ -139,8 +144,11 @@ def _phases_from_dict(d: dict[str, list]) -> list[KalmanPhase]:
         rows = d.get("rows") or [None] * len(d["channel"])
         out = []
         for c, dt, P, K, r in zip(d["channel"], d["dt"], d["P_prior"], d["K"], rows, strict=True):
-            P = np.asarray(P, dtype=float)
-            n = P.shape[0] if P.ndim == 2 else packed_size(P.size)
+            if isinstance(P, LazyRow):          # read and verified on first use
+                n = P.n
+            else:
+                P = np.asarray(P, dtype=float)
+                n = P.shape[0] if P.ndim == 2 else packed_size(P.size)
             out.append(KalmanPhase(int(c), float(dt), P, np.asarray(K, dtype=float).reshape(n, -1),
                                    None if r is None else tuple(int(i) for i in r)))
         return out

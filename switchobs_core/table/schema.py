@@ -72,8 +72,9 @@ class _Layout:
     def numbers(self, x: Any, where: str, size: int | None = None) -> list:
         if not isinstance(x, list) or (size is not None and len(x) != size):
             raise self.fail(where, "a list of numbers" + (f" of length {size}" if size is not None else ""))
-        for i, v in enumerate(x):
-            self.number(v, f"{where}[{i}]")
+        for i, v in enumerate(x):       # self.number inline: the name is formed only for a failure
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise self.fail(f"{where}[{i}]", "a number")
         return x
 
     def matrix(self, x: Any, where: str, rows: int, cols: int) -> None:

@@ -278,4 +278,19 @@ class KalmanTableGains(OnlineKalmanGains):
         xp = x + K @ nu
         self._last_k = k
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
-        return Correction(xp, (FusedMap(hit, dt, x0, x, xp, y, nu),))
+        return Correction(xp, (FusedMap(hit, dt, x0, x, xp, y, nu, -1 if startup else idx),))
+
+    def periodic_maps(self) -> list[KalmanMap]:
+        """The fused maps of the periodic phases at the design's step (the objects the locked path
+        uses for a sample on the grid). Raises InvalidArgument when a phase holds partial rows."""
+        kd, out = self.kalman, []
+        for idx, ent in enumerate(kd.periodic):
+            if ent.rows is not None:
+                raise InvalidArgument(f"the Kalman table's periodic phase {idx} holds partial rows")
+            fk = (False, idx, ent.channel, round(self._dtn * 1e9))
+            hit = self._fused.get(fk)
+            if hit is None:
+                hit = self._fused[fk] = KalmanMap(self._ctx.zoh(OPEN_LOOP, self._dtn), ent.K,
+                                                  self._ctx.C[ent.channel - 1], self._I)
+            out.append(hit)
+        return out

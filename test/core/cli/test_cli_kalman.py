@@ -123,3 +123,17 @@ def test_a_table_over_the_json_limit_is_written_as_npz_and_loads(tmp_path, capsy
     assert main(["design", "paper", "--cycle", "2,0.6", "--gains", "kalman", "--rate", "20", "-o", str(small)]) == 0
     cap = capsys.readouterr()
     assert small.is_file() and "note:" not in cap.err and f"wrote {small}" in cap.out
+
+
+def test_simulate_with_the_phase_bound(ktable, capsys):
+    """``--bound phase``: the same estimates, the noise bound never below the error, looser than the
+    ellipsoid's within 20x once on the table's periodic grid."""
+    out = {}
+    for bound in ("ellipsoid", "phase"):
+        assert main(["simulate", "paper", "--table", str(ktable), "--schedule", "periodic:2,0.6", "--rate", "50",
+                     "--t-end", "20", "--noise", "0.001", "--noise-max", "0.003", "--bound", bound, "--json"]) == 0
+        out[bound] = json.loads(capsys.readouterr().out)
+    e, p = out["ellipsoid"], out["phase"]
+    assert p["cycle_end_errors"] == e["cycle_end_errors"]
+    assert p["noise_bound_violations"] == 0 == e["noise_bound_violations"]
+    assert e["final_noise_bound"] < p["final_noise_bound"] < 20 * e["final_noise_bound"]

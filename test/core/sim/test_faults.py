@@ -55,3 +55,24 @@ def test_without_e0_the_first_bound_comes_after_one_cycle_and_holds(setup):
     assert not run.valid[run.t < CYC.tau].any()
     assert run.first_bound_after(0.0) == pytest.approx(CYC.tau, abs=0.03)
     assert run.valid_fraction(3 * CYC.tau) >= 0.9
+
+
+def test_fixed_gains_run_the_bias_test_only_with_a_covariance(paper, paper_table):
+    """LMI gains: the innovations carry the estimate's transients (after the start, after each unseen
+    stretch), many times the 1 mm noise. Without a covariance to say how large they are the bias
+    test is off (it alarmed at the first sample on noise alone); with a noise model it runs, and
+    neither run alarms or publishes a false bound."""
+    from switchobs_core.model.noise import NoiseModel
+    from switchobs_core.runtime.observer import SwitchedObserver
+    from switchobs_core.runtime.recovery import Recovery
+
+    sched = PeriodicSchedule(CYC)
+    nm = NoiseModel.for_system(paper, measurement_std=1e-3)
+    for noise in (None, nm):
+        obs = SwitchedObserver(paper, paper_table, "periodic", [CYC], x0=X0, e0=1.0, noise_max=0.003, noise=noise)
+        rec = Recovery(obs)
+        assert (rec.bias is None) == (noise is None)
+        assert ("no covariance" in rec.bias_off) == (noise is None)
+        run = run_with_faults(paper, paper_table, sched, X0, X0 + 0.05, 6.0, rate=50.0, noise_std=0.001,
+                              noise_max=0.003, e0=1.0, noise=noise)
+        assert run.alarms == [] and run.withdrawals == [] and run.false == 0

@@ -11,6 +11,8 @@ import zipfile
 import numpy as np
 import pytest
 from _binary_tables import lying_member
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
@@ -108,10 +110,32 @@ def _flip_last_double(name, b):
     return b[:-1] + bytes([b[-1] ^ 1])
 
 
+def _data_offset(path, member):
+    """Byte offset in the archive of the first number of a stored ``member`` (after its ``.npy`` header)."""
+    with zipfile.ZipFile(path) as z, open(path, "rb") as fh:
+        zi = z.getinfo(member)
+        fh.seek(zi.header_offset + 26)
+        name_len, extra_len = int.from_bytes(fh.read(2), "little"), int.from_bytes(fh.read(2), "little")
+        start = zi.header_offset + 30 + name_len + extra_len
+        fh.seek(start)
+        np.lib.format.read_magic(fh)
+        np.lib.format.read_array_header_1_0(fh)
+        return fh.tell()
+
+
+def _save_v3(table, path):
+    """The table written in version 3 of the container (every array verified at load)."""
+    from switchobs_core.table.io import table_payload
+    with open(path, "wb") as fh:
+        container.encode(table_payload(table), fh, version=3)
+    return path
+
+
 @pytest.mark.parametrize("how, match", [
     ("half", r"not a complete binary gain table \(File is not a zip file\)"),
     ("tail", r"not a complete binary gain table"),
     ("byte", r"checksum mismatch: the file was modified"),
+    ("byte_v3", r"checksum mismatch: the file was modified"),
     ("gain", r"checksum mismatch: the file was modified"),
     ("rate", r"checksum mismatch: the file was modified"),
     ("shape", r"array k0_periodic_P is float64 \(\d+, 77\), not float64 \(\d+, 78\)"),
@@ -122,7 +146,11 @@ def test_edited_or_truncated_refused_in_one_line(saved, tmp_path, how, match):
         bad = data[: len(data) // 2]
     elif how == "tail":
         bad = data[:-7]
-    elif how == "byte":     # a byte of a member changed in place (arrays are read past zip's CRC: the SHA-256)
+    elif how == "byte":     # a byte of a gain changed in place (arrays are read past zip's CRC: the SHA-256)
+        i = _data_offset(saved, "k0_periodic_K.npy") + 13
+        bad = data[:i] + bytes([data[i] ^ 0x10]) + data[i + 1:]
+    elif how == "byte_v3":  # a byte of a prior changed in place in a version-3 file: refused at load
+        data = _save_v3(GainTable.load(saved), tmp_path / "v3.npz").read_bytes()
         i = data.index(b"k0_periodic_P.npy") + 4096
         bad = data[:i] + bytes([data[i] ^ 0x10]) + data[i + 1:]
     elif how == "gain":     # a valid archive with one gain's last bit flipped
@@ -187,3 +215,85 @@ def test_a_member_header_that_lies_is_refused_before_allocating(saved, tmp_path,
     finally:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
     assert "\n" not in str(err.value)
+
+
+def _flip(path, at):
+    with open(path, "r+b") as fh:
+        fh.seek(at)
+        b = fh.read(1)
+        fh.seek(at)
+        fh.write(bytes([b[0] ^ 0x01]))
+
+
+@pytest.mark.parametrize("seg, k, byte", [("startup", 0, 0), ("startup", 3, 77), ("periodic", -1, 8 * 78 - 1)])
+@pytest.mark.parametrize("when", ["before_load", "after_load"])
+def test_a_flipped_prior_is_refused_at_its_first_use(table, saved, seg, k, byte, when):
+    """Version 4: loading reads no prior; a prior is read and checked against its own SHA-256 when
+    first used. One bit flipped in one phase's prior (in the file before it is loaded, or rewritten in
+    place after): every other phase gives the stored doubles bit for bit, that phase raises a
+    one-line GainTableError naming the file, array and phase, every time it is asked for, and its
+    numbers are never returned."""
+    c = CYCLES[0]
+    ref = table.kalman_design([c], PAPER)
+    phases = getattr(ref, seg)
+    k %= len(phases)
+    m = PAPER.n * (PAPER.n + 1) // 2
+    at = _data_offset(saved, f"k0_{seg}_P.npy") + 8 * m * k + byte
+    if when == "before_load":
+        _flip(saved, at)
+    loaded = GainTable.load(saved, system=PAPER)      # the gains are checked (table/check.py); no prior read
+    rows = loaded.kalman[0][seg]["P_prior"]
+    assert rows.verified() == 0
+    if when == "after_load":
+        _flip(saved, at)
+    kd = loaded.kalman_design([c], PAPER)
+    for j, (x, y) in enumerate(zip(phases, getattr(kd, seg), strict=True)):
+        assert x.K.tobytes() == y.K.tobytes()
+        if j != k:
+            assert x.P_prior.tobytes() == y.P_prior.tobytes()
+    for _ in range(2):
+        with pytest.raises(GainTableError, match=rf"{saved}: phase {k} of k0_{seg}_P: checksum mismatch") as err:
+            _ = getattr(kd, seg)[k].P_prior
+        assert "\n" not in str(err.value)
+    assert rows.verified() == len(phases) - 1
+
+
+def test_version_3_still_read_and_verified_whole(table, tmp_path):
+    """A version-3 file (every array in the one checksum) loads bit for bit, with every prior read at load."""
+    old = _save_v3(table, tmp_path / "v3.npz")
+    loaded = GainTable.load(old, system=PAPER)
+    assert loaded.to_json() == table.to_json()
+    segments = [d[s]["P_prior"] for d in loaded.kalman for s in ("periodic", "startup")]
+    assert all(isinstance(p, container.PackedRows) for p in segments)
+    with zipfile.ZipFile(old) as z:
+        assert json.loads(np.load(io.BytesIO(z.read("header.npy"))).tobytes())["format_version"] == 3
+    again = GainTable.load(loaded.save(tmp_path / "v4.npz"))     # written again: version 4, the same table
+    assert again.to_json() == table.to_json()
+
+
+@settings(max_examples=80, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(where=st.floats(0.0, 1.0, exclude_max=True), bit=st.integers(0, 7))
+def test_any_bit_flipped_never_gives_other_numbers(table, saved, tmp_path, where, bit):
+    """One bit flipped anywhere in a version-4 file: loading refuses it, or every gain and transition
+    is the stored one and every prior is the stored one or refused at its use (GainTableError).
+    No flip makes the table answer with numbers other than the ones written."""
+    data = bytearray(saved.read_bytes())
+    i = int(where * len(data))
+    data[i] ^= 1 << bit
+    p = tmp_path / "flipped.npz"
+    p.write_bytes(bytes(data))
+    try:
+        loaded = GainTable.load(p, system=PAPER)
+    except GainTableError:
+        return
+    for c in CYCLES:
+        a, b = table.kalman_design([c], PAPER), loaded.kalman_design([c], PAPER)
+        assert a.error_transition.tobytes() == b.error_transition.tobytes()
+        for x, y in zip(_phases(a), _phases(b), strict=True):
+            assert x.K.tobytes() == y.K.tobytes() and (x.channel, x.dt, x.rows) == (y.channel, y.dt, y.rows)
+            try:
+                P = y.P_prior
+            except GainTableError as err:
+                assert "checksum mismatch" in str(err)
+                continue
+            assert P.tobytes() == x.P_prior.tobytes()
