@@ -5,8 +5,9 @@
 point does (:func:`switchobs_ros.runner.run_node`), with cProfile enabled once the node is built
 (start-up and table loading left out), and writes the statistics to
 ``OUT.prof`` at exit (SIGINT). Read them with ``python -m pstats OUT.prof`` or
-:func:`summary`. cProfile adds its own cost to every Python call, so the totals are larger than
-the node's CPU without it; the shares are what it is for.
+:func:`summary`. The clock is the thread's CPU time (waits and descheduling do not count; the
+middleware's own threads are not seen). cProfile adds its own cost to every Python call, so the
+totals are larger than the node's CPU without it; the shares are what it is for.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import cProfile
 import os
 import pstats
 import sys
+import time
 from pathlib import Path
 
 #: The checkout whose estimator runs (``SWITCHOBS_PROFILE_REPO``; default: this one).
@@ -31,7 +33,7 @@ def main() -> int:
     from switchobs_ros.estimator import EstimatorNode
     from switchobs_ros.runner import run_node
 
-    prof = cProfile.Profile()
+    prof = cProfile.Profile(time.thread_time)      # CPU of the node's thread, not wall time
 
     class ProfiledEstimator(EstimatorNode):
         """The estimator, profiled from the end of its construction (start-up left out)."""
