@@ -31,14 +31,14 @@ class _Pub:
 def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     now = [0.0]
     pubs = [_Pub(), _Pub()]
-    d = Demand(lambda: pubs, period=0.1, period_no=0.02, clock=lambda: now[0])
-    assert not d.covariance_wanted() and not d.covariance_wanted()
+    d = Demand(lambda: list(zip(("odometry", "covariance"), pubs)), period=0.1, period_no=0.02, clock=lambda: now[0])
+    assert not d.covariance_wanted() and not d.covariance_wanted() and d.kinds == set()
     assert [p.asked for p in pubs] == [1, 1]              # a no is kept for period_no
     pubs[1].n = 1
     now[0] = 0.01
     assert not d.covariance_wanted()
     now[0] = 0.02
-    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2]
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2] and d.kinds == {"covariance"}
     pubs[1].n = 0
     now[0] = 0.07
     assert d.covariance_wanted()                          # a yes kept for the period
@@ -46,7 +46,7 @@ def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     assert not d.covariance_wanted()                      # then asked again
     pubs[0].n = 1
     d.expire()
-    assert d.covariance_wanted()
+    assert d.covariance_wanted() and d.kinds == {"odometry"}
 
 
 def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:

@@ -1,0 +1,208 @@
+"""Outputs published as serialised bytes: a message of fixed layout serialised once, its numeric
+fields written through numpy views onto those bytes.
+
+``Publisher.publish(msg)`` converts a Python message to its C form field by field (a property
+call per field, every string and array copied) and then serialises it; for one
+``nav_msgs/Odometry`` that is about 30 us of the 45 us a publish costs, and for ``~/covariance``
+the 440 KB label string and the n^2 doubles are converted at every publish. ``publish(bytes)``
+hands serialised bytes to the middleware as they are (rmw ``publish_serialized_message``). The
+writers here keep the serialised message of :mod:`msg_bridge.convert` /
+:mod:`msg_bridge.typed` and rewrite only the numbers that change, in place, with numpy
+assignments (no per-element Python); each publish then costs one ``bytes`` copy of the buffer.
+The bytes are those ``rclpy.serialization.serialize_message`` gives for the message the
+corresponding writer builds (test/bridge/test_raw.py compares them byte for byte).
+
+* :class:`RawMessage`: the serialised message and views of its stamp and float64 fields, found
+  by serialising sentinel values (little-endian CDR, as rmw_fastrtps writes it on x86 and ARM).
+* :class:`RawLabelledArrayWriter`: ``~/state``, ``~/envelope``, ``~/covariance``
+  (:func:`~msg_bridge.convert.labelled_array`).
+* :class:`RawOdometryBatch`: every body's ``nav_msgs/Odometry``
+  (:func:`~msg_bridge.convert.body_odometry`), covariance blocks from ``P``, in one buffer.
+
+A message whose size changes from one publish to the next (a string that changes, a sequence
+that is sometimes empty) has no fixed layout: those stay Python messages.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .convert import STAMP_PAD, Body, body_odometry, labelled_array
+
+__all__ = ["RawLabelledArrayWriter", "RawMessage", "RawOdometryBatch"]
+
+_NS = 1_000_000_000
+_STAMP_SENTINEL = (0x5A3C5A3D, 0x3A5A3C5B)      # (sec, nanosec): nanosec < 10^9
+
+
+def _resolve(msg: Any, path: str) -> tuple[Any, str]:
+    """The object that holds the last field of the dotted ``path``, and that field's name."""
+    *head, last = path.split(".")
+    for p in head:
+        msg = getattr(msg, p)
+    return msg, last
+
+
+def _find_once(blob: bytes, pattern: bytes, what: str) -> int:
+    i = blob.find(pattern)
+    if i < 0 or blob.find(pattern, i + 1) >= 0:
+        raise ValueError(f"raw message: the sentinel of {what} is not found exactly once in the serialised bytes")
+    return i
+
+
+class RawMessage:
+    """``msg`` serialised once, with writable numpy views of its stamp and float64 fields.
+
+    ``RawMessage(msg, stamp="header.stamp", doubles={"p": ("pose.pose.position.x", 3), "c":
+    ("pose.covariance", 36)})``: ``doubles`` maps a name to (the dotted path of a float64 field,
+    the number of consecutive float64 values from it: 1 for a scalar, more for consecutive
+    scalars such as ``position.x, .y, .z`` or an array). :attr:`f` holds the float64 views by
+    name; :meth:`stamp` writes the stamp; :meth:`bytes` is the message to publish. ``msg`` itself
+    is left as it was. Raises ValueError when a field cannot be located unambiguously or the
+    encoding is not little-endian CDR.
+    """
+
+    def __init__(self, msg: Any, stamp: str | None = None, doubles: Mapping[str, tuple[str, int]] | None = None):
+        from rclpy.serialization import serialize_message
+
+        doubles = dict(doubles or {})
+        base = serialize_message(msg)
+        if base[:2] != b"\x00\x01":
+            raise ValueError("raw message: not little-endian CDR")
+        undo = []                               # restores msg, last change first
+        sentinels = {}
+        try:                                    # serialise once more with a sentinel in each field
+            for k, (name, (path, count)) in enumerate(doubles.items()):
+                obj, field = _resolve(msg, path)
+                old = getattr(obj, field)
+                v = float.fromhex(f"0x1.{k + 1:03x}5a3c5a3c5ap-990")
+                if isinstance(old, float):      # a scalar (the first of ``count`` consecutive ones)
+                    undo.append(lambda o=obj, f=field, val=old: setattr(o, f, val))
+                    setattr(obj, field, v)
+                else:                           # an array: its first element (the rest follow it)
+                    undo.append(lambda a=old, val=float(old[0]): a.__setitem__(0, val))
+                    old[0] = v
+                sentinels[name] = (v, count)
+            if stamp is not None:
+                obj, field = _resolve(msg, stamp)
+                st = getattr(obj, field)
+                undo.append(lambda st=st, sec=st.sec, ns=st.nanosec: (setattr(st, "sec", sec),
+                                                                      setattr(st, "nanosec", ns)))
+                st.sec, st.nanosec = _STAMP_SENTINEL
+            marked = serialize_message(msg)
+        finally:
+            for restore in reversed(undo):
+                restore()
+        if len(marked) != len(base):
+            raise ValueError("raw message: the layout changed with the field values")
+        self._buf = self.buffer = bytearray(base)     # the serialised message, written through the views
+        self.f: dict[str, np.ndarray] = {}
+        self.offsets: dict[str, int] = {}       # byte offset of each field (the stamp's: "stamp")
+        for name, (v, count) in sentinels.items():
+            off = self.offsets[name] = _find_once(marked, struct.pack("<d", v), name)
+            if off + 8 * count > len(base):
+                raise ValueError(f"raw message: {name} runs past the end of the message")
+            self.f[name] = np.frombuffer(self._buf, dtype="<f8", count=count, offset=off)
+        self._stamp = None
+        if stamp is not None:
+            off = self.offsets["stamp"] = _find_once(marked, struct.pack("<iI", *_STAMP_SENTINEL), stamp)
+            self._stamp = np.frombuffer(self._buf, dtype="<i4", count=2, offset=off)
+
+    def stamp(self, stamp_ns: int) -> None:
+        """Write the header stamp (integer nanoseconds)."""
+        self._stamp[0], self._stamp[1] = divmod(int(stamp_ns), _NS)
+
+    def bytes(self) -> bytes:
+        """The serialised message as it is now (a copy: the caller may publish it while the views are rewritten)."""
+        return bytes(self._buf)
+
+
+class RawLabelledArrayWriter:
+    """:func:`~msg_bridge.convert.labelled_array` as serialised bytes: ``w.msg(values, stamp_ns)``
+    (``values`` a float64 array of the labels' length, written in one copy)."""
+
+    def __init__(self, labels: Sequence[str]):
+        labels = tuple(labels)
+        self.n = len(labels)
+        self._raw = RawMessage(labelled_array(np.zeros(self.n), labels, 0),
+                               doubles={"data": ("data", STAMP_PAD + self.n)})
+        self._data = self._raw.f["data"]
+
+    def msg(self, values: np.ndarray, stamp_ns: int) -> bytes:
+        d = self._data
+        d[0], d[1] = divmod(int(stamp_ns), _NS)
+        d[STAMP_PAD:] = values
+        return self._raw.bytes()
+
+
+class RawOdometryBatch:
+    """:func:`~msg_bridge.convert.body_odometry` of several bodies as serialised bytes:
+    ``w.msgs(x, stamp_ns, P=None)`` gives one message per body, in the order given.
+
+    The bodies' messages live in one buffer, each placed so that its float64 fields fall on one
+    8-byte grid; every estimate is then written with a few numpy calls for all the bodies at once
+    (positions and velocities from ``x``, the pose and twist covariance blocks of each body's
+    states from ``P``, the stamps), not a few per body. Without ``P`` every variance is
+    :data:`~msg_bridge.convert.UNESTIMATED_VARIANCE`, as :func:`~msg_bridge.convert.body_odometry`
+    writes it.
+    """
+
+    def __init__(self, bodies: Sequence[Body], frame_id: str, child_frame_ids: Sequence[str]):
+        self.bodies = tuple(bodies)
+        n = max((i for b in self.bodies for i in b.indices), default=-1) + 1
+        raws = [RawMessage(body_odometry(np.zeros(n), b, 0, frame_id, c), stamp="header.stamp", doubles={
+            "pos": ("pose.pose.position.x", 2), "vel": ("twist.twist.linear.x", 2),
+            "pc": ("pose.covariance", 36), "tc": ("twist.covariance", 36)})
+                for b, c in zip(self.bodies, child_frame_ids)]
+        spans, start = [], 0
+        for r in raws:                          # each message's doubles on the buffer's 8-byte grid
+            start += (-(start + r.offsets["pos"])) % 8
+            spans.append((start, start + len(r.buffer)))
+            start = spans[-1][1]
+        self._buf = bytearray(start + 8)
+        for (a, b), r in zip(spans, raws):
+            self._buf[a:b] = r.buffer
+        self._spans = tuple(spans)
+        self._mv = memoryview(self._buf)
+        self._f = np.frombuffer(self._buf, dtype="<f8", count=start // 8)
+        if any((a + r.offsets["stamp"]) % 4 for (a, _), r in zip(spans, raws)):
+            raise ValueError("raw odometry: a stamp is not on the 4-byte grid")
+        self._i = np.frombuffer(self._buf, dtype="<i4", count=start // 4)
+        x_dst, x_src, p_dst, p_src, cov = [], [], [], [], []
+        for (a, _), r, b in zip(spans, raws, self.bodies):
+            def at(name, k, a=a, r=r):          # the buffer's float64 index of element k of field name
+                return (a + r.offsets[name]) // 8 + k
+            for field, cov_field, pairs in (("pos", "pc", b.pose_pairs), ("vel", "tc", b.twist_pairs)):
+                for ax, i in pairs:
+                    x_dst.append(at(field, ax))
+                    x_src.append(i)
+                    for ax2, j in pairs:
+                        p_dst.append(at(cov_field, 6 * ax + ax2))
+                        p_src.append(i * n + j)
+                cov += range(at(cov_field, 0), at(cov_field, 36))
+        ip = np.intp
+        self._x_dst, self._x_src = np.array(x_dst, ip), np.array(x_src, ip)
+        self._p_dst, self._p_src, self._cov = np.array(p_dst, ip), np.array(p_src, ip), np.array(cov, ip)
+        self._unknown = self._f[self._cov].copy()       # the templates' covariances: P not known
+        self._sec = np.array([(a + r.offsets["stamp"]) // 4 for (a, _), r in zip(spans, raws)], ip)
+        self.n = n
+        self._has_P = False
+
+    def msgs(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> list[bytes]:
+        f = self._f
+        f[self._x_dst] = x[self._x_src]
+        if P is not None:
+            f[self._p_dst] = P.reshape(-1)[self._p_src]
+            self._has_P = True
+        elif self._has_P:                       # back to "not known"
+            f[self._cov] = self._unknown
+            self._has_P = False
+        sec, nsec = divmod(int(stamp_ns), _NS)
+        self._i[self._sec] = sec
+        self._i[self._sec + 1] = nsec
+        mv = self._mv
+        return [bytes(mv[a:b]) for a, b in self._spans]
