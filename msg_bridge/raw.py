@@ -33,84 +33,108 @@ import numpy as np
 
 from .convert import STAMP_PAD, Body, body_odometry, labelled_array
 
-__all__ = ["RawLabelledArrayWriter", "RawMessage", "RawOdometryBatch"]
+__all__ = ["DTYPES", "RawLabelledArrayWriter", "RawMessage", "RawOdometryBatch"]
 
 _NS = 1_000_000_000
-_STAMP_SENTINEL = (0x5A3C5A3D, 0x3A5A3C5B)      # (sec, nanosec): nanosec < 10^9
+#: numpy dtypes of the fields a :class:`RawMessage` can locate (little-endian CDR).
+DTYPES = ("<f8", "<f4", "<i4")
 
 
 def _resolve(msg: Any, path: str) -> tuple[Any, str]:
-    """The object that holds the last field of the dotted ``path``, and that field's name."""
+    """The object that holds the last field of the dotted ``path`` (``markers[3].points[0].x``:
+    indices allowed), and that field's name."""
     *head, last = path.split(".")
     for p in head:
-        msg = getattr(msg, p)
+        name, _, index = p.partition("[")
+        msg = getattr(msg, name)
+        if index:
+            msg = msg[int(index.rstrip("]"))]
     return msg, last
 
 
-def _find_once(blob: bytes, pattern: bytes, what: str) -> int:
-    i = blob.find(pattern)
-    if i < 0 or blob.find(pattern, i + 1) >= 0:
-        raise ValueError(f"raw message: the sentinel of {what} is not found exactly once in the serialised bytes")
-    return i
+def _sentinel(dtype: str, k: int, salt: int) -> tuple[float | int, bytes]:
+    """The ``k``-th sentinel value of a field of ``dtype`` (``salt`` 0 or 1: two distinct sets) and
+    its bytes. Sentinels of one dtype and salt share constant bits (a float64's low 32 bits, a
+    4-byte value's high 16), which :func:`_find_each_once` looks for first."""
+    if dtype == "<f8":
+        v = float.fromhex(f"0x1.{k + 1:04x}5a3c5a3c{5 + salt}p-990")
+        return v, struct.pack("<d", v)
+    if dtype == "<f4":
+        v = struct.unpack("<f", struct.pack("<I", (0x0D5A0000 | (salt << 20)) + k))[0]
+        return v, struct.pack("<f", v)
+    v = 0x5A3C0000 - (salt << 24) + k
+    return v, struct.pack("<i", v)
 
 
 class RawMessage:
-    """``msg`` serialised once, with writable numpy views of its stamp and float64 fields.
+    """``msg`` serialised once, with writable numpy views of chosen numeric fields.
 
-    ``RawMessage(msg, stamp="header.stamp", doubles={"p": ("pose.pose.position.x", 3), "c":
-    ("pose.covariance", 36)})``: ``doubles`` maps a name to (the dotted path of a float64 field,
-    the number of consecutive float64 values from it: 1 for a scalar, more for consecutive
-    scalars such as ``position.x, .y, .z`` or an array). :attr:`f` holds the float64 views by
-    name; :meth:`stamp` writes the stamp; :meth:`bytes` is the message to publish. ``msg`` itself
-    is left as it was. Raises ValueError when a field cannot be located unambiguously or the
-    encoding is not little-endian CDR.
+    ``RawMessage(msg, stamp="header.stamp", doubles={"p": ("pose.pose.position.x", 3)},
+    fields={"a": ("action", "<i4", 1)})``: ``fields`` maps a name to (the dotted path of a field,
+    its dtype in :data:`DTYPES`, the number of consecutive values of that dtype from it: 1 for a
+    scalar, more for consecutive scalars such as ``position.x, .y, .z`` or an array);
+    ``doubles`` is the same for float64 fields, ``(path, count)``; ``stamp`` the path of a
+    ``builtin_interfaces/Time`` (its view: name ``"stamp"``, ``sec`` and ``nanosec`` as int32).
+    :attr:`f` holds the views by name, :attr:`offsets` their byte offsets; :meth:`stamp` writes
+    the stamp; :meth:`bytes` is the message to publish. ``msg`` itself is left as it was.
+
+    Offsets are found by serialising the message twice with distinct sentinel values in the
+    fields (a sentinel must be found exactly once, at the same offset both times: CDR padding
+    bytes are not initialised, so a single pass could be fooled by what memory held). Raises
+    ValueError when a field cannot be located that way or the encoding is not little-endian CDR.
     """
 
-    def __init__(self, msg: Any, stamp: str | None = None, doubles: Mapping[str, tuple[str, int]] | None = None):
+    def __init__(self, msg: Any, stamp: str | None = None, doubles: Mapping[str, tuple[str, int]] | None = None,
+                 fields: Mapping[str, tuple[str, str, int]] | None = None):
         from rclpy.serialization import serialize_message
 
-        doubles = dict(doubles or {})
+        spec = {name: (path, "<f8", count) for name, (path, count) in (doubles or {}).items()}
+        spec.update(fields or {})
+        if stamp is not None:
+            spec["stamp"] = (f"{stamp}.sec", "<i4", 2)
         base = serialize_message(msg)
         if base[:2] != b"\x00\x01":
             raise ValueError("raw message: not little-endian CDR")
+        found = []
+        for salt in (0, 1):
+            marked, patterns = self._marked(msg, spec, salt, serialize_message)
+            if len(marked) != len(base):
+                raise ValueError("raw message: the layout changed with the field values")
+            found.append(_find_each_once(marked, patterns))
+        if found[0] != found[1]:
+            raise ValueError("raw message: a field was found at two offsets")
+        self._buf = self.buffer = bytearray(base)     # the serialised message, written through the views
+        self.offsets: dict[str, int] = found[0]
+        self.f: dict[str, np.ndarray] = {}
+        for name, (_, dtype, count) in spec.items():
+            off = self.offsets[name]
+            if off + np.dtype(dtype).itemsize * count > len(base):
+                raise ValueError(f"raw message: {name} runs past the end of the message")
+            self.f[name] = np.frombuffer(self._buf, dtype=dtype, count=count, offset=off)
+        self._stamp = self.f.get("stamp")
+
+    @staticmethod
+    def _marked(msg: Any, spec: dict, salt: int, serialize) -> tuple[bytes, dict[str, bytes]]:
+        """``msg`` serialised with the sentinels of ``salt`` in its fields (``msg`` restored after)."""
         undo = []                               # restores msg, last change first
-        sentinels = {}
-        try:                                    # serialise once more with a sentinel in each field
-            for k, (name, (path, count)) in enumerate(doubles.items()):
+        patterns = {}
+        counters = dict.fromkeys(DTYPES, 0)
+        try:
+            for name, (path, dtype, _) in spec.items():
                 obj, field = _resolve(msg, path)
                 old = getattr(obj, field)
-                v = float.fromhex(f"0x1.{k + 1:03x}5a3c5a3c5ap-990")
-                if isinstance(old, float):      # a scalar (the first of ``count`` consecutive ones)
+                v, patterns[name] = _sentinel(dtype, counters[dtype], salt)
+                counters[dtype] += 1
+                if isinstance(old, (float, int)):     # a scalar (the first of ``count`` consecutive ones)
                     undo.append(lambda o=obj, f=field, val=old: setattr(o, f, val))
                     setattr(obj, field, v)
                 else:                           # an array: its first element (the rest follow it)
-                    undo.append(lambda a=old, val=float(old[0]): a.__setitem__(0, val))
+                    undo.append(lambda a=old, val=old[0]: a.__setitem__(0, val))
                     old[0] = v
-                sentinels[name] = (v, count)
-            if stamp is not None:
-                obj, field = _resolve(msg, stamp)
-                st = getattr(obj, field)
-                undo.append(lambda st=st, sec=st.sec, ns=st.nanosec: (setattr(st, "sec", sec),
-                                                                      setattr(st, "nanosec", ns)))
-                st.sec, st.nanosec = _STAMP_SENTINEL
-            marked = serialize_message(msg)
+            return serialize(msg), patterns
         finally:
             for restore in reversed(undo):
                 restore()
-        if len(marked) != len(base):
-            raise ValueError("raw message: the layout changed with the field values")
-        self._buf = self.buffer = bytearray(base)     # the serialised message, written through the views
-        self.f: dict[str, np.ndarray] = {}
-        self.offsets: dict[str, int] = {}       # byte offset of each field (the stamp's: "stamp")
-        for name, (v, count) in sentinels.items():
-            off = self.offsets[name] = _find_once(marked, struct.pack("<d", v), name)
-            if off + 8 * count > len(base):
-                raise ValueError(f"raw message: {name} runs past the end of the message")
-            self.f[name] = np.frombuffer(self._buf, dtype="<f8", count=count, offset=off)
-        self._stamp = None
-        if stamp is not None:
-            off = self.offsets["stamp"] = _find_once(marked, struct.pack("<iI", *_STAMP_SENTINEL), stamp)
-            self._stamp = np.frombuffer(self._buf, dtype="<i4", count=2, offset=off)
 
     def stamp(self, stamp_ns: int) -> None:
         """Write the header stamp (integer nanoseconds)."""
@@ -119,6 +143,34 @@ class RawMessage:
     def bytes(self) -> bytes:
         """The serialised message as it is now (a copy: the caller may publish it while the views are rewritten)."""
         return bytes(self._buf)
+
+
+def _find_each_once(blob: bytes, patterns: Mapping[str, bytes]) -> dict[str, int]:
+    """The offset of each sentinel pattern of :func:`_sentinel` in ``blob``; ValueError unless
+    each is found exactly once. One vectorised pass per size and alignment picks the words that
+    carry a sentinel's constant bits, then those few are looked up."""
+    at: dict[bytes, list[int]] = {p: [] for p in patterns.values()}
+    for size in sorted({len(p) for p in patterns.values()}):
+        kind = f"<u{size}"
+        mask = 0xFFFFFFFF if size == 8 else 0xFFFF0000
+        marks = np.array(sorted({int.from_bytes(p, "little") & mask for p in patterns.values() if len(p) == size}),
+                         dtype=kind)
+        for a in range(size):
+            words = np.frombuffer(blob, dtype=kind, offset=a, count=(len(blob) - a) // size)
+            hit = np.zeros(words.size, dtype=bool)
+            low = words & np.array(mask, dtype=kind)
+            for m in marks:
+                hit |= low == m
+            for i in np.flatnonzero(hit):
+                p = bytes(blob[a + size * int(i):a + size * (int(i) + 1)])
+                if p in at:
+                    at[p].append(a + size * int(i))
+    out = {}
+    for name, p in patterns.items():
+        if len(at[p]) != 1:
+            raise ValueError(f"raw message: the sentinel of {name} is found {len(at[p])} times in the serialised bytes")
+        out[name] = at[p][0]
+    return out
 
 
 class RawLabelledArrayWriter:

@@ -57,6 +57,7 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 from visualization_msgs.msg import MarkerArray
 
 import msg_bridge as mb
+from msg_bridge.markers import RawMarkersWriter
 from msg_bridge.raw import RawLabelledArrayWriter, RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, RawStateEstimateWriter
 
@@ -157,7 +158,7 @@ class EstimatorMixin(OutputsMixin):
         noise = pl.observer.noise_max is not None
         self.w_typed = (RawStateEstimateWriter(self.state_labels, self.frame),
                         ErrorBoundsWriter(sys_.N, self.frame, noise))
-        self.w_markers = mb.MarkersWriter(self.bodies, self.frame) if self.bodies else None
+        self.w_markers = RawMarkersWriter(self.bodies, self.frame) if self.bodies else None
         self.body_in_view = channel_bodies(sys_, self.bodies)
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
