@@ -254,6 +254,7 @@ class EstimatorMixin(OutputsMixin):
         # sim clock that stops (a replay's end) must not hold the last samples back
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback, clock=self._steady)
+        self._pair_armed = True
 
     def _channel_subscription(self) -> None:
         """The channel topic's subscription, of the type :func:`~switchobs_ros.channel_input.channel_type`
@@ -351,7 +352,8 @@ class EstimatorMixin(OutputsMixin):
         callback it runs (about 150 us of Python and middleware per wait for this node,
         measured; bench/RESULTS.md): the target pose that arrives while the camera
         pose is handled would cost one more wait, and a backlog one wait per message. Taking
-        them here costs a few microseconds each. The bound keeps timers and services served.
+        them here costs a few microseconds each. The bound keeps timers and services served. Then
+        the pairing timer runs if a sample waits (:meth:`_arm_pairing_timer`).
         """
         hot = self._hot_inputs
         n = 0
@@ -368,7 +370,8 @@ class EstimatorMixin(OutputsMixin):
                         handle(got[0], got[1])
                         n += 1
                 if n == took:
-                    return
+                    break
+            self._arm_pairing_timer()
         except Exception as err:
             self.pipeline.internal_error("input", err)
 
@@ -396,9 +399,22 @@ class EstimatorMixin(OutputsMixin):
     def pairing_callback(self) -> None:
         if self._channel_tentative:         # channel_type auto: until a channel message arrives
             self._channel_subscription()
-        if not self.answering:
-            return
-        self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
+        if self.answering:
+            self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
+        self._arm_pairing_timer()
+
+    def _arm_pairing_timer(self) -> None:
+        """The pairing timer runs only while it has work: a sample waits (for its partners or its
+        channel) or the channel's type is not settled. A cancelled timer never wakes the executor;
+        a running one wakes it every period (40 times a second by default), each wake a wait of
+        rclpy's executor (bench/RESULTS.md, live at scale). Re-armed, it fires a period later."""
+        need = bool(self.pipeline.pairing.pending) or self._channel_tentative
+        if need != self._pair_armed and self.pair_timer is not None:
+            if need:
+                self.pair_timer.reset()
+            else:
+                self.pair_timer.cancel()
+            self._pair_armed = need
 
     # ------------------------------------------------------------------ runtime parameters
     def set_parameters_atomically(self, parameter_list: list) -> SetParametersResult:
@@ -440,6 +456,7 @@ class EstimatorMixin(OutputsMixin):
                 self.destroy_timer(self.pair_timer)
                 self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback,
                                                     clock=self._steady)
+                self._pair_armed = True
             elif p.name == "diagnostics_period":
                 self.destroy_timer(self.diag_timer)
                 self.diag_timer = self.create_timer(float(p.value), self.diagnostics_callback)
