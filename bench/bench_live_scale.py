@@ -62,17 +62,26 @@ def cpu_seconds(pid: int) -> float:
 
 
 class Receiver(Node):
-    """Records the arrival time of every answer and every truth message, keyed by stamp."""
+    """Records the arrival time of every answer and every truth message, keyed by stamp; with
+    ``optional`` topics, also counts the messages on each (taken raw: not deserialised here)."""
 
-    def __init__(self, answer_topic: str, pose: bool):
+    def __init__(self, answer_topic: str, pose: bool, optional: tuple[tuple[str, type], ...] = ()):
         super().__init__("bench_live_receiver")
         self.answers: dict[int, int] = {}
         self.truth: dict[int, int] = {}
+        self.counts: dict[str, int] = dict.fromkeys((t for t, _ in optional), 0)
         if pose:
             self.create_subscription(PoseStamped, answer_topic, self._pose, qos.OUTPUT)
         else:
             self.create_subscription(Float64MultiArray, answer_topic, self._array, qos.OUTPUT)
         self.create_subscription(Float64MultiArray, "/sim/truth", self._truth, qos.TRUTH)
+        for topic, kind in optional:
+            self.create_subscription(kind, topic, self._counter(topic), qos.OUTPUT, raw=True)
+
+    def _counter(self, topic: str):
+        def count(_raw: bytes) -> None:
+            self.counts[topic] += 1
+        return count
 
     def _pose(self, m: PoseStamped) -> None:
         self.answers[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec] = time.time_ns()
@@ -84,27 +93,57 @@ class Receiver(Node):
         self.truth[mb.unpack_labelled(m).stamp_ns] = time.time_ns()
 
 
-def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path) -> dict:
+def optional_outputs(system) -> tuple[tuple[str, type], ...]:
+    """The estimator's outputs besides ``~/state``: (topic, message type)."""
+    from nav_msgs.msg import Odometry
+    from switchobs_msgs.msg import ErrorBounds, StateEstimate
+    from visualization_msgs.msg import MarkerArray
+    return (("/estimator/envelope", Float64MultiArray), ("/estimator/covariance", Float64MultiArray),
+            ("/estimator/state_estimate", StateEstimate), ("/estimator/error_bounds", ErrorBounds),
+            ("/estimator/markers", MarkerArray),
+            *((f"/estimator/{b.name}/odom", Odometry) for b in mb.bodies(system.state_labels)))
+
+
+def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path,
+             listen: bool = False, every: dict | None = None, profile: Path | None = None,
+             main_repo: Path | None = None) -> dict:
+    """One node under test: ``listen`` subscribes to every optional output of the estimator,
+    ``every`` sets its ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py);
+    a ``kind`` ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one."""
+    repo = REPO
+    if kind.startswith("main:"):
+        repo = main_repo
     sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * m}
+    optional = ()
     if kind == "bare":
         node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
                            log=logs / "bare.log")
         topic, pose = "/bare_republisher/out", True
     else:
-        params = dict(sched, system=str(sys_path), gain_table=tables[kind], e0=1e3)
-        node = NodeProcess("estimator", ros_args(params=params), log=logs / f"{kind}.log")
+        params = dict(sched, system=str(sys_path), gain_table=tables[kind.removeprefix("main:")], e0=1e3,
+                      **{f"output.{k}_every": v for k, v in (every or {}).items()})
+        code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
+                "runpy.run_module('switchobs_ros.estimator', run_name='__main__')")
+        cmd = ([sys.executable, str(REPO / "bench" / "profile_node.py"), str(profile)] if profile
+               else [sys.executable, "-c", code])
+        env = dict(os.environ, SWITCHOBS_PROFILE_REPO=str(repo))
+        node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, env=env,
+                           log=logs / f"{kind.replace(':', '_')}.log")
         topic, pose = "/estimator/state", False
-    rec = Receiver(topic, pose)
+        if listen:
+            optional = optional_outputs(so.load_system(sys_path))
+    rec = Receiver(topic, pose, optional)
     try:
         end = time.monotonic() + 180
-        while rec.count_publishers(topic) == 0 and time.monotonic() < end:
+        while (rec.count_publishers(topic) == 0 or any(rec.count_publishers(t) == 0 for t, _ in optional)) \
+                and time.monotonic() < end:
             rclpy.spin_once(rec, timeout_sec=0.1)
         x0 = np.random.default_rng(1).uniform(-1.0, 1.0, 4 * (m + 1))
         cam = NodeProcess("camera_sim", ros_args(params=dict(sched, system=str(sys_path), rate=rate,
                                                              duration=seconds, wait_for_subscribers=1,
                                                              wait_for_truth_subscribers=1,
                                                              initial_state=list(map(float, x0)))),
-                          log=logs / f"camera_{kind}.log")
+                          log=logs / f"camera_{kind.replace(':', '_')}.log")
         cpu0 = None
         while cam.alive():
             rclpy.spin_once(rec, timeout_sec=0.05)
@@ -123,7 +162,7 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     return {"node": kind, "sent": len(sent), "answered": len(answered),
             "p50": float(np.median(lat)) if lat.size else float("nan"),
             "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
-            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1)}
+            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": dict(rec.counts)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,11 +170,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--agents", type=int, default=32)
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--rate", type=float, default=50.0)
-    ap.add_argument("--nodes", default="bare,kalman,lmi", help="comma-separated: bare, kalman, lmi")
+    ap.add_argument("--nodes", default="bare,kalman,lmi",
+                    help="comma-separated: bare, kalman, lmi; a node may repeat (interleaved rounds)")
+    ap.add_argument("--listen", action="store_true",
+                    help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
+                         "markers, one odometry per body), so that each is built and published")
+    ap.add_argument("--every", default="", metavar="K=V,...",
+                    help="the estimator's output.<K>_every, e.g. odometry=5,covariance=5,typed=5")
+    ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
+                    help="run each estimator under cProfile (bench/profile_node.py), stats in DIR/<node>-<i>.prof")
+    ap.add_argument("--main-repo", type=Path, default=Path("/work/main"),
+                    help="the checkout whose estimator a node main:<kind> runs (before/after in one run)")
+    ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: claim a free one)")
     a = ap.parse_args(argv)
+    every = {k: int(v) for k, v in (kv.split("=") for kv in a.every.split(",") if kv)}
     info = machine_info()
-    lease = claim_domain()
-    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
+    lease = claim_domain() if a.domain is None else None
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id if lease else a.domain)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     kinds = a.nodes.split(",")
     with tempfile.TemporaryDirectory(prefix="bench_live_scale_") as tmp:
@@ -145,20 +196,27 @@ def main(argv: list[str] | None = None) -> int:
         system = so.load_system(sys_path)
         cycle = so.Cycle([1.0] * a.agents)
         tables = {}
-        if "kalman" in kinds:
+        if "kalman" in kinds or "main:kalman" in kinds:
             tables["kalman"] = str(so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)]).save(d / "k.npz"))
-        if "lmi" in kinds:
+        if "lmi" in kinds or "main:lmi" in kinds:
             tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
         rclpy.init()
         try:
-            rows = [run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d) for k in kinds]
+            if a.profile:
+                a.profile.mkdir(parents=True, exist_ok=True)
+            rows = [run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
+                             a.profile / f"{k.replace(':', '_')}-{i}.prof" if a.profile and k != "bare" else None,
+                             a.main_repo)
+                    for i, k in enumerate(kinds)]
         finally:
             rclpy.try_shutdown()
-            lease.release()
+            if lease:
+                lease.release()
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
           f"load average {info['load'][0]:.1f} before ({info['date']}).")
+    extra = (" --listen" if a.listen else "") + (f" --every {a.every}" if a.every else "")
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_live_scale.py --agents {a.agents} "
-          f"--seconds {a.seconds:g} --rate {a.rate:g} --nodes {a.nodes}`\n")
+          f"--seconds {a.seconds:g} --rate {a.rate:g} --nodes {a.nodes}{extra}`\n")
     bare = next((r for r in rows if r["node"] == "bare"), None)
     print("| node | ticks sent | answered | fraction | latency p50 | p99 | CPU per answer | p99 / bare | CPU / bare |")
     print("|---|---|---|---|---|---|---|---|---|")
@@ -167,6 +225,27 @@ def main(argv: list[str] | None = None) -> int:
         rc = f"{r['cpu_ms'] / bare['cpu_ms']:.1f}x" if bare else "-"
         print(f"| {r['node']} | {r['sent']} | {r['answered']} | {r['answered'] / max(r['sent'], 1):.4f} "
               f"| {r['p50']:.1f} ms | {r['p99']:.1f} ms | {r['cpu_ms']:.2f} ms | {rp} | {rc} |")
+    kinds_seen = list(dict.fromkeys(r["node"] for r in rows))
+    if len(kinds_seen) < len(rows):        # rounds: medians per node, ratios against bare's median
+        med = {k: {q: float(np.median([r[q] for r in rows if r["node"] == k])) for q in ("p50", "p99", "cpu_ms")}
+               for k in kinds_seen}
+        base = med.get("bare")
+        print("\nMedians over the rounds:\n")
+        print("| node | rounds | answered (all) | latency p50 | p99 | CPU per answer | p99 / bare | CPU / bare |")
+        print("|---|---|---|---|---|---|---|---|")
+        for k in kinds_seen:
+            rs = [r for r in rows if r["node"] == k]
+            m = med[k]
+            print(f"| {k} | {len(rs)} | {sum(r['answered'] for r in rs)}/{sum(r['sent'] for r in rs)} "
+                  f"| {m['p50']:.1f} ms | {m['p99']:.1f} ms | {m['cpu_ms']:.2f} ms "
+                  f"| {m['p99'] / base['p99']:.2f}x | {m['cpu_ms'] / base['cpu_ms']:.1f}x |" if base else "| - | - |")
+    for r in rows:
+        if r["counts"]:
+            c = r["counts"]
+            odom = sum(v for t, v in c.items() if t.endswith("/odom"))
+            rest = ", ".join(f"{t.rsplit('/', 1)[1]} {v}" for t, v in c.items() if not t.endswith("/odom"))
+            print(f"\n{r['node']}: messages received on the optional outputs: {rest}, odometry {odom} "
+                  f"({sum(t.endswith('/odom') for t in c)} bodies)")
     return 0
 
 

@@ -44,6 +44,8 @@ __all__ = [
     "HIGHLIGHT",
     "NAMESPACES",
     "MarkersWriter",
+    "RawMarkersWriter",
+    "ellipse_disc",
 ]
 
 #: Marker namespaces, in the order of each body's markers.
@@ -130,17 +132,115 @@ class MarkersWriter:
     @staticmethod
     def _ellipse(cov: Marker, P: np.ndarray | None, b: Body) -> int:
         """Fill the 2-sigma ellipse of body ``b``; return its action (DELETE: nothing to show)."""
-        if P is None:
-            return Marker.DELETE
-        Ppp = np.zeros((2, 2))      # a body on a line: no spread across it
-        for a, i in b.pose_pairs:
-            for c, j in b.pose_pairs:
-                Ppp[a, c] = P[i, j]
-        ell = covariance_ellipse(Ppp, sigmas=2.0)
+        ell = ellipse_disc(P, b)
         if ell is None:
             return Marker.DELETE
-        cov.scale.x, cov.scale.y, yaw = ell
-        if b.p_y is None:
-            cov.scale.y = _THIN
-        cov.pose.orientation.z, cov.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+        cov.scale.x, cov.scale.y, cov.pose.orientation.z, cov.pose.orientation.w = ell
         return Marker.ADD
+
+
+def ellipse_disc(P: np.ndarray | None, b: Body) -> tuple[float, float, float, float] | None:
+    """``(scale.x, scale.y, orientation.z, orientation.w)`` of body ``b``'s 2-sigma ellipse disc
+    (module docstring), or None when there is nothing to show (no ``P``, no ellipse)."""
+    if P is None:
+        return None
+    Ppp = np.zeros((2, 2))      # a body on a line: no spread across it
+    for a, i in b.pose_pairs:
+        for c, j in b.pose_pairs:
+            Ppp[a, c] = P[i, j]
+    ell = covariance_ellipse(Ppp, sigmas=2.0)
+    if ell is None:
+        return None
+    sx, sy, yaw = ell
+    return sx, _THIN if b.p_y is None else sy, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+
+
+class RawMarkersWriter:
+    """:class:`MarkersWriter` as serialised bytes (:mod:`msg_bridge.raw`): ``w.msg(x, stamp_ns,
+    P=None, bound=None, active_body=None)``, the same message.
+
+    The marker array's layout does not change from one call to the next (the same markers, the
+    circle's points always there, DELETE or ADD), so it is serialised once; every call writes the
+    stamps, positions, colours, actions, ellipses and circles into it with a few numpy calls for
+    all the bodies (the ellipses one body at a time, as :class:`MarkersWriter` computes them).
+    """
+
+    def __init__(self, bodies: Sequence[Body], frame_id: str, size: float = 0.25):
+        from .raw import RawMessage
+
+        w = MarkersWriter(bodies, frame_id, size)
+        self.bodies, self._names, self._unit = w.bodies, w._names, w._unit
+        B = len(self.bodies)
+        fields = {}
+        for k in range(B):
+            for j in range(4):
+                i = 4 * k + j
+                fields[f"t{i}"] = (f"markers[{i}].header.stamp.sec", "<i4", 2)
+                fields[f"a{i}"] = (f"markers[{i}].action", "<i4", 1)
+                if j < 3:
+                    fields[f"p{i}"] = (f"markers[{i}].pose.position.x", "<f8", 2)
+            fields[f"c{k}"] = (f"markers[{4 * k}].color.r", "<f4", 4)
+            fields[f"s{k}"] = (f"markers[{4 * k + 2}].scale.x", "<f8", 2)
+            fields[f"o{k}"] = (f"markers[{4 * k + 2}].pose.orientation.z", "<f8", 2)
+            fields[f"b{k}"] = (f"markers[{4 * k + 3}].points[0].x", "<f8", 3 * CIRCLE_POINTS)
+        msg = w.msg(np.zeros(max((i for b in self.bodies for i in b.indices), default=0) + 1), 0)
+        for ms in w._sets:                      # a colour object of its own per sphere (the writer shares one)
+            ms[0].color = _color(BODY)
+        self._raw = r = RawMessage(msg, fields=fields)
+        self._raw.f.clear()                     # one view per dtype over the whole message instead
+        buf, off = r.buffer, r.offsets
+        f8_at = min((o for name, o in off.items() if name[0] in "psob"), default=4) % 8
+        self._f8 = np.frombuffer(buf, dtype="<f8", offset=f8_at, count=(len(buf) - f8_at) // 8)
+        self._i4 = np.frombuffer(buf, dtype="<i4", count=len(buf) // 4)
+        self._f4 = np.frombuffer(buf, dtype="<f4", count=len(buf) // 4)
+
+        def f8(name, extra=0):
+            if (off[name] - f8_at) % 8:
+                raise ValueError("raw markers: a float64 field off the 8-byte grid")
+            return (off[name] - f8_at) // 8 + extra
+
+        def i4(name, extra=0):
+            if off[name] % 4:
+                raise ValueError("raw markers: an int32 field off the 4-byte grid")
+            return off[name] // 4 + extra
+
+        ip = np.intp
+        self._sec = np.array([i4(f"t{i}") for i in range(4 * B)], ip)
+        self._px = np.array([[f8(f"p{4 * k + j}") for k in range(B)] for j in range(3)], ip)        # (3, B)
+        self._color = np.array([[i4(f"c{k}", c) for c in range(4)] for k in range(B)], ip)          # (B, 4)
+        self._cov_action = np.array([i4(f"a{4 * k + 2}") for k in range(B)], ip)
+        self._bnd_action = np.array([i4(f"a{4 * k + 3}") for k in range(B)], ip)
+        self._ell = [(f8(f"s{k}"), f8(f"o{k}")) for k in range(B)]
+        self._circle = np.array([[f8(f"b{k}", 3 * q) for q in range(CIRCLE_POINTS)] for k in range(B)], ip)
+        self._ix = np.array([b.p_x for b in self.bodies], ip)
+        self._iy = np.array([-1 if b.p_y is None else b.p_y for b in self.bodies], ip)   # -1: the 0 appended to x
+        self._body = np.array([BODY], dtype="<f4")
+        self._highlight = np.array(HIGHLIGHT, dtype="<f4")
+
+    def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None, bound: float | None = None,
+            active_body: str | None = None) -> bytes:
+        if active_body is not None and active_body not in self._names:
+            raise BridgeError(f"active body '{active_body}' is not one of {', '.join(self._names)}")
+        f8, i4, f4 = self._f8, self._i4, self._f4
+        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        i4[self._sec] = sec
+        i4[self._sec + 1] = nsec
+        xz = np.append(np.asarray(x, dtype=float), 0.0)
+        px, py = xz[self._ix], xz[self._iy]
+        f8[self._px] = px
+        f8[self._px + 1] = py
+        f4[self._color] = self._body
+        if active_body is not None:
+            f4[self._color[self._names[active_body]]] = self._highlight
+        for k, (b, (s, o)) in enumerate(zip(self.bodies, self._ell)):
+            ell = ellipse_disc(P, b)
+            i4[self._cov_action[k]] = Marker.DELETE if ell is None else Marker.ADD
+            if ell is not None:
+                f8[s], f8[s + 1], f8[o], f8[o + 1] = ell
+        if bound is not None and math.isfinite(bound) and bound >= 0.0:
+            i4[self._bnd_action] = Marker.ADD
+            f8[self._circle] = px[:, None] + bound * self._unit.real
+            f8[self._circle + 1] = py[:, None] + bound * self._unit.imag
+        else:
+            i4[self._bnd_action] = Marker.DELETE
+        return self._raw.bytes()

@@ -9,6 +9,7 @@ Writers reuse one message per output (as :class:`~msg_bridge.convert.LabelledArr
 
 * :class:`StateEstimateWriter` ``.msg(x, stamp_ns, P=None)``: the labelled state and, when ``P``
   is given, its covariance row-major (empty otherwise);
+* :class:`RawStateEstimateWriter`: the same as serialised bytes (:mod:`msg_bridge.raw`);
 * :class:`ErrorBoundsWriter` ``.msg(envelope_values, stamp_ns, valid, why)`` from the
   ``~/envelope`` layout ``[z_1..z_N, paper_bound, exact_bound(, noise_bound)]``
   (:func:`~msg_bridge.convert.envelope_labels`), where -1 means withdrawn or not applicable.
@@ -33,6 +34,7 @@ import numpy as np
 import switchobs_msgs
 from switchobs_msgs.msg import ActiveChannel, ErrorBounds, StateEstimate
 
+from .raw import RawMessage
 from .stamps import stamp_to_ns
 from .validate import BridgeError
 
@@ -42,6 +44,7 @@ __all__ = [
     "read_active_channel",
     "MSG_TYPES",
     "NO_BOUND_WHY",
+    "RawStateEstimateWriter",
     "BoundsReading",
     "ErrorBoundsWriter",
     "StateEstimateWriter",
@@ -140,6 +143,27 @@ class ErrorBoundsWriter:
             ok = ok and m.noise_bound_valid
         m.why_invalid = note if ok else (why or NO_BOUND_WHY)
         return m
+
+
+class RawStateEstimateWriter:
+    """:class:`StateEstimateWriter` as serialised bytes (:mod:`msg_bridge.raw`): ``w.msg(x,
+    stamp_ns, P=None)``. Two layouts, one with the n x n covariance and one with it empty; the
+    labels are serialised once, not at every publish."""
+
+    def __init__(self, labels: Sequence[str], frame_id: str):
+        w = StateEstimateWriter(labels, frame_id)
+        n = self.n = w.n
+        self._with = RawMessage(w.msg(np.zeros(n), 0, np.zeros((n, n))), stamp="header.stamp",
+                                doubles={"x": ("x", n), "P": ("covariance", n * n)})
+        self._without = RawMessage(w.msg(np.zeros(n), 0), stamp="header.stamp", doubles={"x": ("x", n)})
+
+    def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> bytes:
+        r = self._without if P is None else self._with
+        r.stamp(stamp_ns)
+        r.f["x"][:] = x
+        if P is not None:
+            r.f["P"][:] = P.reshape(-1)
+        return r.bytes()
 
 
 # --- readers ---------------------------------------------------------------------------------

@@ -18,7 +18,10 @@ table's stored prior) as much again; none of it is spent while nobody listens.
   leaves costs at most that long of covariances nobody reads), a no for :attr:`Demand.period_no`
   seconds (for at most that long after the first subscriber to an output carrying ``P`` appears,
   its messages go out without the covariance: the odometry's unknown, the typed estimate's
-  empty, as with ``publish_covariance`` false).
+  empty, as with ``publish_covariance`` false);
+* ``kinds``: which of those outputs (``covariance``, ``odometry``, ``typed``, ``markers``) have
+  a subscriber, as of the last refresh: the node forms ``P`` only for an estimate one of them
+  takes at its decimation (:mod:`switchobs_ros.outputs`).
 """
 
 from __future__ import annotations
@@ -39,8 +42,9 @@ def listened(pub: Any) -> bool:
 class Demand:
     """Which optional outputs have subscribers (module docstring).
 
-    ``Demand(carriers, period=0.1, period_no=0.02)``: ``carriers()`` returns the publishers whose messages carry
-    ``P`` (re-read at every refresh: the node may recreate its publishers).
+    ``Demand(carriers, period=0.1, period_no=0.02)``: ``carriers()`` returns ``(output, publisher)``
+    of the publishers whose messages carry ``P`` (re-read at every refresh: the node may recreate
+    its publishers).
     """
 
     def __init__(self, carriers: Callable[[], Sequence[Any]], period: float = 0.1, period_no: float = 0.02,
@@ -51,13 +55,15 @@ class Demand:
         self._clock = clock
         self._until = -math.inf
         self._wanted = False
+        self.kinds: frozenset[str] = frozenset()
 
     def covariance_wanted(self) -> bool:
         """Whether an output that carries ``P`` has a subscriber (kept for :attr:`period` s, a no
         for :attr:`period_no` s)."""
         now = self._clock()
         if now >= self._until:
-            self._wanted = any(listened(p) for p in self._carriers())
+            self.kinds = frozenset(k for k, p in self._carriers() if listened(p))
+            self._wanted = bool(self.kinds)
             self._until = now + (self.period if self._wanted else self.period_no)
         return self._wanted
 

@@ -57,35 +57,24 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 from visualization_msgs.msg import MarkerArray
 
 import msg_bridge as mb
-from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
+from msg_bridge.markers import RawMarkersWriter
+from msg_bridge.raw import RawLabelledArrayWriter, RawOdometryBatch
+from msg_bridge.typed import ErrorBoundsWriter, RawStateEstimateWriter
 
 from . import qos
 from .channel_input import CHANNEL_MSG, channel_type
 from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
-from .demand import Demand, listened
+from .demand import Demand
 from .diagnostics import EstimatorDiagnostics, NodeState
+from .outputs import OutputsMixin, channel_bodies
 from .params import ConfigError, declare_all, unknown_parameters
-from .pipeline import Estimate, EstimatorPipeline, PipelineLog
+from .pipeline import EstimatorPipeline, PipelineLog
 from .runner import run_node
 
 __all__ = ["PARAMS", "PREDICTION_BOUND_LABELS", "EstimatorNode", "main"]
 
 #: Element names of ``~/prediction/bound``.
 PREDICTION_BOUND_LABELS = ("exact_bound", "seconds_since_measurement")
-
-
-def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
-    """The body each channel sees (the one whose outputs belong to that channel alone, as
-    ``agent2`` for channel 2 of the camera scenarios): ``{channel: body name}``, channels whose
-    outputs name no such body left out (the markers then highlight none)."""
-    names = {b.name for b in bodies}
-    common = set.intersection(*(set(o) for o in system.output_labels)) if system.N else set()
-    out = {}
-    for c, labels in enumerate(system.output_labels, start=1):
-        own = {lab.rpartition(".")[0] for lab in labels if lab not in common} & names
-        if len(own) == 1:
-            out[c] = own.pop()
-    return out
 
 
 class _NodeLog(PipelineLog):
@@ -123,7 +112,7 @@ class _NodeLog(PipelineLog):
             self._logger.error(text)
 
 
-class EstimatorMixin:
+class EstimatorMixin(OutputsMixin):
     """The estimator's behaviour on any rclpy node class (plain or lifecycle): configuration
     (:meth:`_configure`: the pipeline, the observer, the writers), the ROS interfaces
     (:meth:`_create_interfaces` / :meth:`_destroy_interfaces`), the callbacks. ``answering``
@@ -161,14 +150,15 @@ class EstimatorMixin:
         self.state_labels = tuple(sys_.state_labels)
         self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
         self.frame = cfg["world_frame"]
-        self.w_state = mb.LabelledArrayWriter(self.state_labels)
-        self.w_env = mb.LabelledArrayWriter(self.env_labels)
-        self.w_odom = [mb.OdometryWriter(b, self.frame, c) for b, c in zip(self.bodies, self.child_frames)]
+        # the outputs' writers: serialised once, numbers rewritten in place (msg_bridge.raw)
+        self.w_state = RawLabelledArrayWriter(self.state_labels)
+        self.w_env = RawLabelledArrayWriter(self.env_labels)
+        self.w_odom = RawOdometryBatch(self.bodies, self.frame, self.child_frames)
         # typed outputs (switchobs_msgs) and RViz markers
         noise = pl.observer.noise_max is not None
-        self.w_typed = (StateEstimateWriter(self.state_labels, self.frame),
+        self.w_typed = (RawStateEstimateWriter(self.state_labels, self.frame),
                         ErrorBoundsWriter(sys_.N, self.frame, noise))
-        self.w_markers = mb.MarkersWriter(self.bodies, self.frame) if self.bodies else None
+        self.w_markers = RawMarkersWriter(self.bodies, self.frame) if self.bodies else None
         self.body_in_view = channel_bodies(sys_, self.bodies)
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
@@ -179,6 +169,7 @@ class EstimatorMixin:
         # optional outputs, and P, only while someone listens (switchobs_ros.demand)
         self.covariance_allowed = pl.publish_covariance
         self.demand = Demand(self._covariance_carriers)
+        pl.covariance_due = self._covariance_due    # P formed only for an estimate an output carrying it takes
         self.published = dict.fromkeys(("state", "envelope", "covariance", "odometry", "typed", "markers"), 0)
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
@@ -217,7 +208,7 @@ class EstimatorMixin:
         self.pub_env = pub(Float64MultiArray, "~/envelope", qos.OUTPUT)
         self.pub_cov = None
         if pl.publish_covariance:
-            self.w_cov = mb.LabelledArrayWriter(mb.covariance_labels(self.state_labels))
+            self.w_cov = RawLabelledArrayWriter(mb.covariance_labels(self.state_labels))
             self.pub_cov = pub(Float64MultiArray, "~/covariance", qos.OUTPUT)
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),
@@ -263,6 +254,7 @@ class EstimatorMixin:
         # sim clock that stops (a replay's end) must not hold the last samples back
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback, clock=self._steady)
+        self._pair_armed = True
 
     def _channel_subscription(self) -> None:
         """The channel topic's subscription, of the type :func:`~switchobs_ros.channel_input.channel_type`
@@ -360,7 +352,8 @@ class EstimatorMixin:
         callback it runs (about 150 us of Python and middleware per wait for this node,
         measured; bench/RESULTS.md): the target pose that arrives while the camera
         pose is handled would cost one more wait, and a backlog one wait per message. Taking
-        them here costs a few microseconds each. The bound keeps timers and services served.
+        them here costs a few microseconds each. The bound keeps timers and services served. Then
+        the pairing timer runs if a sample waits (:meth:`_arm_pairing_timer`).
         """
         hot = self._hot_inputs
         n = 0
@@ -377,7 +370,8 @@ class EstimatorMixin:
                         handle(got[0], got[1])
                         n += 1
                 if n == took:
-                    return
+                    break
+            self._arm_pairing_timer()
         except Exception as err:
             self.pipeline.internal_error("input", err)
 
@@ -405,57 +399,22 @@ class EstimatorMixin:
     def pairing_callback(self) -> None:
         if self._channel_tentative:         # channel_type auto: until a channel message arrives
             self._channel_subscription()
-        if not self.answering:
-            return
-        self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
+        if self.answering:
+            self._publish_all(self.pipeline.flush_overdue(time.monotonic(), self.pair_timeout))
+        self._arm_pairing_timer()
 
-    def _covariance_carriers(self) -> list:
-        """The publishers whose messages carry ``P`` (for :class:`~switchobs_ros.demand.Demand`)."""
-        ev = self.every     # (the node may recreate its publishers: read them each time)
-        return [p for p, on in ((getattr(self, "pub_cov", None), ev["covariance"]),
-                                (self.pub_typed[0] if getattr(self, "pub_typed", ()) else None, ev["typed"]),
-                                (getattr(self, "pub_markers", None), ev["markers"]),
-                                *((p, ev["odometry"]) for p in getattr(self, "pub_odom", []))) if on and p is not None]
-
-    def _publish_all(self, estimates: list[Estimate]) -> None:
-        """Publish each estimate: ``~/state`` always, the other outputs at their decimation
-        (``output.*_every``) and only while a subscription is matched to them (:mod:`switchobs_ros.demand`)."""
-        if not estimates:
-            return
-        try:
-            ev, n = self.every, self.published
-            for e in estimates:
-                k = self.n_published
-                self.n_published = k + 1
-                self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
-                n["state"] += 1
-                if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
-                    self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
-                    n["envelope"] += 1
-                if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
-                    self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
-                    n["covariance"] += 1
-                if ev["odometry"] and k % ev["odometry"] == 0:
-                    for pub, w in zip(self.pub_odom, self.w_odom):
-                        if listened(pub):
-                            pub.publish(w.msg(e.x_hat, e.stamp_ns, e.P))
-                            n["odometry"] += 1
-                if ev["typed"] and k % ev["typed"] == 0:
-                    pl = self.pipeline
-                    if listened(self.pub_typed[0]):
-                        self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
-                        n["typed"] += 1
-                    if listened(self.pub_typed[1]):
-                        self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                                      pl.bound_invalid_why, pl.bound_note))
-                        n["typed"] += 1
-                if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
-                    g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
-                    self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
-                                                                self.body_in_view.get(e.channel)))
-                    n["markers"] += 1
-        except Exception as err:
-            self.pipeline.internal_error("publish", err)
+    def _arm_pairing_timer(self) -> None:
+        """The pairing timer runs only while it has work: a sample waits (for its partners or its
+        channel) or the channel's type is not settled. A cancelled timer never wakes the executor;
+        a running one wakes it every period (40 times a second by default), each wake a wait of
+        rclpy's executor (bench/RESULTS.md, live at scale). Re-armed, it fires a period later."""
+        need = bool(self.pipeline.pairing.pending) or self._channel_tentative
+        if need != self._pair_armed and self.pair_timer is not None:
+            if need:
+                self.pair_timer.reset()
+            else:
+                self.pair_timer.cancel()
+            self._pair_armed = need
 
     # ------------------------------------------------------------------ runtime parameters
     def set_parameters_atomically(self, parameter_list: list) -> SetParametersResult:
@@ -497,6 +456,7 @@ class EstimatorMixin:
                 self.destroy_timer(self.pair_timer)
                 self.pair_timer = self.create_timer(self._pairing_period(), self.pairing_callback,
                                                     clock=self._steady)
+                self._pair_armed = True
             elif p.name == "diagnostics_period":
                 self.destroy_timer(self.diag_timer)
                 self.diag_timer = self.create_timer(float(p.value), self.diagnostics_callback)

@@ -150,6 +150,7 @@ class EstimatorPipeline(Counters):
         self.obs_ns: int | None = None           # stamp of the last observer update
         self.last_accept_clock_ns: int | None = None
         self.publish_covariance = bool(observer.track_covariance)   # Estimate.P (from_params: the parameter)
+        self.covariance_due = lambda i: True     # P of a call's i-th estimate needed (the node: an output due)
         self.uncovered: tuple[int, ...] = ()     # channels no source feeds (from_params: the specification's)
 
     # ------------------------------------------------------------------ construction
@@ -507,7 +508,7 @@ class EstimatorPipeline(Counters):
             self.log.warn(self.observer.residence_problem, throttle=True)
         if not self.bound_valid:
             env_vals[self.N + 1:] = NO_BOUND      # exact_bound (and noise_bound)
-        P = self.observer.P if self.publish_covariance else None
+        P = self.observer.P if self.publish_covariance and self.covariance_due(len(out)) else None
         if P is not None and not np.isfinite(P).all():
             P = None
         out.append(Estimate(pend.stamp_ns, np.array(x_hat, dtype=float), env_vals, P, m.channel))

@@ -1,5 +1,6 @@
-"""The estimator node's own glue, in process: the reused output messages and the input drain
-(``EstimatorMixin._drain_inputs``: messages already waiting are taken without another wait)."""
+"""The estimator node's own glue, in process: the reused output messages, the input drain
+(``EstimatorMixin._drain_inputs``: messages already waiting are taken without another wait) and
+the pairing timer, running only while a sample waits."""
 
 from __future__ import annotations
 
@@ -80,5 +81,37 @@ def test_channel_messages_reach_the_pipeline_with_their_sequence_numbers(paper_t
         assert _drain_until(est, lambda: len(pl.attribution.sequence_numbers) == 5)
         seq = pl.attribution.sequence_numbers
         assert None not in seq and np.all(np.diff(seq) == 1) and pl.lost_channel == 0
+    finally:
+        est.destroy_node()
+
+
+def test_pairing_timer_runs_only_while_a_sample_waits(paper_tables, ros_node):
+    """Idle (every sample answered, the channel type settled), the pairing timer is cancelled: it
+    does not wake the executor. A lone camera pose arms it, and it answers the pose alone after
+    ``pairing_timeout``; then it is cancelled again."""
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
+                                             Parameter("reorder_window_ms", value=0.0),
+                                             Parameter("pairing_timeout", value=0.1)])
+    try:
+        io = EstimatorIO(ros_node)
+        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
+                                                for p in (io.pub_channel, io.pub_camera, io.pub_target)), 20.0)
+        pl = est.pipeline
+        io.pub_channel.publish(UInt8(data=1))
+        assert _drain_until(est, lambda: pl.channel == 1)
+        base = time.time_ns()
+        for k in range(1, 4):
+            s = base + k * 10_000_000
+            io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), s, "map"))
+            io.pub_target.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
+        assert _drain_until(est, lambda: pl.updates == 3)
+        assert spin_until(est, lambda: not est._channel_tentative and est.pair_timer.is_canceled(), 5.0)
+        lone = base + 4 * 10_000_000
+        io.pub_camera.publish(mb.xy_to_pose((0.1, 0.2), lone, "map"))      # its target never comes
+        assert _drain_until(est, lambda: pl.accepted["camera/pose"] == 4)
+        assert pl.updates == 3 and not est.pair_timer.is_canceled()
+        assert spin_until(est, lambda: pl.updates == 4, 5.0)         # the timer answered it alone
+        assert pl.partial_updates == 1 and pl.obs_ns == lone
+        assert spin_until(est, lambda: est.pair_timer.is_canceled(), 2.0)
     finally:
         est.destroy_node()

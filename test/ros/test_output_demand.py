@@ -1,11 +1,13 @@
 """Outputs on demand (switchobs_ros.demand): the estimator builds and publishes an optional output
 only while a subscription is matched to it, and forms the covariance only while an output that
-carries it is listened to; ~/state is always published."""
+carries it is listened to, and only for the estimates such an output takes at its decimation;
+~/state is always published."""
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
@@ -31,14 +33,14 @@ class _Pub:
 def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     now = [0.0]
     pubs = [_Pub(), _Pub()]
-    d = Demand(lambda: pubs, period=0.1, period_no=0.02, clock=lambda: now[0])
-    assert not d.covariance_wanted() and not d.covariance_wanted()
+    d = Demand(lambda: list(zip(("odometry", "covariance"), pubs)), period=0.1, period_no=0.02, clock=lambda: now[0])
+    assert not d.covariance_wanted() and not d.covariance_wanted() and d.kinds == set()
     assert [p.asked for p in pubs] == [1, 1]              # a no is kept for period_no
     pubs[1].n = 1
     now[0] = 0.01
     assert not d.covariance_wanted()
     now[0] = 0.02
-    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2]
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [2, 2] and d.kinds == {"covariance"}
     pubs[1].n = 0
     now[0] = 0.07
     assert d.covariance_wanted()                          # a yes kept for the period
@@ -46,7 +48,7 @@ def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     assert not d.covariance_wanted()                      # then asked again
     pubs[0].n = 1
     d.expire()
-    assert d.covariance_wanted()
+    assert d.covariance_wanted() and d.kinds == {"odometry"}
 
 
 def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
@@ -99,5 +101,51 @@ def test_node_publishes_optional_outputs_only_to_subscribers(paper_tables, ros_n
         _feed(est, io, 21, 10)
         assert pl.updates == 30 and n["state"] == 30 and n["odometry"] == 20
         assert not pl.publish_covariance
+    finally:
+        est.destroy_node()
+
+
+def test_node_forms_P_only_for_the_estimates_its_outputs_take(paper_tables, ros_node):
+    """``output.covariance_every: 5`` and ``output.odometry_every: 5``, both listened: ``P`` is formed
+    for the 0th, 5th, ... estimate only, and what goes out is that estimate's ``P``."""
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
+                                             Parameter("reorder_window_ms", value=0.0),
+                                             Parameter("noise.measurement_std", value=0.01),
+                                             Parameter("output.covariance_every", value=5),
+                                             Parameter("output.odometry_every", value=5)])
+    try:
+        io = EstimatorIO.__new__(EstimatorIO)
+        io.node = ros_node
+        io.pub_channel = ros_node.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
+        io.pub_camera = ros_node.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
+        io.pub_target = ros_node.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        got = {"cov": [], "odom": []}
+        ros_node.create_subscription(Float64MultiArray, "/estimator/covariance", got["cov"].append, qos.TRUTH)
+        ros_node.create_subscription(Odometry, "/estimator/agent1/odom", got["odom"].append, qos.TRUTH)
+        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0 for p in
+                                                (io.pub_channel, io.pub_camera, io.pub_target, est.pub_cov))
+                          and est.pub_odom[1].get_subscription_count() > 0, 20.0)
+        seen = []
+        publish_all = est._publish_all
+        est._publish_all = lambda estimates: (seen.extend(estimates), publish_all(estimates))
+        io.pub_channel.publish(UInt8(data=1))
+        end = time.monotonic() + 10
+        while est.pipeline.channel != 1 and time.monotonic() < end:
+            est._drain_inputs()
+            time.sleep(0.01)
+        _feed(est, io, 1, 20)
+        assert len(seen) == 20
+        assert [e.P is not None for e in seen] == [k % 5 == 0 for k in range(20)]
+        assert est.published["covariance"] == 4 and est.published["odometry"] == 4
+        assert spin_until(ros_node, lambda: len(got["cov"]) >= 4 and len(got["odom"]) >= 4, 10.0)
+        taken = [e for e in seen if e.P is not None]
+        agent1 = next(b for b in est.bodies if b.name == "agent1")
+        for e, cov, odom in zip(taken, got["cov"], got["odom"]):
+            c = mb.unpack_labelled(cov)
+            assert c.stamp_ns == e.stamp_ns
+            np.testing.assert_array_equal(c.values, e.P.ravel())                    # the estimate's P, exactly
+            assert odom.pose.pose.position.x == e.x_hat[agent1.p_x]
+            assert odom.pose.covariance[0] == e.P[agent1.p_x, agent1.p_x]
+            assert odom.twist.covariance[7] == e.P[agent1.v_y, agent1.v_y]
     finally:
         est.destroy_node()

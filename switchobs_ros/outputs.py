@@ -1,0 +1,102 @@
+"""The estimator's outputs: each estimate published on ``~/state`` and, at their decimation and only
+while a subscription is matched to them, on the optional outputs (``~/envelope``, ``~/covariance``,
+one ``nav_msgs/Odometry`` per body, the typed messages, the RViz markers).
+
+:class:`OutputsMixin` is the publishing half of :class:`~switchobs_ros.estimator.EstimatorMixin`:
+
+* messages of a fixed layout are published as serialised bytes whose numbers are rewritten in
+  place (:mod:`msg_bridge.raw`: the state, the envelope, the covariance, every body's odometry in
+  one buffer, the typed state estimate); ``~/error_bounds`` (its reasons change length) and the
+  markers are Python messages reused from one estimate to the next;
+* ``output.<name>_every = m`` publishes the ``k``-th estimate (from 0) on that output when
+  ``k % m == 0`` (0: never);
+* ``P`` is formed only for an estimate that a listened output carrying it takes
+  (:meth:`OutputsMixin._covariance_due`, asked by the pipeline before each estimate reads ``P``):
+  with ``output.covariance_every: 5`` and the odometry every 5, four estimates in five cost no
+  covariance at all.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .demand import listened
+from .pipeline import Estimate
+
+__all__ = ["OutputsMixin", "channel_bodies"]
+
+
+def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
+    """The body each channel sees (the one whose outputs belong to that channel alone, as
+    ``agent2`` for channel 2 of the camera scenarios): ``{channel: body name}``, channels whose
+    outputs name no such body left out (the markers then highlight none)."""
+    names = {b.name for b in bodies}
+    common = set.intersection(*(set(o) for o in system.output_labels)) if system.N else set()
+    out = {}
+    for c, labels in enumerate(system.output_labels, start=1):
+        own = {lab.rpartition(".")[0] for lab in labels if lab not in common} & names
+        if len(own) == 1:
+            out[c] = own.pop()
+    return out
+
+
+class OutputsMixin:
+    """Publishing the estimates (module docstring); the node provides the publishers, the writers,
+    ``every`` (``output.*_every``), ``published`` (counts per output), ``n_published``, ``demand``
+    and ``pipeline``."""
+
+    def _covariance_carriers(self) -> list:
+        """``(output, publisher)`` of the outputs whose messages carry ``P``, those published at all
+        (for :class:`~switchobs_ros.demand.Demand`)."""
+        ev = self.every     # (the node may recreate its publishers: read them each time)
+        pubs = (("covariance", getattr(self, "pub_cov", None)),
+                ("typed", self.pub_typed[0] if getattr(self, "pub_typed", ()) else None),
+                ("markers", getattr(self, "pub_markers", None)),
+                *(("odometry", p) for p in getattr(self, "pub_odom", [])))
+        return [(k, p) for k, p in pubs if ev[k] and p is not None]
+
+    def _covariance_due(self, i: int) -> bool:
+        """Whether the ``i``-th estimate of the pipeline's present call (the ``n_published + i``-th)
+        goes out on a listened output that carries ``P`` (``output.*_every``)."""
+        k, ev = self.n_published + i, self.every
+        return any(k % ev[kind] == 0 for kind in self.demand.kinds)
+
+    def _publish_all(self, estimates: list[Estimate]) -> None:
+        """Publish each estimate: ``~/state`` always, the other outputs at their decimation
+        (``output.*_every``) and only while a subscription is matched to them (:mod:`switchobs_ros.demand`)."""
+        if not estimates:
+            return
+        try:
+            ev, n = self.every, self.published
+            for e in estimates:
+                k = self.n_published
+                self.n_published = k + 1
+                self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
+                n["state"] += 1
+                if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
+                    self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
+                    n["envelope"] += 1
+                if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
+                    self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    n["covariance"] += 1
+                if ev["odometry"] and k % ev["odometry"] == 0 and any(on := [listened(p) for p in self.pub_odom]):
+                    for pub, m, yes in zip(self.pub_odom, self.w_odom.msgs(e.x_hat, e.stamp_ns, e.P), on):
+                        if yes:
+                            pub.publish(m)
+                            n["odometry"] += 1
+                if ev["typed"] and k % ev["typed"] == 0:
+                    pl = self.pipeline
+                    if listened(self.pub_typed[0]):
+                        self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        n["typed"] += 1
+                    if listened(self.pub_typed[1]):
+                        self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                                                                      pl.bound_invalid_why, pl.bound_note))
+                        n["typed"] += 1
+                if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
+                    g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
+                    self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
+                                                                self.body_in_view.get(e.channel)))
+                    n["markers"] += 1
+        except Exception as err:
+            self.pipeline.internal_error("publish", err)
