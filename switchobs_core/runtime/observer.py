@@ -538,16 +538,16 @@ class SwitchedObserver:
         return self._propagated(key, v, dt, float(t))[1]
 
     def prior_covariance(self, t: float) -> np.ndarray | None:
-        """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no
-        covariance is kept): the last sample's ``P`` through the step's error map,
-        ``E P E' + Q_d(dt)`` (plus the held measurement noise ``(Gamma L) R (Gamma L)'`` for LMI
-        gains, :mod:`switchobs_core.runtime.covariance`); the state is unchanged. For the
-        chi-square gate of :mod:`switchobs_core.runtime.consistency`."""
-        P = self.P
+        """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no covariance is
+        kept): the family's stored one (a locked Kalman table), else the last sample's ``P`` through the step's
+        error map, ``E P E' + Q_d(dt)`` (plus the held noise ``(Gamma L) R (Gamma L)'`` for LMI gains,
+        :mod:`switchobs_core.runtime.covariance`); the state is unchanged. For the chi-square gate and the bias test."""
         dt = float(t) - self._t
+        S = None if self._lost or not (math.isfinite(dt) and dt > 0) else self._gains.stored_prior(float(t), dt)
+        P = self.P if S is None else S
         if P is None or not (math.isfinite(dt) and dt >= 0):
             return None
-        if dt == 0:
+        if dt == 0 or S is not None:
             return P
         return self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
 

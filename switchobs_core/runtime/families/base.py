@@ -303,6 +303,11 @@ class GainFamily(Protocol):
     def covariance(self) -> np.ndarray | None:
         """The real error covariance after the last sample (a copy), or None when none is kept."""
 
+    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+        """The prior covariance at ``t`` (``dt`` after the last sample) when the family has it stored
+        (a copy; a locked Kalman table: the next phase's), else None: the observer then propagates
+        :meth:`covariance` (:meth:`predict_covariance`)."""
+
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         """``P`` (as :meth:`covariance` returned it) through the step ``e`` over ``dt``, not kept
         (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.prior_covariance`)."""

@@ -157,6 +157,22 @@ class KalmanTableGains(OnlineKalmanGains):
             g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
         return self.kalman.posterior(*g)
 
+    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+        """While locked, a time ``t`` that is the next sample's on the grid (as :meth:`_locked` tests
+        it): the stored prior of that phase, the real prior there whatever the sample's channel
+        (no O(n^3) posterior and propagation); else None."""
+        if self._online or self._origin is None or self._last_k < 0:
+            return None
+        kd = self.kalman
+        tau_ns = round(t * 1e9) - self._origin_ns
+        k = round(tau_ns / self._ns_per_sample)
+        if k != self._last_k + 1 or abs(tau_ns - k * self._ns_per_sample) > MAX_JITTER * self._ns_per_sample \
+                or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
+            return None
+        S = len(kd.startup)
+        ent = kd.startup[k] if k < S else kd.periodic[k % kd.pattern.K]
+        return ent.P_prior.copy()
+
     def depart(self, why: str) -> None:
         """Leave the cache: the real covariance becomes the family's own."""
         if not self._online:

@@ -130,6 +130,9 @@ class LmiGains:
             self._P = self._pending.apply(self._P)
         return self._P.copy()
 
+    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+        return None
+
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         """The prior through ``e``; kept (a copy) for :meth:`stepped` when ``P`` is the covariance kept."""
         prior = self._cov.prior(P, e, dt, self._held_noise(e))

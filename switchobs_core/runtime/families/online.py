@@ -182,6 +182,9 @@ class OnlineKalmanGains:
         spans more than a double resolves (module docstring)."""
         return self._L.copy()
 
+    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+        return None
+
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         return self._cov.prior(P, e, dt)
 

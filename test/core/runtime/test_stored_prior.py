@@ -1,0 +1,68 @@
+"""The prior covariance a locked Kalman table has stored: what the chi-square gate and the bias test
+read before a sample (``SwitchedObserver.prior_covariance``) is the next phase's stored prior while
+the table is locked, equal to the last posterior propagated over the step (within the design's
+rounding), and the propagated one wherever the table is not (a missing sample, a step off the
+grid, after a departure)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.runtime.observer import SwitchedObserver
+from switchobs_core.table.gains import kalman_table
+
+RATE = 50.0
+CYC = Cycle.from_ts(2.0, 0.6)
+#: The stored prior against the posterior propagated in double, relative to its largest entry.
+RTOL = 1e-9
+
+
+@pytest.fixture(scope="module")
+def ktable(paper):
+    return kalman_table(paper, [design_kalman(paper, CYC, RATE)])
+
+
+def _propagated(obs, t):
+    dt = t - obs.t
+    return obs._gains.predict_covariance(obs.P, obs._cache.step(obs._held()[0], dt), dt)
+
+
+def test_the_stored_prior_is_the_propagated_posterior_while_locked(paper, ktable):
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    sched, F, x = PeriodicSchedule(CYC), expm(paper.A / RATE), np.ones(paper.n)
+    stored = 0
+    for k in range(int(12 * RATE) + 1):         # start-up and periodic phases
+        t = k / RATE
+        if k:
+            x = F @ x
+            S = obs._gains.stored_prior(t, t - obs.t)
+            assert S is not None
+            stored += 1
+            P = _propagated(obs, t)
+            np.testing.assert_allclose(obs.prior_covariance(t), P, rtol=0, atol=RTOL * np.abs(P).max())
+        c = sched.channel_at(t)
+        obs.update(t, c, paper.C[c - 1] @ x)
+    assert obs._gains.source == "table" and stored == int(12 * RATE)
+
+
+def test_off_the_grid_or_after_a_departure_the_prior_is_propagated(paper, ktable):
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    sched, x = PeriodicSchedule(CYC), np.ones(paper.n)
+    for k in range(50):
+        t = k / RATE
+        obs.update(t, sched.channel_at(t), paper.C[sched.channel_at(t) - 1] @ x)
+    t = 50 / RATE
+    assert obs._gains.stored_prior(t + 0.3 / RATE, t + 0.3 / RATE - obs.t) is None     # off the grid
+    t_skip = 51 / RATE                                                                    # sample 50 missing
+    assert obs._gains.stored_prior(t_skip, t_skip - obs.t) is None
+    P = _propagated(obs, t_skip)
+    np.testing.assert_array_equal(obs.prior_covariance(t_skip), P)
+    obs.update(t_skip, sched.channel_at(t_skip), paper.C[sched.channel_at(t_skip) - 1] @ x)
+    assert obs._gains.source == "online"                                                  # departed
+    t = 52 / RATE
+    assert obs._gains.stored_prior(t, t - obs.t) is None
+    np.testing.assert_array_equal(obs.prior_covariance(t), _propagated(obs, t))
