@@ -25,6 +25,15 @@ Re-lock
     published covariance stays within the 1 % of test_kalman_table_cache.py (0.11 % at worst in
     six 20 s runs with 5 % partial samples; 1e-2 with a test relative to ``max|S|`` gave 5.8 %).
 
+Alignment to the schedule
+    the grid starts at the first sample, as phase 0 of the table (its first channel, at the start
+    of that channel's residence). A node that starts while the sensors are mid-cycle takes its
+    first sample elsewhere in the cycle: it departs there, and at the first switch it sees (two
+    consecutive samples, one step apart, on different channels) the grid is moved by a whole
+    number of samples so that this sample is the table's first sample of that channel's residence
+    in the periodic pattern (when the pattern starts that channel's residence once per period);
+    the recursion then re-locks as after any departure, once its prior has converged to the stored
+    one.
 First sample after t0
     the stored start-up begins with ``P0`` at the first sample; a first sample later than the
     observer's ``t0`` (by more than ``dt_tol``) has the prior ``P0`` propagated exactly over the
@@ -131,6 +140,8 @@ class KalmanTableGains(OnlineKalmanGains):
         self._origin: float | None = None
         self._origin_ns = 0
         self._last_k = -1           # sample number of the last sample (-1: none; -2: off the grid)
+        self._last_channel = 0      # the last sample's channel (0: none)
+        self.alignments = 0         # grid moves to the schedule (module docstring)
         self._kgain: tuple | None = None
         self.fallback = ""
         self.departures = 0
@@ -241,7 +252,13 @@ class KalmanTableGains(OnlineKalmanGains):
                 dt = 0.0
             elif span > 0:
                 self._P = self._cov.step(self._P, ctx.zoh(OPEN_LOOP, span), span)
-        elif self._online and not why:
+        if self._online and rows is None and self._align(t, channel, span):
+            ph = kd.phase_at(self._since(t), max_jitter=MAX_JITTER)
+            ent = kd.entry(ph)
+            why = self._departure(t, ph, ent, channel, rows, span)
+            self._last_k = ph.k
+        self._last_channel = channel
+        if self._online and not why:
             # every entry within relock_rtol of its own scale: |P - S|_ij <= rtol sqrt(S_ii S_jj)
             S = ent.P_prior
             d = np.sqrt(np.abs(np.diagonal(S)))
@@ -260,6 +277,28 @@ class KalmanTableGains(OnlineKalmanGains):
             x = xm
         xp, m = kalman_correct(x, K, H, y, self._I, prediction)
         return Correction(xp, maps + (m,))
+
+    def _align(self, t: float, channel: int, span: float) -> bool:
+        """At a switch seen one step after the last sample (module docstring, alignment): move the
+        grid so that ``t`` is the periodic pattern's first sample of ``channel``. False (nothing
+        moved) when no switch is seen here or the pattern does not start that residence once."""
+        kd = self.kalman
+        if not self._last_channel or self._last_channel == channel or abs(span - self._dtn) > self.dt_tol:
+            return False
+        per = kd.periodic
+        K = len(per)
+        starts = [j for j in range(K) if per[j].channel == channel and per[j - 1].channel != channel]
+        if len(starts) != 1:
+            return False
+        S = len(kd.startup)
+        k_now = round((round(t * 1e9) - self._origin_ns) / self._ns_per_sample)
+        if k_now >= 0 and k_now % K == starts[0]:
+            return False              # the grid has it there already (start-up sample k is the pattern's k % K)
+        k = starts[0] + K * max(0, -(-(S - starts[0]) // K))     # the first k >= S with k % K on it
+        self._origin_ns = round(t * 1e9 - k * self._ns_per_sample)
+        self._last_k = k - 1
+        self.alignments += 1
+        return True
 
     def _locked(self, s: Sample) -> Correction | None:
         """The hot path (locked, all rows, a step to take): the phase found inline and one cached
@@ -292,7 +331,7 @@ class KalmanTableGains(OnlineKalmanGains):
         x = hit.predict(x0)
         nu = y - H @ x
         xp = x + K @ nu
-        self._last_k = k
+        self._last_k, self._last_channel = k, channel
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
         return Correction(xp, (FusedMap(hit, dt, x0, x, xp, y, nu, -1 if startup else idx),))
 
