@@ -174,15 +174,22 @@ class KalmanTableGains(OnlineKalmanGains):
         (no O(n^3) posterior and propagation); else None."""
         if self._online or self._origin is None or self._last_k < 0:
             return None
+        k = self._next_k(t, dt)
+        if k is None:
+            return None
         kd = self.kalman
+        ent = kd.startup[k] if k < len(kd.startup) else kd.periodic[k % kd.pattern.K]
+        return ent.P_prior.copy()
+
+    def _next_k(self, t: float, dt: float) -> int | None:
+        """The grid's sample number of ``t`` when it is the next sample after the last one, within
+        the jitter and step tolerances of the locked path (module docstring); else None."""
         tau_ns = round(t * 1e9) - self._origin_ns
         k = round(tau_ns / self._ns_per_sample)
         if k != self._last_k + 1 or abs(tau_ns - k * self._ns_per_sample) > MAX_JITTER * self._ns_per_sample \
                 or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
             return None
-        S = len(kd.startup)
-        ent = kd.startup[k] if k < S else kd.periodic[k % kd.pattern.K]
-        return ent.P_prior.copy()
+        return k
 
     def depart(self, why: str) -> None:
         """Leave the cache: the real covariance becomes the family's own."""
@@ -306,10 +313,8 @@ class KalmanTableGains(OnlineKalmanGains):
         done) whenever the general path is needed."""
         kd = self.kalman
         t, dt, channel = s.t, s.dt, s.channel
-        tau_ns = round(t * 1e9) - self._origin_ns
-        k = round(tau_ns / self._ns_per_sample)
-        if k != self._last_k + 1 or abs(tau_ns - k * self._ns_per_sample) > MAX_JITTER * self._ns_per_sample \
-                or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
+        k = self._next_k(t, dt)
+        if k is None:
             return None
         S = len(kd.startup)
         startup = k < S
