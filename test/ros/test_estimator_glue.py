@@ -37,18 +37,24 @@ def _drain_until(node: EstimatorNode, cond, timeout: float = 10.0) -> bool:
     return cond()
 
 
+def _on_channel_one(est, ros_node):
+    """The test's input publishers, matched with the node, and channel 1 taken by it: ``(io, pipeline)``."""
+    io = EstimatorIO(ros_node)
+    assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
+                                            for p in (io.pub_channel, io.pub_camera, io.pub_target)), 20.0)
+    pl = est.pipeline
+    io.pub_channel.publish(UInt8(data=1))
+    assert _drain_until(est, lambda: pl.channel == 1)
+    return io, pl
+
+
 def test_drain_takes_waiting_inputs_channel_first(paper_tables, ros_node):
     # the drain alone (no timer runs here): arrival order decides the channel (reorder window 0),
     # else the last sample would wait for the window's timer (test_attribution.py)
     est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
                                              Parameter("reorder_window_ms", value=0.0)])
     try:
-        io = EstimatorIO(ros_node)
-        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
-                                                for p in (io.pub_channel, io.pub_camera, io.pub_target)), 20.0)
-        pl = est.pipeline
-        io.pub_channel.publish(UInt8(data=1))
-        assert _drain_until(est, lambda: pl.channel == 1)
+        io, pl = _on_channel_one(est, ros_node)
         base = time.time_ns()
         stamps = [base + k * 10_000_000 for k in range(1, 6)]
         for s in stamps:
@@ -93,12 +99,7 @@ def test_pairing_timer_runs_only_while_a_sample_waits(paper_tables, ros_node):
                                              Parameter("reorder_window_ms", value=0.0),
                                              Parameter("pairing_timeout", value=0.1)])
     try:
-        io = EstimatorIO(ros_node)
-        assert spin_until(ros_node, lambda: all(p.get_subscription_count() > 0
-                                                for p in (io.pub_channel, io.pub_camera, io.pub_target)), 20.0)
-        pl = est.pipeline
-        io.pub_channel.publish(UInt8(data=1))
-        assert _drain_until(est, lambda: pl.channel == 1)
+        io, pl = _on_channel_one(est, ros_node)
         base = time.time_ns()
         for k in range(1, 4):
             s = base + k * 10_000_000

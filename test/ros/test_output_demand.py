@@ -63,17 +63,23 @@ def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
         time.sleep(0.01)
 
 
+def _inputs(ros_node):
+    """The test's publishers of the estimator's inputs (channel, camera and target poses)."""
+    io = EstimatorIO.__new__(EstimatorIO)
+    io.node = ros_node
+    io.pub_channel = ros_node.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
+    io.pub_camera = ros_node.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
+    io.pub_target = ros_node.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+    return io
+
+
 def test_node_publishes_optional_outputs_only_to_subscribers(paper_tables, ros_node):
     est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"]),
                                              Parameter("reorder_window_ms", value=0.0),
                                              Parameter("noise.measurement_std", value=0.01)])
     try:
         # the test's inputs, and of the outputs only ~/state and agent1's odometry
-        io = EstimatorIO.__new__(EstimatorIO)
-        io.node = ros_node
-        io.pub_channel = ros_node.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
-        io.pub_camera = ros_node.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
-        io.pub_target = ros_node.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        io = _inputs(ros_node)
         got = {"state": [], "odom": []}
         ros_node.create_subscription(Float64MultiArray, "/estimator/state", got["state"].append, qos.TRUTH)
         odom = ros_node.create_subscription(Odometry, "/estimator/agent1/odom", got["odom"].append, qos.TRUTH)
@@ -114,11 +120,7 @@ def test_node_forms_P_only_for_the_estimates_its_outputs_take(paper_tables, ros_
                                              Parameter("output.covariance_every", value=5),
                                              Parameter("output.odometry_every", value=5)])
     try:
-        io = EstimatorIO.__new__(EstimatorIO)
-        io.node = ros_node
-        io.pub_channel = ros_node.create_publisher(UInt8, "camera/active_channel", qos.CHANNEL_PUB)
-        io.pub_camera = ros_node.create_publisher(PoseStamped, "camera/pose", qos.SENSOR)
-        io.pub_target = ros_node.create_publisher(PoseStamped, "target/pose", qos.SENSOR)
+        io = _inputs(ros_node)
         got = {"cov": [], "odom": []}
         ros_node.create_subscription(Float64MultiArray, "/estimator/covariance", got["cov"].append, qos.TRUTH)
         ros_node.create_subscription(Odometry, "/estimator/agent1/odom", got["odom"].append, qos.TRUTH)
