@@ -61,8 +61,8 @@ def test_open_loop_product_contains_the_exact_product(seed, blocks, b, scale, un
     assert float(np.linalg.eigvalsh(Xp / np.outer(rp, rp))[0]) >= -1e-6
 
 
-def _prior_pairs(noise_max, monkeypatch) -> tuple[list, int]:
-    """Before each sample of a 44-state Kalman table run (camera_agents(10)): the prior sets the
+def _prior_pairs(agents10, noise_max, monkeypatch) -> tuple[list, int]:
+    """Before each sample of a 44-state Kalman table run (``agents10``): the prior sets the
     observer gives and those of the dense product on the same state; and the calls of the sparse form."""
     calls = []
     real = rig.open_loop_product
@@ -71,13 +71,8 @@ def _prior_pairs(noise_max, monkeypatch) -> tuple[list, int]:
         calls.append(1)
         return real(ell, sp)
     monkeypatch.setattr(rig, "open_loop_product", counted)
-    system = so.camera_agents(10)
-    cycle = so.Cycle((0.1,) * 10)
-    table = so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)])
-    sched = so.PeriodicSchedule(cycle)
+    system, cycle, table, sched, x = agents10
     rng = np.random.default_rng(3)
-    x = np.zeros(system.n)
-    x[0::4], x[1::4] = rng.uniform(-3, 3, 11), rng.uniform(-3, 3, 11)
     obs = so.SwitchedObserver(system, table, "periodic", [cycle], e0=10.0, noise_max=noise_max)
     out = []
     for k in range(60):
@@ -95,8 +90,8 @@ def _prior_pairs(noise_max, monkeypatch) -> tuple[list, int]:
 
 
 @pytest.mark.parametrize("noise_max", [None, 1e-3])
-def test_observer_prior_matches_the_dense_path(noise_max, monkeypatch):
-    pairs, calls = _prior_pairs(noise_max, monkeypatch)
+def test_observer_prior_matches_the_dense_path(agents10, noise_max, monkeypatch):
+    pairs, calls = _prior_pairs(agents10, noise_max, monkeypatch)
     assert calls == len(pairs) * (1 if noise_max is None else 2)      # every prior took the sparse form
     for (xa, Sa, Sva), (xb, Sb, Svb) in pairs:
         np.testing.assert_array_equal(xa, xb)
