@@ -18,7 +18,10 @@ Each child (one tree: this checkout or ``--before``) builds the estimator as the
 message with a ``MessageInfo`` of source and receive timestamps and sequence numbers, as rclpy
 does. What it does not run: rclpy's executor, the drain's takes, the middleware. The outputs are
 the goal's configuration (``~/state`` and ``~/envelope`` every sample; odometry, covariance and
-the typed pair every 5th; markers every 10th: ``--every``).
+the typed pair every 5th; markers every 10th: ``--every``). The parameters are
+``bench_live_scale.py``'s (``e0`` 1e3, every ``h_i`` 1 s) with ``max_abs_value`` 1e12: agent 1's
+unstable mode (0.2/s) carries its position past the default 1e6 m at about 70 s, and the
+steady window runs past that.
 
 ``--what core`` times the core alone on the same samples: ``SwitchedObserver.update`` and
 ``envelope()`` of the observer the pipeline builds (no pairing, attribution, screening, tests or
@@ -307,9 +310,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(r["profile"])
             return 0
         res: dict[tuple[str, str], list[dict]] = {}
-        for _ in range(a.rounds):
+        for r in range(a.rounds):          # interleaved, the order of the trees alternating
             for what in whats:
-                for name, tree in trees:
+                for name, tree in (trees if r % 2 == 0 else trees[::-1]):
                     res.setdefault((name, what), []).append(child(tree, what))
     load = os.getloadavg()[0]
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_pipeline.py --agents {a.agents} --table {a.table} "
