@@ -33,7 +33,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from switchobs_core.numerics.ellipse import covariance_ellipse
+from switchobs_core.numerics.ellipse import covariance_ellipse, covariance_ellipses
 
 from .convert import Body
 from .validate import BridgeError
@@ -159,30 +159,16 @@ def ellipse_disc(P: np.ndarray | None, b: Body) -> tuple[float, float, float, fl
 
 def ellipse_discs(P: np.ndarray | None, bodies: Sequence[Body]) -> list[tuple[float, float, float, float] | None]:
     """:func:`ellipse_disc` of every body, the same doubles, with one eigen-decomposition call for
-    all of them (numpy's ``eigh`` runs the same LAPACK routine on each matrix of a stack; the
-    square roots are correctly rounded in both, the angles taken with :mod:`math` as there)."""
+    all of them (:func:`~switchobs_core.numerics.ellipse.covariance_ellipses`)."""
     bodies = tuple(bodies)
-    out: list[tuple[float, float, float, float] | None] = [None] * len(bodies)
     if P is None or not bodies:
-        return out
+        return [None] * len(bodies)
     rows, cols, line = _pose_blocks(bodies)
     Ppp = P[rows, cols]
     Ppp[line] = 0.0             # a body on a line: no spread across it
-    ok = np.isfinite(Ppp).all(axis=(1, 2))
-    if not ok.all():
-        ok = np.flatnonzero(ok)
-        if not ok.size:
-            return out
-        Ppp = Ppp[ok]
-    else:
-        ok = range(len(bodies))
-    lam, V = np.linalg.eigh(0.5 * (Ppp + Ppp.transpose(0, 2, 1)))
-    lam = np.clip(lam, 0.0, None)
-    major, minor = (2.0 * 2.0 * np.sqrt(lam[:, 1])).tolist(), (2.0 * 2.0 * np.sqrt(lam[:, 0])).tolist()
-    for k, sx, sy, vy, vx in zip(ok, major, minor, V[:, 1, 1].tolist(), V[:, 0, 1].tolist()):
-        yaw = math.atan2(vy, vx)
-        out[k] = (sx, _THIN if bodies[k].p_y is None else sy, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-    return out
+    return [None if ell is None else (ell[0], _THIN if b.p_y is None else ell[1], math.sin(ell[2] / 2.0),
+                                      math.cos(ell[2] / 2.0))
+            for b, ell in zip(bodies, covariance_ellipses(Ppp, sigmas=2.0))]
 
 
 @functools.lru_cache(maxsize=16)
