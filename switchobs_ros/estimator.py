@@ -135,7 +135,8 @@ class EstimatorMixin(OutputsMixin):
     def _optional_writer(self, kind: str, make: Callable[[], Any]) -> Any:
         """The writer of an optional output, serialised at its first use: an output nobody listens to
         costs nothing at start-up (the 33 odometries and the markers take 50-90 ms at n = 132). The
-        same writer, the same bytes, as one built in :meth:`_configure`."""
+        same messages as a writer built in :meth:`_configure` (``test_lazy_writers.py``); the writers
+        are built anew at every configuration."""
         w = self._writers.get(kind)
         if w is None:
             w = self._writers[kind] = make()
