@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
 
-    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor]
+    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--early]
                                   [--before DIR] [--before-version 3] [--channel-type TYPE]
                                   [--discovery-profile FILE]
 
@@ -16,6 +16,9 @@ starts
   with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
   written here in the binary container's current version),
 
+with ``--early``, ``early``: this estimator started by ``bench/startup_early_driver.py``, which creates
+the process's DDS participant (a bare node) before importing the estimator, so that discovery runs
+during the imports and the table's load (an experiment; the node's own entry point does not);
 with ``--floor``, ``floor``: the same bare republisher that first imports what every estimator start
 needs of scipy (``scipy.linalg``, ``scipy.sparse``, ``scipy.special``: the runtime's BLAS/LAPACK
 wrappers, matrix exponentials, sparse transitions, chi-square quantiles), the least any estimator
@@ -97,7 +100,8 @@ FLOOR = ("import sys; sys.path.insert(0, {bench!r}); import scipy.linalg, scipy.
          "from bench_node import republisher_main; republisher_main()")
 
 #: The line each node writes once its subscriptions and publishers exist.
-READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "estimator": "estimator ready"}
+READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "estimator": "estimator ready",
+         "early": "estimator ready"}
 
 
 def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0) -> tuple[float, ...]:
@@ -114,7 +118,8 @@ def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 12
         topic, mtype = "/estimator/state", Float64MultiArray
         probe = First(topic, mtype)
         t0 = time.monotonic()
-        node = NodeProcess("estimator", ros_args(params=params), log=log, env=env)
+        cmd = [sys.executable, str(REPO / "bench" / "startup_early_driver.py")] if kind == "early" else None
+        node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, log=log, env=env)
     ready = ready_cpu = float("nan")
     try:
         end = t0 + timeout
@@ -151,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--systems", default="paper,agents32", help="comma-separated: paper, agents32")
     ap.add_argument("--floor", action="store_true", help="also the bare republisher after scipy's imports")
+    ap.add_argument("--early", action="store_true", help="also this estimator with its DDS participant created "
+                                                        "before its imports (bench/startup_early_driver.py)")
     ap.add_argument("--before", default="", help="another checkout whose estimator runs beside this one's")
     ap.add_argument("--before-version", type=int, default=0, help="the container version of the 32-agent table "
                     "the --before checkout reads (default: the same file as this checkout's; 3 for a checkout "
@@ -215,6 +222,8 @@ def main(argv: list[str] | None = None) -> int:
                     kinds = {"bare": env, "estimator": env}
                     if a.floor:
                         kinds["floor"] = env
+                    if a.early:
+                        kinds["early"] = env
                     if a.before:
                         kinds["before"] = dict(env, PYTHONPATH=a.before, PYTHONPYCACHEPREFIX=str(d / "pyc_before"))
                     times: dict[str, list[tuple[float, ...]]] = {k: [] for k in kinds}
@@ -225,7 +234,8 @@ def main(argv: list[str] | None = None) -> int:
                             params = est_params
                             if kind == "before" and name in tables_before:
                                 params = dict(est_params, gain_table=tables_before[name])
-                            res = one_start(kind if kind in ("bare", "floor") else "estimator", params, kind_env,
+                            res = one_start(kind if kind in ("bare", "floor", "early") else "estimator", params,
+                                            kind_env,
                                             d / f"{name}_{kind}_{r}.log")
                             if r:
                                 times[kind].append(res)
@@ -239,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
           f"load average {info['load'][0]:.1f} before ({info['date']}).")
     before = " --floor" if a.floor else ""
+    before += " --early" if a.early else ""
     before += f" --before {a.before}" if a.before else ""
     before += f" --before-version {a.before_version}" if a.before_version else ""
     before += f" --channel-type {a.channel_type}" if a.channel_type else ""
