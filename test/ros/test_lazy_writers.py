@@ -51,3 +51,35 @@ def test_optional_writers_are_built_at_first_use_with_the_same_messages(paper_ta
         assert set(est._writers) == {"odom", "typed", "markers"}
     finally:
         est.destroy_node()
+
+
+def test_an_optional_writer_that_fails_costs_no_other_estimate(paper_tables, ros_node, monkeypatch):
+    """A writer that cannot be built (or write) is counted as the estimate's ``publish`` internal
+    error; ``~/state`` of that estimate is out already, and every other estimate of the call is
+    published in full."""
+    from types import SimpleNamespace
+
+    import switchobs_ros.outputs as outputs
+
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"])])
+    try:
+        monkeypatch.setattr(outputs, "listened", lambda pub: pub is not None)   # as if every output had a subscriber
+        est.every.update(markers=2, envelope=1)
+        calls = []
+
+        def broken(*args):
+            calls.append(args)
+            raise ValueError("raw message: the sentinels of t0 are found at 2 offsets")
+
+        est._writers["markers"] = SimpleNamespace(msg=broken)
+        n = est.system.n
+        es = [SimpleNamespace(x_hat=np.full(n, float(i)), stamp_ns=10**9 * (i + 1), P=None, channel=1,
+                              envelope=np.full(len(est.env_labels), 0.5)) for i in range(5)]
+        before = est.pipeline.rejected[("publish", "internal_error")]
+        est._publish_all(es)
+        assert est.published["state"] == 5 and est.published["envelope"] == 5
+        assert len(calls) == 3                           # estimates 0, 2 and 4 were due on ~/markers
+        assert est.pipeline.rejected[("publish", "internal_error")] - before == 3
+        assert "t0 are found at 2 offsets" in est.pipeline.last_rejection
+    finally:
+        est.destroy_node()
