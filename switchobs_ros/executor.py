@@ -38,7 +38,7 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities
 
-__all__ = ["KeptWaitSetExecutor"]
+__all__ = ["KeptWaitSetExecutor", "PolledEventsExecutor"]
 
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE, _WAITABLE = range(6)
 
@@ -286,3 +286,49 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
             return
         future._set_executor(self)
         future.set_result(response)
+
+
+class PolledEventsExecutor:
+    """rclpy's ``rclpy.experimental.EventsExecutor`` spun by ``spin_once(timeout)`` in a loop.
+
+    Its ``spin()`` (no timeout) waits on a condition variable until ``steady_clock::time_point::max()``;
+    in these wheels ``std::condition_variable`` keeps time on the system clock, the deadline's
+    conversion overflows into the past, and the wait returns at once, forever: the spinning thread
+    busy-loops holding the queue's mutex and the middleware's listener threads, which enqueue
+    every message and timer event under that mutex, starve (no callback at all:
+    bench/events_executor_check.py). A finite timeout converts without overflow. Guard conditions
+    and callback groups are not served by that executor (rclpy's own limits).
+    """
+
+    #: The timeout of each ``spin_once`` (s): also how soon a shutdown is noticed.
+    POLL = 0.5
+
+    def __init__(self, *, context=None) -> None:
+        from rclpy.experimental import EventsExecutor
+        from rclpy.utilities import get_default_context
+        self._context = context or get_default_context()
+        self._ex = EventsExecutor(context=self._context)
+        self._stop = False
+
+    def add_node(self, node) -> bool:
+        return self._ex.add_node(node)
+
+    def remove_node(self, node) -> None:
+        self._ex.remove_node(node)
+
+    def get_nodes(self):
+        return self._ex.get_nodes()
+
+    def wake(self) -> None:
+        self._ex.wake()
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        self._ex.spin_once(timeout_sec=self.POLL if timeout_sec is None or timeout_sec < 0 else timeout_sec)
+
+    def spin(self) -> None:
+        while self._context.ok() and not self._stop:
+            self._ex.spin_once(timeout_sec=self.POLL)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self._stop = True
+        return self._ex.shutdown(timeout_sec) if timeout_sec is not None else self._ex.shutdown()

@@ -28,19 +28,22 @@ from .ros_args import with_float_lists
 
 __all__ = ["make_executor", "run_node"]
 
-#: ``SWITCHOBS_EXECUTOR``: ``kept`` (default) or ``rclpy`` (rclpy's SingleThreadedExecutor).
+#: ``SWITCHOBS_EXECUTOR``: ``kept`` (default), ``rclpy`` (rclpy's SingleThreadedExecutor) or ``events``
+#: (rclpy's EventsExecutor, polled: :class:`~switchobs_ros.executor.PolledEventsExecutor`; for measurements).
 EXECUTOR_ENV = "SWITCHOBS_EXECUTOR"
 
 
 def make_executor():
     """The executor a node spins: :class:`~switchobs_ros.executor.KeptWaitSetExecutor` (one wait
     per wake-up of the middleware, the wait set kept between waits), or rclpy's
-    SingleThreadedExecutor with ``SWITCHOBS_EXECUTOR=rclpy``. Not rclpy's EventsExecutor: with
-    these wheels it delivers no subscription callback (bench/events_executor_check.py)."""
-    if os.environ.get(EXECUTOR_ENV, "kept") == "rclpy":
+    SingleThreadedExecutor with ``SWITCHOBS_EXECUTOR=rclpy``, or rclpy's EventsExecutor with
+    ``events`` (its ``spin()`` serves nothing with these wheels: spun by ``spin_once`` in a loop;
+    it serves no guard condition and no callback group)."""
+    kind = os.environ.get(EXECUTOR_ENV, "kept")
+    if kind == "rclpy":
         return rclpy.executors.SingleThreadedExecutor()
-    from .executor import KeptWaitSetExecutor
-    return KeptWaitSetExecutor()
+    from .executor import KeptWaitSetExecutor, PolledEventsExecutor
+    return PolledEventsExecutor() if kind == "events" else KeptWaitSetExecutor()
 
 
 def _quiet_interrupt_in_finalizers(hook):
