@@ -28,6 +28,7 @@ that spins this executor again cannot re-enter a mutually exclusive group.
 from __future__ import annotations
 
 import inspect
+import weakref
 from collections import deque
 from typing import Any
 
@@ -296,8 +297,12 @@ class PolledEventsExecutor:
     conversion overflows into the past, and the wait returns at once, forever: the spinning thread
     busy-loops holding the queue's mutex and the middleware's listener threads, which enqueue
     every message and timer event under that mutex, starve (no callback at all:
-    bench/events_executor_check.py). A finite timeout converts without overflow. Guard conditions
-    and callback groups are not served by that executor (rclpy's own limits).
+    bench/events_executor_check.py). A finite timeout converts without overflow.
+
+    It also calls a subscription callback that takes rclpy's ``MessageInfo`` with one argument,
+    the ``(message, info)`` tuple (a TypeError, reported as "SystemError: null argument to
+    internal routine"): such callbacks are wrapped here to unpack the tuple. Guard conditions and
+    callback groups are not served by that executor (rclpy's own limits).
     """
 
     #: The timeout of each ``spin_once`` (s): also how soon a shutdown is noticed.
@@ -310,8 +315,25 @@ class PolledEventsExecutor:
         self._ex = EventsExecutor(context=self._context)
         self._stop = False
 
+    @staticmethod
+    def _unpack_message_info(node) -> None:
+        """Wrap each callback of ``node`` that takes MessageInfo to take the one tuple instead."""
+        for sub in node.subscriptions:
+            if sub._callback_type is Subscription.CallbackType.WithMessageInfo and \
+                    not getattr(sub._callback, "unpacks_message_info", False):
+                def unpack(msg_info, fn=sub._callback):
+                    return fn(*msg_info)
+                unpack.unpacks_message_info = True
+                sub._callback = unpack      # the callback type stays WithMessageInfo
+
     def add_node(self, node) -> bool:
-        return self._ex.add_node(node)
+        self._unpack_message_info(node)
+        added = self._ex.add_node(node)
+        # the node's entity changes (Node._wake_executor) come to wake() below, so that a
+        # subscription created later is wrapped too (the Node.executor setter would remove the
+        # node from rclpy's executor first)
+        node._Node__executor_weakref = weakref.ref(self)
+        return added
 
     def remove_node(self, node) -> None:
         self._ex.remove_node(node)
@@ -320,6 +342,8 @@ class PolledEventsExecutor:
         return self._ex.get_nodes()
 
     def wake(self) -> None:
+        for node in self._ex.get_nodes():
+            self._unpack_message_info(node)
         self._ex.wake()
 
     def spin_once(self, timeout_sec: float | None = None) -> None:

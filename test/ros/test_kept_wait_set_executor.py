@@ -188,3 +188,22 @@ def test_shutdown_ends_spin_from_another_thread_and_from_the_context(ctx):
     rclpy.shutdown(context=ctx)
     t2.join(20.0)
     assert not t2.is_alive() and out[-1] in ("returned2", "external2")
+
+
+def test_polled_events_executor_delivers_messages_with_their_info_and_fires_timers(ctx):
+    from switchobs_ros.executor import PolledEventsExecutor
+    node = rclpy.create_node("kws_events", context=ctx)
+    ex = PolledEventsExecutor(context=ctx)
+    ex.add_node(node)
+    got, ticks = [], []
+    node.create_subscription(Int32, "/kws_ev", lambda m, info: got.append((m.data, info["source_timestamp"])),
+                             RELIABLE)
+    pub = node.create_publisher(Int32, "/kws_ev", RELIABLE)
+    node.create_timer(0.01, lambda: ticks.append(1))
+    wait_matched(ex, pub)
+    for i in range(10):
+        pub.publish(Int32(data=i))
+    spin_until(ex, lambda: len(got) == 10 and len(ticks) >= 3)
+    assert [d for d, _ in got] == list(range(10)) and all(ts > 0 for _, ts in got)
+    node.destroy_node()
+    ex.shutdown()
