@@ -9,7 +9,10 @@ Three processes per run, one role each: camera_sim (the built-in ``camera_agents
 agents, every h_i = 1 s, stamping each tick on its grid) as the sender; the node under test: the
 estimator with the model's Kalman table (``kalman``) or LMI table (``lmi``), all outputs at their
 defaults, or the ceiling (``bare``), a bare rclpy node that republishes every target pose
-(``bench/bench_node.py --republisher``); and this process as the receiver, which only records the
+(``bench/bench_node.py --republisher``), or the messaging floor (``sink``, ``bench/sink_node.py``:
+the estimator's subscriptions and outputs, no math); a node ``<kind>@rclpy`` spins rclpy's
+SingleThreadedExecutor, ``<kind>@events`` rclpy's EventsExecutor, otherwise
+``switchobs_ros.executor.KeptWaitSetExecutor`` (``SWITCHOBS_EXECUTOR``); and this process as the receiver, which only records the
 arrival of each answer (``/estimator/state``, or the republisher's ``~/out``) and of each truth
 message (one per tick: what was sent). Reported per node: ticks sent, answers, the fraction
 answered, latency (arrival - the tick's stamp, both this machine's system clock) p50 and p99, and
