@@ -16,8 +16,8 @@ SingleThreadedExecutor, ``<kind>@events`` rclpy's EventsExecutor, otherwise
 receiver, which only records the arrival of each answer (``/estimator/state``, or the
 republisher's ``~/out``) and of each truth message (one per tick: what was sent). Reported per
 node: ticks sent, answers, the fraction answered, latency (arrival - the tick's stamp, both this
-machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system, from ``/proc``, from the first tick to the
-last answer). Ratios against ``bare`` in the same run.
+machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system,
+from ``/proc``, from the first tick to the last answer). Ratios against ``bare`` in the same run.
 
 A script, not a test: nothing is asserted.
 """
