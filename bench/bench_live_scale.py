@@ -9,12 +9,15 @@ Three processes per run, one role each: camera_sim (the built-in ``camera_agents
 agents, every h_i = 1 s, stamping each tick on its grid) as the sender; the node under test: the
 estimator with the model's Kalman table (``kalman``) or LMI table (``lmi``), all outputs at their
 defaults, or the ceiling (``bare``), a bare rclpy node that republishes every target pose
-(``bench/bench_node.py --republisher``); and this process as the receiver, which only records the
-arrival of each answer (``/estimator/state``, or the republisher's ``~/out``) and of each truth
-message (one per tick: what was sent). Reported per node: ticks sent, answers, the fraction
-answered, latency (arrival - the tick's stamp, both this machine's system clock) p50 and p99, and
-the node process's CPU time per answer (user + system, from ``/proc``, from the first tick to the
-last answer). Ratios against ``bare`` in the same run.
+(``bench/bench_node.py --republisher``), or the messaging floor (``sink``, ``bench/sink_node.py``:
+the estimator's subscriptions and outputs, no math); a node ``<kind>@rclpy`` spins rclpy's
+SingleThreadedExecutor, ``<kind>@events`` rclpy's EventsExecutor, otherwise
+``switchobs_ros.executor.KeptWaitSetExecutor`` (``SWITCHOBS_EXECUTOR``); and this process as the
+receiver, which only records the arrival of each answer (``/estimator/state``, or the
+republisher's ``~/out``) and of each truth message (one per tick: what was sent). Reported per
+node: ticks sent, answers, the fraction answered, latency (arrival - the tick's stamp, both this
+machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system,
+from ``/proc``, from the first tick to the last answer). Ratios against ``bare`` in the same run.
 
 A script, not a test: nothing is asserted.
 """
@@ -113,22 +116,33 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     repo = REPO
     if kind.startswith("main:"):
         repo = main_repo
+    base, _, executor = kind.partition("@")
+    env = dict(os.environ, SWITCHOBS_EXECUTOR=executor or "kept")
+    log = logs / f"{kind.replace(':', '_').replace('@', '_')}.log"
     sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * m}
     optional = ()
+    outputs = {f"output.{k}_every": v for k, v in (every or {}).items()}
     if kind == "bare":
         node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
                            log=logs / "bare.log")
         topic, pose = "/bare_republisher/out", True
+    elif base == "sink":
+        params = {k: v for k, v in outputs.items() if k.removeprefix("output.").removesuffix("_every")
+                  in ("odometry", "covariance", "typed", "markers")}
+        node = NodeProcess("estimator", ros_args(params=params) if params else [],
+                           cmd=[sys.executable, str(REPO / "bench" / "sink_node.py"), str(sys_path)],
+                           env=env, log=log)
+        topic, pose = "/estimator/state", False
+        if listen:
+            optional = optional_outputs(so.load_system(sys_path))
     else:
-        params = dict(sched, system=str(sys_path), gain_table=tables[kind.removeprefix("main:")], e0=1e3,
-                      **{f"output.{k}_every": v for k, v in (every or {}).items()})
+        params = dict(sched, system=str(sys_path), gain_table=tables[base.removeprefix("main:")], e0=1e3, **outputs)
         code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
                 "runpy.run_module('switchobs_ros.estimator', run_name='__main__')")
         cmd = ([sys.executable, str(REPO / "bench" / "profile_node.py"), str(profile)] if profile
                else [sys.executable, "-c", code])
-        env = dict(os.environ, SWITCHOBS_PROFILE_REPO=str(repo))
-        node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, env=env,
-                           log=logs / f"{kind.replace(':', '_')}.log")
+        env["SWITCHOBS_PROFILE_REPO"] = str(repo)
+        node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, env=env, log=log)
         topic, pose = "/estimator/state", False
         if listen:
             optional = optional_outputs(so.load_system(sys_path))
@@ -171,7 +185,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--nodes", default="bare,kalman,lmi",
-                    help="comma-separated: bare, kalman, lmi; a node may repeat (interleaved rounds)")
+                    help="comma-separated: bare, sink, kalman, lmi, main:kalman, main:lmi, each with an optional "
+                         "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's); a node may "
+                         "repeat (interleaved rounds)")
     ap.add_argument("--listen", action="store_true",
                     help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
                          "markers, one odometry per body), so that each is built and published")
@@ -196,9 +212,10 @@ def main(argv: list[str] | None = None) -> int:
         system = so.load_system(sys_path)
         cycle = so.Cycle([1.0] * a.agents)
         tables = {}
-        if "kalman" in kinds or "main:kalman" in kinds:
+        bases = {k.partition("@")[0].removeprefix("main:") for k in kinds}
+        if "kalman" in bases:
             tables["kalman"] = str(so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)]).save(d / "k.npz"))
-        if "lmi" in kinds or "main:lmi" in kinds:
+        if "lmi" in bases:
             tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
         rclpy.init()
         try:

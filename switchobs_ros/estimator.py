@@ -377,9 +377,10 @@ class EstimatorMixin(OutputsMixin):
         round, the channel first, as the executor orders them after one wait) and handle them,
         up to :attr:`DRAIN_MAX`.
 
-        rclpy's SingleThreadedExecutor rebuilds its wait set and waits again for every
-        callback it runs (about 150 us of Python and middleware per wait for this node,
-        measured; bench/RESULTS.md): the target pose that arrives while the camera
+        Every wait of the executor costs Python and middleware work (rclpy's
+        SingleThreadedExecutor rebuilds its wait set for it, about 150 us for this node;
+        :class:`~switchobs_ros.executor.KeptWaitSetExecutor`, the node's, keeps it: about a third
+        of that; bench/RESULTS.md): the target pose that arrives while the camera
         pose is handled would cost one more wait, and a backlog one wait per message. Taking
         them here costs a few microseconds each. The bound keeps timers and services served. Then
         the pairing timer runs if a sample waits (:meth:`_arm_pairing_timer`).

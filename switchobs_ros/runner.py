@@ -11,6 +11,7 @@ or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 from __future__ import annotations
 
 import gc
+import os
 import sys
 
 import rclpy
@@ -25,7 +26,24 @@ from . import params_files
 from .params import ConfigError
 from .ros_args import with_float_lists
 
-__all__ = ["run_node"]
+__all__ = ["make_executor", "run_node"]
+
+#: ``SWITCHOBS_EXECUTOR``: ``kept`` (default), ``rclpy`` (rclpy's SingleThreadedExecutor) or ``events``
+#: (rclpy's EventsExecutor, polled: :class:`~switchobs_ros.executor.PolledEventsExecutor`; for measurements).
+EXECUTOR_ENV = "SWITCHOBS_EXECUTOR"
+
+
+def make_executor():
+    """The executor a node spins: :class:`~switchobs_ros.executor.KeptWaitSetExecutor` (one wait
+    per wake-up of the middleware, the wait set kept between waits), or rclpy's
+    SingleThreadedExecutor with ``SWITCHOBS_EXECUTOR=rclpy``, or rclpy's EventsExecutor with
+    ``events`` (its ``spin()`` serves nothing with these wheels: spun by ``spin_once`` in a loop;
+    it serves no guard condition and no callback group)."""
+    kind = os.environ.get(EXECUTOR_ENV, "kept")
+    if kind == "rclpy":
+        return rclpy.executors.SingleThreadedExecutor()
+    from .executor import KeptWaitSetExecutor, PolledEventsExecutor
+    return PolledEventsExecutor() if kind == "events" else KeptWaitSetExecutor()
 
 
 def _quiet_interrupt_in_finalizers(hook):
@@ -61,9 +79,7 @@ def run_node(node_cls, prog: str, args=None) -> int:
     code = 0
     try:
         node = node_cls()
-        # SingleThreadedExecutor: rclpy.experimental.EventsExecutor (rclpy 7.1.6 wheels, Fast DDS) delivers no
-        # subscription callback at all here, even to a one-subscription node (bench/events_executor_check.py)
-        executor = rclpy.executors.SingleThreadedExecutor()
+        executor = make_executor()
         executor.add_node(node)
         if getattr(node, "gc_freeze", False):
             gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations

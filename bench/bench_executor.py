@@ -1,0 +1,138 @@
+#!/usr/bin/env python
+"""In-process cost of an executor per callback: rclpy's SingleThreadedExecutor against
+switchobs_ros.executor.KeptWaitSetExecutor, interleaved rounds in one process (not a test).
+
+    python bench/bench_executor.py [--messages 3000] [--rounds 5]
+
+A node with the estimator's entity count (three input subscriptions, ``~/set_state``, two timers,
+``~/reset``, the parameter and type-description services rclpy gives every node) receives
+``--messages`` messages per round, one at a time: a thread publishes a message on one of the
+three input topics (in turn) 1 ms after it is told to, while this thread spins until its callback
+ran; this thread's CPU time (``time.thread_time``) per message, and the executor's waits per message (the kept executor
+counts them; rclpy's: one wait per ``_wait_for_ready_callbacks`` pass, counted by wrapping the rcl
+wait set's ``wait``). Medians over the rounds, and the ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from switchobs_ros import qos
+from switchobs_ros.executor import KeptWaitSetExecutor
+
+
+def node_like_the_estimator(name: str, got: list):
+    node = rclpy.create_node(name)
+    for t in ("a", "b", "c", "set_state"):
+        node.create_subscription(Float64MultiArray, f"/bench_exec/{t}", lambda m, i: got.append(1),
+                                 qos.CHANNEL_SUB)
+    node.create_timer(1.0, lambda: None)
+    node.create_timer(0.0125, lambda: None).cancel()
+    node.create_service(Trigger, "~/reset", lambda q, r: r)
+    return node
+
+
+def one_round(kind: str, n: int) -> tuple[float, float]:
+    got: list = []
+    node = node_like_the_estimator(f"bench_exec_{kind}", got)
+    pub_node = rclpy.create_node(f"bench_exec_pub_{kind}")
+    pubs = [pub_node.create_publisher(Float64MultiArray, f"/bench_exec/{t}", qos.OUTPUT) for t in "abc"]
+    ex = KeptWaitSetExecutor() if kind == "kept" else SingleThreadedExecutor()
+    ex.add_node(node)
+    waits = [0]
+    if kind == "rclpy":         # count rclpy's waits: wrap the wait set class its executor builds
+        import rclpy.executors as rex
+        real = rex._rclpy.WaitSet
+
+        class Counting:
+            def __init__(self, *a):
+                self._ws = real(*a)
+
+            def wait(self, t):
+                waits[0] += 1
+                return self._ws.wait(t)
+
+            def __getattr__(self, k):
+                return getattr(self._ws, k)
+        rex._rclpy.WaitSet = Counting
+    end = time.monotonic() + 20
+    while any(p.get_subscription_count() == 0 for p in pubs) and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+    for _ in range(20):
+        ex.spin_once(timeout_sec=0.01)
+    got.clear()
+    w0 = ex.waits if kind == "kept" else waits[0]
+    msg = Float64MultiArray(data=[0.0] * 8)
+    go, stop = threading.Event(), []
+
+    def sender() -> None:         # publishes 1 ms after it is told to: the executor waits meanwhile
+        k = 0
+        while True:
+            go.wait()
+            go.clear()
+            if stop:
+                return
+            time.sleep(0.001)
+            pubs[k % 3].publish(msg)
+            k += 1
+    th = threading.Thread(target=sender)
+    th.start()
+    cpu = 0.0
+    for k in range(n):
+        go.set()
+        c0 = time.thread_time()
+        while len(got) <= k:
+            ex.spin_once(timeout_sec=1.0)
+        cpu += time.thread_time() - c0
+    stop.append(1)
+    go.set()
+    th.join()
+    w = (ex.waits if kind == "kept" else waits[0]) - w0
+    if kind == "rclpy":
+        import rclpy.executors as rex
+        rex._rclpy.WaitSet = real
+    ex.shutdown()
+    node.destroy_node()
+    pub_node.destroy_node()
+    return cpu / n * 1e6, w / n
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--messages", type=int, default=3000)
+    ap.add_argument("--rounds", type=int, default=5)
+    a = ap.parse_args()
+    rclpy.init()
+    res: dict[str, list] = {"rclpy": [], "kept": []}
+    try:
+        for _ in range(a.rounds):
+            for kind in ("rclpy", "kept"):
+                res[kind].append(one_round(kind, a.messages))
+    finally:
+        rclpy.try_shutdown()
+    print(f"Command: `python bench/bench_executor.py --messages {a.messages} --rounds {a.rounds}`\n")
+    print("| executor | CPU per callback (median of rounds) | waits per callback | rounds |")
+    print("|---|---|---|---|")
+    med = {}
+    for kind, rows in res.items():
+        med[kind] = statistics.median(r[0] for r in rows)
+        print(f"| {kind} | {med[kind]:.0f} us | {statistics.median(r[1] for r in rows):.2f} | "
+              f"{', '.join(f'{r[0]:.0f}' for r in rows)} |")
+    print(f"\nkept / rclpy: {med['kept'] / med['rclpy']:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

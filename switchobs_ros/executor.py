@@ -1,0 +1,358 @@
+"""A single-threaded rclpy executor that keeps its wait set between waits.
+
+rclpy's :class:`~rclpy.executors.SingleThreadedExecutor` rebuilds its wait set in Python for every
+callback it runs (it gathers the nodes' entities, enters each handle, allocates an rcl wait set,
+and wraps the callback in a :class:`~rclpy.task.Task`), and every callback it runs triggers the
+executor's own guard condition, so the next wait returns at once with nothing but that guard
+ready: two waits per callback. :class:`KeptWaitSetExecutor` builds the entity lists and the rcl
+wait set once, again only after :meth:`wake` (rclpy's nodes call it when they create or destroy an
+entity), and calls each ready callback directly: one wait per wake-up of the middleware.
+
+It serves what rclpy's executor serves, in the same order per wait (timers, subscriptions, guard
+conditions, clients, services, then waitables, each in its node's creation order) and one ready
+entity per :meth:`spin_once`: subscriptions (plain and raw, with or without ``MessageInfo``),
+timers (cancelled timers never fire), services (``~/reset``, the parameter services, the
+lifecycle services), clients, the nodes' guard conditions, waitables (middleware event handlers),
+the executor's own guard condition (:meth:`wake`, :meth:`shutdown`) and the SIGINT guard
+condition. A coroutine callback, a waitable's ``execute`` and a future's done callbacks become
+rclpy :class:`~rclpy.task.Task` objects, run here a step per :meth:`spin_once` as rclpy's
+executor runs them. Clock jumps are rcl's own callbacks, run inside the ``/clock`` subscription's
+callback. Shutdown: :meth:`shutdown` or the context's shutdown (Ctrl-C) wakes the wait;
+:meth:`spin` then returns, or raises :class:`~rclpy.executors.ExternalShutdownException` as
+rclpy's executor does.
+
+Single-threaded only: a callback group's ``beginning_execution`` is still asked, so a callback
+that spins this executor again cannot re-enter a mutually exclusive group.
+"""
+
+from __future__ import annotations
+
+import inspect
+import weakref
+from collections import deque
+from typing import Any
+
+from rclpy.exceptions import InvalidHandle
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutObject
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.subscription import Subscription
+from rclpy.utilities import timeout_sec_to_nsec
+from rclpy.waitable import NumberOfEntities
+
+__all__ = ["KeptWaitSetExecutor", "PolledEventsExecutor"]
+
+_TIMER, _SUB, _GUARD, _CLIENT, _SERVICE, _WAITABLE = range(6)
+
+
+class _Plan:
+    """The entities of the executor's nodes, their handles, and the rcl wait set sized for them."""
+
+    __slots__ = ("entities", "handles", "guards", "waitables", "wait_set", "by_pointer")
+
+    def __init__(self, executor: KeptWaitSetExecutor) -> None:
+        timers, subs, guards, clients, services, waitables = [], [], [], [], [], []
+        for node in executor.get_nodes():
+            timers += [(_TIMER, t, node) for t in node.timers]
+            subs += [(_SUB, s, node) for s in node.subscriptions]
+            guards += [(_GUARD, g, node) for g in node.guards]
+            clients += [(_CLIENT, c, node) for c in node.clients]
+            services += [(_SERVICE, s, node) for s in node.services]
+            waitables += [(_WAITABLE, w, node) for w in node.waitables]
+        own = [g for g in (executor._guard, executor._sigint_gc) if g is not None]
+        self.entities = [e for e in timers + subs + guards + clients + services]
+        self.waitables = waitables
+        self.guards = own
+        self.handles = [e[1].handle for e in self.entities] + [g.handle for g in own]
+        count = NumberOfEntities(len(subs), len(guards) + len(own), len(timers), len(clients), len(services))
+        for _, w, _ in waitables:
+            count += w.get_num_entities()
+        with executor._context.handle:
+            self.wait_set = _rclpy.WaitSet(count.num_subscriptions, count.num_guard_conditions,
+                                           count.num_timers, count.num_clients, count.num_services,
+                                           count.num_events, executor._context.handle)
+        self.by_pointer: dict[tuple[str, int], tuple] = {}
+        kinds = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client",
+                 _SERVICE: "service"}
+        for e in self.entities:
+            try:
+                self.by_pointer[(kinds[e[0]], e[1].handle.pointer)] = e
+            except InvalidHandle:      # destroyed since: left out of the waits
+                pass
+
+
+class KeptWaitSetExecutor(SingleThreadedExecutor):
+    """rclpy's single-threaded executor with a wait set kept between waits (module docstring).
+
+    :attr:`waits` counts the waits, :attr:`calls` the callbacks run, :attr:`rebuilds` the times
+    the wait set was built."""
+
+    def __init__(self, *, context=None) -> None:
+        super().__init__(context=context)
+        self._plan: _Plan | None = None
+        self._ready: deque = deque()
+        self.waits = 0
+        self.calls = 0
+        self.rebuilds = 0
+
+    # -------------------------------------------------------------- changes of the entity set
+    def wake(self) -> None:
+        """Rebuild the wait set before the next wait (an entity was created or destroyed) and wake
+        the current wait."""
+        self._plan = None
+        super().wake()
+
+    def add_node(self, node) -> bool:
+        self._plan = None
+        return super().add_node(node)
+
+    def remove_node(self, node) -> None:
+        self._plan = None
+        super().remove_node(node)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self._plan = None
+        self._ready.clear()
+        return super().shutdown(timeout_sec)
+
+    # -------------------------------------------------------------- spinning
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        """Run one ready callback (and one step of each pending task), waiting up to ``timeout_sec``
+        (None: no limit) when none is ready."""
+        if self._is_shutdown:
+            return
+        if self._tasks and self._run_tasks():
+            timeout_sec = 0.0        # a task waits for something: poll, as rclpy's executor does
+        while not self._ready:
+            if not self._wait(timeout_sec):
+                return
+        self._serve(self._ready.popleft())
+
+    def spin_once_until_future_complete(self, future, timeout_sec=None) -> None:
+        if isinstance(timeout_sec, TimeoutObject):
+            timeout_sec = timeout_sec.timeout
+        if not future.done():
+            self.spin_once(timeout_sec)
+
+    def _run_tasks(self) -> bool:
+        """One step of every task not running (rclpy's order: newest first); True if some remain."""
+        with self._tasks_lock:
+            tasks = list(self._tasks)
+        for task, _, _ in reversed(tasks):
+            if not task.executing() and not task.done():
+                task()
+        with self._tasks_lock:
+            self._tasks = [t for t in self._tasks if not t[0].done() and not t[0].cancelled()]
+            return bool(self._tasks)
+
+    def _wait(self, timeout_sec: float | None) -> bool:
+        """One wait; the ready entities queued in rclpy's order. False on timeout or shutdown."""
+        plan = self._plan
+        if plan is None:
+            plan = self._plan = _Plan(self)
+            self.rebuilds += 1
+        ws = plan.wait_set
+        entered = []
+        try:
+            ws.clear_entities()
+            for kind, ent, _ in plan.entities:
+                try:
+                    ent.handle.__enter__()
+                except InvalidHandle:
+                    continue
+                entered.append(ent.handle)
+                if kind == _SUB:
+                    ws.add_subscription(ent.handle)
+                elif kind == _TIMER:
+                    ws.add_timer(ent.handle)
+                elif kind == _SERVICE:
+                    ws.add_service(ent.handle)
+                elif kind == _GUARD:
+                    ws.add_guard_condition(ent.handle)
+                else:
+                    ws.add_client(ent.handle)
+            for g in plan.guards:
+                g.handle.__enter__()
+                entered.append(g.handle)
+                ws.add_guard_condition(g.handle)
+            live_waitables = []
+            for item in plan.waitables:
+                try:
+                    item[1].__enter__()
+                except InvalidHandle:
+                    continue
+                entered.append(item[1])
+                item[1].add_to_wait_set(ws)
+                live_waitables.append(item)
+            self.waits += 1
+            ws.wait(timeout_sec_to_nsec(timeout_sec))
+            if self._is_shutdown:
+                return False
+            if not self._context.ok():
+                raise ExternalShutdownException()
+            ready = set()
+            for kind in ("timer", "subscription", "guard_condition", "client", "service"):
+                ready.update((kind, p) for p in ws.get_ready_entities(kind))
+            queue = self._ready
+            by_pointer = plan.by_pointer
+            for key in by_pointer:
+                if key in ready:
+                    queue.append(by_pointer[key])
+            for item in live_waitables:
+                if item[1].is_ready(ws):
+                    queue.append(item + (item[1].take_data(),))
+        finally:
+            for h in reversed(entered):
+                h.__exit__(None, None, None)
+        return bool(self._ready) or timeout_sec is None or timeout_sec < 0
+
+    def _serve(self, item: tuple) -> None:
+        """Run the callback of one ready entity (taking its message, request or response first)."""
+        kind, ent = item[0], item[1]
+        group = ent.callback_group
+        if group is not None and not group.beginning_execution(ent):
+            return
+        try:
+            if kind == _SUB:
+                try:
+                    with ent.handle:
+                        got = ent.handle.take_message(ent.msg_type, ent.raw)
+                except InvalidHandle:
+                    return
+                if got is None:         # taken already (e.g. by a callback that drains its inputs)
+                    return
+                if ent._callback_type is Subscription.CallbackType.MessageOnly:
+                    self._call(ent.callback, got[0])
+                else:
+                    self._call(ent.callback, got[0], got[1])
+            elif kind == _TIMER:
+                try:
+                    with ent.handle:
+                        if not ent.handle.is_timer_ready():     # cancelled, or reset since the wait
+                            return
+                        ent.handle.call_timer()
+                except InvalidHandle:
+                    return
+                self._call(ent.callback)
+            elif kind == _SERVICE:
+                try:
+                    with ent.handle:
+                        request, header = ent.handle.service_take_request(ent.srv_type.Request)
+                except InvalidHandle:
+                    return
+                if header is not None:
+                    self._respond(ent, request, header)
+            elif kind == _GUARD:
+                ent._executor_triggered = False
+                if ent.callback is not None:
+                    self._call(ent.callback)
+            elif kind == _CLIENT:
+                self._client_response(ent)
+            else:
+                for future in ent._futures:
+                    future._set_executor(self)
+                self.create_task(ent.execute, item[3])
+        finally:
+            if group is not None:
+                group.ending_execution(ent)
+
+    def _call(self, callback, *args: Any) -> None:
+        """A callback, or, for a coroutine function, a task that rclpy's machinery steps."""
+        self.calls += 1
+        if inspect.iscoroutinefunction(callback):
+            self.create_task(callback, *args)
+        else:
+            callback(*args)
+
+    def _respond(self, srv, request, header) -> None:
+        self.calls += 1
+        if inspect.iscoroutinefunction(srv.callback):
+            async def answer():
+                srv.send_response(await srv.callback(request, srv.srv_type.Response()), header)
+            self.create_task(answer)
+        else:
+            srv.send_response(srv.callback(request, srv.srv_type.Response()), header)
+
+    def _client_response(self, client) -> None:
+        try:
+            with client.handle:
+                header, response = client.handle.take_response(client.srv_type.Response)
+        except InvalidHandle:
+            return
+        if header is None:
+            return
+        self.calls += 1
+        try:
+            future = client.get_pending_request(header.request_id.sequence_number)
+        except KeyError:        # the request was cancelled
+            return
+        future._set_executor(self)
+        future.set_result(response)
+
+
+class PolledEventsExecutor:
+    """rclpy's ``rclpy.experimental.EventsExecutor`` spun by ``spin_once(timeout)`` in a loop.
+
+    Its ``spin()`` (no timeout) waits on a condition variable until ``steady_clock::time_point::max()``;
+    in these wheels ``std::condition_variable`` keeps time on the system clock, the deadline's
+    conversion overflows into the past, and the wait returns at once, forever: the spinning thread
+    busy-loops holding the queue's mutex and the middleware's listener threads, which enqueue
+    every message and timer event under that mutex, starve (no callback at all:
+    bench/events_executor_check.py). A finite timeout converts without overflow.
+
+    It also calls a subscription callback that takes rclpy's ``MessageInfo`` with one argument,
+    the ``(message, info)`` tuple (a TypeError, reported as "SystemError: null argument to
+    internal routine"): such callbacks are wrapped here to unpack the tuple. Guard conditions and
+    callback groups are not served by that executor (rclpy's own limits).
+    """
+
+    #: The timeout of each ``spin_once`` (s): also how soon a shutdown is noticed.
+    POLL = 0.5
+
+    def __init__(self, *, context=None) -> None:
+        from rclpy.experimental import EventsExecutor
+        from rclpy.utilities import get_default_context
+        self._context = context or get_default_context()
+        self._ex = EventsExecutor(context=self._context)
+        self._stop = False
+
+    @staticmethod
+    def _unpack_message_info(node) -> None:
+        """Wrap each callback of ``node`` that takes MessageInfo to take the one tuple instead."""
+        for sub in node.subscriptions:
+            if sub._callback_type is Subscription.CallbackType.WithMessageInfo and \
+                    not getattr(sub._callback, "unpacks_message_info", False):
+                def unpack(msg_info, fn=sub._callback):
+                    return fn(*msg_info)
+                unpack.unpacks_message_info = True
+                sub._callback = unpack      # the callback type stays WithMessageInfo
+
+    def add_node(self, node) -> bool:
+        self._unpack_message_info(node)
+        added = self._ex.add_node(node)
+        # the node's entity changes (Node._wake_executor) come to wake() below, so that a
+        # subscription created later is wrapped too (the Node.executor setter would remove the
+        # node from rclpy's executor first)
+        node._Node__executor_weakref = weakref.ref(self)
+        return added
+
+    def remove_node(self, node) -> None:
+        self._ex.remove_node(node)
+
+    def get_nodes(self):
+        return self._ex.get_nodes()
+
+    def wake(self) -> None:
+        for node in self._ex.get_nodes():
+            self._unpack_message_info(node)
+        self._ex.wake()
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        self._ex.spin_once(timeout_sec=self.POLL if timeout_sec is None or timeout_sec < 0 else timeout_sec)
+
+    def spin(self) -> None:
+        while self._context.ok() and not self._stop:
+            self._ex.spin_once(timeout_sec=self.POLL)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self._stop = True
+        return self._ex.shutdown(timeout_sec) if timeout_sec is not None else self._ex.shutdown()
