@@ -21,9 +21,13 @@ rejected inputs). ``outputs`` selects among the outputs besides ``<node>/state``
 selected one is written as when all are. Optionally a CSV: ``stamp_ns``, the state labels, the envelope
 labels.
 
-Both are written as the estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory
-does not grow with the recording's length (the result then holds the counters and the number of
-estimates, not the estimates: at n = 132 a covariance is 139 KB, 7 MB per second of a 50 Hz bag).
+The bag is read as it is estimated (:meth:`switchobs_ros.bag.io.BagIn.log_order`, chunk by chunk)
+and ordered in a window of log time (:mod:`switchobs_ros.bag.order_stream`: the order of
+:func:`switchobs_ros.bag.order.order_messages` exactly, or, for a recording whose order needs more
+than the window, a second run with the whole recording's order). The outputs are written as the
+estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory does not grow with the
+recording's length (the result then holds the counters and the number of estimates, not the
+estimates: at n = 132 a covariance is 139 KB, 7 MB per second of a 50 Hz bag).
 """
 
 from __future__ import annotations

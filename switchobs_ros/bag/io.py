@@ -13,8 +13,9 @@ it received them), never by topic. The player publishes in this order; the offli
 checks it against the messages' own stamps first (:mod:`switchobs_ros.bag.order`).
 
 Every failure is a :class:`BagError` with one line naming the file or the topic. Before anything
-is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: the offline tools
-hold the messages in memory) must be regular files (:mod:`switchobs_core.files`).
+is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: most offline tools
+hold the messages in memory; ``switchobs_bag estimate`` reads them as it goes, :meth:`BagIn.log_order`)
+must be regular files (:mod:`switchobs_core.files`).
 """
 
 from __future__ import annotations
