@@ -48,11 +48,12 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from msg_bridge.raw import RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, TemplateBatch, decode_pose, header_stamp
+from .cdr import Template, decode_pose, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 from .order_stream import WINDOW_NS, BeyondWindow, StreamCounts, stream_order
@@ -166,15 +167,8 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
     n, ne = len(state_labels), len(env_labels)
     w_state = Template(mb.labelled_array(np.zeros(n), state_labels, 0), array=("data",))
     w_env = Template(mb.labelled_array(np.zeros(ne), env_labels, 0), array=("data",))
-    odom_paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
-                  ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-
-    def odom_template(b, c):    # the entries the body has (position always; y, velocity where it has them)
-        have = [(path, i) for path, i in zip(odom_paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
-        return (Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
-                         doubles=[p for p, _ in have]), tuple(i for _, i in have))
-    w_odom = [odom_template(b, c) for b, c in zip(bodies, frames)]
-    b_odom = TemplateBatch([w for w, _ in w_odom], [idx for _, idx in w_odom])     # the bodies' odometries at once
+    # the bodies' odometries in one buffer, covariance blocks from P: the node's writer (msg_bridge.raw)
+    b_odom = RawOdometryBatch(bodies, cfg["world_frame"], frames)
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
@@ -249,7 +243,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                     datas.append(w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
                 if due("odometry", k):
                     topics += t_odom
-                    datas += b_odom.bytes(e.stamp_ns, e.x_hat)
+                    datas += b_odom.msgs(e.x_hat, e.stamp_ns, e.P)
                 if due("typed", k):
                     topics += (t_se, t_eb)
                     datas.append(t_se_tmpl[e.P is not None].bytes(

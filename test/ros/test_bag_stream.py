@@ -225,3 +225,20 @@ def test_csv_rows_are_the_floats_reprs(tmp_path_factory, values, stamp):
     w.close()
     row = path.read_text().splitlines()[1]
     assert row == f"{stamp}," + ",".join(map(repr, [float(v) for v in values]))
+
+
+def test_odometry_is_the_nodes_with_the_covariance(bag, paper_tables, tmp_path):
+    """The bodies' odometries in the bag are the node's (the node's writer, msg_bridge.raw): each is
+    ``body_odometry`` of its estimate with the covariance blocks of the estimate's P, at the node's
+    decimation (``output.odometry_every``: every 3rd estimate here)."""
+    p = dict(_params(paper_tables), **{"output.odometry_every": 3})
+    kept = estimate(bag, p, out=tmp_path / "o", outputs=("odometry",))
+    bodies = mb.bodies(kept.state_labels)
+    odoms = [m for t, _, m in _messages(tmp_path / "o") if t.endswith("/odom")]
+    due = range(0, kept.count, 3)
+    assert len(odoms) == len(due) * len(bodies) and kept.P is not None
+    for j, k in enumerate(due):
+        for i, b in enumerate(bodies):
+            want = mb.body_odometry(kept.x_hat[k], b, int(kept.stamps[k]), p["world_frame"], b.name, kept.P[k])
+            got = odoms[j * len(bodies) + i]
+            assert got == want and got.pose.covariance[0] == kept.P[k][b.p_x, b.p_x] > 0
