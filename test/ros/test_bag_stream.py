@@ -92,31 +92,6 @@ def test_array_template_takes_a_float_array_in_one_copy():
         w.bytes(array=P.ravel())
 
 
-def test_template_batch_is_each_templates_bytes():
-    """The bodies' odometries patched at once (cdr.TemplateBatch) are byte for byte each template's
-    own bytes for the same stamp and state entries, at successive stamps; a template with an array
-    is refused."""
-    labels = ("camera.p_x", "camera.p_y", "camera.v_x", "camera.v_y", "agent1.p_x", "agent1.p_y", "agent1.v_x",
-              "agent1.v_y", "agent2.p_x", "agent2.p_y")           # agent2 without velocities: two doubles
-    x_n = len(labels)
-    paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
-             ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-    templates, picks = [], []
-    for b in mb.bodies(labels):
-        have = [(p, i) for p, i in zip(paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
-        templates.append(cdr.Template(mb.body_odometry(np.zeros(x_n), b, 0, "world", f"{b.name}_frame"),
-                                      stamp=("header", "stamp"), doubles=[p for p, _ in have]))
-        picks.append(tuple(i for _, i in have))
-    batch = cdr.TemplateBatch(templates, picks)
-    rng = np.random.default_rng(5)
-    for stamp in (0, 1_000_000_007, 2 * 10 ** 18 + 3):
-        x = rng.standard_normal(x_n)
-        assert batch.bytes(stamp, x) == [t.bytes(stamp, [float(x[i]) for i in p]) for t, p in zip(templates, picks)]
-    arr = cdr.Template(mb.labelled_array(np.zeros(3), ("a", "b", "c"), 0), array=("data",))
-    with pytest.raises(ValueError):
-        cdr.TemplateBatch([arr], [()])
-
-
 def test_typed_estimate_template_is_the_writers_message():
     """The typed estimate patched into bytes serialised once (cdr.Template with two arrays, as
     switchobs_bag estimate writes it) reads back as the message StateEstimateWriter makes, with a
