@@ -181,7 +181,7 @@ def _very_late(m):   # the target poses from 2.15 s on logged 3 s late (across t
 @pytest.mark.parametrize("how, window, refused", [("late", None, False), ("bunched", None, False),
                                                   ("very_late", None, False), ("very_late", S, True),
                                                   ("late", 1, False)])
-def test_estimate_streamed_writes_the_bytes_of_the_whole_order(clean, paper_tables, tmp_path, how, window, refused):
+def test_estimate_streamed_writes_the_outputs_of_the_whole_order(clean, paper_tables, tmp_path, how, window, refused):
     """``switchobs_bag estimate`` streamed (the default window, or a short one that the recording
     exceeds: then it starts again with the whole order) writes the bag (message for message,
     ``metadata.yaml`` byte for byte) and the CSV (byte for byte) of the run ordered whole, with the
