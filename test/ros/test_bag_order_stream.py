@@ -15,7 +15,7 @@ from std_msgs.msg import Float64MultiArray
 
 from switchobs_ros.bag.estimate import estimate, estimator_params
 from switchobs_ros.bag.generate import GenerateConfig, generate
-from switchobs_ros.bag.io import BagIn, BagOut, deserialize, msg_class
+from switchobs_ros.bag.io import BagError, BagIn, BagOut, deserialize, msg_class
 from switchobs_ros.bag.order import evidence, order_messages
 from switchobs_ros.bag.order_stream import BeyondWindow, StreamCounts, stream_order
 
@@ -202,3 +202,16 @@ def test_estimate_streamed_writes_the_outputs_of_the_whole_order(clean, paper_ta
     assert _messages(tmp_path / "s" / "o") == _messages(tmp_path / "w" / "o")
     if how != "bunched":
         assert a.unordered > 0
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_bag_that_fails_while_read_leaves_no_output(clean, paper_tables, tmp_path, storage):
+    """A data file cut in half fails while the bag is read as it goes (after the output bag is
+    opened): one BagError naming the bag, and neither the output bag nor the CSV is left behind."""
+    bag = _rewrite(clean / "clean", tmp_path / "cut", lambda m: m.log_ns, storage=storage)
+    f = next(p for p in bag.iterdir() if p.suffix in (".mcap", ".db3"))
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    p = estimator_params(overrides={"gain_table": paper_tables["periodic"], "e0": 5.0})
+    with pytest.raises(BagError, match=f"bag {bag}: .*truncated"):
+        estimate(bag, p, out=tmp_path / "o", csv=tmp_path / "o.csv", keep=False)
+    assert not (tmp_path / "o").exists() and not (tmp_path / "o.csv").exists()
