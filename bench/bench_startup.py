@@ -1,11 +1,13 @@
 #!/usr/bin/env python
 """Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
 
-    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--before DIR]
-                                  [--channel-type TYPE] [--discovery-profile FILE]
+    python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--early]
+                                  [--before DIR] [--before-version 3] [--channel-type TYPE]
+                                  [--discovery-profile FILE]
 
 Per system a camera_sim publishes throughout (50 Hz, the system's periodic schedule, the channel
-stamped); in turn, interleaved over ``--rounds`` rounds, this process starts
+stamped); in turn, interleaved over ``--rounds`` rounds (the order rotated each round), this process
+starts
 
 * ``bare``: the bare rclpy republisher of ``bench/bench_node.py`` (imports rclpy and numpy, one
   subscription per input, republishes every target pose);
@@ -14,25 +16,30 @@ stamped); in turn, interleaved over ``--rounds`` rounds, this process starts
   with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
   written here in the binary container's current version),
 
+with ``--early``, ``early``: this estimator started by ``bench/startup_early_driver.py``, which creates
+the process's DDS participant (a bare node) before importing the estimator, so that discovery runs
+during the imports and the table's load (an experiment; the node's own entry point does not);
 with ``--floor``, ``floor``: the same bare republisher that first imports what every estimator start
 needs of scipy (``scipy.linalg``, ``scipy.sparse``, ``scipy.special``: the runtime's BLAS/LAPACK
 wrappers, matrix exponentials, sparse transitions, chi-square quantiles), the least any estimator
 start built on scipy takes; and, with ``--before DIR``, the same estimator from another checkout
-(``PYTHONPATH=DIR``; the same 32-agent table written in version 3 of the container, which every
-checkout since it reads), and measures
-the wall time from the start of the process to the node being ready (its log line once its publishers
-and subscriptions exist: ``estimator ready``, ``bare_republisher ready``) and the node's CPU time (user +
-system) then, and the wall time to the arrival here of its first answer (``/estimator/state`` or the
-republisher's ``~/out``). The first answer also waits for DDS discovery: a node that starts finds
-camera_sim (and this process) at once in some starts, in the others only at their next participant
-announcement (Fast DDS: every 3 s by default), so the same start answers after about 0.7 s or 3.7 s:
-the time to ready is the node's own start-up. Medians over the rounds; the
-ratio to ``bare`` of the same system and run; each start's wall time to the first answer is listed
-under the table (the medians hide that the wait is bimodal). ``--channel-type`` sets the estimator's
-``channel_type``; ``--discovery-profile`` runs this process, camera_sim and every node with that Fast
-DDS profile (``FASTRTPS_DEFAULT_PROFILES_FILE``, e.g. ``config/fastdds_discovery.xml``: a node
-finds the participants already running at their next announcement). Every child writes its bytecode to a private
-``PYTHONPYCACHEPREFIX`` (an installed package has its ``.pyc``; this checkout is run with
+(``PYTHONPATH=DIR``; the same 32-agent table, or with ``--before-version 3`` the table written in
+version 3 of the container for a checkout that reads only that).
+
+The goal's measure, printed first: the wall time from the start of the process (just before it is
+spawned) to the arrival here of its first answer (``/estimator/state``, the republisher's ``~/out``),
+the estimator's median over the bare republisher's, goal <= 2x. The table beside it gives, per node,
+that time's median and range over the starts, the ratio of each round's start to the bare start of
+the same round (median and range), the wall time to the node being ready (its log line once its
+publishers and subscriptions exist: ``estimator ready``, ``bare_republisher ready``), the node's CPU
+time (user + system) then, the CPU time at its first answer, and each start's first answer in round
+order. The first answer also waits for DDS discovery: a node that starts finds camera_sim (and this
+process) at once in some starts, in the others only at their next participant announcement (Fast
+DDS: every 3 s by default), so the same start answers after about 0.7 s or 3.7 s. ``--discovery-profile``
+runs this process, camera_sim and every node with that Fast DDS profile
+(``FASTRTPS_DEFAULT_PROFILES_FILE``, e.g. ``config/fastdds_discovery.xml``: announcements every
+0.5 s); ``--channel-type`` sets the estimator's ``channel_type``. Every child writes its bytecode to a
+private ``PYTHONPYCACHEPREFIX`` (an installed package has its ``.pyc``; this checkout is run with
 ``PYTHONDONTWRITEBYTECODE``), warmed by one unmeasured start of each.
 
 Goal: the estimator with a cached table of any size <= 2x the bare node.
@@ -93,7 +100,8 @@ FLOOR = ("import sys; sys.path.insert(0, {bench!r}); import scipy.linalg, scipy.
          "from bench_node import republisher_main; republisher_main()")
 
 #: The line each node writes once its subscriptions and publishers exist.
-READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "estimator": "estimator ready"}
+READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "estimator": "estimator ready",
+         "early": "estimator ready"}
 
 
 def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0) -> tuple[float, ...]:
@@ -110,7 +118,8 @@ def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 12
         topic, mtype = "/estimator/state", Float64MultiArray
         probe = First(topic, mtype)
         t0 = time.monotonic()
-        node = NodeProcess("estimator", ros_args(params=params), log=log, env=env)
+        cmd = [sys.executable, str(REPO / "bench" / "startup_early_driver.py")] if kind == "early" else None
+        node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, log=log, env=env)
     ready = ready_cpu = float("nan")
     try:
         end = t0 + timeout
@@ -126,12 +135,35 @@ def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 12
     return ready, ready_cpu, wall, cpu
 
 
+def headline(rows: list) -> str:
+    """The goal's ratio: the estimator's wall time from its process start to its first estimate over
+    the bare republisher's to its first republished message (medians over the starts of one run)."""
+    parts = []
+    for name, _, times in rows:
+        first = {k: statistics.median(r[2] for r in v) for k, v in times.items()}
+        cpu = {k: statistics.median(r[1] for r in v) for k, v in times.items()}
+        others = "".join(f", {k} {first[k] / first['bare']:.2f}x" for k in first if k not in ("bare", "estimator"))
+        parts.append(f"- {name}: **{first['estimator'] / first['bare']:.2f}x** ({first['estimator']:.2f} s against "
+                     f"{first['bare']:.2f} s{others}); CPU to ready {cpu['estimator'] / cpu['bare']:.2f}x")
+    n = min(len(v) for _, _, times in rows for v in times.values())
+    return ("Goal 6, start-up: wall time from the process start to the first estimate received, over the bare "
+            f"node's to its first republished message (medians of {n} starts each, goal <= 2x):\n"
+            + "\n".join(parts) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--systems", default="paper,agents32", help="comma-separated: paper, agents32")
     ap.add_argument("--floor", action="store_true", help="also the bare republisher after scipy's imports")
+    ap.add_argument("--early", action="store_true", help="also this estimator with its DDS participant created "
+                                                        "before its imports (bench/startup_early_driver.py)")
     ap.add_argument("--before", default="", help="another checkout whose estimator runs beside this one's")
+    ap.add_argument("--before-version", type=int, default=0, help="the container version of the 32-agent table "
+                    "the --before checkout reads (default: the same file as this checkout's; 3 for a checkout "
+                    "that reads only version 3)")
+    ap.add_argument("--domain", type=int, default=None, help="the ROS_DOMAIN_ID to run in (default: a free one "
+                                                                 "claimed from 1..100)")
     ap.add_argument("--channel-type", default="", help="the estimator's channel_type (default: its own default)")
     ap.add_argument("--discovery-profile", default="", help="a Fast DDS XML profile for this process and every "
                                                             "node (FASTRTPS_DEFAULT_PROFILES_FILE)")
@@ -139,8 +171,8 @@ def main(argv: list[str] | None = None) -> int:
                                                   "every h = 1 s, 50 Hz (designed here if empty)")
     a = ap.parse_args(argv)
     info = machine_info()
-    lease = claim_domain()
-    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
+    lease = claim_domain() if a.domain is None else None
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id if lease is not None else a.domain)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     if a.discovery_profile:     # read by Fast DDS when this process's participant is created (rclpy.init)
         os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(Path(a.discovery_profile).resolve())
@@ -169,9 +201,10 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     k32 = so.kalman_table(system, [so.design_kalman(system, so.Cycle([1.0] * 32), 50.0)])
                 table = str(k32.save(d / "k32.npz"))
-                with open(d / "k32_v3.npz", "wb") as fh:       # what a checkout before version 4 reads
-                    encode(table_payload(k32), fh, version=3)
-                tables_before[name] = str(d / "k32_v3.npz")
+                if a.before_version:                            # what a checkout before version 4 reads
+                    with open(d / "k32_before.npz", "wb") as fh:
+                        encode(table_payload(k32), fh, version=a.before_version)
+                    tables_before[name] = str(d / "k32_before.npz")
                 del k32
                 sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * 32}
                 setups[name] = (dict(sched, system=str(sys_path)), dict(sched, system=str(sys_path), gain_table=table))
@@ -189,15 +222,20 @@ def main(argv: list[str] | None = None) -> int:
                     kinds = {"bare": env, "estimator": env}
                     if a.floor:
                         kinds["floor"] = env
+                    if a.early:
+                        kinds["early"] = env
                     if a.before:
                         kinds["before"] = dict(env, PYTHONPATH=a.before, PYTHONPYCACHEPREFIX=str(d / "pyc_before"))
                     times: dict[str, list[tuple[float, ...]]] = {k: [] for k in kinds}
                     for r in range(a.rounds + 1):           # round 0 warms the bytecode and the page cache
-                        for kind, kind_env in kinds.items():
+                        order = list(kinds)[r % len(kinds):] + list(kinds)[:r % len(kinds)]     # rotated
+                        for kind in order:
+                            kind_env = kinds[kind]
                             params = est_params
                             if kind == "before" and name in tables_before:
                                 params = dict(est_params, gain_table=tables_before[name])
-                            res = one_start(kind if kind in ("bare", "floor") else "estimator", params, kind_env,
+                            res = one_start(kind if kind in ("bare", "floor", "early") else "estimator", params,
+                                            kind_env,
                                             d / f"{name}_{kind}_{r}.log")
                             if r:
                                 times[kind].append(res)
@@ -206,25 +244,33 @@ def main(argv: list[str] | None = None) -> int:
                     cam.stop()
         finally:
             rclpy.try_shutdown()
-            lease.release()
+            if lease is not None:
+                lease.release()
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
           f"load average {info['load'][0]:.1f} before ({info['date']}).")
     before = " --floor" if a.floor else ""
+    before += " --early" if a.early else ""
     before += f" --before {a.before}" if a.before else ""
+    before += f" --before-version {a.before_version}" if a.before_version else ""
     before += f" --channel-type {a.channel_type}" if a.channel_type else ""
     before += f" --discovery-profile {a.discovery_profile}" if a.discovery_profile else ""
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_startup.py --rounds {a.rounds} --systems {a.systems}"
           f"{before}`\n")
-    print("| system (table size) | node | wall to ready | CPU then | wall to ready / bare (goal <= 2) | CPU / bare | "
-          "wall to the first answer | / bare |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(headline(rows))
+    print("| system (table size) | node | wall to the first answer: median [min, max] | / bare (goal <= 2) | "
+          "per round / bare: median [min, max] | wall to ready | / bare | CPU to ready | / bare | "
+          "CPU at the first answer |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, size, times in rows:
         med = {k: [statistics.median(r[i] for r in v) for i in range(4)] for k, v in times.items()}
         b = med["bare"]
-        for kind, (rw, rc, fw, _) in med.items():
-            print(f"| {name} ({size / 2**20:.1f} MiB) | {kind} | {rw:.2f} s | {rc:.2f} s | {rw / b[0]:.2f}x "
-                  f"| {rc / b[1]:.2f}x | {fw:.2f} s | {fw / b[2]:.2f}x |")
-    print("\nWall time to the first answer, each start (s):")
+        for kind, (rw, rc, fw, fc) in med.items():
+            firsts = [r[2] for r in times[kind]]
+            per = [r[2] / q[2] for r, q in zip(times[kind], times["bare"])]
+            print(f"| {name} ({size / 2**20:.1f} MiB) | {kind} | {fw:.2f} s [{min(firsts):.2f}, {max(firsts):.2f}] "
+                  f"| {fw / b[2]:.2f}x | {statistics.median(per):.2f}x [{min(per):.2f}, {max(per):.2f}] "
+                  f"| {rw:.2f} s | {rw / b[0]:.2f}x | {rc:.2f} s | {rc / b[1]:.2f}x | {fc:.2f} s |")
+    print("\nWall time to the first answer, each start in round order (s):")
     for name, _, times in rows:
         for kind, v in times.items():
             print(f"- {name} {kind}: " + ", ".join(f"{r[2]:.2f}" for r in v))

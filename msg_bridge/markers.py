@@ -24,6 +24,7 @@ markers is the same at every call (4 per body, in body order).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -32,7 +33,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from switchobs_core.numerics.ellipse import covariance_ellipse
+from switchobs_core.numerics.ellipse import covariance_ellipse, covariance_ellipses
 
 from .convert import Body
 from .validate import BridgeError
@@ -46,6 +47,7 @@ __all__ = [
     "MarkersWriter",
     "RawMarkersWriter",
     "ellipse_disc",
+    "ellipse_discs",
 ]
 
 #: Marker namespaces, in the order of each body's markers.
@@ -155,6 +157,32 @@ def ellipse_disc(P: np.ndarray | None, b: Body) -> tuple[float, float, float, fl
     return sx, _THIN if b.p_y is None else sy, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
 
 
+def ellipse_discs(P: np.ndarray | None, bodies: Sequence[Body]) -> list[tuple[float, float, float, float] | None]:
+    """:func:`ellipse_disc` of every body, the same doubles, with one eigen-decomposition call for
+    all of them (:func:`~switchobs_core.numerics.ellipse.covariance_ellipses`)."""
+    bodies = tuple(bodies)
+    if P is None or not bodies:
+        return [None] * len(bodies)
+    rows, cols, line = _pose_blocks(bodies)
+    Ppp = P[rows, cols]
+    Ppp[line] = 0.0             # a body on a line: no spread across it
+    return [None if ell is None else (ell[0], _THIN if b.p_y is None else ell[1], math.sin(ell[2] / 2.0),
+                                      math.cos(ell[2] / 2.0))
+            for b, ell in zip(bodies, covariance_ellipses(Ppp, sigmas=2.0))]
+
+
+@functools.lru_cache(maxsize=16)
+def _pose_blocks(bodies: tuple[Body, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, cols, line)``: ``P[rows, cols]`` is every body's 2 x 2 position block, with the
+    entries ``line`` (a body on a line: its y row and column) to be set to 0."""
+    idx = np.array([[b.p_x, b.p_x if b.p_y is None else b.p_y] for b in bodies], dtype=np.intp)
+    line = np.zeros((len(bodies), 2, 2), dtype=bool)
+    for k, b in enumerate(bodies):
+        if b.p_y is None:
+            line[k, 1, :] = line[k, :, 1] = True
+    return idx[:, :, None], idx[:, None, :], line
+
+
 class RawMarkersWriter:
     """:class:`MarkersWriter` as serialised bytes (:mod:`msg_bridge.raw`): ``w.msg(x, stamp_ns,
     P=None, bound=None, active_body=None)``, the same message.
@@ -162,7 +190,8 @@ class RawMarkersWriter:
     The marker array's layout does not change from one call to the next (the same markers, the
     circle's points always there, DELETE or ADD), so it is serialised once; every call writes the
     stamps, positions, colours, actions, ellipses and circles into it with a few numpy calls for
-    all the bodies (the ellipses one body at a time, as :class:`MarkersWriter` computes them).
+    all the bodies (the ellipses in one batch, :func:`ellipse_discs`: the same doubles as
+    :class:`MarkersWriter`'s, one body at a time).
     """
 
     def __init__(self, bodies: Sequence[Body], frame_id: str, size: float = 0.25):
@@ -232,10 +261,10 @@ class RawMarkersWriter:
         f4[self._color] = self._body
         if active_body is not None:
             f4[self._color[self._names[active_body]]] = self._highlight
-        for k, (b, (s, o)) in enumerate(zip(self.bodies, self._ell)):
-            ell = ellipse_disc(P, b)
+        for k, ell in enumerate(ellipse_discs(P, self.bodies)):
             i4[self._cov_action[k]] = Marker.DELETE if ell is None else Marker.ADD
             if ell is not None:
+                s, o = self._ell[k]
                 f8[s], f8[s + 1], f8[o], f8[o + 1] = ell
         if bound is not None and math.isfinite(bound) and bound >= 0.0:
             i4[self._bnd_action] = Marker.ADD

@@ -53,17 +53,23 @@ def _resolve(msg: Any, path: str) -> tuple[Any, str]:
 
 
 def _sentinel(dtype: str, k: int, salt: int) -> tuple[float | int, bytes]:
-    """The ``k``-th sentinel value of a field of ``dtype`` (``salt`` 0 or 1: two distinct sets) and
-    its bytes. Sentinels of one dtype and salt share constant bits (a float64's low 32 bits, a
-    4-byte value's high 16), which :func:`_find_each_once` looks for first."""
+    """The ``k``-th sentinel value of a field of ``dtype`` (``salt`` 0 to :data:`SALTS` - 1: distinct
+    sets) and its bytes. Sentinels of one dtype and salt share constant bits (a float64's low 32
+    bits, a 4-byte value's high 16), which :func:`_find_each` looks for first; every salt changes
+    those bits."""
     if dtype == "<f8":
         v = float.fromhex(f"0x1.{k + 1:04x}5a3c5a3c{5 + salt}p-990")
         return v, struct.pack("<d", v)
     if dtype == "<f4":
-        v = struct.unpack("<f", struct.pack("<I", (0x0D5A0000 | (salt << 20)) + k))[0]
+        v = struct.unpack("<f", struct.pack("<I", 0x0D5A0000 + (salt << 24) + k))[0]
         return v, struct.pack("<f", v)
     v = 0x5A3C0000 - (salt << 24) + k
     return v, struct.pack("<i", v)
+
+
+#: The sentinel sets :class:`RawMessage` may serialise with (two always; more while a field is
+#: still found at several offsets).
+SALTS = 4
 
 
 class RawMessage:
@@ -78,10 +84,13 @@ class RawMessage:
     :attr:`f` holds the views by name, :attr:`offsets` their byte offsets; :meth:`stamp` writes
     the stamp; :meth:`bytes` is the message to publish. ``msg`` itself is left as it was.
 
-    Offsets are found by serialising the message twice with distinct sentinel values in the
-    fields (a sentinel must be found exactly once, at the same offset both times: CDR padding
-    bytes are not initialised, so a single pass could be fooled by what memory held). Raises
-    ValueError when a field cannot be located that way or the encoding is not little-endian CDR.
+    Offsets are found by serialising the message with distinct sets of sentinel values in the
+    fields: a field is at the offsets where every set's sentinel is found, and must end at exactly
+    one. CDR padding bytes are not initialised: they hold what memory held, which may be a
+    sentinel serialised earlier in the process, at any offset (measured: a marker array's stamp
+    sentinel found twice after a few dozen writers had been built). Two sets always, up to
+    :data:`SALTS` while a field is still found at more than one offset. Raises ValueError when a
+    field cannot be located that way or the encoding is not little-endian CDR.
     """
 
     def __init__(self, msg: Any, stamp: str | None = None, doubles: Mapping[str, tuple[str, int]] | None = None,
@@ -95,16 +104,21 @@ class RawMessage:
         base = serialize_message(msg)
         if base[:2] != b"\x00\x01":
             raise ValueError("raw message: not little-endian CDR")
-        found = []
-        for salt in (0, 1):
+        at: dict[str, set[int]] = {}
+        for salt in range(SALTS):
             marked, patterns = self._marked(msg, spec, salt, serialize_message)
             if len(marked) != len(base):
                 raise ValueError("raw message: the layout changed with the field values")
-            found.append(_find_each_once(marked, patterns))
-        if found[0] != found[1]:
-            raise ValueError("raw message: a field was found at two offsets")
+            seen = _find_each(marked, patterns)
+            at = seen if not at else {name: at[name] & seen[name] for name in spec}
+            if salt >= 1 and all(len(o) == 1 for o in at.values()):
+                break
+        for name, o in at.items():
+            if len(o) != 1:
+                raise ValueError(f"raw message: the sentinels of {name} are found at {len(o)} offsets "
+                                 "in the serialised bytes")
         self._buf = self.buffer = bytearray(base)     # the serialised message, written through the views
-        self.offsets: dict[str, int] = found[0]
+        self.offsets: dict[str, int] = {name: next(iter(o)) for name, o in at.items()}
         self.f: dict[str, np.ndarray] = {}
         for name, (_, dtype, count) in spec.items():
             off = self.offsets[name]
@@ -145,10 +159,10 @@ class RawMessage:
         return bytes(self._buf)
 
 
-def _find_each_once(blob: bytes, patterns: Mapping[str, bytes]) -> dict[str, int]:
-    """The offset of each sentinel pattern of :func:`_sentinel` in ``blob``; ValueError unless
-    each is found exactly once. One vectorised pass per size and alignment picks the words that
-    carry a sentinel's constant bits, then those few are looked up."""
+def _find_each(blob: bytes, patterns: Mapping[str, bytes]) -> dict[str, set[int]]:
+    """The offsets of each sentinel pattern of :func:`_sentinel` in ``blob``, by name. One
+    vectorised pass per size and alignment picks the words that carry a sentinel's constant bits,
+    then those few are looked up."""
     at: dict[bytes, list[int]] = {p: [] for p in patterns.values()}
     for size in sorted({len(p) for p in patterns.values()}):
         kind = f"<u{size}"
@@ -165,12 +179,7 @@ def _find_each_once(blob: bytes, patterns: Mapping[str, bytes]) -> dict[str, int
                 p = bytes(blob[a + size * int(i):a + size * (int(i) + 1)])
                 if p in at:
                     at[p].append(a + size * int(i))
-    out = {}
-    for name, p in patterns.items():
-        if len(at[p]) != 1:
-            raise ValueError(f"raw message: the sentinel of {name} is found {len(at[p])} times in the serialised bytes")
-        out[name] = at[p][0]
-    return out
+    return {name: set(at[p]) for name, p in patterns.items()}
 
 
 class RawLabelledArrayWriter:

@@ -152,6 +152,7 @@ class ChannelAttribution:
         self._seq: list[int | None] = []      # publication sequence numbers (None: unknown)
         self._truncated = False               # older entries dropped (CHANNEL_HISTORY)
         self._answered_src = -1               # newest source timestamp of an answered sample
+        self._memo: tuple | None = None       # (sample, its key, verdict) of the last _by_stamps
         self._guessed_src = -1                # the same, of one answered on the window's expiry
         self._last_fixed = 0                  # channel of the latest sample from a one-channel source
 
@@ -272,10 +273,21 @@ class ChannelAttribution:
     def _by_stamps(self, pend: Pending, force: bool = False) -> tuple[str, int, bool]:
         """:meth:`SwitchHistory.resolve <switchobs_ros.switching.SwitchHistory.resolve>` for the
         sample; without source timestamps a switching message received after its parts proves
-        its channel (the order of a recording is the publishing order)."""
+        its channel (the order of a recording is the publishing order).
+
+        The answer depends on the sample (its stamp and parts) and on the switching messages
+        received (every change of the history counts one in ``received``), so the last one is kept
+        for the same sample, parts, count and ``force``: a sample is resolved, answered and
+        recorded with one look-up."""
+        key = (pend.stamp_ns, len(pend.parts), self.stamped.received, force)
+        memo = self._memo
+        if memo is not None and memo[0] is pend and memo[1] == key:
+            return memo[2]
         sent = self._sent(pend)
         ordered = sent is None and self.stamped.received > max(p.arrival for p in pend.parts.values())
-        return self.stamped.resolve(pend.stamp_ns, sent, force or ordered)
+        out = self.stamped.resolve(pend.stamp_ns, sent, force or ordered)
+        self._memo = (pend, key, out)
+        return out
 
     def _sent(self, pend: Pending) -> int | None:
         """When the parts the sample's channel matters for were sent (the newest source timestamp of

@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -66,6 +67,7 @@ from .channel_input import CHANNEL_MSG, channel_type
 from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
 from .demand import Demand
 from .diagnostics import EstimatorDiagnostics, NodeState
+from .log_callers import register_log_callers
 from .outputs import OutputsMixin, channel_bodies
 from .params import ConfigError, declare_all, unknown_parameters
 from .pipeline import EstimatorPipeline, PipelineLog
@@ -129,6 +131,36 @@ class EstimatorMixin(OutputsMixin):
             f"mode {self.mode}, cycles {[c.label() for c in self.cycles]}, table {self.table_path}, "
             f"start-up {time.monotonic() - self.t_start:.2f} s")
 
+    # ------------------------------------------------------------------ the optional outputs' writers
+    def _optional_writer(self, kind: str, make: Callable[[], Any]) -> Any:
+        """The writer of an optional output, serialised at its first use: an output nobody listens to
+        costs nothing at start-up (the 33 odometries and the markers take 50-90 ms at n = 132). The
+        same messages as a writer built in :meth:`_configure` (``test_lazy_writers.py``); the writers
+        are built anew at every configuration."""
+        w = self._writers.get(kind)
+        if w is None:
+            w = self._writers[kind] = make()
+        return w
+
+    @property
+    def w_odom(self) -> RawOdometryBatch:
+        """The bodies' odometries (``~/<body>/odom``)."""
+        return self._optional_writer("odom", lambda: RawOdometryBatch(self.bodies, self.frame, self.child_frames))
+
+    @property
+    def w_typed(self) -> tuple[RawStateEstimateWriter, ErrorBoundsWriter]:
+        """The typed outputs (switchobs_msgs: ``~/state_estimate``, ``~/error_bounds``)."""
+        return self._optional_writer("typed", lambda: (RawStateEstimateWriter(self.state_labels, self.frame),
+                                                       ErrorBoundsWriter(self.system.N, self.frame,
+                                                                         self._noise_declared)))
+
+    @property
+    def w_markers(self) -> RawMarkersWriter | None:
+        """RViz markers (``~/markers``), ``None`` for a system without bodies."""
+        if not self.bodies:
+            return None
+        return self._optional_writer("markers", lambda: RawMarkersWriter(self.bodies, self.frame))
+
     # ------------------------------------------------------------------ configuration
     def _configure(self, cfg: dict) -> None:
         # the input handling (validation, pairing, observer, counters) is the pipeline's
@@ -148,17 +180,14 @@ class EstimatorMixin(OutputsMixin):
         prefix = body_frame_prefix(cfg["frame_prefix"], self.get_namespace())     # one set of frames per robot
         self.child_frames = [prefix + c for c in conf.child_frames]
         self.state_labels = tuple(sys_.state_labels)
-        self.env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
+        self._noise_declared = pl.observer.noise_max is not None
+        self.env_labels = mb.envelope_labels(sys_.N, noise_bound=self._noise_declared)
         self.frame = cfg["world_frame"]
-        # the outputs' writers: serialised once, numbers rewritten in place (msg_bridge.raw)
+        # the outputs' writers: serialised once, numbers rewritten in place (msg_bridge.raw); those of
+        # the optional outputs (odometries, typed, markers) at their first use (_optional_writer)
         self.w_state = RawLabelledArrayWriter(self.state_labels)
         self.w_env = RawLabelledArrayWriter(self.env_labels)
-        self.w_odom = RawOdometryBatch(self.bodies, self.frame, self.child_frames)
-        # typed outputs (switchobs_msgs) and RViz markers
-        noise = pl.observer.noise_max is not None
-        self.w_typed = (RawStateEstimateWriter(self.state_labels, self.frame),
-                        ErrorBoundsWriter(sys_.N, self.frame, noise))
-        self.w_markers = RawMarkersWriter(self.bodies, self.frame) if self.bodies else None
+        self._writers: dict[str, Any] = {}
         self.body_in_view = channel_bodies(sys_, self.bodies)
         self.pair_timeout = cfg["pairing_timeout"]
         self.sensor_timeout = cfg["sensor_timeout"]
@@ -213,7 +242,7 @@ class EstimatorMixin(OutputsMixin):
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),
                           pub(ErrorBounds, "~/error_bounds", qos.OUTPUT))
-        self.pub_markers = pub(MarkerArray, "~/markers", qos.OUTPUT) if self.w_markers is not None else None
+        self.pub_markers = pub(MarkerArray, "~/markers", qos.OUTPUT) if self.bodies else None
         self.pub_diag = pub(DiagnosticArray, "/diagnostics", qos.OUTPUT)
         # sensor outage: the prediction and its exact bound, once per diagnostics period, on
         # topics of their own (~/state stays one answer per measurement)
@@ -544,6 +573,7 @@ class EstimatorNode(EstimatorMixin, Node):
     def __init__(self, **kwargs):
         super().__init__("estimator", **kwargs)
         self.t_start = time.monotonic()
+        register_log_callers(__name__)      # rclpy's first log line without a visit of every module
         cfg = declare_all(self, PARAMS, gated=True)
         self.cfg = cfg
         self._configure(cfg)

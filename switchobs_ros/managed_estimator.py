@@ -38,6 +38,7 @@ from switchobs_core.exceptions import SwitchobsError, one_line
 
 from .config import PARAMS
 from .estimator import EstimatorMixin
+from .log_callers import register_log_callers
 from .params import ConfigError, declare_all
 from .runner import run_node
 
@@ -51,6 +52,7 @@ class ManagedEstimatorNode(EstimatorMixin, LifecycleNode):
         self._transition_lock = threading.RLock()
         super().__init__("estimator", **kwargs)
         self.t_start = time.monotonic()
+        register_log_callers("switchobs_ros.estimator", __name__)
         self.cfg = declare_all(self, PARAMS, gated=True)
         self.answering = False
         self.configured = False

@@ -66,9 +66,9 @@ class OutputsMixin:
         (``output.*_every``) and only while a subscription is matched to them (:mod:`switchobs_ros.demand`)."""
         if not estimates:
             return
-        try:
-            ev, n = self.every, self.published
-            for e in estimates:
+        ev, n = self.every, self.published
+        for e in estimates:
+            try:     # one estimate's failure (a writer that cannot be built) costs no other estimate
                 k = self.n_published
                 self.n_published = k + 1
                 self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
@@ -98,5 +98,5 @@ class OutputsMixin:
                     self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
                                                                 self.body_in_view.get(e.channel)))
                     n["markers"] += 1
-        except Exception as err:
-            self.pipeline.internal_error("publish", err)
+            except Exception as err:
+                self.pipeline.internal_error("publish", err)

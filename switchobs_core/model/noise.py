@@ -107,10 +107,10 @@ def _array(x: Any, where: str) -> np.ndarray:
 def _plain_numbers(x: list | tuple) -> bool:
     """``x`` is a list of ints and floats or a list of such lists (no booleans, strings or deeper
     nesting): :func:`_array` may convert it at once."""
-    plain = (int, float)
-    if all(type(v) in plain for v in x):
+    plain = {int, float}
+    if set(map(type, x)) <= plain:
         return True
-    return all(type(r) in (list, tuple) and all(type(v) in plain for v in r) for r in x)
+    return all(type(r) in (list, tuple) and set(map(type, r)) <= plain for r in x)
 
 
 def _std(x: Any, where: str) -> float:

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-__all__ = ["covariance_ellipse"]
+__all__ = ["covariance_ellipse", "covariance_ellipses"]
 
 
 def covariance_ellipse(P_pp: np.ndarray, sigmas: float = 2.0) -> tuple[float, float, float] | None:
@@ -24,3 +24,26 @@ def covariance_ellipse(P_pp: np.ndarray, sigmas: float = 2.0) -> tuple[float, fl
     l, V = np.linalg.eigh(0.5 * (P + P.T))
     l = np.clip(l, 0.0, None)
     return (2.0 * sigmas * math.sqrt(l[1]), 2.0 * sigmas * math.sqrt(l[0]), math.atan2(V[1, 1], V[0, 1]))
+
+
+def covariance_ellipses(P_pp: np.ndarray, sigmas: float = 2.0) -> list[tuple[float, float, float] | None]:
+    """:func:`covariance_ellipse` of each 2 x 2 block of a ``(k, 2, 2)`` stack, the same doubles, with
+    one eigen-decomposition call for the finite ones (numpy's ``eigh`` runs the same LAPACK routine
+    on each matrix of a stack; the square roots are correctly rounded in both, the angles taken
+    with :mod:`math` as there); None for a block that is not finite."""
+    P = np.asarray(P_pp, dtype=float)
+    out: list[tuple[float, float, float] | None] = [None] * P.shape[0]
+    ok = np.isfinite(P).all(axis=(1, 2))
+    if not ok.all():
+        ok = np.flatnonzero(ok)
+        if not ok.size:
+            return out
+        P = P[ok]
+    else:
+        ok = range(P.shape[0])
+    lam, V = np.linalg.eigh(0.5 * (P + P.transpose(0, 2, 1)))
+    lam = np.clip(lam, 0.0, None)
+    major, minor = (2.0 * sigmas * np.sqrt(lam[:, 1])).tolist(), (2.0 * sigmas * np.sqrt(lam[:, 0])).tolist()
+    for k, a, b, vy, vx in zip(ok, major, minor, V[:, 1, 1].tolist(), V[:, 0, 1].tolist()):
+        out[k] = (a, b, math.atan2(vy, vx))
+    return out

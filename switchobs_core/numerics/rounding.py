@@ -85,6 +85,7 @@ between anchors (:mod:`switchobs_core.bounds.read`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -150,10 +151,11 @@ class ErrorEllipsoid:
         S = self.S if S is None else S
         return max(float(S.diagonal() @ self._id2), 0.0) * self._gsum
 
-    def image_bound(self, absM: np.ndarray) -> np.ndarray:
-        """``w >= |M| s`` (``s = sqrt(diag S)``) for ``absM = |M|``: step 6's vector."""
+    def image_bound(self, absM: np.ndarray | Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """``w >= |M| s`` (``s = sqrt(diag S)``) for ``absM = |M|``, or a function ``x -> |M| x`` (a
+        sparse form, summing a row's nonzeros only): step 6's vector."""
         s = np.sqrt(np.maximum(self.S.diagonal(), 0.0))
-        return (absM @ s) * (self._gsum * (1.0 + 2.0 * _U))
+        return (absM(s) if callable(absM) else absM @ s) * (self._gsum * (1.0 + 2.0 * _U))
 
     def _diag(self, w: np.ndarray, c: float) -> np.ndarray:
         """``c W (w d)``, ``W = sum_j w_j / d_j``: the diagonal dominating (in the PSD order) a

@@ -537,19 +537,18 @@ class SwitchedObserver:
         key, v = self._held() if hold else (OPEN_LOOP, None)
         return self._propagated(key, v, dt, float(t))[1]
 
-    def prior_covariance(self, t: float) -> np.ndarray | None:
+    def prior_covariance(self, t: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no covariance is
-        kept): the family's stored one (a locked Kalman table), else the last sample's ``P`` through the step's
-        error map, ``E P E' + Q_d(dt)`` (plus the held noise ``(Gamma L) R (Gamma L)'`` for LMI gains,
-        :mod:`switchobs_core.runtime.covariance`); the state is unchanged. For the chi-square gate and the bias test."""
+        kept; with ``cols`` its block on those states): the family's stored one (a locked Kalman table), else the
+        last sample's ``P`` through the step's error map, ``E P E' + Q_d(dt)`` (plus the held noise ``(Gamma L) R
+        (Gamma L)'`` for LMI gains, :mod:`~switchobs_core.runtime.covariance`); the state is unchanged. Read-only."""
         dt = float(t) - self._t
-        S = None if self._lost or not (math.isfinite(dt) and dt > 0) else self._gains.stored_prior(float(t), dt)
+        S = None if self._lost or not (math.isfinite(dt) and dt > 0) else self._gains.stored_prior(float(t), dt, cols)
         P = self.P if S is None else S
-        if P is None or not (math.isfinite(dt) and dt >= 0):
-            return None
-        if dt == 0 or S is not None:
-            return P
-        return self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
+        if P is None or not (math.isfinite(dt) and dt >= 0) or S is not None:
+            return P if S is not None else None
+        P = P if dt == 0 else self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
+        return P if cols is None else P[np.ix_(cols, cols)]
 
     def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample held) and

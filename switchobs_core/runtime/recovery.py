@@ -51,7 +51,7 @@ from scipy.linalg import expm
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.rounding import gamma
 from .bias import K_REF, BiasDetector, H
-from .consistency import output_rows
+from .consistency import output_rows, seen_columns
 from .recertify import Certificate, DataWindow
 
 __all__ = ["Recovery", "body_states", "cycle_span"]
@@ -169,6 +169,7 @@ class Recovery:
         self._valid = True
         self._run = [0] * self.N
         self._raw: list[deque] = [deque(maxlen=5) for _ in range(self.N)]
+        self._rows: dict = {}       # (channel, rows) -> (C_r, its seen_columns, C_r on them): the bias test's
 
     # ------------------------------------------------------------------ the bias test
     def before(self, t: float, channel: int, rows: Any, y: np.ndarray) -> str:
@@ -176,12 +177,17 @@ class Recovery:
         if self.bias is None:
             return ""
         obs = self.obs
-        C_r = output_rows(self.C[channel - 1], rows)
+        key = (channel, None if rows is None else tuple(rows))
+        if key not in self._rows:
+            C_r = output_rows(self.C[channel - 1], rows)
+            cols = seen_columns(C_r)
+            self._rows[key] = (C_r, cols, C_r if cols is None else C_r[:, cols])
+        C_r, cols, Cc = self._rows[key]
         with np.errstate(all="ignore"):
             nu = np.asarray(y, dtype=float) - C_r @ obs.predict(t, hold=True)
-            P = obs.prior_covariance(t)
+            P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
             if P is not None and obs.noise is not None:
-                S = C_r @ P @ C_r.T + obs.noise.R(channel, rows)
+                S = Cc @ P @ Cc.T + obs.noise.R(channel, rows)
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
                 if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
                     sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread

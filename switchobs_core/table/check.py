@@ -54,7 +54,7 @@ def verify_table(table: GainTable, system: LTISystem, *, source: str = "gain tab
     every design of ``table`` passes the checks of the module docstring for ``system``."""
     if table.family == "kalman":
         for d in table.kalman:
-            _verify_kalman(d, system, source)
+            _verify_kalman(table, d, system, source)
         return
     designs = list(table.designs) + ([table.robust] if table.robust is not None else [])
     for design in designs:
@@ -89,9 +89,9 @@ def _verify_lmi(design: CycleDesign, system: LTISystem, source: str) -> None:
     _check_rho(rho, f"design {label}: the error map over the cycle {Cycle(h).label()}", source)
 
 
-def _verify_kalman(d: dict, system: LTISystem, source: str) -> None:
+def _verify_kalman(table: GainTable, d: dict, system: LTISystem, source: str) -> None:
     try:
-        kd = KalmanDesign.from_dict(d, system)
+        kd = table.stored_kalman(d, system)     # the design the observer reads (built once)
     except SwitchobsError as err:
         raise GainTableError(f"{source}: stored Kalman design unusable: {err}") from None
     with np.errstate(all="ignore"):

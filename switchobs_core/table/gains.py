@@ -107,6 +107,16 @@ class GainTable:
         have = ", ".join(d.label() for d in self.designs) or "none"
         raise GainTableError(f"no design for cycle {cycle.label()} in the table (designed cycles: {have})")
 
+    def stored_kalman(self, d: dict, system: LTISystem) -> KalmanDesign:
+        """``KalmanDesign.from_dict(d, system)`` of the stored design ``d`` (an entry of :attr:`kalman`),
+        built once per design and system object: the table check at load and the observer's family
+        read the same one (3 200 phases at 32 agents: 25-35 ms a build)."""
+        key = (id(d), id(system))       # both kept alive by the cached design (kd.system) and the table
+        kd = self._kalman_cache.get(key)
+        if kd is None:
+            kd = self._kalman_cache[key] = KalmanDesign.from_dict(d, system)
+        return kd
+
     def kalman_design(self, cycles: Sequence[Cycle], system: LTISystem, *, rtol: float = CYCLE_RTOL,
                       atol: float = CYCLE_ATOL) -> KalmanDesign:
         """The stored Kalman design of the cycle sequence ``cycles`` (one cycle: periodic).
@@ -118,14 +128,10 @@ class GainTable:
         for d in self.kalman:
             stored = [Cycle(h, d.get("dead_time", 0.0)) for h in d.get("cycles", [])]
             if len(stored) == len(cycles) and all(a.matches(b, rtol=rtol, atol=atol) for a, b in zip(stored, cycles)):
-                key = id(d)
-                kd = self._kalman_cache.get(key)
-                if kd is None:
-                    try:
-                        kd = self._kalman_cache[key] = KalmanDesign.from_dict(d, system)
-                    except SwitchobsError as err:
-                        raise GainTableError(f"gain table: stored Kalman design unusable: {err}") from None
-                return kd
+                try:
+                    return self.stored_kalman(d, system)
+                except SwitchobsError as err:
+                    raise GainTableError(f"gain table: stored Kalman design unusable: {err}") from None
         have = "; ".join(", ".join(Cycle(h, d.get("dead_time", 0.0)).label() for h in d.get("cycles", []))
                          for d in self.kalman) or "none"
         want = ", ".join(c.label() for c in cycles)

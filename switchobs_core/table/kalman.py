@@ -101,11 +101,28 @@ class KalmanPhase:
     def P_prior(self) -> np.ndarray:
         """The prior covariance ``P^-`` of this sample (n x n); raises
         :class:`~switchobs_core.exceptions.GainTableError` when its stored row fails its checksum."""
+        P = self._read()
+        if P.ndim == 1:
+            P = unpack_symmetric(P, self.K.shape[0])
+            object.__setattr__(self, "P_stored", P)
+        return P
+
+    def P_block(self, cols: np.ndarray) -> np.ndarray:
+        """``P_prior[np.ix_(cols, cols)]`` (the same doubles), from the packed row when the matrix
+        has not been unpacked (a phase whose covariance is not published: no n x n matrix made)."""
+        P = self._read()
+        if P.ndim == 2:
+            return P[np.ix_(cols, cols)]
+        n = self.K.shape[0]
+        i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)
+        return P[i * n - i * (i - 1) // 2 + (j - i)]         # (i, j), i <= j, in the row-major upper triangle
+
+    def _read(self) -> np.ndarray:
+        """The stored prior as it is kept: a row not read yet is read and verified now
+        (:class:`~switchobs_core.table.rows.LazyRow`) and kept packed (half the matrix's memory)."""
         P = self.P_stored
         if isinstance(P, LazyRow):
             P = P.load()
-        if P.ndim == 1:
-            P = unpack_symmetric(P, self.K.shape[0])
             object.__setattr__(self, "P_stored", P)
         return P
 

@@ -7,11 +7,22 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from visualization_msgs.msg import Marker, MarkerArray
 
 import msg_bridge as mb
-from msg_bridge.markers import BODY, BOUND, CIRCLE_POINTS, HIGHLIGHT, NAMESPACES, MarkersWriter
+from msg_bridge.markers import (
+    BODY,
+    BOUND,
+    CIRCLE_POINTS,
+    HIGHLIGHT,
+    NAMESPACES,
+    MarkersWriter,
+    ellipse_disc,
+    ellipse_discs,
+)
 
 LABELS = tuple(f"{b}.{q}" for b in ("camera", "agent1", "agent2") for q in ("p_x", "p_y", "v_x", "v_y"))
 NAMES = ("camera", "agent1", "agent2")
@@ -153,3 +164,26 @@ def test_ids_and_namespaces_stable_across_calls(writer):
     assert len(set(keys[0])) == len(keys[0]), "each (namespace, id) once"
     # another writer for the same bodies uses the same keys (a restarted node replaces the markers)
     assert [(m.ns, m.id) for m in MarkersWriter(mb.bodies(LABELS), "map").msg(x, S).markers] == keys[0]
+
+
+@settings(max_examples=40, deadline=None)
+@given(kinds=st.lists(st.sampled_from([("p_x", "p_y", "v_x", "v_y"), ("p_x", "p_y"), ("p", "v")]), min_size=1,
+                      max_size=8),
+       seed=st.integers(0, 2**32 - 1), bad=st.lists(st.sampled_from([math.nan, math.inf, -math.inf]), max_size=3),
+       rank=st.sampled_from(["full", "one", "zero"]), scale=st.floats(1e-12, 1e12))
+def test_batched_ellipses_are_each_bodys_ellipse(kinds, seed, bad, rank, scale):
+    """``ellipse_discs`` (one eigen-decomposition call for all bodies, the raw writer's) gives each
+    body exactly what ``ellipse_disc`` gives it alone: planar bodies, bodies on a line, blocks of
+    rank 2, 1 or 0, non-finite entries (no ellipse for that body only)."""
+    labels = tuple(f"b{k}.{q}" for k, qs in enumerate(kinds) for q in qs)
+    bodies = mb.bodies(labels)
+    n = len(labels)
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n if rank == "full" else 1 if rank == "one" else 0))
+    P = scale * (A @ A.T) if A.size else np.zeros((n, n))
+    for v in bad:
+        i, j = rng.integers(0, n, 2)
+        P[i, j] = v
+    got = ellipse_discs(P, bodies)
+    assert got == [ellipse_disc(P, b) for b in bodies]
+    assert ellipse_discs(None, bodies) == [None] * len(bodies)

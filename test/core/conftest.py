@@ -26,3 +26,21 @@ def paper_table(paper_designer):
     from switchobs_core.model.schedule import Cycle
 
     return paper_designer.table([Cycle.from_ts(2.0, 0.6)], progress=False)
+
+
+@pytest.fixture(scope="session")
+def agents10():
+    """camera_agents(10) (n = 44, above the sparse forms' threshold) with its 50 Hz Kalman table for
+    residences of 0.1 s, designed once per session: ``(system, cycle, table, schedule, x)``, ``x``
+    a state with the bodies' positions in [-3, 3] m (seeded) and no velocity."""
+    import numpy as np
+
+    import switchobs_core as so
+
+    system = so.camera_agents(10)
+    cycle = so.Cycle((0.1,) * 10)
+    table = so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)])
+    rng = np.random.default_rng(5)
+    x = np.zeros(system.n)
+    x[0::4], x[1::4] = rng.uniform(-3, 3, 11), rng.uniform(-3, 3, 11)
+    return system, cycle, table, so.PeriodicSchedule(cycle), x

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from switchobs_core.cli import main
 from switchobs_core.design.lmi import design_table
 from switchobs_core.exceptions import GainTableError, InvalidSystem, SwitchobsError
-from switchobs_core.loading import MAX_DEPTH, MAX_YAML_BYTES, parse_yaml
+from switchobs_core.loading import MAX_DEPTH, MAX_YAML_BYTES, check_depth, json_depth, parse_json, parse_yaml
 from switchobs_core.model.scenarios import load_noise, load_system, paper_system
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
@@ -349,3 +349,44 @@ def test_strict_yaml_accepts_what_the_configs_use():
     assert files
     for f in files:
         assert parse_yaml(f.read_text(), exc=InvalidSystem, source=str(f)) == yaml.safe_load(f.read_text())
+
+
+# --------------------------------------------------------------------------- JSON nesting from the text
+
+#: Strings that look like JSON structure: brackets, quotes and backslashes escaped, non-ASCII text.
+_TRICKY_TEXT = st.text(alphabet=st.sampled_from(list('[]{}"\\,:ab é\u2603\n\t')), max_size=8)
+_JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers(-10, 10) | st.floats(allow_nan=False, allow_infinity=False) | _TRICKY_TEXT,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(_TRICKY_TEXT, inner, max_size=4),
+    max_leaves=40)
+
+
+def _walked_depth(value) -> int:
+    """The nesting check_depth finds: the least limit it passes."""
+    for limit in range(0, 200):
+        try:
+            check_depth(value, exc=SwitchobsError, source="x", limit=limit)
+            return limit
+        except SwitchobsError:
+            pass
+    raise AssertionError("deeper than 200")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(value=_JSON_VALUES, indent=st.sampled_from([None, 0, 2]), ascii_only=st.booleans())
+def test_json_depth_of_the_text_is_the_walked_depth(value, indent, ascii_only):
+    """The depth read from the text (parse_json's check) equals the parsed value's, whatever its
+    strings hold (brackets, quotes, escapes, non-ASCII) and however it is laid out."""
+    text = json.dumps(value, indent=indent, ensure_ascii=ascii_only)
+    assert json_depth(text) == _walked_depth(json.loads(text))
+
+
+def test_parse_json_refuses_one_level_too_deep_and_reads_brackets_in_strings():
+    ok = "[" * MAX_DEPTH + '"]]]{{{"' + "]" * MAX_DEPTH
+    assert parse_json(ok, exc=GainTableError, source="t")
+    too_deep = "[" * (MAX_DEPTH + 1) + "1" + "]" * (MAX_DEPTH + 1)
+    with pytest.raises(GainTableError, match=f"nested deeper than {MAX_DEPTH} levels"):
+        parse_json(too_deep, exc=GainTableError, source="t")
+    hidden = '{"a": "\\"[[[[", "b": ' + "[" * MAX_DEPTH + "]" * MAX_DEPTH + "}"     # an escaped quote, then brackets
+    with pytest.raises(GainTableError, match="nested deeper"):
+        parse_json(hidden, exc=GainTableError, source="t")

@@ -303,9 +303,10 @@ class GainFamily(Protocol):
     def covariance(self) -> np.ndarray | None:
         """The real error covariance after the last sample (a copy), or None when none is kept."""
 
-    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+    def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """The prior covariance at ``t`` (``dt`` after the last sample) when the family has it stored
-        (a copy; a locked Kalman table: the next phase's), else None: the observer then propagates
+        (a read-only array the caller must not keep; a locked Kalman table: the next phase's; with
+        ``cols``, its block on those rows and columns), else None: the observer then propagates
         :meth:`covariance` (:meth:`predict_covariance`)."""
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:

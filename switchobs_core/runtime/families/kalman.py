@@ -168,10 +168,11 @@ class KalmanTableGains(OnlineKalmanGains):
             g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
         return self.kalman.posterior(*g)
 
-    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+    def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """While locked, a time ``t`` that is the next sample's on the grid (as :meth:`_locked` tests
         it): the stored prior of that phase, the real prior there whatever the sample's channel
-        (no O(n^3) posterior and propagation); else None."""
+        (no O(n^3) posterior and propagation; a read-only view of the table's matrix, not a copy;
+        with ``cols``, its block on those rows and columns, read from the packed row); else None."""
         if self._online or self._origin is None or self._last_k < 0:
             return None
         k = self._next_k(t, dt)
@@ -179,7 +180,11 @@ class KalmanTableGains(OnlineKalmanGains):
             return None
         kd = self.kalman
         ent = kd.startup[k] if k < len(kd.startup) else kd.periodic[k % kd.pattern.K]
-        return ent.P_prior.copy()
+        if cols is not None:
+            return ent.P_block(cols)
+        P = ent.P_prior.view()
+        P.flags.writeable = False
+        return P
 
     def _next_k(self, t: float, dt: float) -> int | None:
         """The grid's sample number of ``t`` when it is the next sample after the last one, within

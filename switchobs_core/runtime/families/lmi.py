@@ -130,7 +130,7 @@ class LmiGains:
             self._P = self._pending.apply(self._P)
         return self._P.copy()
 
-    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+    def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         return None
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:

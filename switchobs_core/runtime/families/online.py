@@ -182,7 +182,7 @@ class OnlineKalmanGains:
         spans more than a double resolves (module docstring)."""
         return self._L.copy()
 
-    def stored_prior(self, t: float, dt: float) -> np.ndarray | None:
+    def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         return None
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:

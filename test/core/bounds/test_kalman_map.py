@@ -86,18 +86,14 @@ def test_sparse_form_is_chosen_by_size_and_fill():
 
 
 @pytest.mark.parametrize("family", ["kalman", "kalman-online"])
-def test_observer_bounds_match_the_dense_path(family, monkeypatch):
+def test_observer_bounds_match_the_dense_path(agents10, family, monkeypatch):
     """camera_agents(10) (n = 44): estimates equal to the dense path's to rounding, and the exact
     bound within 20 % of the dense path's (both allowances are in the shape of ``|M| s``; the
     factored one has the larger constant; that it still holds is test_audit.py's agents10 and
     blocks14 cases)."""
-    system = so.camera_agents(10)
-    cycle = so.Cycle((0.1,) * 10)
-    table = so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)])
-    sched = so.PeriodicSchedule(cycle)
+    system, cycle, table, sched, x = agents10
     rng = np.random.default_rng(5)
-    x = np.zeros(system.n)
-    x[0::4], x[1::4] = rng.uniform(-3, 3, 11), rng.uniform(-3, 3, 11)
+    rng.uniform(-3, 3, 22)          # the draws of agents10's positions: the noise below as before
     stream = []
     for k in range(150):
         t = k / 50.0

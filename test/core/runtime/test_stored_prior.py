@@ -66,3 +66,36 @@ def test_off_the_grid_or_after_a_departure_the_prior_is_propagated(paper, ktable
     t = 52 / RATE
     assert obs._gains.stored_prior(t, t - obs.t) is None
     np.testing.assert_array_equal(obs.prior_covariance(t), _propagated(obs, t))
+
+
+def test_the_bias_tests_block_is_the_priors_block_and_unpacks_nothing(paper, ktable, tmp_path):
+    """``prior_covariance(t, cols)``: the block of ``prior_covariance(t)`` on ``cols``, the same
+    doubles, locked (from a version-4 file's packed rows: the phase keeps its verified packed row
+    and makes no n x n matrix) and off the grid (the propagated prior)."""
+    from switchobs_core.table.gains import GainTable
+    from switchobs_core.table.rows import LazyRow
+
+    loaded = GainTable.load(ktable.save(tmp_path / "k.npz"), system=paper)
+    kd = loaded.kalman_design([CYC], paper)
+    assert all(isinstance(ph.P_stored, LazyRow) for ph in kd.startup[:5])
+    obs = SwitchedObserver(paper, loaded, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    ref = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    sched, F, x = PeriodicSchedule(CYC), expm(paper.A / RATE), np.ones(paper.n)
+    cols = np.array([0, 1, 4, 5])
+    for k in range(int(3 * RATE)):
+        t = k / RATE
+        if k:
+            x = F @ x
+            block = obs.prior_covariance(t, cols)
+            ph = kd.startup[k] if k < len(kd.startup) else kd.periodic[k % len(kd.periodic)]
+            assert ph.P_stored.ndim == 1                      # verified, kept packed, not unpacked
+            np.testing.assert_array_equal(block, ref.prior_covariance(t)[np.ix_(cols, cols)])
+        c = sched.channel_at(t)
+        obs.update(t, c, paper.C[c - 1] @ x)
+        ref.update(t, c, paper.C[c - 1] @ x)
+    full = obs.prior_covariance(obs.t + 1 / RATE)               # the matrix, unpacked on demand
+    np.testing.assert_array_equal(full[np.ix_(cols, cols)], obs.prior_covariance(obs.t + 1 / RATE, cols))
+    t_off = obs.t + 1.3 / RATE                                  # off the grid: the propagated prior's block
+    assert obs._gains.stored_prior(t_off, t_off - obs.t) is None
+    np.testing.assert_array_equal(obs.prior_covariance(t_off, cols), obs.prior_covariance(t_off)[np.ix_(cols, cols)])
+    assert obs.prior_covariance(float("nan"), cols) is None

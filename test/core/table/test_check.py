@@ -69,6 +69,29 @@ def test_zeroed_kalman_gains_are_refused(paper, kalman):
         verify_table(planted, paper, source="planted.json")
 
 
+def test_the_check_and_the_observer_read_one_design_built_once(paper, kalman):
+    """The design the check verifies is the one :meth:`GainTable.kalman_design` gives the observer (one
+    build of the stored phases), the same numbers as a build of its own; a zeroed table is refused
+    through the same path, and its design is not the one of the table it was planted from."""
+    table = GainTable.from_json(kalman.to_json(), source="k.json")
+    verify_table(table, paper)
+    kd = table.kalman_design([Cycle.from_ts(2.0, 0.6)], paper)
+    assert kd is table.stored_kalman(table.kalman[0], paper)
+    fresh = KalmanDesign.from_dict(table.kalman[0], paper)
+    for a, b in zip(kd.startup + kd.periodic, fresh.startup + fresh.periodic, strict=True):
+        assert a.channel == b.channel and a.dt == b.dt and np.array_equal(a.K, b.K)
+    assert np.array_equal(_period_map(kd, paper, "x"), _period_map(fresh, paper, "x"))
+
+    def zero(data):
+        for k in data["kalman"]:
+            for part in ("periodic", "startup"):
+                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+    planted = _replant(table, zero)
+    with pytest.raises(GainTableError, match="spectral radius"):
+        verify_table(planted, paper, source="planted.json")
+    assert not np.array_equal(planted.stored_kalman(planted.kalman[0], paper).periodic[0].K, kd.periodic[0].K)
+
+
 def test_gain_of_the_wrong_shape_or_not_finite_is_refused(paper, paper_table):
     """(A file with either is refused by the loader's layout check already; a table built in memory
     is checked here.)"""

@@ -1,0 +1,346 @@
+#!/usr/bin/env python
+"""The estimator's CPU per sample at 32 agents (n = 132), in process: camera_sim's stream through
+the node's input handler and outputs without DDS, over the Kalman table's first visits and at
+steady state, against the core alone (not a test; bench/RESULTS.md).
+
+    python bench/bench_pipeline.py [--table /tmp/boot/k32v4.npz] [--rounds 3] [--before /work/main]
+    python bench/bench_pipeline.py --cprofile 30 --window steady      # where the time goes
+
+The stream is camera_sim's (``camera_agents`` with M agents, every ``h_i = 1 s``, ``rate`` Hz,
+stamped on its grid, the switching instant in the stamped channel message): the channel message,
+``camera/pose`` and ``target/pose`` of every tick, serialised once in this process and read back in
+each child before its timed part, so every tree is fed the same bytes.
+
+Each child (one tree: this checkout or ``--before``) builds the estimator as the node does
+(:class:`~switchobs_ros.estimator.EstimatorMixin` on a stand-in for the rclpy node: its
+``_configure``, its input handler ``_input_handler`` and its outputs ``_publish_all``, the raw writers of
+:mod:`msg_bridge.raw`), every output listened, publishers that drop the bytes; then feeds each
+message with a ``MessageInfo`` of source and receive timestamps and sequence numbers, as rclpy
+does. What it does not run: rclpy's executor, the drain's takes, the middleware. The outputs are
+the goal's configuration (``~/state`` and ``~/envelope`` every sample; odometry, covariance and
+the typed pair every 5th; markers every 10th: ``--every``). The parameters are
+``bench_live_scale.py``'s (``e0`` 1e3, every ``h_i`` 1 s) with ``max_abs_value`` 1e12: agent 1's
+unstable mode (0.2/s) carries its position past the default 1e6 m at about 70 s, and the
+steady window runs past that.
+
+``--what core`` times the core alone on the same samples: ``SwitchedObserver.update`` and
+``envelope()`` of the observer the pipeline builds (no pairing, attribution, screening, tests or
+outputs).
+
+Reported per tree and window (``first``: 0 to ``--first`` s, all first visits of the table's
+phases; ``steady``: one table period from ``--steady`` s): CPU per sample (``time.process_time``,
+the total over the window divided by the samples, the goal's "CPU per answer") and the median
+sample, medians over interleaved rounds, and the ratio after/before in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+# ---------------------------------------------------------------------------- the stream
+def make_stream(agents: int, rate: float, seconds: float, out: Path) -> None:
+    """camera_sim's ticks for ``seconds``: ``out`` (an ``.npz``) holds each message serialised
+    (topic, type and bytes per message, in publication order), each tick's stamp, channel and
+    output ``y`` (the core-alone run reads those)."""
+    sys.path.insert(0, str(REPO))
+    import yaml
+    from rclpy.serialization import serialize_message
+
+    import msg_bridge as mb
+    import switchobs_core as so
+    from switchobs_core.model.schedule import PeriodicSchedule
+    from switchobs_core.sim.plant import Plant
+    from switchobs_ros.core_config import SensorOutputs
+
+    sys_path = out.with_suffix(".yaml")
+    sys_path.write_text(yaml.safe_dump({"scenario": "camera_agents", "agents": agents}))
+    system = so.load_system(sys_path)
+    sched = PeriodicSchedule(so.Cycle([1.0] * agents))
+    x0 = np.random.default_rng(1).uniform(-1.0, 1.0, 4 * (agents + 1))     # as bench_live_scale.py
+    plant = Plant(system, x0, seed=0)
+    specs = mb.load_inputs(str(sys_path), system)
+    outputs = SensorOutputs(specs)
+    period = round(1e9 / rate)
+    epoch = 1_800_000_000_000_000_000
+    topics, types, blobs, tick_of = [], [], [], []
+    stamps, chans, ys = [], [], []
+    switch = (0, 0)
+    for k in range(int(round(seconds * rate))):
+        stamp = epoch + k * period
+        t = k * period * 1e-9
+        plant.advance(t)
+        rho = int(sched.channel_at(t))
+        y = plant.measure(rho)
+        if rho != switch[0]:
+            switch = (rho, stamp)
+        for topic, msg in outputs.messages(rho, y, stamp, "map", sched.blind_at(t), switch[1]):
+            topics.append(topic)
+            types.append(f"{type(msg).__module__.split('.')[0]}/msg/{type(msg).__name__}")
+            blobs.append(np.frombuffer(serialize_message(msg), dtype=np.uint8))
+            tick_of.append(k)
+        stamps.append(stamp)
+        chans.append(rho)
+        ys.append(np.asarray(y, dtype=float))
+    offsets = np.cumsum([0] + [b.size for b in blobs])
+    np.savez(out, topics=np.array(topics), types=np.array(types), data=np.concatenate(blobs),
+             offsets=offsets, tick_of=np.array(tick_of), stamps=np.array(stamps, dtype=np.int64),
+             channels=np.array(chans), y=np.array(ys), system=str(sys_path))
+
+
+# ---------------------------------------------------------------------------- one child
+class _Logger:
+    def info(self, *_a, **_k):
+        pass
+
+    warn = error = debug = warning = info
+
+
+class _Now:
+    __slots__ = ("nanoseconds",)
+
+    def __init__(self):
+        self.nanoseconds = 0
+
+
+class _Clock:
+    """The node clock of the stand-in: the receive time of the message being handled."""
+
+    def __init__(self):
+        self.t = _Now()
+
+    def now(self):
+        return self.t
+
+
+class _Publisher:
+    """A publisher with one matched subscription that drops what it is given (counts it)."""
+
+    def __init__(self):
+        self.n = 0
+
+    def get_subscription_count(self) -> int:
+        return 1
+
+    def publish(self, msg) -> None:
+        self.n += 1
+
+
+def _bench_node(cfg: dict):
+    """The estimator's behaviour (``EstimatorMixin``) on a stand-in for the rclpy node, every
+    output with a listened publisher."""
+    from switchobs_ros.estimator import EstimatorMixin
+
+    clock = _Clock()
+
+    class BenchNode(EstimatorMixin):
+        def get_logger(self):
+            return _Logger()
+
+        def get_namespace(self):
+            return "/"
+
+        def get_fully_qualified_name(self):
+            return "/estimator"
+
+        def get_clock(self):
+            return clock
+
+    node = BenchNode()
+    node.cfg = cfg
+    node._configure(cfg)
+    node.pub_state, node.pub_env, node.pub_cov, node.pub_markers = (_Publisher() for _ in range(4))
+    node.pub_odom = [_Publisher() for _ in node.bodies]
+    node.pub_typed = (_Publisher(), _Publisher())
+    if not hasattr(node, "w_cov"):        # made with the covariance's publisher (_create_interfaces)
+        import msg_bridge as mb
+        from msg_bridge.raw import RawLabelledArrayWriter
+        node.w_cov = RawLabelledArrayWriter(mb.covariance_labels(node.state_labels))
+    return node, clock
+
+
+def run_child(a) -> dict:
+    """One tree, one run: the stream through the node's handler (or the core alone); per-sample
+    CPU times in each window (JSON on stdout)."""
+    sys.path.insert(0, str(a.child))
+    import gc
+    import importlib
+
+    from rclpy.serialization import deserialize_message
+
+    from switchobs_core.threads import single_threaded_blas
+    from switchobs_ros.config import params_from_file
+
+    single_threaded_blas()
+    s = np.load(a.stream)
+    agents = int(a.agents)
+    every = {k: int(v) for k, v in (kv.split("=") for kv in a.every.split(",") if kv)}
+    cfg = params_from_file(overrides={"system": str(s["system"]), "gain_table": a.table,
+                                      "schedule.mode": "periodic", "schedule.h": tuple([1.0] * agents),
+                                      "e0": 1e3, "max_abs_value": 1e12,
+                                      **{f"output.{k}_every": v for k, v in every.items()}})
+    node, clock = _bench_node(cfg)
+    import switchobs_core
+    assert switchobs_core.__file__.startswith(str(a.child)), switchobs_core.__file__
+    pl = node.pipeline
+    stamps, tick_of = s["stamps"], s["tick_of"]
+    rate = 1e9 / float(stamps[1] - stamps[0])
+    k_first = int(round(a.first * rate))
+    k0, k1 = int(round(a.steady * rate)), int(round((a.steady + a.steady_len) * rate))
+    n_ticks = min(k1, len(stamps))
+    cost = np.zeros(n_ticks)
+    prof = None
+    if a.cprofile:
+        import cProfile
+        prof = cProfile.Profile(time.process_time)
+    lo, hi = (0, k_first) if a.window == "first" else (k0, n_ticks)
+    if a.what == "core":
+        obs = pl.observer
+        obs.reset(pl.x0, 0.0)
+        y, ch = s["y"], s["channels"]
+        gc.freeze()
+        for k in range(n_ticks):
+            t = (int(stamps[k]) - int(stamps[0])) * 1e-9
+            c0 = time.process_time()
+            if prof is not None and k == lo:
+                prof.enable()
+            obs.update(t, int(ch[k]), y[k])
+            obs.envelope()
+            if prof is not None and k == hi - 1:
+                prof.disable()
+            cost[k] = time.process_time() - c0
+        answers = n_ticks
+    else:
+        topics, types, data, offsets = s["topics"], s["types"], s["data"], s["offsets"]
+        classes = {t: getattr(importlib.import_module(t.split("/")[0] + ".msg"), t.split("/")[2])
+                   for t in set(types.tolist())}
+        msgs = [deserialize_message(data[offsets[i]:offsets[i + 1]].tobytes(), classes[types[i]])
+                for i in range(len(topics))]
+        index = {src.topic: src.index for src in pl.sources}
+        handlers = {t: node._input_handler(None if t == pl.channel_topic else index[t]) for t in set(topics.tolist())}
+        seq = dict.fromkeys(handlers, 0)
+        gc.freeze()
+        i = 0
+        for k in range(n_ticks):
+            c0 = time.process_time()
+            if prof is not None and k == lo:
+                prof.enable()
+            while i < len(topics) and tick_of[i] == k:
+                topic = topics[i]
+                seq[topic] += 1
+                sent = int(stamps[k]) + 100_000 * (1 + i % 3)
+                clock.t.nanoseconds = sent + 300_000
+                handlers[topic](msgs[i], {"source_timestamp": sent, "received_timestamp": sent + 300_000,
+                                          "publication_sequence_number": seq[topic]})
+                i += 1
+            if prof is not None and k == hi - 1:
+                prof.disable()
+            cost[k] = time.process_time() - c0
+        answers = pl.updates
+    if pl.errors or sum(pl.rejected.values()):
+        sys.exit(f"the stream was not answered cleanly: {dict(pl.rejected)}; {pl.last_rejection}")
+    out = {"answers": int(answers), "ticks": n_ticks, "first": cost[:k_first].tolist(),
+           "steady": cost[k0:n_ticks].tolist(), "errors": int(pl.errors),
+           "published": dict(getattr(node, "published", {}))}
+    if prof is not None:
+        import io
+        import pstats
+        buf = io.StringIO()
+        st = pstats.Stats(prof, stream=buf)
+        st.sort_stats("tottime").print_stats(a.cprofile)
+        st.sort_stats("cumulative").print_stats(a.cprofile)
+        out["profile"] = buf.getvalue()
+    return out
+
+
+# ---------------------------------------------------------------------------- the parent
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--agents", type=int, default=32)
+    ap.add_argument("--rate", type=float, default=50.0)
+    ap.add_argument("--table", default="/tmp/boot/k32v4.npz", help="the Kalman table of the model and schedule")
+    ap.add_argument("--first", type=float, default=60.0, help="the first-visit window: 0 to this (s)")
+    ap.add_argument("--steady", type=float, default=72.0, help="the steady window's start (s)")
+    ap.add_argument("--steady-len", type=float, default=32.0, help="the steady window's length (s; one period)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--before", type=Path, default=None, help="a checkout to compare with (e.g. /work/main)")
+    ap.add_argument("--what", default="pipeline,core", help="pipeline, core, or both (comma-separated)")
+    ap.add_argument("--every", default="envelope=1,odometry=5,covariance=5,typed=5,markers=10",
+                    help="output.<K>_every values")
+    ap.add_argument("--cprofile", type=int, default=0, metavar="K",
+                    help="one run of this checkout under cProfile, print the K costliest functions")
+    ap.add_argument("--window", default="steady", choices=("first", "steady"), help="the window --cprofile profiles")
+    ap.add_argument("--stream", type=Path, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.child is not None:
+        print(json.dumps(run_child(a)))
+        return 0
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONDONTWRITEBYTECODE="")
+    with tempfile.TemporaryDirectory(prefix="bench_pipeline_") as tmp:
+        stream = Path(tmp) / "stream.npz"
+        make_stream(a.agents, a.rate, a.steady + a.steady_len, stream)
+        trees = [("this", REPO)] + ([("before", a.before.resolve())] if a.before else [])
+        whats = [w for w in a.what.split(",") if w]
+
+        def child(tree: Path, what: str, extra: list[str] = ()) -> dict:
+            cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(tree), "--stream", str(stream),
+                   "--what", what, "--agents", str(a.agents), "--table", a.table, "--first", str(a.first),
+                   "--steady", str(a.steady), "--steady-len", str(a.steady_len), "--every", a.every, *extra]
+            r = subprocess.run(cmd, env=dict(env, PYTHONPATH=str(tree)), capture_output=True, text=True)
+            if r.returncode:
+                sys.exit(f"child {tree} {what} failed:\n{r.stderr[-4000:]}")
+            return json.loads(r.stdout.strip().splitlines()[-1])
+
+        if a.cprofile:
+            for what in whats:
+                r = child(REPO, what, ["--cprofile", str(a.cprofile), "--window", a.window])
+                print(f"## {what}, window {a.window}\n")
+                print(r["profile"])
+            return 0
+        res: dict[tuple[str, str], list[dict]] = {}
+        for r in range(a.rounds):          # interleaved, the order of the trees alternating
+            for what in whats:
+                for name, tree in (trees if r % 2 == 0 else trees[::-1]):
+                    res.setdefault((name, what), []).append(child(tree, what))
+    load = os.getloadavg()[0]
+    print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_pipeline.py --agents {a.agents} --table {a.table} "
+          f"--rounds {a.rounds}{f' --before {a.before}' if a.before else ''} --what {a.what} --every {a.every}` "
+          f"(n = {4 * (a.agents + 1)}; load {load:.1f} after)\n")
+    print("CPU per sample, ms: mean over the window (median sample), medians over the rounds\n")
+    print(f"| tree | what | answered | first visits (0-{a.first:g}s) | steady ({a.steady:g}-"
+          f"{a.steady + a.steady_len:g}s) |")
+    print("|---|---|---|---|---|")
+    table = {}
+    for (name, what), runs in res.items():
+        row = {}
+        for w in ("first", "steady"):
+            row[w] = (float(np.median([np.mean(r[w]) for r in runs])) * 1e3,
+                      float(np.median([np.median(r[w]) for r in runs])) * 1e3)
+        table[(name, what)] = row
+        print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} "
+              f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) |")
+    if a.before:
+        print("\nthis / before (means):", ", ".join(
+            f"{what} {w} {table[('this', what)][w][0] / table[('before', what)][w][0]:.2f}x"
+            for what in whats for w in ("first", "steady")))
+    if "core" in whats and "pipeline" in whats:
+        for name, _ in trees:
+            diff = {w: table[(name, "pipeline")][w][0] - table[(name, "core")][w][0] for w in ("first", "steady")}
+            print(f"{name}: pipeline - core (means): " + ", ".join(f"{w} {v:.3f} ms" for w, v in diff.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
