@@ -10,8 +10,6 @@ estimator's time. Here:
   it does not recognise exactly (big-endian, a length that does not add up) goes to rclpy.
 * :class:`Template` serialises a message once with rclpy and then only patches the bytes of
   the fields that change (the stamp and some float64s) with ``struct.pack_into``.
-* :class:`TemplateBatch` patches several such templates at once (one stamp, their float64s taken
-  from one state vector): the 33 odometries of a 32-agent estimate in two numpy assignments.
 
 Both are checked against rclpy byte for byte / field for field in test/ros/test_bag_tools.py.
 """
@@ -23,7 +21,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["Template", "TemplateBatch", "decode_pose", "decode_uint8", "header_stamp"]
+__all__ = ["Template", "decode_pose", "decode_uint8", "header_stamp"]
 
 _HDR_LE = (b"\x00\x01", b"\x00\x03")     # CDR_LE, PL_CDR_LE (encapsulation id, big-endian u16)
 _U32 = struct.Struct("<I")
@@ -157,38 +155,3 @@ def _unique(blob: bytes, pattern: bytes, what: str) -> int:
     if i < 0 or blob.find(pattern, i + 1) >= 0:
         raise ValueError(f"template: the {what} sentinel is not found exactly once")
     return i
-
-
-class TemplateBatch:
-    """Templates with a stamp and float64 fields (no arrays) patched together: ``TemplateBatch(templates,
-    picks)``, ``picks[k]`` the entries of a vector ``x`` that go to template ``k``'s doubles in order;
-    :meth:`bytes` gives each template's message, the bytes ``templates[k].bytes(stamp_ns, [x[i] for i in
-    picks[k]])`` gives (tested), with two numpy assignments into the templates' bytes laid end to end.
-    """
-
-    def __init__(self, templates: Sequence[Template], picks: Sequence[Sequence[int]]):
-        if len(picks) != len(templates):
-            raise ValueError("template batch: one pick per template")
-        stamps, doubles, gather, bounds = [], [], [], []
-        start = 0
-        for t, pick in zip(templates, picks):
-            if t.stamp_off is None or t.array_off is not None or t.arrays or len(pick) != len(t.double_offs):
-                raise ValueError("template batch: templates with a stamp and doubles only, one entry per double")
-            stamps.append(start + t.stamp_off)
-            doubles += [start + off for off in t.double_offs]
-            gather += [int(i) for i in pick]
-            bounds.append((start, start + len(t.base)))
-            start += len(t.base)
-        self._buf = np.frombuffer(bytearray(b"".join(bytes(t.base) for t in templates)), dtype=np.uint8)
-        self._stamp_at = np.asarray(stamps, dtype=np.intp)[:, None] + np.arange(8)
-        self._double_at = np.asarray(doubles, dtype=np.intp)[:, None] + np.arange(8)
-        self._gather = np.asarray(gather, dtype=np.intp)
-        self._bounds = bounds
-
-    def bytes(self, stamp_ns: int, x: np.ndarray) -> list[bytes]:
-        buf = self._buf
-        buf[self._stamp_at] = np.frombuffer(_STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000)), dtype=np.uint8)
-        buf[self._double_at] = np.ascontiguousarray(np.asarray(x, dtype=float)[self._gather], dtype="<f8").view(
-            np.uint8).reshape(-1, 8)
-        raw = buf.tobytes()
-        return [raw[a:b] for a, b in self._bounds]

@@ -21,13 +21,18 @@ rejected inputs). ``outputs`` selects among the outputs besides ``<node>/state``
 selected one is written as when all are. Optionally a CSV: ``stamp_ns``, the state labels, the envelope
 labels.
 
-Both are written as the estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory
-does not grow with the recording's length (the result then holds the counters and the number of
-estimates, not the estimates: at n = 132 a covariance is 139 KB, 7 MB per second of a 50 Hz bag).
+The bag is read as it is estimated (:meth:`switchobs_ros.bag.io.BagIn.log_order`, chunk by chunk)
+and ordered in a window of log time (:mod:`switchobs_ros.bag.order_stream`: the order of
+:func:`switchobs_ros.bag.order.order_messages` exactly, or, for a recording whose order needs more
+than the window, a second run with the whole recording's order). The outputs are written as the
+estimates come, so with ``keep=False`` (``switchobs_bag estimate``) memory does not grow with the
+recording's length (the result then holds the counters and the number of estimates, not the
+estimates: at n = 132 a covariance is 139 KB, 7 MB per second of a 50 Hz bag).
 """
 
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Collection
 from dataclasses import dataclass, field
@@ -43,13 +48,15 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from msg_bridge.raw import RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, TemplateBatch, decode_pose, header_stamp
+from .cdr import Template, decode_pose, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
+from .order_stream import WINDOW_NS, BeyondWindow, StreamCounts, stream_order
 
 __all__ = ["OUTPUTS", "EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
 
@@ -94,6 +101,7 @@ class EstimateResult:
     uncovered_warning: str = ""        # the line that says so
     unordered: int = 0                 # parts whose side of a channel change the recording cannot tell (rejected)
     unproven_ties: int = 0             # log-time ties whose file order the stamps contradict
+    whole_order: str = ""              # why the recording was ordered whole (the streamed order needed more)
     out: str | None = None
     csv: str | None = None
     count: int = 0                     # estimates made (those kept or not)
@@ -102,27 +110,52 @@ class EstimateResult:
 def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, csv: str | Path | None = None,
              storage: str | None = None, inputs: bool = True, node: str = "/estimator",
              progress: bool | None = False, keep: bool = True,
-             outputs: Collection[str] | None = None) -> EstimateResult:
+             outputs: Collection[str] | None = None, window_ns: int | None = WINDOW_NS) -> EstimateResult:
     """Run the estimator pipeline over the bag at ``bag_path`` (see the module docstring);
     ``progress``: a bar of the messages on stderr (None: on a terminal); ``keep``: the result holds
     every estimate (False: only their number; the bag and the CSV are written as they come);
     ``outputs``: the topics of :data:`OUTPUTS` written to the bag (None: all of them; ``<node>/state``
     always), each with the content and decimation it has when all are written (the others' topics
-    are not in the bag)."""
+    are not in the bag); ``window_ns``: the recording is read and ordered as it goes, in this window
+    of log time (:mod:`switchobs_ros.bag.order_stream`; None: read whole and ordered at once). When the
+    order needs more than the window, the run starts again with the whole recording's order (what
+    was written is removed first; ``whole_order`` says why): the result is the same either way."""
     if outputs is not None and set(outputs) - set(OUTPUTS):
         raise BagError(f"unknown output(s) {', '.join(sorted(set(outputs) - set(OUTPUTS)))} (known: "
                        f"{', '.join(OUTPUTS)})")
-    chosen = set(OUTPUTS if outputs is None else outputs)
-    with BagIn(bag_path) as bag:
+    args = dict(out=out, csv=csv, storage=storage, inputs=inputs, node=node, progress=progress, keep=keep,
+                chosen=set(OUTPUTS if outputs is None else outputs))
+    if window_ns is None:
+        return _estimate(bag_path, cfg, window_ns=None, **args)
+    try:
+        return _estimate(bag_path, cfg, window_ns=window_ns, **args)
+    except BeyondWindow as why:
+        res = _estimate(bag_path, cfg, window_ns=None, **args)
+        res.whole_order = str(why)
+        return res
+
+
+def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: str | Path | None,
+              storage: str | None, inputs: bool, node: str, progress: bool | None, keep: bool,
+              chosen: set[str], window_ns: int | None) -> EstimateResult:
+    """:func:`estimate` with the outputs ``chosen``, streamed in ``window_ns`` (None: the whole recording's order)."""
+    bag = BagIn(bag_path)
+    try:
         pl = EstimatorPipeline.from_params(cfg)
         needed = {"/" + s.topic: s.type for s in pl.sources}     # the system's input specification
         if pl.channel_topic:
             needed["/" + pl.channel_topic] = CHANNEL_TYPES
         bag.require(needed, " (the estimator's inputs)")
         check_estimable(bag, pl)
-        msgs = bag.messages(order="file")     # ordered below (switchobs_ros.bag.order)
         in_topics = dict(bag.topics)
         storage = storage or bag.storage or "mcap"
+        total = bag.message_count
+        if window_ns is None:
+            msgs = bag.messages(order="file")     # ordered below (switchobs_ros.bag.order)
+            bag.close()
+    except BaseException:
+        bag.close()
+        raise
     sys_ = pl.system
     state_labels = tuple(sys_.state_labels)
     env_labels = mb.envelope_labels(sys_.N, noise_bound=pl.observer.noise_max is not None)
@@ -134,15 +167,8 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
     n, ne = len(state_labels), len(env_labels)
     w_state = Template(mb.labelled_array(np.zeros(n), state_labels, 0), array=("data",))
     w_env = Template(mb.labelled_array(np.zeros(ne), env_labels, 0), array=("data",))
-    odom_paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
-                  ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-
-    def odom_template(b, c):    # the entries the body has (position always; y, velocity where it has them)
-        have = [(path, i) for path, i in zip(odom_paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
-        return (Template(mb.body_odometry(np.zeros(n), b, 0, cfg["world_frame"], c), stamp=("header", "stamp"),
-                         doubles=[p for p, _ in have]), tuple(i for _, i in have))
-    w_odom = [odom_template(b, c) for b, c in zip(bodies, frames)]
-    b_odom = TemplateBatch([w for w, _ in w_odom], [idx for _, idx in w_odom])     # the bodies' odometries at once
+    # the bodies' odometries in one buffer, covariance blocks from P: the node's writer (msg_bridge.raw)
+    b_odom = RawOdometryBatch(bodies, cfg["world_frame"], frames)
     node = "/" + node.strip("/")
     t_state, t_env, t_cov = f"{node}/state", f"{node}/envelope", f"{node}/covariance"
     t_odom = [f"{node}/{b.name}/odom" for b in bodies]
@@ -217,7 +243,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                     datas.append(w_env.bytes(array=[sec, nsec, *e.envelope.tolist()]))
                 if due("odometry", k):
                     topics += t_odom
-                    datas += b_odom.bytes(e.stamp_ns, e.x_hat)
+                    datas += b_odom.msgs(e.x_hat, e.stamp_ns, e.P)
                 if due("typed", k):
                     topics += (t_se, t_eb)
                     datas.append(t_se_tmpl[e.P is not None].bytes(
@@ -239,24 +265,32 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             return deserialize(m, mb.message_class(src.type))
 
         n_inputs = 0
+        n_msgs = 0
         last_ns = 0
         t0 = time.perf_counter()
-        ordering = recording_order(msgs, pl, sources, channel_topic, ctl_topic)
         unordered_why = Rejection(Reason.AMBIGUOUS_CHANNEL, pl.channel_topic or "channel",
                                   "the recording does not establish whether it was sent before or after a change of "
                                   "the channel (log times that tie or contradict the stamps)")
-        order = ordering.order
+        counts = StreamCounts()
+        if window_ns is None:
+            ordering = recording_order(msgs, pl, sources, channel_topic, ctl_topic)
+            counts = StreamCounts(unordered=len(ordering.unordered), unproven=ordering.unproven)
+            items = ((msgs[i], i in ordering.unordered) for i in ordering.order)
+        else:
+            kinds = _Kinds(pl, sources, channel_topic, ctl_topic)
+            items = stream_order(((m.log_ns, m.topic, *kinds(m), m) for m in bag.log_order()), pl.future_ns, counts,
+                                 window_ns)
         if progress is not False:       # a bar (None: on a terminal); tqdm is imported only for one
             from tqdm import tqdm
-            order = tqdm(order, disable=None if progress is None else not progress, leave=False, unit="msg",
-                         desc="estimate")
-        for i in order:
-            m = msgs[i]
+            items = tqdm(items, disable=None if progress is None else not progress, leave=False, unit="msg",
+                         desc="estimate", total=total)
+        for m, unord in items:
+            n_msgs += 1
             last_ns = m.log_ns
             src = sources.get(m.topic)
             if src is not None:
                 n_inputs += 1
-                if i in ordering.unordered:         # never attributed by a guess: rejected, counted
+                if unord:                           # never attributed by a guess: rejected, counted
                     pl.reject(src.topic, unordered_why)
                 else:
                     emit(pl.on_input(src.index, decoded(m, src), m.log_ns, 0.0), m.log_ns)
@@ -279,7 +313,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
                      KeyValue(key="switches", value=str(pl.switches)),
                      KeyValue(key="inconsistent samples", value=str(pl.inconsistent)),
                      KeyValue(key="re-attributed samples", value=str(pl.reattributed)),
-                     KeyValue(key="unordered samples (recording)", value=str(len(ordering.unordered))),
+                     KeyValue(key="unordered samples (recording)", value=str(counts.unordered)),
                      KeyValue(key="bounds valid", value=str(pl.bound_valid).lower()
                               + (f" ({pl.bound_note})" if pl.bound_note else "" if pl.bound_valid
                                  else f" ({pl.bound_invalid_why})")),
@@ -291,12 +325,16 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",
                                            message="switchobs_bag estimate", hardware_id="switchobs", values=vals)]
             writer.write("/diagnostics", last_ns, serialize_message(arr))
-    except BaseException:
+    except BaseException as err:
+        bag.close()
         if writer is not None:
             writer.close()
+            if window_ns is not None and isinstance(err, (BeyondWindow, BagError)):
+                shutil.rmtree(writer.path, ignore_errors=True)      # a part of a run that starts again or fails
         if table is not None:
             table.discard()
         raise
+    bag.close()
     if writer is not None:
         writer.close()
     if table is not None:
@@ -305,7 +343,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         stamps=np.array(stamps, dtype=np.int64), x_hat=np.array(xs).reshape(-1, n),
         envelope=np.array(envs).reshape(-1, len(env_labels)), state_labels=state_labels,
         P=np.array(covs).reshape(-1, n, n) if w_cov is not None and keep else None,
-        envelope_labels=env_labels, messages_in=len(msgs), inputs=n_inputs, accepted=dict(pl.accepted),
+        envelope_labels=env_labels, messages_in=n_msgs, inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
         reattributed=pl.reattributed, bound_valid=pl.bound_valid, bound_invalid_why=pl.bound_invalid_why,
@@ -313,7 +351,7 @@ def estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None = None, 
         model_failures=pl.model_failures,
         seconds=seconds, out=str(out) if out is not None else None, unanswered=unanswered(pl),
         uncovered=tuple(pl.uncovered), uncovered_warning=pl.config.inputs.uncovered_warning(),
-        unordered=len(ordering.unordered), unproven_ties=ordering.unproven, count=count,
+        unordered=counts.unordered, unproven_ties=counts.unproven, count=count,
         csv=str(csv) if csv is not None else None)
     return res
 
@@ -323,36 +361,41 @@ def recording_order(msgs: list, pl: EstimatorPipeline, sources: dict, channel_to
     """The order to process the bag's messages (given in file order) and the unordered parts
     (:mod:`switchobs_ros.bag.order`), from their log times, file order, header stamps (the
     sources' and the commands') and the channel messages' values."""
-    from msg_bridge import BridgeError
-
-    n = len(msgs)
+    kinds = _Kinds(pl, sources, channel_topic, control_topic)
+    stamp, dependent, channel, is_channel = (list(x) for x in zip(*map(kinds, msgs))) if msgs else ([], [], [], [])
     log_ns = [m.log_ns for m in msgs]
-    stamp: list[int | None] = [None] * n
-    dependent = [False] * n
-    channel: list[int | None] = [None] * n
-    is_channel = [False] * n
-    for i, m in enumerate(msgs):
-        src = sources.get(m.topic)
+    ev = evidence([m.topic for m in msgs], log_ns, stamp, pl.future_ns)
+    return order_messages(log_ns, stamp, ev, dependent, channel, is_channel)
+
+
+class _Kinds:
+    """Per message, what :func:`order_messages` takes of it: ``(stamp, dependent, channel, is_channel)``."""
+
+    def __init__(self, pl: EstimatorPipeline, sources: dict, channel_topic: str | None, control_topic: str | None):
+        self.pl, self.sources, self.channel_topic, self.control_topic = pl, sources, channel_topic, control_topic
+
+    def __call__(self, m) -> tuple[int | None, bool, int | None, bool]:
+        from msg_bridge import BridgeError
+
+        src = self.sources.get(m.topic)
         if src is not None:
-            dependent[i] = bool(channel_topic) and src.channel is None and not src.shared
+            dependent = bool(self.channel_topic) and src.channel is None and not src.shared
             st = header_stamp(m.data) if src.type != mb.LABELLED_ARRAY else None
             if st is None:
                 try:
                     st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], 1_000_000_000)
                 except (BagError, BridgeError):
-                    continue
-            if st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
-                stamp[i] = st[0] * 1_000_000_000 + st[1]
-        elif m.topic == channel_topic:
-            is_channel[i] = True
+                    return None, dependent, None, False
+            ok = st[0] >= 0 and 0 <= st[1] < 1_000_000_000
+            return (st[0] * 1_000_000_000 + st[1] if ok else None), dependent, None, False
+        if m.topic == self.channel_topic:
             c = mb.channel_value(channel_message(m))
-            channel[i] = c if 1 <= c <= pl.N else None
-        elif m.topic == control_topic:          # a command: taken in stamp order in a tie the file does not prove
+            return None, False, (c if 1 <= c <= self.pl.N else None), True
+        if m.topic == self.control_topic:       # a command: taken in stamp order in a tie the file does not prove
             st = header_stamp(m.data)
             if st is not None and st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
-                stamp[i] = st[0] * 1_000_000_000 + st[1]
-    ev = evidence([m.topic for m in msgs], log_ns, stamp, pl.future_ns)
-    return order_messages(log_ns, stamp, ev, dependent, channel, is_channel)
+                return st[0] * 1_000_000_000 + st[1], False, None, False
+        return None, False, None, False
 
 
 def _listed(items: list[str]) -> str:

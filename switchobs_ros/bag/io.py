@@ -13,14 +13,15 @@ it received them), never by topic. The player publishes in this order; the offli
 checks it against the messages' own stamps first (:mod:`switchobs_ros.bag.order`).
 
 Every failure is a :class:`BagError` with one line naming the file or the topic. Before anything
-is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: the offline tools
-hold the messages in memory) must be regular files (:mod:`switchobs_core.files`).
+is opened, ``metadata.yaml`` (at most 1 MiB) and the data files (at most 1 GiB: most offline tools
+hold the messages in memory; ``switchobs_bag estimate`` reads them as it goes, :meth:`BagIn.log_order`)
+must be regular files (:mod:`switchobs_core.files`).
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -250,6 +251,77 @@ class BagIn:
         if order != "file":
             out.sort(key=lambda m: m.log_ns)        # stable: ties stay in the file's order
         return out
+
+    def log_order(self) -> Iterator[BagMessage]:
+        """Every message, by log time, ties in the file's order (:meth:`messages` with ``order="log"``),
+        read as it goes: an MCAP file's chunks one at a time (a message is handed on once no chunk still
+        to read starts before it: the chunk index's start times), a SQLite file's rows by its query. A
+        file without a chunk index (or several files) is read whole first. Raises :class:`BagError`
+        as :meth:`messages` does, after the messages that could be read."""
+        got: dict[str, int] = {}
+        n = 0
+        try:
+            for m in self._log_order():
+                got[m.topic] = got.get(m.topic, 0) + 1
+                n += 1
+                yield m
+        except BagError:
+            raise
+        except Exception as err:
+            raise BagError(f"bag {self.path}: reading messages failed after {n} messages "
+                           f"({one_line(err, with_type=True)}); the file is truncated or damaged") from None
+        for c in self._reader.connections:
+            if got.get(c.topic, 0) < self.counts.get(c.topic, 0):
+                raise BagError(f"bag {self.path}: topic {c.topic} has {got.get(c.topic, 0)} readable messages "
+                               f"but metadata.yaml counts {self.counts[c.topic]}; the file is truncated")
+
+    def _log_order(self) -> Iterator[BagMessage]:
+        files = sorted(self.path.glob("*.mcap" if self.storage == "mcap" else "*.db3"))
+        if len(files) != 1:
+            yield from self.messages()
+            return
+        if self.storage != "mcap":
+            import sqlite3
+            db = sqlite3.connect(f"file:{files[0]}?mode=ro", uri=True)
+            try:
+                q = ("SELECT topics.name, topics.type, messages.timestamp, messages.data FROM messages "
+                     "JOIN topics ON messages.topic_id = topics.id ORDER BY messages.timestamp, messages.id")
+                for name, ty, t, data in db.execute(q):
+                    yield BagMessage(name, ty, t, bytes(data))
+            finally:
+                db.close()
+            return
+        import heapq
+
+        from mcap.data_stream import ReadDataStream
+        from mcap.reader import breakup_chunk, make_reader
+        from mcap.records import Chunk, Message
+
+        with files[0].open("rb") as fh:
+            reader = make_reader(fh)
+            summary = reader.get_summary()
+            if summary is None or not summary.chunk_indexes:
+                yield from self.messages()
+                return
+            chunks = summary.chunk_indexes          # in the file's order (what messages() reads)
+            later = [2**63] * (len(chunks) + 1)     # the earliest start of the chunks after each
+            for j in range(len(chunks) - 1, -1, -1):
+                later[j] = min(later[j + 1], chunks[j].message_start_time)
+            topics = {cid: ch.topic for cid, ch in summary.channels.items()}
+            heap: list[tuple[int, int, BagMessage]] = []
+            seq = 0
+            for j, ci in enumerate(chunks):
+                fh.seek(ci.chunk_start_offset + 1 + 8)
+                chunk = Chunk.read(ReadDataStream(fh))
+                for rec in breakup_chunk(chunk, validate_crc=False):
+                    if isinstance(rec, Message):
+                        topic = topics[rec.channel_id]
+                        heapq.heappush(heap, (rec.log_time, seq, BagMessage(topic, self.topics[topic], rec.log_time,
+                                                                             bytes(rec.data))))
+                        seq += 1
+                bound = later[j + 1]
+                while heap and heap[0][0] <= bound:
+                    yield heapq.heappop(heap)[2]
 
     def _file_order(self, topics: set[str]):
         """``(topic, type, log_ns, data)`` in the order written (mcap: records; sqlite3: row ids)."""

@@ -92,31 +92,6 @@ def test_array_template_takes_a_float_array_in_one_copy():
         w.bytes(array=P.ravel())
 
 
-def test_template_batch_is_each_templates_bytes():
-    """The bodies' odometries patched at once (cdr.TemplateBatch) are byte for byte each template's
-    own bytes for the same stamp and state entries, at successive stamps; a template with an array
-    is refused."""
-    labels = ("camera.p_x", "camera.p_y", "camera.v_x", "camera.v_y", "agent1.p_x", "agent1.p_y", "agent1.v_x",
-              "agent1.v_y", "agent2.p_x", "agent2.p_y")           # agent2 without velocities: two doubles
-    x_n = len(labels)
-    paths = [("pose", "pose", "position", "x"), ("pose", "pose", "position", "y"),
-             ("twist", "twist", "linear", "x"), ("twist", "twist", "linear", "y")]
-    templates, picks = [], []
-    for b in mb.bodies(labels):
-        have = [(p, i) for p, i in zip(paths, (b.p_x, b.p_y, b.v_x, b.v_y)) if i is not None]
-        templates.append(cdr.Template(mb.body_odometry(np.zeros(x_n), b, 0, "world", f"{b.name}_frame"),
-                                      stamp=("header", "stamp"), doubles=[p for p, _ in have]))
-        picks.append(tuple(i for _, i in have))
-    batch = cdr.TemplateBatch(templates, picks)
-    rng = np.random.default_rng(5)
-    for stamp in (0, 1_000_000_007, 2 * 10 ** 18 + 3):
-        x = rng.standard_normal(x_n)
-        assert batch.bytes(stamp, x) == [t.bytes(stamp, [float(x[i]) for i in p]) for t, p in zip(templates, picks)]
-    arr = cdr.Template(mb.labelled_array(np.zeros(3), ("a", "b", "c"), 0), array=("data",))
-    with pytest.raises(ValueError):
-        cdr.TemplateBatch([arr], [()])
-
-
 def test_typed_estimate_template_is_the_writers_message():
     """The typed estimate patched into bytes serialised once (cdr.Template with two arrays, as
     switchobs_bag estimate writes it) reads back as the message StateEstimateWriter makes, with a
@@ -225,3 +200,20 @@ def test_csv_rows_are_the_floats_reprs(tmp_path_factory, values, stamp):
     w.close()
     row = path.read_text().splitlines()[1]
     assert row == f"{stamp}," + ",".join(map(repr, [float(v) for v in values]))
+
+
+def test_odometry_is_the_nodes_with_the_covariance(bag, paper_tables, tmp_path):
+    """The bodies' odometries in the bag are the node's (the node's writer, msg_bridge.raw): each is
+    ``body_odometry`` of its estimate with the covariance blocks of the estimate's P, at the node's
+    decimation (``output.odometry_every``: every 3rd estimate here)."""
+    p = dict(_params(paper_tables), **{"output.odometry_every": 3})
+    kept = estimate(bag, p, out=tmp_path / "o", outputs=("odometry",))
+    bodies = mb.bodies(kept.state_labels)
+    odoms = [m for t, _, m in _messages(tmp_path / "o") if t.endswith("/odom")]
+    due = range(0, kept.count, 3)
+    assert len(odoms) == len(due) * len(bodies) and kept.P is not None
+    for j, k in enumerate(due):
+        for i, b in enumerate(bodies):
+            want = mb.body_odometry(kept.x_hat[k], b, int(kept.stamps[k]), p["world_frame"], b.name, kept.P[k])
+            got = odoms[j * len(bodies) + i]
+            assert got == want and got.pose.covariance[0] == kept.P[k][b.p_x, b.p_x] > 0

@@ -95,7 +95,7 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
             "partial_updates": res.partial_updates, "rejected": res.rejected, "unanswered": res.unanswered,
             "inconsistent": res.inconsistent, "reattributed": res.reattributed, "bounds_valid": res.bound_valid,
             "uncovered_channels": list(res.uncovered), "unordered": res.unordered,
-            "out": res.out, "csv": res.csv}
+            "whole_order": res.whole_order, "out": res.out, "csv": res.csv}
     code = STRICT_EXIT if a.strict and res.unanswered else 0
     if a.json:
         print(json.dumps(info))
@@ -108,6 +108,8 @@ def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
         if res.unordered:
             print(f"samples whose channel the recording cannot tell: {res.unordered} (log times that tie or contradict "
                   f"the stamps around a channel change; rejected as ambiguous_channel, never guessed)")
+        if res.whole_order:
+            print(f"the recording was ordered whole (read twice): {res.whole_order}")
         if res.recertifications or res.bias_alarms or res.model_failures:
             print(f"re-certifications {res.recertifications} (latest: {res.recertified or 'none'}); bias alarms "
                   f"{res.bias_alarms}; model failures (gate) {res.model_failures}")
