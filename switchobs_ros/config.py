@@ -13,8 +13,9 @@ takes it from there (gain table, observer).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,8 @@ from switchobs_core.model.system import LTISystem
 from switchobs_core.ranges import RANGES, check_range
 from switchobs_core.runtime.bound_option import BOUND_FORMS
 from switchobs_core.runtime.observer import MODES
+from switchobs_core.table.ahead import TableReadAhead
+from switchobs_core.table.gains import GainTable
 
 from .core_config import (
     GAIN_FAMILY_PARAM,
@@ -323,6 +326,8 @@ class EstimatorConfig:
     child_frames: tuple[str, ...]
     transforms: dict[str, FrameTransform] | None = None     # input_transforms by frame
     disturbance: Disturbance | None = None      # disturbance.max (switchobs_core.model.disturbance)
+    #: ``gain_table``'s file, read while the system was built (taken by the pipeline's table load)
+    table_ahead: TableReadAhead | None = field(default=None, compare=False, repr=False)
 
     @property
     def e0(self) -> float | None:
@@ -348,6 +353,9 @@ class EstimatorConfig:
         values.update(cfg)
         values["gain_table_cache_dir"] = cache_dir_param(values["gain_table_cache_dir"],
                                                          values["gain_table_cache_trusted"])
+        path = values["gain_table"]
+        # the table file is read in a worker thread while the system (its decompositions) is built
+        ahead = TableReadAhead(GainTable, os.path.expanduser(path)) if path and isinstance(path, str) else None
         sys_ = load_system_param(values["system"])
         mode = values["schedule.mode"]
         if mode not in MODES:
@@ -425,4 +433,4 @@ class EstimatorConfig:
                    inputs=inputs, family=family, noise=noise, noise_max=vmax if vmax >= 0 else None, rate=rate,
                    publish_covariance=bool(values["publish_covariance"]),
                    child_frames=tuple(frames) if frames else tuple(bodies), transforms=transforms,
-                   disturbance=dist if dist is not None and dist.active else None)
+                   disturbance=dist if dist is not None and dist.active else None, table_ahead=ahead)

@@ -23,6 +23,7 @@ from switchobs_core.model.scenarios import load_disturbance, load_noise, load_sy
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
 from switchobs_core.ranges import MAX_CYCLES
+from switchobs_core.table.ahead import TableReadAhead
 from switchobs_core.table.check import verify_table
 from switchobs_core.table.gains import GainTable
 
@@ -140,18 +141,25 @@ def table_cache_path(cache_dir: str, system: LTISystem, mode: str, cycles: list[
 def load_or_design_table(path: str, cache_dir: str, system: LTISystem, mode: str,
                          cycles: list[Cycle], robust: tuple[float, float] | None, delta: float,
                          log: Callable[[str], None], *, family: str = "lmi", rate: float = 0.0,
-                         noise: NoiseModel | None = None, warn: Callable[[str], None] | None = None):
+                         noise: NoiseModel | None = None, warn: Callable[[str], None] | None = None,
+                         ahead: TableReadAhead | None = None):
     """The gain table: from ``path``; else from the cache; else designed now and cached.
 
     ``family`` says what to design when there is no table: the paper's LMI gains, or offline
     Kalman gains for the cycle sequence at ``rate`` Hz under ``noise``. A cache that cannot be
     written (a read-only or full filesystem, a symlink loop) is said once on ``warn`` (default
     ``log``), and the start-up goes on with the designed table.
+    ``ahead``: ``path``'s file already being read (:class:`~switchobs_core.table.ahead.TableReadAhead`),
+    taken instead of a read here: the same table or refusal.
     Returns ``(table, where)`` with ``where`` the file the table came from or went to.
     """
     if path:
+        file = os.path.expanduser(path)
         try:
-            table = GainTable.load(os.path.expanduser(path), system=system)
+            if ahead is not None and ahead.path == Path(file):
+                table = ahead.table(system)
+            else:
+                table = GainTable.load(file, system=system)
             verify_table(table, system, source=f"gain table {path}")
         except SwitchobsError as err:
             raise ConfigError(f"parameter 'gain_table': {err}") from None

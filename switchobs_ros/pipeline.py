@@ -170,7 +170,7 @@ class EstimatorPipeline(Counters):
         design = family_entry(family).table if family else "lmi"
         table, table_path = load_or_design_table(
             conf["gain_table"], conf["gain_table_cache_dir"], sys_, mode, cycles, conf.robust, conf["delta"],
-            log.info, family=design, rate=conf.rate, noise=conf.noise, warn=log.warn)
+            log.info, family=design, rate=conf.rate, noise=conf.noise, warn=log.warn, ahead=conf.table_ahead)
         if family and family_entry(family).stored and table.family != family:
             raise ConfigError(f"parameter 'gain_family' is '{family}' but the gain table holds {table.family} gains")
         try:
