@@ -356,6 +356,16 @@ class EstimatorConfig:
         path = values["gain_table"]
         # the table file is read in a worker thread while the system (its decompositions) is built
         ahead = TableReadAhead(GainTable, os.path.expanduser(path)) if path and isinstance(path, str) else None
+        try:
+            return cls._checked(values, ahead)
+        except BaseException:
+            if ahead is not None:
+                ahead.close()       # a refused configuration leaves no thread reading
+            raise
+
+    @classmethod
+    def _checked(cls, values: dict, ahead: TableReadAhead | None) -> EstimatorConfig:
+        """:meth:`from_values` once the defaults are in and ``gain_table``'s file is being read."""
         sys_ = load_system_param(values["system"])
         mode = values["schedule.mode"]
         if mode not in MODES:

@@ -27,8 +27,8 @@ __all__ = ["TableReadAhead"]
 class TableReadAhead:
     """``cls.load(path)`` started now in a daemon thread; :meth:`table` takes its result once.
 
-    A caller that stops before taking it (a refused parameter, a Ctrl-C) leaves the thread to end on
-    its own (daemon: the process does not wait for it); its file is closed with the table.
+    A caller that will not take it calls :meth:`close` (the estimator's configuration does on a refused
+    parameter); a thread left reading does not hold the process's exit (daemon).
     """
 
     def __init__(self, cls: Any, path: str | Path) -> None:
@@ -45,6 +45,12 @@ class TableReadAhead:
             self._result = table_io.load(self.cls, self.path)
         except Exception as err:        # raised again by table(), in the caller's thread
             self._error = err
+
+    def close(self) -> None:
+        """Wait for the read to end and drop what it gave (a caller that will not take the table)."""
+        self._thread.join()
+        self._taken = True
+        self._result = self._error = None
 
     def table(self, system: LTISystem | None = None) -> Any:
         """The table, checked against ``system`` when given: what ``cls.load(path, system=system)``
