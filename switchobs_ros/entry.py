@@ -7,7 +7,9 @@ that Ctrl-C a quiet stop with exit code 0 (the runner's contract for a Ctrl-C, s
 :mod:`switchobs_ros.runner`): nothing has started yet, so there is nothing to clean up. Once the
 module is imported the usual handling takes over (:func:`~switchobs_ros.runner.run_node`).
 
-This module imports nothing heavy itself, so that the handler is in place at once. A ``pip install``
+This module imports nothing heavy itself, so that the handler is in place at once. The estimator's
+DDS participant is created before its module is imported (:mod:`switchobs_ros.early`), so that DDS
+discovery runs during the imports. A ``pip install``
 without the interface package switchobs_msgs gets one line saying how to build it (exit code 2),
 not an import traceback.
 ``python -m switchobs_ros.<node>`` still runs the module directly.
@@ -31,11 +33,15 @@ NO_MSGS = ("the interface package switchobs_msgs (the typed outputs' messages) i
            "(docs/how-to/ros2.md)")
 
 
-def _run(module: str, prog: str) -> int:
+def _run(module: str, prog: str, participant_first: bool = False) -> int:
     """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
-    switchobs_msgs is one line on stderr and exit code 2."""
+    switchobs_msgs is one line on stderr and exit code 2. ``participant_first``: the node's DDS
+    participant is created before the import (:mod:`switchobs_ros.early`)."""
     previous = signal.signal(signal.SIGINT, _stop_quietly)
     try:
+        if participant_first:
+            from . import early
+            early.start(prog)
         node = importlib.import_module(f"switchobs_ros.{module}")
     except ModuleNotFoundError as err:
         if not (err.name or "").startswith("switchobs_msgs"):
@@ -48,8 +54,8 @@ def _run(module: str, prog: str) -> int:
 
 
 def estimator() -> int:
-    """``estimator``: :mod:`switchobs_ros.estimator`."""
-    return _run("estimator", "estimator")
+    """``estimator``: :mod:`switchobs_ros.estimator`, its participant created first."""
+    return _run("estimator", "estimator", participant_first=True)
 
 
 def managed_estimator() -> int:

@@ -3,7 +3,9 @@
 ``rclpy.init``, build the node, spin; Ctrl-C or an external shutdown ends it with exit code 0; a
 bad configuration (:class:`~switchobs_ros.params.ConfigError`, a parameter of the wrong type)
 prints one line, ``<prog>: error: ...``, and exits 2. A signal while the node is still being
-built (its context shut down under it) is a stop as well: exit 0, no traceback. A second signal
+built (its context shut down under it) is a stop as well: exit 0, no traceback. A context the entry
+point initialised already (the estimator's participant created before its imports,
+:mod:`switchobs_ros.early`) is taken as it is, rclpy's signal handlers installed then. A second signal
 during the clean-up (or one that arrives before the spin) must not turn the exit into a traceback
 or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 """
@@ -18,11 +20,12 @@ import rclpy
 import rclpy.executors
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions, install_signal_handlers
 
 from switchobs_core.exceptions import one_line
 from switchobs_core.threads import single_threaded_blas
 
-from . import params_files
+from . import early, params_files
 from .params import ConfigError
 from .ros_args import with_float_lists
 
@@ -62,6 +65,17 @@ def _quiet_interrupt_in_finalizers(hook):
     return unraisable
 
 
+def _quiet_shutdown() -> None:
+    """Shut down a context the entry point initialised (:mod:`switchobs_ros.early`), a second
+    Ctrl-C included."""
+    try:
+        if early.started():
+            early.release()
+            rclpy.try_shutdown()
+    except KeyboardInterrupt:
+        pass
+
+
 def run_node(node_cls, prog: str, args=None) -> int:
     """Run ``node_cls()`` until shutdown; the process's exit code (see the module docstring)."""
     sys.unraisablehook = _quiet_interrupt_in_finalizers(sys.unraisablehook)
@@ -69,8 +83,14 @@ def run_node(node_cls, prog: str, args=None) -> int:
         single_threaded_blas()  # small matrices; see switchobs_core.threads (loads BLAS: a Ctrl-C may land here)
         argv = sys.argv if args is None else args
         params_files.GLOBAL_FILES[:] = params_files.params_files(argv)      # checked by declare_all
-        rclpy.init(args=with_float_lists(argv))   # [1, 0.8]: doubles
+        if early.init_error is not None:    # the entry point's rclpy.init, from sys.argv, failed
+            raise early.init_error
+        if early.started():     # the entry point initialised the context (and its participant) from sys.argv
+            install_signal_handlers(SignalHandlerOptions.ALL)
+        else:
+            rclpy.init(args=with_float_lists(argv))   # [1, 0.8]: doubles
     except KeyboardInterrupt:
+        _quiet_shutdown()
         return 0
     except Exception as err:
         print(f"{prog}: error: cannot start ROS 2: {one_line(err)}", file=sys.stderr)
@@ -79,6 +99,7 @@ def run_node(node_cls, prog: str, args=None) -> int:
     code = 0
     try:
         node = node_cls()
+        early.release()         # the node's own holds the participant now
         executor = make_executor()
         executor.add_node(node)
         if getattr(node, "gc_freeze", False):
@@ -97,6 +118,7 @@ def run_node(node_cls, prog: str, args=None) -> int:
         code = 0
     finally:
         try:
+            early.release()
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()

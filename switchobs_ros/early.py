@@ -1,0 +1,70 @@
+"""The estimator's DDS participant, created before its modules are imported (its console script's start).
+
+A node's participant exists once the first node of its context does. The estimator's node is built
+after about half a second of imports and its table's load, so without this DDS discovery (finding the
+sensors' publishers, being found by their subscribers) would only start then: with Fast DDS's default
+announcements (every 3 s) a start that misses the first exchange waits for the next one
+(``bench/bench_startup.py``, bench/RESULTS.md). :func:`start`, called by :mod:`switchobs_ros.entry`
+before it imports the node's module, initialises rclpy's default context from ``sys.argv`` and
+creates a bare node in it (no parameter services, no rosout, no remapping), whose creation makes the
+participant; discovery then runs during the imports. :func:`~switchobs_ros.runner.run_node` takes
+that context instead of initialising one (:func:`started`) and destroys the bare node once the
+estimator's node exists (:func:`release`).
+
+Nothing here decides how a start ends: what ``rclpy.init`` raises (a bad ``--ros-args``) is kept
+for ``run_node``, which refuses it in one line with its exit code as when it calls ``rclpy.init``
+itself (:data:`init_error`); if the bare node cannot be created, the context is shut down again and
+``run_node`` initialises it as it always does. The context is initialised without rclpy's signal handlers,
+so the entry point's Ctrl-C handler (a quiet exit 0) stays in place during the imports; ``run_node``
+installs rclpy's when it takes the context.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+__all__ = ["release", "start", "started"]
+
+_boot: Any = None       # the bare node holding the participant until the node's own exists
+#: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
+init_error: Exception | None = None
+
+
+def start(name: str) -> None:
+    """Initialise rclpy's default context from ``sys.argv`` and create the bare node ``<name>_boot``."""
+    global _boot, init_error
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    from .ros_args import with_float_lists
+    try:
+        rclpy.init(args=with_float_lists(sys.argv), signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:    # a bad --ros-args: run_node's one-line refusal, without a second attempt
+        init_error = err
+        return
+    try:
+        _boot = rclpy.create_node(f"{name}_boot", use_global_arguments=False, enable_rosout=False,
+                                  start_parameter_services=False)
+    except Exception:       # run_node initialises the context and reports what is wrong, as without this
+        _boot = None
+        try:
+            rclpy.try_shutdown()
+        except Exception:
+            pass
+
+
+def started() -> bool:
+    """Whether :func:`start` left an initialised context (with its bare node) for ``run_node``."""
+    return _boot is not None
+
+
+def release() -> None:
+    """Destroy the bare node (the node's own holds the participant now); nothing if there is none."""
+    global _boot
+    boot, _boot = _boot, None
+    if boot is not None:
+        try:
+            boot.destroy_node()
+        except Exception:       # the context was shut down under it (a signal): nothing left to free
+            pass
