@@ -2,7 +2,7 @@
 """Start-up to the first estimate: the estimator with a cached table against a bare rclpy node.
 
     python bench/bench_startup.py [--rounds 3] [--systems paper,agents32] [--table32 FILE] [--floor] [--early]
-                                  [--before DIR] [--before-version 3] [--channel-type TYPE]
+                                  [--before DIR] [--before-version 3] [--channel-type TYPE] [--script]
                                   [--discovery-profile FILE]
 
 Per system a camera_sim publishes throughout (50 Hz, the system's periodic schedule, the channel
@@ -11,7 +11,9 @@ starts
 
 * ``bare``: the bare rclpy republisher of ``bench/bench_node.py`` (imports rclpy and numpy, one
   subscription per input, republishes every target pose);
-* ``estimator``: ``python -m switchobs_ros.estimator`` with the system and its table already on disk
+* ``estimator``: ``python -m switchobs_ros.estimator`` (with ``--script``, as its console script
+  ``ros2 run switchobs_ros estimator`` starts it: :func:`switchobs_ros.entry.estimator`, which
+  creates the node's DDS participant before its imports) with the system and its table already on disk
   (``gain_table``): the paper's LMI table (JSON), or the 251 MiB Kalman table of ``camera_agents``
   with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
   written here in the binary container's current version),
@@ -104,7 +106,12 @@ READY = {"bare": "bare_republisher ready", "floor": "bare_republisher ready", "e
          "early": "estimator ready"}
 
 
-def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0) -> tuple[float, ...]:
+#: ``--script``: the estimator started as its console script (``ros2 run switchobs_ros estimator``) starts it.
+SCRIPT = "import sys; from switchobs_ros.entry import estimator; sys.exit(estimator())"
+
+
+def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 120.0,
+              script: bool = False) -> tuple[float, ...]:
     """(wall seconds to ready, the node's CPU seconds then, wall seconds to the first answer, CPU then) of
     one start."""
     if kind in ("bare", "floor"):
@@ -118,7 +125,8 @@ def one_start(kind: str, params: dict, env: dict, log: Path, timeout: float = 12
         topic, mtype = "/estimator/state", Float64MultiArray
         probe = First(topic, mtype)
         t0 = time.monotonic()
-        cmd = [sys.executable, str(REPO / "bench" / "startup_early_driver.py")] if kind == "early" else None
+        cmd = [sys.executable, str(REPO / "bench" / "startup_early_driver.py")] if kind == "early" else \
+            [sys.executable, "-c", SCRIPT] if script else None
         node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, log=log, env=env)
     ready = ready_cpu = float("nan")
     try:
@@ -162,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--before-version", type=int, default=0, help="the container version of the 32-agent table "
                     "the --before checkout reads (default: the same file as this checkout's; 3 for a checkout "
                     "that reads only version 3)")
+    ap.add_argument("--script", action="store_true", help="start the estimator (and --before's) as its console "
+                    "script does (switchobs_ros.entry.estimator) instead of python -m switchobs_ros.estimator")
     ap.add_argument("--domain", type=int, default=None, help="the ROS_DOMAIN_ID to run in (default: a free one "
                                                                  "claimed from 1..100)")
     ap.add_argument("--channel-type", default="", help="the estimator's channel_type (default: its own default)")
@@ -236,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
                                 params = dict(est_params, gain_table=tables_before[name])
                             res = one_start(kind if kind in ("bare", "floor", "early") else "estimator", params,
                                             kind_env,
-                                            d / f"{name}_{kind}_{r}.log")
+                                            d / f"{name}_{kind}_{r}.log", script=a.script)
                             if r:
                                 times[kind].append(res)
                     rows.append((name, size, times))
@@ -250,6 +260,7 @@ def main(argv: list[str] | None = None) -> int:
           f"load average {info['load'][0]:.1f} before ({info['date']}).")
     before = " --floor" if a.floor else ""
     before += " --early" if a.early else ""
+    before += " --script" if a.script else ""
     before += f" --before {a.before}" if a.before else ""
     before += f" --before-version {a.before_version}" if a.before_version else ""
     before += f" --channel-type {a.channel_type}" if a.channel_type else ""
