@@ -24,7 +24,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-__all__ = ["release", "start", "started"]
+__all__ = ["release", "start", "started", "stop"]
 
 _boot: Any = None       # the bare node holding the participant until the node's own exists
 #: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
@@ -68,3 +68,11 @@ def release() -> None:
             boot.destroy_node()
         except Exception:       # the context was shut down under it (a signal): nothing left to free
             pass
+
+
+def stop() -> None:
+    """:func:`release`, then shut the context down (a start that ends before ``run_node`` takes it)."""
+    if _boot is not None:
+        import rclpy
+        release()
+        rclpy.try_shutdown()

@@ -47,6 +47,8 @@ def _run(module: str, prog: str, participant_first: bool = False) -> int:
         if not (err.name or "").startswith("switchobs_msgs"):
             raise
         print(f"{prog}: error: {NO_MSGS}", file=sys.stderr)
+        if participant_first:
+            early.stop()
         return 2
     finally:
         signal.signal(signal.SIGINT, previous)

@@ -69,9 +69,7 @@ def _quiet_shutdown() -> None:
     """Shut down a context the entry point initialised (:mod:`switchobs_ros.early`), a second
     Ctrl-C included."""
     try:
-        if early.started():
-            early.release()
-            rclpy.try_shutdown()
+        early.stop()
     except KeyboardInterrupt:
         pass
 
