@@ -389,7 +389,7 @@ def relock_excluded(diag: tuple[np.ndarray, np.ndarray], S_diag: np.ndarray, rto
     sqrt|S_ii|`` squared, the products and the difference: a relative ``16 eps``). So a True
     never changes the test's outcome; it spares forming ``P`` (an n x n product) and unpacking
     ``S`` at every sample of the recursion, where the test fails for a whole cycle after a
-    departure. NaN and infinite entries give False (the full test decides)."""
+    departure. A NaN gives False (the full test decides)."""
     q, err = diag
     with np.errstate(all="ignore"):
         gap = np.abs(q - S_diag) * (1.0 - 4.0 * _EPS) - err
