@@ -18,6 +18,9 @@ republisher's ``~/out``) and of each truth message (one per tick: what was sent)
 node: ticks sent, answers, the fraction answered, latency (arrival - the tick's stamp, both this
 machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system,
 from ``/proc``, from the first tick to the last answer). Ratios against ``bare`` in the same run.
+``--threads`` adds the node's CPU per answer by thread name (the Python thread, Fast DDS's
+``dds.*`` threads) and its minor page faults; ``--spy DIR`` samples each node with py-spy
+``--native`` (``PY_SPY``: its path; it pauses the process at each sample, so the run is slower).
 
 A script, not a test: nothing is asserted.
 """
