@@ -19,7 +19,6 @@ from hypothesis import strategies as st
 from scipy.linalg import block_diag, expm
 
 from switchobs_core.design.kalman import design_kalman
-from switchobs_core.model.noise import default_noise
 from switchobs_core.model.schedule import Cycle, PeriodicSchedule
 from switchobs_core.numerics.kalman_step import symmetrize
 from switchobs_core.runtime.covariance import CovarianceStep
