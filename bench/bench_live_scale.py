@@ -18,6 +18,9 @@ republisher's ``~/out``) and of each truth message (one per tick: what was sent)
 node: ticks sent, answers, the fraction answered, latency (arrival - the tick's stamp, both this
 machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system,
 from ``/proc``, from the first tick to the last answer). Ratios against ``bare`` in the same run.
+``--threads`` adds the node's CPU per answer by thread name (the Python thread, Fast DDS's
+``dds.*`` threads) and its minor page faults; ``--spy DIR`` samples each node with py-spy
+``--native`` (``PY_SPY``: its path; it pauses the process at each sample, so the run is slower).
 
 A script, not a test: nothing is asserted.
 """
@@ -62,6 +65,32 @@ def cpu_seconds(pid: int) -> float:
     """User + system CPU time of process ``pid`` (and its reaped children not counted)."""
     f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(f[11]) + int(f[12])) / TICKS
+
+
+def thread_cpu(pid: int) -> dict[str, list[float]]:
+    """Per thread of process ``pid``, grouped by thread name: [user s, system s, minor faults]."""
+    out: dict[str, list[float]] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            raw = (task / "stat").read_text()
+        except OSError:             # the thread ended
+            continue
+        name = raw[raw.index("(") + 1:raw.rindex(")")]
+        f = raw.rsplit(")", 1)[1].split()
+        row = out.setdefault(name, [0.0, 0.0, 0.0])
+        row[0] += int(f[11]) / TICKS
+        row[1] += int(f[12]) / TICKS
+        row[2] += int(f[7])
+    return out
+
+
+def spy(pid: int, seconds: float, out: Path):
+    """py-spy (``PY_SPY``, e.g. a scratch venv's) sampling process ``pid`` with native frames."""
+    import subprocess
+    exe = os.environ.get("PY_SPY", "py-spy")
+    return subprocess.Popen([exe, "record", "--native", "-r", "100", "-p", str(pid),
+                             "-d", str(int(seconds)), "-f", "raw", "-o", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 class Receiver(Node):
@@ -109,10 +138,12 @@ def optional_outputs(system) -> tuple[tuple[str, type], ...]:
 
 def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path,
              listen: bool = False, every: dict | None = None, profile: Path | None = None,
-             main_repo: Path | None = None) -> dict:
+             main_repo: Path | None = None, threads: bool = False, spy_dir: Path | None = None,
+             tag: str = "") -> dict:
     """One node under test: ``listen`` subscribes to every optional output of the estimator,
     ``every`` sets its ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py);
-    a ``kind`` ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one."""
+    a ``kind`` ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
+    ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy."""
     repo = REPO
     if kind.startswith("main:"):
         repo = main_repo
@@ -158,15 +189,21 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
                                                              wait_for_truth_subscribers=1,
                                                              initial_state=list(map(float, x0)))),
                           log=logs / f"camera_{kind.replace(':', '_')}.log")
-        cpu0 = None
+        cpu0 = th0 = sampler = None
         while cam.alive():
             rclpy.spin_once(rec, timeout_sec=0.05)
             if cpu0 is None and rec.truth:
                 cpu0 = cpu_seconds(node.pid)
+                th0 = thread_cpu(node.pid) if threads else None
+                if spy_dir is not None:
+                    sampler = spy(node.pid, seconds, spy_dir / f"{tag}.txt")
         t_end = time.monotonic() + 2.0
         while time.monotonic() < t_end:
             rclpy.spin_once(rec, timeout_sec=0.05)
         cpu1 = cpu_seconds(node.pid)
+        th1 = thread_cpu(node.pid) if threads else None
+        if sampler is not None:
+            sampler.wait(timeout=60)
     finally:
         node.stop()
         rec.destroy_node()
@@ -176,7 +213,9 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     return {"node": kind, "sent": len(sent), "answered": len(answered),
             "p50": float(np.median(lat)) if lat.size else float("nan"),
             "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
-            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": dict(rec.counts)}
+            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": dict(rec.counts),
+            "threads": ({k: [v - th0.get(k, [0.0] * 3)[i] for i, v in enumerate(row)] for k, row in th1.items()}
+                        if th0 is not None and th1 is not None else None)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,6 +236,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="run each estimator under cProfile (bench/profile_node.py), stats in DIR/<node>-<i>.prof")
     ap.add_argument("--main-repo", type=Path, default=Path("/work/main"),
                     help="the checkout whose estimator a node main:<kind> runs (before/after in one run)")
+    ap.add_argument("--threads", action="store_true",
+                    help="the node's CPU per answer by thread name (user, system) and minor page faults per answer")
+    ap.add_argument("--spy", type=Path, default=None, metavar="DIR",
+                    help="sample each node with py-spy --native (PY_SPY: its path), raw stacks in DIR/<node>-<i>.txt")
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: claim a free one)")
     a = ap.parse_args(argv)
     every = {k: int(v) for k, v in (kv.split("=") for kv in a.every.split(",") if kv)}
@@ -219,11 +262,12 @@ def main(argv: list[str] | None = None) -> int:
             tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
         rclpy.init()
         try:
-            if a.profile:
-                a.profile.mkdir(parents=True, exist_ok=True)
+            for d_ in (a.profile, a.spy):
+                if d_:
+                    d_.mkdir(parents=True, exist_ok=True)
             rows = [run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
                              a.profile / f"{k.replace(':', '_')}-{i}.prof" if a.profile and k != "bare" else None,
-                             a.main_repo)
+                             a.main_repo, a.threads, a.spy, f"{k.replace(':', '_').replace('@', '_')}-{i}")
                     for i, k in enumerate(kinds)]
         finally:
             rclpy.try_shutdown()
@@ -256,6 +300,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {k} | {len(rs)} | {sum(r['answered'] for r in rs)}/{sum(r['sent'] for r in rs)} "
                   f"| {m['p50']:.1f} ms | {m['p99']:.1f} ms | {m['cpu_ms']:.2f} ms "
                   f"| {m['p99'] / base['p99']:.2f}x | {m['cpu_ms'] / base['cpu_ms']:.1f}x |" if base else "| - | - |")
+    for r in rows:
+        if r["threads"]:
+            k = max(r["answered"], 1)
+            print(f"\n{r['node']}: CPU per answer by thread (user + system, ms), minor faults per answer:")
+            for name, (u, st, flt) in sorted(r["threads"].items(), key=lambda kv: -(kv[1][0] + kv[1][1])):
+                if u + st > 0 or flt > 0:
+                    print(f"  {name:16s} {1e3 * (u + st) / k:6.3f} ({1e3 * u / k:.3f} + {1e3 * st / k:.3f})"
+                          f"  faults {flt / k:.1f}")
     for r in rows:
         if r["counts"]:
             c = r["counts"]

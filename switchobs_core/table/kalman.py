@@ -117,6 +117,16 @@ class KalmanPhase:
         i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)
         return P[i * n - i * (i - 1) // 2 + (j - i)]         # (i, j), i <= j, in the row-major upper triangle
 
+    def P_diagonal(self) -> np.ndarray:
+        """``np.diagonal(P_prior)`` (the same doubles, a new array), from the packed row when the
+        matrix has not been unpacked."""
+        P = self._read()
+        if P.ndim == 2:
+            return np.diagonal(P).copy()
+        n = self.K.shape[0]
+        i = np.arange(n)
+        return P[i * n - i * (i - 1) // 2]
+
     def _read(self) -> np.ndarray:
         """The stored prior as it is kept: a row not read yet is read and verified now
         (:class:`~switchobs_core.table.rows.LazyRow`) and kept packed (half the matrix's memory)."""

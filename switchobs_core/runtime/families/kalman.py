@@ -77,6 +77,7 @@ __all__ = ["KalmanTableGains", "MAX_JITTER"]
 MAX_JITTER = 0.25
 #: Entries of the fused step cache (phase, channel, dt) before it is cleared.
 _FUSED_MAX = 8192
+_EPS = float(np.finfo(float).eps)
 
 
 def scaled_cov(S: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -172,8 +173,11 @@ class KalmanTableGains(OnlineKalmanGains):
         """While locked, a time ``t`` that is the next sample's on the grid (as :meth:`_locked` tests
         it): the stored prior of that phase, the real prior there whatever the sample's channel
         (no O(n^3) posterior and propagation; a read-only view of the table's matrix, not a copy;
-        with ``cols``, its block on those rows and columns, read from the packed row); else None."""
-        if self._online or self._origin is None or self._last_k < 0:
+        with ``cols``, its block on those rows and columns, read from the packed row); after a
+        departure the recursion's block (:meth:`OnlineKalmanGains.stored_prior`); else None."""
+        if self._online:
+            return super().stored_prior(t, dt, cols)
+        if self._origin is None or self._last_k < 0:
             return None
         k = self._next_k(t, dt)
         if k is None:
@@ -270,7 +274,7 @@ class KalmanTableGains(OnlineKalmanGains):
             why = self._departure(t, ph, ent, channel, rows, span)
             self._last_k = ph.k
         self._last_channel = channel
-        if self._online and not why:
+        if self._online and not why and not relock_excluded(self._diagonal(), ent.P_diagonal(), self.relock_rtol):
             # every entry within relock_rtol of its own scale: |P - S|_ij <= rtol sqrt(S_ii S_jj)
             S = ent.P_prior
             d = np.sqrt(np.abs(np.diagonal(S)))
@@ -289,6 +293,22 @@ class KalmanTableGains(OnlineKalmanGains):
             x = xm
         xp, m = kalman_correct(x, K, H, y, self._I, prediction)
         return Correction(xp, maps + (m,))
+
+    def _diagonal(self) -> tuple[np.ndarray, np.ndarray]:
+        """The diagonal of the recursion's covariance ``P = L L'`` without forming ``P``: ``(q, err)``
+        with ``|P_ii - q_i| <= err_i`` (:func:`relock_excluded`). ``P`` kept as given: its own diagonal,
+        ``err = 0``; else ``q_i = sum_k L_ik^2``, and ``P_ii`` (the product's entry; ``(P + P') / 2``
+        leaves the diagonal as it is) and ``q_i`` are two sums of the same ``m`` nonnegative terms,
+        each within ``gamma_m`` of the exact sum: ``err = 2 gamma_m q / (1 - gamma_m)``, taken twice
+        over (rounding of the bound itself)."""
+        Pc = self._Pc
+        if Pc is not None:
+            q = np.diagonal(Pc)
+            return q, np.zeros_like(q)
+        L = self._L
+        q = np.einsum("ij,ij->i", L, L)
+        m = L.shape[1] + 2
+        return q, q * (4.0 * m * _EPS / (1.0 - m * _EPS))
 
     def _align(self, t: float, channel: int, span: float) -> bool:
         """At a switch seen one step after the last sample (module docstring, alignment): move the
@@ -359,3 +379,18 @@ class KalmanTableGains(OnlineKalmanGains):
                                                   self._ctx.C[ent.channel - 1], self._I)
             out.append(hit)
         return out
+
+
+def relock_excluded(diag: tuple[np.ndarray, np.ndarray], S_diag: np.ndarray, rtol: float) -> bool:
+    """Whether the re-lock test (module docstring: ``|P - S|_ij <= rtol sqrt(S_ii S_jj)`` for
+    every entry) certainly fails on the diagonal, from ``diag = (q, err)`` with ``|P_ii - q_i| <=
+    err_i`` and the diagonal ``S_diag`` of the stored prior: True only where some ``i`` has
+    ``|q_i - S_ii| - err_i`` above ``rtol |S_ii|`` with room for the test's own roundings (``d_i =
+    sqrt|S_ii|`` squared, the products and the difference: a relative ``16 eps``). So a True
+    never changes the test's outcome; it spares forming ``P`` (an n x n product) and unpacking
+    ``S`` at every sample of the recursion, where the test fails for a whole cycle after a
+    departure. A NaN gives False (the full test decides)."""
+    q, err = diag
+    with np.errstate(all="ignore"):
+        gap = np.abs(q - S_diag) * (1.0 - 4.0 * _EPS) - err
+        return bool(np.any(gap > rtol * np.abs(S_diag) * (1.0 + 16.0 * _EPS)))

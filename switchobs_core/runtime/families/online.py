@@ -183,7 +183,15 @@ class OnlineKalmanGains:
         return self._L.copy()
 
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
-        return None
+        """With ``cols`` (a consistency test's block) and ``dt > 0``: the prior's block on ``cols``
+        from the recursion's factor (:meth:`~switchobs_core.runtime.covariance.CovarianceStep.prior_block`;
+        nothing is held: the open-loop step), without forming the n x n ``P`` and its prior; else
+        None (the observer propagates :meth:`covariance`)."""
+        if cols is None or not dt > 0:
+            return None
+        e = self._ctx.zoh(OPEN_LOOP, dt)
+        Pc = self._Pc
+        return self._cov.prior_block(self._L if Pc is None else Pc, e, dt, np.asarray(cols), factor=Pc is None)
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         return self._cov.prior(P, e, dt)
