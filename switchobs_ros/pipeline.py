@@ -479,6 +479,8 @@ class EstimatorPipeline(Counters):
         """``SwitchedObserver.update`` with ``m`` at ``t``; append the estimate (withheld, and the
         estimator reset, when not finite)."""
         dt = t - self.observer.t
+        if not self.bound_valid:    # none published until a re-certification or a reset restarts them
+            self.observer.bounds_withdrawn = self.bound_invalid_why
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
@@ -499,7 +501,7 @@ class EstimatorPipeline(Counters):
                            "resetting the estimator")
             self.reset("non-finite estimate")
             return
-        if not np.isfinite(env_vals).all():
+        if not np.isfinite(env_vals[:None if self.bound_valid else self.N + 1]).all():
             # a bound that can no longer be computed: the estimate is good, the bounds are
             # withdrawn with the reason and it keeps answering (never a reset for it)
             self.withdraw(self.observer.bounds_withdrawn or f"the bounds are not finite at stamp {pend.stamp_ns}")
