@@ -279,9 +279,9 @@ class SwitchedObserver:
         return self._lost
 
     bounds_withdrawn = property(lambda self: self._bounds.withdrawn, lambda self, why: self._bounds.withdraw(why),
-                                doc="Why the rigorous bounds are ``inf`` until :meth:`reset` or :meth:`recertify` (\"\" "
-                                "while they hold): they could no longer be computed, or a caller that publishes none set "
-                                "it (the sets are then not propagated); the estimate is kept (:mod:`~switchobs_core.bounds.rigorous`).")
+                                doc="Why the rigorous bounds are ``inf`` until :meth:`reset` or :meth:`recertify` "
+                                "(\"\" while they hold): they could no longer be computed, or a caller that publishes "
+                                "none set it (the sets then rest); the estimate is kept (module bounds.rigorous).")
 
     def recertify(self, e: float) -> bool:
         """Restart the rigorous bounds from ``||x - x_hat|| <= e`` now (:mod:`~switchobs_core.runtime.recertify`)."""
