@@ -25,7 +25,8 @@ answered after start-up or a reset; every estimate carries the stamp of the samp
 An exception while handling a message is caught and counted (``internal_error``); an estimate
 that is not finite is never returned (the estimator resets instead); a bound that can no longer
 be computed (the observer's ``bounds_withdrawn``) withdraws the bounds with that reason while the
-estimate is answered as usual. The failure table is docs/failures.md.
+estimate is answered as usual. While no bound is published the observer's rigorous sets rest (its
+``bounds_withdrawn`` set): a re-certification or a reset starts them afresh. The failure table is docs/failures.md.
 """
 
 from __future__ import annotations
