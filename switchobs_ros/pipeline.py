@@ -25,7 +25,8 @@ answered after start-up or a reset; every estimate carries the stamp of the samp
 An exception while handling a message is caught and counted (``internal_error``); an estimate
 that is not finite is never returned (the estimator resets instead); a bound that can no longer
 be computed (the observer's ``bounds_withdrawn``) withdraws the bounds with that reason while the
-estimate is answered as usual. The failure table is docs/failures.md.
+estimate is answered as usual. While no bound is published the observer's rigorous sets rest (its
+``bounds_withdrawn`` set): a re-certification or a reset starts them afresh. The failure table is docs/failures.md.
 """
 
 from __future__ import annotations
@@ -479,6 +480,8 @@ class EstimatorPipeline(Counters):
         """``SwitchedObserver.update`` with ``m`` at ``t``; append the estimate (withheld, and the
         estimator reset, when not finite)."""
         dt = t - self.observer.t
+        if not self.bound_valid:    # none published until a re-certification or a reset restarts them
+            self.observer.bounds_withdrawn = self.bound_invalid_why
         with np.errstate(all="ignore"):     # an overflow is caught below, not warned about
             violations = self.observer.residence_violations
             x_hat = self.observer.update(t, m.channel, m.y, rows=m.rows)
@@ -499,7 +502,7 @@ class EstimatorPipeline(Counters):
                            "resetting the estimator")
             self.reset("non-finite estimate")
             return
-        if not np.isfinite(env_vals).all():
+        if not np.isfinite(env_vals[:None if self.bound_valid else self.N + 1]).all():
             # a bound that can no longer be computed: the estimate is good, the bounds are
             # withdrawn with the reason and it keeps answering (never a reset for it)
             self.withdraw(self.observer.bounds_withdrawn or f"the bounds are not finite at stamp {pend.stamp_ns}")

@@ -63,6 +63,14 @@ class ErrorBounds:
         self._last = None
         return True
 
+    def withdraw(self, why: str) -> None:
+        """The rigorous sets are withdrawn with ``why`` (kept if they already are) until :meth:`reset` or
+        :meth:`restart`: not propagated any more, their bounds ``inf``; for a caller that publishes no
+        bound while it holds none (a restart starts them afresh, so nothing of the sets is lost)."""
+        if self.rigorous is not None and not self.rigorous.withdrawn:
+            self.rigorous.withdrawn = str(why) or "withdrawn by the caller"
+            self._last = None
+
     def changed(self) -> None:
         """The sets changed (a sample, a step): their bounds are read again."""
         self._last = None

@@ -278,11 +278,10 @@ class SwitchedObserver:
         recursion ran out of digits (:class:`~switchobs_core.runtime.families.base.Correction` ``lost``)."""
         return self._lost
 
-    @property
-    def bounds_withdrawn(self) -> str:
-        """Why the rigorous bounds are ``inf`` until :meth:`reset` ("" while they hold): they could no
-        longer be computed; the estimate is kept (:mod:`switchobs_core.bounds.rigorous`)."""
-        return self._bounds.withdrawn
+    bounds_withdrawn = property(lambda self: self._bounds.withdrawn, lambda self, why: self._bounds.withdraw(why),
+                                doc="Why the rigorous bounds are ``inf`` until :meth:`reset` or :meth:`recertify` "
+                                "(\"\" while they hold): they could no longer be computed, or a caller that publishes "
+                                "none set it (the sets then rest); the estimate is kept (module bounds.rigorous).")
 
     def recertify(self, e: float) -> bool:
         """Restart the rigorous bounds from ``||x - x_hat|| <= e`` now (:mod:`~switchobs_core.runtime.recertify`)."""
