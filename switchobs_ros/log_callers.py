@@ -10,7 +10,7 @@ estimator, 25-50 ms at its first log line (``estimator ready`` or the one before
 cache with the entries the visit itself would write (the absolute and the real path of each
 module's source, mapped to the module's name), so the first line costs what every later one
 does. The caller rclpy names is the same (``test_log_callers.py``); a log call from a module not
-registered fills the cache as before.
+registered fills the cache by the visit, as rclpy alone does.
 """
 
 from __future__ import annotations

@@ -181,10 +181,9 @@ def test_raw_message_locates_a_field_past_stale_copies_of_its_sentinel(monkeypat
 
 def test_many_marker_writers_in_one_process_each_write_the_writers_message():
     """Writers of many body sets built one after another in one process, each message the same as
-    MarkersWriter's. Padding bytes then may hold sentinels of earlier writers (in a script building
-    every set of up to four bodies three times, 744 of 1020 builds found a stamp's sentinel twice
-    with one sentinel set per pass; whether it happens depends on the allocator's history, so the
-    planted copies above are the deterministic test)."""
+    MarkersWriter's. Padding bytes then may hold sentinels of earlier writers (a single sentinel set
+    finds a stamp's sentinel twice in most such builds, measured in a script; whether it happens
+    depends on the allocator's history, so the planted copies above are the deterministic test)."""
     import itertools
 
     rng = np.random.default_rng(3)

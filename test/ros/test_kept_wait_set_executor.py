@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -12,7 +13,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int32
 from std_srvs.srv import Trigger
 
-from switchobs_ros.executor import KeptWaitSetExecutor
+from switchobs_ros.executor import KeptWaitSetExecutor, PolledEventsExecutor
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -37,119 +38,112 @@ def wait_matched(ex, pub, limit: float = 20.0) -> None:
     spin_until(ex, lambda: pub.get_subscription_count() > 0, limit)
 
 
+@contextlib.contextmanager
+def _spun(ctx, *names: str, executor=KeptWaitSetExecutor):
+    """An executor of ``executor``'s class with a node of each name added: ``(ex, *nodes)``; the
+    nodes destroyed and the executor shut down on the way out, also when the test fails."""
+    ex = executor(context=ctx)
+    nodes = [rclpy.create_node(name, context=ctx) for name in names]
+    try:
+        for node in nodes:
+            ex.add_node(node)
+        yield (ex, *nodes)
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        ex.shutdown()
+
+
 def test_timers_fire_and_a_cancelled_timer_does_not(ctx):
-    node = rclpy.create_node("kws_timers", context=ctx)
-    ex = KeptWaitSetExecutor(context=ctx)
-    ex.add_node(node)
-    fired, cancelled = [], []
-    node.create_timer(0.01, lambda: fired.append(1))
-    dead = node.create_timer(0.005, lambda: cancelled.append(1))
-    dead.cancel()
-    spin_until(ex, lambda: len(fired) >= 5)
-    assert cancelled == []
-    dead.reset()        # re-armed: it fires again
-    spin_until(ex, lambda: len(cancelled) >= 1)
-    node.destroy_node()
-    ex.shutdown()
+    with _spun(ctx, "kws_timers") as (ex, node):
+        fired, cancelled = [], []
+        node.create_timer(0.01, lambda: fired.append(1))
+        dead = node.create_timer(0.005, lambda: cancelled.append(1))
+        dead.cancel()
+        spin_until(ex, lambda: len(fired) >= 5)
+        assert cancelled == []
+        dead.reset()        # re-armed: it fires again
+        spin_until(ex, lambda: len(cancelled) >= 1)
 
 
 def test_messages_taken_in_order_one_wait_each_and_the_wait_set_kept(ctx):
-    node = rclpy.create_node("kws_sub", context=ctx)
-    ex = KeptWaitSetExecutor(context=ctx)
-    ex.add_node(node)
-    got, infos = [], []
+    with _spun(ctx, "kws_sub") as (ex, node):
+        got, infos = [], []
 
-    def with_info(msg, info):
-        got.append(msg.data)
-        infos.append(info)
-    node.create_subscription(Int32, "/kws_in", with_info, RELIABLE)
-    pub = node.create_publisher(Int32, "/kws_in", RELIABLE)
-    wait_matched(ex, pub)
-    for i in range(40):
-        pub.publish(Int32(data=i))
-    spin_until(ex, lambda: len(got) >= 1)
-    rebuilds = ex.rebuilds
-    calls, waits = ex.calls, ex.waits
-    spin_until(ex, lambda: len(got) == 40)
-    assert got == list(range(40))
-    assert all(info.get("source_timestamp") for info in infos)        # MessageInfo passed
-    assert ex.rebuilds == rebuilds           # the wait set was not rebuilt for any of them
-    # one wait per callback at most (rclpy's executor: two, one of them woken by its own guard)
-    assert ex.waits - waits <= ex.calls - calls
-    # a subscription created later is served after the executor rebuilds its wait set
-    late = []
-    node.create_subscription(Int32, "/kws_late", lambda m: late.append(m.data), RELIABLE)
-    pub2 = node.create_publisher(Int32, "/kws_late", RELIABLE)
-    wait_matched(ex, pub2)
-    pub2.publish(Int32(data=7))
-    spin_until(ex, lambda: late == [7])
-    assert ex.rebuilds > rebuilds
-    node.destroy_node()
-    ex.shutdown()
+        def with_info(msg, info):
+            got.append(msg.data)
+            infos.append(info)
+        node.create_subscription(Int32, "/kws_in", with_info, RELIABLE)
+        pub = node.create_publisher(Int32, "/kws_in", RELIABLE)
+        wait_matched(ex, pub)
+        for i in range(40):
+            pub.publish(Int32(data=i))
+        spin_until(ex, lambda: len(got) >= 1)
+        rebuilds = ex.rebuilds
+        calls, waits = ex.calls, ex.waits
+        spin_until(ex, lambda: len(got) == 40)
+        assert got == list(range(40))
+        assert all(info.get("source_timestamp") for info in infos)        # MessageInfo passed
+        assert ex.rebuilds == rebuilds           # the wait set was not rebuilt for any of them
+        # one wait per callback at most (rclpy's executor: two, one of them woken by its own guard)
+        assert ex.waits - waits <= ex.calls - calls
+        # a subscription created later is served after the executor rebuilds its wait set
+        late = []
+        node.create_subscription(Int32, "/kws_late", lambda m: late.append(m.data), RELIABLE)
+        pub2 = node.create_publisher(Int32, "/kws_late", RELIABLE)
+        wait_matched(ex, pub2)
+        pub2.publish(Int32(data=7))
+        spin_until(ex, lambda: late == [7])
+        assert ex.rebuilds > rebuilds
 
 
 def test_raw_subscription_gets_bytes(ctx):
-    node = rclpy.create_node("kws_raw", context=ctx)
-    ex = KeptWaitSetExecutor(context=ctx)
-    ex.add_node(node)
-    got = []
-    node.create_subscription(Int32, "/kws_raw", got.append, RELIABLE, raw=True)
-    pub = node.create_publisher(Int32, "/kws_raw", RELIABLE)
-    wait_matched(ex, pub)
-    pub.publish(Int32(data=0x01020304))
-    spin_until(ex, lambda: len(got) == 1)
-    assert isinstance(got[0], bytes) and got[0][-4:] == bytes([4, 3, 2, 1])    # CDR little endian
-    node.destroy_node()
-    ex.shutdown()
+    with _spun(ctx, "kws_raw") as (ex, node):
+        got = []
+        node.create_subscription(Int32, "/kws_raw", got.append, RELIABLE, raw=True)
+        pub = node.create_publisher(Int32, "/kws_raw", RELIABLE)
+        wait_matched(ex, pub)
+        pub.publish(Int32(data=0x01020304))
+        spin_until(ex, lambda: len(got) == 1)
+        assert isinstance(got[0], bytes) and got[0][-4:] == bytes([4, 3, 2, 1])    # CDR little endian
 
 
 def test_services_answer_clients_and_parameter_services(ctx):
-    server = rclpy.create_node("kws_server", context=ctx)
-    client_node = rclpy.create_node("kws_client", context=ctx)
-    ex = KeptWaitSetExecutor(context=ctx)
-    ex.add_node(server)
-    ex.add_node(client_node)
-    calls = []
+    with _spun(ctx, "kws_server", "kws_client") as (ex, server, client_node):
+        calls = []
 
-    def answer(req, resp):
-        calls.append(1)
-        resp.success, resp.message = True, f"call {len(calls)}"
-        return resp
-    server.create_service(Trigger, "/kws_trigger", answer)
-    cli = client_node.create_client(Trigger, "/kws_trigger")
-    spin_until(ex, cli.service_is_ready)
-    for k in (1, 2):
-        fut = cli.call_async(Trigger.Request())
+        def answer(req, resp):
+            calls.append(1)
+            resp.success, resp.message = True, f"call {len(calls)}"
+            return resp
+        server.create_service(Trigger, "/kws_trigger", answer)
+        cli = client_node.create_client(Trigger, "/kws_trigger")
+        spin_until(ex, cli.service_is_ready)
+        for k in (1, 2):
+            fut = cli.call_async(Trigger.Request())
+            ex.spin_until_future_complete(fut, timeout_sec=20.0)
+            assert fut.done() and fut.result().success and fut.result().message == f"call {k}"
+        # the node's own parameter services
+        server.declare_parameter("gain", 1.5)
+        from rcl_interfaces.srv import GetParameters
+        pcli = client_node.create_client(GetParameters, "/kws_server/get_parameters")
+        spin_until(ex, pcli.service_is_ready)
+        fut = pcli.call_async(GetParameters.Request(names=["gain"]))
         ex.spin_until_future_complete(fut, timeout_sec=20.0)
-        assert fut.done() and fut.result().success and fut.result().message == f"call {k}"
-    # the node's own parameter services
-    server.declare_parameter("gain", 1.5)
-    from rcl_interfaces.srv import GetParameters
-    pcli = client_node.create_client(GetParameters, "/kws_server/get_parameters")
-    spin_until(ex, pcli.service_is_ready)
-    fut = pcli.call_async(GetParameters.Request(names=["gain"]))
-    ex.spin_until_future_complete(fut, timeout_sec=20.0)
-    assert fut.result().values[0].double_value == 1.5
-    server.destroy_node()
-    client_node.destroy_node()
-    ex.shutdown()
+        assert fut.result().values[0].double_value == 1.5
 
 
 def test_guard_conditions_and_coroutine_callbacks(ctx):
-    node = rclpy.create_node("kws_guard", context=ctx)
-    ex = KeptWaitSetExecutor(context=ctx)
-    ex.add_node(node)
-    hits, steps = [], []
-    gc = node.create_guard_condition(lambda: hits.append(1))
-    gc.trigger()
-    spin_until(ex, lambda: hits == [1])
+    with _spun(ctx, "kws_guard") as (ex, node):
+        hits, steps = [], []
+        gc = node.create_guard_condition(lambda: hits.append(1))
+        gc.trigger()
+        spin_until(ex, lambda: hits == [1])
 
-    async def coro():
-        steps.append("a")
-    node.create_timer(0.01, coro)
-    spin_until(ex, lambda: len(steps) >= 2)
-    node.destroy_node()
-    ex.shutdown()
+        async def coro():
+            steps.append("a")
+        node.create_timer(0.01, coro)
+        spin_until(ex, lambda: len(steps) >= 2)
 
 
 def test_shutdown_ends_spin_from_another_thread_and_from_the_context(ctx):
@@ -191,19 +185,14 @@ def test_shutdown_ends_spin_from_another_thread_and_from_the_context(ctx):
 
 
 def test_polled_events_executor_delivers_messages_with_their_info_and_fires_timers(ctx):
-    from switchobs_ros.executor import PolledEventsExecutor
-    node = rclpy.create_node("kws_events", context=ctx)
-    ex = PolledEventsExecutor(context=ctx)
-    ex.add_node(node)
-    got, ticks = [], []
-    node.create_subscription(Int32, "/kws_ev", lambda m, info: got.append((m.data, info["source_timestamp"])),
-                             RELIABLE)
-    pub = node.create_publisher(Int32, "/kws_ev", RELIABLE)
-    node.create_timer(0.01, lambda: ticks.append(1))
-    wait_matched(ex, pub)
-    for i in range(10):
-        pub.publish(Int32(data=i))
-    spin_until(ex, lambda: len(got) == 10 and len(ticks) >= 3)
-    assert [d for d, _ in got] == list(range(10)) and all(ts > 0 for _, ts in got)
-    node.destroy_node()
-    ex.shutdown()
+    with _spun(ctx, "kws_events", executor=PolledEventsExecutor) as (ex, node):
+        got, ticks = [], []
+        node.create_subscription(Int32, "/kws_ev", lambda m, info: got.append((m.data, info["source_timestamp"])),
+                                 RELIABLE)
+        pub = node.create_publisher(Int32, "/kws_ev", RELIABLE)
+        node.create_timer(0.01, lambda: ticks.append(1))
+        wait_matched(ex, pub)
+        for i in range(10):
+            pub.publish(Int32(data=i))
+        spin_until(ex, lambda: len(got) == 10 and len(ticks) >= 3)
+        assert [d for d, _ in got] == list(range(10)) and all(ts > 0 for _, ts in got)

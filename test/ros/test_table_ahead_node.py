@@ -38,7 +38,7 @@ def test_pipeline_takes_the_table_read_ahead(paper_tables, tmp_path, kind):
     assert not _readers()
 
 
-def test_bad_table_refused_in_one_line_as_before(paper_tables, tmp_path):
+def test_bad_table_refused_in_one_line(paper_tables, tmp_path):
     """A truncated .npz: the node refuses it in one line with exit code 2, and the configuration's
     refusal is the one a load in place gives."""
     data = GainTable.load(paper_tables["periodic"]).save(tmp_path / "good.npz").read_bytes()

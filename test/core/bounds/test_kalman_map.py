@@ -93,7 +93,7 @@ def test_observer_bounds_match_the_dense_path(agents10, family, monkeypatch):
     blocks14 cases)."""
     system, cycle, table, sched, x = agents10
     rng = np.random.default_rng(5)
-    rng.uniform(-3, 3, 22)          # the draws of agents10's positions: the noise below as before
+    rng.uniform(-3, 3, 22)          # the draws of agents10's positions come first in this stream
     stream = []
     for k in range(150):
         t = k / 50.0
