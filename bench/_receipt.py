@@ -22,6 +22,8 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 #: The receivers' subscriptions: reliable, deep enough that a receiver which falls behind loses
 #: nothing from its own history (a keep-last reader overwrites its oldest unread sample).
 RECEIVE = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
+#: A witness of a sensor-data topic (best effort, as its writer), as deep.
+WITNESS = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.BEST_EFFORT)
 
 #: The largest (Python arrival - DDS reception) median accepted as "the same clock" (ns): the two
 #: clocks of a machine differ by decades (system: since 1970; steady: since boot).

@@ -5,22 +5,33 @@ republisher, side by side in one run.
     python bench/bench_live_scale.py                       # 32 agents, 50 Hz, 60 s per node
     python bench/bench_live_scale.py --agents 8 --seconds 20 --nodes kalman,bare
 
-Three processes per run, one role each: camera_sim (the built-in ``camera_agents`` model with M
-agents, every h_i = 1 s, stamping each tick on its grid) as the sender; the node under test: the
+Processes per run, one role each: camera_sim (the built-in ``camera_agents`` model with M agents,
+every h_i = 1 s, stamping each tick on its grid) as the sender; the node under test: the
 estimator with the model's Kalman table (``kalman``) or LMI table (``lmi``), all outputs at their
 defaults, or the ceiling (``bare``), a bare rclpy node that republishes every target pose
 (``bench/bench_node.py --republisher``), or the messaging floor (``sink``, ``bench/sink_node.py``:
 the estimator's subscriptions and outputs, no math); a node ``<kind>@rclpy`` spins rclpy's
 SingleThreadedExecutor, ``<kind>@events`` rclpy's EventsExecutor, otherwise
-``switchobs_ros.executor.KeptWaitSetExecutor`` (``SWITCHOBS_EXECUTOR``); and this process as the
-receiver, which only records the arrival of each answer (``/estimator/state``, or the
-republisher's ``~/out``) and of each truth message (one per tick: what was sent). Reported per
-node: ticks sent, answers, the fraction answered, latency (arrival - the tick's stamp, both this
-machine's system clock) p50 and p99, and the node process's CPU time per answer (user + system,
-from ``/proc``, from the first tick to the last answer). Ratios against ``bare`` in the same run.
-``--threads`` adds the node's CPU per answer by thread name (the Python thread, Fast DDS's
-``dds.*`` threads) and its minor page faults; ``--spy DIR`` samples each node with py-spy
-``--native`` (``PY_SPY``: its path; it pauses the process at each sample, so the run is slower).
+``switchobs_ros.executor.KeptWaitSetExecutor`` (``SWITCHOBS_EXECUTOR``); this process as the
+receiver of each answer (``/estimator/state``, or the republisher's ``~/out``) and of each truth
+message (one per tick: what was sent); and, with ``--listen`` (or a node ``<kind>+listen``), a
+listener that subscribes to every optional output of the estimator so that each is built and
+published, and counts them: ``bench/output_counter.py`` in a process of its own (``--counter
+process``, the default) or raw subscriptions in the receiver (``--counter inline``), both taken
+raw by ``KeptWaitSetExecutor``.
+
+Latency = the answer's arrival at the receiver's middleware (``MessageInfo.received_timestamp``,
+Fast DDS's reception time, on the system clock: ``bench/_receipt.py``) - the tick's stamp (the
+same clock): the node and the transport, not the receiver's own queue. The arrival in the
+receiver's Python callback is a second column (what this benchmark measured before). Reported per
+node: ticks camera_sim sent and the ticks it skipped (its timer late by a period or more: the
+stamps missing from its grid), answers, the fraction answered, latency p50 and p99, the node
+process's CPU time per answer (user + system, from ``/proc``, from the first tick to the last
+answer), camera_sim's own lateness (each truth message's DDS reception - its stamp: published
+after the tick's poses), and ratios against ``bare`` in the same run. ``--threads`` adds the
+node's CPU per answer by thread name (the Python thread, Fast DDS's ``dds.*`` threads) and its
+minor page faults; ``--spy DIR`` samples each node with py-spy ``--native`` (``PY_SPY``: its
+path; it pauses the process at each sample, so the run is slower).
 
 A script, not a test: nothing is asserted.
 """
@@ -28,6 +39,7 @@ A script, not a test: nothing is asserted.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -48,13 +60,14 @@ from switchobs_core.threads import single_threaded_blas  # noqa: E402
 single_threaded_blas()
 
 import rclpy  # noqa: E402
+from _receipt import RECEIVE, WITNESS, Receipts, labelled_stamp, pose_stamp  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
+from output_counter import counting, optional_outputs  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-import msg_bridge as mb  # noqa: E402
 import switchobs_core as so  # noqa: E402
-from switchobs_ros import qos  # noqa: E402
+from switchobs_ros.executor import KeptWaitSetExecutor  # noqa: E402
 from tools.domain import claim_domain  # noqa: E402
 from tools.launch import NodeProcess, ros_args  # noqa: E402
 
@@ -94,68 +107,59 @@ def spy(pid: int, seconds: float, out: Path):
 
 
 class Receiver(Node):
-    """Records the arrival time of every answer and every truth message, keyed by stamp; with
-    ``optional`` topics, also counts the messages on each (taken raw: not deserialised here)."""
+    """Keeps every answer, every truth message and, as a witness, every target pose raw, with its
+    DDS reception, source and Python arrival times (``bench/_receipt.py``; decoded after the run);
+    with ``optional`` topics, also counts the messages on each (taken raw: not deserialised here)."""
 
     def __init__(self, answer_topic: str, pose: bool, optional: tuple[tuple[str, type], ...] = ()):
         super().__init__("bench_live_receiver")
-        self.answers: dict[int, int] = {}
-        self.truth: dict[int, int] = {}
-        self.counts: dict[str, int] = dict.fromkeys((t for t, _ in optional), 0)
-        if pose:
-            self.create_subscription(PoseStamped, answer_topic, self._pose, qos.OUTPUT)
-        else:
-            self.create_subscription(Float64MultiArray, answer_topic, self._array, qos.OUTPUT)
-        self.create_subscription(Float64MultiArray, "/sim/truth", self._truth, qos.TRUTH)
-        for topic, kind in optional:
-            self.create_subscription(kind, topic, self._counter(topic), qos.OUTPUT, raw=True)
-
-    def _counter(self, topic: str):
-        def count(_raw: bytes) -> None:
-            self.counts[topic] += 1
-        return count
-
-    def _pose(self, m: PoseStamped) -> None:
-        self.answers[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec] = time.time_ns()
-
-    def _array(self, m: Float64MultiArray) -> None:
-        self.answers[mb.unpack_labelled(m).stamp_ns] = time.time_ns()
-
-    def _truth(self, m: Float64MultiArray) -> None:
-        self.truth[mb.unpack_labelled(m).stamp_ns] = time.time_ns()
+        self.answers = Receipts()
+        self.truth = Receipts()
+        self.create_subscription(PoseStamped if pose else Float64MultiArray, answer_topic, self.answers, RECEIVE,
+                                 raw=True)
+        self.create_subscription(Float64MultiArray, "/sim/truth", self.truth, RECEIVE, raw=True)
+        self.poses = Receipts()
+        self.create_subscription(PoseStamped, "/target/pose", self.poses, WITNESS, raw=True)
+        self.counts = counting(self, optional, RECEIVE)
 
 
-def optional_outputs(system) -> tuple[tuple[str, type], ...]:
-    """The estimator's outputs besides ``~/state``: (topic, message type)."""
-    from nav_msgs.msg import Odometry
-    from switchobs_msgs.msg import ErrorBounds, StateEstimate
-    from visualization_msgs.msg import MarkerArray
-    return (("/estimator/envelope", Float64MultiArray), ("/estimator/covariance", Float64MultiArray),
-            ("/estimator/state_estimate", StateEstimate), ("/estimator/error_bounds", ErrorBounds),
-            ("/estimator/markers", MarkerArray),
-            *((f"/estimator/{b.name}/odom", Odometry) for b in mb.bodies(system.state_labels)))
+def percentiles(values) -> tuple[float, float]:
+    """(p50, p99) of ``values``, NaN for none."""
+    v = np.asarray(values, dtype=float)
+    return (float(np.median(v)), float(np.percentile(v, 99))) if v.size else (float("nan"), float("nan"))
+
+
+def parse_kind(kind: str) -> tuple[str, str, bool | None]:
+    """``base[@executor][+listen|+quiet]`` -> (base, executor, listened: None = as ``--listen``)."""
+    name, _, mod = kind.partition("+")
+    if mod not in ("", "listen", "quiet"):
+        raise SystemExit(f"node {kind!r}: the suffix is +listen or +quiet")
+    base, _, executor = name.partition("@")
+    return base, executor, None if not mod else mod == "listen"
 
 
 def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path,
              listen: bool = False, every: dict | None = None, profile: Path | None = None,
              main_repo: Path | None = None, threads: bool = False, spy_dir: Path | None = None,
-             tag: str = "") -> dict:
-    """One node under test: ``listen`` subscribes to every optional output of the estimator,
-    ``every`` sets its ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py);
-    a ``kind`` ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
+             tag: str = "", counter: str = "process") -> dict:
+    """One node under test: ``listen`` subscribes to every optional output of the estimator (a
+    ``+listen`` / ``+quiet`` suffix of ``kind`` overrides it), counted by ``bench/output_counter.py``
+    (``counter`` ``process``) or by this process (``inline``); ``every`` sets its
+    ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py); a ``kind``
+    ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
     ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy."""
-    repo = REPO
-    if kind.startswith("main:"):
-        repo = main_repo
-    base, _, executor = kind.partition("@")
+    base, executor, listened = parse_kind(kind)
+    listen = listen if listened is None else listened
+    repo = main_repo if base.startswith("main:") else REPO
     env = dict(os.environ, SWITCHOBS_EXECUTOR=executor or "kept")
-    log = logs / f"{kind.replace(':', '_').replace('@', '_')}.log"
+    stem = tag or kind.replace(":", "_").replace("@", "_").replace("+", "_")
+    log = logs / f"{stem}.log"
     sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * m}
     optional = ()
     outputs = {f"output.{k}_every": v for k, v in (every or {}).items()}
-    if kind == "bare":
+    if base == "bare":
         node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
-                           log=logs / "bare.log")
+                           log=log)
         topic, pose = "/bare_republisher/out", True
     elif base == "sink":
         params = {k: v for k, v in outputs.items() if k.removeprefix("output.").removesuffix("_every")
@@ -164,8 +168,6 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
                            cmd=[sys.executable, str(REPO / "bench" / "sink_node.py"), str(sys_path)],
                            env=env, log=log)
         topic, pose = "/estimator/state", False
-        if listen:
-            optional = optional_outputs(so.load_system(sys_path))
     else:
         params = dict(sched, system=str(sys_path), gain_table=tables[base.removeprefix("main:")], e0=1e3, **outputs)
         code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
@@ -175,47 +177,76 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
         env["SWITCHOBS_PROFILE_REPO"] = str(repo)
         node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, env=env, log=log)
         topic, pose = "/estimator/state", False
-        if listen:
-            optional = optional_outputs(so.load_system(sys_path))
-    rec = Receiver(topic, pose, optional)
+    if listen and base != "bare":
+        optional = optional_outputs(so.load_system(sys_path))
+    counts_file = logs / f"{stem}.counts.json"
+    listener = (NodeProcess("output_counter", cmd=[sys.executable, str(REPO / "bench" / "output_counter.py"),
+                                                   str(sys_path), str(counts_file)], log=logs / f"{stem}.counter.log")
+                if optional and counter == "process" else None)
+    rec = Receiver(topic, pose, optional if counter == "inline" else ())
+    ex = KeptWaitSetExecutor()
+    ex.add_node(rec)
     try:
         end = time.monotonic() + 180
-        while (rec.count_publishers(topic) == 0 or any(rec.count_publishers(t) == 0 for t, _ in optional)) \
-                and time.monotonic() < end:
-            rclpy.spin_once(rec, timeout_sec=0.1)
+        while (rec.count_publishers(topic) == 0 or any(rec.count_publishers(t) == 0 or rec.count_subscribers(t) == 0
+                                                       for t, _ in optional)) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.1)
         x0 = np.random.default_rng(1).uniform(-1.0, 1.0, 4 * (m + 1))
+        # camera_sim starts when the node and this witness subscribe to the target pose
         cam = NodeProcess("camera_sim", ros_args(params=dict(sched, system=str(sys_path), rate=rate,
-                                                             duration=seconds, wait_for_subscribers=1,
+                                                             duration=seconds, wait_for_subscribers=2,
                                                              wait_for_truth_subscribers=1,
                                                              initial_state=list(map(float, x0)))),
-                          log=logs / f"camera_{kind.replace(':', '_')}.log")
+                          log=logs / f"camera_{stem}.log")
         cpu0 = th0 = sampler = None
         while cam.alive():
-            rclpy.spin_once(rec, timeout_sec=0.05)
-            if cpu0 is None and rec.truth:
+            ex.spin_once(timeout_sec=0.05)
+            if cpu0 is None and len(rec.truth):
                 cpu0 = cpu_seconds(node.pid)
                 th0 = thread_cpu(node.pid) if threads else None
                 if spy_dir is not None:
                     sampler = spy(node.pid, seconds, spy_dir / f"{tag}.txt")
         t_end = time.monotonic() + 2.0
         while time.monotonic() < t_end:
-            rclpy.spin_once(rec, timeout_sec=0.05)
+            ex.spin_once(timeout_sec=0.05)
         cpu1 = cpu_seconds(node.pid)
         th1 = thread_cpu(node.pid) if threads else None
         if sampler is not None:
             sampler.wait(timeout=60)
     finally:
         node.stop()
+        counts = dict(rec.counts)
+        if listener is not None:
+            listener.stop(timeout=30)
+            counts = json.loads(counts_file.read_text()) if counts_file.exists() else {}
+        ex.remove_node(rec)
         rec.destroy_node()
-    sent = sorted(rec.truth)
-    answered = [s for s in sent if s in rec.answers]
-    lat = np.array([(rec.answers[s] - s) * 1e-6 for s in answered])
-    return {"node": kind, "sent": len(sent), "answered": len(answered),
-            "p50": float(np.median(lat)) if lat.size else float("nan"),
-            "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
-            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": dict(rec.counts),
+        ex.shutdown()
+    truth = rec.truth.times(labelled_stamp)
+    answers = rec.answers.times(pose_stamp if pose else labelled_stamp)
+    sent = sorted(truth)
+    answered = [s for s in sent if s in answers]
+    p50, p99 = percentiles([(answers[s][0] - s) * 1e-6 for s in answered])
+    py50, py99 = percentiles([(answers[s][2] - s) * 1e-6 for s in answered])
+    cam50, cam99 = percentiles([(truth[s][0] - s) * 1e-6 for s in sent])
+    poses = rec.poses.times(pose_stamp)
+    pub50, pub99 = percentiles([(answers[s][0] - poses[s][1]) * 1e-6 for s in answered if s in poses])
+    return {"node": kind, "sent": len(sent), "skipped": round(seconds * rate) + 1 - len(sent),
+            "answered": len(answered), "p50": p50, "p99": p99, "py_p50": py50, "py_p99": py99,
+            "pub_p50": pub50, "pub_p99": pub99,
+            "cam_p50": cam50, "cam_p99": cam99,
+            "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": counts,
             "threads": ({k: [v - th0.get(k, [0.0] * 3)[i] for i, v in enumerate(row)] for k, row in th1.items()}
                         if th0 is not None and th1 is not None else None)}
+
+
+def ratios(r: dict, bare: dict | None, latency: str = "") -> str:
+    """Table cells: p50 and p99 (``latency``: the prefix of another latency's keys) of ``r`` over
+    ``bare``'s, and CPU per answer unless ``latency``."""
+    if not bare:
+        return "- | -" + ("" if latency else " | -")
+    cells = f"{r[latency + 'p50'] / bare[latency + 'p50']:.2f}x | {r[latency + 'p99'] / bare[latency + 'p99']:.2f}x"
+    return cells if latency else f"{cells} | {r['cpu_ms'] / bare['cpu_ms']:.1f}x"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -225,11 +256,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--nodes", default="bare,kalman,lmi",
                     help="comma-separated: bare, sink, kalman, lmi, main:kalman, main:lmi, each with an optional "
-                         "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's); a node may "
-                         "repeat (interleaved rounds)")
+                         "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's) and an optional "
+                         "+listen or +quiet (this node's outputs listened or not, whatever --listen says); a node "
+                         "may repeat (interleaved rounds)")
     ap.add_argument("--listen", action="store_true",
                     help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
                          "markers, one odometry per body), so that each is built and published")
+    ap.add_argument("--counter", choices=("process", "inline"), default="process",
+                    help="who takes the optional outputs: bench/output_counter.py in a process of its own, or raw "
+                         "subscriptions in the receiver")
     ap.add_argument("--every", default="", metavar="K=V,...",
                     help="the estimator's output.<K>_every, e.g. odometry=5,covariance=5,typed=5")
     ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
@@ -243,11 +278,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: claim a free one)")
     a = ap.parse_args(argv)
     every = {k: int(v) for k, v in (kv.split("=") for kv in a.every.split(",") if kv)}
+    kinds = a.nodes.split(",")
+    bases = {parse_kind(k)[0].removeprefix("main:") for k in kinds}
     info = machine_info()
     lease = claim_domain() if a.domain is None else None
     os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id if lease else a.domain)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    kinds = a.nodes.split(",")
     with tempfile.TemporaryDirectory(prefix="bench_live_scale_") as tmp:
         d = Path(tmp)
         sys_path = d / f"agents{a.agents}.yaml"
@@ -255,7 +291,6 @@ def main(argv: list[str] | None = None) -> int:
         system = so.load_system(sys_path)
         cycle = so.Cycle([1.0] * a.agents)
         tables = {}
-        bases = {k.partition("@")[0].removeprefix("main:") for k in kinds}
         if "kalman" in bases:
             tables["kalman"] = str(so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)]).save(d / "k.npz"))
         if "lmi" in bases:
@@ -265,41 +300,57 @@ def main(argv: list[str] | None = None) -> int:
             for d_ in (a.profile, a.spy):
                 if d_:
                     d_.mkdir(parents=True, exist_ok=True)
-            rows = [run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
-                             a.profile / f"{k.replace(':', '_')}-{i}.prof" if a.profile and k != "bare" else None,
-                             a.main_repo, a.threads, a.spy, f"{k.replace(':', '_').replace('@', '_')}-{i}")
-                    for i, k in enumerate(kinds)]
+            rows = []
+            for i, k in enumerate(kinds):
+                tag = f"{k.replace(':', '_').replace('@', '_').replace('+', '_')}-{i}"
+                rows.append(run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
+                                     a.profile / f"{tag}.prof" if a.profile and parse_kind(k)[0] != "bare" else None,
+                                     a.main_repo, a.threads, a.spy, tag, a.counter))
+                r = rows[-1]
+                sys.stderr.write(f"{k}: {r['answered']}/{r['sent']} ({r['skipped']} skipped), p50 {r['p50']:.1f} ms, "
+                                 f"p99 {r['p99']:.1f} ms (Python arrival {r['py_p99']:.1f} ms), "
+                                 f"CPU {r['cpu_ms']:.2f} ms per answer\n")
         finally:
             rclpy.try_shutdown()
             if lease:
                 lease.release()
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
-          f"load average {info['load'][0]:.1f} before ({info['date']}).")
-    extra = (" --listen" if a.listen else "") + (f" --every {a.every}" if a.every else "")
+          f"load average {info['load'][0]:.1f} before, {os.getloadavg()[0]:.1f} after ({info['date']}).")
+    extra = (" --listen" if a.listen else "") + (f" --every {a.every}" if a.every else "") \
+        + (f" --counter {a.counter}" if a.counter != "process" else "")
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_live_scale.py --agents {a.agents} "
           f"--seconds {a.seconds:g} --rate {a.rate:g} --nodes {a.nodes}{extra}`\n")
-    bare = next((r for r in rows if r["node"] == "bare"), None)
-    print("| node | ticks sent | answered | fraction | latency p50 | p99 | CPU per answer | p99 / bare | CPU / bare |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("Latency: the answer's DDS reception at the receiver - the tick's stamp; \"Python\": its arrival in the "
+          "receiver's callback instead; \"from publication\": the answer's DDS reception - camera_sim's publication "
+          "of the tick's target pose (its writer's source time: camera_sim's lateness taken out). Camera late: "
+          "camera_sim's truth message's DDS reception - its stamp.\n")
+    bare = next((r for r in rows if parse_kind(r["node"])[0] == "bare"), None)
+    print("| node | ticks sent | skipped | answered | fraction | latency p50 | p99 | p99 (Python) | CPU per answer "
+          "| p50 / bare | p99 / bare | CPU / bare | camera late p50 / p99 | from publication p50 / p99 "
+          "| p50 / bare | p99 / bare |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        rp = f"{r['p99'] / bare['p99']:.2f}x" if bare else "-"
-        rc = f"{r['cpu_ms'] / bare['cpu_ms']:.1f}x" if bare else "-"
-        print(f"| {r['node']} | {r['sent']} | {r['answered']} | {r['answered'] / max(r['sent'], 1):.4f} "
-              f"| {r['p50']:.1f} ms | {r['p99']:.1f} ms | {r['cpu_ms']:.2f} ms | {rp} | {rc} |")
+        print(f"| {r['node']} | {r['sent']} | {r['skipped']} | {r['answered']} "
+              f"| {r['answered'] / max(r['sent'], 1):.4f} | {r['p50']:.1f} ms | {r['p99']:.1f} ms "
+              f"| {r['py_p99']:.1f} ms | {r['cpu_ms']:.2f} ms | {ratios(r, bare)} "
+              f"| {r['cam_p50']:.1f} / {r['cam_p99']:.1f} ms | {r['pub_p50']:.1f} / {r['pub_p99']:.1f} ms "
+              f"| {ratios(r, bare, 'pub_')} |")
     kinds_seen = list(dict.fromkeys(r["node"] for r in rows))
     if len(kinds_seen) < len(rows):        # rounds: medians per node, ratios against bare's median
-        med = {k: {q: float(np.median([r[q] for r in rows if r["node"] == k])) for q in ("p50", "p99", "cpu_ms")}
-               for k in kinds_seen}
-        base = med.get("bare")
+        qs = ("p50", "p99", "py_p99", "cpu_ms", "pub_p50", "pub_p99")
+        med = {k: {q: float(np.median([r[q] for r in rows if r["node"] == k])) for q in qs} for k in kinds_seen}
+        base = next((med[k] for k in kinds_seen if parse_kind(k)[0] == "bare"), None)
         print("\nMedians over the rounds:\n")
-        print("| node | rounds | answered (all) | latency p50 | p99 | CPU per answer | p99 / bare | CPU / bare |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("| node | rounds | answered (all) | skipped (all) | latency p50 | p99 | p99 (Python) | CPU per answer "
+              "| p50 / bare | p99 / bare | CPU / bare | from publication p50 / p99 | p50 / bare | p99 / bare |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for k in kinds_seen:
             rs = [r for r in rows if r["node"] == k]
             m = med[k]
             print(f"| {k} | {len(rs)} | {sum(r['answered'] for r in rs)}/{sum(r['sent'] for r in rs)} "
-                  f"| {m['p50']:.1f} ms | {m['p99']:.1f} ms | {m['cpu_ms']:.2f} ms "
-                  f"| {m['p99'] / base['p99']:.2f}x | {m['cpu_ms'] / base['cpu_ms']:.1f}x |" if base else "| - | - |")
+                  f"| {sum(r['skipped'] for r in rs)} | {m['p50']:.1f} ms | {m['p99']:.1f} ms | {m['py_p99']:.1f} ms "
+                  f"| {m['cpu_ms']:.2f} ms | {ratios(m, base)} | {m['pub_p50']:.1f} / {m['pub_p99']:.1f} ms "
+                  f"| {ratios(m, base, 'pub_')} |")
     for r in rows:
         if r["threads"]:
             k = max(r["answered"], 1)

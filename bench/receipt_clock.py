@@ -30,9 +30,8 @@ TOPIC = "/receipt_clock/probe"
 
 def publisher(n: int, rate: float) -> None:
     import rclpy
-    from geometry_msgs.msg import PoseStamped
-
     from _receipt import RECEIVE
+    from geometry_msgs.msg import PoseStamped
     rclpy.init()
     node = rclpy.create_node("receipt_clock_pub")
     pub = node.create_publisher(PoseStamped, TOPIC, RECEIVE)
@@ -62,9 +61,9 @@ def main(argv: list[str] | None = None) -> int:
         publisher(a.messages, a.rate)
         return 0
     import rclpy
+    from _receipt import RECEIVE, pose_stamp
     from geometry_msgs.msg import PoseStamped
 
-    from _receipt import RECEIVE, pose_stamp
     from switchobs_ros.executor import KeptWaitSetExecutor
     from tools.domain import claim_domain, localhost_env
     from tools.launch import NodeProcess
