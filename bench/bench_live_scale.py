@@ -231,9 +231,12 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     cam50, cam99 = percentiles([(truth[s][0] - s) * 1e-6 for s in sent])
     poses = rec.poses.times(pose_stamp)
     pub50, pub99 = percentiles([(answers[s][0] - poses[s][1]) * 1e-6 for s in answered if s in poses])
+    split = {"node": percentiles([(answers[s][1] - poses[s][1]) * 1e-6 for s in answered if s in poses]),
+             "delivery": percentiles([(answers[s][0] - answers[s][1]) * 1e-6 for s in answered]),
+             "queue": percentiles([(answers[s][2] - answers[s][0]) * 1e-6 for s in answered])}
     return {"node": kind, "sent": len(sent), "skipped": round(seconds * rate) + 1 - len(sent),
             "answered": len(answered), "p50": p50, "p99": p99, "py_p50": py50, "py_p99": py99,
-            "pub_p50": pub50, "pub_p99": pub99,
+            "pub_p50": pub50, "pub_p99": pub99, "split": split,
             "cam_p50": cam50, "cam_p99": cam99,
             "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": counts,
             "threads": ({k: [v - th0.get(k, [0.0] * 3)[i] for i, v in enumerate(row)] for k, row in th1.items()}
@@ -351,6 +354,14 @@ def main(argv: list[str] | None = None) -> int:
                   f"| {sum(r['skipped'] for r in rs)} | {m['p50']:.1f} ms | {m['p99']:.1f} ms | {m['py_p99']:.1f} ms "
                   f"| {m['cpu_ms']:.2f} ms | {ratios(m, base)} | {m['pub_p50']:.1f} / {m['pub_p99']:.1f} ms "
                   f"| {ratios(m, base, 'pub_')} |")
+    print("\nWhere the time from publication goes, p50 / p99 (ms): at the node (its answer's publication - the "
+          "target pose's), the answer's delivery (its DDS reception at the receiver - its publication), the "
+          "receiver's own queue (Python arrival - DDS reception):\n")
+    print("| node | at the node | delivery | receiver's queue |")
+    print("|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['node']} | " + " | ".join(f"{r['split'][k][0]:.1f} / {r['split'][k][1]:.1f}"
+                                           for k in ("node", "delivery", "queue")) + " |")
     for r in rows:
         if r["threads"]:
             k = max(r["answered"], 1)

@@ -19,7 +19,9 @@ Four processes per run, one role each, so that the measurement is the node's and
 * this process, which starts them in turn (estimator configurations and the republisher
   alternate at each rate, in one run) and reads the two files.
 
-Latency = arrival - the measurement's header stamp (both this machine's system clock). A rate is
+Latency = the answer's arrival at the receiver's middleware (``MessageInfo.received_timestamp``,
+``bench/_receipt.py``) - the measurement's header stamp (both this machine's system clock); the
+arrival in the receiver's Python callback is a second p50 column. A rate is
 "answered in full" when every measurement gets its answer. ``--soak S`` runs the estimator at
 500 Hz for S seconds and reports the largest latency.
 
@@ -208,36 +210,44 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
 
 
 def receiver_main(topic: str, kind: str, out: str, witness: str = "") -> None:
-    """Record ``(stamp, arrival)`` of every answer on ``topic`` until SIGINT; save them. With
-    ``witness`` (a topic of the sender's), record its messages' ``(stamp, arrival)`` as well, in
-    ``out`` + ``.witness.npy``: a second subscriber of the node's input, in another process, that
-    tells whether a late answer's measurement was late everywhere (sender, middleware, machine) or
-    only at the node.
+    """Record ``(stamp, DDS reception, Python arrival)`` of every answer on ``topic`` until SIGINT;
+    save them. The DDS reception (``MessageInfo.received_timestamp``, the system clock:
+    ``bench/_receipt.py``) is the arrival the latency uses: the receiver's own queue stays out of
+    it; the Python arrival (``time.time_ns()`` in the callback) is kept for comparison. With
+    ``witness`` (a topic of the sender's), record its messages' ``(stamp, DDS reception, Python
+    arrival)`` as well, in ``out`` + ``.witness.npy``: a second subscriber of the node's input, in
+    another process, that tells whether a late answer's measurement was late everywhere (sender,
+    middleware, machine) or only at the node.
 
-    The callbacks keep the serialized message and its arrival time only (``raw=True``); the
-    messages are deserialized after the run. The receiver shares this machine's two cores with the
-    node under test (perf, 2026-11-23: in a 20 ms cluster of late answers at 1000 Hz the
-    receiver's thread ran 15.8 ms, the node's 14.0 ms); deserializing later cut its CPU at
-    1000 Hz from 0.34-0.37 to 0.29-0.32 of a core."""
+    The callbacks keep the serialized message and its times only (``raw=True``), served by
+    ``switchobs_ros.executor.KeptWaitSetExecutor``; the messages are deserialized after the run. The
+    receiver shares this machine's two cores with the node under test (perf, 2026-11-23: in a
+    20 ms cluster of late answers at 1000 Hz the receiver's thread ran 15.8 ms, the node's
+    14.0 ms); deserializing later cut its CPU at 1000 Hz from 0.34-0.37 to 0.29-0.32 of a core."""
     import rclpy
+    from _receipt import RECEIVE, check_system_clock
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import ExternalShutdownException
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Float64MultiArray
 
     from switchobs_ros import qos
+    from switchobs_ros.executor import KeptWaitSetExecutor
 
     rclpy.init()
     node = rclpy.create_node("bench_receiver")
-    got: list[tuple[bytes, int]] = []
-    wit: list[tuple[bytes, int]] = []
+    got: list[tuple[bytes, int, int]] = []
+    wit: list[tuple[bytes, int, int]] = []
     answer_type = Float64MultiArray if kind == "array" else PoseStamped
-    node.create_subscription(answer_type, topic, lambda b: got.append((b, time.time_ns())), qos.TRUTH, raw=True)
+    node.create_subscription(answer_type, topic, lambda b, info: got.append(
+        (b, info["received_timestamp"], time.time_ns())), RECEIVE, raw=True)
     if witness:
-        node.create_subscription(PoseStamped, witness, lambda b: wit.append((b, time.time_ns())), qos.SENSOR_SUB,
-                                 raw=True)
+        node.create_subscription(PoseStamped, witness, lambda b, info: wit.append(
+            (b, info["received_timestamp"], time.time_ns())), qos.SENSOR_SUB, raw=True)
+    ex = KeptWaitSetExecutor()
+    ex.add_node(node)
     try:
-        rclpy.spin(node)
+        ex.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -250,11 +260,12 @@ def receiver_main(topic: str, kind: str, out: str, witness: str = "") -> None:
                 return int(m.data[0]) * 1_000_000_000 + int(m.data[1])
             return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
 
-        rec = [(stamp(b, answer_type), t) for b, t in got]
-        np.save(out, np.array(rec, dtype=np.int64).reshape(-1, 2))
+        rec = np.array([(stamp(b, answer_type), dds, py) for b, dds, py in got], dtype=np.int64).reshape(-1, 3)
+        check_system_clock(rec[:, [1, 1, 2]])
+        np.save(out, rec)
         if witness:
             np.save(out + ".witness.npy",
-                    np.array([(stamp(b, PoseStamped), t) for b, t in wit], dtype=np.int64).reshape(-1, 2))
+                    np.array([(stamp(b, PoseStamped), dds, py) for b, dds, py in wit], dtype=np.int64).reshape(-1, 3))
 
 
 # ----------------------------------------------------------------------------- orchestration
@@ -323,8 +334,10 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
     if not (tmp / "recv.npy").exists():
         raise RuntimeError(f"the receiver saved no answers (its log: {tmp / 'receiver.log'})")
     rec = np.load(tmp / "recv.npy")
-    arrival = dict(zip(rec[:, 0].tolist(), rec[:, 1].tolist()))
+    arrival = dict(zip(rec[:, 0].tolist(), rec[:, 1].tolist()))         # DDS reception
+    python_arrival = dict(zip(rec[:, 0].tolist(), rec[:, 2].tolist()))
     lat = np.array([(arrival[s] - s) * 1e-6 for s in sent.tolist() if s in arrival])
+    lat_py = np.array([(python_arrival[s] - s) * 1e-6 for s in sent.tolist() if s in arrival])
     achieved = (len(sent) - 1) / ((sent[-1] - sent[0]) * 1e-9) if len(sent) > 1 else 0.0
     late_ms = LATE_MS if rate <= 500 else 5.0
     if PERF_DIR is not None and (lat.size < len(sent) or (lat > late_ms).any()):
@@ -340,6 +353,7 @@ def measure(target: str, params: dict, rate: float, seconds: float, table: str, 
             "cpu": (c1 - c0) / (w1 - w0), "receiver_cpu": (r1 - r0) / (w1 - w0), "trace": trace,
             "p50": float(np.median(lat)) if lat.size else np.nan,
             "p99": float(np.percentile(lat, 99)) if lat.size else np.nan,
+            "p50_py": float(np.median(lat_py)) if lat.size else np.nan,
             "max": float(lat.max()) if lat.size else np.nan}
 
 
@@ -505,16 +519,17 @@ def main(argv=None) -> int:
           + (f"; **{a.load} busy-looping processes** running throughout" if a.load else "")
           + (" (medians over the runs; answered: summed)" if a.repeat > 1 else "") + ". Node CPU: CPU seconds "
           "of the node's process per second while the sender sends (1.00 = one core).\n")
-    print("| rate (Hz) | node | answered | p50 (ms) | p99 (ms) | max (ms) | node CPU | p99 / republisher's |")
-    print("|---:|---|---:|---:|---:|---:|---:|---:|")
+    print("| rate (Hz) | node | answered | p50 (ms) | p50 at the receiver's Python (ms) | p99 (ms) | max (ms) "
+          "| node CPU | p99 / republisher's |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for i, rate in enumerate(rates):
         bare = runs["bare republisher"][i]
         for name, rs in runs.items():
             r = rs[i]
             ratio = float(np.median([x["p99"] / b["p99"] for x, b in zip(r, bare)]))
             print(f"| {rate:g} | {name} | {sum(x['answered'] for x in r)}/{sum(x['sent'] for x in r)} "
-                  f"| {med(r, 'p50'):.3f} | {med(r, 'p99'):.3f} | {med(r, 'max'):.2f} | {med(r, 'cpu'):.2f} "
-                  f"| {ratio:.2f} |")
+                  f"| {med(r, 'p50'):.3f} | {med(r, 'p50_py'):.3f} | {med(r, 'p99'):.3f} | {med(r, 'max'):.2f} "
+                  f"| {med(r, 'cpu'):.2f} | {ratio:.2f} |")
     full = {name: max([rate for i, rate in enumerate(rates) if all(x["answered"] == x["sent"] for x in rs[i])],
                       default=0.0) for name, rs in runs.items()}
     print("\nHighest rate answered in full: " + ", ".join(f"{k} {v:g} Hz" for k, v in full.items()) + ".")
