@@ -18,7 +18,8 @@ message (one per tick: what was sent); and, with ``--listen`` (or a node ``<kind
 listener that subscribes to every optional output of the estimator so that each is built and
 published, and counts them: ``bench/output_counter.py`` in a process of its own (``--counter
 process``, the default) or raw subscriptions in the receiver (``--counter inline``), both taken
-raw by ``KeptWaitSetExecutor``.
+raw by ``KeptWaitSetExecutor``. A node ``<kind>+dds`` runs with the Fast DDS profile
+``--node-dds-profile`` (default ``bench/fastdds_shm_segment.xml``: an 8 MiB shared-memory segment).
 
 Latency = the answer's arrival at the receiver's middleware (``MessageInfo.received_timestamp``,
 Fast DDS's reception time, on the system clock: ``bench/_receipt.py``) - the tick's stamp (the
@@ -129,29 +130,33 @@ def percentiles(values) -> tuple[float, float]:
     return (float(np.median(v)), float(np.percentile(v, 99))) if v.size else (float("nan"), float("nan"))
 
 
-def parse_kind(kind: str) -> tuple[str, str, bool | None]:
-    """``base[@executor][+listen|+quiet]`` -> (base, executor, listened: None = as ``--listen``)."""
-    name, _, mod = kind.partition("+")
-    if mod not in ("", "listen", "quiet"):
-        raise SystemExit(f"node {kind!r}: the suffix is +listen or +quiet")
+def parse_kind(kind: str) -> tuple[str, str, bool | None, bool]:
+    """``base[@executor][+listen|+quiet][+dds]`` -> (base, executor, listened: None = as ``--listen``,
+    the node under ``--node-dds-profile``)."""
+    name, *mods = kind.split("+")
+    if not set(mods) <= {"listen", "quiet", "dds"} or {"listen", "quiet"} <= set(mods):
+        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, and +dds")
     base, _, executor = name.partition("@")
-    return base, executor, None if not mod else mod == "listen"
+    return base, executor, "listen" in mods if {"listen", "quiet"} & set(mods) else None, "dds" in mods
 
 
 def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path,
              listen: bool = False, every: dict | None = None, profile: Path | None = None,
              main_repo: Path | None = None, threads: bool = False, spy_dir: Path | None = None,
-             tag: str = "", counter: str = "process") -> dict:
+             tag: str = "", counter: str = "process", dds_profile: Path | None = None) -> dict:
     """One node under test: ``listen`` subscribes to every optional output of the estimator (a
     ``+listen`` / ``+quiet`` suffix of ``kind`` overrides it), counted by ``bench/output_counter.py``
     (``counter`` ``process``) or by this process (``inline``); ``every`` sets its
     ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py); a ``kind``
     ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
-    ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy."""
-    base, executor, listened = parse_kind(kind)
+    ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy; a
+    ``+dds`` suffix runs the node (only) with the Fast DDS profile ``dds_profile``."""
+    base, executor, listened, own_profile = parse_kind(kind)
     listen = listen if listened is None else listened
     repo = main_repo if base.startswith("main:") else REPO
     env = dict(os.environ, SWITCHOBS_EXECUTOR=executor or "kept")
+    if own_profile:
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(dds_profile)
     stem = tag or kind.replace(":", "_").replace("@", "_").replace("+", "_")
     log = logs / f"{stem}.log"
     sched = {"schedule.mode": "periodic", "schedule.h": [1.0] * m}
@@ -159,7 +164,7 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     outputs = {f"output.{k}_every": v for k, v in (every or {}).items()}
     if base == "bare":
         node = NodeProcess("bare", cmd=[sys.executable, str(REPO / "bench" / "bench_node.py"), "--republisher"],
-                           log=log)
+                           env=env, log=log)
         topic, pose = "/bare_republisher/out", True
     elif base == "sink":
         params = {k: v for k, v in outputs.items() if k.removeprefix("output.").removesuffix("_every")
@@ -268,6 +273,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--counter", choices=("process", "inline"), default="process",
                     help="who takes the optional outputs: bench/output_counter.py in a process of its own, or raw "
                          "subscriptions in the receiver")
+    ap.add_argument("--node-dds-profile", type=Path, default=REPO / "bench" / "fastdds_shm_segment.xml",
+                    help="the Fast DDS profile (FASTRTPS_DEFAULT_PROFILES_FILE) of the nodes written <kind>+dds")
     ap.add_argument("--every", default="", metavar="K=V,...",
                     help="the estimator's output.<K>_every, e.g. odometry=5,covariance=5,typed=5")
     ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
@@ -308,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
                 tag = f"{k.replace(':', '_').replace('@', '_').replace('+', '_')}-{i}"
                 rows.append(run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
                                      a.profile / f"{tag}.prof" if a.profile and parse_kind(k)[0] != "bare" else None,
-                                     a.main_repo, a.threads, a.spy, tag, a.counter))
+                                     a.main_repo, a.threads, a.spy, tag, a.counter, a.node_dds_profile))
                 r = rows[-1]
                 sys.stderr.write(f"{k}: {r['answered']}/{r['sent']} ({r['skipped']} skipped), p50 {r['p50']:.1f} ms, "
                                  f"p99 {r['p99']:.1f} ms (Python arrival {r['py_p99']:.1f} ms), "
@@ -320,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Machine: {info['cpu']}, {info['nproc']} cores, Python {info['python']}; commit {info['commit']}; "
           f"load average {info['load'][0]:.1f} before, {os.getloadavg()[0]:.1f} after ({info['date']}).")
     extra = (" --listen" if a.listen else "") + (f" --every {a.every}" if a.every else "") \
-        + (f" --counter {a.counter}" if a.counter != "process" else "")
+        + (f" --counter {a.counter}" if a.counter != "process" else "") \
+        + (f" --node-dds-profile {a.node_dds_profile}" if any(parse_kind(k)[3] for k in kinds) else "")
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_live_scale.py --agents {a.agents} "
           f"--seconds {a.seconds:g} --rate {a.rate:g} --nodes {a.nodes}{extra}`\n")
     print("Latency: the answer's DDS reception at the receiver - the tick's stamp; \"Python\": its arrival in the "
