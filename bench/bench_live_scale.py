@@ -25,11 +25,14 @@ Latency = the answer's arrival at the receiver's middleware (``MessageInfo.recei
 Fast DDS's reception time, on the system clock: ``bench/_receipt.py``) - the tick's stamp (the
 same clock): the node and the transport, not the receiver's own queue. The arrival in the
 receiver's Python callback is a second column (what this benchmark measured before). Reported per
-node: ticks camera_sim sent and the ticks it skipped (its timer late by a period or more: the
-stamps missing from its grid), answers, the fraction answered, latency p50 and p99, the node
-process's CPU time per answer (user + system, from ``/proc``, from the first tick to the last
-answer), camera_sim's own lateness (each truth message's DDS reception - its stamp: published
-after the tick's poses), and ratios against ``bare`` in the same run. ``--threads`` adds the
+node: ticks camera_sim sent and the ticks it skipped (the stamps missing from its grid: a tick is
+skipped when its timer's wake-ups straddle the grid of stamps), answers, the fraction answered,
+latency p50 and p99, the node process's CPU time per answer (user + system, from ``/proc``, from
+the first tick to the last answer), camera_sim's own lateness (each truth message's DDS reception
+- its stamp: published after the tick's poses), and ratios against ``bare`` in the same run; the
+receiver also witnesses ``/target/pose``, so that the latency *from publication* (the answer's
+reception - camera_sim's publication of the tick's target pose) leaves camera_sim's lateness out,
+and splits it: at the node, the answer's delivery, the receiver's own queue. ``--threads`` adds the
 node's CPU per answer by thread name (the Python thread, Fast DDS's ``dds.*`` threads) and its
 minor page faults; ``--spy DIR`` samples each node with py-spy ``--native`` (``PY_SPY``: its
 path; it pauses the process at each sample, so the run is slower).
