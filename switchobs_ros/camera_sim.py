@@ -21,8 +21,10 @@ camera computer whose clock runs that far ahead of the targets'); ``channel_last
 channel message after the poses (the first pose of a new channel sent before it).
 
 Time: tick k is at plant time ``k / rate`` and stamp ``epoch + k / rate``. Without
-``publish_clock`` the epoch is the node clock at start and ticks follow the node clock
-(so ``use_sim_time`` on camera_sim works as for any node). With ``publish_clock`` camera_sim
+``publish_clock`` the epoch is the time the first timer call after start was due on the node
+clock (the timer's own grid: a call late by less than a period publishes the next tick, a call
+later than that skips the ticks it missed) and ticks follow the node clock (so ``use_sim_time``
+on camera_sim works as for any node). With ``publish_clock`` camera_sim
 *is* the clock: it publishes ``/clock`` itself, starting at ``clock_start``, and runs
 ``time_scale`` times faster than the wall clock; run the estimator with ``use_sim_time:=true``.
 """
@@ -276,7 +278,7 @@ class CameraSimNode(Node):
             if c["publish_clock"]:
                 self.epoch_ns = round(c["clock_start"] * 1e9)
             else:
-                self.epoch_ns = self.get_clock().now().nanoseconds
+                self.epoch_ns = self._timer_grid(self.get_clock().now().nanoseconds)
             self.get_logger().info("subscribers present: starting the simulation")
         if c["publish_clock"]:
             k = self.k + 1
@@ -291,6 +293,18 @@ class CameraSimNode(Node):
             raise SystemExit(0)
         self.k = k
         self.publish_tick(k)
+
+    def _timer_grid(self, now_ns: int) -> int:
+        """The time this timer call was due (``now`` less its lateness): the epoch on the timer's
+        own grid, so that each later call, due one period after the last and late by less than a
+        period, finds exactly the next tick due. An epoch at ``now`` would put the grid of stamps
+        at the first call's random lateness: every later call that runs less late than the first
+        would find no new tick due, and the call after it would skip one (a tick dropped with no
+        load at all). ``now`` itself when the timer cannot say."""
+        left = self.timer.time_until_next_call()
+        if left is None or not 0 <= left <= self.period_ns:
+            return now_ns
+        return now_ns + left - self.period_ns
 
     def publish_tick(self, k: int) -> None:
         stamp_ns = self.epoch_ns + k * self.period_ns
