@@ -32,6 +32,14 @@ rtol sqrt(S_ii S_jj)`` (Cauchy-Schwarz): the difference is within what the re-lo
 after a departure, and ``U`` is dropped; from there the stored covariance is published, as after a
 re-lock. The test leaves room for its roundings: a relative ``2 (r + 4) eps`` on the row norms.
 
+Too far. The stored gains suit a covariance near the stored one. Where missing samples leave a
+prior deviation larger than :data:`GAP_MAX` times the stored prior on some diagonal entry
+(``||V_i||^2 > GAP_MAX S_ii``: a run of missing samples, or one early in the start-up, where the
+stored prior is far below ``P0``), the table departs instead and the recursion runs online from
+the real covariance (``S + V V'`` at that sample), as for any other departure. One missing sample
+never does: its deviation ``K W K' = S - P^+`` is below ``S`` (measured on the paper's system: a
+missing sample at 0.04 s left the stored-gain covariance 480x the filter's, against its largest entry).
+
 The estimate with the stored gains is not the optimal Kalman estimate while a gap's ``U`` lasts
 (the optimal gain would use ``S + V V'``); its covariance is exact, so the chi-square gate, the
 innovation and bias tests and the published covariance stay right. The accuracy cost is measured
@@ -47,7 +55,11 @@ import numpy as np
 
 from ...bounds.kalman_map import sparse_transition
 
-__all__ = ["GapDeviation"]
+__all__ = ["GAP_MAX", "GapDeviation"]
+
+#: Largest prior deviation after missing samples, in units of the stored prior's diagonal, served
+#: with the stored gains (module docstring, too far).
+GAP_MAX = 10.0
 
 _EPS = float(np.finfo(float).eps)
 
@@ -144,6 +156,12 @@ class GapDeviation:
         if U.shape[1] >= 2 * U.shape[0]:
             U = np.linalg.qr(U.T, mode="r").T        # U U' = R' R: n columns
         self.U = U
+
+    def too_far(self, last_k: int, k: int, S_diag: np.ndarray) -> bool:
+        """Whether the prior deviation at sample ``k`` exceeds :data:`GAP_MAX` times the stored
+        prior's diagonal ``S_diag`` on some entry (module docstring, too far)."""
+        V = self.prior(last_k, k)
+        return V is not None and bool(np.any(np.einsum("ij,ij->i", V, V) > GAP_MAX * np.abs(S_diag)))
 
     def retires(self, V: np.ndarray, S_diag: np.ndarray) -> bool:
         """``||V_i||^2 <= rtol S_ii`` on every row with room for the roundings (module docstring)."""

@@ -70,7 +70,7 @@ from ...table.gains import kalman_table
 from ...table.kalman import Phase
 from ..error_maps import FusedMap, ZohMap, zoh_step
 from .base import OPEN_LOOP, Correction, FamilyContext, Sample
-from .gaps import GapDeviation
+from .gaps import GAP_MAX, GapDeviation
 from .online import OnlineKalmanGains, kalman_correct
 
 __all__ = ["KalmanTableGains", "MAX_JITTER", "MISSING"]
@@ -267,6 +267,9 @@ class KalmanTableGains(OnlineKalmanGains):
                 return (f"a step of {span:.9g} s at t = {t:.9g} s over {g - 1} missing samples, "
                         f"{abs(span - g * ent.dt):.3g} s off {g} of the Kalman table's {ent.dt:.9g} s "
                         f"(tolerance {self.dt_tol:.3g} s)")
+            if self._gap.too_far(self._last_k, ph.k, ent.P_diagonal()):
+                return (f"{g - 1} missing samples before t = {t:.9g} s leave a covariance more than "
+                        f"{GAP_MAX:g} times the Kalman table's on some entry")
             return ""
         if g != 1:
             return (f"sample {ph.k} of the Kalman table's grid at t = {t:.9g} s follows "
@@ -407,8 +410,11 @@ class KalmanTableGains(OnlineKalmanGains):
             hit = self._fused[fk] = KalmanMap(self._ctx.zoh(OPEN_LOOP, dt), ent.K, self._ctx.C[channel - 1],
                                               self._I)
         K, H = hit.K, hit.H
-        if self._gap.U is not None or k > self._last_k + 1:
-            self._gap.corrected(self._last_k, k, K, H, self._gap.entry(k).P_diagonal)
+        gap = self._gap
+        if gap.U is not None or k > self._last_k + 1:
+            if k > self._last_k + 1 and gap.too_far(self._last_k, k, gap.entry(k).P_diagonal()):
+                return None         # the general path departs (module gaps)
+            gap.corrected(self._last_k, k, K, H, gap.entry(k).P_diagonal)
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
         # level of the error, not of ||x||); the map (I - K H) e^{A dt} for Phi and the bound
         x0, y = s.x, s.y
