@@ -1,4 +1,4 @@
-r"""Missing samples on a locked Kalman table's grid: the stored gains kept, the covariance exact.
+r"""Missing samples on a Kalman table's grid: the table stays the reference, the difference in low rank.
 
 A table locked at sample ``k0`` has the stored posterior ``P^+_{k0}`` as its real covariance
 (:mod:`switchobs_core.runtime.families.kalman`). A sample ``j`` of the grid that does not come
@@ -9,41 +9,38 @@ A table locked at sample ``k0`` has the stored posterior ``P^+_{k0}`` as its rea
 
     S_j = P^+_j + K_j W_j K_j'
 
-(the Joseph form with the optimal gain: ``P^+_j = S_j - K_j W_j K_j'``). With the stored gains
-applied from there on, the real covariance is the stored one plus a term of low rank, ``U U'``,
-``U`` (n x r) a deviation of the posterior carried sample by sample:
+(the Joseph form with the optimal gain). So from there the real covariance is the stored one plus
+a term of low rank, ``U U'``, ``U`` (n x r) a deviation of the posterior carried sample by sample:
 
 - a missing sample ``j``: ``U <- [U, K_j W_j^{1/2}]`` (``W_j^{1/2}`` its Cholesky factor);
 - the prediction over one sample period: ``U <- e^{A dt} U`` (``Q_d`` is in the stored prior:
-  ``e (P^+ + U U') e' + Q_d = S + (e U)(e U)'``);
-- a sample with the stored gain ``K`` and rows ``H``: ``U <- (I - K H) U``, since the Joseph
-  form holds for any gain: ``(I - K H)(S + U U')(I - K H)' + K R K' = P^+ + ((I - K H) U)((I -
-  K H) U)'``.
+  ``e (P^+ + U U') e' + Q_d = S + (e U)(e U)'``); a step over ``g`` periods is ``g`` of these
+  with a missing sample between each two;
+- a sample with rows ``H`` corrected with any gain ``K`` (stored gain ``K_s``, ``K_s W = S H'``)
+  from the prior ``S + V V'``: the Joseph form is linear in the prior and
+  ``(I - K H) S (I - K H)' + K R K' = P^+ + (K - K_s) W (K - K_s)'``, so
+  ``U <- [(I - K H) V, (K - K_s) W^{1/2}]``.
 
-A step over ``g`` periods (``g - 1`` samples missing) is ``g`` of these predictions with a missing
-sample between each two. Each costs ``O(nnz(e^{A dt}) r + n p r)`` (``e^{A dt}`` in its sparse
-form where it is sparse, :func:`~switchobs_core.bounds.kalman_map.sparse_transition`) where the
-recursion online costs ``O(n^3)``; ``U`` is compressed to n columns (one QR of ``U'``, ``U U'``
-unchanged) once it holds ``2 n``.
+The gain applied is the Kalman filter's own for the real prior, ``K* = (K_s W + V (H V)') (W + (H
+V)(H V)')^{-1}`` (``P^- H' = S H' + V (H V)'``, ``H P^- H' + R = W + (H V)(H V)'``): the estimate
+is the optimal filter's, the one the Riccati recursion online computes (rounded differently), at
+``O(nnz(e^{A dt}) r + n p r)`` a sample (``e^{A dt}`` in its sparse form where it is sparse,
+:func:`~switchobs_core.bounds.kalman_map.sparse_transition`) where the recursion costs ``O(n^3)``.
+``U`` gains ``p`` columns a sample and is compressed to n (one QR of ``U'``, ``U U'`` unchanged)
+once it holds ``2 n``. The rigorous bound takes the error map of the gain applied, as everywhere.
 
 Retire. At a sample whose prior deviation ``V`` satisfies ``||V_i||^2 <= rtol S_ii`` on every row
 (``S`` the stored prior, ``rtol`` the table's ``relock_rtol``), ``|V V'|_ij <= ||V_i|| ||V_j|| <=
 rtol sqrt(S_ii S_jj)`` (Cauchy-Schwarz): the difference is within what the re-lock test accepts
-after a departure, and ``U`` is dropped; from there the stored covariance is published, as after a
-re-lock. The test leaves room for its roundings: a relative ``2 (r + 4) eps`` on the row norms.
+after a departure, and ``U`` is dropped; from there the stored gains serve and the stored
+covariance is published, as after a re-lock (the same approximation). The test leaves room for
+its roundings: a relative ``2 (r + 4) eps`` on the row norms.
 
-Too far. The stored gains suit a covariance near the stored one. Where missing samples leave a
-prior deviation larger than :data:`GAP_MAX` times the stored prior on some diagonal entry
-(``||V_i||^2 > GAP_MAX S_ii``: a run of missing samples, or one early in the start-up, where the
-stored prior is far below ``P0``), the table departs instead and the recursion runs online from
-the real covariance (``S + V V'`` at that sample), as for any other departure. One missing sample
-never does: its deviation ``K W K' = S - P^+`` is below ``S`` (measured on the paper's system: a
-missing sample at 0.04 s left the stored-gain covariance 480x the filter's, against its largest entry).
-
-The estimate with the stored gains is not the optimal Kalman estimate while a gap's ``U`` lasts
-(the optimal gain would use ``S + V V'``); its covariance is exact, so the chi-square gate, the
-innovation and bias tests and the published covariance stay right. The accuracy cost is measured
-in bench/RESULTS.md and docs/concepts/gain-families.md.
+Too far. A deviation past :data:`GAP_MAX` times the stored prior on some diagonal entry
+(``||V_i||^2 > GAP_MAX S_ii``) would cancel more than six digits in ``(I - K H) V``; the table
+departs there instead and the square-root recursion runs online from the real covariance. The
+largest seen on the 32-agent table with 10 % of the samples missing was 1.1e9 (the first sample
+of an agent's residence missing in the start-up, while its prior was still near ``P0``).
 """
 
 from __future__ import annotations
@@ -59,13 +56,13 @@ __all__ = ["GAP_MAX", "GapDeviation"]
 
 #: Largest prior deviation after missing samples, in units of the stored prior's diagonal, served
 #: with the stored gains (module docstring, too far).
-GAP_MAX = 10.0
+GAP_MAX = 1e12
 
 _EPS = float(np.finfo(float).eps)
 
 
 class GapDeviation:
-    """The deviation ``U`` of a locked table's covariance after missing samples (module docstring).
+    """The deviation ``U`` of a table's covariance after missing samples (module docstring).
 
     ``GapDeviation(kd, step, rtol)``: ``kd`` the :class:`~switchobs_core.table.kalman.KalmanDesign`,
     ``step()`` the ZOH cache entry of one sample period (``e^{A dt}`` of the design's step).
@@ -81,6 +78,7 @@ class GapDeviation:
 
     def __init__(self, kd: Any, step: Callable[[], Any], rtol: float) -> None:
         self.kd, self._step, self.rtol = kd, step, float(rtol)
+        self._W: dict = {}
         self._cols: dict = {}
         self.reset()
 
@@ -94,24 +92,38 @@ class GapDeviation:
         self.U = None
         self._memo = None
 
+    def _key(self, k: int) -> tuple:
+        kd = self.kd
+        return (True, k) if k < len(kd.startup) else (False, k % kd.pattern.K)
+
     def entry(self, k: int) -> Any:
         """The stored sample ``k`` of the grid (start-up, then the periodic pattern)."""
         kd = self.kd
         return kd.startup[k] if k < len(kd.startup) else kd.periodic[k % kd.pattern.K]
 
+    def _innovation(self, k: int, channel: int, rows: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+        """``(W, W^{1/2})`` of the stored prior of sample ``k`` on ``channel``'s ``rows``:
+        ``W = H S H' + R`` (from the block of ``S`` the rows see; cached)."""
+        key = (self._key(k), channel, rows)
+        hit = self._W.get(key)
+        if hit is None:
+            kd = self.kd
+            H = kd.H(channel, rows)
+            cols = _seen(H)
+            Hc = H[:, cols]
+            W = Hc @ self.entry(k).P_block(cols) @ Hc.T + kd.noise.R(channel, rows)
+            W = 0.5 * (W + W.T)
+            hit = self._W[key] = (W, np.linalg.cholesky(W))
+        return hit
+
     def missing_columns(self, k: int) -> np.ndarray:
         """``K_k W_k^{1/2}`` of sample ``k`` (n x p, cached per phase): its posterior is its prior
         less ``(K W^{1/2})(K W^{1/2})'``, so a missing sample adds these columns to ``U``."""
-        kd = self.kd
-        key = (True, k) if k < len(kd.startup) else (False, k % kd.pattern.K)
+        key = self._key(k)
         G = self._cols.get(key)
         if G is None:
             ent = self.entry(k)
-            H = kd.H(ent.channel, ent.rows)
-            cols = np.flatnonzero(np.any(H != 0, axis=0))
-            Hc = H[:, cols]
-            W = Hc @ ent.P_block(cols) @ Hc.T + kd.noise.R(ent.channel, ent.rows)
-            G = self._cols[key] = ent.K @ np.linalg.cholesky(0.5 * (W + W.T))
+            G = self._cols[key] = ent.K @ self._innovation(k, ent.channel, ent.rows)[1]
         return G
 
     def _propagate(self, V: np.ndarray) -> np.ndarray:
@@ -135,35 +147,50 @@ class GapDeviation:
         self._memo = (last_k, k, V)
         return V
 
-    def corrected(self, last_k: int, k: int, K: np.ndarray, H: np.ndarray, S_diag: Callable[[], np.ndarray]) -> None:
-        """Sample ``k`` corrected with the gain ``K`` on rows ``H``: ``U <- (I - K H) V`` of the
-        prior deviation ``V`` (counting the missing samples), or None when ``V`` passes the retire
-        test against the diagonal ``S_diag()`` of the stored prior (module docstring)."""
+    def too_far(self, last_k: int, k: int, S_diag: np.ndarray) -> str:
+        """Why the prior deviation at sample ``k`` is too far (module docstring: past
+        :data:`GAP_MAX` times the stored prior's diagonal ``S_diag`` on some entry), "" if it is not."""
+        V = self.prior(last_k, k)
+        if V is None:
+            return ""
+        r = np.einsum("ij,ij->i", V, V) / np.abs(S_diag)
+        i = int(np.argmax(r))
+        return (f"a covariance {r[i]:.3g} times the Kalman table's in entry {i} (more than {GAP_MAX:g})"
+                if r[i] > GAP_MAX else "")
+
+    def correct(self, last_k: int, k: int, K: np.ndarray, H: np.ndarray, channel: int, rows: tuple | None,
+                S_diag: Callable[[], np.ndarray]) -> np.ndarray:
+        """The gain of sample ``k`` (after ``last_k``) on ``channel``'s ``rows`` ``H``, whose stored
+        gain is ``K``, and ``U`` after it (module docstring): ``K`` itself when there is no deviation
+        or it retires against the diagonal ``S_diag()`` of the stored prior, else the filter's gain
+        ``K*`` of the prior ``S + V V'``."""
         if k > last_k + 1:
             self.gaps += 1
             self.missed += k - last_k - 1
         V = self.prior(last_k, k)
         self._memo = None
+        if V is not None and self.retires(V, S_diag()):
+            self.retired += 1
+            V = None
         if V is None:
             self.U = None
-            return
-        if self.retires(V, S_diag()):
-            self.U = None
-            self.retired += 1
-            return
-        cols = np.flatnonzero(np.any(H != 0, axis=0))
-        U = V - K @ (H[:, cols] @ V[cols])
+            return K
+        W, Ws = self._innovation(k, channel, rows)
+        cols = _seen(H)
+        HV = H[:, cols] @ V[cols]
+        Kx = np.linalg.solve(W + HV @ HV.T, (K @ W + V @ HV.T).T).T
+        U = np.hstack((V - Kx @ HV, (Kx - K) @ Ws))
         if U.shape[1] >= 2 * U.shape[0]:
             U = np.linalg.qr(U.T, mode="r").T        # U U' = R' R: n columns
         self.U = U
-
-    def too_far(self, last_k: int, k: int, S_diag: np.ndarray) -> bool:
-        """Whether the prior deviation at sample ``k`` exceeds :data:`GAP_MAX` times the stored
-        prior's diagonal ``S_diag`` on some entry (module docstring, too far)."""
-        V = self.prior(last_k, k)
-        return V is not None and bool(np.any(np.einsum("ij,ij->i", V, V) > GAP_MAX * np.abs(S_diag)))
+        return Kx
 
     def retires(self, V: np.ndarray, S_diag: np.ndarray) -> bool:
         """``||V_i||^2 <= rtol S_ii`` on every row with room for the roundings (module docstring)."""
         v = np.einsum("ij,ij->i", V, V) * (1.0 + 2.0 * (V.shape[1] + 4) * _EPS)
         return bool(np.all(v <= self.rtol * np.abs(S_diag) * (1.0 - 4.0 * _EPS)))
+
+
+def _seen(H: np.ndarray) -> np.ndarray:
+    """The states rows ``H`` read (the columns holding a nonzero)."""
+    return np.flatnonzero(np.any(H != 0, axis=0))

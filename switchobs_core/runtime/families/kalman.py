@@ -70,7 +70,7 @@ from ...table.gains import kalman_table
 from ...table.kalman import Phase
 from ..error_maps import FusedMap, ZohMap, zoh_step
 from .base import OPEN_LOOP, Correction, FamilyContext, Sample
-from .gaps import GAP_MAX, GapDeviation
+from .gaps import GapDeviation
 from .online import OnlineKalmanGains, kalman_correct
 
 __all__ = ["KalmanTableGains", "MAX_JITTER", "MISSING"]
@@ -267,10 +267,8 @@ class KalmanTableGains(OnlineKalmanGains):
                 return (f"a step of {span:.9g} s at t = {t:.9g} s over {g - 1} missing samples, "
                         f"{abs(span - g * ent.dt):.3g} s off {g} of the Kalman table's {ent.dt:.9g} s "
                         f"(tolerance {self.dt_tol:.3g} s)")
-            if self._gap.too_far(self._last_k, ph.k, ent.P_diagonal()):
-                return (f"{g - 1} missing samples before t = {t:.9g} s leave a covariance more than "
-                        f"{GAP_MAX:g} times the Kalman table's on some entry")
-            return ""
+            far = self._gap.too_far(self._last_k, ph.k, ent.P_diagonal())
+            return f"{g - 1} missing samples before t = {t:.9g} s leave {far}" if far else ""
         if g != 1:
             return (f"sample {ph.k} of the Kalman table's grid at t = {t:.9g} s follows "
                     + ("a sample off the grid" if self._last_k < -1 else
@@ -339,7 +337,7 @@ class KalmanTableGains(OnlineKalmanGains):
         K = kd.gain(ph, channel, rows)
         self._kgain = (ph, channel, rows)
         if held and (self._gap.U is not None or ph.k > last_k + 1):     # locked from the last sample on
-            self._gap.corrected(last_k, ph.k, K, H, ent.P_diagonal)
+            K = self._gap.correct(last_k, ph.k, K, H, channel, rows, ent.P_diagonal)
         maps: tuple = ()
         if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's; no input was held)
             e = ctx.zoh(OPEN_LOOP, dt)
@@ -414,7 +412,9 @@ class KalmanTableGains(OnlineKalmanGains):
         if gap.U is not None or k > self._last_k + 1:
             if k > self._last_k + 1 and gap.too_far(self._last_k, k, gap.entry(k).P_diagonal()):
                 return None         # the general path departs (module gaps)
-            gap.corrected(self._last_k, k, K, H, gap.entry(k).P_diagonal)
+            K = gap.correct(self._last_k, k, K, H, channel, None, gap.entry(k).P_diagonal)
+            if K is not hit.K:      # the filter's gain of the prior S + V V' (module gaps)
+                hit = KalmanMap(hit.e, K, H, self._I)
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
         # level of the error, not of ||x||); the map (I - K H) e^{A dt} for Phi and the bound
         x0, y = s.x, s.y
