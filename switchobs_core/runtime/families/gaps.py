@@ -52,6 +52,11 @@ import numpy as np
 
 from ...bounds.kalman_map import sparse_transition
 
+try:        # scipy's kernel behind ``csr_array @ dense`` (as bounds.kalman_map: without its checks)
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:     # pragma: no cover - another scipy layout: the public product
+    _csr_matvecs = None
+
 __all__ = ["GAP_MAX", "GapDeviation"]
 
 #: Largest prior deviation after missing samples, in units of the stored prior's diagonal, served
@@ -101,9 +106,9 @@ class GapDeviation:
         kd = self.kd
         return kd.startup[k] if k < len(kd.startup) else kd.periodic[k % kd.pattern.K]
 
-    def _innovation(self, k: int, channel: int, rows: tuple | None) -> tuple[np.ndarray, np.ndarray]:
-        """``(W, W^{1/2})`` of the stored prior of sample ``k`` on ``channel``'s ``rows``:
-        ``W = H S H' + R`` (from the block of ``S`` the rows see; cached)."""
+    def _innovation(self, k: int, channel: int, rows: tuple | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(W, W^{1/2}, cols)`` of the stored prior of sample ``k`` on ``channel``'s ``rows``:
+        ``W = H S H' + R`` (from the block of ``S`` on the states ``cols`` the rows see; cached)."""
         key = (self._key(k), channel, rows)
         hit = self._W.get(key)
         if hit is None:
@@ -113,7 +118,7 @@ class GapDeviation:
             Hc = H[:, cols]
             W = Hc @ self.entry(k).P_block(cols) @ Hc.T + kd.noise.R(channel, rows)
             W = 0.5 * (W + W.T)
-            hit = self._W[key] = (W, np.linalg.cholesky(W))
+            hit = self._W[key] = (W, np.linalg.cholesky(W), cols)
         return hit
 
     def missing_columns(self, k: int) -> np.ndarray:
@@ -127,9 +132,18 @@ class GapDeviation:
         return G
 
     def _propagate(self, V: np.ndarray) -> np.ndarray:
+        """``e^{A dt} V`` (sparse where ``e^{A dt}`` is)."""
         e = self._step()
         sp = sparse_transition(e)
-        return e.Phi @ V if sp is None else np.asarray(sp.csr @ V)
+        if sp is None:
+            return e.Phi @ V
+        if _csr_matvecs is None:        # pragma: no cover
+            return np.asarray(sp.csr @ V)
+        n, r = V.shape
+        out = np.zeros((n, r))
+        c = sp.csr
+        _csr_matvecs(n, n, r, c.indptr, c.indices, c.data, np.ascontiguousarray(V).ravel(), out.ravel())
+        return out
 
     def prior(self, last_k: int, k: int) -> np.ndarray | None:
         """The prior deviation ``V`` at sample ``k > last_k`` (the real prior is ``S_k + V V'``),
@@ -175,11 +189,14 @@ class GapDeviation:
         if V is None:
             self.U = None
             return K
-        W, Ws = self._innovation(k, channel, rows)
-        cols = _seen(H)
+        W, Ws, cols = self._innovation(k, channel, rows)
         HV = H[:, cols] @ V[cols]
         Kx = np.linalg.solve(W + HV @ HV.T, (K @ W + V @ HV.T).T).T
-        U = np.hstack((V - Kx @ HV, (Kx - K) @ Ws))
+        r = V.shape[1]
+        U = np.empty((V.shape[0], r + Ws.shape[0]))
+        U[:, :r] = V
+        U[:, :r] -= Kx @ HV
+        U[:, r:] = (Kx - K) @ Ws
         if U.shape[1] >= 2 * U.shape[0]:
             U = np.linalg.qr(U.T, mode="r").T        # U U' = R' R: n columns
         self.U = U

@@ -10,9 +10,18 @@ Locked (the cache is valid)
     of the design's ``1 / f``: the stored gain, one fused map ``E = (I - K H) e^{A dt}`` per
     (phase, dt), O(n^2) per sample. The real covariance is the stored posterior of the phase
     (published on demand, :meth:`KalmanTableGains.covariance`).
+Missing samples (:attr:`KalmanTableGains.missing` ``"table"``, the default)
+    a sample ``k > k_prev + 1`` on the grid, otherwise locked (its phase's channel and rows, a
+    step of ``k - k_prev`` design steps within ``dt_tol``): the table stays on its grid and the real
+    covariance is the stored one plus ``U U'``, a deviation of low rank carried with the filter's
+    own gain for the real prior (:mod:`~switchobs_core.runtime.families.gaps`): the optimal
+    estimate and its covariance at ``O(n^2 r)`` a sample, until the deviation retires at the
+    re-lock test's tolerance. The counts: :attr:`KalmanTableGains.gaps`,
+    :attr:`KalmanTableGains.gaps_retired`. With ``missing="online"`` a missing sample is a departure.
 Departure (any other sample)
-    partial rows, a missing sample, a channel other than the phase's, a stamp off the grid or a
-    step off the design's ``dt``, a state set from outside: the real covariance (the stored
+    partial rows, a missing sample (``missing="online"``, or a deviation past
+    :data:`~switchobs_core.runtime.families.gaps.GAP_MAX`), a channel other than the phase's, a
+    stamp off the grid or a step off the design's ``dt``, a state set from outside: the real covariance (the stored
     posterior of the last locked sample, propagated exactly to this sample) becomes the
     family's own and the Riccati recursion runs online from it (:mod:`switchobs_core.runtime.families.online`).
 Re-lock
@@ -93,14 +102,15 @@ def scaled_cov(S: np.ndarray, d: np.ndarray) -> np.ndarray:
 class KalmanTableGains(OnlineKalmanGains):
     """The ``kalman`` family (module docstring): a :class:`~switchobs_core.runtime.families.base.GainFamily`.
 
-    ``KalmanTableGains(ctx, table, mode, cycles, noise=None, relock_rtol=1e-3)``; ``noise``, if
-    given, must be the table's noise model. Its position in the table (the grid's origin, the
+    ``KalmanTableGains(ctx, table, mode, cycles, noise=None, relock_rtol=1e-3, missing="table")``;
+    ``noise``, if given, must be the table's noise model; ``missing`` (also set later, an
+    attribute): what a missing sample does (module docstring). Its position in the table (the grid's origin, the
     last sample's phase) and, after a departure, the covariance are its own.
 
     Attributes
     ----------
-    departures, relocks : int
-        Counts since the last reset.
+    departures, relocks, gaps, gaps_retired : int
+        Counts since the last reset (module docstring).
     fallback : str
         Why the latest departure happened.
     dt_tol : float
