@@ -72,7 +72,7 @@ import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
 from ...design.kalman import design_kalman
-from ...exceptions import InvalidArgument
+from ...exceptions import GainTableError, InvalidArgument
 from ...numerics.kalman_step import symmetrize
 from ...numerics.scaling import balance, balanced_norm
 from ...table.gains import kalman_table
@@ -224,7 +224,10 @@ class KalmanTableGains(OnlineKalmanGains):
         if k is None:
             return None
         ent = self._gap.entry(k)
-        V = self._gap.prior(self._last_k, k)
+        try:
+            V = self._gap.prior(self._last_k, k)
+        except GainTableError:      # a missing phase's row is unreadable: the sample will depart
+            return None
         if V is not None:
             if cols is not None:
                 Vc = V[cols]
