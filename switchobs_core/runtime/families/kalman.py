@@ -143,9 +143,10 @@ class KalmanTableGains(OnlineKalmanGains):
 
     @property
     def missing(self) -> str:
-        """What a missing sample on the grid does: ``"table"`` (the stored gains, with the
-        covariance's deviation, :mod:`~switchobs_core.runtime.families.gaps`) or ``"online"`` (a
-        departure: the Riccati recursion until it re-locks)."""
+        """What a missing sample on the grid does: ``"table"`` (the table's grid kept, the
+        covariance's deviation from the stored one in low rank and the filter's gain for it,
+        :mod:`~switchobs_core.runtime.families.gaps`) or ``"online"`` (a departure: the Riccati
+        recursion until it re-locks)."""
         return self._missing
 
     @missing.setter
