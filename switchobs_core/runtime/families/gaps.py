@@ -32,7 +32,8 @@ once it holds ``2 n``. The rigorous bound takes the error map of the gain applie
 Retire. At a sample whose prior deviation ``V`` satisfies ``||V_i||^2 <= rtol S_ii`` on every row
 (``S`` the stored prior, ``rtol`` the table's ``relock_rtol``), ``|V V'|_ij <= ||V_i|| ||V_j|| <=
 rtol sqrt(S_ii S_jj)`` (Cauchy-Schwarz): the difference is within what the re-lock test accepts
-after a departure, and ``U`` is dropped; from there the stored gains serve and the stored
+after a departure, and ``U`` is dropped (tested at every :data:`RETIRE_EVERY`-th sample of a
+deviation: a deviation kept longer is still exact); from there the stored gains serve and the stored
 covariance is published, as after a re-lock (the same approximation). The test leaves room for
 its roundings: a relative ``2 (r + 4) eps`` on the row norms.
 
@@ -61,6 +62,9 @@ except ImportError:     # pragma: no cover - another scipy layout: the public pr
 
 __all__ = ["GAP_MAX", "GapDeviation"]
 
+#: The retire test runs at every this many samples of a deviation (it spares nothing exact: a
+#: deviation kept longer is still the real one).
+RETIRE_EVERY = 8
 #: Largest prior deviation after missing samples, in units of the stored prior's diagonal, served
 #: with the stored gains (module docstring, too far).
 GAP_MAX = 1e12
@@ -92,6 +96,7 @@ class GapDeviation:
     def reset(self) -> None:
         self.U: np.ndarray | None = None
         self._memo: tuple | None = None
+        self._since = 0             # corrections since the deviation appeared (the retire test's cadence)
         self.gaps = self.missed = self.retired = 0
 
     def clear(self) -> None:
@@ -189,20 +194,21 @@ class GapDeviation:
             self.missed += k - last_k - 1
         V = self.prior(last_k, k)
         self._memo = None
-        if V is not None and self.retires(V, S_diag()):
+        self._since += 1
+        if V is not None and self._since % RETIRE_EVERY == 0 and self.retires(V, S_diag()):
             self.retired += 1
             V = None
         if V is None:
             self.U = None
+            self._since = 0
             return K
         W, Ws, cols = self._innovation(k, channel, rows)
         HV = H[:, cols] @ V[cols]
         Kx = np.linalg.solve(W + HV @ HV.T, (K @ W + V @ HV.T).T).T
         r = V.shape[1]
         U = np.empty((V.shape[0], r + Ws.shape[0]))
-        U[:, :r] = V
-        U[:, :r] -= Kx @ HV
-        U[:, r:] = (Kx - K) @ Ws
+        np.subtract(V, Kx @ HV, out=U[:, :r])
+        np.matmul(Kx - K, Ws, out=U[:, r:])
         if U.shape[1] >= 2 * U.shape[0]:
             U = np.linalg.qr(U.T, mode="r").T        # U U' = R' R: n columns
         self.U = U
