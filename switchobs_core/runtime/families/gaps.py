@@ -66,7 +66,7 @@ __all__ = ["GAP_MAX", "GapDeviation"]
 #: deviation kept longer is still the real one).
 RETIRE_EVERY = 8
 #: Largest prior deviation after missing samples, in units of the stored prior's diagonal, served
-#: with the stored gains (module docstring, too far).
+#: on the table's grid (module docstring, too far).
 GAP_MAX = 1e12
 
 _EPS = float(np.finfo(float).eps)
