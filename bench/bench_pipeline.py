@@ -211,6 +211,7 @@ def run_child(a) -> dict:
         import cProfile
         prof = cProfile.Profile(time.process_time)
     lo, hi = (0, k_first) if a.window == "first" else (k0, n_ticks)
+    served: dict = {}
     if a.what == "core":
         obs = pl.observer
         obs.reset(pl.x0, 0.0)
@@ -240,7 +241,7 @@ def run_child(a) -> dict:
         dropped = np.random.default_rng(7).random(n_ticks) < a.drop
         dropped[:int(rate)] = False
         gc.freeze()
-        i = 0
+        i, done = 0, 0
         for k in range(n_ticks):
             c0 = time.process_time()
             if prof is not None and k == lo:
@@ -259,6 +260,9 @@ def run_child(a) -> dict:
             if prof is not None and k == hi - 1:
                 prof.disable()
             cost[k] = time.process_time() - c0
+            if pl.updates > done:       # the answers of this tick: served online or from the table
+                served[pl.observer.gains_source] = served.get(pl.observer.gains_source, 0) + pl.updates - done
+                done = pl.updates
         answers = pl.updates
         answered = ~dropped[:n_ticks]
     if pl.errors or sum(pl.rejected.values()):
@@ -266,7 +270,10 @@ def run_child(a) -> dict:
     out = {"answers": int(answers), "ticks": n_ticks, "first": cost[:k_first].tolist(),
            "steady": cost[k0:n_ticks].tolist(), "errors": int(pl.errors),
            "published": dict(getattr(node, "published", {})),
-           "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum())}
+           "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
+           "online": served.get("online", 0),
+           "kalman": {k: int(getattr(pl.observer.gains, k, -1))
+                      for k in ("departures", "relocks", "gaps", "gaps_retired")}}
     if prof is not None:
         import io
         import pstats
@@ -337,9 +344,9 @@ def main(argv: list[str] | None = None) -> int:
           f"{f' --drop {a.drop:g}' if a.drop else ''}` "
           f"(n = {4 * (a.agents + 1)}; load {load:.1f} after)\n")
     print("CPU per sample, ms: mean over the window (median sample), medians over the rounds\n")
-    print(f"| tree | what | answered | first visits (0-{a.first:g}s) | steady ({a.steady:g}-"
-          f"{a.steady + a.steady_len:g}s) |")
-    print("|---|---|---|---|---|")
+    print(f"| tree | what | answered | served online | first visits (0-{a.first:g}s) | steady ({a.steady:g}-"
+          f"{a.steady + a.steady_len:g}s) | departures, re-locks, gaps, gaps retired |")
+    print("|---|---|---|---|---|---|---|")
     table = {}
     for (name, what), runs in res.items():
         row = {}
@@ -347,8 +354,10 @@ def main(argv: list[str] | None = None) -> int:
             row[w] = (float(np.median([np.sum(r[w]) / r.get(f"{w}_n", len(r[w])) for r in runs])) * 1e3,
                       float(np.median([np.median(r[w]) for r in runs])) * 1e3)
         table[(name, what)] = row
-        print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} "
-              f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) |")
+        kal = runs[0].get("kalman", {})
+        print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} | {runs[0].get('online', '-')} "
+              f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) "
+              f"| {', '.join(str(v) for v in kal.values()) or '-'} |")
     if a.before:
         print("\nthis / before (means):", ", ".join(
             f"{what} {w} {table[('this', what)][w][0] / table[('before', what)][w][0]:.2f}x"

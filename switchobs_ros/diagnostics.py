@@ -134,6 +134,8 @@ class EstimatorDiagnostics:
         if obs.kalman is not None:
             ob += [kv("kalman table departures (online recursion)", obs.kalman_departures),
                    kv("kalman table re-locks", obs.kalman_relocks),
+                   kv("kalman table gaps (missing samples served on the table's grid)", getattr(obs.gains, "gaps", 0)),
+                   kv("kalman table gaps retired", getattr(obs.gains, "gaps_retired", 0)),
                    kv("kalman gains now", obs.gains_source)]
             if obs.kalman_fallback:
                 ob.append(kv("last kalman departure", obs.kalman_fallback))

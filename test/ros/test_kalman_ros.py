@@ -92,3 +92,4 @@ def test_node_with_kalman_table_publishes_covariance(kalman_node, ros_node):
     assert spin_until(ros_node, lambda: io.diag_values().get("gain family") == "kalman", 5.0)
     d = io.diag_values()
     assert d["kalman table departures (online recursion)"] == "0" and d["kalman gains now"] == "table"
+    assert d["kalman table gaps (missing samples served on the table's grid)"] == "0"

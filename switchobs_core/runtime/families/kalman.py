@@ -10,9 +10,18 @@ Locked (the cache is valid)
     of the design's ``1 / f``: the stored gain, one fused map ``E = (I - K H) e^{A dt}`` per
     (phase, dt), O(n^2) per sample. The real covariance is the stored posterior of the phase
     (published on demand, :meth:`KalmanTableGains.covariance`).
+Missing samples (:attr:`KalmanTableGains.missing` ``"table"``, the default)
+    a sample ``k > k_prev + 1`` on the grid, otherwise locked (its phase's channel and rows, a
+    step of ``k - k_prev`` design steps within ``dt_tol``): the table stays on its grid and the real
+    covariance is the stored one plus ``U U'``, a deviation of low rank carried with the filter's
+    own gain for the real prior (:mod:`~switchobs_core.runtime.families.gaps`): the optimal
+    estimate and its covariance at ``O(n^2 r)`` a sample, until the deviation retires at the
+    re-lock test's tolerance. The counts: :attr:`KalmanTableGains.gaps`,
+    :attr:`KalmanTableGains.gaps_retired`. With ``missing="online"`` a missing sample is a departure.
 Departure (any other sample)
-    partial rows, a missing sample, a channel other than the phase's, a stamp off the grid or a
-    step off the design's ``dt``, a state set from outside: the real covariance (the stored
+    partial rows, a missing sample (``missing="online"``, or a deviation past
+    :data:`~switchobs_core.runtime.families.gaps.GAP_MAX`), a channel other than the phase's, a
+    stamp off the grid or a step off the design's ``dt``, a state set from outside: the real covariance (the stored
     posterior of the last locked sample, propagated exactly to this sample) becomes the
     family's own and the Riccati recursion runs online from it (:mod:`switchobs_core.runtime.families.online`).
 Re-lock
@@ -63,15 +72,20 @@ import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
 from ...design.kalman import design_kalman
-from ...exceptions import InvalidArgument
+from ...exceptions import GainTableError, InvalidArgument
+from ...numerics.kalman_step import symmetrize
 from ...numerics.scaling import balance, balanced_norm
 from ...table.gains import kalman_table
 from ...table.kalman import Phase
 from ..error_maps import FusedMap, ZohMap, zoh_step
 from .base import OPEN_LOOP, Correction, FamilyContext, Sample
+from .gaps import GapDeviation
 from .online import OnlineKalmanGains, kalman_correct
 
-__all__ = ["KalmanTableGains", "MAX_JITTER"]
+__all__ = ["KalmanTableGains", "MAX_JITTER", "MISSING"]
+
+#: What a missing sample on the grid does (module docstring, missing samples).
+MISSING = ("table", "online")
 
 #: Largest stamp offset from the Kalman table's sample grid, in sample periods (as phase_at).
 MAX_JITTER = 0.25
@@ -88,14 +102,15 @@ def scaled_cov(S: np.ndarray, d: np.ndarray) -> np.ndarray:
 class KalmanTableGains(OnlineKalmanGains):
     """The ``kalman`` family (module docstring): a :class:`~switchobs_core.runtime.families.base.GainFamily`.
 
-    ``KalmanTableGains(ctx, table, mode, cycles, noise=None, relock_rtol=1e-3)``; ``noise``, if
-    given, must be the table's noise model. Its position in the table (the grid's origin, the
+    ``KalmanTableGains(ctx, table, mode, cycles, noise=None, relock_rtol=1e-3, missing="table")``;
+    ``noise``, if given, must be the table's noise model; ``missing`` (also set later, an
+    attribute): what a missing sample does (module docstring). Its position in the table (the grid's origin, the
     last sample's phase) and, after a departure, the covariance are its own.
 
     Attributes
     ----------
-    departures, relocks : int
-        Counts since the last reset.
+    departures, relocks, gaps, gaps_retired : int
+        Counts since the last reset (module docstring).
     fallback : str
         Why the latest departure happened.
     dt_tol : float
@@ -105,7 +120,7 @@ class KalmanTableGains(OnlineKalmanGains):
     name: ClassVar[str] = "kalman"
 
     def __init__(self, ctx: FamilyContext, table: Any, mode: str, cycles: Any, *, noise: Any = None,
-                 relock_rtol: float = 1e-3, **_: Any) -> None:
+                 relock_rtol: float = 1e-3, missing: str = "table", **_: Any) -> None:
         self._ctx = ctx
         cycles = self._schedule(mode, cycles, None)
         self.kalman = kd = table.kalman_design(cycles, ctx.system)
@@ -123,6 +138,27 @@ class KalmanTableGains(OnlineKalmanGains):
         self.dt_tol = min(0.1 * self.relock_rtol * sb / a if a > 0 else math.inf, MAX_JITTER / f)
         self._fused: dict = {}
         self._keep_noise(kd.noise)
+        self.missing = missing
+        self._gap = GapDeviation(kd, lambda: ctx.zoh(OPEN_LOOP, self._dtn), self.relock_rtol)
+
+    @property
+    def missing(self) -> str:
+        """What a missing sample on the grid does: ``"table"`` (the table's grid kept, the
+        covariance's deviation from the stored one in low rank and the filter's gain for it,
+        :mod:`~switchobs_core.runtime.families.gaps`) or ``"online"`` (a departure: the Riccati
+        recursion until it re-locks)."""
+        return self._missing
+
+    @missing.setter
+    def missing(self, how: str) -> None:
+        if how not in MISSING:
+            raise InvalidArgument(f"missing must be one of {', '.join(MISSING)}; got {how!r}")
+        self._missing = how
+
+    gaps = property(lambda self: self._gap.gaps,
+                    doc="Samples served from the table after missing ones (since the last reset).")
+    gaps_retired = property(lambda self: self._gap.retired,
+                            doc="Deviations of missing samples retired (module gaps), since the last reset.")
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, rate: float = 0.0, noise: Any = None, **_: Any) -> Any:
@@ -147,6 +183,7 @@ class KalmanTableGains(OnlineKalmanGains):
         self.fallback = ""
         self.departures = 0
         self.relocks = 0
+        self._gap.reset()
 
     def _since(self, t: float) -> float:
         """Seconds from the first sample to ``t``, counted in whole nanoseconds (module docstring)."""
@@ -159,7 +196,8 @@ class KalmanTableGains(OnlineKalmanGains):
 
     def covariance(self) -> np.ndarray:
         """The real covariance after the last sample: the stored posterior of its phase while
-        locked (Joseph form from the stored prior), the recursion's own after a departure."""
+        locked (Joseph form from the stored prior) plus ``U U'`` after missing samples
+        (:mod:`~switchobs_core.runtime.families.gaps`), the recursion's own after a departure."""
         if self._online:
             return self._P.copy()
         g = self._kgain
@@ -167,14 +205,18 @@ class KalmanTableGains(OnlineKalmanGains):
             return self.noise.P0.copy()
         if len(g) == 4:
             g = (Phase(g[0], g[1], g[2], 0.0), g[3], None)
-        return self.kalman.posterior(*g)
+        P = self.kalman.posterior(*g)
+        U = self._gap.U
+        return P if U is None else symmetrize(P + U @ U.T)
 
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """While locked, a time ``t`` that is the next sample's on the grid (as :meth:`_locked` tests
         it): the stored prior of that phase, the real prior there whatever the sample's channel
         (no O(n^3) posterior and propagation; a read-only view of the table's matrix, not a copy;
         with ``cols``, its block on those rows and columns, read from the packed row); after a
-        departure the recursion's block (:meth:`OnlineKalmanGains.stored_prior`); else None."""
+        departure the recursion's block (:meth:`OnlineKalmanGains.stored_prior`); else None. After
+        missing samples on the grid, the stored prior plus ``V V'`` of the deviation
+        (:mod:`~switchobs_core.runtime.families.gaps`; a new array)."""
         if self._online:
             return super().stored_prior(t, dt, cols)
         if self._origin is None or self._last_k < 0:
@@ -182,8 +224,16 @@ class KalmanTableGains(OnlineKalmanGains):
         k = self._next_k(t, dt)
         if k is None:
             return None
-        kd = self.kalman
-        ent = kd.startup[k] if k < len(kd.startup) else kd.periodic[k % kd.pattern.K]
+        ent = self._gap.entry(k)
+        try:
+            V = self._gap.prior(self._last_k, k)
+        except GainTableError:      # a missing phase's row is unreadable: the sample will depart
+            return None
+        if V is not None:
+            if cols is not None:
+                Vc = V[cols]
+                return symmetrize(ent.P_block(cols) + Vc @ Vc.T)
+            return symmetrize(ent.P_prior + V @ V.T)
         if cols is not None:
             return ent.P_block(cols)
         P = ent.P_prior.view()
@@ -191,19 +241,26 @@ class KalmanTableGains(OnlineKalmanGains):
         return P
 
     def _next_k(self, t: float, dt: float) -> int | None:
-        """The grid's sample number of ``t`` when it is the next sample after the last one, within
-        the jitter and step tolerances of the locked path (module docstring); else None."""
+        """The grid's sample number of ``t`` when it is the next sample after the last one (or,
+        with :attr:`missing` ``"table"``, a later one: the samples between missing), within the
+        jitter and step tolerances of the locked path (module docstring); else None."""
         tau_ns = round(t * 1e9) - self._origin_ns
         k = round(tau_ns / self._ns_per_sample)
-        if k != self._last_k + 1 or abs(tau_ns - k * self._ns_per_sample) > MAX_JITTER * self._ns_per_sample \
-                or abs(dt - self._dtn) > self.dt_tol + 4e-16 * abs(t):
+        g = k - self._last_k
+        if g < 1 or g > 1 and not self._gap_allowed() or abs(tau_ns - k * self._ns_per_sample) > \
+                MAX_JITTER * self._ns_per_sample or abs(dt - g * self._dtn) > self.dt_tol + 4e-16 * abs(t):
             return None
         return k
+
+    def _gap_allowed(self) -> bool:
+        """Whether samples missing since the last one keep the table (:attr:`missing`, locked on the grid)."""
+        return self._missing == "table" and self._last_k >= 0 and not self._online
 
     def depart(self, why: str) -> None:
         """Leave the cache: the real covariance becomes the family's own."""
         if not self._online:
             self._P = self.covariance()
+            self._gap.clear()
             self._online = True
             self.departures += 1
             self.fallback = why
@@ -218,7 +275,15 @@ class KalmanTableGains(OnlineKalmanGains):
             want = "all rows" if ent.rows is None else f"rows {list(ent.rows)}"
             got = "all rows" if rows is None else f"rows {list(rows)}"
             return f"a sample with {got} at t = {t:.9g} s, where the Kalman table's phase has {want}"
-        if ph.k != self._last_k + 1:
+        g = ph.k - self._last_k
+        if g > 1 and self._gap_allowed():     # samples missing: the table goes on (module gaps)
+            if abs(span - g * ent.dt) > self.dt_tol + 4e-16 * abs(t):
+                return (f"a step of {span:.9g} s at t = {t:.9g} s over {g - 1} missing samples, "
+                        f"{abs(span - g * ent.dt):.3g} s off {g} of the Kalman table's {ent.dt:.9g} s "
+                        f"(tolerance {self.dt_tol:.3g} s)")
+            far = self._gap.too_far(self._last_k, ph.k, ent.P_diagonal())
+            return f"{g - 1} missing samples before t = {t:.9g} s leave {far}" if far else ""
+        if g != 1:
             return (f"sample {ph.k} of the Kalman table's grid at t = {t:.9g} s follows "
                     + ("a sample off the grid" if self._last_k < -1 else
                        f"sample {self._last_k} ({ph.k - self._last_k - 1} missing)"))
@@ -244,7 +309,7 @@ class KalmanTableGains(OnlineKalmanGains):
         if self._online and dt > 0:     # the recursion's prediction (fused with its correction)
             x, prediction = self.predict(x, dt)
             dt = 0.0
-        first = self._origin is None
+        first, last_k, held = self._origin is None, self._last_k, not self._online
         if first:
             self._origin = t
             self._origin_ns = round(t * 1e9)
@@ -285,6 +350,8 @@ class KalmanTableGains(OnlineKalmanGains):
             return self.correct_online(channel, rows, H, y, x, prediction)
         K = kd.gain(ph, channel, rows)
         self._kgain = (ph, channel, rows)
+        if held and (self._gap.U is not None or ph.k > last_k + 1):     # locked from the last sample on
+            K = self._gap.correct(last_k, ph.k, K, H, channel, rows, ent.P_diagonal)
         maps: tuple = ()
         if dt > 0:              # x^- = e^{A dt} x^+ (the table's prior is this sample's; no input was held)
             e = ctx.zoh(OPEN_LOOP, dt)
@@ -355,6 +422,13 @@ class KalmanTableGains(OnlineKalmanGains):
             hit = self._fused[fk] = KalmanMap(self._ctx.zoh(OPEN_LOOP, dt), ent.K, self._ctx.C[channel - 1],
                                               self._I)
         K, H = hit.K, hit.H
+        gap = self._gap
+        if gap.U is not None or k > self._last_k + 1:
+            if k > self._last_k + 1 and gap.too_far(self._last_k, k, gap.entry(k).P_diagonal()):
+                return None         # the general path departs (module gaps)
+            K = gap.correct(self._last_k, k, K, H, channel, None, gap.entry(k).P_diagonal)
+            if K is not hit.K:      # the filter's gain of the prior S + V V' (module gaps)
+                hit = KalmanMap(hit.e, K, H, self._I)
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
         # level of the error, not of ||x||); the map (I - K H) e^{A dt} for Phi and the bound
         x0, y = s.x, s.y

@@ -14,7 +14,9 @@ whenever every row arrives). Disturbances (one per scenario):
 * ``rows3``: only the shared row on the first 3 samples;
 * ``partial5``: 5 % of the samples (seeded, per run) carry only the shared row;
 * ``drop2``: 2 % of the samples are not delivered, on an unstable variant (1.5 Hz and 2.5 Hz,
-  damping ratios -0.05 and 0.01: the first mode grows at 0.47/s);
+  damping ratios -0.05 and 0.01: the first mode grows at 0.47/s); the table stays on its grid
+  and carries the covariance's deviation in low rank with the filter's gain
+  (:mod:`switchobs_core.runtime.families.gaps`);
 * ``set_state``: ``set_estimate`` of ``v1`` at 7.01 s (between two samples), to the true value
   plus N(0, 0.01), with variance 0.01 (so the reset entry's error is independent of the rest,
   which is what zeroing its row and column of ``P`` states).

@@ -74,6 +74,7 @@ def test_after_a_departure_the_bias_tests_block_comes_from_the_factor(paper, kta
     the recursion's own block (not None, not the stored prior), within rounding of the block of
     the full prior, which is still the propagated one."""
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    obs.gains.missing = "online"       # the missing sample departs
     sched, x = PeriodicSchedule(CYC), np.ones(paper.n)
     cols = np.array([0, 1, 4, 5])
     checked = 0

@@ -50,7 +50,9 @@ def test_the_stored_prior_is_the_propagated_posterior_while_locked(paper, ktable
 
 
 def test_off_the_grid_or_after_a_departure_the_prior_is_propagated(paper, ktable):
+    """With ``missing="online"`` a missing sample is a departure like a stamp off the grid."""
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    obs.gains.missing = "online"
     sched, x = PeriodicSchedule(CYC), np.ones(paper.n)
     for k in range(50):
         t = k / RATE
@@ -66,6 +68,26 @@ def test_off_the_grid_or_after_a_departure_the_prior_is_propagated(paper, ktable
     t = 52 / RATE
     assert obs._gains.stored_prior(t, t - obs.t) is None
     np.testing.assert_array_equal(obs.prior_covariance(t), _propagated(obs, t))
+
+
+def test_after_a_missing_sample_the_prior_is_the_propagated_posterior(paper, ktable):
+    """The default ``missing="table"``: the prior over a missing sample is the stored prior plus the
+    gap's deviation, the last posterior propagated over two steps (within the design's rounding),
+    whole and on a block; the table stays locked."""
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=np.zeros(paper.n), e0=1.0)
+    sched, x = PeriodicSchedule(CYC), np.ones(paper.n)
+    for k in (*range(50), 51, 53, 56):          # samples 50, 52, 54 and 55 missing
+        t = k / RATE
+        if k > 50:
+            P = _propagated(obs, t)
+            S = obs._gains.stored_prior(t, t - obs.t)
+            assert S is not None
+            np.testing.assert_allclose(S, P, rtol=0, atol=RTOL * np.abs(P).max())
+            cols = np.array([0, 3, 7])
+            np.testing.assert_allclose(obs.prior_covariance(t, cols), P[np.ix_(cols, cols)], rtol=0,
+                                       atol=RTOL * np.abs(P).max())
+        obs.update(t, sched.channel_at(t), paper.C[sched.channel_at(t) - 1] @ x)
+    assert obs._gains.source == "table" and obs.gains.departures == 0 and obs.gains.gaps == 3
 
 
 def test_the_bias_tests_block_is_the_priors_block_and_unpacks_nothing(paper, ktable, tmp_path):
