@@ -17,23 +17,36 @@ itself (:data:`init_error`); if the bare node cannot be created, the context is 
 ``run_node`` initialises it as it always does. The context is initialised without rclpy's signal handlers,
 so the entry point's Ctrl-C handler (a quiet exit 0) stays in place during the imports; ``run_node``
 installs rclpy's when it takes the context.
+
+Garbage collection is off from :func:`start` until the node is built (:func:`resume_gc`, called by
+``run_node``): a 32-agent start otherwise makes about 160 collections, 35-40 ms of its CPU, over objects
+that live as long as the node (modules, the table, the observer), which the node then freezes anyway
+(``gc_freeze``, on by default: :func:`gc.freeze` first, then collection back on, the order Python's
+documentation gives for objects made before a freeze). A start leaves few cyclic leftovers (about 750
+objects at 32 agents), frozen with the rest.
 """
 
 from __future__ import annotations
 
+import gc
 import sys
 from typing import Any
 
-__all__ = ["release", "start", "started", "stop"]
+__all__ = ["release", "resume_gc", "start", "started", "stop"]
 
 _boot: Any = None       # the bare node holding the participant until the node's own exists
 #: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
 init_error: Exception | None = None
+_gc_paused = False      # start() turned garbage collection off; resume_gc() turns it back on
 
 
 def start(name: str) -> None:
-    """Initialise rclpy's default context from ``sys.argv`` and create the bare node ``<name>_boot``."""
-    global _boot, init_error
+    """Initialise rclpy's default context from ``sys.argv`` and create the bare node ``<name>_boot``;
+    garbage collection off until :func:`resume_gc`."""
+    global _boot, init_error, _gc_paused
+    if gc.isenabled():
+        gc.disable()
+        _gc_paused = True
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -52,6 +65,17 @@ def start(name: str) -> None:
             rclpy.try_shutdown()
         except Exception:
             pass
+
+
+def resume_gc(freeze: bool) -> None:
+    """Once the node is built: :func:`gc.freeze` if ``freeze`` (the node's ``gc_freeze``), then garbage
+    collection back on if :func:`start` turned it off."""
+    global _gc_paused
+    if freeze:
+        gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations
+    if _gc_paused:
+        _gc_paused = False
+        gc.enable()
 
 
 def started() -> bool:

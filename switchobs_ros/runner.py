@@ -12,7 +12,6 @@ or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 
 from __future__ import annotations
 
-import gc
 import os
 import sys
 
@@ -100,8 +99,7 @@ def run_node(node_cls, prog: str, args=None) -> int:
         early.release()         # the node's own holds the participant now
         executor = make_executor()
         executor.add_node(node)
-        if getattr(node, "gc_freeze", False):
-            gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations
+        early.resume_gc(bool(getattr(node, "gc_freeze", False)))   # freeze, then collection on (early.py)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -18,6 +18,7 @@ SCRIPT = "import sys; from switchobs_ros.entry import estimator; sys.exit(estima
 
 #: The console script's start with a node that records what it finds once built, then stops.
 PROBE = """
+import gc
 import sys
 import rclpy
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
@@ -26,14 +27,15 @@ from switchobs_ros.estimator import EstimatorNode
 
 class Probe(EstimatorNode):
     def __init__(self):
-        print("boot before the node:", early.started(), rclpy.ok(), flush=True)
+        print("boot before the node:", early.started(), rclpy.ok(), "gc", gc.isenabled(), flush=True)
         super().__init__()
         self.create_timer(0.0, self.report)
 
     def report(self):
         names = [n for n, _ in self.get_node_names_and_namespaces()]
         print("boot after the node:", early.started(), "estimator" in names,
-              get_current_signal_handlers_options() == SignalHandlerOptions.ALL, flush=True)
+              get_current_signal_handlers_options() == SignalHandlerOptions.ALL, "gc", gc.isenabled(),
+              gc.get_freeze_count() > 1000, flush=True)
         rclpy.try_shutdown()
 
 import switchobs_ros.estimator as node_module
@@ -47,14 +49,15 @@ def _run(code: str, *args: str) -> subprocess.CompletedProcess:
 
 
 def test_node_built_in_the_early_context(paper_tables):
-    """Through the console script: the context and its bare node exist before the node is built; the
-    node is built in that context and ready with the table given; once it exists the bare node is gone
-    and rclpy's signal handlers are installed; the stop is exit 0."""
+    """Through the console script: the context and its bare node exist before the node is built, garbage
+    collection off; the node is built in that context and ready with the table given; once it exists the
+    bare node is gone, rclpy's signal handlers are installed, the start's objects frozen and garbage
+    collection on again; the stop is exit 0."""
     res = _run(PROBE, *ros_args(params={"gain_table": paper_tables["periodic"]}))
     assert res.returncode == 0, res.stderr
     out = res.stdout + res.stderr
-    assert "boot before the node: True True" in out, out
-    assert "boot after the node: False True True" in out, out
+    assert "boot before the node: True True gc False" in out, out
+    assert "boot after the node: False True True gc True True" in out, out
     assert "estimator ready: system 'paper'" in out and paper_tables["periodic"] in out, out
     assert "Traceback" not in out, out
 
@@ -75,3 +78,16 @@ def test_console_script_refuses_bad_ros_args_as_run_node_does():
     line = assert_refused(res, "estimator: error: cannot start ROS 2:", "gain_table:=[1", code=2)
     assert line.startswith("estimator: error: cannot start ROS 2: failed to initialize rcl")
     assert res.stderr.count("Failed to parse global arguments") == 1, res.stderr
+
+
+def test_python_m_starts_as_the_console_script():
+    """``python -m switchobs_ros.estimator`` runs the console script's start (participant first): the module
+    run as ``__main__`` hands over to ``entry.estimator`` before it imports rclpy, numpy or the node, and
+    the process exits with what that returns."""
+    code = ("import runpy, sys\n"
+            "from switchobs_ros import entry\n"
+            "entry.estimator = lambda: print('console start', 'rclpy' in sys.modules, 'numpy' in sys.modules) or 7\n"
+            "runpy.run_module('switchobs_ros.estimator', run_name='__main__', alter_sys=True)\n")
+    res = _run(code)
+    assert res.returncode == 7, res.stderr
+    assert res.stdout.strip() == "console start False False", res.stdout + res.stderr
