@@ -18,12 +18,12 @@ itself (:data:`init_error`); if the bare node cannot be created, the context is 
 so the entry point's Ctrl-C handler (a quiet exit 0) stays in place during the imports; ``run_node``
 installs rclpy's when it takes the context.
 
-Garbage collection is off from :func:`start` until the node is built (:func:`resume_gc`, called by
-``run_node``): a 32-agent start otherwise makes about 160 collections, 35-40 ms of its CPU, over objects
-that live as long as the node (modules, the table, the observer), which the node then freezes anyway
-(``gc_freeze``, on by default: :func:`gc.freeze` first, then collection back on, the order Python's
-documentation gives for objects made before a freeze). A start leaves few cyclic leftovers (about 750
-objects at 32 agents), frozen with the rest.
+Garbage collection is off from :func:`start` until the node's module is imported (:func:`imported`,
+called by the entry point): the imports otherwise make about 130 collections, 30-35 ms of a 32-agent
+start's CPU, over objects that live as long as the process (modules, functions, classes). They are
+then frozen (:func:`gc.freeze`, the order Python's documentation gives for objects made while
+collection is off) and collection is on again before the node is built, so a table designed at
+start-up is collected as usual.
 """
 
 from __future__ import annotations
@@ -32,17 +32,17 @@ import gc
 import sys
 from typing import Any
 
-__all__ = ["release", "resume_gc", "start", "started", "stop"]
+__all__ = ["imported", "release", "start", "started", "stop"]
 
 _boot: Any = None       # the bare node holding the participant until the node's own exists
 #: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
 init_error: Exception | None = None
-_gc_paused = False      # start() turned garbage collection off; resume_gc() turns it back on
+_gc_paused = False      # start() turned garbage collection off; imported() turns it back on
 
 
 def start(name: str) -> None:
     """Initialise rclpy's default context from ``sys.argv`` and create the bare node ``<name>_boot``;
-    garbage collection off until :func:`resume_gc`."""
+    garbage collection off until :func:`imported`."""
     global _boot, init_error, _gc_paused
     if gc.isenabled():
         gc.disable()
@@ -67,14 +67,13 @@ def start(name: str) -> None:
             pass
 
 
-def resume_gc(freeze: bool) -> None:
-    """Once the node is built: :func:`gc.freeze` if ``freeze`` (the node's ``gc_freeze``), then garbage
-    collection back on if :func:`start` turned it off."""
+def imported() -> None:
+    """The node's module is imported: what the imports made frozen, garbage collection on again (if
+    :func:`start` turned it off)."""
     global _gc_paused
-    if freeze:
-        gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations
     if _gc_paused:
         _gc_paused = False
+        gc.freeze()
         gc.enable()
 
 

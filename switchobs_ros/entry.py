@@ -47,6 +47,8 @@ def _run(module: str, prog: str, participant_first: bool = False) -> int:
         from .lean_scipy import import_scipy
         import_scipy()      # without the numpy submodules scipy's namespace copy would import
         node = importlib.import_module(f"switchobs_ros.{module}")
+        if participant_first:
+            early.imported()    # garbage collection, off during the imports, on again
     except ModuleNotFoundError as err:
         if not (err.name or "").startswith("switchobs_msgs"):
             raise

@@ -12,6 +12,7 @@ or a death by SIGINT: the clean-up swallows KeyboardInterrupt.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 
@@ -99,7 +100,8 @@ def run_node(node_cls, prog: str, args=None) -> int:
         early.release()         # the node's own holds the participant now
         executor = make_executor()
         executor.add_node(node)
-        early.resume_gc(bool(getattr(node, "gc_freeze", False)))   # freeze, then collection on (early.py)
+        if getattr(node, "gc_freeze", False):
+            gc.freeze()     # start-up objects (tables, caches, messages) leave the collected generations
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
