@@ -8,13 +8,16 @@ node's start (bench/RESULTS.md), for attributes that scipy reads only on CuPy's 
 namespaces (``xp.testing``), never on numpy's. :func:`import_scipy` makes that copy with
 :data:`NOT_ARRAY_API` left out of both lists, then puts numpy's lists back: numpy itself is
 unchanged (``numpy.testing`` and the others still import on first access), and so is every array
-function of the copy. The node's console scripts call it before they import the node
-(:mod:`switchobs_ros.entry`); a process that imported scipy already keeps its copy as it is.
+function of the copy. Like :mod:`switchobs_core.threads`, importing this module changes nothing:
+the application decides (the nodes' console scripts, :mod:`switchobs_ros.entry`, call it before they
+import the node); a process that imported scipy already keeps its copy as it is.
 """
 
 from __future__ import annotations
 
 import sys
+
+import numpy
 
 __all__ = ["NOT_ARRAY_API", "import_scipy"]
 
@@ -32,7 +35,6 @@ def import_scipy() -> bool:
     exists already."""
     if COPY in sys.modules:
         return False
-    import numpy
     names, listing = numpy.__all__, numpy.__dict__.get("__dir__")
     numpy.__all__ = [n for n in names if n not in NOT_ARRAY_API]
     if listing is not None:

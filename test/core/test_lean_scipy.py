@@ -1,4 +1,4 @@
-"""scipy imported by the nodes' console scripts (:mod:`switchobs_ros.lean_scipy`): its copy of numpy's
+"""scipy imported by the nodes' console scripts (:mod:`switchobs_core.lean_scipy`): its copy of numpy's
 namespace made without numpy's submodules outside the array API, numpy itself left as it was, and
 the scipy functions the estimator calls giving the same bytes as after a plain import."""
 
@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 
-from switchobs_ros.lean_scipy import NOT_ARRAY_API
+from switchobs_core.lean_scipy import NOT_ARRAY_API
 
 #: Prints, as JSON: what import_scipy returned (twice), numpy's lists before and after, the submodules
 #: imported, the copy's names, and the bytes (hex) of scipy results the estimator relies on.
@@ -18,7 +18,7 @@ import numpy as np
 all_before, dir_before = list(np.__all__), dir(np)
 lean = sys.argv[1] == "lean"
 if lean:
-    from switchobs_ros.lean_scipy import import_scipy
+    from switchobs_core.lean_scipy import import_scipy
     first, second = import_scipy(), import_scipy()
 else:
     import scipy.linalg, scipy.sparse, scipy.special
