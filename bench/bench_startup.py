@@ -13,7 +13,8 @@ starts
   subscription per input, republishes every target pose);
 * ``estimator``: ``python -m switchobs_ros.estimator`` (with ``--script``, as its console script
   ``ros2 run switchobs_ros estimator`` starts it: :func:`switchobs_ros.entry.estimator`, which
-  creates the node's DDS participant before its imports) with the system and its table already on disk
+  creates the node's DDS participant before its imports; ``python -m`` starts the same way where the
+  ``estimator`` module hands over to it when run as ``__main__``) with the system and its table already on disk
   (``gain_table``): the paper's LMI table (JSON), or the 251 MiB Kalman table of ``camera_agents``
   with 32 agents (n = 132, 1 600 phases, ``.npz``; designed here unless ``--table32`` names one;
   written here in the binary container's current version),

@@ -9,10 +9,12 @@ module is imported the usual handling takes over (:func:`~switchobs_ros.runner.r
 
 This module imports nothing heavy itself, so that the handler is in place at once. The estimator's
 DDS participant is created before its module is imported (:mod:`switchobs_ros.early`), so that DDS
-discovery runs during the imports. A ``pip install``
+discovery runs during the imports; scipy is imported without the numpy submodules its namespace copy
+would import (:mod:`switchobs_core.lean_scipy`). A ``pip install``
 without the interface package switchobs_msgs gets one line saying how to build it (exit code 2),
 not an import traceback.
-``python -m switchobs_ros.<node>`` still runs the module directly.
+``python -m switchobs_ros.estimator`` starts through :func:`estimator` as well (the module hands over
+before its imports); ``python -m`` of the other nodes runs the module directly.
 """
 
 from __future__ import annotations
@@ -42,7 +44,11 @@ def _run(module: str, prog: str, participant_first: bool = False) -> int:
         if participant_first:
             from . import early
             early.start(prog)
+        from switchobs_core.lean_scipy import import_scipy
+        import_scipy()      # without the numpy submodules scipy's namespace copy would import
         node = importlib.import_module(f"switchobs_ros.{module}")
+        if participant_first:
+            early.imported()    # garbage collection, off during the imports, on again
     except ModuleNotFoundError as err:
         if not (err.name or "").startswith("switchobs_msgs"):
             raise

@@ -36,8 +36,13 @@ that go back without the clock going back are rejected as ``old_stamp``, never s
 
 from __future__ import annotations
 
-import math
 import sys
+
+if __name__ == "__main__":      # python -m switchobs_ros.estimator: the console script's start, participant first
+    from switchobs_ros.entry import estimator as _console_script
+    sys.exit(_console_script())
+
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -586,6 +591,3 @@ class EstimatorNode(EstimatorMixin, Node):
 def main(args=None) -> int:
     return run_node(EstimatorNode, "estimator", args)
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -37,6 +37,11 @@ from ..exceptions import GainTableError, SwitchobsError
 from ..model.schedule import Cycle
 from .kalman import KalmanDesign
 
+try:        # scipy's kernel behind ``csr_array @ dense``
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:     # pragma: no cover - another scipy layout: the public product
+    _csr_matvecs = None
+
 if TYPE_CHECKING:
     from ..model.system import LTISystem
     from .gains import CycleDesign, GainTable
@@ -101,22 +106,39 @@ def _verify_kalman(table: GainTable, d: dict, system: LTISystem, source: str) ->
 
 
 def _period_map(kd: KalmanDesign, system: LTISystem, source: str) -> np.ndarray:
-    """``prod_k (I - K_k H_k) Phi_k`` over the design's periodic phases, from its stored gains."""
+    """``prod_k (I - K_k H_k) Phi_k`` over the design's periodic phases, from its stored gains.
+
+    Each phase's ``H_k`` (the channel's rows) is made once per channel and rows, and a sparse
+    ``Phi_k`` is applied by scipy's kernel behind ``csr_array @ dense`` (:func:`_apply`): the same
+    products, without about 15 us of scipy's checks per phase (1 600 phases at 32 agents)."""
     A = np.asarray(system.A, dtype=float)
     n = system.n
     M = np.eye(n)
     steps: dict[float, np.ndarray | csr_array] = {}
+    outputs: dict[tuple, np.ndarray] = {}
     for k, ph in enumerate(kd.periodic):
-        C = np.asarray(system.C[ph.channel - 1], dtype=float)
-        H = C if ph.rows is None else C[list(ph.rows)]
+        H = outputs.get((ph.channel, ph.rows))
+        if H is None:
+            C = np.asarray(system.C[ph.channel - 1], dtype=float)
+            H = outputs[ph.channel, ph.rows] = C if ph.rows is None else C[list(ph.rows)]
         K = np.asarray(ph.K, dtype=float)
         _shapes(K, n, H.shape[0], f"Kalman design {kd.rate:g} Hz, gain of sample {k}", source)
         Phi = steps.get(ph.dt)
         if Phi is None:
             Phi = steps[ph.dt] = _transition(expm(A * ph.dt))
-        PM = Phi @ M
-        M = PM - K @ (H @ PM)       # (I - K H) Phi M
+        M = _apply(Phi, M)
+        M -= K @ (H @ M)            # (I - K H) Phi M
     return M
+
+
+def _apply(Phi: np.ndarray | csr_array, M: np.ndarray) -> np.ndarray:
+    """``Phi @ M`` (``M`` dense, n x n): for a sparse ``Phi`` scipy's ``csr_matvecs``, the loop that
+    ``csr_array @ dense`` runs (the same sums in the same order), called directly."""
+    if _csr_matvecs is None or not isinstance(Phi, csr_array):
+        return Phi @ M
+    out = np.zeros((Phi.shape[0], M.shape[1]))
+    _csr_matvecs(Phi.shape[0], Phi.shape[1], M.shape[1], Phi.indptr, Phi.indices, Phi.data, M.ravel(), out.ravel())
+    return out
 
 
 def _transition(Phi: np.ndarray) -> np.ndarray | csr_array:

@@ -15,6 +15,9 @@ PKG = Path(switchobs_core.__file__).parent
 #: subpackage named in full: scipy's optimisers and interpolants, which only a design needs, cost an
 #: estimator that loads a cached table a tenth of a second of start-up).
 LAZY_OK = {"cvxpy", "matplotlib", "tqdm", "threadpoolctl", "yaml", "scipy.optimize", "scipy.interpolate"}
+#: Modules whose function is an import made under conditions it sets first (and so inside a function):
+#: ``lean_scipy`` imports scipy with numpy's star-export trimmed.
+LAZY_BY_PURPOSE = {"switchobs_core.lean_scipy": {"scipy.linalg", "scipy.sparse", "scipy.special"}}
 
 
 def _modules() -> dict[str, Path]:
@@ -61,7 +64,8 @@ def _scan(mod: str, path: Path) -> tuple[set[str], list[str]]:
             f = in_func or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
             if isinstance(child, (ast.Import, ast.ImportFrom)):
                 names = _target(mod, is_pkg, child)
-                if f and names[0].split(".")[0] not in LAZY_OK and names[0] not in LAZY_OK:
+                if f and names[0].split(".")[0] not in LAZY_OK and names[0] not in LAZY_OK \
+                        and names[0] not in LAZY_BY_PURPOSE.get(mod, ()):
                     lazy.append(f"{mod}:{child.lineno} {names[0]}")
                 elif not f:
                     top.update(n for n in names if n.split(".")[0] == "switchobs_core")

@@ -18,6 +18,7 @@ SCRIPT = "import sys; from switchobs_ros.entry import estimator; sys.exit(estima
 
 #: The console script's start with a node that records what it finds once built, then stops.
 PROBE = """
+import gc
 import sys
 import rclpy
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
@@ -26,7 +27,8 @@ from switchobs_ros.estimator import EstimatorNode
 
 class Probe(EstimatorNode):
     def __init__(self):
-        print("boot before the node:", early.started(), rclpy.ok(), flush=True)
+        print("boot before the node:", early.started(), rclpy.ok(), "gc", gc.isenabled(), gc.get_freeze_count() > 1000,
+              flush=True)
         super().__init__()
         self.create_timer(0.0, self.report)
 
@@ -47,13 +49,14 @@ def _run(code: str, *args: str) -> subprocess.CompletedProcess:
 
 
 def test_node_built_in_the_early_context(paper_tables):
-    """Through the console script: the context and its bare node exist before the node is built; the
-    node is built in that context and ready with the table given; once it exists the bare node is gone
-    and rclpy's signal handlers are installed; the stop is exit 0."""
+    """Through the console script: the context and its bare node exist before the node is built, what the
+    imports made is frozen (collection was off during them) and garbage collection is on again; the node
+    is built in that context and ready with the table given; once it exists the bare node is gone and
+    rclpy's signal handlers are installed; the stop is exit 0."""
     res = _run(PROBE, *ros_args(params={"gain_table": paper_tables["periodic"]}))
     assert res.returncode == 0, res.stderr
     out = res.stdout + res.stderr
-    assert "boot before the node: True True" in out, out
+    assert "boot before the node: True True gc True True" in out, out
     assert "boot after the node: False True True" in out, out
     assert "estimator ready: system 'paper'" in out and paper_tables["periodic"] in out, out
     assert "Traceback" not in out, out
@@ -75,3 +78,16 @@ def test_console_script_refuses_bad_ros_args_as_run_node_does():
     line = assert_refused(res, "estimator: error: cannot start ROS 2:", "gain_table:=[1", code=2)
     assert line.startswith("estimator: error: cannot start ROS 2: failed to initialize rcl")
     assert res.stderr.count("Failed to parse global arguments") == 1, res.stderr
+
+
+def test_python_m_starts_as_the_console_script():
+    """``python -m switchobs_ros.estimator`` runs the console script's start (participant first): the module
+    run as ``__main__`` hands over to ``entry.estimator`` before it imports rclpy, numpy or the node, and
+    the process exits with what that returns."""
+    code = ("import runpy, sys\n"
+            "from switchobs_ros import entry\n"
+            "entry.estimator = lambda: print('console start', 'rclpy' in sys.modules, 'numpy' in sys.modules) or 7\n"
+            "runpy.run_module('switchobs_ros.estimator', run_name='__main__', alter_sys=True)\n")
+    res = _run(code)
+    assert res.returncode == 7, res.stderr
+    assert res.stdout.strip() == "console start False False", res.stdout + res.stderr

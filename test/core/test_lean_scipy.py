@@ -1,0 +1,63 @@
+"""scipy imported by the nodes' console scripts (:mod:`switchobs_core.lean_scipy`): its copy of numpy's
+namespace made without numpy's submodules outside the array API, numpy itself left as it was, and
+the scipy functions the estimator calls giving the same bytes as after a plain import."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from switchobs_core.lean_scipy import NOT_ARRAY_API
+
+#: Prints, as JSON: what import_scipy returned (twice), numpy's lists before and after, the submodules
+#: imported, the copy's names, and the bytes (hex) of scipy results the estimator relies on.
+PROBE = """
+import json, sys
+import numpy as np
+all_before, dir_before = list(np.__all__), dir(np)
+lean = sys.argv[1] == "lean"
+if lean:
+    from switchobs_core.lean_scipy import import_scipy
+    first, second = import_scipy(), import_scipy()
+else:
+    import scipy.linalg, scipy.sparse, scipy.special
+    first = second = None
+loaded = sorted(m for m in sys.modules if m.startswith("numpy.") and m.count(".") == 1)    # before any call
+import scipy._lib.array_api_compat.numpy as copy
+from scipy.linalg import expm, matrix_balance
+from scipy.special import chdtri
+from scipy.sparse import csr_array
+rng = np.random.default_rng(7)
+A = rng.standard_normal((12, 12))
+out = [expm(A).tobytes().hex(), matrix_balance(A)[0].tobytes().hex(), np.float64(chdtri(4, 1e-3)).tobytes().hex(),
+       (csr_array(np.triu(A)) @ A).tobytes().hex()]
+print(json.dumps({"first": first, "second": second, "all_same": list(np.__all__) == all_before,
+                  "dir_same": dir(np) == dir_before,
+                  "loaded": loaded,
+                  "copy": sorted(n for n in dir(copy) if not n.startswith("_")), "out": out,
+                  "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None}))
+"""
+
+
+def _probe(mode: str) -> dict:
+    res = subprocess.run([sys.executable, "-c", PROBE, mode], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
+def test_namespace_copy_without_the_submodules_and_numpy_unchanged():
+    """The lean import leaves out exactly numpy's non-array-API submodules: none of them is imported by it
+    (scipy's own functions may import one later, as ``matrix_balance`` imports ``numpy.ma``),
+    the copy lacks only those names (every other name of a plain import's copy is there), numpy's
+    ``__all__`` and ``dir`` are what they were, ``numpy.testing`` still imports when asked; expm, the
+    balancing, the chi-square quantile and a sparse product give the same bytes; a second call is a no-op."""
+    lean, plain = _probe("lean"), _probe("plain")
+    assert (lean["first"], lean["second"]) == (True, False)
+    assert lean["all_same"] and lean["dir_same"] and lean["testing_later"]
+    assert not {f"numpy.{m}" for m in NOT_ARRAY_API} & set(lean["loaded"]), lean["loaded"]
+    assert {f"numpy.{m}" for m in ("f2py", "testing")} <= set(plain["loaded"])      # what the plain copy imports
+    missing = set(plain["copy"]) - set(lean["copy"])
+    assert missing and missing <= NOT_ARRAY_API, missing
+    assert set(lean["copy"]) <= set(plain["copy"])
+    assert lean["out"] == plain["out"]
