@@ -137,6 +137,7 @@ class RoundingBound:
         if self.phase is not None:
             self.phase.reset()
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
+        self._memo: tuple | None = None     # the last propagated() sets and their arguments (step reuses them)
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
 
@@ -354,6 +355,16 @@ class RoundingBound:
         ``extra``: the residual (balanced) of what the step added besides (:meth:`rho_input`)."""
         if self.withdrawn:
             return
+        hit = self._memo is not None and self._same(self._memo[0], e, dt, x0, x1, nu, u, extra)
+        if hit:     # the sets propagated() gave for these very arguments: the same doubles (copied)
+            out, outv = self._memo[1]
+            self._ell.S, self._ell.tr = out[0].copy(), out[1]
+            if outv is not None:
+                self._ellv.S, self._ellv.tr = outv[0].copy(), outv[1]
+        self._memo = None
+        if hit:
+            self._check()
+            return
         with np.errstate(over="ignore", invalid="ignore"):
             self._noise(self.ell, e, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
                         e.GL if nu is not None and self.w else None, True, 0.0, 0.0)
@@ -362,18 +373,42 @@ class RoundingBound:
                             e.GL if nu is not None else None, True, dt)
         self._check()
 
+    def _key(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
+             u: np.ndarray | None, extra: float) -> tuple:
+        """Everything a step's sets are computed from: the entry, ``dt``, the residual's data, the held
+        sample's noise, stamp error and rounding, and the ellipsoids' shape matrices (by identity: a
+        step replaces them, never changes them in place); the vectors copied, compared by value."""
+        cp = (lambda v: None if v is None else np.array(v, dtype=float, copy=True))
+        ell, ellv = self.ell, self.ellv
+        return (e, dt, extra, self.vn, self.w, self.nu_err, ell.S, ell.tr, None if ellv is None else ellv.S,
+                cp(x0), cp(x1), cp(nu), cp(u))
+
+    def _same(self, key: tuple, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
+              u: np.ndarray | None, extra: float) -> bool:
+        """Whether a step with these arguments computes the sets of ``key`` (:meth:`_key`)."""
+        ell, ellv = self.ell, self.ellv
+        if not (key[0] is e and key[1] == dt and key[2] == extra and key[3] == self.vn and key[4] == self.w
+                and key[5] == self.nu_err and key[6] is ell.S and key[7] == ell.tr
+                and key[8] is (None if ellv is None else ellv.S)):
+            return False
+        return all((a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+                   for a, b in zip(key[9:], (x0, x1, nu, u)))
+
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
                    u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
         (``extra`` as in :meth:`step`; a sparse map in compressed rows, as :meth:`step` takes it)."""
+        key = self._key(e, dt, x0, xp, nu, u, extra) if not self.withdrawn else None
         with np.errstate(over="ignore", invalid="ignore"):
-            S, _ = self._noise(self.ell, e, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
-                               e.GL if nu is not None and self.w else None, False, 0.0, 0.0)
-            Sv = None
+            out = self._noise(self.ell, e, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
+                              e.GL if nu is not None and self.w else None, False, 0.0, 0.0)
+            outv = None
             if self.ellv is not None:
-                Sv, _ = self._noise(self.ellv, e, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
-                                    e.GL if nu is not None else None, False, dt)
-        return S, Sv
+                outv = self._noise(self.ellv, e, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
+                                   e.GL if nu is not None else None, False, dt)
+        # kept for a step with the same arguments (the sample at that time: prior, then update)
+        self._memo = None if key is None else (key, (out, outv))
+        return out[0], None if outv is None else outv[0]
 
     def correct(self, M: np.ndarray, rho: float, K: np.ndarray, H: np.ndarray, p: int, channel: int) -> None:
         """Both ellipsoids through a Kalman correction ``e^+ = M e^- + r + K v`` with the computed

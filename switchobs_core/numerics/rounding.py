@@ -155,6 +155,7 @@ class ErrorEllipsoid:
         self._ii = np.arange(self.n)
         self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
         self.c_dense = gamma(2 * self.n + 2)
+        self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -173,6 +174,30 @@ class ErrorEllipsoid:
         symmetric matrix bounded entrywise by ``c w w'`` (step 6), rounded up."""
         W = float(w @ self._id) * self._gsum
         return (c * W) * (w * self.d) * (1.0 + 4.0 * _U)
+
+    def _shaped(self, G: np.ndarray, c: float, GGt: np.ndarray | None) -> tuple:
+        """``(Q, R_q, w_q, trace_D(Q + R_q))`` of the added set ``E(c G G')`` (module docstring, step 7):
+        ``Q = sym fl(c fl(G G'))``, its allowance ``R_q`` and vector ``w_q``. Kept for the last few
+        ``(G, c)`` (a held innovation's ``Gamma L`` and a channel's ``p v_max^2`` recur every cycle),
+        ``G`` compared by value: the same doubles as computing them again."""
+        hit = self._qc.get(id(G))
+        if hit is not None and hit[1] == c and hit[2] is GGt and np.array_equal(hit[0], G):
+            return hit[3]
+        given = GGt
+        if GGt is None:
+            GGt = G @ G.T
+        Q = c * GGt
+        Q += Q.T
+        Q *= 0.5
+        g = np.sqrt(np.einsum("ij,ij->i", G, G)) * (self._gsum * (1.0 + 2.0 * _U))     # row norms
+        cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
+        wq = g * math.sqrt(c * (1.0 + cq))
+        rq = self._diag(g, cq * c)
+        tq = max(float((Q.diagonal() + rq) @ self._id2), 0.0) * self._gsum
+        if len(self._qc) >= 64:
+            self._qc.clear()
+        self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
+        return Q, rq, wq, tq
 
     # ------------------------------------------------------------------ steps
     def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
@@ -220,16 +245,7 @@ class ErrorEllipsoid:
         if noise is not None:
             G, c, GGt = noise
             if G.size and c > 0.0:
-                if GGt is None:
-                    GGt = G @ G.T
-                Q = c * GGt
-                Q += Q.T
-                Q *= 0.5
-                g = np.sqrt(np.einsum("ij,ij->i", G, G)) * (self._gsum * (1.0 + 2.0 * _U))     # row norms
-                cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
-                wq = g * math.sqrt(c * (1.0 + cq))
-                rq = self._diag(g, cq * c)
-                tq = max(float((Q.diagonal() + rq) @ id2), 0.0) * self._gsum
+                Q, rq, wq, tq = self._shaped(G, c, GGt)
                 if not tq > 0.0:
                     Q = None
         # the added set: E(Q + R_q) (+) E(rho^2 D^2) inside E(beta (Q + R_q) + kappa rho^2 D^2)
