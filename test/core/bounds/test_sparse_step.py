@@ -153,3 +153,66 @@ def test_lmi_observer_bounds_are_the_dense_paths_less_its_allowance(lmi10, monke
         assert ea <= eb and eb - ea <= 1e-7 * eb, (ea, eb)
         assert na <= nb and nb - na <= 1e-7 * nb, (na, nb)
         assert err <= na
+
+
+def test_step_after_the_prior_takes_its_sets(lmi10, monkeypatch):
+    """The innovation test's prior at a sample's time, then the sample: the step takes the sets the
+    prior computed for the same arguments (half the products), the same doubles as a run without
+    the prior."""
+    system, cycle, table, x0 = lmi10
+    sched = so.PeriodicSchedule(cycle)
+    steps = []
+    real = rig.RoundingBound._noise
+
+    def counted(self, *a, **k):
+        steps.append(1)
+        return real(self, *a, **k)
+    monkeypatch.setattr(rig.RoundingBound, "_noise", counted)
+
+    def run(with_prior: bool):
+        obs = so.SwitchedObserver(system, table, cycles=[cycle], e0=10.0, noise_max=1e-3)
+        out, priors = [], []
+        for k in range(60):
+            t = k / 50.0
+            ch = sched.channel_at(t)
+            if with_prior and k:
+                priors.append(obs.prior(t))
+            obs.update(t, ch, np.asarray(system.C[ch - 1]) @ x0)
+            b = obs._bound
+            out.append((b.ell.S.copy(), b.ellv.S.copy(), b.ell.tr, b.ellv.tr))
+        return out, priors
+
+    plain, _ = run(False)
+    n_plain, steps[:] = len(steps), []
+    with_prior, priors = run(True)
+    assert len(steps) == n_plain         # the priors' products, and none again at the samples
+    for (S, Sv, tr, trv), (S2, Sv2, tr2, trv2), (_, P, Pv) in zip(plain[1:], with_prior[1:], priors):
+        np.testing.assert_array_equal(S, S2)
+        np.testing.assert_array_equal(Sv, Sv2)
+        assert (tr, trv) == (tr2, trv2)
+        np.testing.assert_array_equal(P, S)     # the prior's sets are the sample's step
+        np.testing.assert_array_equal(Pv, Sv)
+
+
+def test_added_set_follows_a_gain_changed_in_place():
+    """The added set ``E(c G G')`` is kept per gain array, compared by value: a gain written in place
+    gives the set a fresh ellipsoid computes."""
+    rng = np.random.default_rng(8)
+    n, p = 48, 3
+    X = rng.standard_normal((n, n))
+    S = X @ X.T / n
+    S = 0.5 * (S + S.T)
+    G = rng.standard_normal((n, p))
+    Z = S.copy()
+    w = np.sqrt(np.diagonal(S)).copy()
+    kept = ErrorEllipsoid(n, 1.0)
+    kept.S = S
+    first = kept.propagate_shaped_product(Z.copy(), w, 1e-15, 1e-9, 2.0, G, 1e-4)
+    again = kept.propagate_shaped_product(Z.copy(), w, 1e-15, 1e-9, 2.0, G, 1e-4)
+    np.testing.assert_array_equal(first[0], again[0])
+    G *= 3.0
+    fresh = ErrorEllipsoid(n, 1.0)
+    fresh.S = S
+    np.testing.assert_array_equal(kept.propagate_shaped_product(Z.copy(), w, 1e-15, 1e-9, 2.0, G, 1e-4)[0],
+                                  fresh.propagate_shaped_product(Z.copy(), w, 1e-15, 1e-9, 2.0, G, 1e-4)[0])
+    assert not np.array_equal(first[0], fresh.propagate_shaped_product(Z.copy(), w, 1e-15, 1e-9, 2.0, G, 1e-4)[0])
