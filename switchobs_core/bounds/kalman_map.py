@@ -201,7 +201,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -215,6 +215,7 @@ class KalmanMap:
         self._Ks: np.ndarray | None = None
         self._Hs: np.ndarray | None = None
         self._aE: tuple | None = None
+        self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
 
@@ -354,7 +355,10 @@ class KalmanMap:
         n, p = S.shape[0], H.shape[0]
         s = np.sqrt(np.maximum(np.diagonal(S), 0.0))
         y = sp.abs_matvec(s)
-        w = (y + np.abs(K) @ (np.abs(H) @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
-        mn = (1.0 + float((np.abs(K) @ np.abs(H).sum(axis=1)).max())) * sp.inf_norm    # ||J |Phi|||_inf
+        if self._aKH is None:
+            aK, aH = np.abs(K), np.abs(H)
+            self._aKH = (aK, aH, (1.0 + float((aK @ aH.sum(axis=1)).max())) * sp.inf_norm)    # ||J |Phi~| ||_inf
+        aK, aH, mn = self._aKH
+        w = (y + aK @ (aH @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
         g1, gm = sp.c, gamma(2 * h + 3 * p + 2)         # steps 1 and 2 of the module docstring
         return Z, w, (g1 + gm * (1.0 + g1)) * (1.0 + 4.0 * gamma(1)), mn
