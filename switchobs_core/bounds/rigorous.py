@@ -396,8 +396,9 @@ class RoundingBound:
 
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
                    u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
-        """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
-        (``extra`` as in :meth:`step`; a sparse map in compressed rows, as :meth:`step` takes it)."""
+        """The shape matrices after the step ``e`` over ``dt``: ``(S, S_noise or None)``, read-only (``extra``
+        as in :meth:`step`; a sparse map in compressed rows, as :meth:`step` takes it). The sets stay
+        as they are; a :meth:`step` with the same arguments next takes copies of these."""
         key = self._key(e, dt, x0, xp, nu, u, extra) if not self.withdrawn else None
         with np.errstate(over="ignore", invalid="ignore"):
             out = self._noise(self.ell, e, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,

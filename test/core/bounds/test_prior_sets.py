@@ -2,7 +2,7 @@
 open-loop step whose exponential is sparse (:func:`switchobs_core.bounds.rigorous.open_loop_product`):
 ``|Z~ - Phi S Phi'| <= c w w'`` entrywise against the exact product (extended precision), the
 allowance built from it contains ``Phi S Phi'``, and through the observer the sets equal the dense
-path's to rounding, for both the exact and the noise set."""
+path's to rounding and the dense path's larger allowance, for both the exact and the noise set."""
 
 from __future__ import annotations
 
