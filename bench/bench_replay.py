@@ -21,6 +21,11 @@ system) and its peak resident memory (``ru_maxrss``), medians over the rounds:
 Goal: CPU <= 2x the script's; memory flat in the recording's length (the growth per
 simulated second is printed). A script, not a test: nothing is asserted.
 
+``--noise-max V`` declares ``noise.max`` (m) to the estimate commands (``-p noise.max:=V``; 6 mm
+for the bag's 1 mm noise): the bounds then hold throughout and the rigorous sets (the exact and
+the noise set) are stepped every tick; without it the first noisy sample withdraws them and the
+sets rest. The rows of each estimate run's CSV whose bound is withdrawn (-1) are counted and printed.
+
 Bytecode is cached as an installed package has it: the children write and read it under a
 cache folder of the run's own (``PYTHONPYCACHEPREFIX``, whatever ``PYTHONDONTWRITEBYTECODE`` says;
 no checkout is written to), after one untimed warm-up run of each command on a 1 s bag.
@@ -120,6 +125,8 @@ def main() -> None:
     ap.add_argument("--before", type=Path, default=None,
                     help="also run the estimate command of another checkout (e.g. the main branch), same bags")
     ap.add_argument("--no-all", action="store_true", help="skip the runs with --outputs all (7 MB/s of covariance)")
+    ap.add_argument("--noise-max", type=float, default=None, metavar="V",
+                    help="declare noise.max (m) to the estimate commands: bounds that hold throughout")
     ap.add_argument("--no-bytecode", action="store_true",
                     help="keep the environment's bytecode setting (no private cache, no warm-up run)")
     a = ap.parse_args()
@@ -156,7 +163,17 @@ def main() -> None:
     def est(d, r, tag):
         return [*exe, "estimate", str(bags[d]), "-o", str(work / f"{tag}{d:g}_{r}"), "--csv",
                 str(work / f"{tag}{d:g}_{r}.csv"), "--gain-table", str(table), "--system", str(sysf),
-                "-p", f"schedule.h:={[1.0] * M}", "--no-progress"]
+                "-p", f"schedule.h:={[1.0] * M}", "--no-progress",
+                *([] if a.noise_max is None else ["-p", f"noise.max:={a.noise_max!r}"])]
+
+    withdrawn: dict = {}            # tag -> (rows with a withdrawn bound, rows), over the runs
+
+    def count(tag, d, r):           # the estimate run's CSV: rows whose published bound is -1
+        import numpy as np
+        rows = np.genfromtxt(work / f"{tag}{d:g}_{r}.csv", delimiter=",", names=True)
+        col = rows["noise_bound" if a.noise_max is not None else "exact_bound"]
+        w, t = withdrawn.get(tag, (0, 0))
+        withdrawn[tag] = (w + int((col < 0).sum()), t + int(col.size))
 
     def done(*names):           # an output measured is removed at once (100 s with every output: 3.4 GB)
         for name in names:
@@ -171,12 +188,14 @@ def main() -> None:
     for r in range(a.rounds):
         for d in a.durations:
             ours[d].append(peak(est(d, r, "o")))
+            count("o", d, r)
             done(f"o{d:g}_{r}", f"o{d:g}_{r}.csv")
             if not a.no_all:
                 ours_all[d].append(peak([*est(d, r, "a"), "--outputs", "all"]))
                 done(f"a{d:g}_{r}", f"a{d:g}_{r}.csv")
             if a.before is not None:
                 before[d].append(peak(est(d, r, "b"), a.before))
+                count("b", d, r)
                 done(f"b{d:g}_{r}", f"b{d:g}_{r}.csv")
             alt[d].append(peak([sys.executable, "-c", KF_SCRIPT, str(bags[d]), str(sysf),
                                 str(work / f"k{d:g}_{r}.csv")]))
@@ -185,11 +204,15 @@ def main() -> None:
           "Kalman filter script\n")
     print(f"`python bench/bench_replay.py --durations {' '.join(f'{d:g}' for d in a.durations)} --rounds "
           f"{a.rounds} --agents {M}{f' --before {a.before}' if a.before else ''}"
-          f"{' --no-all' if a.no_all else ''}{' --no-bytecode' if a.no_bytecode else ''}`; load average at the end "
+          f"{' --no-all' if a.no_all else ''}{' --no-bytecode' if a.no_bytecode else ''}"
+          f"{'' if a.noise_max is None else f' --noise-max {a.noise_max:g}'}`; load average at the end "
           f"{os.getloadavg()[0]:.1f}.\n")
+    print("Rows with a withdrawn bound: " + ", ".join(f"{'estimate' if k == 'o' else '--before'} {w} of {t}"
+                                                      for k, (w, t) in withdrawn.items()) + ".\n")
     print("| bag | estimate: CPU | peak RSS | numpy KF script: CPU | peak RSS | CPU ratio (goal <= 2) | "
-          "--outputs all: CPU | ratio |" + (" --before: CPU | peak RSS | ratio |" if a.before else ""))
-    print("|---|---|---|---|---|---|---|---|" + ("---|---|---|" if a.before else ""))
+          "--outputs all: CPU | ratio |" + (" --before: CPU | peak RSS | ratio | estimate / before, per round |"
+                                            if a.before else ""))
+    print("|---|---|---|---|---|---|---|---|" + ("---|---|---|---|" if a.before else ""))
     med = {}
     for d in a.durations:
         oc, om = statistics.median(x[0] for x in ours[d]), statistics.median(x[1] for x in ours[d])
@@ -199,7 +222,8 @@ def main() -> None:
         extra = ""
         if a.before:
             bc = statistics.median(x[0] for x in before[d])
-            extra = f" {bc:.2f} s | {statistics.median(x[1] for x in before[d]):.0f} MiB | {bc / kc:.2f}x |"
+            extra = (f" {bc:.2f} s | {statistics.median(x[1] for x in before[d]):.0f} MiB | {bc / kc:.2f}x |"
+                     f" {statistics.median(o[0] / b[0] for o, b in zip(ours[d], before[d])):.2f} |")
         print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x | {ac:.2f} s | "
               f"{ac / kc:.2f}x |" + extra)
     if len(a.durations) > 1:

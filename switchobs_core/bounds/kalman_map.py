@@ -21,23 +21,30 @@ two sparse products (``4 nnz(Phi~) n`` flops), ``G`` and ``Y H'`` read only the 
 that hold a nonzero (a channel sees a few states), and ``Z`` is one product of inner dimension
 ``2 p``: ``O(nnz(Phi~) n + p n^2)`` in all.
 
-Rounding (the standard model ``|fl(A B) - A B| <= gamma_m |A| |B|``, ``m`` the inner dimension; a
-sparse product or a product over a subset of columns skips exact zeros, which only shortens its
-sums). ``S`` is exactly symmetric and positive semidefinite (:mod:`switchobs_core.numerics.rounding`,
-step 6), so ``|S| <= s s'`` with ``s = sqrt(diag S)``; write ``y = |Phi~| s`` and ``J = I + |K| |H|``
-(``|I - K H| <= J`` entrywise).
+Rounding (the standard model ``|fl(A B) - A B| <= gamma_m |A| |B|``, ``m`` the number of terms of
+the longest sum: a sparse product, or a product over the columns a row holds, skips exact zeros,
+and a term ``0 * x`` or a sum ``s + 0`` is exact, so only the nonzero terms count). ``S`` is exactly
+symmetric and positive semidefinite (:mod:`switchobs_core.numerics.rounding`, step 6), so
+``|S| <= s s'`` with ``s = sqrt(diag S)``; write ``y = |Phi~| s``, ``J = I + |K| |H|``
+(``|I - K H| <= J`` entrywise), ``k`` the most nonzeros in a row of ``Phi~``
+(:attr:`SparseTransition.k`) and ``h`` the most nonzeros in a row of ``H``.
 
-1. ``|Y~ - Phi~ S Phi~'| <= gamma_{2n} |Phi~| |S| |Phi~'| <= gamma_{2n} y y'``, and through
-   ``I - K H`` on both sides at most ``gamma_{2n} (J y) (J y)'``.
-2. The longest chain of roundings from ``Y~`` to ``Z~`` is ``G H'`` (``2n``), ``K (.)`` (``p``),
-   the difference ``V`` (1), the product of inner dimension ``2p`` and the last difference (1):
-   ``m = 2n + 3p + 2``. Every term of ``Z`` is one of ``Y``, ``K H Y``, ``Y H' K'``,
-   ``K H Y H' K'``, so ``|Z~ - (I - K H) Y~ (I - K H)'| <= gamma_m J |Y~| J'
-   <= gamma_m (1 + gamma_{2n}) (J y) (J y)'``.
-3. So ``|Z~ - M S M'| <= c w w'`` entrywise with ``w = J y = y + |K| (|H| y)`` (O(nnz(Phi~) + n p))
-   and ``c = gamma_{2n} + gamma_m (1 + gamma_{2n}) <= 2.01 gamma_{2n+4p+4}``: the form
+1. ``X = Phi~ S`` sums at most ``k`` terms per entry: ``|X~ - Phi~ S| <= gamma_k |Phi~| |S|``, and
+   ``Y = Phi~ X'`` again: ``|Y~ - Phi~ S Phi~'| <= (gamma_k + gamma_k (1 + gamma_k)) |Phi~| |S| |Phi~'|
+   <= gamma_{2k} y y'`` (``2 gamma_k + gamma_k^2 <= gamma_{2k}``), and through ``I - K H`` on both sides
+   at most ``gamma_{2k} (J y) (J y)'``.
+2. The longest chain of roundings from ``Y~`` to ``Z~`` is ``G H'`` (``2h``: ``G = H Y`` and
+   ``G H'`` each sum a row of ``H``'s nonzeros), ``K (.)`` (``p``), the difference ``V`` (1), the
+   product of inner dimension ``2p`` and the last difference (1): ``m = 2h + 3p + 2``. Every term of
+   ``Z`` is one of ``Y``, ``K H Y``, ``Y H' K'``, ``K H Y H' K'``, so
+   ``|Z~ - (I - K H) Y~ (I - K H)'| <= gamma_m J |Y~| J' <= gamma_m (1 + gamma_{2k}) (J y) (J y)'``.
+3. So ``|Z~ - M S M'| <= c w w'`` entrywise with ``w = J y = y + |K| (|H| y)`` (``O(nnz(Phi~) + n p)``,
+   never an ``n x n`` product) and ``c = gamma_{2k} + gamma_m (1 + gamma_{2k})`` (rounded up): the form
    :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product` turns into an
-   allowance in the shape of ``w`` (in balanced units, the same in any units of the state).
+   allowance in the shape of ``w`` (in balanced units, the same in any units of the state). For
+   ``camera_agents(32)`` (``n = 132``, ``k = 2``, ``h = 1``, ``p = 4``): ``c = gamma_4 +
+   gamma_16 (1 + gamma_4) = 2.2e-15``, where counting every sum as ``n`` long gives
+   ``2.01 gamma_{2n+4p+4} = 6.3e-14``.
 
 The residual's factor ``||I - K H||`` is taken in the balanced coordinates of the entry's
 ``scale`` (``kappa >= 1 + || |D^-1 K| |H D| ||_2``, by ``sqrt(||.||_1 ||.||_inf)``), like every
@@ -65,7 +72,7 @@ try:        # scipy's kernel behind ``csr_array @ dense`` (the same loop, withou
 except ImportError:     # pragma: no cover - another scipy layout: the public product
     _csr_matvec = _csr_matvecs = None
 
-__all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_transition", "KalmanMap"]
+__all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_map", "sparse_transition", "KalmanMap"]
 
 #: Fewest states for which the factored form is used (below, dense products are as fast).
 SPARSE_MIN_N = 40
@@ -74,9 +81,12 @@ SPARSE_MAX_FILL = 0.125
 
 
 class SparseTransition:
-    """``Phi~`` in compressed rows: ``sandwich(S) = Phi~ S Phi~'`` and ``Phi~ @ v``."""
+    """``Phi~`` in compressed rows: ``sandwich(S) = Phi~ S Phi~'`` and ``Phi~ @ v``; :attr:`k` the most
+    nonzeros in a row (the terms of the longest sum a product takes), :attr:`c` the allowance of
+    :meth:`sandwich`: ``|fl(Phi~ S Phi~') - Phi~ S Phi~'| <= c y y'`` entrywise for a PSD ``S``,
+    ``y = |Phi~| sqrt(diag S)`` (module docstring, step 1: ``c = gamma_{2k}``)."""
 
-    __slots__ = ("n", "csr", "nu", "inf_norm", "_ip", "_ix", "_dv", "_adv")
+    __slots__ = ("n", "csr", "nu", "inf_norm", "k", "c", "_ip", "_ix", "_dv", "_adv")
 
     def __init__(self, Phi: np.ndarray) -> None:
         self.n = n = Phi.shape[0]
@@ -89,6 +99,8 @@ class SparseTransition:
         cols = np.bincount(self._ix, weights=a, minlength=n)
         self.nu = math.sqrt(float(rows.max()) * float(cols.max())) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
         self.inf_norm = float(rows.max()) * (1.0 + 2.0 * gamma(n + 2)) if n else 0.0
+        self.k = int(np.diff(self._ip).max()) if n else 0
+        self.c = gamma(2 * self.k)
         self._adv = a
 
     def abs_matvec(self, x: np.ndarray) -> np.ndarray:
@@ -143,17 +155,36 @@ def sparse_transition(entry: Any) -> SparseTransition | None:
     return sp
 
 
+def sparse_map(entry: Any) -> SparseTransition | None:
+    """The sparse form of a ZOH cache entry's error map ``E`` (``Phi~ - Gamma L C`` with a held
+    innovation, else ``Phi~``; kept on the entry), or None when the dense form is the faster one:
+    chosen as :func:`sparse_transition` chooses, by the size and the count of nonzeros of ``E``."""
+    E = entry.E
+    if E is entry.Phi:
+        return sparse_transition(entry)
+    sp = getattr(entry, "sparse_E", False)
+    if sp is False:
+        n = E.shape[0]
+        sp = None
+        if n >= SPARSE_MIN_N and np.count_nonzero(E) <= SPARSE_MAX_FILL * n * n:
+            sp = SparseTransition(E)
+        entry.sparse_E = sp
+    return sp
+
+
 _COLUMNS: dict[int, tuple] = {}
 
 
-def _columns(H: np.ndarray) -> tuple:
-    """``(c, H[:, c])`` with ``c`` the columns of ``H`` that hold a nonzero (a channel sees a few
-    states), or ``()`` when they are more than a quarter of the columns; kept per ``H`` array."""
+def _columns(H: np.ndarray) -> tuple[tuple, int]:
+    """``((c, H[:, c]), h)`` with ``c`` the columns of ``H`` that hold a nonzero (a channel sees a few
+    states; ``()`` instead when they are more than a quarter of the columns) and ``h`` the most
+    nonzeros in a row of ``H``; kept per ``H`` array."""
     hit = _COLUMNS.get(id(H))
     if hit is not None and hit[0] is H:
         return hit[1]
-    c = np.flatnonzero(np.any(H != 0.0, axis=0))
-    out = (c, H[:, c]) if 4 * c.size <= H.shape[1] else ()
+    nz = H != 0.0
+    c = np.flatnonzero(np.any(nz, axis=0))
+    out = ((c, H[:, c]) if 4 * c.size <= H.shape[1] else (), int(nz.sum(axis=1).max()) if H.size else 0)
     if len(_COLUMNS) > 256:
         _COLUMNS.clear()
     _COLUMNS[id(H)] = (H, out)
@@ -170,7 +201,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -184,6 +215,7 @@ class KalmanMap:
         self._Ks: np.ndarray | None = None
         self._Hs: np.ndarray | None = None
         self._aE: tuple | None = None
+        self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
 
@@ -303,6 +335,7 @@ class KalmanMap:
         cols = self._cols
         if cols is None:
             cols = self._cols = _columns(H)
+        cols, h = cols
         if cols:
             c, Hc = cols
             G = Hc @ Y[c]               # H Y
@@ -322,6 +355,10 @@ class KalmanMap:
         n, p = S.shape[0], H.shape[0]
         s = np.sqrt(np.maximum(np.diagonal(S), 0.0))
         y = sp.abs_matvec(s)
-        w = (y + np.abs(K) @ (np.abs(H) @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
-        mn = (1.0 + float((np.abs(K) @ np.abs(H).sum(axis=1)).max())) * sp.inf_norm    # ||J |Phi|||_inf
-        return Z, w, 2.01 * gamma(2 * n + 4 * p + 4), mn
+        if self._aKH is None:
+            aK, aH = np.abs(K), np.abs(H)
+            self._aKH = (aK, aH, (1.0 + float((aK @ aH.sum(axis=1)).max())) * sp.inf_norm)    # ||J |Phi~| ||_inf
+        aK, aH, mn = self._aKH
+        w = (y + aK @ (aH @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
+        g1, gm = sp.c, gamma(2 * h + 3 * p + 2)         # steps 1 and 2 of the module docstring
+        return Z, w, (g1 + gm * (1.0 + g1)) * (1.0 + 4.0 * gamma(1)), mn

@@ -50,7 +50,7 @@ from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
-from .kalman_map import SparseTransition, sparse_transition
+from .kalman_map import SparseTransition, sparse_map
 from .read import AnchoredBound
 from .stamp import StampError
 
@@ -64,14 +64,15 @@ _U = UNIT_ROUNDOFF
 
 
 def open_loop_product(ell: ErrorEllipsoid, sp: SparseTransition) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """``(Z, w, c, mn)`` of the ellipsoid's step through a sparse ``Phi~`` (compressed rows,
-    :class:`~switchobs_core.bounds.kalman_map.SparseTransition`): ``Z = Phi~ S Phi~'`` in two sparse
-    products, with ``|Z - Phi~ S Phi~'| <= c w w'`` entrywise for ``w >= |Phi~| s`` and ``c``
-    the dense product's ``gamma_{2n+2}`` (a sum over a row's nonzeros only skips exact zeros, which
-    shortens it: :mod:`~switchobs_core.bounds.kalman_map`, step 1), and ``mn >= ||Phi~||_inf``: what
-    :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product` takes. O(nnz n)
-    instead of two dense products."""
-    return sp.sandwich_either(ell.S), ell.image_bound(sp.abs_matvec), ell.c_dense, sp.inf_norm
+    """``(Z, w, c, mn)`` of the ellipsoid's step through a sparse map ``E`` (compressed rows,
+    :class:`~switchobs_core.bounds.kalman_map.SparseTransition`: an open-loop ``Phi~``, or the error
+    map ``Phi~ - Gamma L C`` of a held innovation): ``Z = E S E'`` in two sparse products, with
+    ``|Z - E S E'| <= c w w'`` entrywise for ``w >= |E| s`` and ``c = gamma_{2k}``, ``k`` the most
+    nonzeros in a row of ``E`` (each sum of the two products has at most ``k`` terms:
+    :mod:`~switchobs_core.bounds.kalman_map`, step 1; the dense product's is ``gamma_{2n+2}``), and
+    ``mn >= ||E||_inf``: what :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product`
+    takes. ``O(nnz(E) n)`` instead of two dense products."""
+    return sp.sandwich_either(ell.S), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
 
 
 class RoundingBound:
@@ -136,6 +137,7 @@ class RoundingBound:
         if self.phase is not None:
             self.phase.reset()
         self._read, self._readv = AnchoredBound(), AnchoredBound()     # the published bounds
+        self._memo: tuple | None = None     # the last propagated() sets and their arguments (step reuses them)
         #: Why the bound can no longer be computed ("" while it can; module docstring).
         self.withdrawn = ""
 
@@ -319,33 +321,33 @@ class RoundingBound:
             self.withdrawn = ("the rounding bound's ellipsoid overflowed (it is no longer finite); "
                               "the bounds are withdrawn until the next reset")
 
-    def _noise(self, ell: ErrorEllipsoid, E: np.ndarray, rho: float, GL: np.ndarray | None,
-               keep: bool, absE: tuple | None = None, dt: float = 0.0, vn: float | None = None,
-               sparse: Any = None) -> tuple | None:
-        """A step of an ellipsoid over ``dt`` with a held innovation: its noise (``vn``, default the
-        held ``sqrt(p) v_max``; 0 for the exact set) and its stamp error ``w`` enter through
-        ``Gamma L`` (``||v + w|| <= vn + w``; open-loop steps and Kalman prediction steps add
-        none), a declared disturbance as :meth:`disturbed` says (``dt`` 0 for the exact set: none).
-        ``sparse``: the step's map ``E`` in compressed rows (:func:`open_loop_product`; not kept)."""
+    def _noise(self, ell: ErrorEllipsoid, e: Any, rho: float, GL: np.ndarray | None, keep: bool,
+               dt: float = 0.0, vn: float | None = None) -> tuple | None:
+        """A step of an ellipsoid through the ZOH cache entry ``e`` over ``dt`` with a held
+        innovation: its noise (``vn``, default the held ``sqrt(p) v_max``; 0 for the exact set) and
+        its stamp error ``w`` enter through ``Gamma L`` (``||v + w|| <= vn + w``; open-loop steps and
+        Kalman prediction steps add none), a declared disturbance as :meth:`disturbed` says (``dt`` 0
+        for the exact set: none). The map ``e.E`` is taken in compressed rows where it is sparse
+        (:func:`~switchobs_core.bounds.kalman_map.sparse_map`, :func:`open_loop_product`), else
+        densely. ``keep``: the step is kept in ``ell`` (None returned), else ``(S, trace S)``."""
         vn = self.vn if vn is None else vn
         c = vn ** 2 if not self.w else (vn + self.w) ** 2 * (1.0 + 4.0 * _U)
         G, c = (GL, c) if GL is not None and c > 0.0 else (None, 0.0)
         G, c, r = self.disturbed(dt, G, c)
         rho += r
-        if sparse is not None and not keep:
-            Z, w, cz, mn = open_loop_product(ell, sparse)
-            if G is not None:
-                return ell.propagate_shaped_product(Z, w, cz, rho, mn, G, c)
-            return ell.propagate_product(Z, w, cz, rho, mn)
-        if G is not None:
-            if keep:
-                ell.step_shaped(E, rho, G, c, absM=absE)
-                return None
-            return ell.propagate_shaped(E, rho, G, c, absM=absE)
+        sp = sparse_map(e)
+        if sp is not None:
+            Z, w, cz, mn = open_loop_product(ell, sp)
+            out = (ell.propagate_shaped_product(Z, w, cz, rho, mn, G, c) if G is not None
+                   else ell.propagate_product(Z, w, cz, rho, mn))
+        else:
+            absE = e.abs_E() if hasattr(e, "abs_E") else None
+            out = (ell.propagate_shaped(e.E, rho, G, c, absM=absE) if G is not None
+                   else ell.propagate(e.E, rho, absE))
         if keep:
-            ell.step(E, rho, absE)
+            ell.S, ell.tr = out
             return None
-        return ell.propagate(E, rho, absE)
+        return out
 
     def step(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
              u: np.ndarray | None, extra: float = 0.0) -> None:
@@ -353,31 +355,61 @@ class RoundingBound:
         ``extra``: the residual (balanced) of what the step added besides (:meth:`rho_input`)."""
         if self.withdrawn:
             return
-        absE = e.abs_E() if hasattr(e, "abs_E") else None
+        hit = self._memo is not None and self._same(self._memo[0], e, dt, x0, x1, nu, u, extra)
+        if hit:     # the sets propagated() gave for these very arguments: the same doubles (copied)
+            out, outv = self._memo[1]
+            self._ell.S, self._ell.tr = out[0].copy(), out[1]
+            if outv is not None:
+                self._ellv.S, self._ellv.tr = outv[0].copy(), outv[1]
+        self._memo = None
+        if hit:
+            self._check()
+            return
         with np.errstate(over="ignore", invalid="ignore"):
-            self._noise(self.ell, e.E, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
-                        e.GL if nu is not None and self.w else None, True, absE, 0.0, 0.0)
+            self._noise(self.ell, e, self.rho_step(e, dt, x0, x1, self.ell, nu, u) + extra,
+                        e.GL if nu is not None and self.w else None, True, 0.0, 0.0)
             if self.ellv is not None:
-                self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
-                            e.GL if nu is not None else None, True, absE, dt)
+                self._noise(self.ellv, e, self.rho_step(e, dt, x0, x1, self.ellv, nu, u) + extra,
+                            e.GL if nu is not None else None, True, dt)
         self._check()
 
+    def _key(self, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
+             u: np.ndarray | None, extra: float) -> tuple:
+        """Everything a step's sets are computed from: the entry, ``dt``, the residual's data, the held
+        sample's noise, stamp error and rounding, and the ellipsoids' shape matrices (by identity: a
+        step replaces them, never changes them in place); the vectors copied, compared by value."""
+        cp = (lambda v: None if v is None else np.array(v, dtype=float, copy=True))
+        ell, ellv = self.ell, self.ellv
+        return (e, dt, extra, self.vn, self.w, self.nu_err, ell.S, ell.tr, None if ellv is None else ellv.S,
+                cp(x0), cp(x1), cp(nu), cp(u))
+
+    def _same(self, key: tuple, e: Any, dt: float, x0: np.ndarray, x1: np.ndarray, nu: np.ndarray | None,
+              u: np.ndarray | None, extra: float) -> bool:
+        """Whether a step with these arguments computes the sets of ``key`` (:meth:`_key`)."""
+        ell, ellv = self.ell, self.ellv
+        if not (key[0] is e and key[1] == dt and key[2] == extra and key[3] == self.vn and key[4] == self.w
+                and key[5] == self.nu_err and key[6] is ell.S and key[7] == ell.tr
+                and key[8] is (None if ellv is None else ellv.S)):
+            return False
+        return all((a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+                   for a, b in zip(key[9:], (x0, x1, nu, u)))
+
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
-                   u: np.ndarray | None, extra: float = 0.0, *,
-                   sparse: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
-        """The shape matrices after the step ``e`` over ``dt``, not kept: ``(S, S_noise or None)``
-        (``extra`` as in :meth:`step`). With ``sparse``, an open-loop step (``E`` is ``e^{A dt}``)
-        whose exponential is sparse takes ``E S E'`` in compressed rows (:func:`open_loop_product`:
-        the same containment, other roundings); else the dense product."""
-        sp = sparse_transition(e) if sparse and e.E is e.Phi else None
+                   u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """The shape matrices after the step ``e`` over ``dt``: ``(S, S_noise or None)``, read-only (``extra``
+        as in :meth:`step`; a sparse map in compressed rows, as :meth:`step` takes it). The sets stay
+        as they are; a :meth:`step` with the same arguments next takes copies of these."""
+        key = self._key(e, dt, x0, xp, nu, u, extra) if not self.withdrawn else None
         with np.errstate(over="ignore", invalid="ignore"):
-            S, _ = self._noise(self.ell, e.E, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
-                               e.GL if nu is not None and self.w else None, False, None, 0.0, 0.0, sparse=sp)
-            Sv = None
+            out = self._noise(self.ell, e, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
+                              e.GL if nu is not None and self.w else None, False, 0.0, 0.0)
+            outv = None
             if self.ellv is not None:
-                Sv, _ = self._noise(self.ellv, e.E, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
-                                    e.GL if nu is not None else None, False, dt=dt, sparse=sp)
-        return S, Sv
+                outv = self._noise(self.ellv, e, self.rho_step(e, dt, x0, xp, self.ellv, nu, u) + extra,
+                                   e.GL if nu is not None else None, False, dt)
+        # kept for a step with the same arguments (the sample at that time: prior, then update)
+        self._memo = None if key is None else (key, (out, outv))
+        return out[0], None if outv is None else outv[0]
 
     def correct(self, M: np.ndarray, rho: float, K: np.ndarray, H: np.ndarray, p: int, channel: int) -> None:
         """Both ellipsoids through a Kalman correction ``e^+ = M e^- + r + K v`` with the computed

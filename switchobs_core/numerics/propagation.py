@@ -171,7 +171,7 @@ class ZOHEntry:
     """
 
     __slots__ = ("Phi", "Gamma", "GL", "GB", "E", "dt", "eps", "epsG", "fPhi", "nPhi", "fGL", "fGB", "emap",
-                 "scale", "sparse", "_absE")
+                 "scale", "sparse", "sparse_E", "_absE")
 
     def __init__(self, Phi, Gamma, GL, GB, dt, E=None, eps=0.0, *, epsG=0.0, scale=None, C=None):
         n = Phi.shape[0]
@@ -196,6 +196,7 @@ class ZOHEntry:
             self.emap = (gamma(GL.shape[1] + 1) * nu(GL / d[:, None]) * nu(C * d[None, :])
                          + 2.0 * UNIT_ROUNDOFF * nu(scaled(E, d))) * (1.0 + 8.0 * UNIT_ROUNDOFF)
         self.sparse = False      # Phi's sparse form, None if dense (kalman_map.sparse_transition)
+        self.sparse_E = False    # E's sparse form, None if dense (kalman_map.sparse_map)
         self._absE = None
 
     def abs_E(self) -> tuple[np.ndarray, float]:

@@ -48,7 +48,13 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
 6. ``S`` itself is computed in floating point, exactly symmetric (``(Z + Z') / 2``), and positive
    semidefinite (it dominates a PSD matrix), so ``|S_ij| <= s_i s_j`` with ``s = sqrt(diag S)``. The
    computed ``Z = fl(M S M')`` then has ``|Z - M S M'| <= c w w'`` entrywise with ``w = |M| s`` and
-   ``c = gamma_{2n+2}`` (two products and the symmetrisation), and for any symmetric ``X`` with
+   ``c = gamma_{2n+2}`` (two products and the symmetrisation; a product whose sums have fewer
+   terms rounds less: with ``M`` sparse, at most ``k`` nonzeros in a row, both products
+   sum at most ``k`` nonzero terms per entry (a term ``0 * x`` and a sum ``s + 0`` are exact), so
+   ``|fl(M S) - M S| <= gamma_k |M| |S|``, then ``gamma_k`` again on the computed ``M S``, in all
+   ``(2 gamma_k + gamma_k^2) w w' <= gamma_{2k} w w'``: ``c = gamma_{2k}``, about 12 ``u`` for
+   ``camera_agents(32)``'s held-innovation map (``k = 6``) against 266 ``u``; the symmetrisation's own rounding is
+   counted at the assembly), and for any symmetric ``X`` with
    ``|X| <= c w w'``: ``x' X x <= c (sum_i w_i |x_i|)^2 <= c W sum_i w_i d_i x_i^2`` (Cauchy-Schwarz
    with weights ``w_i / (d_i W)``, ``W = sum_j w_j / d_j``). So ``Z + c W diag(w d)`` contains
    ``M S M'`` in the PSD order: an allowance in the shape of the step's image of the ellipsoid,
@@ -76,10 +82,15 @@ Argument (innovation hold or Kalman gains, noise-free samples ``y_k = C x_k``)
    ``n sqrt(eta) = n 2.2e-162``.
 
 Cost: two n x n products per step (like the transition product itself) and O(n^2) for the
-allowances, one eigenvalue problem when the bound is read. A Kalman sample with a sparse
-``e^{A dt}`` takes step 6's product in factors, O(n^2 p), with its own ``c`` and ``w``
-(:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the bound is read in O(n^2)
-between anchors (:mod:`switchobs_core.bounds.read`).
+allowances, one eigenvalue problem when the bound is read. A sparse error map (from
+:data:`~switchobs_core.bounds.kalman_map.SPARSE_MIN_N` states, at most
+:data:`~switchobs_core.bounds.kalman_map.SPARSE_MAX_FILL` of nonzeros: chosen by the count of
+nonzeros, deterministically) takes step 6's product in compressed rows, O(nnz n), with ``c =
+gamma_{2k}`` and ``w = |M| s`` summed over each row's nonzeros
+(:func:`~switchobs_core.bounds.rigorous.open_loop_product`); a Kalman sample with a sparse
+``e^{A dt}`` takes it in factors, the sparse ``e^{A dt}`` and a rank-``2p`` term, O(nnz n + n^2 p),
+with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the
+bound is read in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`).
 """
 
 from __future__ import annotations
@@ -144,6 +155,7 @@ class ErrorEllipsoid:
         self._ii = np.arange(self.n)
         self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
         self.c_dense = gamma(2 * self.n + 2)
+        self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -162,6 +174,30 @@ class ErrorEllipsoid:
         symmetric matrix bounded entrywise by ``c w w'`` (step 6), rounded up."""
         W = float(w @ self._id) * self._gsum
         return (c * W) * (w * self.d) * (1.0 + 4.0 * _U)
+
+    def _shaped(self, G: np.ndarray, c: float, GGt: np.ndarray | None) -> tuple:
+        """``(Q, R_q, w_q, trace_D(Q + R_q))`` of the added set ``E(c G G')`` (module docstring, step 7):
+        ``Q = sym fl(c fl(G G'))``, its allowance ``R_q`` and vector ``w_q``. Kept for the last few
+        ``(G, c)`` (a held innovation's ``Gamma L`` and a channel's ``p v_max^2`` recur every cycle),
+        ``G`` compared by value: the same doubles as computing them again."""
+        hit = self._qc.get(id(G))
+        if hit is not None and hit[1] == c and hit[2] is GGt and np.array_equal(hit[0], G):
+            return hit[3]
+        given = GGt
+        if GGt is None:
+            GGt = G @ G.T
+        Q = c * GGt
+        Q += Q.T
+        Q *= 0.5
+        g = np.sqrt(np.einsum("ij,ij->i", G, G)) * (self._gsum * (1.0 + 2.0 * _U))     # row norms
+        cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
+        wq = g * math.sqrt(c * (1.0 + cq))
+        rq = self._diag(g, cq * c)
+        tq = max(float((Q.diagonal() + rq) @ self._id2), 0.0) * self._gsum
+        if len(self._qc) >= 64:
+            self._qc.clear()
+        self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
+        return Q, rq, wq, tq
 
     # ------------------------------------------------------------------ steps
     def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
@@ -209,16 +245,7 @@ class ErrorEllipsoid:
         if noise is not None:
             G, c, GGt = noise
             if G.size and c > 0.0:
-                if GGt is None:
-                    GGt = G @ G.T
-                Q = c * GGt
-                Q += Q.T
-                Q *= 0.5
-                g = np.sqrt(np.einsum("ij,ij->i", G, G)) * (self._gsum * (1.0 + 2.0 * _U))     # row norms
-                cq = gamma(G.shape[1] + 4)          # |fl(c G G') - c G G'| <= cq c g g', symmetrised
-                wq = g * math.sqrt(c * (1.0 + cq))
-                rq = self._diag(g, cq * c)
-                tq = max(float((Q.diagonal() + rq) @ id2), 0.0) * self._gsum
+                Q, rq, wq, tq = self._shaped(G, c, GGt)
                 if not tq > 0.0:
                     Q = None
         # the added set: E(Q + R_q) (+) E(rho^2 D^2) inside E(beta (Q + R_q) + kappa rho^2 D^2)

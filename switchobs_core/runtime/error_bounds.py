@@ -110,8 +110,8 @@ class ErrorBounds:
     def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
              u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray | float, np.ndarray | float | None]:
         """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
-        :meth:`read`; copies at the sample's time, propagated and not kept after it, an open-loop
-        step with a sparse exponential in compressed rows: ``RoundingBound.propagated(sparse=True)``)."""
+        :meth:`read`; copies at the sample's time, propagated after it by ``RoundingBound.propagated``, a
+        sparse map in compressed rows: read-only, the sample's own step at ``t`` takes copies of them)."""
         b = self.rigorous
         if b.withdrawn:         # no set is kept any more: the norm bounds say so
             return math.inf, None if b.ellv is None else math.inf
@@ -119,4 +119,4 @@ class ErrorBounds:
             return b.phase.bounds() if step is None else b.phase.later(b, step, dt, x, xp, v, u, extra)
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        return b.propagated(step, dt, x, xp, v, u, extra, sparse=True)
+        return b.propagated(step, dt, x, xp, v, u, extra)

@@ -111,8 +111,8 @@ CASES = [
     Case("unstable15", stamps="late", seconds=17.5, slow=True),
     # n = 42 and 44 (module docstring of kalman_map): the Kalman families only (no LMI design at this size)
     Case("blocks14", seconds=17.5, families=("kalman", "kalman-online")),
-    Case("agents10", seconds=4.0, families=("kalman", "kalman-online")),
-    Case("agents10", noise="sign", seconds=4.0, families=("kalman", "kalman-online")),
+    Case("agents10", seconds=4.0, families=("kalman", "kalman-online", "lmi")),
+    Case("agents10", noise="sign", seconds=4.0, families=("kalman", "kalman-online", "lmi")),
     Case("agents10", stamps="jitter", noise="corner", seconds=3.0, families=("kalman",)),
 ]
 
@@ -207,7 +207,8 @@ def audit(case: Case, family: str, table: so.GainTable) -> dict:
     b = obs._bound
     out.update(factored=any(getattr(m, "_sp", None) is not None
                             for m in getattr(obs._gains, "_fused", {}).values())
-               or any(isinstance(getattr(e, "sparse", None), SparseTransition) for e in obs._cache._lru.values()),
+               or any(isinstance(getattr(e, "sparse", None), SparseTransition)
+                      or isinstance(getattr(e, "sparse_E", None), SparseTransition) for e in obs._cache._lru.values()),
                verified=(b._readv if case.noise else b._read).verified,
                anchors=(b._readv if case.noise else b._read).anchors)
     out.update(samples=len(ts), error=err_of(obs.x_hat, truth.x), bound=bound, max_x=max_x,
