@@ -91,6 +91,8 @@ RANGES: dict[str, tuple[float, float, bool, str]] = {
     "rate": (0.0, MAX_RATE_HZ, False, "Hz (0: not set); samples per period also bounded by memory"),
     "reorder_window_ms": (0.0, 1000.0, False, "ms a sample waits for its channel: a wait, and up to 1024 samples held"),
     "clock_tolerance_ms": (0.0, 1000.0, False, "ms of clock error; beyond a second a sample's time is unknown"),
+    "switch_horizon": (0.0, 1.0, False, "a fraction of the shortest designed residence (1: no slack for a switch "
+                       "that comes early)"),
     "consistency.chi2_alpha": (0.0, 0.5, False, "a false-alarm probability per sample (0: off)"),
 }
 

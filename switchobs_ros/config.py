@@ -133,6 +133,12 @@ PARAMS = [
           "error d is a measurement error of at most sup_{|s|<=d} ||C (e^{A s} - I) x|| "
           "(switchobs_core.bounds.stamp); a sample stamped within it of a switching instant is ambiguous; a stamp "
           "that proves a larger offset (ahead of the receive clock by more) withdraws the bounds. 0: exact stamps."),
+    Param("switch_horizon", 0.9, "With the stamped channel: a sample stamped within this fraction of its channel's "
+          "shortest designed residence after the latest switching instant (less clock_tolerance_ms) is certain at "
+          "once, answered without waiting for a later channel message; the rest of the residence waits for one "
+          "(about one tick with camera_sim). A switch that comes sooner than this withdraws the bounds "
+          "(switchobs_ros.switching). 0.9 leaves a tenth of the residence for a camera that switches early; 1 trusts "
+          "the schedule's residences to the nanosecond and answers every sample at once."),
     Param("channel_type", "auto", "The channel topic's message type: switchobs_msgs/msg/ActiveChannel (the "
           "switching instant in its stamp: samples attributed by their stamps), std_msgs/msg/UInt8 (attributed by "
           "the publishers' source timestamps; for one publisher of the channel and the samples), or auto (the type "
@@ -404,6 +410,7 @@ class EstimatorConfig:
                               f"got {values['consistency.check']!r}")
         check_range(values["reorder_window_ms"], "reorder_window_ms", exc=ConfigError)
         check_range(values["clock_tolerance_ms"], "clock_tolerance_ms", exc=ConfigError)
+        check_range(values["switch_horizon"], "switch_horizon", exc=ConfigError)
         if values["channel_type"] not in CHANNEL_TYPES:
             raise ConfigError(f"parameter 'channel_type' must be one of {', '.join(CHANNEL_TYPES)}; got "
                               f"'{values['channel_type']}'")

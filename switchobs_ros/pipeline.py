@@ -198,7 +198,7 @@ class EstimatorPipeline(Counters):
         pipe.screening.watch_only = conf["consistency.check"] == "auto" and conf.noise_max is None
         pipe.screening.options(conf["consistency.recertify"], conf["consistency.bias"], conf["consistency.reinit"])
         h_min = [min((cy.h[c] for cy in cycles), default=conf.robust[0] if conf.robust else 0.0) for c in range(sys_.N)]
-        pipe.attribution.stamped.horizon = {c + 1: int(0.9 * h * 1e9) for c, h in enumerate(h_min)}   # at once
+        pipe.attribution.stamped.horizon = {c + 1: int(conf["switch_horizon"] * h * 1e9) for c, h in enumerate(h_min)}
         pipe.config = conf
         pipe.uncovered = tuple(conf.inputs.uncovered)
         for why in ([conf.inputs.uncovered_warning()] if pipe.uncovered else []) + ([] if check else [UNCHECKED]):

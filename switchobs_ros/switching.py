@@ -13,11 +13,12 @@ channel rows and counts them.
 A sample is *certain* once a later switching instant ``S > s + d`` is known, or a channel message
 sent ``2 d`` after it (source timestamps: a switch is published when it happens, so none before
 ``s + d`` can follow it), or at once when it lies within the *horizon* after the latest switching
-instant (:attr:`SwitchHistory.horizon`: 0.9 of the shortest residence of its channel the gains were
-designed for, less ``d``): no switch can come sooner while the schedule holds, and a switch that
-does come sooner arrives as a switching message for samples already answered, which withdraws the
-bounds (:meth:`SwitchHistory.remember`). Nothing else makes a sample certain: a sample whose
-reorder window passes before the stamps prove its channel is *uncertain*
+instant (:attr:`SwitchHistory.horizon`: the parameter ``switch_horizon``, 0.9 by default, of the
+shortest residence of its channel the gains were designed for, less ``d``): no switch can come
+sooner while the schedule holds, and a switch that does come sooner arrives as a switching message
+for samples already answered, which withdraws the bounds (:meth:`SwitchHistory.remember`).
+Nothing else makes a sample certain: a sample whose reorder window passes before the stamps prove
+its channel is *uncertain*
 (:attr:`~switchobs_ros.attribution.Verdict.UNCERTAIN`), never attributed by a guess; the pipeline
 treats it as ambiguous. A gap in the publisher's sequence numbers between two messages with
 different instants leaves the channel between them unknown

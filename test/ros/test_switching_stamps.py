@@ -17,10 +17,10 @@ MS = 1_000_000
 NOW = 100_000 * S
 
 
-def _pipe(paper_tables, tolerance_ms):
+def _pipe(paper_tables, tolerance_ms, **params):
     c = {p.name: p.default for p in PARAMS}
     # e0 covers the scene: the consistency test (on whenever a bound is published) holds the samples to it
-    c.update(gain_table=paper_tables["periodic"], clock_tolerance_ms=tolerance_ms, e0=20.0)
+    c.update(gain_table=paper_tables["periodic"], clock_tolerance_ms=tolerance_ms, e0=20.0, **params)
     return EstimatorPipeline.from_params(c)
 
 
@@ -139,6 +139,26 @@ def test_within_the_horizon_a_sample_is_answered_at_once(exact):
     pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
     assert [e.stamp_ns for e in _tick(pl, t0 + S, (3.0, 1.0), 0.0, S)] == [t0 + S]
     assert _tick(pl, t0 + 1100 * MS, (3.0, 1.0), 0.1, S + 10 * MS) == []
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_the_horizon_is_the_switch_horizon_of_the_residence(paper_tables, fraction):
+    """``switch_horizon`` sets the horizon: at 1 a sample 1 ms before the end of channel 1's 1.2 s
+    is certain at once; at 0.5 one at 0.7 s waits for its channel and one at 0.5 s less 1 ms does not."""
+    pl = _pipe(paper_tables, 0.0, switch_horizon=fraction)
+    assert pl.attribution.stamped.horizon == {1: int(fraction * 1.2 * S), 2: int(fraction * 0.8 * S)}
+    t0 = NOW - 10 * S
+    pl.on_channel(active_channel(1, t0), src_ns=S, seq=1)
+    inside = t0 + int(fraction * 1.2 * S) - MS
+    assert [e.stamp_ns for e in _tick(pl, inside, (3.0, 1.0), 0.0, S)] == [inside]
+    if fraction < 1.0:
+        assert _tick(pl, t0 + 700 * MS, (3.0, 1.0), 0.1, S + 10 * MS) == []
+
+
+def test_a_switch_horizon_outside_zero_to_one_is_refused(paper_tables):
+    from switchobs_ros.config import ConfigError
+    with pytest.raises(ConfigError, match="switch_horizon"):
+        _pipe(paper_tables, 0.0, switch_horizon=1.5)
 
 
 def test_a_switch_sooner_than_the_schedule_withdraws_the_bounds(exact):
