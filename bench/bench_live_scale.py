@@ -134,11 +134,12 @@ def percentiles(values) -> tuple[float, float]:
 
 
 def parse_kind(kind: str) -> tuple[str, str, bool | None, bool]:
-    """``base[@executor][+listen|+quiet][+dds]`` -> (base, executor, listened: None = as ``--listen``,
-    the node under ``--node-dds-profile``)."""
+    """``base[@executor][+listen|+quiet][+dds][+once]`` -> (base, executor, listened: None = as ``--listen``,
+    the node under ``--node-dds-profile``); ``+once`` (read by :func:`run_node`) sets the estimator's
+    ``switch_horizon`` to 1."""
     name, *mods = kind.split("+")
-    if not set(mods) <= {"listen", "quiet", "dds"} or {"listen", "quiet"} <= set(mods):
-        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, and +dds")
+    if not set(mods) <= {"listen", "quiet", "dds", "once"} or {"listen", "quiet"} <= set(mods):
+        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, +dds and +once")
     base, _, executor = name.partition("@")
     return base, executor, "listen" in mods if {"listen", "quiet"} & set(mods) else None, "dds" in mods
 
@@ -153,7 +154,8 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     ``output.*_every``, ``profile`` runs it under cProfile (bench/profile_node.py); a ``kind``
     ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
     ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy; a
-    ``+dds`` suffix runs the node (only) with the Fast DDS profile ``dds_profile``."""
+    ``+dds`` suffix runs the node (only) with the Fast DDS profile ``dds_profile``; ``+once`` runs the
+    estimator with ``switch_horizon`` 1 (every sample of a residence answered at once)."""
     base, executor, listened, own_profile = parse_kind(kind)
     listen = listen if listened is None else listened
     repo = main_repo if base.startswith("main:") else REPO
@@ -178,6 +180,8 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
         topic, pose = "/estimator/state", False
     else:
         params = dict(sched, system=str(sys_path), gain_table=tables[base.removeprefix("main:")], e0=1e3, **outputs)
+        if "once" in kind.split("+")[1:]:
+            params["switch_horizon"] = 1.0
         code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
                 "runpy.run_module('switchobs_ros.estimator', run_name='__main__')")
         cmd = ([sys.executable, str(REPO / "bench" / "profile_node.py"), str(profile)] if profile
@@ -268,7 +272,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--nodes", default="bare,kalman,lmi",
                     help="comma-separated: bare, sink, kalman, lmi, main:kalman, main:lmi, each with an optional "
                          "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's) and an optional "
-                         "+listen or +quiet (this node's outputs listened or not, whatever --listen says); a node "
+                         "+listen or +quiet (this node's outputs listened or not, whatever --listen says), +dds (under "
+                         "--node-dds-profile) and +once (the estimator's switch_horizon 1); a node "
                          "may repeat (interleaved rounds)")
     ap.add_argument("--listen", action="store_true",
                     help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
