@@ -63,14 +63,9 @@ import numpy as np
 from scipy.linalg.blas import dgemm as _dgemm
 from scipy.sparse import csr_array
 
+from ..numerics.csr import csr_matmat, csr_matvec
 from ..numerics.expm_bound import nu
 from ..numerics.rounding import fro_norm, gamma
-
-try:        # scipy's kernel behind ``csr_array @ dense`` (the same loop, without 30 us of checks)
-    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
-    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
-except ImportError:     # pragma: no cover - another scipy layout: the public product
-    _csr_matvec = _csr_matvecs = None
 
 __all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_map", "sparse_transition", "KalmanMap"]
 
@@ -105,40 +100,28 @@ class SparseTransition:
 
     def abs_matvec(self, x: np.ndarray) -> np.ndarray:
         """``|Phi~| x`` (for ``x >= 0``: the factored step's ``y``)."""
-        if _csr_matvec is None:         # pragma: no cover
-            return np.asarray(csr_array((self._adv, self._ix, self._ip), shape=(self.n, self.n)) @ x)
-        out = np.zeros(self.n)
-        _csr_matvec(self.n, self.n, self._ip, self._ix, self._adv, x, out)
-        return out
+        return csr_matvec(self._ip, self._ix, self._adv, (self.n, self.n), x)
 
-    def _mm(self, B: np.ndarray) -> np.ndarray:
-        """``Phi~ B`` for a C-contiguous ``B`` (n x m)."""
-        if _csr_matvecs is None:        # pragma: no cover
-            return np.asarray(self.csr @ B)
-        out = np.zeros((self.n, B.shape[1]))
-        _csr_matvecs(self.n, self.n, B.shape[1], self._ip, self._ix, self._dv, B.ravel(), out.ravel())
-        return out
+    def matmat(self, B: np.ndarray) -> np.ndarray:
+        """``Phi~ B`` for a dense ``B`` (n x m)."""
+        return csr_matmat(self._ip, self._ix, self._dv, (self.n, self.n), B)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """``Phi~ x`` (the sum over a row's nonzeros only: its rounding is within the dense one's)."""
-        if _csr_matvec is None:         # pragma: no cover
-            return np.asarray(self.csr @ x)
-        out = np.zeros(self.n)
-        _csr_matvec(self.n, self.n, self._ip, self._ix, self._dv, x, out)
-        return out
+        return csr_matvec(self._ip, self._ix, self._dv, (self.n, self.n), x)
 
     def sandwich(self, S: np.ndarray) -> np.ndarray:
         """``Phi~ S Phi~'`` as ``(Phi~ (Phi~ S)')'`` (two sparse products)."""
-        X = self._mm(np.ascontiguousarray(S))
-        return self._mm(np.ascontiguousarray(X.T)).T
+        X = self.matmat(S)
+        return self.matmat(X.T).T
 
     def sandwich_either(self, S: np.ndarray) -> np.ndarray:
         """``Phi~ S Phi~'`` or its transpose ``Phi~ S' Phi~'`` (C-ordered), whichever needs one
         copy less: ``S`` or ``S'`` is read where it lies in memory. The ellipsoid is ``sym S``, the
         same for both (:mod:`switchobs_core.numerics.rounding`, step 5)."""
         T = S if S.flags.c_contiguous else np.ascontiguousarray(S.T)     # S.T of an F-ordered S: no copy
-        X = self._mm(T)                                 # Phi~ T
-        return self._mm(np.ascontiguousarray(X.T))      # Phi~ T' Phi~'
+        X = self.matmat(T)                                 # Phi~ T
+        return self.matmat(X.T)      # Phi~ T' Phi~'
 
 
 def sparse_transition(entry: Any) -> SparseTransition | None:
@@ -310,7 +293,7 @@ class KalmanMap:
 
     def __matmul__(self, other: np.ndarray) -> np.ndarray:
         if self._sp is not None and self._E is None:     # M X = Phi~ X - K (H (Phi~ X))
-            PX = self._sp._mm(np.ascontiguousarray(other))
+            PX = self._sp.matmat(other)
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 

@@ -35,12 +35,8 @@ from ..certificate import cycle_transition
 from ..certificate.paper import design_dead_time
 from ..exceptions import GainTableError, SwitchobsError
 from ..model.schedule import Cycle
+from ..numerics.csr import csr_matmat
 from .kalman import KalmanDesign
-
-try:        # scipy's kernel behind ``csr_array @ dense``
-    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
-except ImportError:     # pragma: no cover - another scipy layout: the public product
-    _csr_matvecs = None
 
 if TYPE_CHECKING:
     from ..model.system import LTISystem
@@ -132,13 +128,11 @@ def _period_map(kd: KalmanDesign, system: LTISystem, source: str) -> np.ndarray:
 
 
 def _apply(Phi: np.ndarray | csr_array, M: np.ndarray) -> np.ndarray:
-    """``Phi @ M`` (``M`` dense, n x n): for a sparse ``Phi`` scipy's ``csr_matvecs``, the loop that
-    ``csr_array @ dense`` runs (the same sums in the same order), called directly."""
-    if _csr_matvecs is None or not isinstance(Phi, csr_array):
+    """``Phi @ M`` (``M`` dense, n x n); a sparse ``Phi`` through scipy's kernel
+    (:mod:`~switchobs_core.numerics.csr`)."""
+    if not isinstance(Phi, csr_array):
         return Phi @ M
-    out = np.zeros((Phi.shape[0], M.shape[1]))
-    _csr_matvecs(Phi.shape[0], Phi.shape[1], M.shape[1], Phi.indptr, Phi.indices, Phi.data, M.ravel(), out.ravel())
-    return out
+    return csr_matmat(Phi.indptr, Phi.indices, Phi.data, Phi.shape, M)
 
 
 def _transition(Phi: np.ndarray) -> np.ndarray | csr_array:

@@ -55,11 +55,6 @@ import numpy as np
 from ...bounds.kalman_map import sparse_transition
 from ...exceptions import GainTableError
 
-try:        # scipy's kernel behind ``csr_array @ dense`` (as bounds.kalman_map: without its checks)
-    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
-except ImportError:     # pragma: no cover - another scipy layout: the public product
-    _csr_matvecs = None
-
 __all__ = ["GAP_MAX", "GapDeviation"]
 
 #: The retire test runs at every this many samples of a deviation (it spares nothing exact: a
@@ -144,13 +139,7 @@ class GapDeviation:
         sp = sparse_transition(e)
         if sp is None:
             return e.Phi @ V
-        if _csr_matvecs is None:        # pragma: no cover
-            return np.asarray(sp.csr @ V)
-        n, r = V.shape
-        out = np.zeros((n, r))
-        c = sp.csr
-        _csr_matvecs(n, n, r, c.indptr, c.indices, c.data, np.ascontiguousarray(V).ravel(), out.ravel())
-        return out
+        return sp.matmat(V)
 
     def prior(self, last_k: int, k: int) -> np.ndarray | None:
         """The prior deviation ``V`` at sample ``k > last_k`` (the real prior is ``S_k + V V'``),
