@@ -24,8 +24,8 @@ import numpy as np
 from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
-from ..covariance import CovarianceStep, PendingSteps
-from .base import Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
+from ..covariance import CovarianceStep, HeldBlock, PendingSteps
+from .base import OPEN_LOOP, Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
 
 __all__ = ["LmiGains"]
 
@@ -79,6 +79,7 @@ class LmiGains:
             noise.check_system(ctx.system)
             self._cov = CovarianceStep(ctx.A, ctx.B, noise, ctx.dt_resolution)
             self._pending = PendingSteps(self._cov)
+            self._block = HeldBlock(self._cov)
         self._keys: dict = {}       # (design, channel, rows) -> (ZOH key, C rows)
         self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
@@ -105,6 +106,7 @@ class LmiGains:
         self._P = self.noise.P0.copy() if self.track_covariance else None
         if self.track_covariance:
             self._pending.clear()
+            self._block.clear()
         self._prior = None
         self._held = None
         self._R_held = None
@@ -115,6 +117,7 @@ class LmiGains:
     def stepped(self, e: Any, dt: float) -> None:
         if self._P is not None:
             held = self._R_held if self._held is not None else None
+            self._block.step(e, dt, held)
             prior, self._prior = self._prior, None
             if (prior is not None and prior[0] is self._P and prior[1] is e and prior[2] is self._cov.q_d(dt)
                     and prior[3] is held and not len(self._pending) and self._cov.prior_is_step(e)):
@@ -131,7 +134,23 @@ class LmiGains:
         return self._P.copy()
 
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
-        return None
+        """With ``cols`` (a bias test's block): the prior's block on them from the block of ``P`` the
+        step maps into itself (:class:`~switchobs_core.runtime.covariance.HeldBlock`, started from the
+        full covariance when it is not the one kept), without the n x n prior; else None."""
+        if cols is None or self._P is None:
+            return None
+        h = self._held
+        e = self._ctx.zoh(OPEN_LOOP if h is None else h.key, dt)
+        got = self._block.closure(e, np.asarray(cols))
+        if got is None:
+            return None
+        K, ix = got
+        if not self._block.holds(K):
+            if len(self._pending):
+                self._P = self._pending.apply(self._P)
+            self._block.start(self._P, K)
+        B = self._block.prior(e, dt, self._R_held if h is not None else None)
+        return B[ix]
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         """The prior through ``e``; kept (a copy) for :meth:`stepped` when ``P`` is the covariance kept."""
@@ -147,6 +166,7 @@ class LmiGains:
     def set_covariance(self, P: np.ndarray) -> None:
         if self._P is not None:
             self._pending.clear()
+            self._block.clear()
         self._prior = None
         self._P = P
 
