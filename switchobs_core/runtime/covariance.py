@@ -14,7 +14,10 @@ none: its correction follows at the sample). ``E P E'`` is taken in factors when
 agents ``E`` has 210 nonzeros of 17 424), each entry summed over a row's nonzeros only, the same
 covariance as the dense products up to their rounding. The gain families keep their covariance with it; the
 Kalman families keep a factor of it (``P = L L'``, :meth:`CovarianceStep.factor_step`, the
-square-root form of :mod:`switchobs_core.runtime.families.online`).
+square-root form of :mod:`switchobs_core.runtime.families.online`). A bias test's block of the prior
+is taken on the few states a held step maps into itself (:class:`HeldBlock`), and a run of equal
+steps waiting to be taken (:class:`PendingSteps`) by powers of ``E`` in compressed rows where they
+stay sparse.
 """
 
 from __future__ import annotations
@@ -149,8 +152,9 @@ class PendingSteps:
     arithmetic as at every sample), a run of ``m >= MIN_DOUBLING`` steps by binary powers,
     ``P <- E^{2^i} P E^{2^i}' + S_i`` for each bit ``i`` of ``m``, with ``S_0 = Q``,
     ``S_{i+1} = E^{2^i} S_i E^{2^i}' + S_i`` and ``Q = Q_d + Gamma L R (Gamma L)'``: about
-    ``2 log2 m`` products of n x n matrices instead of ``2 m`` (the powers are kept per step, up to
-    :data:`POWER_BYTES`), the same covariance up to rounding. :meth:`push` returns True when
+    ``2 log2 m`` products of n x n matrices instead of ``2 m`` (in compressed rows where a power is
+    sparse: a held gain's at 32 agents stays within one agent and the common states; the powers are
+    kept per step, up to :data:`POWER_BYTES`), the same covariance up to rounding. :meth:`push` returns True when
     :data:`MAX_RUNS` runs wait (the caller applies them: the work is then what it was).
     """
 
@@ -164,7 +168,7 @@ class PendingSteps:
     def __init__(self, cov: CovarianceStep) -> None:
         self._cov = cov
         self._runs: list[list] = []             # [e, dt, Q_d, R, count]
-        self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i)])
+        self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i, its CSR)])
         self._bytes = 0
 
     def __len__(self) -> int:

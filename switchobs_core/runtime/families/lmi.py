@@ -13,6 +13,9 @@ equal steps by binary powers), so a sample costs no n x n product where no outpu
 prior a consistency test reads at a sample (:meth:`LmiGains.predict_covariance`) is the step the
 sample's update then takes, by the same arithmetic from the same covariance: it is kept and becomes the
 covariance (one propagation per sample where the test and an output both read it, the same numbers).
+A bias test reads the prior's block on a sample's columns only (:meth:`LmiGains.stored_prior`): from the
+block of ``P`` the held step maps into itself, carried step by step
+(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait.
 """
 
 from __future__ import annotations
