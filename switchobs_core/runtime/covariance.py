@@ -59,10 +59,7 @@ class CovarianceStep:
         Kalman family (:func:`~switchobs_core.bounds.kalman_map.sparse_transition`)."""
         _, _, Q_d = self._dcache.get(dt)
         sp = sparse_transition(e) if e.E is e.Phi else self.sparse_map(e)
-        P = (sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T) + Q_d
-        if held_noise is not None:
-            P += held_noise
-        return symmetrize(P)
+        return _added(sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T, Q_d, held_noise)
 
     def sparse_map(self, e: Any) -> SparseTransition | None:
         """The sparse form of the error map ``E = e^{A dt} - Gamma_A L C`` of an entry ``e`` that holds a
@@ -121,10 +118,7 @@ class CovarianceStep:
         """The same (the prior a consistency test reads), with dense products where nothing is held."""
         _, _, Q_d = self._dcache.get(dt)
         sp = self.sparse_map(e)
-        P = (sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T) + Q_d
-        if held_noise is not None:
-            P += held_noise
-        return symmetrize(P)
+        return _added(sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T, Q_d, held_noise)
 
 
     def prior_block(self, P: np.ndarray, e: Any, dt: float, cols: np.ndarray, *, factor: bool = False) -> np.ndarray:
@@ -168,6 +162,7 @@ class PendingSteps:
     def __init__(self, cov: CovarianceStep) -> None:
         self._cov = cov
         self._runs: list[list] = []             # [e, dt, Q_d, R, count]
+        self._held: dict = {}                   # id(e) -> (e, R, (Gamma L) R (Gamma L)')
         self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i, its CSR)])
         self._bytes = 0
 
@@ -190,7 +185,7 @@ class PendingSteps:
         """``P`` through every pending step (then none is pending)."""
         for e, dt, Q_d, R, m in self._runs:
             if m < self.MIN_DOUBLING:
-                held = None if R is None else e.GL @ R @ e.GL.T
+                held = None if R is None else self._held_noise(e, R)
                 for _ in range(m):
                     P = self._cov.step(P, e, dt, held)
                 continue
@@ -201,6 +196,15 @@ class PendingSteps:
                     P = symmetrize((spi.sandwich(P) if spi is not None else Ei @ P @ Ei.T) + Si)
         self._runs.clear()
         return P
+
+    def _held_noise(self, e: Any, R: np.ndarray) -> np.ndarray:
+        """``(Gamma L) R (Gamma L)'`` of the entry ``e``, kept per entry and ``R``."""
+        hit = self._held.get(id(e))
+        if hit is None or hit[0] is not e or hit[1] is not R:
+            if len(self._held) >= 256:
+                self._held.clear()
+            hit = self._held[id(e)] = (e, R, e.GL @ R @ e.GL.T)
+        return hit[2]
 
     def _levels(self, e: Any, Q_d: np.ndarray, R: np.ndarray | None, k: int) -> list:
         """``[(E^{2^i}, S_i)]`` for ``i < k`` (class docstring), kept."""
@@ -227,6 +231,14 @@ class PendingSteps:
     def _drop(self, key: Any) -> None:
         _, _, _, levels = self._powers.pop(key)
         self._bytes -= sum(E.nbytes + S.nbytes for E, S, _ in levels)
+
+
+def _added(X: np.ndarray, Q_d: np.ndarray, held_noise: np.ndarray | None) -> np.ndarray:
+    """``symmetrize((X + Q_d) + held_noise)``."""
+    P = X + Q_d
+    if held_noise is not None:
+        P += held_noise
+    return symmetrize(P)
 
 
 def _sparse(E: np.ndarray) -> SparseTransition | None:

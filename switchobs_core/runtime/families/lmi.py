@@ -90,6 +90,7 @@ class LmiGains:
         self._noises: dict = {}             # id(e) -> (e, R, (Gamma L) R (Gamma L)'): per step and held R
         self._held: Held | None = None
         self._R_held = None
+        self._read = False      # P read since the last step (a reader at every sample)
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, robust: Any = None, delta: float = 0.99, **_: Any) -> Any:
@@ -113,6 +114,7 @@ class LmiGains:
         self._prior = None
         self._held = None
         self._R_held = None
+        self._read = False
 
     def fuses(self, input_held: bool) -> bool:
         return False
@@ -120,6 +122,7 @@ class LmiGains:
     def stepped(self, e: Any, dt: float) -> None:
         if self._P is not None:
             held = self._R_held if self._held is not None else None
+            self._read = False
             self._block.step(e, dt, held)
             prior, self._prior = self._prior, None
             if (prior is not None and prior[0] is self._P and prior[1] is e and prior[2] is self._cov.q_d(dt)
@@ -134,13 +137,19 @@ class LmiGains:
             return None
         if len(self._pending):
             self._P = self._pending.apply(self._P)
+        self._read = True
         return self._P.copy()
 
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """With ``cols`` (a bias test's block): the prior's block on them from the block of ``P`` the
         step maps into itself (:class:`~switchobs_core.runtime.covariance.HeldBlock`, started from the
-        full covariance when it is not the one kept), without the n x n prior; else None."""
+        full covariance when it is not the one kept), without the n x n prior; else None, and None
+        where ``P`` was read since the last step (a reader at every sample: the full prior is then the
+        step the sample takes, kept by :meth:`predict_covariance`, and the block would be work added)."""
         if cols is None or self._P is None:
+            return None
+        if self._read and not len(self._pending):
+            self._block.clear()
             return None
         h = self._held
         e = self._ctx.zoh(OPEN_LOOP if h is None else h.key, dt)

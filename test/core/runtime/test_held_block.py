@@ -133,11 +133,13 @@ def test_the_observers_prior_block_is_the_full_priors_and_keeps_the_covariance(a
     steps one by one; measured 1.4e-12, the first seconds' blocks a cancellation of terms a
     thousand times larger, from ``P0``), the full prior is never formed for a block, and the
     covariance kept (its steps taken when read, a run by powers) is the other's within 1e-12
-    relative (measured 3.3e-14)."""
+    relative (measured 3.3e-14). One whose ``P`` is read at every sample takes the full prior instead
+    (the step the sample then takes): its blocks are the full prior's, the same doubles."""
     system, table = agents8
     cyc = so.Cycle([1.0] * 8)
     obs = so.SwitchedObserver(system, table, "periodic", [cyc], noise=default_noise(system))
     other = so.SwitchedObserver(system, table, "periodic", [cyc], noise=default_noise(system))
+    reader = so.SwitchedObserver(system, table, "periodic", [cyc], noise=default_noise(system))
     sched = so.PeriodicSchedule(cyc)
     rng = np.random.default_rng(1)
     x = rng.uniform(-1, 1, system.n)
@@ -161,10 +163,13 @@ def test_the_observers_prior_block_is_the_full_priors_and_keeps_the_covariance(a
             cols = seen_columns(np.asarray(system.C[ch - 1]))
             block = obs.prior_covariance(t, cols)
             full = other.prior_covariance(t)[np.ix_(cols, cols)]
+            np.testing.assert_array_equal(reader.prior_covariance(t, cols), full)    # P read: the full prior
             assert block.shape == (cols.size, cols.size)
             worst = max(worst, float(np.abs(block - full).max() / np.abs(full).max()))
         obs.update(t, ch, y)
         other.update(t, ch, y)
+        reader.update(t, ch, y)
+        assert reader.P is not None      # read at every sample, as a published estimate reads it
     assert full_calls == 0
     assert worst <= 1e-11
     P, Po = obs.P, other.P
