@@ -14,7 +14,10 @@ none: its correction follows at the sample). ``E P E'`` is taken in factors when
 agents ``E`` has 210 nonzeros of 17 424), each entry summed over a row's nonzeros only, the same
 covariance as the dense products up to their rounding. The gain families keep their covariance with it; the
 Kalman families keep a factor of it (``P = L L'``, :meth:`CovarianceStep.factor_step`, the
-square-root form of :mod:`switchobs_core.runtime.families.online`).
+square-root form of :mod:`switchobs_core.runtime.families.online`). A bias test's block of the prior
+is taken on the few states a held step maps into itself (:class:`HeldBlock`), and a run of equal
+steps waiting to be taken (:class:`PendingSteps`) by powers of ``E`` in compressed rows where they
+stay sparse.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from ..design.riccati import DiscretizationCache
 from ..numerics.kalman_step import psd_sqrt, symmetrize
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION
 
-__all__ = ["CovarianceStep", "PendingSteps", "set_entries", "CHOLESKY_RCOND"]
+__all__ = ["CovarianceStep", "PendingSteps", "HeldBlock", "set_entries", "CHOLESKY_RCOND"]
 
 #: Smallest reciprocal condition (LAPACK's 1-norm estimate) of the Cholesky factor of a predicted
 #: covariance that :meth:`CovarianceStep.factor_step` keeps (the covariance's condition is its square:
@@ -56,10 +59,7 @@ class CovarianceStep:
         Kalman family (:func:`~switchobs_core.bounds.kalman_map.sparse_transition`)."""
         _, _, Q_d = self._dcache.get(dt)
         sp = sparse_transition(e) if e.E is e.Phi else self.sparse_map(e)
-        P = (sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T) + Q_d
-        if held_noise is not None:
-            P += held_noise
-        return symmetrize(P)
+        return _added(sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T, Q_d, held_noise)
 
     def sparse_map(self, e: Any) -> SparseTransition | None:
         """The sparse form of the error map ``E = e^{A dt} - Gamma_A L C`` of an entry ``e`` that holds a
@@ -73,10 +73,7 @@ class CovarianceStep:
         if hit is None or hit[0] is not e:
             if len(self._maps) >= 4 * self._dcache.maxsize:
                 self._maps.clear()
-            E = e.E
-            n = E.shape[0]
-            sp = SparseTransition(E) if n >= SPARSE_MIN_N and np.count_nonzero(E) <= SPARSE_MAX_FILL * n * n else None
-            hit = self._maps[id(e)] = (e, sp)
+            hit = self._maps[id(e)] = (e, _sparse(e.E))
         return hit[1]
 
     def factor_step(self, L: np.ndarray, e: Any, dt: float) -> np.ndarray:
@@ -121,10 +118,7 @@ class CovarianceStep:
         """The same (the prior a consistency test reads), with dense products where nothing is held."""
         _, _, Q_d = self._dcache.get(dt)
         sp = self.sparse_map(e)
-        P = (sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T) + Q_d
-        if held_noise is not None:
-            P += held_noise
-        return symmetrize(P)
+        return _added(sp.sandwich(P) if sp is not None else e.E @ P @ e.E.T, Q_d, held_noise)
 
 
     def prior_block(self, P: np.ndarray, e: Any, dt: float, cols: np.ndarray, *, factor: bool = False) -> np.ndarray:
@@ -152,8 +146,9 @@ class PendingSteps:
     arithmetic as at every sample), a run of ``m >= MIN_DOUBLING`` steps by binary powers,
     ``P <- E^{2^i} P E^{2^i}' + S_i`` for each bit ``i`` of ``m``, with ``S_0 = Q``,
     ``S_{i+1} = E^{2^i} S_i E^{2^i}' + S_i`` and ``Q = Q_d + Gamma L R (Gamma L)'``: about
-    ``2 log2 m`` products of n x n matrices instead of ``2 m`` (the powers are kept per step, up to
-    :data:`POWER_BYTES`), the same covariance up to rounding. :meth:`push` returns True when
+    ``2 log2 m`` products of n x n matrices instead of ``2 m`` (in compressed rows where a power is
+    sparse: a held gain's at 32 agents stays within one agent and the common states; the powers are
+    kept per step, up to :data:`POWER_BYTES`), the same covariance up to rounding. :meth:`push` returns True when
     :data:`MAX_RUNS` runs wait (the caller applies them: the work is then what it was).
     """
 
@@ -167,7 +162,8 @@ class PendingSteps:
     def __init__(self, cov: CovarianceStep) -> None:
         self._cov = cov
         self._runs: list[list] = []             # [e, dt, Q_d, R, count]
-        self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i)])
+        self._held: dict = {}                   # id(e) -> (e, R, (Gamma L) R (Gamma L)')
+        self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i, its CSR)])
         self._bytes = 0
 
     def __len__(self) -> int:
@@ -189,17 +185,26 @@ class PendingSteps:
         """``P`` through every pending step (then none is pending)."""
         for e, dt, Q_d, R, m in self._runs:
             if m < self.MIN_DOUBLING:
-                held = None if R is None else e.GL @ R @ e.GL.T
+                held = None if R is None else self._held_noise(e, R)
                 for _ in range(m):
                     P = self._cov.step(P, e, dt, held)
                 continue
             levels = self._levels(e, Q_d, R, m.bit_length())
             for i in range(m.bit_length()):
                 if m >> i & 1:
-                    Ei, Si = levels[i]
-                    P = symmetrize(Ei @ P @ Ei.T + Si)
+                    Ei, Si, spi = levels[i]
+                    P = symmetrize((spi.sandwich(P) if spi is not None else Ei @ P @ Ei.T) + Si)
         self._runs.clear()
         return P
+
+    def _held_noise(self, e: Any, R: np.ndarray) -> np.ndarray:
+        """``(Gamma L) R (Gamma L)'`` of the entry ``e``, kept per entry and ``R``."""
+        hit = self._held.get(id(e))
+        if hit is None or hit[0] is not e or hit[1] is not R:
+            if len(self._held) >= 256:
+                self._held.clear()
+            hit = self._held[id(e)] = (e, R, e.GL @ R @ e.GL.T)
+        return hit[2]
 
     def _levels(self, e: Any, Q_d: np.ndarray, R: np.ndarray | None, k: int) -> list:
         """``[(E^{2^i}, S_i)]`` for ``i < k`` (class docstring), kept."""
@@ -209,14 +214,15 @@ class PendingSteps:
             if hit is not None:
                 self._drop(key)
             Q = Q_d if R is None else Q_d + e.GL @ R @ e.GL.T
-            hit = (e, Q_d, R, [(e.E, symmetrize(Q))])
+            hit = (e, Q_d, R, [(e.E, symmetrize(Q), _sparse(e.E))])
             self._powers[key] = hit
             self._bytes += 2 * Q.nbytes
         self._powers.move_to_end(key)
         levels = hit[3]
         while len(levels) < k:
-            Ei, Si = levels[-1]
-            levels.append((Ei @ Ei, symmetrize(Ei @ Si @ Ei.T + Si)))
+            Ei, Si, spi = levels[-1]
+            E2 = Ei @ Ei if spi is None else np.asarray(spi.csr @ Ei)
+            levels.append((E2, symmetrize((Ei @ Si @ Ei.T if spi is None else spi.sandwich(Si)) + Si), _sparse(E2)))
             self._bytes += 2 * Si.nbytes
         while self._bytes > self.POWER_BYTES and len(self._powers) > 1:
             self._drop(next(iter(self._powers)))
@@ -224,7 +230,126 @@ class PendingSteps:
 
     def _drop(self, key: Any) -> None:
         _, _, _, levels = self._powers.pop(key)
-        self._bytes -= sum(E.nbytes + S.nbytes for E, S in levels)
+        self._bytes -= sum(E.nbytes + S.nbytes for E, S, _ in levels)
+
+
+def _added(X: np.ndarray, Q_d: np.ndarray, held_noise: np.ndarray | None) -> np.ndarray:
+    """``symmetrize((X + Q_d) + held_noise)``."""
+    P = X + Q_d
+    if held_noise is not None:
+        P += held_noise
+    return symmetrize(P)
+
+
+def _sparse(E: np.ndarray) -> SparseTransition | None:
+    """``E`` in compressed rows where its products are the cheaper that way (:meth:`CovarianceStep.sparse_map`)."""
+    n = E.shape[0]
+    return SparseTransition(E) if n >= SPARSE_MIN_N and np.count_nonzero(E) <= SPARSE_MAX_FILL * n * n else None
+
+
+class HeldBlock:
+    """The covariance's block ``P[K, K]`` on a set ``K`` of states that each step maps into itself,
+    carried step by step while the full covariance waits (:class:`PendingSteps`).
+
+    The prior's block on ``cols`` (a bias test's rows) is ``E[cols, K] P[K, K] E[cols, K]' +
+    Q_d[cols, cols] + H[cols, cols]`` (``H = (Gamma L) R (Gamma L)'`` the held sample's noise,
+    module docstring) with ``K`` the columns where ``E[cols]`` has a nonzero (exact zeros add
+    nothing). :meth:`closure` takes the smallest ``K`` holding ``cols`` with ``E[K]`` zero outside
+    ``K``: a held gain at 32 agents reads one agent and the common states, ``|K| = 8`` of 132.
+    While the steps keep that property (a residence on one channel), :meth:`step` carries
+    ``B = P[K, K]`` through each, ``E[K, K] B E[K, K]' + Q_d[K, K] + H[K, K]`` (the full step's
+    block, summed over the same nonzero products: equal up to rounding, ``test_held_block.py``),
+    so a sample costs no n x n product; a step that leaves ``K`` drops it (:attr:`K` None), and
+    the owner starts it again from the full covariance (:meth:`start`).
+    """
+
+    #: Largest share of the states a block is kept for (beyond it the full products are as cheap).
+    MAX_SHARE = 0.25
+
+    def __init__(self, cov: CovarianceStep) -> None:
+        self._cov = cov
+        self.K: np.ndarray | None = None
+        self.B: np.ndarray | None = None
+        self._sets: dict = {}     # (id(e), cols) -> (e, K or None, np.ix_ of cols' positions in K)
+        self._maps: dict = {}     # (id(e), K) -> [e, E[K, K] or None (E[K] leaves K), Q_d, R, Q_d + H on K]
+        self._next: tuple | None = None     # (e, Q_d, R, B through e): the last prior
+
+    def clear(self) -> None:
+        self.K = self.B = self._next = None
+
+    def closure(self, e: Any, cols: np.ndarray) -> tuple[np.ndarray, tuple] | None:
+        """``(K, the index of the cols block within K's)`` for the step ``e`` (class docstring), or None when ``K``
+        holds more than :data:`MAX_SHARE` of the states; kept per step and ``cols``."""
+        key = (id(e), cols.tobytes())
+        hit = self._sets.get(key)
+        if hit is None or hit[0] is not e:
+            if len(self._sets) >= 1024:
+                self._sets.clear()
+            nz = e.E != 0
+            K = np.unique(cols)
+            while True:
+                grown = np.union1d(K, np.flatnonzero(np.any(nz[K], axis=0)))
+                if grown.size == K.size:
+                    break
+                K = grown
+            ok = K.size <= self.MAX_SHARE * nz.shape[0]
+            at = np.searchsorted(K, cols)
+            hit = self._sets[key] = (e, K if ok else None, np.ix_(at, at) if ok else None)
+        return None if hit[1] is None else (hit[1], hit[2])
+
+    def start(self, P: np.ndarray, K: np.ndarray) -> None:
+        """Keep ``P[K, K]`` (``P`` the full covariance after the last step)."""
+        self.K, self.B, self._next = K, P[np.ix_(K, K)], None
+
+    def holds(self, K: np.ndarray) -> bool:
+        """Whether the block kept is on ``K``."""
+        return self.K is K or (self.K is not None and np.array_equal(self.K, K))
+
+    def prior(self, e: Any, dt: float, R: np.ndarray | None) -> np.ndarray | None:
+        """``B`` through the step ``e`` over ``dt`` with ``R`` held (None: nothing held), kept for
+        :meth:`step`; None when ``E[K]`` leaves ``K``."""
+        Q_d = self._cov.q_d(dt)
+        m = self._map(e, Q_d, R)
+        if m[1] is None:
+            return None
+        EK = m[1]
+        B = symmetrize(EK @ self.B @ EK.T + m[4])
+        self._next = (e, Q_d, R, B)
+        return B
+
+    def step(self, e: Any, dt: float, R: np.ndarray | None) -> None:
+        """The owner took the step ``e`` over ``dt`` with ``R`` held: carry ``B`` through it (the
+        last :meth:`prior` when it is this step's), or drop it when ``E[K]`` leaves ``K``."""
+        if self.K is None:
+            return
+        nxt, self._next = self._next, None
+        if nxt is not None and nxt[0] is e and nxt[1] is self._cov.q_d(dt) and nxt[2] is R:
+            self.B = nxt[3]
+            return
+        B = self.prior(e, dt, R)
+        self._next = None
+        if B is None:
+            self.clear()
+        else:
+            self.B = B
+
+    def _map(self, e: Any, Q_d: np.ndarray, R: np.ndarray | None) -> list:
+        K = self.K
+        key = (id(e), K.tobytes())
+        hit = self._maps.get(key)
+        if hit is None or hit[0] is not e:
+            if len(self._maps) >= 1024:
+                self._maps.clear()
+            rows = e.E[K]
+            inside = not np.any(np.delete(rows, K, axis=1))
+            hit = self._maps[key] = [e, rows[:, K] if inside else None, None, None, None]
+        if hit[1] is not None and (hit[2] is not Q_d or hit[3] is not R):
+            QH = Q_d[np.ix_(K, K)]
+            if R is not None:
+                G = e.GL[K]
+                QH = QH + G @ R @ G.T
+            hit[2:] = [Q_d, R, QH]
+        return hit
 
 
 def set_entries(P: np.ndarray, indices: Any, variances: dict) -> np.ndarray:

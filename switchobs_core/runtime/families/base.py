@@ -307,9 +307,9 @@ class GainFamily(Protocol):
         """The prior covariance at ``t`` (``dt`` after the last sample) when the family has it stored
         (a read-only array the caller must not keep; a locked Kalman table: the next phase's; with
         ``cols``, its block on those rows and columns) or, with ``cols``, can give that block
-        without the n x n prior (the online Kalman recursion: from its factor, equal up to
-        rounding), else None: the observer then propagates :meth:`covariance`
-        (:meth:`predict_covariance`)."""
+        without the n x n prior (the online Kalman recursion: from its factor; the LMI gains: from
+        a block the held step maps into itself; equal up to rounding), else None: the observer then
+        propagates :meth:`covariance` (:meth:`predict_covariance`)."""
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         """``P`` (as :meth:`covariance` returned it) through the step ``e`` over ``dt``, not kept

@@ -13,6 +13,9 @@ equal steps by binary powers), so a sample costs no n x n product where no outpu
 prior a consistency test reads at a sample (:meth:`LmiGains.predict_covariance`) is the step the
 sample's update then takes, by the same arithmetic from the same covariance: it is kept and becomes the
 covariance (one propagation per sample where the test and an output both read it, the same numbers).
+A bias test reads the prior's block on a sample's columns only (:meth:`LmiGains.stored_prior`): from the
+block of ``P`` the held step maps into itself, carried step by step
+(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait.
 """
 
 from __future__ import annotations
@@ -24,8 +27,8 @@ import numpy as np
 from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
-from ..covariance import CovarianceStep, PendingSteps
-from .base import Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
+from ..covariance import CovarianceStep, HeldBlock, PendingSteps
+from .base import OPEN_LOOP, Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
 
 __all__ = ["LmiGains"]
 
@@ -79,6 +82,7 @@ class LmiGains:
             noise.check_system(ctx.system)
             self._cov = CovarianceStep(ctx.A, ctx.B, noise, ctx.dt_resolution)
             self._pending = PendingSteps(self._cov)
+            self._block = HeldBlock(self._cov)
         self._keys: dict = {}       # (design, channel, rows) -> (ZOH key, C rows)
         self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
@@ -86,6 +90,7 @@ class LmiGains:
         self._noises: dict = {}             # id(e) -> (e, R, (Gamma L) R (Gamma L)'): per step and held R
         self._held: Held | None = None
         self._R_held = None
+        self._read = False      # P read since the last step (a reader at every sample)
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, robust: Any = None, delta: float = 0.99, **_: Any) -> Any:
@@ -105,9 +110,11 @@ class LmiGains:
         self._P = self.noise.P0.copy() if self.track_covariance else None
         if self.track_covariance:
             self._pending.clear()
+            self._block.clear()
         self._prior = None
         self._held = None
         self._R_held = None
+        self._read = False
 
     def fuses(self, input_held: bool) -> bool:
         return False
@@ -115,6 +122,8 @@ class LmiGains:
     def stepped(self, e: Any, dt: float) -> None:
         if self._P is not None:
             held = self._R_held if self._held is not None else None
+            self._read = False
+            self._block.step(e, dt, held)
             prior, self._prior = self._prior, None
             if (prior is not None and prior[0] is self._P and prior[1] is e and prior[2] is self._cov.q_d(dt)
                     and prior[3] is held and not len(self._pending) and self._cov.prior_is_step(e)):
@@ -128,10 +137,32 @@ class LmiGains:
             return None
         if len(self._pending):
             self._P = self._pending.apply(self._P)
+        self._read = True
         return self._P.copy()
 
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
-        return None
+        """With ``cols`` (a bias test's block): the prior's block on them from the block of ``P`` the
+        step maps into itself (:class:`~switchobs_core.runtime.covariance.HeldBlock`, started from the
+        full covariance when it is not the one kept), without the n x n prior; else None, and None
+        where ``P`` was read since the last step (a reader at every sample: the full prior is then the
+        step the sample takes, kept by :meth:`predict_covariance`, and the block would be work added)."""
+        if cols is None or self._P is None:
+            return None
+        if self._read and not len(self._pending):
+            self._block.clear()
+            return None
+        h = self._held
+        e = self._ctx.zoh(OPEN_LOOP if h is None else h.key, dt)
+        got = self._block.closure(e, np.asarray(cols))
+        if got is None:
+            return None
+        K, ix = got
+        if not self._block.holds(K):
+            if len(self._pending):
+                self._P = self._pending.apply(self._P)
+            self._block.start(self._P, K)
+        B = self._block.prior(e, dt, self._R_held if h is not None else None)
+        return B[ix]
 
     def predict_covariance(self, P: np.ndarray, e: Any, dt: float) -> np.ndarray:
         """The prior through ``e``; kept (a copy) for :meth:`stepped` when ``P`` is the covariance kept."""
@@ -147,6 +178,7 @@ class LmiGains:
     def set_covariance(self, P: np.ndarray) -> None:
         if self._P is not None:
             self._pending.clear()
+            self._block.clear()
         self._prior = None
         self._P = P
 
