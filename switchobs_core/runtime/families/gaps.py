@@ -98,6 +98,7 @@ class GapDeviation:
         """Drop ``U`` (the family's covariance is its own from here: a departure)."""
         self.U = None
         self._memo = None
+        self._since = 0
 
     def _key(self, k: int) -> tuple:
         kd = self.kd
@@ -167,10 +168,13 @@ class GapDeviation:
             return f"a deviation the table cannot give ({err})"
         if V is None:
             return ""
-        r = np.einsum("ij,ij->i", V, V) / np.abs(S_diag)
-        i = int(np.argmax(r))
-        return (f"a covariance {r[i]:.3g} times the Kalman table's in entry {i} (more than {GAP_MAX:g})"
-                if r[i] > GAP_MAX else "")
+        vv, s = np.einsum("ij,ij->i", V, V), np.abs(S_diag)
+        over = np.flatnonzero(~(vv <= GAP_MAX * s))     # NaN too; a zero S_ii with V_i != 0 is past any ratio
+        if not over.size:
+            return ""
+        i = int(over[0])
+        return f"a covariance {vv[i] / s[i] if s[i] > 0 else np.inf:.3g} times the Kalman table's in entry {i} " \
+               f"(more than {GAP_MAX:g})"
 
     def correct(self, last_k: int, k: int, K: np.ndarray, H: np.ndarray, channel: int, rows: tuple | None,
                 S_diag: Callable[[], np.ndarray]) -> np.ndarray:

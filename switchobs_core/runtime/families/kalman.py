@@ -281,7 +281,10 @@ class KalmanTableGains(OnlineKalmanGains):
                 return (f"a step of {span:.9g} s at t = {t:.9g} s over {g - 1} missing samples, "
                         f"{abs(span - g * ent.dt):.3g} s off {g} of the Kalman table's {ent.dt:.9g} s "
                         f"(tolerance {self.dt_tol:.3g} s)")
-            far = self._gap.too_far(self._last_k, ph.k, ent.P_diagonal())
+            try:
+                far = self._gap.too_far(self._last_k, ph.k, ent.P_diagonal())
+            except GainTableError as err:       # this phase's own row is unreadable
+                return f"{g - 1} missing samples before t = {t:.9g} s, and the Kalman table's row: {err}"
             return f"{g - 1} missing samples before t = {t:.9g} s leave {far}" if far else ""
         if g != 1:
             return (f"sample {ph.k} of the Kalman table's grid at t = {t:.9g} s follows "
@@ -328,6 +331,7 @@ class KalmanTableGains(OnlineKalmanGains):
             # the real covariance: the last sample's posterior (P0 at t0 before the first),
             # propagated exactly to this sample
             self.depart(f"{why}; running the Riccati recursion online from here")
+            held = False        # not locked from the last sample on: a re-lock below starts afresh
             if dt > 0:
                 x, prediction = self.predict(x, dt)
                 dt = 0.0
@@ -424,9 +428,12 @@ class KalmanTableGains(OnlineKalmanGains):
         K, H = hit.K, hit.H
         gap = self._gap
         if gap.U is not None or k > self._last_k + 1:
-            if k > self._last_k + 1 and gap.too_far(self._last_k, k, gap.entry(k).P_diagonal()):
-                return None         # the general path departs (module gaps)
-            K = gap.correct(self._last_k, k, K, H, channel, None, gap.entry(k).P_diagonal)
+            try:
+                if k > self._last_k + 1 and gap.too_far(self._last_k, k, gap.entry(k).P_diagonal()):
+                    return None         # the general path departs (module gaps)
+                K = gap.correct(self._last_k, k, K, H, channel, None, gap.entry(k).P_diagonal)
+            except GainTableError:      # this phase's row is unreadable: the general path departs
+                return None
             if K is not hit.K:      # the filter's gain of the prior S + V V' (module gaps)
                 hit = KalmanMap(hit.e, K, H, self._I)
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the

@@ -217,3 +217,32 @@ def test_missing_is_checked(systems):
     obs = SwitchedObserver(system, table, "periodic", [CYC])
     with pytest.raises(Exception, match="missing must be one of"):
         obs.gains.missing = "skip"
+
+
+@pytest.mark.parametrize("name", ["paper", "agents2"])
+def test_a_relock_in_the_sample_that_departs_counts_no_missing_sample(systems, name):
+    """A switch one sample early departs; the grid moves to it (alignment) and, with a loose
+    re-lock tolerance, the table re-locks in that same sample. Nothing was missing: no gap is
+    counted (not the hundreds of samples between the grid's old and new positions taken as
+    missing, with their deviation added to the covariance)."""
+    system, table = systems[name]
+    obs = SwitchedObserver(system, table, "periodic", [CYC], x0=np.zeros(system.n), e0=1.0, relock_rtol=0.9)
+    sched = PeriodicSchedule(CYC)
+    for k in range(365):
+        t = k / RATE
+        c = sched.channel_at(t + (1 / RATE if t > 6.6 else 0.0))
+        obs.update(t, c, system.C[c - 1] @ np.ones(system.n))
+    g = obs.gains
+    assert g.departures >= 1 and g.relocks >= 1
+    assert g.gaps == 0, g.gaps
+
+
+def test_too_far_sees_past_a_state_of_zero_variance():
+    """A state whose stored variance and deviation are both 0 (0 / 0) hides no other row past GAP_MAX."""
+    from switchobs_core.runtime.families.gaps import GAP_MAX, GapDeviation
+    gd = GapDeviation(None, lambda: None, 1e-3)
+    gd.prior = lambda last_k, k: np.array([[0.0], [1.0]])
+    assert gd.too_far(0, 2, np.array([0.0, 0.5 / GAP_MAX]))
+    assert not gd.too_far(0, 2, np.array([0.0, 2.0 / GAP_MAX]))
+    gd.prior = lambda last_k, k: np.array([[1e-3], [0.0]])
+    assert gd.too_far(0, 2, np.array([0.0, 1.0]))       # a deviation where the table says none at all
