@@ -27,7 +27,8 @@ arrival in the receiver's Python callback is a second p50 column. A rate is
 
 Configurations (``--configs``, ``--soak-config``): ``on-change-uint8`` and ``on-change-stamped``
 (the sender switches channels by the paper's cycle and publishes the channel only on a change, as
-``UInt8`` or as the stamped ``ActiveChannel``; otherwise it publishes channel 1 once), the
+``UInt8`` or as the stamped ``ActiveChannel``; otherwise it publishes channel 1 once),
+``on-change-stamped-once`` (the latter with the estimator's ``switch_horizon`` 1), the
 estimator's ``default``, ``no-gc-freeze``,
 ``state-only``, ``lean-loop``, ``traced``, ``rt`` (its process under ``chrt -f 40``), ``udp``
 (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``), and ``bare`` (the republisher) for soaks. ``--load K``
@@ -67,6 +68,8 @@ CONFIGS = {
     # switchobs_msgs/ActiveChannel (its switching instant: the first tick on the channel)
     "on-change-uint8": {"_channel": "uint8"},
     "on-change-stamped": {"_channel": "stamped"},
+    # the same, every sample of a residence certain at once (switchobs_ros.switching: switch_horizon)
+    "on-change-stamped-once": {"_channel": "stamped", "switch_horizon": 1.0},
 }
 #: The soak's goal: no answer later than this (ms).
 LATE_MS = 20.0
