@@ -67,7 +67,8 @@ from ..numerics.csr import csr_matmat, csr_matvec
 from ..numerics.expm_bound import nu
 from ..numerics.rounding import fro_norm, gamma
 
-__all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_map", "sparse_transition", "KalmanMap"]
+__all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_form", "sparse_map", "sparse_transition",
+           "KalmanMap"]
 
 #: Fewest states for which the factored form is used (below, dense products are as fast).
 SPARSE_MIN_N = 40
@@ -129,13 +130,16 @@ def sparse_transition(entry: Any) -> SparseTransition | None:
     form is the faster one (module docstring)."""
     sp = getattr(entry, "sparse", False)
     if sp is False:
-        Phi = entry.Phi
-        n = Phi.shape[0]
-        sp = None
-        if n >= SPARSE_MIN_N and np.count_nonzero(Phi) <= SPARSE_MAX_FILL * n * n:
-            sp = SparseTransition(Phi)
-        entry.sparse = sp
+        sp = entry.sparse = sparse_form(entry.Phi)
     return sp
+
+
+def sparse_form(M: np.ndarray) -> SparseTransition | None:
+    """``M`` in compressed rows where its products are the cheaper that way (at least
+    :data:`SPARSE_MIN_N` states and at most :data:`SPARSE_MAX_FILL` of nonzeros), else None: the
+    one rule for every sparse form of a map."""
+    n = M.shape[0]
+    return SparseTransition(M) if n >= SPARSE_MIN_N and np.count_nonzero(M) <= SPARSE_MAX_FILL * n * n else None
 
 
 def sparse_map(entry: Any) -> SparseTransition | None:
@@ -147,11 +151,7 @@ def sparse_map(entry: Any) -> SparseTransition | None:
         return sparse_transition(entry)
     sp = getattr(entry, "sparse_E", False)
     if sp is False:
-        n = E.shape[0]
-        sp = None
-        if n >= SPARSE_MIN_N and np.count_nonzero(E) <= SPARSE_MAX_FILL * n * n:
-            sp = SparseTransition(E)
-        entry.sparse_E = sp
+        sp = entry.sparse_E = sparse_form(E)
     return sp
 
 

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 from scipy.linalg.lapack import dtrcon as _dtrcon
 
-from ..bounds.kalman_map import SPARSE_MAX_FILL, SPARSE_MIN_N, SparseTransition, sparse_transition
+from ..bounds.kalman_map import SparseTransition, sparse_form, sparse_transition
 from ..design.riccati import DiscretizationCache
 from ..numerics.kalman_step import psd_sqrt, symmetrize
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION
 
-__all__ = ["CovarianceStep", "PendingSteps", "HeldBlock", "set_entries", "CHOLESKY_RCOND"]
+__all__ = ["CovarianceStep", "PendingSteps", "HeldBlock", "HeldNoise", "set_entries", "CHOLESKY_RCOND"]
 
 #: Smallest reciprocal condition (LAPACK's 1-norm estimate) of the Cholesky factor of a predicted
 #: covariance that :meth:`CovarianceStep.factor_step` keeps (the covariance's condition is its square:
@@ -73,7 +73,7 @@ class CovarianceStep:
         if hit is None or hit[0] is not e:
             if len(self._maps) >= 4 * self._dcache.maxsize:
                 self._maps.clear()
-            hit = self._maps[id(e)] = (e, _sparse(e.E))
+            hit = self._maps[id(e)] = (e, sparse_form(e.E))
         return hit[1]
 
     def factor_step(self, L: np.ndarray, e: Any, dt: float) -> np.ndarray:
@@ -162,7 +162,7 @@ class PendingSteps:
     def __init__(self, cov: CovarianceStep) -> None:
         self._cov = cov
         self._runs: list[list] = []             # [e, dt, Q_d, R, count]
-        self._held: dict = {}                   # id(e) -> (e, R, (Gamma L) R (Gamma L)')
+        self._held = HeldNoise()
         self._powers: OrderedDict = OrderedDict()   # (id(e), id(Q_d), id(R)) -> (e, Q_d, R, [(E^2^i, S_i, its CSR)])
         self._bytes = 0
 
@@ -185,7 +185,7 @@ class PendingSteps:
         """``P`` through every pending step (then none is pending)."""
         for e, dt, Q_d, R, m in self._runs:
             if m < self.MIN_DOUBLING:
-                held = None if R is None else self._held_noise(e, R)
+                held = None if R is None else self._held(e, R)
                 for _ in range(m):
                     P = self._cov.step(P, e, dt, held)
                 continue
@@ -197,15 +197,6 @@ class PendingSteps:
         self._runs.clear()
         return P
 
-    def _held_noise(self, e: Any, R: np.ndarray) -> np.ndarray:
-        """``(Gamma L) R (Gamma L)'`` of the entry ``e``, kept per entry and ``R``."""
-        hit = self._held.get(id(e))
-        if hit is None or hit[0] is not e or hit[1] is not R:
-            if len(self._held) >= 256:
-                self._held.clear()
-            hit = self._held[id(e)] = (e, R, e.GL @ R @ e.GL.T)
-        return hit[2]
-
     def _levels(self, e: Any, Q_d: np.ndarray, R: np.ndarray | None, k: int) -> list:
         """``[(E^{2^i}, S_i)]`` for ``i < k`` (class docstring), kept."""
         key = (id(e), id(Q_d), id(R))
@@ -214,7 +205,7 @@ class PendingSteps:
             if hit is not None:
                 self._drop(key)
             Q = Q_d if R is None else Q_d + e.GL @ R @ e.GL.T
-            hit = (e, Q_d, R, [(e.E, symmetrize(Q), _sparse(e.E))])
+            hit = (e, Q_d, R, [(e.E, symmetrize(Q), sparse_form(e.E))])
             self._powers[key] = hit
             self._bytes += 2 * Q.nbytes
         self._powers.move_to_end(key)
@@ -222,7 +213,7 @@ class PendingSteps:
         while len(levels) < k:
             Ei, Si, spi = levels[-1]
             E2 = Ei @ Ei if spi is None else np.asarray(spi.csr @ Ei)
-            levels.append((E2, symmetrize((Ei @ Si @ Ei.T if spi is None else spi.sandwich(Si)) + Si), _sparse(E2)))
+            levels.append((E2, symmetrize((Ei @ Si @ Ei.T if spi is None else spi.sandwich(Si)) + Si), sparse_form(E2)))
             self._bytes += 2 * Si.nbytes
         while self._bytes > self.POWER_BYTES and len(self._powers) > 1:
             self._drop(next(iter(self._powers)))
@@ -241,10 +232,21 @@ def _added(X: np.ndarray, Q_d: np.ndarray, held_noise: np.ndarray | None) -> np.
     return symmetrize(P)
 
 
-def _sparse(E: np.ndarray) -> SparseTransition | None:
-    """``E`` in compressed rows where its products are the cheaper that way (:meth:`CovarianceStep.sparse_map`)."""
-    n = E.shape[0]
-    return SparseTransition(E) if n >= SPARSE_MIN_N and np.count_nonzero(E) <= SPARSE_MAX_FILL * n * n else None
+class HeldNoise:
+    """``held(e, R)``: ``(Gamma L) R (Gamma L)'``, the noise a held sample adds over the step of the
+    ZOH entry ``e`` (its held gain ``Gamma L``, the held sample's noise covariance ``R``), kept per
+    entry and ``R`` (the objects, by identity; the last 256 entries)."""
+
+    def __init__(self) -> None:
+        self._kept: dict = {}
+
+    def __call__(self, e: Any, R: np.ndarray) -> np.ndarray:
+        hit = self._kept.get(id(e))
+        if hit is None or hit[0] is not e or hit[1] is not R:
+            if len(self._kept) >= 256:
+                self._kept.clear()
+            hit = self._kept[id(e)] = (e, R, e.GL @ R @ e.GL.T)
+        return hit[2]
 
 
 class HeldBlock:

@@ -27,7 +27,7 @@ import numpy as np
 from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
-from ..covariance import CovarianceStep, HeldBlock, PendingSteps
+from ..covariance import CovarianceStep, HeldBlock, HeldNoise, PendingSteps
 from .base import OPEN_LOOP, Correction, FamilyContext, Held, Sample, check_bounds, check_cycles
 
 __all__ = ["LmiGains"]
@@ -87,7 +87,7 @@ class LmiGains:
         self._Rs: dict = {}         # (channel, rows) -> R of those rows
         self._P: np.ndarray | None = None
         self._prior: tuple | None = None    # (P, e, Q_d, R, P through e): the last prior (predict_covariance)
-        self._noises: dict = {}             # id(e) -> (e, R, (Gamma L) R (Gamma L)'): per step and held R
+        self._noises = HeldNoise()
         self._held: Held | None = None
         self._R_held = None
         self._read = False      # P read since the last step (a reader at every sample)
@@ -187,13 +187,7 @@ class LmiGains:
         per step and ``R``."""
         if self._held is None or self._R_held is None:
             return None
-        R = self._R_held
-        hit = self._noises.get(id(e))
-        if hit is None or hit[0] is not e or hit[1] is not R:
-            if len(self._noises) >= 256:
-                self._noises.clear()
-            hit = self._noises[id(e)] = (e, R, e.GL @ R @ e.GL.T)
-        return hit[2]
+        return self._noises(e, self._R_held)
 
     def _gain_key(self, design: int, channel: int, rows: Any) -> tuple:
         """ZOH cache key and output rows of channel ``channel`` with rows ``rows`` under design
