@@ -2,7 +2,7 @@
 """In-process cost of an executor per callback: rclpy's SingleThreadedExecutor against
 switchobs_ros.executor.KeptWaitSetExecutor, interleaved rounds in one process (not a test).
 
-    python bench/bench_executor.py [--messages 3000] [--rounds 5]
+    python bench/bench_executor.py [--messages 3000] [--rounds 5] [--before /path/to/other/checkout]
 
 A node with the estimator's entity count (three input subscriptions, ``~/set_state``, two timers,
 ``~/reset``, the parameter and type-description services rclpy gives every node) receives
@@ -10,12 +10,15 @@ A node with the estimator's entity count (three input subscriptions, ``~/set_sta
 three input topics (in turn) 1 ms after it is told to, while this thread spins until its callback
 ran; this thread's CPU time (``time.thread_time``) per message, and the executor's waits per message (the kept executor
 counts them; rclpy's: one wait per ``_wait_for_ready_callbacks`` pass, counted by wrapping the rcl
-wait set's ``wait``). Medians over the rounds, and the ratio.
+wait set's ``wait``). Medians over the rounds, and the ratio. ``--before DIR`` adds ``kept_before``:
+the ``KeptWaitSetExecutor`` of another checkout's ``switchobs_ros/executor.py``, loaded beside this
+one, in the same interleaved rounds.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import threading
@@ -44,12 +47,25 @@ def node_like_the_estimator(name: str, got: list):
     return node
 
 
+def executor_from(tree: Path) -> type:
+    """``KeptWaitSetExecutor`` of the checkout ``tree`` (its ``switchobs_ros/executor.py`` loaded as
+    a module of its own)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("executor_before", tree / "switchobs_ros" / "executor.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.KeptWaitSetExecutor
+
+
+KEPT = {"kept": KeptWaitSetExecutor}
+
+
 def one_round(kind: str, n: int) -> tuple[float, float]:
     got: list = []
     node = node_like_the_estimator(f"bench_exec_{kind}", got)
     pub_node = rclpy.create_node(f"bench_exec_pub_{kind}")
     pubs = [pub_node.create_publisher(Float64MultiArray, f"/bench_exec/{t}", qos.OUTPUT) for t in "abc"]
-    ex = KeptWaitSetExecutor() if kind == "kept" else SingleThreadedExecutor()
+    ex = KEPT[kind]() if kind in KEPT else SingleThreadedExecutor()
     ex.add_node(node)
     waits = [0]
     if kind == "rclpy":         # count rclpy's waits: wrap the wait set class its executor builds
@@ -73,7 +89,7 @@ def one_round(kind: str, n: int) -> tuple[float, float]:
     for _ in range(20):
         ex.spin_once(timeout_sec=0.01)
     got.clear()
-    w0 = ex.waits if kind == "kept" else waits[0]
+    w0 = ex.waits if kind in KEPT else waits[0]
     msg = Float64MultiArray(data=[0.0] * 8)
     go, stop = threading.Event(), []
 
@@ -99,7 +115,7 @@ def one_round(kind: str, n: int) -> tuple[float, float]:
     stop.append(1)
     go.set()
     th.join()
-    w = (ex.waits if kind == "kept" else waits[0]) - w0
+    w = (ex.waits if kind in KEPT else waits[0]) - w0
     if kind == "rclpy":
         import rclpy.executors as rex
         rex._rclpy.WaitSet = real
@@ -113,16 +129,20 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--messages", type=int, default=3000)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--before", type=Path, default=None, help="a checkout whose KeptWaitSetExecutor runs beside")
     a = ap.parse_args()
+    if a.before is not None:
+        KEPT["kept_before"] = executor_from(a.before.resolve())
     rclpy.init()
-    res: dict[str, list] = {"rclpy": [], "kept": []}
+    res: dict[str, list] = {kind: [] for kind in ("rclpy", *KEPT)}
     try:
-        for _ in range(a.rounds):
-            for kind in ("rclpy", "kept"):
+        for r in range(a.rounds):
+            for kind in (list(res) if r % 2 == 0 else list(res)[::-1]):
                 res[kind].append(one_round(kind, a.messages))
     finally:
         rclpy.try_shutdown()
-    print(f"Command: `python bench/bench_executor.py --messages {a.messages} --rounds {a.rounds}`\n")
+    print(f"Command: `python bench/bench_executor.py --messages {a.messages} --rounds {a.rounds}"
+          f"{f' --before {a.before}' if a.before else ''}` (load {os.getloadavg()[0]:.1f} after)\n")
     print("| executor | CPU per callback (median of rounds) | waits per callback | rounds |")
     print("|---|---|---|---|")
     med = {}
@@ -131,6 +151,8 @@ def main() -> int:
         print(f"| {kind} | {med[kind]:.0f} us | {statistics.median(r[1] for r in rows):.2f} | "
               f"{', '.join(f'{r[0]:.0f}' for r in rows)} |")
     print(f"\nkept / rclpy: {med['kept'] / med['rclpy']:.2f}x")
+    if "kept_before" in med:
+        print(f"kept / kept_before: {med['kept'] / med['kept_before']:.2f}x")
     return 0
 
 

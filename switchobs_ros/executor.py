@@ -32,6 +32,7 @@ import weakref
 from collections import deque
 from typing import Any
 
+from rclpy.event_handler import EventHandler
 from rclpy.exceptions import InvalidHandle
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutObject
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -45,9 +46,18 @@ _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE, _WAITABLE = range(6)
 
 
 class _Plan:
-    """The entities of the executor's nodes, their handles, and the rcl wait set sized for them."""
+    """The entities of the executor's nodes, their handles, and the rcl wait set sized for them.
 
-    __slots__ = ("entities", "handles", "guards", "waitables", "wait_set", "by_pointer")
+    What each wait repeats is prepared here once: ``adds``, the wait set's adder and the handle of
+    each entity in rclpy's order (the executor's own guard conditions last), so that a wait reads no
+    ``handle`` property and dispatches on no kind; ``waitables``, each waitable with, for an rclpy
+    ``EventHandler`` (the middleware's QoS events of publishers and subscriptions), the event handle
+    it adds, entered and added directly (:func:`_event_of`; None: any other waitable, served through
+    the Waitable API); ``index``, each entity's place in that order by the pointer the wait set
+    reports it ready by (``kinds``: the entity kinds present), so that a wait looks up the few ready
+    entities instead of testing every entity."""
+
+    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds")
 
     def __init__(self, executor: KeptWaitSetExecutor) -> None:
         timers, subs, guards, clients, services, waitables = [], [], [], [], [], []
@@ -59,25 +69,43 @@ class _Plan:
             services += [(_SERVICE, s, node) for s in node.services]
             waitables += [(_WAITABLE, w, node) for w in node.waitables]
         own = [g for g in (executor._guard, executor._sigint_gc) if g is not None]
-        self.entities = [e for e in timers + subs + guards + clients + services]
-        self.waitables = waitables
-        self.guards = own
-        self.handles = [e[1].handle for e in self.entities] + [g.handle for g in own]
+        self.entities = timers + subs + guards + clients + services
         count = NumberOfEntities(len(subs), len(guards) + len(own), len(timers), len(clients), len(services))
         for _, w, _ in waitables:
             count += w.get_num_entities()
         with executor._context.handle:
-            self.wait_set = _rclpy.WaitSet(count.num_subscriptions, count.num_guard_conditions,
-                                           count.num_timers, count.num_clients, count.num_services,
-                                           count.num_events, executor._context.handle)
-        self.by_pointer: dict[tuple[str, int], tuple] = {}
-        kinds = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client",
-                 _SERVICE: "service"}
-        for e in self.entities:
+            ws = self.wait_set = _rclpy.WaitSet(count.num_subscriptions, count.num_guard_conditions,
+                                                count.num_timers, count.num_clients, count.num_services,
+                                                count.num_events, executor._context.handle)
+        adder = {_TIMER: ws.add_timer, _SUB: ws.add_subscription, _GUARD: ws.add_guard_condition,
+                 _CLIENT: ws.add_client, _SERVICE: ws.add_service}
+        self.adds = [(adder[e[0]], e[1].handle) for e in self.entities] + \
+                    [(ws.add_guard_condition, g.handle) for g in own]
+        self.waitables = [(item, _event_of(item[1])) for item in waitables]
+        self.index: dict[str, dict[int, int]] = {}
+        for i, e in enumerate(self.entities):
             try:
-                self.by_pointer[(kinds[e[0]], e[1].handle.pointer)] = e
+                self.index.setdefault(_KINDS[e[0]], {})[e[1].handle.pointer] = i
             except InvalidHandle:      # destroyed since: left out of the waits
                 pass
+        self.kinds = tuple(self.index.items())
+
+
+_KINDS = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client", _SERVICE: "service"}
+
+
+def _event_of(waitable: Any) -> Any:
+    """The event handle of an rclpy ``EventHandler`` whose Waitable methods are rclpy's own (a QoS
+    event of a publisher or subscription), else None (the waitable is served through its methods).
+
+    Such a handler's ``__enter__``, ``add_to_wait_set`` and ``__exit__`` only enter, add and exit
+    this handle and keep the index ``add_event`` returns (``_event_index``, which its ``is_ready``
+    reads): the executor does that itself, without three Python calls per handler and wait."""
+    cls = type(waitable)
+    if not isinstance(waitable, EventHandler) or any(
+            getattr(cls, m) is not getattr(EventHandler, m) for m in ("__enter__", "__exit__", "add_to_wait_set")):
+        return None
+    return getattr(waitable, "_EventHandler__event", None)
 
 
 class KeptWaitSetExecutor(SingleThreadedExecutor):
@@ -152,52 +180,50 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
             self.rebuilds += 1
         ws = plan.wait_set
         entered = []
+        keep = entered.append
         try:
             ws.clear_entities()
-            for kind, ent, _ in plan.entities:
+            for add, h in plan.adds:
                 try:
-                    ent.handle.__enter__()
+                    h.__enter__()
                 except InvalidHandle:
                     continue
-                entered.append(ent.handle)
-                if kind == _SUB:
-                    ws.add_subscription(ent.handle)
-                elif kind == _TIMER:
-                    ws.add_timer(ent.handle)
-                elif kind == _SERVICE:
-                    ws.add_service(ent.handle)
-                elif kind == _GUARD:
-                    ws.add_guard_condition(ent.handle)
+                keep(h)
+                add(h)
+            add_event = ws.add_event
+            live = []
+            for item, ev in plan.waitables:
+                w = item[1]
+                h = w if ev is None else ev
+                try:
+                    h.__enter__()
+                except InvalidHandle:
+                    continue
+                keep(h)
+                if ev is None:
+                    w.add_to_wait_set(ws)
                 else:
-                    ws.add_client(ent.handle)
-            for g in plan.guards:
-                g.handle.__enter__()
-                entered.append(g.handle)
-                ws.add_guard_condition(g.handle)
-            live_waitables = []
-            for item in plan.waitables:
-                try:
-                    item[1].__enter__()
-                except InvalidHandle:
-                    continue
-                entered.append(item[1])
-                item[1].add_to_wait_set(ws)
-                live_waitables.append(item)
+                    w._event_index = add_event(ev)
+                live.append(item)
             self.waits += 1
             ws.wait(timeout_sec_to_nsec(timeout_sec))
             if self._is_shutdown:
                 return False
             if not self._context.ok():
                 raise ExternalShutdownException()
-            ready = set()
-            for kind in ("timer", "subscription", "guard_condition", "client", "service"):
-                ready.update((kind, p) for p in ws.get_ready_entities(kind))
+            ready = []
+            for kind, where in plan.kinds:
+                for p in ws.get_ready_entities(kind):
+                    i = where.get(p)
+                    if i is not None:
+                        ready.append(i)
             queue = self._ready
-            by_pointer = plan.by_pointer
-            for key in by_pointer:
-                if key in ready:
-                    queue.append(by_pointer[key])
-            for item in live_waitables:
+            if ready:
+                if len(ready) > 1:
+                    ready.sort()
+                entities = plan.entities
+                queue.extend(entities[i] for i in ready)
+            for item in live:
                 if item[1].is_ready(ws):
                     queue.append(item + (item[1].take_data(),))
         finally:

@@ -97,6 +97,48 @@ def test_messages_taken_in_order_one_wait_each_and_the_wait_set_kept(ctx):
         assert ex.rebuilds > rebuilds
 
 
+def test_entities_ready_in_one_wait_served_in_creation_order(ctx):
+    """Three subscriptions ready together are called in the order they were created (rclpy's), not
+    the order their messages were published in."""
+    with _spun(ctx, "kws_order") as (ex, node):
+        got = []
+        for name in ("c", "a", "b"):
+            node.create_subscription(Int32, f"/kws_order_{name}", lambda m, name=name: got.append(name), RELIABLE)
+        pubs = {name: node.create_publisher(Int32, f"/kws_order_{name}", RELIABLE) for name in ("a", "b", "c")}
+        for pub in pubs.values():
+            wait_matched(ex, pub)
+        for _ in range(3):          # the wake-ups of the entities' creation, consumed
+            ex.spin_once(timeout_sec=0.05)
+        for name in ("a", "b", "c"):
+            pubs[name].publish(Int32(data=1))
+        time.sleep(0.2)             # all three delivered before the wait (nothing is timed)
+        waits = ex.waits
+        spin_until(ex, lambda: len(got) == 3)
+        assert got == ["c", "a", "b"]
+        assert ex.waits - waits == 1
+
+
+def test_middleware_events_of_publishers_and_subscriptions_are_served(ctx):
+    """The QoS events rclpy attaches to publishers and subscriptions (waitables the kept wait set
+    adds without their Python wrappers): an incompatible reliability is reported to both sides'
+    callbacks, and the messages of a compatible pair still arrive."""
+    from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+    with _spun(ctx, "kws_qos") as (ex, node):
+        requested, offered, got = [], [], []
+        node.create_subscription(Int32, "/kws_qos", got.append, RELIABLE,
+                                 event_callbacks=SubscriptionEventCallbacks(
+                                     incompatible_qos=lambda e: requested.append(e.total_count)))
+        best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        node.create_publisher(Int32, "/kws_qos", best_effort, event_callbacks=PublisherEventCallbacks(
+            incompatible_qos=lambda e: offered.append(e.total_count)))
+        spin_until(ex, lambda: requested and offered)
+        assert requested[-1] >= 1 and offered[-1] >= 1
+        pub = node.create_publisher(Int32, "/kws_qos", RELIABLE)
+        wait_matched(ex, pub)
+        pub.publish(Int32(data=5))
+        spin_until(ex, lambda: [m.data for m in got] == [5])
+
+
 def test_raw_subscription_gets_bytes(ctx):
     with _spun(ctx, "kws_raw") as (ex, node):
         got = []
