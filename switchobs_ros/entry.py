@@ -10,7 +10,9 @@ module is imported the usual handling takes over (:func:`~switchobs_ros.runner.r
 This module imports nothing heavy itself, so that the handler is in place at once. The estimator's
 DDS participant is created before its module is imported (:mod:`switchobs_ros.early`), so that DDS
 discovery runs during the imports; scipy is imported without the numpy submodules its namespace copy
-would import (:mod:`switchobs_core.lean_scipy`). A ``pip install``
+would import (:mod:`switchobs_core.lean_scipy`). The estimators' console scripts first set glibc's
+malloc to keep the heap between samples (:mod:`switchobs_ros.heap`: a process-wide setting, made
+once, before the imports allocate). A ``pip install``
 without the interface package switchobs_msgs gets one line saying how to build it (exit code 2),
 not an import traceback.
 ``python -m switchobs_ros.estimator`` starts through :func:`estimator` as well (the module hands over
@@ -35,10 +37,14 @@ NO_MSGS = ("the interface package switchobs_msgs (the typed outputs' messages) i
            "(docs/how-to/ros2.md)")
 
 
-def _run(module: str, prog: str, participant_first: bool = False) -> int:
+def _run(module: str, prog: str, participant_first: bool = False, keep_heap: bool = False) -> int:
     """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
     switchobs_msgs is one line on stderr and exit code 2. ``participant_first``: the node's DDS
-    participant is created before the import (:mod:`switchobs_ros.early`)."""
+    participant is created before the import (:mod:`switchobs_ros.early`); ``keep_heap``: glibc's
+    malloc keeps the heap between samples, set before anything else (:mod:`switchobs_ros.heap`)."""
+    if keep_heap:
+        from .heap import keep_heap as keep
+        keep()
     previous = signal.signal(signal.SIGINT, _stop_quietly)
     try:
         if participant_first:
@@ -62,13 +68,13 @@ def _run(module: str, prog: str, participant_first: bool = False) -> int:
 
 
 def estimator() -> int:
-    """``estimator``: :mod:`switchobs_ros.estimator`, its participant created first."""
-    return _run("estimator", "estimator", participant_first=True)
+    """``estimator``: :mod:`switchobs_ros.estimator`, its participant created first, its heap kept."""
+    return _run("estimator", "estimator", participant_first=True, keep_heap=True)
 
 
 def managed_estimator() -> int:
-    """``managed_estimator``: :mod:`switchobs_ros.managed_estimator`."""
-    return _run("managed_estimator", "managed_estimator")
+    """``managed_estimator``: :mod:`switchobs_ros.managed_estimator`, its heap kept."""
+    return _run("managed_estimator", "managed_estimator", keep_heap=True)
 
 
 def camera_sim() -> int:
