@@ -12,7 +12,9 @@ ran; this thread's CPU time (``time.thread_time``) per message, and the executor
 counts them; rclpy's: one wait per ``_wait_for_ready_callbacks`` pass, counted by wrapping the rcl
 wait set's ``wait``). Medians over the rounds, and the ratio. ``--before DIR`` adds ``kept_before``:
 the ``KeptWaitSetExecutor`` of another checkout's ``switchobs_ros/executor.py``, loaded beside this
-one, in the same interleaved rounds.
+one, in the same interleaved rounds. ``--idle K`` adds, for each kept executor, the CPU time of one
+wait with nothing ready (``K`` zero-timeout waits per round, the estimator's entities and two publishers
+with their QoS event handlers): the executor's own Python per wait and rcl's wait, no callback.
 """
 
 from __future__ import annotations
@@ -125,24 +127,48 @@ def one_round(kind: str, n: int) -> tuple[float, float]:
     return cpu / n * 1e6, w / n
 
 
+def idle_round(kind: str, k: int) -> float:
+    """CPU time (us) of one zero-timeout wait of executor ``kind`` with nothing ready (``k`` waits)."""
+    node = node_like_the_estimator(f"bench_idle_{kind}", [])
+    for t in "xy":
+        node.create_publisher(Float64MultiArray, f"/bench_exec/idle_{t}", qos.OUTPUT)
+    ex = KEPT[kind]()
+    ex.add_node(node)
+    for _ in range(50):
+        ex.spin_once(timeout_sec=0.0)
+    c0 = time.thread_time()
+    for _ in range(k):
+        ex._wait(0.0)
+    cpu = (time.thread_time() - c0) / k * 1e6
+    ex.shutdown()
+    node.destroy_node()
+    return cpu
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--messages", type=int, default=3000)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--before", type=Path, default=None, help="a checkout whose KeptWaitSetExecutor runs beside")
+    ap.add_argument("--idle", type=int, default=0, metavar="K", help="also time K waits with nothing ready per round")
     a = ap.parse_args()
     if a.before is not None:
         KEPT["kept_before"] = executor_from(a.before.resolve())
     rclpy.init()
     res: dict[str, list] = {kind: [] for kind in ("rclpy", *KEPT)}
+    idle: dict[str, list] = {kind: [] for kind in KEPT}
     try:
         for r in range(a.rounds):
             for kind in (list(res) if r % 2 == 0 else list(res)[::-1]):
                 res[kind].append(one_round(kind, a.messages))
+            for kind in (list(idle) if r % 2 == 0 else list(idle)[::-1]):
+                if a.idle:
+                    idle[kind].append(idle_round(kind, a.idle))
     finally:
         rclpy.try_shutdown()
     print(f"Command: `python bench/bench_executor.py --messages {a.messages} --rounds {a.rounds}"
-          f"{f' --before {a.before}' if a.before else ''}` (load {os.getloadavg()[0]:.1f} after)\n")
+          f"{f' --before {a.before}' if a.before else ''}{f' --idle {a.idle}' if a.idle else ''}`"
+          f" (load {os.getloadavg()[0]:.1f} after)\n")
     print("| executor | CPU per callback (median of rounds) | waits per callback | rounds |")
     print("|---|---|---|---|")
     med = {}
@@ -153,6 +179,12 @@ def main() -> int:
     print(f"\nkept / rclpy: {med['kept'] / med['rclpy']:.2f}x")
     if "kept_before" in med:
         print(f"kept / kept_before: {med['kept'] / med['kept_before']:.2f}x")
+    if a.idle:
+        print("\nOne wait with nothing ready (CPU, median of rounds): " + ", ".join(
+            f"{kind} {statistics.median(v):.1f} us ({', '.join(f'{x:.1f}' for x in v)})" for kind, v in idle.items()))
+        if "kept_before" in idle:
+            ratio = statistics.median(idle["kept"]) / statistics.median(idle["kept_before"])
+            print(f"kept / kept_before: {ratio:.2f}x")
     return 0
 
 
