@@ -85,6 +85,7 @@ from .validate import (
     check_channel,
     check_pose,
     check_stamp,
+    check_time,
     check_values,
 )
 
@@ -135,6 +136,7 @@ __all__ = [
     "check_channel",
     "check_pose",
     "check_stamp",
+    "check_time",
     "check_values",
     "envelope_labels",
     "labelled_array",

@@ -40,7 +40,7 @@ from std_msgs.msg import Float64MultiArray
 
 from .convert import STAMP_PAD, labelled_array, labelled_stamp_ns
 from .stamps import ns_to_stamp
-from .validate import BridgeError, Reason, Rejection, SpecError
+from .validate import BridgeError, SpecError, check_time
 
 __all__ = [
     "LABELLED_ARRAY",
@@ -160,8 +160,7 @@ def _check_fields(type_name: str, fields: Sequence[str]) -> tuple[str, tuple[str
 
 
 def _bad_stamp(sec: int, nsec: int) -> None:
-    raise BridgeError(Rejection(Reason.BAD_STAMP, "header.stamp",
-                                f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)"))
+    raise BridgeError(check_time(sec, nsec))
 
 
 def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, str, np.ndarray]]:

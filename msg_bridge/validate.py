@@ -20,7 +20,7 @@ from std_msgs.msg import UInt8
 from switchobs_core.exceptions import SwitchobsError
 
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
-           "check_pose", "check_stamp", "check_values"]
+           "check_pose", "check_stamp", "check_time", "check_values"]
 
 
 class Reason(enum.Enum):
@@ -122,8 +122,7 @@ def check_pose(
     if frame_id and frame != frame_id:
         return Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')")
     if sec < 0 or nsec >= _NS:
-        return Rejection(Reason.BAD_STAMP, "header.stamp",
-                         f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)")
+        return check_time(sec, nsec)
     return check_stamp(sec * _NS + nsec, last_ns=last_ns, now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
 
 
@@ -141,6 +140,14 @@ def _pose_parser() -> Any:
     if p.fields != _POSE_FIELDS or p.index != tuple(range(7)):
         raise AssertionError("PoseStamped's float64 fields are not the seven pose fields")
     return p
+
+
+def check_time(sec: int, nsec: int) -> Rejection | None:
+    """A header stamp's ``sec`` and ``nanosec`` a valid time (``sec >= 0``, ``nanosec < 1e9``)."""
+    if sec < 0 or nsec >= _NS:
+        return Rejection(Reason.BAD_STAMP, "header.stamp",
+                         f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)")
+    return None
 
 
 def check_values(y: np.ndarray, fields: Sequence[str], *, max_abs: float = 1e6) -> Rejection | None:

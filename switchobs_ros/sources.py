@@ -84,8 +84,7 @@ class Source:
                 rej = mb.check_values(values, self.fields, max_abs=max_abs)
             return sec * _NS + nsec, values, _named(rej)
         if sec < 0 or nsec >= _NS:
-            return 0, _EMPTY, Rejection(Reason.BAD_STAMP, "header.stamp", f"sec {sec}, nanosec {nsec} is not a "
-                                        "valid time (sec >= 0, nanosec < 1e9)")
+            return 0, _EMPTY, mb.check_time(sec, nsec)
         stamp_ns = sec * _NS + nsec
         values = self.parser.values(every)
         rej = mb.check_values(values, self.fields, max_abs=max_abs)
