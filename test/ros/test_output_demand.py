@@ -67,6 +67,14 @@ def test_listened_keeps_each_publishers_answer_for_its_period():
     assert not listened(b, clock) and b.asked == 2       # then asked again
 
 
+def test_demands_refresh_answers_listened_for_the_carriers():
+    pubs = [_Pub(1), _Pub(0)]
+    d = Demand(lambda: list(zip(("odometry", "covariance"), pubs)))
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [1, 1]
+    pubs[0].n = 0
+    assert listened(pubs[0]) and pubs[0].asked == 1      # the refresh's yes, kept LISTEN_PERIOD (0.5 s)
+
+
 def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
     base = time.time_ns()
     for k in range(k0, k0 + n):
