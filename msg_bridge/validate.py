@@ -38,7 +38,7 @@ class Reason(enum.Enum):
     NO_CHANNEL = "no_channel"            # a pose before any active-channel message
     STALE_AFTER_SWITCH = "stale_after_switch"  # target pose taken before the last switch
     INTERNAL_ERROR = "internal_error"    # an exception while handling the message (counted, node runs on)
-    BAD_LAYOUT = "bad_layout"            # a labelled array that is not ours, or names no state entry
+    BAD_LAYOUT = "bad_layout"            # a labelled array not ours / naming no state entry; bytes not the type
     AMBIGUOUS_CHANNEL = "ambiguous_channel"  # the sample's channel was not certain (never guessed)
     INCONSISTENT = "inconsistent"        # the innovation exceeds what the published bound allows
     OUTLIER = "outlier"                  # the normalised innovation exceeds the chi-square gate
