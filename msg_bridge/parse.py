@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from .fields import LABELLED_ARRAY, canonical_type, float64_fields, message_class
+from .fields import LABELLED_ARRAY, canonical_type, compile_parse, float64_fields, message_class
 from .validate import Reason, Rejection
 
 __all__ = ["RAW_TYPES", "Parsed", "Parser", "RawReader", "raw_readable"]
@@ -142,7 +142,7 @@ class Parser:
         every = float64_fields(self.type)
         self.index = tuple(every.index(f) for f in self.fields)
         self.raw = RawReader(self.type) if self.type in RAW_TYPES else None
-        self._get = attrgetter("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", *every)
+        self._get = compile_parse(every)
         idx = self.index
         self._pick = (lambda v, i=idx[0]: (v[i],)) if len(idx) == 1 else itemgetter(*idx)
 
@@ -155,8 +155,7 @@ class Parser:
             if self.raw is None:
                 return _bad(f"{self.type} is read as a message, not from bytes")
             return self.raw.parse(msg)
-        t = self._get(msg)
-        return t[0], t[1], t[2], t[3:]
+        return self._get(msg)
 
     def values(self, every: tuple[float, ...]) -> np.ndarray:
         """The chosen fields of a parsed message's ``values`` (a new float64 array)."""

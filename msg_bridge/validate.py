@@ -113,12 +113,14 @@ def check_pose(
     if msg.__class__ is not tuple:
         msg = _pose_parser().parse(msg)
     sec, nsec, frame, v = msg
-    for k in range(7):
-        x = v[k]
-        if not math.isfinite(x):
-            return Rejection(Reason.NON_FINITE, _POSE_FIELDS[k], f"{x}")
-        if k < 3 and abs(x) > max_abs:
-            return Rejection(Reason.TOO_LARGE, _POSE_FIELDS[k], f"|{x:g}| > {max_abs:g}")
+    s = v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6]   # finite only if all seven are (else, or on overflow: the loop)
+    if not (abs(v[0]) <= max_abs and abs(v[1]) <= max_abs and abs(v[2]) <= max_abs and s - s == 0.0):
+        for k in range(7):
+            x = v[k]
+            if not math.isfinite(x):
+                return Rejection(Reason.NON_FINITE, _POSE_FIELDS[k], f"{x}")
+            if k < 3 and abs(x) > max_abs:
+                return Rejection(Reason.TOO_LARGE, _POSE_FIELDS[k], f"|{x:g}| > {max_abs:g}")
     if frame_id and frame != frame_id:
         return Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')")
     if sec < 0 or nsec >= _NS:

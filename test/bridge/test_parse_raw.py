@@ -132,3 +132,38 @@ def test_parser_takes_bytes_messages_and_parsed_forms():
     assert odom.raw is None and odom.parse(b"\x00\x01\x00\x00").reason is Reason.BAD_LAYOUT
     with pytest.raises(ValueError):
         Parser(mb.LABELLED_ARRAY, ("a",))
+
+
+def _first_bad_value(v, max_abs):
+    """check_pose's value rule, field by field: the first non-finite value, or position above max_abs."""
+    for k, x in enumerate(v):
+        if not math.isfinite(x):
+            return Reason.NON_FINITE, k
+        if k < 3 and abs(x) > max_abs:
+            return Reason.TOO_LARGE, k
+    return None
+
+
+@_SETTINGS
+@given(st.lists(st.one_of(_doubles, st.sampled_from([1e308, -1e308, 1e6, 1.0000001e6, math.inf, math.nan])),
+                min_size=7, max_size=7),
+       st.sampled_from([1e6, 1e300, math.inf, 0.0]))
+def test_check_pose_names_the_first_bad_field(values, max_abs):
+    rej = mb.check_pose((1, 0, "map", tuple(values)), max_abs=max_abs)
+    want = _first_bad_value(values, max_abs)
+    if want is None:
+        assert rej is None
+    else:
+        assert (rej.reason, rej.field) == (want[0], mb.float64_fields("geometry_msgs/PoseStamped")[want[1]])
+
+
+@pytest.mark.parametrize("max_abs", [1e6, math.inf])
+@pytest.mark.parametrize("bad", [math.inf, -math.inf, math.nan])
+def test_check_pose_non_finite_at_each_field_whatever_max_abs(max_abs, bad):
+    for k, field in enumerate(mb.float64_fields("geometry_msgs/PoseStamped")):
+        v = [1.0, -2.0, 3.0, 0.0, 0.0, 0.0, 1.0]
+        v[k] = bad
+        rej = mb.check_pose((1, 0, "map", tuple(v)), max_abs=max_abs)
+        assert (rej.reason, rej.field) == (Reason.NON_FINITE, field)
+    huge = (1e308, 1e308, 1e308, 1e308, 1e308, 1e308, 1e308)       # finite, the sum overflows
+    assert mb.check_pose((1, 0, "map", huge), max_abs=math.inf) is None
