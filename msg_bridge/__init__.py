@@ -12,6 +12,8 @@ convert   PoseStamped <-> planar position, labelled Float64MultiArray (state, en
           truth), per-body nav_msgs/Odometry
 validate  checks of incoming messages returning a :class:`Rejection` with a
           :class:`Reason` code; the error types :class:`BridgeError`, :class:`SpecError`
+parse     a stamped input's one checked form ``(sec, nanosec, frame_id, values)`` from its
+          serialised bytes (:class:`RawReader`, no message built) or a message (:class:`Parser`)
 fields    one converter per sensor message type: :class:`FieldReader` (message ->
           ``(stamp_ns, frame_id, y)``) and :class:`FieldWriter` (values -> message)
 inputs    input specifications: topic, type, fields -> output rows, and how the channel is
@@ -71,6 +73,7 @@ from .inputs import (
     ros_topic_error,
 )
 from .markers import MarkersWriter
+from .parse import RAW_TYPES, Parser, RawReader, raw_readable
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
 from .validate import (
     BridgeError,
@@ -82,6 +85,7 @@ from .validate import (
     check_channel,
     check_pose,
     check_stamp,
+    check_time,
     check_values,
 )
 
@@ -113,6 +117,10 @@ __all__ = [
     "LabelledArray",
     "LabelledArrayWriter",
     "MarkersWriter",
+    "Parser",
+    "RAW_TYPES",
+    "RawReader",
+    "raw_readable",
     "OdometryWriter",
     "Reason",
     "Rejection",
@@ -128,6 +136,7 @@ __all__ = [
     "check_channel",
     "check_pose",
     "check_stamp",
+    "check_time",
     "check_values",
     "envelope_labels",
     "labelled_array",

@@ -40,7 +40,7 @@ from std_msgs.msg import Float64MultiArray
 
 from .convert import STAMP_PAD, labelled_array, labelled_stamp_ns
 from .stamps import ns_to_stamp
-from .validate import BridgeError, Reason, Rejection, SpecError
+from .validate import BridgeError, SpecError, check_time
 
 __all__ = [
     "LABELLED_ARRAY",
@@ -160,12 +160,14 @@ def _check_fields(type_name: str, fields: Sequence[str]) -> tuple[str, tuple[str
 
 
 def _bad_stamp(sec: int, nsec: int) -> None:
-    raise BridgeError(Rejection(Reason.BAD_STAMP, "header.stamp",
-                                f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)"))
+    raise BridgeError(check_time(sec, nsec))
 
 
-def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, str, np.ndarray]]:
-    """``msg -> (stamp_ns, frame_id, y)`` for a header type, as one generated function.
+def _compile_getter(fields: tuple[str, ...], head: Sequence[str], result: Callable[[list[str]], str],
+                    scope: dict) -> Callable[[object], object]:
+    """``read(msg)``, one generated function: the lines ``head`` (``h = msg.header``, ``st =
+    h.stamp`` are bound first), then ``return`` of ``result(leaves)``, ``leaves`` the expressions
+    of ``fields`` in order.
 
     Each intermediate object (``msg.pose``, ``msg.pose.position``, ...) is fetched once, so a
     read costs one attribute access per distinct path prefix and leaf: about a quarter less than an
@@ -173,8 +175,7 @@ def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, st
     :func:`float64_fields` (identifiers from the message definition) before they get here.
     """
     names = {"msg": "msg"}
-    lines = ["    h = msg.header", "    st = h.stamp", "    sec, nsec = st.sec, st.nanosec",
-             f"    if sec < 0 or nsec >= {_NS}:", "        _bad_stamp(sec, nsec)"]
+    lines = ["    h = msg.header", "    st = h.stamp", *head]
     leaves = []
     for f in fields:
         parts = f.split(".")
@@ -185,11 +186,24 @@ def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, st
                 parent = ".".join(parts[:k - 1]) or "msg"
                 lines.append(f"    {names[path]} = {names[parent]}.{parts[k - 1]}")
         leaves.append(f"{names['.'.join(parts[:-1]) or 'msg']}.{parts[-1]}")
-    lines.append(f"    return sec * {_NS} + nsec, h.frame_id, _array(({', '.join(leaves)},), _float)")
+    lines.append(f"    return {result(leaves)}")
     code = "def read(msg):\n" + "\n".join(lines) + "\n"
-    scope: dict = {"_array": np.array, "_float": float, "_bad_stamp": _bad_stamp}
     exec(code, scope)              # the source above is built from checked field names only
     return scope["read"]
+
+
+def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, str, np.ndarray]]:
+    """``msg -> (stamp_ns, frame_id, y)`` for a header type (:func:`_compile_getter`)."""
+    return _compile_getter(fields, ["    sec, nsec = st.sec, st.nanosec", f"    if sec < 0 or nsec >= {_NS}:",
+                                    "        _bad_stamp(sec, nsec)"],
+                           lambda leaves: f"sec * {_NS} + nsec, h.frame_id, _array(({', '.join(leaves)},), _float)",
+                           {"_array": np.array, "_float": float, "_bad_stamp": _bad_stamp})
+
+
+def compile_parse(fields: tuple[str, ...]) -> Callable[[object], tuple]:
+    """``msg -> (sec, nanosec, frame_id, (field values...))`` for a header type, the fields
+    checked by :func:`float64_fields` (:data:`msg_bridge.parse.Parsed`)."""
+    return _compile_getter(fields, [], lambda leaves: f"st.sec, st.nanosec, h.frame_id, ({', '.join(leaves)},)", {})
 
 
 class FieldReader:

@@ -11,18 +11,16 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped
 from std_msgs.msg import UInt8
 
 from switchobs_core.exceptions import SwitchobsError
 
-from .stamps import stamp_to_ns
-
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
-           "check_pose", "check_stamp", "check_values"]
+           "check_pose", "check_stamp", "check_time", "check_values"]
 
 
 class Reason(enum.Enum):
@@ -40,7 +38,7 @@ class Reason(enum.Enum):
     NO_CHANNEL = "no_channel"            # a pose before any active-channel message
     STALE_AFTER_SWITCH = "stale_after_switch"  # target pose taken before the last switch
     INTERNAL_ERROR = "internal_error"    # an exception while handling the message (counted, node runs on)
-    BAD_LAYOUT = "bad_layout"            # a labelled array that is not ours, or names no state entry
+    BAD_LAYOUT = "bad_layout"            # a labelled array not ours / naming no state entry; bytes not the type
     AMBIGUOUS_CHANNEL = "ambiguous_channel"  # the sample's channel was not certain (never guessed)
     INCONSISTENT = "inconsistent"        # the innovation exceeds what the published bound allows
     OUTLIER = "outlier"                  # the normalised innovation exceeds the chi-square gate
@@ -97,7 +95,7 @@ def check_stamp(
 
 
 def check_pose(
-    msg: PoseStamped,
+    msg: Any,
     *,
     frame_id: str | None = None,
     max_abs: float = 1e6,
@@ -107,26 +105,51 @@ def check_pose(
 ) -> Rejection | None:
     """Every pose field finite, positions within ``max_abs``, the frame, then the stamp.
 
-    ``frame_id`` None or "" accepts any frame.
+    ``msg`` is a PoseStamped's :data:`~msg_bridge.parse.Parsed` form ``(sec, nanosec, frame_id,
+    values)`` (its serialised bytes read by :class:`~msg_bridge.parse.RawReader`), or a message
+    object (rclpy, rosbags, or any with the same attribute paths), parsed into that form first: one
+    check for both. ``frame_id`` None or "" accepts any frame.
     """
-    p, q = msg.pose.position, msg.pose.orientation
-    for name, v in (("x", p.x), ("y", p.y), ("z", p.z)):
-        if not math.isfinite(v):
-            return Rejection(Reason.NON_FINITE, f"pose.position.{name}", f"{v}")
-        if abs(v) > max_abs:
-            return Rejection(Reason.TOO_LARGE, f"pose.position.{name}", f"|{v:g}| > {max_abs:g}")
-    for name, v in (("x", q.x), ("y", q.y), ("z", q.z), ("w", q.w)):
-        if not math.isfinite(v):
-            return Rejection(Reason.NON_FINITE, f"pose.orientation.{name}", f"{v}")
-    if frame_id and msg.header.frame_id != frame_id:
-        return Rejection(Reason.WRONG_FRAME, "header.frame_id",
-                         f"'{msg.header.frame_id}' (expected '{frame_id}')")
-    st = msg.header.stamp
-    if st.sec < 0 or st.nanosec >= 1_000_000_000:
+    if msg.__class__ is not tuple:
+        msg = _pose_parser().parse(msg)
+    sec, nsec, frame, v = msg
+    s = v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6]   # finite only if all seven are (else, or on overflow: the loop)
+    if not (abs(v[0]) <= max_abs and abs(v[1]) <= max_abs and abs(v[2]) <= max_abs and s - s == 0.0):
+        for k in range(7):
+            x = v[k]
+            if not math.isfinite(x):
+                return Rejection(Reason.NON_FINITE, _POSE_FIELDS[k], f"{x}")
+            if k < 3 and abs(x) > max_abs:
+                return Rejection(Reason.TOO_LARGE, _POSE_FIELDS[k], f"|{x:g}| > {max_abs:g}")
+    if frame_id and frame != frame_id:
+        return Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')")
+    if sec < 0 or nsec >= _NS:
+        return check_time(sec, nsec)
+    return check_stamp(sec * _NS + nsec, last_ns=last_ns, now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
+
+
+_NS = 1_000_000_000
+#: A PoseStamped's float64 fields, in the order of its parsed ``values``.
+_POSE_FIELDS = ("pose.position.x", "pose.position.y", "pose.position.z",
+                "pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w")
+
+
+@cache
+def _pose_parser() -> Any:
+    from .parse import Parser  # parse builds on this module's Rejection
+
+    p = Parser("geometry_msgs/msg/PoseStamped", _POSE_FIELDS)
+    if p.fields != _POSE_FIELDS or p.index != tuple(range(7)):
+        raise AssertionError("PoseStamped's float64 fields are not the seven pose fields")
+    return p
+
+
+def check_time(sec: int, nsec: int) -> Rejection | None:
+    """A header stamp's ``sec`` and ``nanosec`` a valid time (``sec >= 0``, ``nanosec < 1e9``)."""
+    if sec < 0 or nsec >= _NS:
         return Rejection(Reason.BAD_STAMP, "header.stamp",
-                         f"sec {st.sec}, nanosec {st.nanosec} is not a valid time (sec >= 0, nanosec < 1e9)")
-    return check_stamp(stamp_to_ns(st), last_ns=last_ns, now_ns=now_ns,
-                       future_tolerance_ns=future_tolerance_ns)
+                         f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)")
+    return None
 
 
 def check_values(y: np.ndarray, fields: Sequence[str], *, max_abs: float = 1e6) -> Rejection | None:

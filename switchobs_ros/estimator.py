@@ -226,14 +226,14 @@ class EstimatorMixin(OutputsMixin):
             return self.create_publisher(msg_type, topic, profile,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-        def sub(msg_type, topic, callback, profile):
+        def sub(msg_type, topic, callback, profile, raw=False):
             warn = self.get_logger().warn
 
             def incompatible(event, topic=topic):
                 warn(f"a publisher on '{topic}' offers incompatible QoS (policy "
                      f"{qos_policy_name_from_kind(event.last_policy_kind)}): its messages are not received")
             events = SubscriptionEventCallbacks(incompatible_qos=incompatible, use_default_callbacks=False)
-            return self.create_subscription(msg_type, topic, callback, profile, event_callbacks=events)
+            return self.create_subscription(msg_type, topic, callback, profile, event_callbacks=events, raw=raw)
 
         # publishers (reliable), then subscriptions (sensor data; channel reliable). The
         # channel subscription is created first so that, when a channel message and a pose
@@ -258,13 +258,15 @@ class EstimatorMixin(OutputsMixin):
         self.last_prediction = None
         # inputs (the system's input specification): the channel topic first, so that, when a
         # channel message and a pose are ready together, the executor takes the channel first
-        # (attribution does not depend on it: source timestamps, switchobs_ros.attribution)
+        # (attribution does not depend on it: source timestamps, switchobs_ros.attribution). A source
+        # of a fixed layout is taken as serialised bytes and read without a message object
+        # (msg_bridge.parse: the same checks as a message's)
         self._input_subs = []
         hot = []
         self.sub_channel, self._sub = None, sub     # the channel's: _channel_subscription
         for src in pl.sources:
             handle = self._input_handler(src.index)
-            s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB)
+            s = sub(mb.message_class(src.type), src.topic, self._with_drain(handle), qos.SENSOR_SUB, raw=src.raw)
             self._input_subs.append(s)
             hot.append((s, handle))
         self.sub_control = None

@@ -7,7 +7,9 @@ estimator's time. Here:
 * :func:`decode_pose` reads a little-endian CDR ``geometry_msgs/PoseStamped`` into a light
   object with the same attribute paths (``header.stamp.sec``, ``pose.position.x``, ...), which
   is all that :func:`msg_bridge.check_pose` and :func:`msg_bridge.pose_to_xy` read. Anything
-  it does not recognise exactly (big-endian, a length that does not add up) goes to rclpy.
+  it does not recognise exactly (big-endian, a length that does not add up) goes to rclpy. The
+  estimator itself reads its inputs' bytes with :class:`msg_bridge.parse.RawReader` (no object
+  at all); this one serves scripts that want message-like objects (bench/bench_replay.py).
 * :class:`Template` serialises a message once with rclpy and then only patches the bytes of
   the fields that change (the stamp and some float64s) with ``struct.pack_into``.
 

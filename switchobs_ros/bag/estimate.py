@@ -40,7 +40,6 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
@@ -53,7 +52,7 @@ from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
 from ..config import params_from_file
 from ..pipeline import EstimatorPipeline
-from .cdr import Template, decode_pose, header_stamp
+from .cdr import Template, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 from .order_stream import WINDOW_NS, BeyondWindow, StreamCounts, stream_order
@@ -260,9 +259,11 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                                               else "/" + ctl.topic)
 
         def decoded(m, src):
-            if src.pose:          # the CDR fast path of the paper interface
-                return decode_pose(m.data, lambda d, m=m: deserialize(m, PoseStamped))
-            return deserialize(m, mb.message_class(src.type))
+            if src.raw:           # a fixed layout: its parsed form read from the bytes (msg_bridge.parse)
+                p = src.parser.raw.parse(m.data)
+                if p.__class__ is tuple:
+                    return p
+            return deserialize(m, mb.message_class(src.type))     # another encoding, or damaged: BagError
 
         n_inputs = 0
         n_msgs = 0

@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+from rclpy.serialization import serialize_message
 from ros_harness import EstimatorIO, spin_until, start_feed
 from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
@@ -105,6 +106,8 @@ def test_bad_messages_rejected_counted_node_keeps_running(estimator, ros_node):
     bad.append(mb.xy_to_pose((0.0, 0.0), s_last, "world_test"))                  # duplicate
     bad.append(mb.xy_to_pose((0.0, 0.0), s_last - 1_000_000, "world_test"))      # older
     bad.append(mb.xy_to_pose((0.0, 0.0), time.time_ns() + 60 * 10**9, "world_test"))  # 60 s ahead
+    ok = serialize_message(mb.xy_to_pose((0.0, 0.0), next(good), "world_test"))
+    bad += [ok[:-8], b"\x00\x00" + ok[2:]]          # serialised bytes: truncated, big-endian (bad_layout)
     for m in bad:
         io.pub_target.publish(m)
         spin_until(ros_node, lambda: False, 0.01)
@@ -116,7 +119,7 @@ def test_bad_messages_rejected_counted_node_keeps_running(estimator, ros_node):
     assert spin_until(ros_node, lambda: any(mb.unpack_labelled(m).stamp_ns == s_after
                                             for m in io.msgs["state"][n0:]), 5.0), estimator.output()
     expected = {"non_finite": 2, "too_large": 1, "wrong_frame": 1, "zero_stamp": 1, "duplicate_stamp": 1,
-                "old_stamp": 1, "future_stamp": 1}
+                "old_stamp": 1, "future_stamp": 1, "bad_layout": 2}
 
     def counts_ok():
         d = io.diag_values()

@@ -14,6 +14,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt8
 
 import msg_bridge as mb
@@ -72,12 +73,14 @@ POSE_FIELDS = ["pose.position.x", "pose.position.y", "pose.position.z", "pose.or
 
 
 def _check_rejected(pl, part, msg, reason):
+    """``msg`` rejected for ``reason``, as a message and as the serialised bytes the node takes."""
     before = _state(pl)
-    out = pl.on_pose(part, msg, NOW)
-    assert out == []
-    assert pl.rejected[(f"{part}/pose", reason)] == 1, dict(pl.rejected)
-    assert sum(pl.rejected.values()) == 1, dict(pl.rejected)
-    assert _state(pl) == before           # a rejected message changes nothing
+    for k, form in enumerate((msg, serialize_message(msg)), 1):
+        out = pl.on_pose(part, form, NOW)
+        assert out == []
+        assert pl.rejected[(f"{part}/pose", reason)] == k, dict(pl.rejected)
+        assert sum(pl.rejected.values()) == k, dict(pl.rejected)
+        assert _state(pl) == before           # a rejected message changes nothing
 
 
 @pytest.mark.parametrize("part", ["camera", "target"])
@@ -118,6 +121,22 @@ def test_stamps_and_frames(pl, part, case, reason):
         "empty_frame": lambda: _pose((0, 0), t0 + MS, ""),
     }[case]()
     _check_rejected(pl, part, msg, reason)
+    assert [e.stamp_ns for e in _pair(pl, t0 + 20 * MS)] == [t0 + 20 * MS]
+
+
+@pytest.mark.parametrize("part", ["camera", "target"])
+@pytest.mark.parametrize("damage", ["truncated", "big_endian", "frame_length", "not_utf8"])
+def test_malformed_serialised_pose_is_bad_layout(pl, part, damage):
+    """The node takes poses as serialised bytes (msg_bridge.parse): bytes that are not a
+    PoseStamped are rejected as ``bad_layout``, counted, and change nothing."""
+    t0 = _started(pl)
+    good = serialize_message(_pose((0.0, 0.0), t0 + MS))
+    bad = {"truncated": lambda: good[:-5], "big_endian": lambda: b"\x00\x00" + good[2:],
+           "frame_length": lambda: good[:12] + (2**31).to_bytes(4, "little") + good[16:],
+           "not_utf8": lambda: good[:16] + b"\xff" + good[17:]}[damage]()
+    before = _state(pl)
+    assert pl.on_pose(part, bad, NOW) == []
+    assert dict(pl.rejected) == {(f"{part}/pose", "bad_layout"): 1} and _state(pl) == before
     assert [e.stamp_ns for e in _pair(pl, t0 + 20 * MS)] == [t0 + 20 * MS]
 
 
@@ -309,7 +328,7 @@ def test_fuzz_100k_messages_every_valid_one_answered(pl):
     expected_stamps: list[int] = []
     expected_rej: Counter = Counter()
     first_channel_seen = False
-    for kind, part, msg, exp in _stream(N, seed=6):
+    for i, (kind, part, msg, exp) in enumerate(_stream(N, seed=6)):
         if kind == "channel":
             pl.on_channel(msg)
             if exp == "bad_channel":
@@ -317,7 +336,7 @@ def test_fuzz_100k_messages_every_valid_one_answered(pl):
             else:
                 first_channel_seen = True
             continue
-        out = pl.on_pose(part, msg, NOW)
+        out = pl.on_pose(part, serialize_message(msg) if i % 4 == 0 else msg, NOW)    # a quarter as the node takes it
         if kind == "valid":
             if not first_channel_seen:
                 expected_rej[(f"{part}/pose", "no_channel")] += 1

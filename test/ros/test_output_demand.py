@@ -16,7 +16,7 @@ from std_msgs.msg import Float64MultiArray, UInt8
 
 import msg_bridge as mb
 from switchobs_ros import qos
-from switchobs_ros.demand import Demand
+from switchobs_ros.demand import LISTEN_PERIOD, LISTEN_PERIOD_NO, Demand, listened
 from switchobs_ros.estimator import EstimatorNode
 
 
@@ -49,6 +49,30 @@ def test_demand_keeps_a_yes_and_a_no_for_their_periods():
     pubs[0].n = 1
     d.expire()
     assert d.covariance_wanted() and d.kinds == {"odometry"}
+
+
+def test_listened_keeps_each_publishers_answer_for_its_period():
+    now = [10.0]
+    clock = lambda: now[0]
+    a, b = _Pub(0), _Pub(1)
+    assert not listened(a, clock) and listened(b, clock) and not listened(None, clock)
+    a.n, b.n = 1, 0
+    now[0] += LISTEN_PERIOD_NO * 0.99
+    assert not listened(a, clock) and listened(b, clock) and (a.asked, b.asked) == (1, 1)   # kept
+    now[0] += LISTEN_PERIOD_NO * 0.02
+    assert listened(a, clock) and a.asked == 2           # a new subscriber: seen after at most period_no
+    now[0] = 10.0 + LISTEN_PERIOD * 0.99
+    assert listened(b, clock) and b.asked == 1           # a yes kept for the period
+    now[0] = 10.0 + LISTEN_PERIOD * 1.01
+    assert not listened(b, clock) and b.asked == 2       # then asked again
+
+
+def test_demands_refresh_answers_listened_for_the_carriers():
+    pubs = [_Pub(1), _Pub(0)]
+    d = Demand(lambda: list(zip(("odometry", "covariance"), pubs)))
+    assert d.covariance_wanted() and [p.asked for p in pubs] == [1, 1]
+    pubs[0].n = 0
+    assert listened(pubs[0]) and pubs[0].asked == 1      # the refresh's yes, kept LISTEN_PERIOD (0.5 s)
 
 
 def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:

@@ -1,0 +1,169 @@
+"""msg_bridge.parse: the raw reader gives, from a serialised message, exactly the fields
+rclpy's deserialiser gives; bytes that are not such a message are rejected, never raised; the
+parsed form and the message are checked by the same code with the same result."""
+
+from __future__ import annotations
+
+import math
+import struct
+from operator import attrgetter
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from rclpy.serialization import deserialize_message, serialize_message
+
+import msg_bridge as mb
+from msg_bridge import Reason, Rejection
+from msg_bridge.parse import RAW_TYPES, Parser, RawReader
+
+_doubles = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True, width=64)
+_frames = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=40)
+_SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def _message(type_name: str, sec: int, nsec: int, frame: str, values: list[float]):
+    msg = mb.message_class(type_name)()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
+    msg.header.frame_id = frame
+    for f, v in zip(mb.float64_fields(type_name), values):
+        obj, _, leaf = f.rpartition(".")
+        setattr(attrgetter(obj)(msg), leaf, v)
+    return msg
+
+
+def _bits(values) -> list[bytes]:
+    return [struct.pack("<d", v) for v in values]
+
+
+@st.composite
+def _messages(draw):
+    type_name = draw(st.sampled_from(RAW_TYPES))
+    k = len(mb.float64_fields(type_name))
+    values = draw(st.lists(_doubles, min_size=k, max_size=k))
+    sec = draw(st.integers(-2**31, 2**31 - 1))
+    nsec = draw(st.integers(0, 2**32 - 1))
+    return type_name, _message(type_name, sec, nsec, draw(_frames), values)
+
+
+@_SETTINGS
+@given(_messages())
+def test_raw_reader_gives_the_fields_rclpy_deserialises(case):
+    type_name, msg = case
+    data = serialize_message(msg)
+    got = RawReader(type_name).parse(data)
+    back = deserialize_message(data, mb.message_class(type_name))
+    assert isinstance(got, tuple), got
+    sec, nsec, frame, values = got
+    assert (sec, nsec, frame) == (back.header.stamp.sec, back.header.stamp.nanosec, back.header.frame_id)
+    want = Parser(type_name, mb.float64_fields(type_name)).parse(back)[3]
+    assert len(values) == len(mb.float64_fields(type_name))
+    assert _bits(values) == _bits(want)           # bit for bit: nan payloads, -0.0, subnormals
+    if type_name == "geometry_msgs/msg/PoseWithCovarianceStamped":       # the fixed array after the fields
+        assert np.array_equal(np.frombuffer(data, "<f8", 36, len(data) - 288), back.pose.covariance, equal_nan=True)
+
+
+@_SETTINGS
+@given(_messages(), st.data())
+def test_truncated_or_corrupted_bytes_are_rejected_not_raised(case, data):
+    type_name, msg = case
+    good = serialize_message(msg)
+    reader = RawReader(type_name)
+    cut = data.draw(st.integers(0, len(good) - 1))
+    rej = reader.parse(good[:cut])
+    assert isinstance(rej, Rejection) and rej.reason is Reason.BAD_LAYOUT
+    assert isinstance(reader.parse(good + b"\x00" * data.draw(st.integers(1, 9))), Rejection)
+    # any bytes flipped anywhere: a parse or a rejection, never an exception
+    bad = bytearray(good)
+    for _ in range(data.draw(st.integers(1, 4))):
+        bad[data.draw(st.integers(0, len(bad) - 1))] ^= data.draw(st.integers(1, 255))
+    got = reader.parse(bytes(bad))
+    assert isinstance(got, (tuple, Rejection))
+    if isinstance(got, tuple) and bad[4:16] == good[4:16] and bad[:2] == good[:2]:
+        assert got[:2] == (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+
+def test_malformed_frames_and_encodings_are_bad_layout():
+    msg = mb.xy_to_pose((1.0, 2.0), 5_000_000_007, "map")
+    data = bytearray(serialize_message(msg))
+    reader = RawReader("geometry_msgs/PoseStamped")
+    assert reader.parse(bytes(data))[:3] == (5, 7, "map")
+    big = bytes(b"\x00\x00" + data[2:])                        # CDR_BE encapsulation
+    utf = bytes(data[:16] + b"\xff" + data[17:])               # "\xffap": not UTF-8
+    nul = bytes(data[:16] + b"\x00" + data[17:])               # a NUL inside the frame
+    unterminated = bytes(data[:19] + b"p" + data[20:])         # the terminator overwritten
+    long = bytes(data[:12] + struct.pack("<I", 2**32 - 1) + data[16:])
+    empty_len = bytes(data[:12] + struct.pack("<I", 0) + data[16:])
+    for bad in (big, utf, nul, unterminated, long, empty_len, b"", b"\x00\x01"):
+        rej = reader.parse(bad)
+        assert isinstance(rej, Rejection) and rej.reason is Reason.BAD_LAYOUT, bad
+
+
+@pytest.mark.parametrize("frame", ["", "map", "ma", "odom_1234", "wörld/frame"])
+def test_every_frame_length_and_padding(frame):
+    """Each frame length mod 8 (the doubles' padding) read as rclpy reads it."""
+    for type_name in RAW_TYPES:
+        k = len(mb.float64_fields(type_name))
+        msg = _message(type_name, 3, 999_999_999, frame, [math.ldexp(1.0 + j, -1070) for j in range(k)])
+        want = Parser(type_name, mb.float64_fields(type_name)).parse(msg)
+        assert RawReader(type_name).parse(serialize_message(msg)) == want
+
+
+@_SETTINGS
+@given(st.lists(_doubles, min_size=7, max_size=7), st.integers(-3, 3), st.integers(0, 2**32 - 1),
+       st.sampled_from(["map", "odom", ""]), st.one_of(st.none(), st.integers(0, 2 * 10**9)))
+def test_check_pose_same_answer_from_bytes_and_message(values, sec, nsec, frame, last_ns):
+    """The node's raw input and a Python message are checked by the same code, with the same result."""
+    msg = _message("geometry_msgs/PoseStamped", sec, nsec, frame, values)
+    kw = dict(frame_id="map", max_abs=1e6, last_ns=last_ns, now_ns=2 * 10**9, future_tolerance_ns=10**8)
+    parsed = RawReader("geometry_msgs/PoseStamped").parse(serialize_message(msg))
+    assert mb.check_pose(parsed, **kw) == mb.check_pose(msg, **kw)
+
+
+def test_parser_takes_bytes_messages_and_parsed_forms():
+    p = Parser("geometry_msgs/PointStamped", ("point.y",))
+    msg = _message("geometry_msgs/PointStamped", 1, 2, "map", [0.5, -1.5, 2.5])
+    parsed = p.parse(serialize_message(msg))
+    assert parsed == p.parse(msg) == (1, 2, "map", (0.5, -1.5, 2.5))
+    assert p.parse(parsed) is parsed
+    assert np.array_equal(p.values(parsed[3]), [-1.5])
+    odom = Parser("nav_msgs/Odometry", ("twist.twist.linear.x",))
+    assert odom.raw is None and odom.parse(b"\x00\x01\x00\x00").reason is Reason.BAD_LAYOUT
+    with pytest.raises(ValueError):
+        Parser(mb.LABELLED_ARRAY, ("a",))
+
+
+def _first_bad_value(v, max_abs):
+    """check_pose's value rule, field by field: the first non-finite value, or position above max_abs."""
+    for k, x in enumerate(v):
+        if not math.isfinite(x):
+            return Reason.NON_FINITE, k
+        if k < 3 and abs(x) > max_abs:
+            return Reason.TOO_LARGE, k
+    return None
+
+
+@_SETTINGS
+@given(st.lists(st.one_of(_doubles, st.sampled_from([1e308, -1e308, 1e6, 1.0000001e6, math.inf, math.nan])),
+                min_size=7, max_size=7),
+       st.sampled_from([1e6, 1e300, math.inf, 0.0]))
+def test_check_pose_names_the_first_bad_field(values, max_abs):
+    rej = mb.check_pose((1, 0, "map", tuple(values)), max_abs=max_abs)
+    want = _first_bad_value(values, max_abs)
+    if want is None:
+        assert rej is None
+    else:
+        assert (rej.reason, rej.field) == (want[0], mb.float64_fields("geometry_msgs/PoseStamped")[want[1]])
+
+
+@pytest.mark.parametrize("max_abs", [1e6, math.inf])
+@pytest.mark.parametrize("bad", [math.inf, -math.inf, math.nan])
+def test_check_pose_non_finite_at_each_field_whatever_max_abs(max_abs, bad):
+    for k, field in enumerate(mb.float64_fields("geometry_msgs/PoseStamped")):
+        v = [1.0, -2.0, 3.0, 0.0, 0.0, 0.0, 1.0]
+        v[k] = bad
+        rej = mb.check_pose((1, 0, "map", tuple(v)), max_abs=max_abs)
+        assert (rej.reason, rej.field) == (Reason.NON_FINITE, field)
+    huge = (1e308, 1e308, 1e308, 1e308, 1e308, 1e308, 1e308)       # finite, the sum overflows
+    assert mb.check_pose((1, 0, "map", huge), max_abs=math.inf) is None
