@@ -16,7 +16,9 @@ the header's frame id, and ``values``, every float64 field of the type
   of 8 bytes from the body's start; the float64 fields. Anything else (another encapsulation, a
   length that does not add up, a frame id that is not UTF-8 or holds a NUL) is a
   :class:`~msg_bridge.validate.Rejection` with reason ``BAD_LAYOUT``, never an exception.
-* :class:`Parser` takes either form: bytes go to the :class:`RawReader`, a message object (rclpy,
+* :class:`Parser` takes either form: bytes go to the :class:`RawReader` (bytes in another
+  encapsulation, a big-endian writer's, to rclpy's deserialiser, which reads them, and then as a
+  message), a message object (rclpy,
   rosbags or any object with the same attribute paths) is read attribute by attribute into the
   same tuple, and a :data:`Parsed` tuple is passed through. The checks then run on one form.
 
@@ -154,7 +156,21 @@ class Parser:
         if isinstance(msg, _BYTES):
             if self.raw is None:
                 return _bad(f"{self.type} is read as a message, not from bytes")
-            return self.raw.parse(msg)
+            got = self.raw.parse(msg)
+            if isinstance(got, Rejection) and msg[:2] != _CDR_LE:
+                return self._other_encoding(msg, got)
+            return got
+        return self._get(msg)
+
+    def _other_encoding(self, data: bytes | bytearray | memoryview, rejection: Rejection) -> Parsed | Rejection:
+        """Bytes in another encapsulation than little-endian CDR (a big-endian writer's): read by rclpy's
+        deserialiser, which honours the encapsulation, then parsed as a message; ``rejection`` (the raw
+        reader's) when rclpy cannot read them either."""
+        from rclpy.serialization import deserialize_message
+        try:
+            msg = deserialize_message(bytes(data), message_class(self.type))
+        except Exception:       # any failure of the C deserialiser: not such a message
+            return rejection
         return self._get(msg)
 
     def values(self, every: tuple[float, ...]) -> np.ndarray:

@@ -167,3 +167,31 @@ def test_check_pose_non_finite_at_each_field_whatever_max_abs(max_abs, bad):
         assert (rej.reason, rej.field) == (Reason.NON_FINITE, field)
     huge = (1e308, 1e308, 1e308, 1e308, 1e308, 1e308, 1e308)       # finite, the sum overflows
     assert mb.check_pose((1, 0, "map", huge), max_abs=math.inf) is None
+
+
+def _big_endian(sec: int, nsec: int, frame: str, values: list[float]) -> bytes:
+    """A PoseStamped in big-endian CDR (encapsulation 0x0000), as a big-endian writer serialises it."""
+    name = frame.encode() + b"\x00"
+    body = struct.pack(">iII", sec, nsec, len(name)) + name
+    body += b"\x00" * (-len(body) % 8) + struct.pack(">7d", *values)
+    return b"\x00\x00\x00\x00" + body
+
+
+@_SETTINGS
+@given(st.integers(-(2**31), 2**31 - 1), st.integers(0, 2**32 - 1), _frames, st.lists(_doubles, min_size=7, max_size=7))
+def test_parser_reads_big_endian_bytes_as_rclpy_does(sec, nsec, frame, values):
+    """Bytes of a big-endian writer are not lost: the raw reader refuses them, the parser hands
+    them to rclpy's deserialiser and gives the form of the little-endian bytes of the same message."""
+    data = _big_endian(sec, nsec, frame, values)
+    assert isinstance(RawReader("geometry_msgs/PoseStamped").parse(data), Rejection)
+    got = Parser("geometry_msgs/PoseStamped", ("pose.position.x",)).parse(data)
+    want = RawReader("geometry_msgs/PoseStamped").parse(
+        serialize_message(_message("geometry_msgs/msg/PoseStamped", sec, nsec, frame, values)))
+    assert got[:3] == want[:3] and _bits(got[3]) == _bits(want[3])
+
+
+def test_parser_rejects_bytes_rclpy_cannot_read_either():
+    data = _big_endian(5, 7, "map", [1.0] * 7)
+    for bad in (data[:20], b"\x00\x00\x00\x00", b"\x00\x00"):
+        rej = Parser("geometry_msgs/PoseStamped", ("pose.position.x",)).parse(bad)
+        assert isinstance(rej, Rejection) and rej.reason is Reason.BAD_LAYOUT, bad
