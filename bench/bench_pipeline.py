@@ -31,7 +31,10 @@ reported per answer (the window's CPU over its answers).
 
 ``--what core`` times the core alone on the same samples: ``SwitchedObserver.update`` and
 ``envelope()`` of the observer the pipeline builds (no pairing, attribution, screening, tests or
-outputs).
+outputs). ``--what screen`` adds what the pipeline's screening asks of the core before each
+update (:meth:`switchobs_ros.screening.Screening.admit`): the innovation test against
+``prior(t)`` and the bias test (``Recovery.before``: the held prediction and the prior
+covariance's block), the per-sample core path.
 
 Reported per tree and window (``first``: 0 to ``--first`` s, all first visits of the table's
 phases; ``steady``: one table period from ``--steady`` s): CPU per sample (``time.process_time``,
@@ -212,16 +215,28 @@ def run_child(a) -> dict:
         prof = cProfile.Profile(time.process_time)
     lo, hi = (0, k_first) if a.window == "first" else (k0, n_ticks)
     served: dict = {}
-    if a.what == "core":
+    screened = 0
+    if a.what in ("core", "screen"):
         obs = pl.observer
         obs.reset(pl.x0, 0.0)
         y, ch = s["y"], s["channels"]
+        scr = pl.screening
+        screen = a.what == "screen"
+        if screen:      # the screening's calls, as Screening.admit makes them (the pipeline's objects)
+            from switchobs_core.runtime.recovery import Recovery
+            rec = Recovery(obs, labels=scr.labels)
         gc.freeze()
         for k in range(n_ticks):
             t = (int(stamps[k]) - int(stamps[0])) * 1e-9
             c0 = time.process_time()
             if prof is not None and k == lo:
                 prof.enable()
+            if screen:
+                c = int(ch[k])
+                with np.errstate(all="ignore"):
+                    ok = scr.innovation.check(obs.prior(t), c, None, y[k]).ok
+                rec.before(t, c, None, y[k])
+                screened += ok
             obs.update(t, int(ch[k]), y[k])
             obs.envelope()
             if prof is not None and k == hi - 1:
@@ -271,7 +286,7 @@ def run_child(a) -> dict:
            "steady": cost[k0:n_ticks].tolist(), "errors": int(pl.errors),
            "published": dict(getattr(node, "published", {})),
            "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
-           "online": served.get("online", 0),
+           "online": served.get("online", 0), "screened": int(screened),
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
     if prof is not None:
@@ -296,7 +311,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steady-len", type=float, default=32.0, help="the steady window's length (s; one period)")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--before", type=Path, default=None, help="a checkout to compare with (e.g. /work/main)")
-    ap.add_argument("--what", default="pipeline,core", help="pipeline, core, or both (comma-separated)")
+    ap.add_argument("--what", default="pipeline,core",
+                    help="pipeline, core, screen (the core with the innovation and bias tests), comma-separated")
     ap.add_argument("--every", default="envelope=1,odometry=5,covariance=5,typed=5,markers=10",
                     help="output.<K>_every values")
     ap.add_argument("--cprofile", type=int, default=0, metavar="K",

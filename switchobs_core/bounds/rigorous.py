@@ -338,6 +338,8 @@ class RoundingBound:
         sp = sparse_map(e)
         if sp is not None:
             Z, w, cz, mn = open_loop_product(ell, sp)
+            if not keep and e.E is e.Phi:   # a prior's open-loop product: a Kalman sample's step takes it
+                ell.keep_product(sp, Z.copy())      # (KalmanMap.sandwich) before Z is assembled in place
             out = (ell.propagate_shaped_product(Z, w, cz, rho, mn, G, c) if G is not None
                    else ell.propagate_product(Z, w, cz, rho, mn))
         else:

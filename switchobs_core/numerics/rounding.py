@@ -156,6 +156,7 @@ class ErrorEllipsoid:
         self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
         self.c_dense = gamma(2 * self.n + 2)
         self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
+        self._kept: tuple | None = None             # (map, S, its product) for one taker (:meth:`keep_product`)
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -198,6 +199,19 @@ class ErrorEllipsoid:
             self._qc.clear()
         self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
         return Q, rq, wq, tq
+
+    def keep_product(self, key: object, Z: np.ndarray) -> None:
+        """Keep ``Z``, a product of the current ``S`` through the map ``key`` (the open-loop step's
+        ``Phi~ S Phi~'`` of a prior), for the step at the same time that takes the same product first
+        (:meth:`take_product`): the same doubles, computed once."""
+        self._kept = (key, self.S, Z)
+
+    def take_product(self, key: object) -> np.ndarray | None:
+        """The product :meth:`keep_product` kept for the map ``key`` (compared by identity) of the
+        current ``S`` (the very array it was computed from), handed over once (the taker may overwrite
+        it); None otherwise. Anything kept is dropped."""
+        k, self._kept = self._kept, None
+        return k[2] if k is not None and k[0] is key and k[1] is self.S else None
 
     # ------------------------------------------------------------------ steps
     def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
