@@ -107,7 +107,8 @@ try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without it
 except ImportError:     # pragma: no cover - another numpy layout: the public function
     _eigvalsh_lo = None
 
-__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "verify_against_extended"]
+__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "largest_eigenvalue",
+           "verify_against_extended"]
 
 #: Unit roundoff of IEEE double precision, ``u = 2^-53``.
 UNIT_ROUNDOFF = 2.0**-53
@@ -349,6 +350,17 @@ class ErrorEllipsoid:
         if not math.isfinite(lam):
             return math.inf
         return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
+
+
+def largest_eigenvalue(S: np.ndarray) -> float:
+    """``np.linalg.eigvalsh(S)[-1]`` (the same LAPACK call and doubles) through its gufunc, without
+    the wrapper's checks; where that gives no finite value, the wrapper decides (it raises
+    ``LinAlgError`` when the solver does not converge)."""
+    if _eigvalsh_lo is not None:
+        lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
+        if math.isfinite(lam):
+            return lam
+    return float(np.linalg.eigvalsh(S)[-1])
 
 
 def fro_norm(X: np.ndarray) -> float:
