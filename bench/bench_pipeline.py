@@ -225,6 +225,8 @@ def run_child(a) -> dict:
         if screen:      # the screening's calls, as Screening.admit makes them (the pipeline's objects)
             from switchobs_core.runtime.recovery import Recovery
             rec = Recovery(obs, labels=scr.labels)
+            import inspect
+            kw = {"lazy": True} if "lazy" in inspect.signature(obs.prior).parameters else {}    # as the screening
         gc.freeze()
         for k in range(n_ticks):
             t = (int(stamps[k]) - int(stamps[0])) * 1e-9
@@ -234,7 +236,7 @@ def run_child(a) -> dict:
             if screen:
                 c = int(ch[k])
                 with np.errstate(all="ignore"):
-                    ok = scr.innovation.check(obs.prior(t), c, None, y[k]).ok
+                    ok = scr.innovation.check(obs.prior(t, **kw), c, None, y[k]).ok
                 rec.before(t, c, None, y[k])
                 screened += ok
             obs.update(t, int(ch[k]), y[k])

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..numerics.rounding import UNIT_ROUNDOFF, gamma, largest_eigenvalue
+from ..numerics.rounding import UNIT_ROUNDOFF, PendingSet, assembled, gamma, largest_eigenvalue
 
 __all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
            "innovation_allowance", "likely_causes", "output_rows", "projected_bound", "rows_product", "seen_columns",
@@ -120,14 +120,20 @@ def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None =
     of the eigenvalue solver (relative ``2 p u``). Tighter than ``||C_r||_2 sqrt(lambda_max(S))``
     when the error's set is long in directions the rows do not see. ``cols``: :func:`seen_columns`
     of ``C_r`` (the product over them, :func:`rows_product`; the allowance is the dense one's);
-    ``fC2``: :func:`squared_norm` of ``C_r`` when the caller keeps it."""
+    ``fC2``: :func:`squared_norm` of ``C_r`` when the caller keeps it. ``S`` may be a
+    :class:`~switchobs_core.numerics.rounding.PendingSet`: its block and trace are read without
+    assembling it (the same doubles)."""
     p, n = C_rows.shape
     if p == 0:
         return 0.0
-    P = rows_product(C_rows, S, cols)
+    if isinstance(S, PendingSet) and cols is not None:
+        Cc = C_rows[:, cols]
+        P, tr = Cc @ S.block(cols) @ Cc.T, S.trace
+    else:
+        S = assembled(S)
+        P, tr = rows_product(C_rows, S, cols), float(np.trace(S))
     P = 0.5 * (P + P.T)
     fC2 = squared_norm(C_rows) if fC2 is None else fC2
-    tr = float(np.trace(S))
     fP = math.sqrt(float(np.sum(P * P)))
     lam = largest_eigenvalue(P)
     lam = max(lam, 0.0) + gamma(2 * n + 2) * fC2 * abs(tr) + 2 * p * UNIT_ROUNDOFF * fP
@@ -148,7 +154,7 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
     ----------
     C_rows : (p, n) ndarray
         The rows of ``C_c`` the sample holds.
-    bound : float or (n, n) ndarray
+    bound : float, (n, n) ndarray or PendingSet
         Rigorous bound ``b(t) >= ||x(t) - x_hat(t)||`` on the prior error (rounding included), or
         the shape matrix ``S`` of an ellipsoid holding it (:func:`projected_bound`, tighter).
     v_max : float
@@ -168,7 +174,7 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
     n2 = spectral_norm(C_rows) if norm_C is None else norm_C
     xn = math.sqrt(float(x_hat @ x_hat))
     yn = math.sqrt(float(y @ y))
-    seen = projected_bound(C_rows, bound, cols, fC2) if isinstance(bound, np.ndarray) else n2 * bound
+    seen = projected_bound(C_rows, bound, cols, fC2) if isinstance(bound, (np.ndarray, PendingSet)) else n2 * bound
     allowance = seen + math.sqrt(p) * v_max + gamma(n + 1) * (fC * xn + yn)
     return allowance * (1.0 + _SLACK)
 
@@ -180,8 +186,9 @@ def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: floa
     nu = y - C_rows @ x_hat
     inn = math.sqrt(float(nu @ nu))
     allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2)
-    if isinstance(bound, np.ndarray):     # the largest axis, for the report of a failure only
-        b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (bound + bound.T))[-1]), 0.0)) if inn > allow else math.nan
+    if isinstance(bound, (np.ndarray, PendingSet)):     # the largest axis, for the report of a failure only
+        S = assembled(bound) if inn > allow else None
+        b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (S + S.T))[-1]), 0.0)) if S is not None else math.nan
     else:
         b = float(bound)
     return Consistency(channel, inn, allow, b)

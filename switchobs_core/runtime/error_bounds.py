@@ -115,10 +115,11 @@ class ErrorBounds:
         return "" if self.rigorous is None else self.rigorous.withdrawn
 
     def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
-             u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray | float, np.ndarray | float | None]:
+             u: np.ndarray | None, extra: float = 0.0, *, lazy: bool = False) -> tuple[Any, Any]:
         """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
         :meth:`read`; copies at the sample's time, propagated after it by ``RoundingBound.propagated``, a
-        sparse map in compressed rows: read-only, the sample's own step at ``t`` takes copies of them)."""
+        sparse map in compressed rows: read-only, the sample's own step at ``t`` takes copies of them;
+        ``lazy``: :class:`~switchobs_core.numerics.rounding.PendingSet` where the map is sparse)."""
         b = self.rigorous
         if b.withdrawn:         # no set is kept any more: the norm bounds say so
             return math.inf, None if b.ellv is None else math.inf
@@ -126,4 +127,4 @@ class ErrorBounds:
             return b.phase.bounds() if step is None else b.phase.later(b, step, dt, x, xp, v, u, extra)
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        return b.propagated(step, dt, x, xp, v, u, extra)
+        return b.propagated(step, dt, x, xp, v, u, extra, lazy=lazy)

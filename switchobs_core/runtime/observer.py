@@ -56,6 +56,7 @@ from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
+from ..numerics.rounding import assembled
 from ..numerics.scaling import balance
 from ..table.kalman import KalmanDesign
 from .arguments import (
@@ -546,13 +547,14 @@ class SwitchedObserver:
             P = P if cols is None else P[np.ix_(cols, cols)]
         return P if c is None else c.keep_block(cols, P)
 
-    def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
+    def prior(self, t: float, *, lazy: bool = False) -> tuple[np.ndarray, Any, Any]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample held) and
         the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape matrix ``S`` of an ellipsoid
         ``{S^(1/2) u : ||u|| <= 1}`` holding the error (:class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`,
-        rounding included; read-only, computed once per time and state: :mod:`~switchobs_core.runtime.priors`),
-        or a float norm bound where no ellipsoid is kept; ``noise`` is None without a declared ``noise_max``.
-        The state is unchanged. The innovation test (:mod:`switchobs_core.runtime.consistency`) takes these."""
+        rounding included; read-only, computed once per time and state: :mod:`~switchobs_core.runtime.priors`;
+        ``lazy``: a :class:`~switchobs_core.numerics.rounding.PendingSet` where it is one), or a float norm bound
+        where no ellipsoid is kept; ``noise`` is None without a declared ``noise_max``. The state is unchanged.
+        The innovation test (:mod:`switchobs_core.runtime.consistency`) takes these."""
         if self._bound is None:
             env = self.envelope(t)
             return self.predict(t, hold=True), env.exact_bound, env.noise_bound
@@ -562,10 +564,8 @@ class SwitchedObserver:
         e, x, rho = self._held_step(float(t), dt)
         c = self._priors
         if c.sets is None:
-            c.sets = self._bounds.sets(e, dt, self._x, x, self._held()[1], self._in.u, rho)
-        else:
-            c.hits += 1
-        return (x.copy(), *c.sets)
+            c.sets = self._bounds.sets(e, dt, self._x, x, self._held()[1], self._in.u, rho, lazy=True)
+        return (x.copy(), *(c.sets if lazy else map(assembled, c.sets)))
 
     def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).

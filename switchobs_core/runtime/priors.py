@@ -36,13 +36,11 @@ __all__ = ["PriorCache"]
 class PriorCache:
     """The prior at one time (module docstring): :attr:`step` ``(entry, x_hat, rho)`` of the held
     step, :attr:`sets` (what ``ErrorBounds.sets`` gave), and the prior covariance's blocks by
-    columns (:meth:`block`, :meth:`keep_block`: copies, a reader may write into its own).
-    ``hits`` counts the reads served from it."""
+    columns (:meth:`block`, :meth:`keep_block`: copies, a reader may write into its own)."""
 
-    __slots__ = ("_key", "step", "sets", "_blocks", "hits")
+    __slots__ = ("_key", "step", "sets", "_blocks")
 
     def __init__(self) -> None:
-        self.hits = 0
         self.clear()
 
     def clear(self) -> None:
@@ -64,10 +62,7 @@ class PriorCache:
     def block(self, cols: np.ndarray) -> np.ndarray | None:
         """A copy of the covariance's block kept for the columns ``cols``, or None."""
         hit = self._blocks.get((cols.dtype.str, cols.tobytes()))
-        if hit is None:
-            return None
-        self.hits += 1
-        return hit.copy()
+        return None if hit is None else hit.copy()
 
     def keep_block(self, cols: np.ndarray, P: np.ndarray | None) -> np.ndarray | None:
         """Keep a copy of ``P``, the block for ``cols`` (None: nothing kept); returns ``P``."""

@@ -17,7 +17,7 @@ import switchobs_core as so
 from switchobs_core.bounds.kalman_map import SparseTransition
 from switchobs_core.bounds.rigorous import RoundingBound
 from switchobs_core.numerics.rounding import ErrorEllipsoid
-from switchobs_core.runtime.consistency import seen_columns
+from switchobs_core.runtime.consistency import InnovationTest, seen_columns
 from switchobs_core.runtime.priors import PriorCache
 
 DT = 0.02
@@ -91,6 +91,12 @@ def test_shared_prior_equals_fresh_and_the_update_is_unchanged(agents10, noise_m
             _same(again[2], ref[2])
             _same(again[3], ref[2])
             assert again[1] is not first[0]         # each reader its own prediction
+            # the innovation test on the pending sets: the doubles of the test on the whole ones
+            test = InnovationTest(system.C, None if noise_max is None else (noise_max,) * system.N)
+            for c, rows in ((ch, None), (ch % system.N + 1, None), (ch, (0, 1)), (ch, (3,))):
+                yc = y if rows is None else y[list(rows)]
+                lazy, whole = test.check(shared.prior(t, lazy=True), c, rows, yc), test.check(ref[0], c, rows, yc)
+                assert (lazy.innovation, lazy.allowance) == (whole.innovation, whole.allowance)
             if k % 7 == 0:      # the prediction bound at t reads the same step (and forms its own sets)
                 with fresh_priors():
                     e_ref = fresh.envelope(t)
