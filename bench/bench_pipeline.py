@@ -34,7 +34,8 @@ reported per answer (the window's CPU over its answers).
 outputs). ``--what screen`` adds what the pipeline's screening asks of the core before each
 update (:meth:`switchobs_ros.screening.Screening.admit`): the innovation test against
 ``prior(t)`` and the bias test (``Recovery.before``: the held prediction and the prior
-covariance's block), the per-sample core path.
+covariance's block), the per-sample core path. Both print a digest of every estimate and bound
+(the trees' numbers compared).
 
 Reported per tree and window (``first``: 0 to ``--first`` s, all first visits of the table's
 phases; ``steady``: one table period from ``--steady`` s): CPU per sample (``time.process_time``,
@@ -216,6 +217,7 @@ def run_child(a) -> dict:
     lo, hi = (0, k_first) if a.window == "first" else (k0, n_ticks)
     served: dict = {}
     screened = 0
+    digest = None
     if a.what in ("core", "screen"):
         obs = pl.observer
         obs.reset(pl.x0, 0.0)
@@ -227,6 +229,8 @@ def run_child(a) -> dict:
             rec = Recovery(obs, labels=scr.labels)
             import inspect
             kw = {"lazy": True} if "lazy" in inspect.signature(obs.prior).parameters else {}    # as the screening
+        import hashlib
+        digest = hashlib.sha256()       # of every estimate and bound: the trees' numbers compared
         gc.freeze()
         for k in range(n_ticks):
             t = (int(stamps[k]) - int(stamps[0])) * 1e-9
@@ -240,7 +244,9 @@ def run_child(a) -> dict:
                 rec.before(t, c, None, y[k])
                 screened += ok
             obs.update(t, int(ch[k]), y[k])
-            obs.envelope()
+            env = obs.envelope()
+            digest.update(obs.x_hat.tobytes())
+            digest.update(np.array([env.exact_bound, -1.0 if env.noise_bound is None else env.noise_bound]).tobytes())
             if prof is not None and k == hi - 1:
                 prof.disable()
             cost[k] = time.process_time() - c0
@@ -289,6 +295,7 @@ def run_child(a) -> dict:
            "published": dict(getattr(node, "published", {})),
            "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
            "online": served.get("online", 0), "screened": int(screened),
+           "digest": digest.hexdigest()[:16] if a.what in ("core", "screen") else "",
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
     if prof is not None:
@@ -376,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} | {runs[0].get('online', '-')} "
               f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) "
               f"| {', '.join(str(v) for v in kal.values()) or '-'} |")
+    digests = {f"{name} {what}": runs[0]["digest"] for (name, what), runs in res.items() if runs[0].get("digest")}
+    if digests:         # the estimates and bounds of every sample (core, screen), by tree
+        print("\nsha256 of the estimates and bounds:", ", ".join(f"{k} {v}" for k, v in digests.items()))
     if a.before:
         print("\nthis / before (means):", ", ".join(
             f"{what} {w} {table[('this', what)][w][0] / table[('before', what)][w][0]:.2f}x"
