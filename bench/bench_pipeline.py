@@ -218,6 +218,7 @@ def run_child(a) -> dict:
     served: dict = {}
     screened = 0
     digest = None
+    tests = np.zeros(n_ticks)       # screen: the tests' share of each sample's CPU
     if a.what in ("core", "screen"):
         obs = pl.observer
         obs.reset(pl.x0, 0.0)
@@ -243,6 +244,7 @@ def run_child(a) -> dict:
                     ok = scr.innovation.check(obs.prior(t, **kw), c, None, y[k]).ok
                 rec.before(t, c, None, y[k])
                 screened += ok
+                tests[k] = time.process_time() - c0
             obs.update(t, int(ch[k]), y[k])
             env = obs.envelope()
             digest.update(obs.x_hat.tobytes())
@@ -296,6 +298,7 @@ def run_child(a) -> dict:
            "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
            "online": served.get("online", 0), "screened": int(screened),
            "digest": digest.hexdigest()[:16] if a.what in ("core", "screen") else "",
+           "tests_first": float(np.sum(tests[:k_first])), "tests_steady": float(np.sum(tests[k0:n_ticks])),
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
     if prof is not None:
@@ -383,6 +386,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} | {runs[0].get('online', '-')} "
               f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) "
               f"| {', '.join(str(v) for v in kal.values()) or '-'} |")
+    for (name, what), runs in res.items():
+        if what == "screen":    # the tests alone, timed inside the same samples (the core's noise left out)
+            print(f"\n{name}: the tests' CPU per sample (means, medians over the rounds): " + ", ".join(
+                f"{w} {np.median([r[f'tests_{w}'] / r[f'{w}_n'] for r in runs]) * 1e3:.3f} ms"
+                for w in ("first", "steady")))
     digests = {f"{name} {what}": runs[0]["digest"] for (name, what), runs in res.items() if runs[0].get("digest")}
     if digests:         # the estimates and bounds of every sample (core, screen), by tree
         print("\nsha256 of the estimates and bounds:", ", ".join(f"{k} {v}" for k, v in digests.items()))
