@@ -253,14 +253,14 @@ class ErrorEllipsoid:
                   noise: tuple | None, mn: float) -> tuple[np.ndarray, float]:
         """``S' = (1 + a) (Z + R_z) + (1 + 1/a) [(1 + b) (Q + R_q) + (1 + 1/b) rho^2 D^2]`` with the
         allowances of steps 5-7 and the rounding of this assembly (module docstring); ``Z`` overwritten."""
-        return self._apply(Z, self._plan(np.diagonal(Z), w, cz, rho, noise, mn))
+        return self._apply(Z, self._plan(Z.diagonal(), w, cz, rho, noise, mn))
 
     def pending(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, mn: float, G: np.ndarray | None = None,
                 c: float = 0.0, remake: Callable[[], np.ndarray] | None = None) -> PendingSet:
         """:meth:`propagate_product` (``G`` None) or :meth:`propagate_shaped_product` whose n x n assembly waits
         for a reader of the whole set (:class:`PendingSet`; its blocks and trace in O(p^2 + n)); ``remake``
         forms ``Z`` again should it be handed over before (:meth:`PendingSet.take`)."""
-        return PendingSet(self, Z, self._plan(np.diagonal(Z), w, cz, rho, None if G is None else (G, c, None), mn),
+        return PendingSet(self, Z, self._plan(Z.diagonal(), w, cz, rho, None if G is None else (G, c, None), mn),
                           remake)
 
     def _plan(self, zd: np.ndarray, w: np.ndarray, cz: float, rho: float, noise: tuple | None,
