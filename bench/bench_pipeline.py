@@ -31,7 +31,11 @@ reported per answer (the window's CPU over its answers).
 
 ``--what core`` times the core alone on the same samples: ``SwitchedObserver.update`` and
 ``envelope()`` of the observer the pipeline builds (no pairing, attribution, screening, tests or
-outputs).
+outputs). ``--what screen`` adds what the pipeline's screening asks of the core before each
+update (:meth:`switchobs_ros.screening.Screening.admit`): the innovation test against
+``prior(t)`` and the bias test (``Recovery.before``: the held prediction and the prior
+covariance's block), the per-sample core path. Both print a digest of every estimate and bound
+(the trees' numbers compared).
 
 Reported per tree and window (``first``: 0 to ``--first`` s, all first visits of the table's
 phases; ``steady``: one table period from ``--steady`` s): CPU per sample (``time.process_time``,
@@ -212,18 +216,39 @@ def run_child(a) -> dict:
         prof = cProfile.Profile(time.process_time)
     lo, hi = (0, k_first) if a.window == "first" else (k0, n_ticks)
     served: dict = {}
-    if a.what == "core":
+    screened = 0
+    digest = None
+    tests = np.zeros(n_ticks)       # screen: the tests' share of each sample's CPU
+    if a.what in ("core", "screen"):
         obs = pl.observer
         obs.reset(pl.x0, 0.0)
         y, ch = s["y"], s["channels"]
+        scr = pl.screening
+        screen = a.what == "screen"
+        if screen:      # the screening's calls, as Screening.admit makes them (the pipeline's objects)
+            from switchobs_core.runtime.recovery import Recovery
+            rec = Recovery(obs, labels=scr.labels)
+            import inspect
+            kw = {"lazy": True} if "lazy" in inspect.signature(obs.prior).parameters else {}    # as the screening
+        import hashlib
+        digest = hashlib.sha256()       # of every estimate and bound: the trees' numbers compared
         gc.freeze()
         for k in range(n_ticks):
             t = (int(stamps[k]) - int(stamps[0])) * 1e-9
             c0 = time.process_time()
             if prof is not None and k == lo:
                 prof.enable()
+            if screen:
+                c = int(ch[k])
+                with np.errstate(all="ignore"):
+                    ok = scr.innovation.check(obs.prior(t, **kw), c, None, y[k]).ok
+                rec.before(t, c, None, y[k])
+                screened += ok
+                tests[k] = time.process_time() - c0
             obs.update(t, int(ch[k]), y[k])
-            obs.envelope()
+            env = obs.envelope()
+            digest.update(obs.x_hat.tobytes())
+            digest.update(np.array([env.exact_bound, -1.0 if env.noise_bound is None else env.noise_bound]).tobytes())
             if prof is not None and k == hi - 1:
                 prof.disable()
             cost[k] = time.process_time() - c0
@@ -271,7 +296,9 @@ def run_child(a) -> dict:
            "steady": cost[k0:n_ticks].tolist(), "errors": int(pl.errors),
            "published": dict(getattr(node, "published", {})),
            "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
-           "online": served.get("online", 0),
+           "online": served.get("online", 0), "screened": int(screened),
+           "digest": digest.hexdigest()[:16] if a.what in ("core", "screen") else "",
+           "tests_first": float(np.sum(tests[:k_first])), "tests_steady": float(np.sum(tests[k0:n_ticks])),
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
     if prof is not None:
@@ -296,7 +323,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steady-len", type=float, default=32.0, help="the steady window's length (s; one period)")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--before", type=Path, default=None, help="a checkout to compare with (e.g. /work/main)")
-    ap.add_argument("--what", default="pipeline,core", help="pipeline, core, or both (comma-separated)")
+    ap.add_argument("--what", default="pipeline,core",
+                    help="pipeline, core, screen (the core with the innovation and bias tests), comma-separated")
     ap.add_argument("--every", default="envelope=1,odometry=5,covariance=5,typed=5,markers=10",
                     help="output.<K>_every values")
     ap.add_argument("--cprofile", type=int, default=0, metavar="K",
@@ -358,6 +386,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {what} | {runs[0]['answers']}/{runs[0]['ticks']} | {runs[0].get('online', '-')} "
               f"| {row['first'][0]:.3f} ({row['first'][1]:.3f}) | {row['steady'][0]:.3f} ({row['steady'][1]:.3f}) "
               f"| {', '.join(str(v) for v in kal.values()) or '-'} |")
+    for (name, what), runs in res.items():
+        if what == "screen":    # the tests alone, timed inside the same samples (the core's noise left out)
+            print(f"\n{name}: the tests' CPU per sample (means, medians over the rounds): " + ", ".join(
+                f"{w} {np.median([r[f'tests_{w}'] / r[f'{w}_n'] for r in runs]) * 1e3:.3f} ms"
+                for w in ("first", "steady")))
+    digests = {f"{name} {what}": runs[0]["digest"] for (name, what), runs in res.items() if runs[0].get("digest")}
+    if digests:         # the estimates and bounds of every sample (core, screen), by tree
+        print("\nsha256 of the estimates and bounds:", ", ".join(f"{k} {v}" for k, v in digests.items()))
     if a.before:
         print("\nthis / before (means):", ", ".join(
             f"{what} {w} {table[('this', what)][w][0] / table[('before', what)][w][0]:.2f}x"

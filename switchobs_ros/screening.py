@@ -138,7 +138,7 @@ class Screening:
     def fitting_channels(self, pend: Pending, t: float) -> list[int]:
         """The channels whose reading of the pending sample passes the innovation test at ``t``."""
         with np.errstate(all="ignore"):
-            prior = self.observer.prior(t)
+            prior = self.observer.prior(t, lazy=True)
         return consistent_channels([self._test(prior, self.pairing.measurement(pend, c))
                                     for c in range(1, self.N + 1)])
 
@@ -150,7 +150,7 @@ class Screening:
         passes when exactly one does (only a sample whose channel came from the channel topic can
         have another); else None: rejected, and the bounds withdrawn."""
         with np.errstate(all="ignore"):
-            prior = self.observer.prior(t)
+            prior = self.observer.prior(t, lazy=True)
         first = self._test(prior, m)
         if first.ok:
             return m

@@ -314,7 +314,9 @@ class KalmanMap:
             aE, mn = self._aE
             return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
-        Y = sp.sandwich_either(S)       # C-ordered
+        Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken
+        if Y is None:
+            Y = sp.sandwich_either(S)   # C-ordered
         cols = self._cols
         if cols is None:
             cols = self._cols = _columns(H)

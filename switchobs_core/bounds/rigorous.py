@@ -48,7 +48,7 @@ import numpy as np
 
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
-from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, PendingSet, fro_norm, gamma
 from ..numerics.scaling import balance, balanced
 from .kalman_map import SparseTransition, sparse_map
 from .read import AnchoredBound
@@ -73,6 +73,13 @@ def open_loop_product(ell: ErrorEllipsoid, sp: SparseTransition) -> tuple[np.nda
     ``mn >= ||E||_inf``: what :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product`
     takes. ``O(nnz(E) n)`` instead of two dense products."""
     return sp.sandwich_either(ell.S), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
+
+
+def _whole(out: Any) -> tuple[np.ndarray, float]:
+    """``(S, trace S rounded up)`` of a step's set kept whole (a copy) or pending (assembled now)."""
+    if isinstance(out, PendingSet):
+        return out.full().copy(), out.tr
+    return out[0].copy(), out[1]
 
 
 class RoundingBound:
@@ -329,7 +336,8 @@ class RoundingBound:
         Kalman prediction steps add none), a declared disturbance as :meth:`disturbed` says (``dt`` 0
         for the exact set: none). The map ``e.E`` is taken in compressed rows where it is sparse
         (:func:`~switchobs_core.bounds.kalman_map.sparse_map`, :func:`open_loop_product`), else
-        densely. ``keep``: the step is kept in ``ell`` (None returned), else ``(S, trace S)``."""
+        densely. ``keep``: the step is kept in ``ell`` (None returned), else ``(S, trace S)`` or, through a
+        sparse map, a :class:`~switchobs_core.numerics.rounding.PendingSet`."""
         vn = self.vn if vn is None else vn
         c = vn ** 2 if not self.w else (vn + self.w) ** 2 * (1.0 + 4.0 * _U)
         G, c = (GL, c) if GL is not None and c > 0.0 else (None, 0.0)
@@ -338,6 +346,11 @@ class RoundingBound:
         sp = sparse_map(e)
         if sp is not None:
             Z, w, cz, mn = open_loop_product(ell, sp)
+            if not keep:        # assembled for a reader of the whole set only (PendingSet)
+                out = ell.pending(Z, w, cz, rho, mn, G, c, lambda S=ell.S: sp.sandwich_either(S))
+                if e.E is e.Phi:    # a prior's open-loop product: a Kalman sample's step takes it
+                    ell.keep_product(sp, out)       # (KalmanMap.sandwich) unless the set was assembled
+                return out
             out = (ell.propagate_shaped_product(Z, w, cz, rho, mn, G, c) if G is not None
                    else ell.propagate_product(Z, w, cz, rho, mn))
         else:
@@ -358,9 +371,9 @@ class RoundingBound:
         hit = self._memo is not None and self._same(self._memo[0], e, dt, x0, x1, nu, u, extra)
         if hit:     # the sets propagated() gave for these very arguments: the same doubles (copied)
             out, outv = self._memo[1]
-            self._ell.S, self._ell.tr = out[0].copy(), out[1]
+            self._ell.S, self._ell.tr = _whole(out)
             if outv is not None:
-                self._ellv.S, self._ellv.tr = outv[0].copy(), outv[1]
+                self._ellv.S, self._ellv.tr = _whole(outv)
         self._memo = None
         if hit:
             self._check()
@@ -395,10 +408,12 @@ class RoundingBound:
                    for a, b in zip(key[9:], (x0, x1, nu, u)))
 
     def propagated(self, e: Any, dt: float, x0: np.ndarray, xp: np.ndarray, nu: np.ndarray | None,
-                   u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+                   u: np.ndarray | None, extra: float = 0.0, *, lazy: bool = False) -> tuple[Any, Any]:
         """The shape matrices after the step ``e`` over ``dt``: ``(S, S_noise or None)``, read-only (``extra``
         as in :meth:`step`; a sparse map in compressed rows, as :meth:`step` takes it). The sets stay
-        as they are; a :meth:`step` with the same arguments next takes copies of these."""
+        as they are; a :meth:`step` with the same arguments next takes copies of these. ``lazy``: a
+        set through a sparse map is a :class:`~switchobs_core.numerics.rounding.PendingSet` (assembled
+        at its first whole read; its blocks and trace without the n x n passes)."""
         key = self._key(e, dt, x0, xp, nu, u, extra) if not self.withdrawn else None
         with np.errstate(over="ignore", invalid="ignore"):
             out = self._noise(self.ell, e, self.rho_step(e, dt, x0, xp, self.ell, nu, u) + extra,
@@ -409,7 +424,8 @@ class RoundingBound:
                                    e.GL if nu is not None else None, False, dt)
         # kept for a step with the same arguments (the sample at that time: prior, then update)
         self._memo = None if key is None else (key, (out, outv))
-        return out[0], None if outv is None else outv[0]
+        pick = (lambda o: (o if lazy else o.full()) if isinstance(o, PendingSet) else o[0])
+        return pick(out), None if outv is None else pick(outv)
 
     def correct(self, M: np.ndarray, rho: float, K: np.ndarray, H: np.ndarray, p: int, channel: int) -> None:
         """Both ellipsoids through a Kalman correction ``e^+ = M e^- + r + K v`` with the computed

@@ -97,6 +97,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -107,7 +108,8 @@ try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without it
 except ImportError:     # pragma: no cover - another numpy layout: the public function
     _eigvalsh_lo = None
 
-__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "verify_against_extended"]
+__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "PendingSet", "assembled",
+           "largest_eigenvalue", "verify_against_extended"]
 
 #: Unit roundoff of IEEE double precision, ``u = 2^-53``.
 UNIT_ROUNDOFF = 2.0**-53
@@ -156,6 +158,7 @@ class ErrorEllipsoid:
         self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
         self.c_dense = gamma(2 * self.n + 2)
         self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
+        self._kept: tuple | None = None             # (map, S, its product) for one taker (:meth:`keep_product`)
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -199,6 +202,23 @@ class ErrorEllipsoid:
         self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
         return Q, rq, wq, tq
 
+    def keep_product(self, key: object, Z: np.ndarray) -> None:
+        """Keep ``Z``, a product of the current ``S`` through the map ``key`` (the open-loop step's
+        ``Phi~ S Phi~'`` of a prior), for the step at the same time that takes the same product first
+        (:meth:`take_product`): the same doubles, computed once. ``Z`` may be a :class:`PendingSet`."""
+        if isinstance(Z, PendingSet):
+            Z.kept = True
+        self._kept = (key, self.S, Z)
+
+    def take_product(self, key: object) -> np.ndarray | None:
+        """The product :meth:`keep_product` kept for the map ``key`` (compared by identity) of the
+        current ``S`` (the very array it was computed from), handed over once (the taker may overwrite
+        it); None otherwise. Anything kept is dropped."""
+        k, self._kept = self._kept, None
+        if k is None or k[0] is not key or k[1] is not self.S:
+            return None
+        return k[2].take() if isinstance(k[2], PendingSet) else k[2]
+
     # ------------------------------------------------------------------ steps
     def propagate(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> tuple[np.ndarray, float]:
         """The next ``(S, trace S)`` for a step ``(M, rho)``, without keeping it; ``absM`` is
@@ -232,15 +252,30 @@ class ErrorEllipsoid:
     def _assemble(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float,
                   noise: tuple | None, mn: float) -> tuple[np.ndarray, float]:
         """``S' = (1 + a) (Z + R_z) + (1 + 1/a) [(1 + b) (Q + R_q) + (1 + 1/b) rho^2 D^2]`` with the
-        allowances of steps 5-7 and the rounding of this assembly (module docstring)."""
+        allowances of steps 5-7 and the rounding of this assembly (module docstring); ``Z`` overwritten."""
+        return self._apply(Z, self._plan(Z.diagonal(), w, cz, rho, noise, mn))
+
+    def pending(self, Z: np.ndarray, w: np.ndarray, cz: float, rho: float, mn: float, G: np.ndarray | None = None,
+                c: float = 0.0, remake: Callable[[], np.ndarray] | None = None) -> PendingSet:
+        """:meth:`propagate_product` (``G`` None) or :meth:`propagate_shaped_product` whose n x n assembly waits
+        for a reader of the whole set (:class:`PendingSet`; its blocks and trace in O(p^2 + n)); ``remake``
+        forms ``Z`` again should it be handed over before (:meth:`PendingSet.take`)."""
+        return PendingSet(self, Z, self._plan(Z.diagonal(), w, cz, rho, None if G is None else (G, c, None), mn),
+                          remake)
+
+    def _plan(self, zd: np.ndarray, w: np.ndarray, cz: float, rho: float, noise: tuple | None,
+              mn: float) -> tuple:
+        """The O(n) part of :meth:`_assemble` from ``zd``, the diagonal of ``Z`` before its symmetrisation:
+        ``(alpha, tb, Q, q, trace, tr)`` with ``S' = alpha sym Z (+ tb Q)`` and ``q`` added to its diagonal,
+        ``trace`` the sum of that diagonal and ``tr`` it rounded up (the doubles the n x n passes give)."""
         n, d2, id2 = self.n, self._d2, self._id2
-        Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
-        Z *= 0.5
+        zs = zd + zd                # the diagonal of sym Z = (Z + Z') / 2, as the full pass rounds it
+        zs *= 0.5
         cz = cz + _U * (1.0 + cz)       # the symmetrisation's rounding, relative u of |sym Z|
         wd = w * self.d
         Wz = float(w @ self._id) * self._gsum
         rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
-        tz = max(float((Z.diagonal() + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
+        tz = max(float((zs + rz) @ id2), 0.0) * self._gsum       # trace_D of E(Z + R_z)
         Q, rq, wq, tq = None, None, None, 0.0
         if noise is not None:
             G, c, GGt = noise
@@ -261,34 +296,57 @@ class ErrorEllipsoid:
             a = _clamp(rho / math.sqrt(tz)) if Q is None else _clamp(math.sqrt(tn) / math.sqrt(tz))
             alpha = 1.0 + a                 # the factor applied; a' = alpha - 1 is its exact pair
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
-        S = Z
-        if alpha != 1.0:
-            S *= alpha
+        sd = zs * alpha if alpha != 1.0 else zs
         # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
         # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
         q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
         if rho2 > 0.0:
             q += (theta * kappa * rho2) * d2
+        tb = theta * beta
         if Q is not None:
-            S += (theta * beta) * Q
-            q += (theta * beta) * rq
+            sd = sd + tb * Q.diagonal()
+            q += tb * rq
             # the rounding of alpha Z + beta' Q: relative 2u of |alpha Z| + |beta' Q|, entrywise
-            q += self._diag(wq, 3.0 * _U * theta * beta)
+            q += self._diag(wq, 3.0 * _U * tb)
         # the diagonal's own addition: relative u of the result (and q's few operations); underflow
         # (step 8): the products' absolute errors, and those of c G G' and the scalings
-        dS = np.abs(S.diagonal())
+        dS = np.abs(sd)
         dS *= 2.0 * _U
         dS += (n + 4) * n * UNDERFLOW * (2.0 + mn + (0 if noise is None else 1.0))
         q += dS
         q *= 1.0 + 8.0 * _U
-        if S.flags.c_contiguous or S.flags.f_contiguous:    # the diagonal in place: a strided view
-            dS = S.ravel(order="K")[:: n + 1]
+        trace = float((sd + q).sum())
+        return alpha, tb, Q, q, trace, max(trace, 0.0) * self._gsum
+
+    def _apply(self, Z: np.ndarray, plan: tuple) -> tuple[np.ndarray, float]:
+        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`."""
+        alpha, tb, Q, q, _, tr = plan
+        Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
+        Z *= 0.5
+        if alpha != 1.0:
+            Z *= alpha
+        if Q is not None:
+            Z += tb * Q
+        if Z.flags.c_contiguous or Z.flags.f_contiguous:    # the diagonal in place: a strided view
+            dS = Z.ravel(order="K")[:: self.n + 1]
             dS += q
         else:
-            S[self._ii, self._ii] += q
-            dS = S.diagonal()
-        tr = max(float(dS.sum()), 0.0) * self._gsum
-        return S, tr
+            Z[self._ii, self._ii] += q
+        return Z, tr
+
+    def _block(self, Z: np.ndarray, plan: tuple, cols: np.ndarray) -> np.ndarray:
+        """``S'[np.ix_(cols, cols)]`` of :meth:`_apply` without the n x n passes (the same doubles)."""
+        alpha, tb, Q, q, _, _ = plan
+        ix = cols[:, None], cols
+        B = Z[ix]
+        B += B.T
+        B *= 0.5
+        if alpha != 1.0:
+            B *= alpha
+        if Q is not None:
+            B += tb * Q[ix]
+        B[np.diag_indices(cols.size)] += q[cols]
+        return B
 
     def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
@@ -335,6 +393,70 @@ class ErrorEllipsoid:
         if not math.isfinite(lam):
             return math.inf
         return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
+
+
+class PendingSet:
+    """A step's set ``S'`` whose n x n assembly waits for a reader of the whole matrix
+    (:meth:`ErrorEllipsoid.pending`): :meth:`block` and :attr:`trace` read it in O(p^2 + n),
+    :meth:`full` assembles it once; every read gives the doubles of the eager assembly. Its product
+    ``Z`` may be handed over once before (:meth:`take`: a step that starts from the same product);
+    a later read forms ``Z`` again (``remake``)."""
+
+    __slots__ = ("_ell", "_Z", "_plan", "_S", "_remake", "tr", "trace", "kept")
+
+    def __init__(self, ell: ErrorEllipsoid, Z: np.ndarray, plan: tuple,
+                 remake: Callable[[], np.ndarray] | None) -> None:
+        self._ell, self._Z, self._plan, self._S, self._remake = ell, Z, plan, None, remake
+        #: Kept for a taker (:meth:`ErrorEllipsoid.keep_product`): :meth:`full` assembles a copy of ``Z``.
+        self.kept = False
+        #: ``trace S'`` (the sum of its diagonal, as ``np.trace``) and that rounded up (``ErrorEllipsoid.tr``).
+        self.trace, self.tr = plan[4], plan[5]
+
+    def _product(self) -> np.ndarray:
+        if self._Z is None:
+            self._Z = self._remake()
+        return self._Z
+
+    def full(self) -> np.ndarray:
+        """``S'`` (n x n, assembled at the first call; read-only)."""
+        if self._S is None:
+            Z = self._product()
+            if self.kept:       # Z stays for the taker
+                Z = Z.copy(order="K")
+            else:
+                self._Z = None
+            self._S = self._ell._apply(Z, self._plan)[0]
+        return self._S
+
+    def block(self, cols: np.ndarray) -> np.ndarray:
+        """``S'[np.ix_(cols, cols)]`` (a new array)."""
+        if self._S is not None:
+            return self._S[cols[:, None], cols]
+        return self._ell._block(self._product(), self._plan, cols)
+
+    def take(self) -> np.ndarray | None:
+        """The product ``Z``, handed over once (the taker may overwrite it), or None when it is gone
+        (assembled in place, or taken) or could not be formed again."""
+        if self._Z is None or self._remake is None:
+            return None
+        Z, self._Z = self._Z, None
+        return Z
+
+
+def assembled(s: Any) -> Any:
+    """``s.full()`` of a :class:`PendingSet`, else ``s`` (an array, a float, None)."""
+    return s.full() if isinstance(s, PendingSet) else s
+
+
+def largest_eigenvalue(S: np.ndarray) -> float:
+    """``np.linalg.eigvalsh(S)[-1]`` (the same LAPACK call and doubles) through its gufunc, without
+    the wrapper's checks; where that gives no finite value, the wrapper decides (it raises
+    ``LinAlgError`` when the solver does not converge)."""
+    if _eigvalsh_lo is not None:
+        lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
+        if math.isfinite(lam):
+            return lam
+    return float(np.linalg.eigvalsh(S)[-1])
 
 
 def fro_norm(X: np.ndarray) -> float:

@@ -91,14 +91,14 @@ class BiasDetector:
     def update(self, channel: int, rows: np.ndarray | list[int] | None, s: np.ndarray) -> BiasAlarm | None:
         """One sample's normalised innovations; an alarm restarts that channel's statistics."""
         i = channel - 1
-        idx = np.arange(self.p[i]) if rows is None else np.asarray(rows, dtype=int)
+        idx = slice(None) if rows is None else np.asarray(rows, dtype=int)
         s = np.asarray(s, dtype=float)
-        if not np.all(np.isfinite(s)):
+        if not np.isfinite(s).all():
             return None
         gp, gn = self.g_pos[i], self.g_neg[i]
         gp[idx] = np.maximum(0.0, gp[idx] + s - self.k_ref)
         gn[idx] = np.maximum(0.0, gn[idx] - s - self.k_ref)
-        jp, jn = int(np.argmax(gp)), int(np.argmax(gn))
+        jp, jn = int(gp.argmax()), int(gn.argmax())
         if max(gp[jp], gn[jn]) <= self.h:
             return None
         sign, j, g = (1, jp, gp[jp]) if gp[jp] >= gn[jn] else (-1, jn, gn[jn])

@@ -44,11 +44,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..numerics.rounding import UNIT_ROUNDOFF, gamma
+from ..numerics.rounding import UNIT_ROUNDOFF, PendingSet, assembled, gamma, largest_eigenvalue
 
 __all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
            "innovation_allowance", "likely_causes", "output_rows", "projected_bound", "rows_product", "seen_columns",
-           "spectral_norm"]
+           "spectral_norm", "squared_norm"]
 
 #: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
 #: products and sums of non-negative numbers: far below 1e-12 relative).
@@ -109,38 +109,52 @@ def rows_product(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = No
     if cols is None:
         return C_rows @ S @ C_rows.T
     Cc = C_rows[:, cols]
-    return Cc @ S[np.ix_(cols, cols)] @ Cc.T
+    return Cc @ S[cols[:, None], cols] @ Cc.T      # the block S[np.ix_(cols, cols)]
 
 
-def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = None) -> float:
+def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = None,
+                    fC2: float | None = None) -> float:
     """A rigorous bound on ``||C_r e||`` over the ellipsoid ``e in {S^(1/2) u : ||u|| <= 1}``:
     ``sqrt(lambda_max(C_r S C_r'))`` (``p x p``, cheap), inflated for the rounding of the
     product (``gamma(2n + 2) ||C_r||_F^2 trace S``, as :mod:`switchobs_core.numerics.rounding` step 6) and
     of the eigenvalue solver (relative ``2 p u``). Tighter than ``||C_r||_2 sqrt(lambda_max(S))``
     when the error's set is long in directions the rows do not see. ``cols``: :func:`seen_columns`
-    of ``C_r`` (the product over them, :func:`rows_product`; the allowance is the dense one's)."""
+    of ``C_r`` (the product over them, :func:`rows_product`; the allowance is the dense one's);
+    ``fC2``: :func:`squared_norm` of ``C_r`` when the caller keeps it. ``S`` may be a
+    :class:`~switchobs_core.numerics.rounding.PendingSet`: its block and trace are read without
+    assembling it (the same doubles)."""
     p, n = C_rows.shape
     if p == 0:
         return 0.0
-    P = rows_product(C_rows, S, cols)
+    if isinstance(S, PendingSet) and cols is not None:
+        Cc = C_rows[:, cols]
+        P, tr = Cc @ S.block(cols) @ Cc.T, S.trace
+    else:
+        S = assembled(S)
+        P, tr = rows_product(C_rows, S, cols), float(np.trace(S))
     P = 0.5 * (P + P.T)
-    fC2 = float(np.sum(C_rows * C_rows))
-    tr = float(np.trace(S))
+    fC2 = squared_norm(C_rows) if fC2 is None else fC2
     fP = math.sqrt(float(np.sum(P * P)))
-    lam = float(np.linalg.eigvalsh(P)[-1])
+    lam = largest_eigenvalue(P)
     lam = max(lam, 0.0) + gamma(2 * n + 2) * fC2 * abs(tr) + 2 * p * UNIT_ROUNDOFF * fP
     return math.sqrt(lam) * (1.0 + _SLACK)
 
 
+def squared_norm(C_rows: np.ndarray) -> float:
+    """``||C_r||_F^2`` as the allowances compute it (the sum of the squared entries)."""
+    return float(np.sum(C_rows * C_rows))
+
+
 def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: float, x_hat: np.ndarray,
-                         y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None) -> float:
+                         y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
+                         fC2: float | None = None) -> float:
     """The largest computed innovation ``||y - C_r x_hat||`` a model that holds allows.
 
     Parameters
     ----------
     C_rows : (p, n) ndarray
         The rows of ``C_c`` the sample holds.
-    bound : float or (n, n) ndarray
+    bound : float, (n, n) ndarray or PendingSet
         Rigorous bound ``b(t) >= ||x(t) - x_hat(t)||`` on the prior error (rounding included), or
         the shape matrix ``S`` of an ellipsoid holding it (:func:`projected_bound`, tighter).
     v_max : float
@@ -151,25 +165,30 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
         :func:`spectral_norm` of ``C_rows`` when the caller keeps it (computed if None).
     cols : ndarray, optional
         :func:`seen_columns` of ``C_rows`` when the caller keeps them (:func:`projected_bound`).
+    fC2 : float, optional
+        :func:`squared_norm` of ``C_rows`` when the caller keeps it.
     """
     p, n = C_rows.shape
-    fC = math.sqrt(float(np.sum(C_rows * C_rows)))
+    fC2 = squared_norm(C_rows) if fC2 is None else fC2
+    fC = math.sqrt(fC2)
     n2 = spectral_norm(C_rows) if norm_C is None else norm_C
     xn = math.sqrt(float(x_hat @ x_hat))
     yn = math.sqrt(float(y @ y))
-    seen = projected_bound(C_rows, bound, cols) if isinstance(bound, np.ndarray) else n2 * bound
+    seen = projected_bound(C_rows, bound, cols, fC2) if isinstance(bound, (np.ndarray, PendingSet)) else n2 * bound
     allowance = seen + math.sqrt(p) * v_max + gamma(n + 1) * (fC * xn + yn)
     return allowance * (1.0 + _SLACK)
 
 
 def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: float, x_hat: np.ndarray,
-                     y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None) -> Consistency:
+                     y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
+                     fC2: float | None = None) -> Consistency:
     """The test for one sample ``y`` of ``channel`` (rows ``C_rows``) against the prior ``x_hat``."""
     nu = y - C_rows @ x_hat
     inn = math.sqrt(float(nu @ nu))
-    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols)
-    if isinstance(bound, np.ndarray):     # the largest axis, for the report of a failure only
-        b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (bound + bound.T))[-1]), 0.0)) if inn > allow else math.nan
+    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2)
+    if isinstance(bound, (np.ndarray, PendingSet)):     # the largest axis, for the report of a failure only
+        S = assembled(bound) if inn > allow else None
+        b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (S + S.T))[-1]), 0.0)) if S is not None else math.nan
     else:
         b = float(bound)
     return Consistency(channel, inn, allow, b)
@@ -227,13 +246,14 @@ class InnovationTest:
         <switchobs_core.runtime.observer.SwitchedObserver>`); None: noise-free samples, tested against
         the exact bound.
 
-    ``C_r``, its :func:`spectral_norm` and its :func:`seen_columns` are kept per ``(channel, rows)``.
+    ``C_r``, its :func:`spectral_norm`, its :func:`seen_columns` and its :func:`squared_norm` are kept
+    per ``(channel, rows)``.
     """
 
     def __init__(self, C: Sequence[np.ndarray], noise_max: Sequence[float] | None = None):
         self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
         self.noise_max = None if noise_max is None else tuple(noise_max)
-        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float, np.ndarray | None]] = {}
+        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float, np.ndarray | None, float]] = {}
 
     def check(self, prior: tuple, channel: int, rows: Sequence[int] | None, y: np.ndarray) -> Consistency:
         """The test of the sample ``y`` of ``channel`` (``rows`` of its output, 0-based; None:
@@ -244,8 +264,8 @@ class InnovationTest:
         key = (channel, None if rows is None else tuple(rows))
         if key not in self._rows:
             C_r = output_rows(self.C[channel - 1], rows)
-            self._rows[key] = (C_r, spectral_norm(C_r), seen_columns(C_r))
-        C_r, norm_C, cols = self._rows[key]
+            self._rows[key] = (C_r, spectral_norm(C_r), seen_columns(C_r), squared_norm(C_r))
+        C_r, norm_C, cols, fC2 = self._rows[key]
         if self.noise_max is None:
-            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols)
-        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols)
+            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols, fC2)
+        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols, fC2)

@@ -34,7 +34,9 @@ class ErrorBounds:
 
     ``ErrorBounds(A, p_max, e0, noise_max, hold, rounding_bound, phi, disturbance=d)`` (``d`` a declared
     :class:`~switchobs_core.model.disturbance.Disturbance` or None); :attr:`rigorous` is the
-    :class:`~switchobs_core.bounds.rigorous.RoundingBound` the error maps step (None when not kept).
+    :class:`~switchobs_core.bounds.rigorous.RoundingBound` the error maps step (None when not kept);
+    :attr:`version` counts the changes of the sets (:meth:`reset`, :meth:`restart`, :meth:`withdraw`,
+    :meth:`changed`; :mod:`~switchobs_core.runtime.priors` keys on it).
     """
 
     def __init__(self, A: np.ndarray, p_max: int, e0: float | None, noise_max: Sequence[float] | None, hold: str,
@@ -47,9 +49,11 @@ class ErrorBounds:
         self._measurement = hold == "measurement"
         self._phi = phi
         self._last: tuple | None = None     # (amortised, (exact, noise)) of the last sample's sets
+        self.version = 0
 
     def reset(self) -> None:
         """``S = e0^2 I``."""
+        self.version += 1
         if self.rigorous is not None:
             self.rigorous.reset()
         self._last = None
@@ -57,6 +61,7 @@ class ErrorBounds:
     def restart(self, e: float) -> bool:
         """The rigorous sets restart as the ball of radius ``e`` (a bound that holds at the last
         sample's time, :mod:`switchobs_core.runtime.recertify`); False when no rigorous set is kept."""
+        self.version += 1
         if self.rigorous is None:
             return False
         self.rigorous.restart(e)
@@ -67,12 +72,14 @@ class ErrorBounds:
         """The rigorous sets are withdrawn with ``why`` (kept if they already are) until :meth:`reset` or
         :meth:`restart`: not propagated any more, their bounds ``inf``; for a caller that publishes no
         bound while it holds none (a restart starts them afresh, so nothing of the sets is lost)."""
+        self.version += 1
         if self.rigorous is not None and not self.rigorous.withdrawn:
             self.rigorous.withdrawn = str(why) or "withdrawn by the caller"
             self._last = None
 
     def changed(self) -> None:
         """The sets changed (a sample, a step): their bounds are read again."""
+        self.version += 1
         self._last = None
 
     def read(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray | None, v: np.ndarray | None,
@@ -108,10 +115,11 @@ class ErrorBounds:
         return "" if self.rigorous is None else self.rigorous.withdrawn
 
     def sets(self, step: Any, dt: float, x: np.ndarray, xp: np.ndarray, v: np.ndarray | None,
-             u: np.ndarray | None, extra: float = 0.0) -> tuple[np.ndarray | float, np.ndarray | float | None]:
+             u: np.ndarray | None, extra: float = 0.0, *, lazy: bool = False) -> tuple[Any, Any]:
         """The shape matrices ``(S, S_noise or None)`` of the rigorous sets at ``t`` (arguments as
         :meth:`read`; copies at the sample's time, propagated after it by ``RoundingBound.propagated``, a
-        sparse map in compressed rows: read-only, the sample's own step at ``t`` takes copies of them)."""
+        sparse map in compressed rows: read-only, the sample's own step at ``t`` takes copies of them;
+        ``lazy``: :class:`~switchobs_core.numerics.rounding.PendingSet` where the map is sparse)."""
         b = self.rigorous
         if b.withdrawn:         # no set is kept any more: the norm bounds say so
             return math.inf, None if b.ellv is None else math.inf
@@ -119,4 +127,4 @@ class ErrorBounds:
             return b.phase.bounds() if step is None else b.phase.later(b, step, dt, x, xp, v, u, extra)
         if step is None:
             return b.ell.S.copy(), None if b.ellv is None else b.ellv.S.copy()
-        return b.propagated(step, dt, x, xp, v, u, extra)
+        return b.propagated(step, dt, x, xp, v, u, extra, lazy=lazy)

@@ -23,12 +23,15 @@ __all__ = ["HeldInput"]
 
 class HeldInput:
     """The input held at the observer's time (``u``, None: zero) and the changes after it
-    (``changes``: ``(t_j, u_j)`` in time order, ``u_j`` None for zero)."""
+    (``changes``: ``(t_j, u_j)`` in time order, ``u_j`` None for zero). ``version`` counts the
+    changes of either (:mod:`~switchobs_core.runtime.priors` keys on it)."""
 
     def __init__(self) -> None:
+        self.version = 0
         self.reset()
 
     def reset(self) -> None:
+        self.version += 1
         self.u: np.ndarray | None = None
         self.changes: list[tuple[float, np.ndarray | None]] = []
 
@@ -43,6 +46,7 @@ class HeldInput:
 
     def change(self, t: float, u: np.ndarray | None) -> None:
         """Hold ``u`` from ``t`` on (``t`` not before the last change)."""
+        self.version += 1
         self.changes.append((float(t), u))
 
     def add(self, x: np.ndarray, t: float, step: Callable[[float], Any],
@@ -67,5 +71,6 @@ class HeldInput:
 
     def settle(self, t: float) -> None:
         """The observer is at ``t``: the changes up to ``t`` are held now."""
+        self.version += 1
         while self.changes and self.changes[0][0] <= t:
             self.u = self.changes.pop(0)[1]

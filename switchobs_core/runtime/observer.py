@@ -56,6 +56,7 @@ from ..model.decomposition import observability_decomposition
 from ..model.noise import NoiseModel
 from ..model.schedule import BLIND_TOL
 from ..numerics.propagation import DEFAULT_DT_RESOLUTION, ZOHCache, ZOHEntry
+from ..numerics.rounding import assembled
 from ..numerics.scaling import balance
 from ..table.kalman import KalmanDesign
 from .arguments import (
@@ -81,6 +82,7 @@ from .error_bounds import ErrorBounds
 from .error_maps import apply_zoh, zoh_step
 from .families.base import OPEN_LOOP, Correction, FamilyContext, Sample, ScheduledCycle
 from .held_input import HeldInput
+from .priors import PriorCache
 from .sequence import DesignSequence
 from .transition import Transition
 
@@ -116,14 +118,9 @@ class SwitchedObserver:
         Initial error bound ``||x_tilde(t0)|| <= e0`` (None: unknown, no bound until :meth:`recertify`).
     bounds : (float, float), optional
         ``(h_min, h_max)`` of A2 for robust mode; default ``table.robust.h_bounds``.
-    match_tol : float
-        Tolerance in seconds on each measured ``h_i`` (default 0.05).
-    cache_size : int
-        LRU size of the ZOH step cache (default 64).
-    dt_resolution : float or None
-        Step quantum of the cache (default 1 ns, see :mod:`switchobs_core.numerics.propagation`).
-    max_records : int
-        Number of :class:`CycleRecord` kept (oldest dropped first).
+    match_tol, cache_size, dt_resolution, max_records : float, int, float or None, int
+        Tolerance in seconds on each measured ``h_i`` (default 0.05); LRU size of the ZOH step cache (64)
+        and its step quantum (1 ns, :mod:`switchobs_core.numerics.propagation`); :class:`CycleRecord` kept.
     hold : {"innovation", "measurement"}
         What is held between samples (module docstring). Default ``"innovation"``.
     family : {"lmi", "kalman", "kalman-online"}, optional
@@ -142,13 +139,11 @@ class SwitchedObserver:
         Keep the exact bound with floating-point rounding (:mod:`switchobs_core.numerics.rounding`;
         about 9 us per sample for n = 12). Off: ``envelope().exact_bound`` is ``inf`` (no bound).
     noise_max : float or (N,) sequence of float, optional
-        A declared bound on the measurement noise, ``|v_j| <= noise_max`` for every row ``j``
-        (one value for all channels, or one per channel). The observer then also keeps
-        ``envelope().noise_bound``, a rigorous bound on the error of the computed estimate
-        under any noise within that bound (same argument as the exact bound with the noise's
-        image ``||G v|| <= ||G||_F sqrt(p) v_max`` added to each step's residual, see
-        :mod:`switchobs_core.numerics.rounding`; about as much work again per sample). Needs
-        ``rounding_bound`` and innovation hold.
+        A declared bound on the measurement noise, ``|v_j| <= noise_max`` for every row ``j`` (one value
+        for all channels, or one per channel). The observer then also keeps ``envelope().noise_bound``, a
+        rigorous bound on the error of the computed estimate under any noise within that bound (the exact
+        bound's argument with the noise's image added to each step, :mod:`switchobs_core.numerics.rounding`;
+        about as much work again per sample). Needs ``rounding_bound`` and innovation hold.
     disturbance : Disturbance, optional
         A declared ``x' = A x + B_w w``, ``|w_j| <= max_j`` (:mod:`switchobs_core.model.disturbance`): ``noise_bound``
         holds for every such ``w`` (:mod:`switchobs_core.numerics.disturbance_reach`). Needs ``noise_max``.
@@ -176,16 +171,14 @@ class SwitchedObserver:
     ``alpha * sum z_i`` is reported as the paper's claim, not as a guarantee.
     """
 
-    def __init__(self, system: Any, table: Any, mode: str = "periodic",
-                 cycles: Sequence[Any] | None = None, x0: Any = None, t0: float = 0.0,
-                 e0: float | None = 1.0, *, bounds: tuple[float, float] | None = None,
-                 match_tol: float = 0.05, cache_size: int = 64,
-                 dt_resolution: float | None = DEFAULT_DT_RESOLUTION,
-                 max_records: int = 100_000, hold: str = "innovation",
-                 family: str | None = None, noise: NoiseModel | None = None,
-                 track_covariance: bool | None = None, relock_rtol: float = 1e-3,
-                 rounding_bound: bool = True, noise_max: float | Sequence[float] | None = None,
-                 transition: bool | None = None, disturbance: Any = None, bound: str = "ellipsoid"):
+    def __init__(self, system: Any, table: Any, mode: str = "periodic", cycles: Sequence[Any] | None = None,
+                 x0: Any = None, t0: float = 0.0, e0: float | None = 1.0, *,
+                 bounds: tuple[float, float] | None = None, match_tol: float = 0.05, cache_size: int = 64,
+                 dt_resolution: float | None = DEFAULT_DT_RESOLUTION, max_records: int = 100_000,
+                 hold: str = "innovation", family: str | None = None, noise: NoiseModel | None = None,
+                 track_covariance: bool | None = None, relock_rtol: float = 1e-3, rounding_bound: bool = True,
+                 noise_max: float | Sequence[float] | None = None, transition: bool | None = None,
+                 disturbance: Any = None, bound: str = "ellipsoid"):
         self.system = system
         self.table = table
         self.A = np.ascontiguousarray(system.A, dtype=float)
@@ -229,7 +222,7 @@ class SwitchedObserver:
         self._scale = balance(self.A, np.vstack(self.C))
         self._cache = ZOHCache(cache_size, dt_resolution, scale=self._scale)
         self._cache.register(OPEN_LOOP, self.A, None, self.B)
-        self._in = HeldInput()
+        self._in, self._priors = HeldInput(), PriorCache()
         self._seq = DesignSequence(self.designs, self.promised, mode, self.N, self.bounds, self.match_tol, t0,
                                    max_records)
         # the transition Phi (apply_map): measurement hold's exact bound reads it at every envelope
@@ -260,10 +253,7 @@ class SwitchedObserver:
         self._gains.reset()     # covariance P0, nothing held: the family's own
         self._lost = ""
 
-    @property
-    def gains(self) -> Any:
-        """The gain family in use (:mod:`switchobs_core.families`)."""
-        return self._gains
+    gains = property(lambda self: self._gains, doc="The gain family in use (:mod:`switchobs_core.families`).")
 
     kalman_fallback = property(lambda self: getattr(self._gains, "fallback", ""),
                                doc="Why the Kalman table last left its cache (\"\" if it has not since the reset).")
@@ -272,11 +262,9 @@ class SwitchedObserver:
     kalman_relocks = property(lambda self: getattr(self._gains, "relocks", 0),
                               doc="Returns of the Kalman table to its cache since the reset (0 for other families).")
 
-    @property
-    def covariance_withdrawn(self) -> str:
-        """Why :attr:`P` is None until :meth:`reset` ("" while the family's covariance holds): the
-        recursion ran out of digits (:class:`~switchobs_core.runtime.families.base.Correction` ``lost``)."""
-        return self._lost
+    covariance_withdrawn = property(lambda self: self._lost, doc="Why :attr:`P` is None until :meth:`reset` (\"\" "
+                                    "while the family's covariance holds): the recursion ran out of digits "
+                                    "(:class:`~switchobs_core.runtime.families.base.Correction` ``lost``).")
 
     bounds_withdrawn = property(lambda self: self._bounds.withdrawn, lambda self, why: self._bounds.withdraw(why),
                                 doc="Why the rigorous bounds are ``inf`` until :meth:`reset` or :meth:`recertify` "
@@ -432,19 +420,13 @@ class SwitchedObserver:
     def set_estimate(self, t: float, values: dict[int, float], variances: dict[int, float] | None = None) -> None:
         """Set entries of the estimate at time ``t >= obs.t`` (robot_localization's ``set_pose``).
 
-        The observer first propagates to ``t`` exactly as between samples (the last innovation
-        held), then ``x_hat[i] = values[i]``. Where the family keeps a covariance, ``P`` keeps
-        its other entries and gets row/column ``i`` zeroed with ``P[i, i] = variances[i]`` (the
-        entry's own variance, default the previous ``P[i, i]``); a Kalman table then runs the
-        recursion online from that ``P`` and re-locks as after any departure. The exact bound
-        no longer holds (the set entries' error is unknown): the caller must stop publishing it,
-        as after :meth:`reset`.
-
-        Raises
-        ------
-        InvalidArgument
-            ``t`` before the observer's time or not finite, an index out of range, a value or
-            a variance that is not finite (variances must be >= 0).
+        The observer first propagates to ``t`` exactly as between samples (the last innovation held), then
+        ``x_hat[i] = values[i]``. Where the family keeps a covariance, ``P`` keeps its other entries and gets
+        row/column ``i`` zeroed with ``P[i, i] = variances[i]`` (the entry's own variance, default the previous
+        ``P[i, i]``); a Kalman table then runs the recursion online from that ``P`` and re-locks as after any
+        departure. The exact bound no longer holds (the set entries' error is unknown): the caller must stop
+        publishing it, as after :meth:`reset`. Raises InvalidArgument for ``t`` before the observer's time or
+        not finite, an index out of range, a value or a variance that is not finite (variances must be >= 0).
         """
         dt = check_set(t, self._t, values, variances, self.n)
         # a cache of the recursion (the Kalman table) leaves it: the real covariance runs online
@@ -533,39 +515,57 @@ class SwitchedObserver:
         dt = check_time(t, self._t)
         if dt == 0:
             return self._x.copy()
-        key, v = self._held() if hold else (OPEN_LOOP, None)
-        return self._propagated(key, v, dt, float(t))[1]
+        return self._held_step(float(t), dt)[1].copy() if hold else self._propagated(OPEN_LOOP, None, dt, float(t))[1]
+
+    def _held_step(self, t: float, dt: float) -> tuple[Any, np.ndarray, float]:
+        """:meth:`_propagated` with what is held, to ``t`` (``dt > 0`` ahead): once per time and state, shared by
+        :meth:`predict`, :meth:`prior`, :meth:`envelope` (:mod:`~switchobs_core.runtime.priors`; read-only)."""
+        c = self._prior_at(t)
+        if c.step is None:
+            c.step = self._propagated(*self._held(), dt, t)
+        return c.step
+
+    def _prior_at(self, t: float) -> PriorCache:
+        return self._priors.at(t, self._t, self._x, self._bounds.version, self._in.version)
 
     def prior_covariance(self, t: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no covariance is
-        kept; with ``cols`` its block on those states): the family's stored one (a locked Kalman table), else the
-        last sample's ``P`` through the step's error map, ``E P E' + Q_d(dt)`` (plus the held noise ``(Gamma L) R
-        (Gamma L)'`` for LMI gains, :mod:`~switchobs_core.runtime.covariance`); the state is unchanged. Read-only."""
+        kept; with ``cols`` its block on those states, kept for the time: :mod:`~switchobs_core.runtime.priors`):
+        the family's stored one (a locked Kalman table), else the last sample's ``P`` through the step's error
+        map, ``E P E' + Q_d(dt)`` (plus the held noise ``(Gamma L) R (Gamma L)'`` for LMI gains,
+        :mod:`~switchobs_core.runtime.covariance`); the state is unchanged. Read-only."""
         dt = float(t) - self._t
+        c = self._prior_at(float(t)) if cols is not None and math.isfinite(dt) and dt > 0 else None
+        if c is not None and (B := c.block(cols)) is not None:
+            return B
         S = None if self._lost or not (math.isfinite(dt) and dt > 0) else self._gains.stored_prior(float(t), dt, cols)
         P = self.P if S is None else S
         if P is None or not (math.isfinite(dt) and dt >= 0) or S is not None:
-            return P if S is not None else None
-        P = P if dt == 0 else self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
-        return P if cols is None else P[np.ix_(cols, cols)]
+            P = P if S is not None else None
+        else:
+            P = P if dt == 0 else self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
+            P = P if cols is None else P[np.ix_(cols, cols)]
+        return P if c is None else c.keep_block(cols, P)
 
-    def prior(self, t: float) -> tuple[np.ndarray, np.ndarray | float, np.ndarray | float | None]:
+    def prior(self, t: float, *, lazy: bool = False) -> tuple[np.ndarray, Any, Any]:
         """What :meth:`update` at ``t`` starts from: the prediction ``x_hat(t)`` (the last sample held) and
         the rigorous sets of its error, ``(x_hat, exact, noise)``: each the shape matrix ``S`` of an ellipsoid
         ``{S^(1/2) u : ||u|| <= 1}`` holding the error (:class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`,
-        rounding included), or a float norm bound where no ellipsoid is kept; ``noise`` is None without a
-        declared ``noise_max``. The state is unchanged. The innovation test of
-        :mod:`switchobs_core.runtime.consistency` takes these: a sample at ``t`` whose innovation exceeds
-        what they allow proves the model broken for that sample."""
+        rounding included; read-only, computed once per time and state: :mod:`~switchobs_core.runtime.priors`;
+        ``lazy``: a :class:`~switchobs_core.numerics.rounding.PendingSet` where it is one), or a float norm bound
+        where no ellipsoid is kept; ``noise`` is None without a declared ``noise_max``. The state is unchanged.
+        The innovation test (:mod:`switchobs_core.runtime.consistency`) takes these."""
         if self._bound is None:
             env = self.envelope(t)
             return self.predict(t, hold=True), env.exact_bound, env.noise_bound
         dt = check_time(t, self._t)
         if dt == 0:
             return (self._x.copy(), *self._bounds.sets(None, dt, self._x, self._x, None, None))
-        key, v = self._held()
-        e, x, rho = self._propagated(key, v, dt, float(t))
-        return (x, *self._bounds.sets(e, dt, self._x, x, v, self._in.u, rho))
+        e, x, rho = self._held_step(float(t), dt)
+        c = self._priors
+        if c.sets is None:
+            c.sets = self._bounds.sets(e, dt, self._x, x, self._held()[1], self._in.u, rho, lazy=True)
+        return (x.copy(), *(c.sets if lazy else map(assembled, c.sets)))
 
     def envelope(self, t: float | None = None, *, amortised: bool | None = None) -> Envelope:
         """The paper's envelopes and bound, and the exact bound, at ``t`` (default: now).
@@ -587,8 +587,8 @@ class SwitchedObserver:
         if t is None:
             t = self._t
         dt = check_time(t, self._t)
-        key, v = self._held()
-        step, xp, rho = self._propagated(key, v, dt, float(t)) if dt > 0 else (None, None, 0.0)
+        v = self._held()[1]
+        step, xp, rho = self._held_step(float(t), dt) if dt > 0 else (None, None, 0.0)
         exact, noisy = self._bounds.read(step, dt, self._x, xp, v, self._in.u, amortised, rho)
         if self._tracker is None or self.e0 is None:    # Kalman gains (the envelope is the LMI gains'), no e0
             return Envelope(z=self._na.copy(), paper_bound=NOT_APPLICABLE,

@@ -169,7 +169,7 @@ class Recovery:
         self._valid = True
         self._run = [0] * self.N
         self._raw: list[deque] = [deque(maxlen=5) for _ in range(self.N)]
-        self._rows: dict = {}       # (channel, rows) -> (C_r, its seen_columns, C_r on them): the bias test's
+        self._rows: dict = {}       # (channel, rows) -> the bias test's C_r, its seen_columns, C_r on them, noise, R
 
     # ------------------------------------------------------------------ the bias test
     def before(self, t: float, channel: int, rows: Any, y: np.ndarray) -> str:
@@ -178,16 +178,19 @@ class Recovery:
             return ""
         obs = self.obs
         key = (channel, None if rows is None else tuple(rows))
-        if key not in self._rows:
+        noise = obs.noise
+        hit = self._rows.get(key)
+        if hit is None or hit[3] is not noise:
             C_r = output_rows(self.C[channel - 1], rows)
             cols = seen_columns(C_r)
-            self._rows[key] = (C_r, cols, C_r if cols is None else C_r[:, cols])
-        C_r, cols, Cc = self._rows[key]
+            hit = self._rows[key] = (C_r, cols, C_r if cols is None else C_r[:, cols], noise,
+                                     None if noise is None else noise.R(channel, rows))
+        C_r, cols, Cc, _, R = hit
         with np.errstate(all="ignore"):
             nu = np.asarray(y, dtype=float) - C_r @ obs.predict(t, hold=True)
             P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
-            if P is not None and obs.noise is not None:
-                S = Cc @ P @ Cc.T + obs.noise.R(channel, rows)
+            if P is not None and noise is not None:
+                S = Cc @ P @ Cc.T + R
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
                 if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
                     sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread

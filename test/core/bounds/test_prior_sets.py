@@ -17,6 +17,7 @@ from switchobs_core.bounds.kalman_map import sparse_transition
 from switchobs_core.bounds.rigorous import open_loop_product
 from switchobs_core.numerics.propagation import ZOHEntry
 from switchobs_core.numerics.rounding import ErrorEllipsoid
+from switchobs_core.runtime.priors import PriorCache
 
 LD = np.longdouble
 needs_ld = pytest.mark.skipif(np.finfo(LD).eps > 2.0**-60, reason="needs an extended-precision longdouble")
@@ -71,6 +72,11 @@ def _prior_pairs(agents10, noise_max, monkeypatch) -> tuple[list, int]:
         calls.append(1)
         return real(ell, sp)
     monkeypatch.setattr(rig, "open_loop_product", counted)
+    real_at = PriorCache.at
+
+    def fresh_at(self, *a):
+        self.clear()
+        return real_at(self, *a)
     system, cycle, table, sched, x = agents10
     rng = np.random.default_rng(3)
     obs = so.SwitchedObserver(system, table, "periodic", [cycle], e0=10.0, noise_max=noise_max)
@@ -83,6 +89,7 @@ def _prior_pairs(agents10, noise_max, monkeypatch) -> tuple[list, int]:
             fast = obs.prior(t)
             with monkeypatch.context() as m:
                 m.setattr(rig, "sparse_map", lambda e: None)
+                m.setattr(PriorCache, "at", fresh_at)       # computed again, not the prior kept for t
                 dense = obs.prior(t)
             out.append((fast, dense))
         obs.update(t, ch, y)
