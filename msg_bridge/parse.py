@@ -16,9 +16,10 @@ the header's frame id, and ``values``, every float64 field of the type
   of 8 bytes from the body's start; the float64 fields. Anything else (another encapsulation, a
   length that does not add up, a frame id that is not UTF-8 or holds a NUL) is a
   :class:`~msg_bridge.validate.Rejection` with reason ``BAD_LAYOUT``, never an exception.
-* :class:`Parser` takes either form: bytes go to the :class:`RawReader` (bytes in another
-  encapsulation, a big-endian writer's, to rclpy's deserialiser, which reads them, and then as a
-  message), a message object (rclpy,
+* :class:`Parser` takes either form: bytes go to the :class:`RawReader` (bytes it refuses to
+  rclpy's deserialiser, then read as a message: one rule, rclpy's, decides which bytes are a
+  message, live and in a bag, as before inputs were taken raw; the raw reader only makes the
+  well-formed ones cheap), a message object (rclpy,
   rosbags or any object with the same attribute paths) is read attribute by attribute into the
   same tuple, and a :data:`Parsed` tuple is passed through. The checks then run on one form.
 
@@ -109,9 +110,11 @@ class RawReader:
         sec, nsec, n = _HEAD.unpack_from(data, 4)
         end = 16 + n
         off = end + (-(end - 4)) % 8             # the doubles: 8-aligned from the body's start (byte 4)
-        if n == 0 or off + self._tail != size:
+        if n == 0:
+            return _bad("a frame id length of 0 (CDR counts the terminating NUL: at least 1)")
+        if off + self._tail != size:
             return _bad(f"{size} bytes with a frame id of {n} bytes (expected {off + self._tail})")
-        raw = data[16:end - 1]
+        raw = bytes(data[16:end - 1])           # bytes: ``in`` on a memoryview compares items, not bytes
         if data[end - 1] != 0 or b"\x00" in raw:
             return _bad("frame id not terminated by its only NUL")
         try:
@@ -157,15 +160,16 @@ class Parser:
             if self.raw is None:
                 return _bad(f"{self.type} is read as a message, not from bytes")
             got = self.raw.parse(msg)
-            if isinstance(got, Rejection) and msg[:2] != _CDR_LE:
-                return self._other_encoding(msg, got)
-            return got
+            return got if got.__class__ is tuple else self._by_rclpy(msg, got)
         return self._get(msg)
 
-    def _other_encoding(self, data: bytes | bytearray | memoryview, rejection: Rejection) -> Parsed | Rejection:
-        """Bytes in another encapsulation than little-endian CDR (a big-endian writer's): read by rclpy's
-        deserialiser, which honours the encapsulation, then parsed as a message; ``rejection`` (the raw
-        reader's) when rclpy cannot read them either."""
+    def _by_rclpy(self, data: bytes | bytearray | memoryview, rejection: Rejection) -> Parsed | Rejection:
+        """Bytes the raw reader refuses, read by rclpy's deserialiser as the node read every input
+        before it took them raw (and as ``switchobs_bag estimate`` reads a bag's): another
+        encapsulation (a big-endian writer's), a frame id that is not UTF-8 (rclpy replaces the bad
+        bytes) or not terminated as the raw reader expects, trailing bytes; then parsed as a
+        message. ``rejection`` (the raw reader's) when rclpy cannot read them either, so bytes are
+        refused by one rule, rclpy's, whichever path reads them."""
         from rclpy.serialization import deserialize_message
         try:
             msg = deserialize_message(bytes(data), message_class(self.type))

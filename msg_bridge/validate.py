@@ -112,6 +112,8 @@ def check_pose(
     """
     if msg.__class__ is not tuple:
         msg = _pose_parser().parse(msg)
+        if msg.__class__ is not tuple:      # bytes that are not a PoseStamped: its rejection
+            return msg
     sec, nsec, frame, v = msg
     s = v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6]   # finite only if all seven are (else, or on overflow: the loop)
     if not (abs(v[0]) <= max_abs and abs(v[1]) <= max_abs and abs(v[2]) <= max_abs and s - s == 0.0):

@@ -27,6 +27,11 @@ as the plain estimator does. ``autostart:=false`` waits for the lifecycle servic
 from __future__ import annotations
 
 import sys
+
+if __name__ == "__main__":      # python -m switchobs_ros.managed_estimator: the console script's start, heap kept
+    from switchobs_ros.entry import managed_estimator as _console_script
+    sys.exit(_console_script())
+
 import threading
 import time
 
@@ -136,7 +141,3 @@ class ManagedEstimatorNode(EstimatorMixin, LifecycleNode):
 
 def main(args=None) -> int:
     return run_node(ManagedEstimatorNode, "managed_estimator", args)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

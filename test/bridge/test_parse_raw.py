@@ -80,8 +80,13 @@ def test_truncated_or_corrupted_bytes_are_rejected_not_raised(case, data):
         bad[data.draw(st.integers(0, len(bad) - 1))] ^= data.draw(st.integers(1, 255))
     got = reader.parse(bytes(bad))
     assert isinstance(got, (tuple, Rejection))
-    if isinstance(got, tuple) and bad[4:16] == good[4:16] and bad[:2] == good[:2]:
-        assert got[:2] == (msg.header.stamp.sec, msg.header.stamp.nanosec)
+    if isinstance(got, tuple):      # what the raw reader reads, rclpy reads the same
+        back = deserialize_message(bytes(bad), type(msg))
+        assert got[:3] == (back.header.stamp.sec, back.header.stamp.nanosec, back.header.frame_id)
+        assert _bits(got[3]) == _bits(attrgetter(*mb.float64_fields(type_name))(back))
+    # the parser: a parse or a rejection for any of these bytes, never an exception
+    for b in (good[:cut], bytes(bad)):
+        assert isinstance(Parser(type_name, mb.float64_fields(type_name)[:1]).parse(b), (tuple, Rejection))
 
 
 def test_malformed_frames_and_encodings_are_bad_layout():
@@ -89,13 +94,13 @@ def test_malformed_frames_and_encodings_are_bad_layout():
     data = bytearray(serialize_message(msg))
     reader = RawReader("geometry_msgs/PoseStamped")
     assert reader.parse(bytes(data))[:3] == (5, 7, "map")
-    big = bytes(b"\x00\x00" + data[2:])                        # CDR_BE encapsulation
+    big = bytes(b"\x00\x00" + data[2:])                        # CDR_BE label on little-endian content
     utf = bytes(data[:16] + b"\xff" + data[17:])               # "\xffap": not UTF-8
     nul = bytes(data[:16] + b"\x00" + data[17:])               # a NUL inside the frame
     unterminated = bytes(data[:19] + b"p" + data[20:])         # the terminator overwritten
     long = bytes(data[:12] + struct.pack("<I", 2**32 - 1) + data[16:])
     empty_len = bytes(data[:12] + struct.pack("<I", 0) + data[16:])
-    for bad in (big, utf, nul, unterminated, long, empty_len, b"", b"\x00\x01"):
+    for bad in (big, utf, nul, memoryview(nul), unterminated, long, empty_len, b"", b"\x00\x01"):
         rej = reader.parse(bad)
         assert isinstance(rej, Rejection) and rej.reason is Reason.BAD_LAYOUT, bad
 
@@ -195,3 +200,28 @@ def test_parser_rejects_bytes_rclpy_cannot_read_either():
     for bad in (data[:20], b"\x00\x00\x00\x00", b"\x00\x00"):
         rej = Parser("geometry_msgs/PoseStamped", ("pose.position.x",)).parse(bad)
         assert isinstance(rej, Rejection) and rej.reason is Reason.BAD_LAYOUT, bad
+
+
+def test_parser_reads_the_bytes_the_raw_reader_refuses_as_rclpy_does():
+    """One rule for bytes, live and in a bag: what rclpy reads is a message (a frame id that is not
+    UTF-8 or holds a NUL, trailing bytes), read into the form of that message; what it cannot read is
+    ``bad_layout``; check_pose answers a rejection for such bytes, never raises."""
+    data = serialize_message(mb.xy_to_pose((1.0, 2.0), 5_000_000_007, "map"))
+    parser = Parser("geometry_msgs/PoseStamped", ("pose.position.x", "pose.position.y"))
+    cases = [data[:16] + b"\xff" + data[17:], data[:16] + b"\x00" + data[17:], data + b"\x00" * 8,
+             data[:-5], data[:12] + struct.pack("<I", 2**31) + data[16:]]
+    read = 0
+    for bad in cases:
+        assert isinstance(RawReader("geometry_msgs/PoseStamped").parse(bad), Rejection)
+        try:
+            back = deserialize_message(bad, mb.message_class("geometry_msgs/PoseStamped"))
+        except Exception:
+            back = None
+        got = parser.parse(bad)
+        if back is None:
+            assert isinstance(got, Rejection) and got.reason is Reason.BAD_LAYOUT
+            assert isinstance(mb.check_pose(bad), Rejection)
+        else:
+            read += 1
+            assert got == parser.parse(back)
+    assert read >= 2 and read < len(cases)      # both outcomes exercised

@@ -8,6 +8,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from refusals import TIMEOUT_S, assert_refused
 
 from switchobs_core.table.gains import GainTable
@@ -80,14 +81,16 @@ def test_console_script_refuses_bad_ros_args_as_run_node_does():
     assert res.stderr.count("Failed to parse global arguments") == 1, res.stderr
 
 
-def test_python_m_starts_as_the_console_script():
-    """``python -m switchobs_ros.estimator`` runs the console script's start (participant first): the module
-    run as ``__main__`` hands over to ``entry.estimator`` before it imports rclpy, numpy or the node, and
-    the process exits with what that returns."""
+@pytest.mark.parametrize("module", ["estimator", "managed_estimator"])
+def test_python_m_starts_as_the_console_script(module):
+    """``python -m switchobs_ros.estimator`` (and ``managed_estimator``) runs the console script's start
+    (the heap kept; the estimator's participant first): the module run as ``__main__`` hands over to
+    its ``entry`` function before it imports rclpy, numpy or the node, and the process exits with what
+    that returns."""
     code = ("import runpy, sys\n"
             "from switchobs_ros import entry\n"
-            "entry.estimator = lambda: print('console start', 'rclpy' in sys.modules, 'numpy' in sys.modules) or 7\n"
-            "runpy.run_module('switchobs_ros.estimator', run_name='__main__', alter_sys=True)\n")
+            f"entry.{module} = lambda: print('console start', 'rclpy' in sys.modules, 'numpy' in sys.modules) or 7\n"
+            f"runpy.run_module('switchobs_ros.{module}', run_name='__main__', alter_sys=True)\n")
     res = _run(code)
     assert res.returncode == 7, res.stderr
     assert res.stdout.strip() == "console start False False", res.stdout + res.stderr

@@ -107,7 +107,7 @@ def test_bad_messages_rejected_counted_node_keeps_running(estimator, ros_node):
     bad.append(mb.xy_to_pose((0.0, 0.0), s_last - 1_000_000, "world_test"))      # older
     bad.append(mb.xy_to_pose((0.0, 0.0), time.time_ns() + 60 * 10**9, "world_test"))  # 60 s ahead
     ok = serialize_message(mb.xy_to_pose((0.0, 0.0), next(good), "world_test"))
-    bad += [ok[:-8], b"\x00\x00" + ok[2:]]          # serialised bytes: truncated, big-endian (bad_layout)
+    bad += [ok[:-8], b"\x00\x00" + ok[2:]]    # bytes: truncated, a big-endian label on little-endian content
     for m in bad:
         io.pub_target.publish(m)
         spin_until(ros_node, lambda: False, 0.01)

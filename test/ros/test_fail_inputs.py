@@ -125,19 +125,35 @@ def test_stamps_and_frames(pl, part, case, reason):
 
 
 @pytest.mark.parametrize("part", ["camera", "target"])
-@pytest.mark.parametrize("damage", ["truncated", "big_endian", "frame_length", "not_utf8"])
-def test_malformed_serialised_pose_is_bad_layout(pl, part, damage):
-    """The node takes poses as serialised bytes (msg_bridge.parse): bytes that are not a
-    PoseStamped are rejected as ``bad_layout``, counted, and change nothing."""
+@pytest.mark.parametrize("damage, reason", [("truncated", "bad_layout"), ("wrong_endianness", "bad_layout"),
+                                            ("frame_length", "bad_layout"), ("not_utf8", "wrong_frame")])
+def test_malformed_serialised_pose_is_rejected(pl, part, damage, reason):
+    """The node takes poses as serialised bytes (msg_bridge.parse): bytes that rclpy cannot read
+    as a PoseStamped either are rejected as ``bad_layout``; bytes it reads (a frame id that is not
+    UTF-8, read with its bad bytes replaced) are checked as that message (here: not the input
+    frame). Counted, and nothing else changes."""
     t0 = _started(pl)
     good = serialize_message(_pose((0.0, 0.0), t0 + MS))
-    bad = {"truncated": lambda: good[:-5], "big_endian": lambda: b"\x00\x00" + good[2:],
+    bad = {"truncated": lambda: good[:-5], "wrong_endianness": lambda: b"\x00\x00" + good[2:],
            "frame_length": lambda: good[:12] + (2**31).to_bytes(4, "little") + good[16:],
            "not_utf8": lambda: good[:16] + b"\xff" + good[17:]}[damage]()
     before = _state(pl)
     assert pl.on_pose(part, bad, NOW) == []
-    assert dict(pl.rejected) == {(f"{part}/pose", "bad_layout"): 1} and _state(pl) == before
+    assert dict(pl.rejected) == {(f"{part}/pose", reason): 1} and _state(pl) == before
     assert [e.stamp_ns for e in _pair(pl, t0 + 20 * MS)] == [t0 + 20 * MS]
+
+
+@pytest.mark.parametrize("as_bytes", [False, True])
+def test_an_invalid_stamp_with_a_bad_field_is_counted_under_the_field(pl, as_bytes):
+    """The checks run in their documented order (fields, frame, then the stamp): a pose with a NaN
+    and a nanosec of 1e9 is ``non_finite``, by bytes and by message alike, never an internal error."""
+    t0 = _started(pl)
+    msg = _pose((0.0, 0.0), t0 + MS)
+    msg.header.stamp.nanosec = 10**9
+    msg.pose.position.x = math.nan
+    before = _state(pl)
+    assert pl.on_pose("camera", serialize_message(msg) if as_bytes else msg, NOW) == []
+    assert dict(pl.rejected) == {("camera/pose", "non_finite"): 1} and _state(pl) == before
 
 
 def test_future_within_tolerance_is_accepted(pl):
