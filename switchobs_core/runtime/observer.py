@@ -375,9 +375,9 @@ class SwitchedObserver:
         # 1. exact step over [t_prev, t]: x <- Phi x + GL v_held + GB u_held, v = nu or y
         #    (a family may fuse it with its correction: the Kalman table's one map per phase)
         fuse = self._gains.fuses(self._in.u is not None or self._in.pending(t))
-        self._bounds.changed()
         if dt > 0 and not fuse:
             self._step(dt, t)
+        self._bounds.changed()
         self._t = t
         self._in.settle(t)
         # 2. switching instant
@@ -442,8 +442,8 @@ class SwitchedObserver:
 
     def _advance(self, t: float, dt: float) -> None:
         if dt > 0:      # propagate to t (dt ahead) as between samples
-            self._bounds.changed()
             self._step(dt, t)
+            self._bounds.changed()
             self._t = float(t)
             self._in.settle(t)
 
@@ -456,9 +456,10 @@ class SwitchedObserver:
 
     def _step(self, dt: float, t: float) -> None:
         """Exact step over ``dt`` to ``t`` with the held innovation/measurement and input (step 1): the
-        estimate, its error map into ``Phi`` and the bound, the family's covariance."""
+        estimate, its error map into ``Phi`` and the bound, the family's covariance. The held step a
+        :meth:`prior` at ``t`` computed from this state is taken as it is (:mod:`~switchobs_core.runtime.priors`)."""
         key, v = self._held()
-        e, x, rho = self._propagated(key, v, dt, t)
+        e, x, rho = self._prior_at(t).step or self._propagated(key, v, dt, t)
         apply_zoh(self._phi, self._bound, e, dt, self._x, x, v, self._in.u, rho)
         self._x = x
         self._gains.stepped(e, dt)
@@ -544,7 +545,7 @@ class SwitchedObserver:
             P = P if S is not None else None
         else:
             P = P if dt == 0 else self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
-            P = P if cols is None else P[np.ix_(cols, cols)]
+            P = P if cols is None else P[cols][:, cols]
         return P if c is None else c.keep_block(cols, P)
 
     def prior(self, t: float, *, lazy: bool = False) -> tuple[np.ndarray, Any, Any]:
