@@ -545,7 +545,7 @@ class SwitchedObserver:
             P = P if S is not None else None
         else:
             P = P if dt == 0 else self._gains.predict_covariance(P, self._cache.step(self._held()[0], dt), dt)
-            P = P if cols is None else P[cols][:, cols]
+            P = P if cols is None else P[np.ix_(cols, cols)]
         return P if c is None else c.keep_block(cols, P)
 
     def prior(self, t: float, *, lazy: bool = False) -> tuple[np.ndarray, Any, Any]:
