@@ -9,7 +9,9 @@ see (:meth:`~switchobs_core.runtime.observer.SwitchedObserver.predict`,
 every channel's reading of the same sample. Each is a function of the observer's state and ``t``
 only, so :class:`PriorCache` keeps them for one time: the held step ``(entry, x_hat(t), rho)``,
 the sets, and the covariance's blocks by columns (the whole covariance is not kept: it is a
-view of the table's matrix, or n x n).
+view of the table's matrix, or n x n). The sample's own step at ``t`` takes the held step (the
+estimate is propagated once per sample); the sets and the LMI family's prior covariance are taken by
+their owners' own memos (``RoundingBound.step``, ``LmiGains.stepped``).
 
 What it is keyed by (:meth:`PriorCache.at`): ``t`` and the observer's time, compared by value; the
 estimate array by identity (every change of the estimate makes a new array, and the cache holds
