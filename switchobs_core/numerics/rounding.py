@@ -451,7 +451,10 @@ def assembled(s: Any) -> Any:
 def largest_eigenvalue(S: np.ndarray) -> float:
     """``np.linalg.eigvalsh(S)[-1]`` (the same LAPACK call and doubles) through its gufunc, without
     the wrapper's checks; where that gives no finite value, the wrapper decides (it raises
-    ``LinAlgError`` when the solver does not converge)."""
+    ``LinAlgError`` when the solver does not converge). Under numpy's default error state a
+    matrix with a NaN also warns (``invalid value``) before that ``LinAlgError``, and under
+    ``errstate(invalid="raise")`` it raises ``FloatingPointError`` instead: callers that may
+    pass one run it under ``errstate(all="ignore")`` (the screening does)."""
     if _eigvalsh_lo is not None:
         lam = float(_eigvalsh_lo(S, signature="d->d")[-1])
         if math.isfinite(lam):

@@ -527,7 +527,8 @@ class SwitchedObserver:
         return c.step
 
     def _prior_at(self, t: float) -> PriorCache:
-        return self._priors.at(t, self._t, self._x, self._bounds.version, self._in.version)
+        return self._priors.at(t, self._t, self._x, self._bounds.version, self._in.version,
+                               getattr(self._gains, "missing", None))
 
     def prior_covariance(self, t: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """The error covariance ``P^-(t)`` that :meth:`update` at ``t`` starts from (None when no covariance is

@@ -19,10 +19,10 @@ the one it was computed from, so an identity is never reused); and the versions 
 owners of the rest of the state: the published bounds' sets
 (:attr:`~switchobs_core.runtime.error_bounds.ErrorBounds.version`: a sample, a step, a reset, a
 restart, a withdrawal) and the held input (:attr:`~switchobs_core.runtime.held_input.HeldInput.version`:
-a change ahead, a reset). Any other time, any change of state: nothing is served. The family's state (the
-covariance, the Kalman table's position) changes only with a sample, a reset or a set state, each
-of which changes the key (a new estimate array, or the sets' version; its settings, such as the
-Kalman table's ``missing``, are made before the samples). An estimate a caller writes into in place
+a change ahead, a reset), and the Kalman table's ``missing`` setting. Any other time, any change of
+state: nothing is served. The family's state (the covariance, the Kalman table's position) changes
+only with a sample, a reset or a set state, each of which changes the key (a new estimate array, or
+the sets' version). An estimate a caller writes into in place
 (``update`` returns the observer's own array) is outside this, as it is outside every other step.
 
 A hit serves the very objects computed at the miss: the same doubles (read-only; the prediction

@@ -201,3 +201,23 @@ def test_kept_product_is_taken_once_for_its_map_and_set():
     ell.keep_product(key, Z)
     ell.S = ell.S.copy()                        # a step: another set
     assert ell.take_product(key) is None
+
+
+def test_a_change_of_the_tables_missing_setting_is_not_served_the_old_prior(agents10):
+    """The Kalman table's ``missing`` is part of the key: with a grid sample missing, the block read
+    after switching ``"table"`` -> ``"online"`` at the same time is the one a fresh read gives."""
+    system, cycle, table, sched, x = agents10
+    obs = so.SwitchedObserver(system, table, "periodic", [cycle], e0=10.0)
+    obs.gains.missing = "table"
+    for k in range(3):
+        ch = sched.channel_at(k * DT)
+        obs.update(k * DT, ch, np.asarray(system.C[ch - 1]) @ x)
+    t = 4 * DT                      # the sample at 3 DT missing
+    cols = seen_columns(np.asarray(system.C[sched.channel_at(t) - 1]))
+    as_table = obs.prior_covariance(t, cols)
+    obs.gains.missing = "online"
+    read = obs.prior_covariance(t, cols)
+    with fresh_priors():
+        want = obs.prior_covariance(t, cols)
+    _same(read, want)
+    assert not np.array_equal(as_table, want)       # the two settings give different blocks here
