@@ -26,6 +26,13 @@ if HAVE_ROS:
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
     os.environ["SWITCHOBS_CLAIM_DOMAIN"] = "0"   # the demo runner uses ours
     os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+
+    import forkserver
+
+    from tools.launch import NodeProcess
+
+    # the nodes start forked from a helper with them imported, not as fresh interpreters (forkserver.py)
+    NodeProcess.spawner = staticmethod(forkserver.popen)
 else:
     collect_ignore_glob = ["test_*.py"]
 
