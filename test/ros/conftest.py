@@ -43,6 +43,16 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.ros)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _fork_server():
+    """The fork server (forkserver.py) stops at the end of the session: this process waits for it (and so
+    its time counts in this one's children, and no child of it outlives the run)."""
+    yield
+    import forkserver
+
+    forkserver.stop()
+
+
 @pytest.fixture(scope="session")
 def ros_domain() -> int:
     return int(os.environ["ROS_DOMAIN_ID"])

@@ -120,7 +120,7 @@ def _request(req: dict) -> dict:
         if _server is None or _server.poll() is not None:
             _server = subprocess.Popen([sys.executable, "-c", _SERVER, *PRELOAD], stdin=subprocess.PIPE,
                                        stdout=subprocess.PIPE, text=True, bufsize=1)
-            atexit.register(_stop)
+            atexit.register(stop)
         _server.stdin.write(json.dumps(req) + "\n")
         _server.stdin.flush()
         line = _server.stdout.readline()
@@ -129,7 +129,8 @@ def _request(req: dict) -> dict:
         return json.loads(line)
 
 
-def _stop() -> None:
+def stop() -> None:
+    """End the helper (its children are ended by their owners) and wait for it."""
     global _server
     if _server is not None and _server.poll() is None:
         _server.stdin.close()
