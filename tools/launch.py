@@ -45,6 +45,10 @@ def ros_args(params_files: Sequence[str | Path] = (), params: dict | None = None
 class NodeProcess:
     """One node executable in its own process (``python -m switchobs_ros.<name>`` by default)."""
 
+    #: What starts the process (``subprocess.Popen``'s signature and interface; the ROS tests fork
+    #: it from a helper with the nodes imported: test/ros/forkserver.py).
+    spawner = staticmethod(subprocess.Popen)
+
     def __init__(self, name: str, args: Sequence[str] = (), *, cmd: Sequence[str] | None = None,
                  log: str | Path | None = None, env: dict | None = None):
         self.name = name
@@ -58,7 +62,7 @@ class NodeProcess:
         env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
         self.log_path = Path(log) if log else None
         self._log = open(self.log_path, "w") if self.log_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(self.cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        self.proc = self.spawner(self.cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env)
         self.pid = self.proc.pid
 
     def alive(self) -> bool:

@@ -243,14 +243,21 @@ class Schedule:
         """``(cycle, channel, time since the channel's switching instant)`` at ``t`` (the tie rule of
         the module docstring: the time since may be down to ``-TIE``); before t0 ``(None, 1, 0.0)``.
         The one walk over the cycles that :meth:`channel_at`, :meth:`slot_at` and :meth:`blind_at`
-        share."""
+        share. It resumes at the cycle the previous call ended in when that cycle starts at or before
+        ``t`` (else at t0): the cycle starts are the same sums, in the same order, as a walk from t0,
+        so the answer is the same, and a run that asks at increasing times walks each cycle once."""
         t = as_finite(t, "t") + TIE
         if t < self.t0:
             return None, 1, 0.0
-        tt, k = self.t0, 0
+        cur = getattr(self, "_walk", None)
+        if cur is not None and cur[0] == self.t0 and cur[1] <= t:
+            _, tt, k = cur
+        else:
+            tt, k = self.t0, 0
         while True:
             c = self.cycle(k)
             if t < tt + c.tau:
+                self._walk = (self.t0, tt, k)
                 off = t - tt
                 acc = 0.0
                 for i, h in enumerate(c.h):

@@ -26,6 +26,13 @@ if HAVE_ROS:
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
     os.environ["SWITCHOBS_CLAIM_DOMAIN"] = "0"   # the demo runner uses ours
     os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+
+    import forkserver
+
+    from tools.launch import NodeProcess
+
+    # the nodes start forked from a helper with them imported, not as fresh interpreters (forkserver.py)
+    NodeProcess.spawner = staticmethod(forkserver.popen)
 else:
     collect_ignore_glob = ["test_*.py"]
 
@@ -34,6 +41,16 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "test/ros" in str(item.fspath).replace(os.sep, "/"):
             item.add_marker(pytest.mark.ros)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _fork_server():
+    """The fork server (forkserver.py) stops at the end of the session: this process waits for it (and so
+    its time counts in this one's children, and no child of it outlives the run)."""
+    yield
+    import forkserver
+
+    forkserver.stop()
 
 
 @pytest.fixture(scope="session")

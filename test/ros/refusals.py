@@ -1,5 +1,6 @@
 """Helpers of the refusal tests: run a tool as a user would, inside
-the acceptance limits (30 s, 4 GB of address space), and check the one-line failure; run a
+the acceptance limits (30 s, 4 GB of address space), in a process of its own (forked from a helper
+with the tools imported: forkserver.py), and check the one-line failure; run a
 node's ``main`` in the test's own process (a start-up refusal without a fresh interpreter)."""
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import subprocess
 import sys
 import tempfile
 
+import forkserver
+
 #: The acceptance limits: wall time and address space of every tool run.
 TIMEOUT_S = 30
 ADDRESS_SPACE = 4 * 10**9
@@ -22,18 +25,23 @@ def _limits() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))
 
 
-def run(module: str, *args: str) -> subprocess.CompletedProcess:
-    """``python -m <module> <args>`` within the acceptance limits."""
-    return subprocess.run([sys.executable, "-m", module, *map(str, args)], capture_output=True, text=True,
-                          timeout=TIMEOUT_S, preexec_fn=_limits)
+def run(module: str, *args: str, fresh: bool = False) -> subprocess.CompletedProcess:
+    """``python -m <module> <args>`` within the acceptance limits: a process of its own forked from a
+    helper that has the tools imported (forkserver.py), or with ``fresh`` a fresh interpreter (the
+    process's own imports and exit path)."""
+    if fresh:
+        return subprocess.run([sys.executable, "-m", module, *map(str, args)], capture_output=True, text=True,
+                              timeout=TIMEOUT_S, preexec_fn=_limits)
+    return forkserver.run_module(module, list(map(str, args)), TIMEOUT_S,
+                                 [(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))], fresh_preexec=_limits)
 
 
-def switchobs(*args: str) -> subprocess.CompletedProcess:
-    return run("switchobs_core.cli", *args)
+def switchobs(*args: str, fresh: bool = False) -> subprocess.CompletedProcess:
+    return run("switchobs_core.cli", *args, fresh=fresh)
 
 
-def switchobs_bag(*args: str) -> subprocess.CompletedProcess:
-    return run("switchobs_ros.bag", *args)
+def switchobs_bag(*args: str, fresh: bool = False) -> subprocess.CompletedProcess:
+    return run("switchobs_ros.bag", *args, fresh=fresh)
 
 
 def assert_refused(res: subprocess.CompletedProcess, *needles: str, code: int | None = None) -> str:

@@ -22,7 +22,9 @@ def test_design_output_that_is_not_a_regular_file_is_refused_untouched(tmp_path,
     """`design -o DIR` was an IsADirectoryError traceback (its temporary file created in DIR's
     parent); `-o /dev/null` replaced the device with a regular file (as root)."""
     for target, kind in ((tmp_path, "a directory"), (fifo, "a FIFO"), (device, "a character device")):
-        res = switchobs("design", "paper", "--cycle", "2,0.6", "-o", target)
+        # one fresh interpreter per tool: the process's own imports and exit path (the others run
+        # forked from a helper with the tools imported: forkserver.py)
+        res = switchobs("design", "paper", "--cycle", "2,0.6", "-o", target, fresh=target == tmp_path)
         assert_refused(res, str(target), kind, "refusing to replace it", code=2)
     assert stat.S_ISFIFO(os.stat(fifo).st_mode) and stat.S_ISCHR(os.stat(device).st_mode)
     assert not [p for p in tmp_path.parent.iterdir() if p.name.endswith(".tmp")]
@@ -70,7 +72,7 @@ def test_sizes_are_refused_up_front_with_the_amount(args, needles, tmp_path, pap
 
 
 def test_bag_generate_size_refused_before_the_folder_is_made(tmp_path):
-    res = switchobs_bag("generate", tmp_path / "g", "--duration", "1e9", "--rate", "1e6")
+    res = switchobs_bag("generate", tmp_path / "g", "--duration", "1e9", "--rate", "1e6", fresh=True)
     assert_refused(res, "1e+15 ticks", "beyond the budget of 1 GiB", code=2)
     assert not (tmp_path / "g").exists()
 
