@@ -48,10 +48,8 @@ def child(a) -> dict:
         import ctypes
         ctypes.CDLL(None).mallopt(-1, 64 << 20)         # M_TRIM_THRESHOLD alone
     import gc
-    import importlib
 
-    from bench_pipeline import _bench_node
-    from rclpy.serialization import deserialize_message
+    from bench_pipeline import _bench_node, stream_inputs
 
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.config import params_from_file
@@ -64,15 +62,8 @@ def child(a) -> dict:
                                       **{f"output.{k}_every": v for k, v in every.items()}})
     node, clock = _bench_node(cfg)
     pl = node.pipeline
-    stamps, tick_of, topics, types = s["stamps"], s["tick_of"], s["topics"], s["types"]
-    data, offsets = s["data"], s["offsets"]
-    classes = {t: getattr(importlib.import_module(t.split("/")[0] + ".msg"), t.split("/")[2])
-               for t in set(types.tolist())}
-    msgs = [deserialize_message(data[offsets[i]:offsets[i + 1]].tobytes(), classes[types[i]])
-            for i in range(len(topics))]
-    index = {src.topic: src.index for src in pl.sources}
-    handlers = {t: node._input_handler(None if t == pl.channel_topic else index[t]) for t in set(topics.tolist())}
-    seq = dict.fromkeys(handlers, 0)
+    stamps, tick_of, topics = s["stamps"], s["tick_of"], s["topics"]
+    msgs, handlers, seq = stream_inputs(s, node)
     n = len(stamps)
     faults, user, system, rss = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
     gc.freeze()

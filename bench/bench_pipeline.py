@@ -147,6 +147,24 @@ class _Publisher:
         self.n += 1
 
 
+def stream_inputs(s: dict, node) -> tuple[list, dict, dict]:
+    """The stream's messages (``s``: :func:`make_stream`'s) as the node takes them, the node's input
+    handler per topic and a sequence counter per topic (the benchmarks' replay loop)."""
+    import importlib
+
+    from rclpy.serialization import deserialize_message
+
+    topics, types, data, offsets = s["topics"], s["types"], s["data"], s["offsets"]
+    classes = {t: getattr(importlib.import_module(t.split("/")[0] + ".msg"), t.split("/")[2])
+               for t in set(types.tolist())}
+    msgs = [deserialize_message(data[offsets[i]:offsets[i + 1]].tobytes(), classes[types[i]])
+            for i in range(len(topics))]
+    pl = node.pipeline
+    index = {src.topic: src.index for src in pl.sources}
+    handlers = {t: node._input_handler(None if t == pl.channel_topic else index[t]) for t in set(topics.tolist())}
+    return msgs, handlers, dict.fromkeys(handlers, 0)
+
+
 def _bench_node(cfg: dict):
     """The estimator's behaviour (``EstimatorMixin``) on a stand-in for the rclpy node, every
     output with a listened publisher."""
@@ -185,9 +203,6 @@ def run_child(a) -> dict:
     CPU times in each window (JSON on stdout)."""
     sys.path.insert(0, str(a.child))
     import gc
-    import importlib
-
-    from rclpy.serialization import deserialize_message
 
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.config import params_from_file
@@ -255,14 +270,8 @@ def run_child(a) -> dict:
         answers = n_ticks
         answered = np.ones(n_ticks, dtype=bool)     # --drop: the pipeline only
     else:
-        topics, types, data, offsets = s["topics"], s["types"], s["data"], s["offsets"]
-        classes = {t: getattr(importlib.import_module(t.split("/")[0] + ".msg"), t.split("/")[2])
-                   for t in set(types.tolist())}
-        msgs = [deserialize_message(data[offsets[i]:offsets[i + 1]].tobytes(), classes[types[i]])
-                for i in range(len(topics))]
-        index = {src.topic: src.index for src in pl.sources}
-        handlers = {t: node._input_handler(None if t == pl.channel_topic else index[t]) for t in set(topics.tolist())}
-        seq = dict.fromkeys(handlers, 0)
+        topics = s["topics"]
+        msgs, handlers, seq = stream_inputs(s, node)
         dropped = np.random.default_rng(7).random(n_ticks) < a.drop
         dropped[:int(rate)] = False
         gc.freeze()

@@ -12,6 +12,11 @@ set -euo pipefail
 . "$(dirname "$0")/lib.sh"
 claim_ros_domain
 cd "$REPO"
+# Bytecode as an installed package has it: compiled once, under the venv (not in the checkout), and
+# read by every test process. With PYTHONDONTWRITEBYTECODE set and no __pycache__ (a fresh clone),
+# each of the suite's few hundred interpreters would compile the package again (~0.3 s each).
+export PYTHONPYCACHEPREFIX="${PYTHONPYCACHEPREFIX:-$VENV/pycache}"
+unset PYTHONDONTWRITEBYTECODE
 echo "== ruff check"
 "$VENV/bin/ruff" check .
 echo "== pytest"

@@ -11,7 +11,7 @@ from unittest import mock
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import switchobs_core as so
@@ -79,13 +79,18 @@ def test_the_row_test_passes_data_within_noise_max_and_measures_the_worst_row():
 
 
 @settings(max_examples=8, deadline=None)
+@example(accel=0.25, sign=-1.0, j=0, onset=2.0, duration=0.5, seed=0)     # not noticed, and no bound broken
+@example(accel=0.5, sign=1.0, j=4, onset=5.0, duration=None, seed=3)      # noticed
 @given(accel=st.floats(0.2, 1.0), sign=st.sampled_from([-1.0, 1.0]), j=st.integers(0, 7),
        onset=st.floats(2.0, 5.0), duration=st.one_of(st.none(), st.floats(0.5, 3.0)), seed=st.integers(0, 99))
 def test_no_bound_published_after_a_withdrawal_is_false_on_an_undeclared_manoeuvre(cams, accel, sign, j, onset,
                                                                                   duration, seed):
     """One velocity state of ``camera_agents(3)`` driven by ``sign * accel`` m/s^2 from ``onset`` for
     ``duration`` s (None: to the end of the 15 s run), no disturbance declared, the consistency
-    test, the bias test and the re-certification as the estimator runs them."""
+    test, the bias test and the re-certification as the estimator runs them. A manoeuvre that breaks
+    a published bound is noticed (a sustained one of 0.5 m/s^2 always is); a short, small one may
+    stay inside the bound unnoticed (the first example: 0.25 m/s^2 for 0.5 s, the error at most
+    0.12 of the bound)."""
     sys_, noise, table, x0, B_w = cams
     end = np.inf if duration is None else onset + duration
 
@@ -95,9 +100,13 @@ def test_no_bound_published_after_a_withdrawal_is_false_on_an_undeclared_manoeuv
         return out
     r = run_with_faults(sys_, table, PeriodicSchedule(CYC), x0, x0, 15.0, rate=RATE, noise_std=SIGMA,
                         noise_max=3 * SIGMA, e0=0.5, seed=seed, noise=noise, B_w=B_w, w=w)
-    assert r.withdrawals, "a manoeuvre of at least 0.2 m/s^2 is noticed"
-    after = r.t >= r.withdrawals[0][0]
     false = r.valid & (r.error > r.bound)
+    if duration is None and accel >= 0.5:
+        assert r.withdrawals, "a sustained manoeuvre of at least 0.5 m/s^2 is noticed"
+    if not r.withdrawals:       # a short, small manoeuvre (0.25 m/s^2 for 0.5 s) may stay inside the bound
+        assert not false.any(), ("a manoeuvre that breaks a bound is noticed", r.t[false][:3])
+        return
+    after = r.t >= r.withdrawals[0][0]
     assert not false[after].any(), (r.t[false & after][:3], r.recertified[:3])
     if end + 2 * CYCLE <= 14.0:     # ended: a window of the model's data certifies the bounds again
         assert r.valid_fraction(end + 2 * CYCLE) >= 0.9, r.valid_fraction(end + 2 * CYCLE)
