@@ -203,7 +203,7 @@ def test_kept_product_is_taken_once_for_its_map_and_set():
     assert ell.take_product(key) is None
 
 
-def test_a_change_of_the_tables_missing_setting_is_not_served_the_old_prior(agents10):
+def test_a_change_of_the_tables_missing_setting_is_served_a_fresh_prior(agents10):
     """The Kalman table's ``missing`` is part of the key: with a grid sample missing, the block read
     after switching ``"table"`` -> ``"online"`` at the same time is the one a fresh read gives."""
     system, cycle, table, sched, x = agents10
