@@ -49,7 +49,7 @@ def child(a) -> dict:
         ctypes.CDLL(None).mallopt(-1, 64 << 20)         # M_TRIM_THRESHOLD alone
     import gc
 
-    from bench_pipeline import _bench_node, stream_inputs
+    from bench_pipeline import _bench_node, deliver, stream_inputs
 
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.config import params_from_file
@@ -71,12 +71,7 @@ def child(a) -> dict:
     for k in range(n):
         r0 = resource.getrusage(resource.RUSAGE_SELF)
         while i < len(topics) and tick_of[i] == k:
-            topic = topics[i]
-            seq[topic] += 1
-            sent = int(stamps[k]) + 100_000 * (1 + i % 3)
-            clock.t.nanoseconds = sent + 300_000
-            handlers[topic](msgs[i], {"source_timestamp": sent, "received_timestamp": sent + 300_000,
-                                      "publication_sequence_number": seq[topic]})
+            deliver(handlers, seq, clock, topics[i], msgs[i], int(stamps[k]) + 100_000 * (1 + i % 3))
             i += 1
         r1 = resource.getrusage(resource.RUSAGE_SELF)
         faults[k] = r1.ru_minflt - r0.ru_minflt

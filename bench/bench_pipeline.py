@@ -165,6 +165,15 @@ def stream_inputs(s: dict, node) -> tuple[list, dict, dict]:
     return msgs, handlers, dict.fromkeys(handlers, 0)
 
 
+def deliver(handlers: dict, seq: dict, clock, topic: str, msg, sent_ns: int) -> None:
+    """``msg`` to the node's handler of ``topic`` as the middleware hands it: sent at ``sent_ns``,
+    received (the node clock ``clock`` set to it) 0.3 ms later, the topic's next sequence number."""
+    seq[topic] += 1
+    clock.t.nanoseconds = sent_ns + 300_000
+    handlers[topic](msg, {"source_timestamp": sent_ns, "received_timestamp": sent_ns + 300_000,
+                          "publication_sequence_number": seq[topic]})
+
+
 def _bench_node(cfg: dict):
     """The estimator's behaviour (``EstimatorMixin``) on a stand-in for the rclpy node, every
     output with a listened publisher."""
@@ -285,11 +294,7 @@ def run_child(a) -> dict:
                 if dropped[k] and topic != pl.channel_topic:
                     i += 1
                     continue
-                seq[topic] += 1
-                sent = int(stamps[k]) + 100_000 * (1 + i % 3)
-                clock.t.nanoseconds = sent + 300_000
-                handlers[topic](msgs[i], {"source_timestamp": sent, "received_timestamp": sent + 300_000,
-                                          "publication_sequence_number": seq[topic]})
+                deliver(handlers, seq, clock, topic, msgs[i], int(stamps[k]) + 100_000 * (1 + i % 3))
                 i += 1
             if prof is not None and k == hi - 1:
                 prof.disable()

@@ -18,12 +18,9 @@ them and the trace of the last ``P`` (the trees' covariances side by side).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -80,24 +77,16 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=1600)
     a = ap.parse_args()
     sys.path.insert(0, str(REPO))
-    from switchobs_core.design.lmi import design_table
-    from switchobs_core.model.scenarios import load_system
-    from switchobs_core.model.schedule import Cycle
+    from _lmi_child import agents_lmi_table, run_child
 
     M = a.agents
-    work = Path(tempfile.mkdtemp(prefix="switchobs_bench_prior_block_"))
-    sysf = work / "system.yaml"
-    sysf.write_text(f"scenario: camera_agents\nagents: {M}\nD_agents: {[[0.0, 0.05]] * M}\n")
-    table = design_table(load_system(str(sysf)), [Cycle([1.0] * M)], progress=False).save(work / "gains.json")
+    sysf, table = agents_lmi_table(M, "switchobs_bench_prior_block_")
     trees = [("this", REPO)] + ([("before", a.before)] if a.before else [])
     got: dict = {(name, read): [] for name, _ in trees for read in ("1", "0")}
     for r in range(a.rounds):
         for name, tree in (trees if r % 2 == 0 else trees[::-1]):
             for read in ("1", "0"):
-                env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1", PYTHONSAFEPATH="1")
-                out = subprocess.run([sys.executable, "-c", CHILD, str(sysf), str(table), str(M), str(a.warm),
-                                      str(a.samples), read], env=env, capture_output=True, text=True, check=True)
-                got[(name, read)].append(json.loads(out.stdout.strip().splitlines()[-1]))
+                got[(name, read)].append(run_child(CHILD, tree, sysf, table, M, a.warm, a.samples, read))
     print(f"`python bench/bench_prior_block.py --agents {M} --rounds {a.rounds} --warm {a.warm} --samples "
           f"{a.samples}{f' --before {a.before}' if a.before else ''}`; load average at the end "
           f"{os.getloadavg()[0]:.1f}.\n")
