@@ -18,8 +18,8 @@ the header's frame id, and ``values``, every float64 field of the type
   :class:`~msg_bridge.validate.Rejection` with reason ``BAD_LAYOUT``, never an exception.
 * :class:`Parser` takes either form: bytes go to the :class:`RawReader` (bytes it refuses to
   rclpy's deserialiser, then read as a message: one rule, rclpy's, decides which bytes are a
-  message, live and in a bag, as before inputs were taken raw; the raw reader only makes the
-  well-formed ones cheap), a message object (rclpy,
+  message, live and in a bag, the same bytes a node taking rclpy messages accepts; the raw
+  reader only makes the well-formed ones cheap), a message object (rclpy,
   rosbags or any object with the same attribute paths) is read attribute by attribute into the
   same tuple, and a :data:`Parsed` tuple is passed through. The checks then run on one form.
 
@@ -164,8 +164,8 @@ class Parser:
         return self._get(msg)
 
     def _by_rclpy(self, data: bytes | bytearray | memoryview, rejection: Rejection) -> Parsed | Rejection:
-        """Bytes the raw reader refuses, read by rclpy's deserialiser as the node read every input
-        before it took them raw (and as ``switchobs_bag estimate`` reads a bag's): another
+        """Bytes the raw reader refuses, read by rclpy's deserialiser as a subscription of rclpy
+        messages reads them (and as ``switchobs_bag estimate`` reads a bag's): another
         encapsulation (a big-endian writer's), a frame id that is not UTF-8 (rclpy replaces the bad
         bytes) or not terminated as the raw reader expects, trailing bytes; then parsed as a
         message. ``rejection`` (the raw reader's) when rclpy cannot read them either, so bytes are
