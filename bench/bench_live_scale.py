@@ -134,12 +134,12 @@ def percentiles(values) -> tuple[float, float]:
 
 
 def parse_kind(kind: str) -> tuple[str, str, bool | None, bool]:
-    """``base[@executor][+listen|+quiet][+dds][+once]`` -> (base, executor, listened: None = as ``--listen``,
-    the node under ``--node-dds-profile``); ``+once`` (read by :func:`run_node`) sets the estimator's
-    ``switch_horizon`` to 1."""
+    """``base[@executor][+listen|+quiet][+dds][+once][+phase]`` -> (base, executor, listened: None = as
+    ``--listen``, the node under ``--node-dds-profile``); ``+once`` (read by :func:`run_node`) sets the
+    estimator's ``switch_horizon`` to 1, ``+phase`` its ``bound`` to ``phase`` (the per-phase scalar bound)."""
     name, *mods = kind.split("+")
-    if not set(mods) <= {"listen", "quiet", "dds", "once"} or {"listen", "quiet"} <= set(mods):
-        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, +dds and +once")
+    if not set(mods) <= {"listen", "quiet", "dds", "once", "phase"} or {"listen", "quiet"} <= set(mods):
+        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, +dds, +once and +phase")
     base, _, executor = name.partition("@")
     return base, executor, "listen" in mods if {"listen", "quiet"} & set(mods) else None, "dds" in mods
 
@@ -184,6 +184,8 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
         params = dict(sched, system=str(sys_path), gain_table=tables[base.removeprefix("main:")], e0=1e3, **outputs)
         if "once" in kind.split("+")[1:]:
             params["switch_horizon"] = 1.0
+        if "phase" in kind.split("+")[1:]:
+            params["bound"] = "phase"
         code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
                 "runpy.run_module('switchobs_ros.estimator', run_name='__main__')")
         cmd = ([sys.executable, str(REPO / "bench" / "profile_node.py"), str(profile)] if profile
@@ -276,8 +278,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated: bare, sink, kalman, lmi, main:kalman, main:lmi, each with an optional "
                          "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's) and an optional "
                          "+listen or +quiet (this node's outputs listened or not, whatever --listen says), +dds (under "
-                         "--node-dds-profile) and +once (the estimator's switch_horizon 1); a node "
-                         "may repeat (interleaved rounds)")
+                         "--node-dds-profile), +once (the estimator's switch_horizon 1) and +phase (its bound: "
+                         "phase); a node may repeat (interleaved rounds)")
     ap.add_argument("--listen", action="store_true",
                     help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
                          "markers, one odometry per body), so that each is built and published")

@@ -297,7 +297,18 @@ def run_child(a) -> dict:
                 junk[::64] += 1      # every cache line, written
             if ph is not None:
                 evict = ph.timed(evict, "bench: evict")
+        pace = None
+        if a.pace:      # the ticks at their rate: the thread idles between them, as the node's, or spins
+
+            def pace(until: float) -> None:
+                if a.pace == "sleep":
+                    time.sleep(max(0.0, until - time.monotonic()))
+                while a.pace == "spin" and time.monotonic() < until:
+                    pass
+            if ph is not None:
+                pace = ph.timed(pace, "bench: pace")
         i, done = 0, 0
+        t_pace = time.monotonic()
         for k in range(n_ticks):
             c0 = time.process_time()
             if prof is not None and k == lo:
@@ -319,6 +330,8 @@ def run_child(a) -> dict:
             cost[k] = time.process_time() - c0
             if evict is not None:
                 evict()
+            if pace is not None:
+                pace(t_pace + (k + 1) / rate)
             if pl.updates > done:       # the answers of this tick: served online or from the table
                 served[pl.observer.gains_source] = served.get(pl.observer.gains_source, 0) + pl.updates - done
                 done = pl.updates
@@ -370,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evict", type=float, default=0.0, metavar="MB",
                     help="between ticks, write every cache line of a buffer of MB MiB (untimed; with --phases "
                          "left out of the phases): the caches as cold as other processes leave them")
+    ap.add_argument("--pace", choices=("sleep", "spin"), default=None,
+                    help="feed the ticks at their rate instead of back to back, the thread sleeping between them "
+                         "(as the node's) or spinning (the core kept busy); untimed (with --phases: not in the phases)")
     ap.add_argument("--window", default="steady", choices=("first", "steady"), help="the window --cprofile profiles")
     ap.add_argument("--drop", type=float, default=0.0, metavar="F",
                     help="drop this fraction of the ticks (both poses; the same ticks in every tree)")
@@ -391,6 +407,7 @@ def main(argv: list[str] | None = None) -> int:
                    "--what", what, "--agents", str(a.agents), "--table", a.table, "--first", str(a.first),
                    "--steady", str(a.steady), "--steady-len", str(a.steady_len), "--every", a.every,
                    "--drop", str(a.drop), *(["--evict", str(a.evict)] if a.evict and "--evict" not in extra else []),
+                   *(["--pace", a.pace] if a.pace else []),
                    *extra]
             r = subprocess.run(cmd, env=dict(env, PYTHONPATH=str(tree)), capture_output=True, text=True)
             if r.returncode:
@@ -420,7 +437,8 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()[0]
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_pipeline.py --agents {a.agents} --table {a.table} "
           f"--rounds {a.rounds}{f' --before {a.before}' if a.before else ''} --what {a.what} --every {a.every}"
-          f"{f' --drop {a.drop:g}' if a.drop else ''}{f' --evict {a.evict:g}' if a.evict else ''}` "
+          f"{f' --drop {a.drop:g}' if a.drop else ''}{f' --evict {a.evict:g}' if a.evict else ''}"
+          f"{f' --pace {a.pace}' if a.pace else ''}` "
           f"(n = {4 * (a.agents + 1)}; load {load:.1f} after)\n")
     print("CPU per sample, ms: mean over the window (median sample), medians over the rounds\n")
     print(f"| tree | what | answered | served online | first visits (0-{a.first:g}s) | steady ({a.steady:g}-"

@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, os.environ.get("SWITCHOBS_PROFILE_REPO") or str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import phases  # noqa: E402  (bench/phases.py, after the checkout is on the path)
+import phases  # bench/phases.py, after the checkout is on the path
 
 
 def main() -> int:
