@@ -228,7 +228,7 @@ def run_child(a) -> dict:
     if a.phases:        # bench/phases.py: the thread's CPU by phase, installed before the node is built
         sys.path.insert(0, str(REPO / "bench"))
         import phases as ph
-        ph.install()
+        ph.install(fine=bool(os.environ.get("SWITCHOBS_PHASES_FINE")))
     node, clock = _bench_node(cfg)
     import switchobs_core
     assert switchobs_core.__file__.startswith(str(a.child)), switchobs_core.__file__

@@ -129,12 +129,22 @@ def _wrap_publish(fn):
     return publish
 
 
-def install() -> None:
-    """Wrap :data:`PHASES` (and ``SwitchedObserver.P``, the garbage collector); call before the
+#: Finer phases inside the screening and the update (:func:`install` with ``fine=True``).
+FINE = (
+    ("switchobs_core.runtime.observer", "SwitchedObserver.prior", "screening: prior (x, rigorous sets at t)"),
+    ("switchobs_core.runtime.consistency", "InnovationTest.check", "screening: innovation test"),
+    ("switchobs_core.runtime.recovery", "Recovery.before", "screening: bias test"),
+    ("switchobs_core.runtime.observer", "SwitchedObserver.prior_covariance", "screening: bias test's prior covariance"),
+    ("switchobs_core.table.kalman", "KalmanPhase.P_block", "screening: table rows (P_block)"),
+)
+
+
+def install(fine: bool = False) -> None:
+    """Wrap :data:`PHASES` (``fine``: and :data:`FINE`; and ``SwitchedObserver.P``, the garbage collector); call before the
     node or pipeline is built (the input handler's closures are made at construction)."""
     import importlib
 
-    for mod_name, path, phase in PHASES:
+    for mod_name, path, phase in PHASES + (FINE if fine else ()):
         mod = importlib.import_module(mod_name)
         *owners, name = path.split(".")
         owner = mod
