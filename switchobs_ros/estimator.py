@@ -382,11 +382,10 @@ class EstimatorMixin(OutputsMixin):
     def _drain_inputs(self) -> None:
         """Take the input messages already waiting (channel, camera, target: one of each per
         round, the channel first, as the executor orders them after one wait) and handle them,
-        up to :attr:`DRAIN_MAX`. A round after the first asks only the inputs that gave a message
-        in the round before (a backlog); one that was empty is seen by the next wait (rcl's wait
-        reports a subscription ready while it holds a message). Then the executor's queue loses
-        its entries of the inputs (``discard_ready``): their messages are taken, and an entry
-        would cost an empty take.
+        up to :attr:`DRAIN_MAX`. Then the executor's queue loses its entries of the inputs
+        (``discard_ready``): their messages are taken, and an entry would cost an empty take (one
+        that holds a message again is reported by the next wait: rcl's wait reports a
+        subscription ready while it holds one).
 
         Every wait of the executor costs Python and middleware work (rclpy's
         SingleThreadedExecutor rebuilds its wait set for it, about 150 us for this node;
@@ -399,20 +398,19 @@ class EstimatorMixin(OutputsMixin):
         hot = self._hot_inputs
         n = 0
         try:
-            while hot and n < self.DRAIN_MAX:
-                again = []
-                for item in hot:
-                    sub = item[0]
+            while n < self.DRAIN_MAX:
+                took = n
+                for sub, handle in hot:
                     try:
                         with sub.handle:
                             got = sub.handle.take_message(sub.msg_type, sub.raw)
                     except InvalidHandle:       # destroyed (managed node cleanup)
                         return
                     if got is not None:
-                        item[1](got[0], got[1])
+                        handle(got[0], got[1])
                         n += 1
-                        again.append(item)
-                hot = again
+                if n == took:
+                    break
             discard = getattr(getattr(self, "executor", None), "discard_ready", None)
             if discard is not None:
                 discard(tuple(h[0] for h in self._hot_inputs))
