@@ -140,8 +140,9 @@ FINE = (
 
 
 def install(fine: bool = False) -> None:
-    """Wrap :data:`PHASES` (``fine``: and :data:`FINE`; and ``SwitchedObserver.P``, the garbage collector); call before the
-    node or pipeline is built (the input handler's closures are made at construction)."""
+    """Wrap :data:`PHASES` (``fine``: and :data:`FINE`), ``SwitchedObserver.P`` and the garbage
+    collector; call before the node or pipeline is built (the input handler's closures are made at
+    construction)."""
     import importlib
 
     for mod_name, path, phase in PHASES + (FINE if fine else ()):
