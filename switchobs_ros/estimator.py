@@ -382,10 +382,9 @@ class EstimatorMixin(OutputsMixin):
     def _drain_inputs(self) -> None:
         """Take the input messages already waiting (channel, camera, target: one of each per
         round, the channel first, as the executor orders them after one wait) and handle them,
-        up to :attr:`DRAIN_MAX`. Then the executor's queue loses its entries of the inputs
-        (``discard_ready``): their messages are taken, and an entry would cost an empty take (one
-        that holds a message again is reported by the next wait: rcl's wait reports a
-        subscription ready while it holds one).
+        up to :attr:`DRAIN_MAX`; then the executor's queued entries of the inputs are dropped
+        (``discard_ready``: each would cost an empty take; an input that holds a message again is
+        reported by the next wait, rcl's wait being level-triggered).
 
         Every wait of the executor costs Python and middleware work (rclpy's
         SingleThreadedExecutor rebuilds its wait set for it, about 150 us for this node;
