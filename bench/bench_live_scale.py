@@ -134,12 +134,12 @@ def percentiles(values) -> tuple[float, float]:
 
 
 def parse_kind(kind: str) -> tuple[str, str, bool | None, bool]:
-    """``base[@executor][+listen|+quiet][+dds][+once]`` -> (base, executor, listened: None = as ``--listen``,
-    the node under ``--node-dds-profile``); ``+once`` (read by :func:`run_node`) sets the estimator's
-    ``switch_horizon`` to 1."""
+    """``base[@executor][+listen|+quiet][+dds][+once][+phase]`` -> (base, executor, listened: None = as
+    ``--listen``, the node under ``--node-dds-profile``); ``+once`` (read by :func:`run_node`) sets the
+    estimator's ``switch_horizon`` to 1, ``+phase`` its ``bound`` to ``phase`` (the per-phase scalar bound)."""
     name, *mods = kind.split("+")
-    if not set(mods) <= {"listen", "quiet", "dds", "once"} or {"listen", "quiet"} <= set(mods):
-        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, +dds and +once")
+    if not set(mods) <= {"listen", "quiet", "dds", "once", "phase"} or {"listen", "quiet"} <= set(mods):
+        raise SystemExit(f"node {kind!r}: the suffixes are +listen or +quiet, +dds, +once and +phase")
     base, _, executor = name.partition("@")
     return base, executor, "listen" in mods if {"listen", "quiet"} & set(mods) else None, "dds" in mods
 
@@ -147,7 +147,8 @@ def parse_kind(kind: str) -> tuple[str, str, bool | None, bool]:
 def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tables: dict, logs: Path,
              listen: bool = False, every: dict | None = None, profile: Path | None = None,
              main_repo: Path | None = None, threads: bool = False, spy_dir: Path | None = None,
-             tag: str = "", counter: str = "process", dds_profile: Path | None = None) -> dict:
+             tag: str = "", counter: str = "process", dds_profile: Path | None = None,
+             phases: Path | None = None) -> dict:
     """One node under test: ``listen`` subscribes to every optional output of the estimator (a
     ``+listen`` / ``+quiet`` suffix of ``kind`` overrides it), counted by ``bench/output_counter.py``
     (``counter`` ``process``) or by this process (``inline``); ``every`` sets its
@@ -155,7 +156,8 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     ``main:kalman`` runs the estimator of the checkout ``main_repo`` instead of this one;
     ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy; a
     ``+dds`` suffix runs the node (only) with the Fast DDS profile ``dds_profile``; ``+once`` runs the
-    estimator with ``switch_horizon`` 1 (every sample of a residence answered at once)."""
+    estimator with ``switch_horizon`` 1 (every sample of a residence answered at once); ``phases``
+    runs it under bench/phase_node.py (its CPU by phase, JSON in that file)."""
     base, executor, listened, own_profile = parse_kind(kind)
     listen = listen if listened is None else listened
     repo = main_repo if base.startswith("main:") else REPO
@@ -182,9 +184,12 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
         params = dict(sched, system=str(sys_path), gain_table=tables[base.removeprefix("main:")], e0=1e3, **outputs)
         if "once" in kind.split("+")[1:]:
             params["switch_horizon"] = 1.0
+        if "phase" in kind.split("+")[1:]:
+            params["bound"] = "phase"
         code = (f"import sys; sys.path.insert(0, {str(repo)!r}); import runpy; "
                 "runpy.run_module('switchobs_ros.estimator', run_name='__main__')")
         cmd = ([sys.executable, str(REPO / "bench" / "profile_node.py"), str(profile)] if profile
+               else [sys.executable, str(REPO / "bench" / "phase_node.py"), str(phases)] if phases
                else [sys.executable, "-c", code])
         env["SWITCHOBS_PROFILE_REPO"] = str(repo)
         node = NodeProcess("estimator", ros_args(params=params), cmd=cmd, env=env, log=log)
@@ -273,8 +278,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated: bare, sink, kalman, lmi, main:kalman, main:lmi, each with an optional "
                          "@rclpy (rclpy's SingleThreadedExecutor instead of switchobs_ros.executor's) and an optional "
                          "+listen or +quiet (this node's outputs listened or not, whatever --listen says), +dds (under "
-                         "--node-dds-profile) and +once (the estimator's switch_horizon 1); a node "
-                         "may repeat (interleaved rounds)")
+                         "--node-dds-profile), +once (the estimator's switch_horizon 1) and +phase (its bound: "
+                         "phase); a node may repeat (interleaved rounds)")
     ap.add_argument("--listen", action="store_true",
                     help="subscribe to every optional output of the estimator (envelope, covariance, typed, "
                          "markers, one odometry per body), so that each is built and published")
@@ -287,6 +292,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the estimator's output.<K>_every, e.g. odometry=5,covariance=5,typed=5")
     ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
                     help="run each estimator under cProfile (bench/profile_node.py), stats in DIR/<node>-<i>.prof")
+    ap.add_argument("--phases", type=Path, default=None, metavar="DIR",
+                    help="run each estimator under bench/phase_node.py: its thread's CPU by phase "
+                         "(bench/phases.py), JSON in DIR/<node>-<i>.json and a table at the end")
     ap.add_argument("--main-repo", type=Path, default=Path("/work/main"),
                     help="the checkout whose estimator a node main:<kind> runs (before/after in one run)")
     ap.add_argument("--threads", action="store_true",
@@ -315,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
             tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
         rclpy.init()
         try:
-            for d_ in (a.profile, a.spy):
+            for d_ in (a.profile, a.spy, a.phases):
                 if d_:
                     d_.mkdir(parents=True, exist_ok=True)
             rows = []
@@ -323,7 +331,9 @@ def main(argv: list[str] | None = None) -> int:
                 tag = f"{k.replace(':', '_').replace('@', '_').replace('+', '_')}-{i}"
                 rows.append(run_node(k, a.agents, a.seconds, a.rate, sys_path, tables, d, a.listen, every,
                                      a.profile / f"{tag}.prof" if a.profile and parse_kind(k)[0] != "bare" else None,
-                                     a.main_repo, a.threads, a.spy, tag, a.counter, a.node_dds_profile))
+                                     a.main_repo, a.threads, a.spy, tag, a.counter, a.node_dds_profile,
+                                     a.phases / f"{tag}.json" if a.phases and parse_kind(k)[0] not in ("bare", "sink")
+                                     else None))
                 r = rows[-1]
                 sys.stderr.write(f"{k}: {r['answered']}/{r['sent']} ({r['skipped']} skipped), p50 {r['p50']:.1f} ms, "
                                  f"p99 {r['p99']:.1f} ms (Python arrival {r['py_p99']:.1f} ms), "
@@ -386,6 +396,12 @@ def main(argv: list[str] | None = None) -> int:
                 if u + st > 0 or flt > 0:
                     print(f"  {name:16s} {1e3 * (u + st) / k:6.3f} ({1e3 * u / k:.3f} + {1e3 * st / k:.3f})"
                           f"  faults {flt / k:.1f}")
+    if a.phases:
+        import phases as ph
+        got = {p.stem: json.loads(p.read_text()) for p in sorted(a.phases.glob("*.json"))}
+        if got:
+            print("\nThe node's spinning thread by phase (bench/phases.py: own CPU per answer, ms):\n")
+            print(ph.table(got))
     for r in rows:
         if r["counts"]:
             c = r["counts"]

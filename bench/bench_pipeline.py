@@ -224,6 +224,11 @@ def run_child(a) -> dict:
                                       "schedule.mode": "periodic", "schedule.h": tuple([1.0] * agents),
                                       "e0": 1e3, "max_abs_value": 1e12,
                                       **{f"output.{k}_every": v for k, v in every.items()}})
+    ph = None
+    if a.phases:        # bench/phases.py: the thread's CPU by phase, installed before the node is built
+        sys.path.insert(0, str(REPO / "bench"))
+        import phases as ph
+        ph.install(fine=bool(os.environ.get("SWITCHOBS_PHASES_FINE")))
     node, clock = _bench_node(cfg)
     import switchobs_core
     assert switchobs_core.__file__.startswith(str(a.child)), switchobs_core.__file__
@@ -284,11 +289,33 @@ def run_child(a) -> dict:
         dropped = np.random.default_rng(7).random(n_ticks) < a.drop
         dropped[:int(rate)] = False
         gc.freeze()
+        evict = None
+        if a.evict:     # between ticks: other work through the caches, as the node's 20 ms between ticks
+            junk = np.zeros(int(a.evict * 2**20), dtype=np.uint8)
+
+            def evict():
+                junk[::64] += 1      # every cache line, written
+            if ph is not None:
+                evict = ph.timed(evict, "bench: evict")
+        pace = None
+        if a.pace:      # the ticks at their rate: the thread idles between them, as the node's, or spins
+
+            def pace(until: float) -> None:
+                if a.pace == "sleep":
+                    time.sleep(max(0.0, until - time.monotonic()))
+                while a.pace == "spin" and time.monotonic() < until:
+                    pass
+            if ph is not None:
+                pace = ph.timed(pace, "bench: pace")
         i, done = 0, 0
+        t_pace = time.monotonic()
         for k in range(n_ticks):
             c0 = time.process_time()
             if prof is not None and k == lo:
                 prof.enable()
+            if ph is not None and k == lo:
+                ph.start()
+                done_lo = pl.updates
             while i < len(topics) and tick_of[i] == k:
                 topic = topics[i]
                 if dropped[k] and topic != pl.channel_topic:
@@ -298,7 +325,13 @@ def run_child(a) -> dict:
                 i += 1
             if prof is not None and k == hi - 1:
                 prof.disable()
+            if ph is not None and k == hi - 1:
+                phase_report = ph.report(pl.updates - done_lo)
             cost[k] = time.process_time() - c0
+            if evict is not None:
+                evict()
+            if pace is not None:
+                pace(t_pace + (k + 1) / rate)
             if pl.updates > done:       # the answers of this tick: served online or from the table
                 served[pl.observer.gains_source] = served.get(pl.observer.gains_source, 0) + pl.updates - done
                 done = pl.updates
@@ -315,6 +348,8 @@ def run_child(a) -> dict:
            "tests_first": float(np.sum(tests[:k_first])), "tests_steady": float(np.sum(tests[k0:n_ticks])),
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
+    if ph is not None:
+        out["phases"] = phase_report
     if prof is not None:
         import io
         import pstats
@@ -343,6 +378,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="output.<K>_every values")
     ap.add_argument("--cprofile", type=int, default=0, metavar="K",
                     help="one run of this checkout under cProfile, print the K costliest functions")
+    ap.add_argument("--phases", action="store_true",
+                    help="one run of this checkout (and --before) with bench/phases.py: the CPU by phase in --window")
+    ap.add_argument("--evict", type=float, default=0.0, metavar="MB",
+                    help="between ticks, write every cache line of a buffer of MB MiB (untimed; with --phases "
+                         "left out of the phases): the caches as cold as other processes leave them")
+    ap.add_argument("--pace", choices=("sleep", "spin"), default=None,
+                    help="feed the ticks at their rate instead of back to back, the thread sleeping between them "
+                         "(as the node's) or spinning (the core kept busy); untimed (with --phases: not in the phases)")
     ap.add_argument("--window", default="steady", choices=("first", "steady"), help="the window --cprofile profiles")
     ap.add_argument("--drop", type=float, default=0.0, metavar="F",
                     help="drop this fraction of the ticks (both poses; the same ticks in every tree)")
@@ -363,12 +406,23 @@ def main(argv: list[str] | None = None) -> int:
             cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(tree), "--stream", str(stream),
                    "--what", what, "--agents", str(a.agents), "--table", a.table, "--first", str(a.first),
                    "--steady", str(a.steady), "--steady-len", str(a.steady_len), "--every", a.every,
-                   "--drop", str(a.drop), *extra]
+                   "--drop", str(a.drop), *(["--evict", str(a.evict)] if a.evict and "--evict" not in extra else []),
+                   *(["--pace", a.pace] if a.pace else []),
+                   *extra]
             r = subprocess.run(cmd, env=dict(env, PYTHONPATH=str(tree)), capture_output=True, text=True)
             if r.returncode:
                 sys.exit(f"child {tree} {what} failed:\n{r.stderr[-4000:]}")
             return json.loads(r.stdout.strip().splitlines()[-1])
 
+        if a.phases:
+            got = {f"{name}, evict {mb:g} MiB" if mb else name: child(tree, "pipeline", [
+                "--phases", "--window", a.window, "--evict", str(mb)])["phases"]
+                for name, tree in trees for mb in dict.fromkeys([0.0, a.evict])}
+            print(f"In process (`--phases --window {a.window}`), own CPU per answer by phase (bench/phases.py):\n")
+            sys.path.insert(0, str(REPO / "bench"))
+            import phases as ph
+            print(ph.table(got))
+            return 0
         if a.cprofile:
             for what in whats:
                 r = child(REPO, what, ["--cprofile", str(a.cprofile), "--window", a.window])
@@ -383,7 +437,8 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()[0]
     print(f"Command: `OPENBLAS_NUM_THREADS=1 python bench/bench_pipeline.py --agents {a.agents} --table {a.table} "
           f"--rounds {a.rounds}{f' --before {a.before}' if a.before else ''} --what {a.what} --every {a.every}"
-          f"{f' --drop {a.drop:g}' if a.drop else ''}` "
+          f"{f' --drop {a.drop:g}' if a.drop else ''}{f' --evict {a.evict:g}' if a.evict else ''}"
+          f"{f' --pace {a.pace}' if a.pace else ''}` "
           f"(n = {4 * (a.agents + 1)}; load {load:.1f} after)\n")
     print("CPU per sample, ms: mean over the window (median sample), medians over the rounds\n")
     print(f"| tree | what | answered | served online | first visits (0-{a.first:g}s) | steady ({a.steady:g}-"

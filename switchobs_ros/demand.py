@@ -14,7 +14,8 @@ table's stored prior) as much again; none of it is spent while nobody listens.
   call from Python; at 32 agents the outputs ask 15 times per estimate) is kept per publisher:
   a yes for :data:`LISTEN_PERIOD` (0.5 s), a no for :data:`LISTEN_PERIOD_NO` (0.02 s), from the
   last time it was asked, here or by :class:`Demand`'s refresh of the publishers that carry
-  ``P`` (every 0.1 s while one is listened). So a new subscriber gets the estimates published
+  ``P`` (every 0.1 s while one is listened; of a kind's publishers, those up to the first listened
+  one). So a new subscriber gets the estimates published
   from at most 0.02 s after it is matched (the outputs are volatile: it could never get those
   before it), and after the last subscriber leaves an output is built and published for at most
   0.5 s more, to nobody;
@@ -91,7 +92,11 @@ class Demand:
         now = self._clock()
         if now >= self._until:
             mono = time.monotonic()         # listened()'s clock: the fresh answers kept for it too
-            self.kinds = frozenset(k for k, p in self._carriers() if p is not None and _ask(p, mono))
+            kinds = set()
+            for k, p in self._carriers():   # a kind is in once one of its publishers is listened
+                if p is not None and k not in kinds and _ask(p, mono):
+                    kinds.add(k)
+            self.kinds = frozenset(kinds)
             self._wanted = bool(self.kinds)
             self._until = now + (self.period if self._wanted else self.period_no)
         return self._wanted

@@ -382,7 +382,9 @@ class EstimatorMixin(OutputsMixin):
     def _drain_inputs(self) -> None:
         """Take the input messages already waiting (channel, camera, target: one of each per
         round, the channel first, as the executor orders them after one wait) and handle them,
-        up to :attr:`DRAIN_MAX`.
+        up to :attr:`DRAIN_MAX`; then the executor's queued entries of the inputs are dropped
+        (``discard_ready``: each would cost an empty take; an input that holds a message again is
+        reported by the next wait, rcl's wait being level-triggered).
 
         Every wait of the executor costs Python and middleware work (rclpy's
         SingleThreadedExecutor rebuilds its wait set for it, about 150 us for this node;
@@ -408,6 +410,9 @@ class EstimatorMixin(OutputsMixin):
                         n += 1
                 if n == took:
                     break
+            discard = getattr(getattr(self, "executor", None), "discard_ready", None)
+            if discard is not None:
+                discard(tuple(h[0] for h in self._hot_inputs))
             self._arm_pairing_timer()
         except Exception as err:
             self.pipeline.internal_error("input", err)

@@ -159,6 +159,16 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                 return
         self._serve(self._ready.popleft())
 
+    def discard_ready(self, subscriptions: tuple) -> None:
+        """Drop the queued ready entries of these subscriptions: a callback took their messages
+        (:meth:`EstimatorMixin._drain_inputs <switchobs_ros.estimator.EstimatorMixin._drain_inputs>`).
+        Nothing is lost: one that holds a message again is reported ready by the next wait."""
+        queue = self._ready
+        if queue and any(item[0] == _SUB and item[1] in subscriptions for item in queue):
+            kept = [item for item in queue if not (item[0] == _SUB and item[1] in subscriptions)]
+            queue.clear()
+            queue.extend(kept)
+
     def spin_once_until_future_complete(self, future, timeout_sec=None) -> None:
         if isinstance(timeout_sec, TimeoutObject):
             timeout_sec = timeout_sec.timeout

@@ -118,6 +118,40 @@ def test_entities_ready_in_one_wait_served_in_creation_order(ctx):
         assert ex.waits - waits == 1
 
 
+def test_entries_discarded_after_a_callback_took_their_messages(ctx):
+    """A callback that takes another ready subscription's message itself and discards its queued
+    entry: that subscription's callback is not called for it (its message was handled once, by the
+    taker), and a later message of it is served as usual (nothing lost)."""
+    with _spun(ctx, "kws_discard") as (ex, node):
+        got = []
+
+        def first(m):
+            got.append(("first", m.data))
+            with second.handle:
+                taken = second.handle.take_message(second.msg_type, second.raw)
+            if taken is not None:
+                got.append(("taken", taken[0].data))
+            ex.discard_ready((second,))
+
+        node.create_subscription(Int32, "/kws_discard_a", first, RELIABLE)
+        second = node.create_subscription(Int32, "/kws_discard_b", lambda m: got.append(("second", m.data)),
+                                          RELIABLE)
+        pubs = [node.create_publisher(Int32, f"/kws_discard_{name}", RELIABLE) for name in ("a", "b")]
+        for pub in pubs:
+            wait_matched(ex, pub)
+        for _ in range(3):          # the wake-ups of the entities' creation, consumed
+            ex.spin_once(timeout_sec=0.05)
+        pubs[0].publish(Int32(data=1))
+        pubs[1].publish(Int32(data=2))
+        time.sleep(0.2)             # both delivered before the wait (nothing is timed)
+        waits = ex.waits
+        spin_until(ex, lambda: ("taken", 2) in got)
+        assert ex.waits - waits == 1 and not ex._ready
+        pubs[1].publish(Int32(data=3))
+        spin_until(ex, lambda: ("second", 3) in got)
+        assert got == [("first", 1), ("taken", 2), ("second", 3)]
+
+
 def test_middleware_events_of_publishers_and_subscriptions_are_served(ctx):
     """The QoS events rclpy attaches to publishers and subscriptions (waitables the kept wait set
     adds without their Python wrappers): an incompatible reliability is reported to both sides'

@@ -75,6 +75,20 @@ def test_demands_refresh_answers_listened_for_the_carriers():
     assert listened(pubs[0]) and pubs[0].asked == 1      # the refresh's yes, kept LISTEN_PERIOD (0.5 s)
 
 
+def test_demands_refresh_asks_a_kinds_publishers_up_to_the_first_listened():
+    odom = [_Pub(0), _Pub(1), _Pub(1)]
+    cov = _Pub(0)
+    d = Demand(lambda: [("odometry", p) for p in odom] + [("covariance", cov)])
+    assert d.covariance_wanted() and d.kinds == {"odometry"}
+    assert [p.asked for p in odom] == [1, 1, 0] and cov.asked == 1
+    odom[1].n = 0
+    d.expire()
+    assert d.covariance_wanted() and d.kinds == {"odometry"} and [p.asked for p in odom] == [2, 2, 1]
+    odom[2].n = 0
+    d.expire()
+    assert not d.covariance_wanted() and d.kinds == set() and [p.asked for p in odom] == [3, 3, 2]
+
+
 def _feed(est: EstimatorNode, io: EstimatorIO, k0: int, n: int) -> None:
     base = time.time_ns()
     for k in range(k0, k0 + n):
