@@ -297,6 +297,15 @@ class KalmanMap:
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 
+    def dense_abs(self) -> tuple[np.ndarray, float] | None:
+        """``(|E~|, ||E~||_inf)`` of the dense map (kept), or None on the factored path."""
+        if self._sp is not None:
+            return None
+        if self._aE is None:
+            aE = np.abs(self.E)
+            self._aE = (aE, float(aE.sum(axis=1).max()))
+        return self._aE
+
     def sandwich(self, ell: Any) -> tuple[np.ndarray, np.ndarray, float, float]:
         """``(Z, w, c, mn)``: ``|Z - M S M'| <= c w w'`` entrywise for the ellipsoid's ``S`` (up to
         underflow), ``mn >= ||M||_inf`` for its underflow allowance.
@@ -308,10 +317,7 @@ class KalmanMap:
         sp = self._sp
         if sp is None:
             E = self.E
-            if self._aE is None:
-                aE = np.abs(E)
-                self._aE = (aE, float(aE.sum(axis=1).max()))
-            aE, mn = self._aE
+            aE, mn = self.dense_abs()
             return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
         Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken

@@ -101,6 +101,8 @@ class RoundingBound:
         self.noise_max = noise_max
         self.d = balance(A) if scale is None else np.asarray(scale, dtype=float)
         self._id = 1.0 / self.d
+        self._unit = bool(np.all(self.d == 1.0))     # no scaling: ||D^-1 x|| = ||x||
+        self._xlast: tuple = (None, 0.0)     # the last x^+ of a fused step and its balanced norm (the next x0's)
         # ||A||_2 in balanced coordinates (the step quantum), gamma_{n+2}, gamma_{p+2}
         self.nA = nu2(balanced(A, self.d))
         self.g_n = gamma(self.n + 2)
@@ -192,8 +194,20 @@ class RoundingBound:
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
         """``||D^-1 x||``."""
+        if self._unit:
+            return math.sqrt(float(x.dot(x)))
         v = x * self._id
-        return math.sqrt(float(v @ v))
+        return math.sqrt(float(v.dot(v)))
+
+    def fused_norms(self, x0: np.ndarray, xm: np.ndarray, xp: np.ndarray) -> tuple[float, float, float]:
+        """``||D^-1 .||`` of a fused step's ``x0``, ``x^-`` and ``x^+``; ``x^+``'s is kept for the next
+        step, whose ``x0`` is the same array (compared by identity: an estimate changed in place by its
+        reader would move the error itself outside every set, whatever norm is taken here)."""
+        xl = self._xlast
+        xs = xl[1] if x0 is xl[0] else self.xn(x0)
+        xsp = self.xn(xp)
+        self._xlast = (xp, xsp)
+        return xs, self.xn(xm), xsp
 
     def _cd(self, C: np.ndarray) -> float:
         """``||C D||_F`` (kept per matrix)."""
@@ -304,7 +318,7 @@ class RoundingBound:
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
         ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
         and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
-        yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
+        yn, nun = math.sqrt(float(y.dot(y))), math.sqrt(float(nu.dot(nu)))
         return self.rho_correct_norms(fK, fH, self.xn(x_minus) if xm is None else xm, yn, nun,
                                       self.xn(x_plus) if xp is None else xp, y.size)
 
@@ -455,6 +469,13 @@ class RoundingBound:
         if self.withdrawn:
             return
         xs, xs1 = (self.xn(x0), self.xn(xm)) if norms is None else norms
+        ell = self.ell
+        dense = None if self.w or self._ellv is not None else m.dense_abs()
+        if dense is not None:       # the exact set alone through a dense map (ErrorEllipsoid.step_dense)
+            en = math.sqrt(ell.lam_scaled())
+            ell.step_dense(m.E, dense, m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en)
+            self._check()
+            return
         with np.errstate(over="ignore", invalid="ignore"):
             for ell, noisy in ((self.ell, False), (self.ellv, True)):
                 if ell is None:
@@ -490,6 +511,10 @@ class RoundingBound:
             return math.inf, noisy0
         if self.phase is not None and self.phase.j >= 0 and S is None and Sv is None:
             return self.phase.bounds()      # finite while it holds (PhaseBound.sample withdraws otherwise)
+        if not amortised and S is None and self._ellv is None and self._ell.tr < 1e140:
+            exact = self._ell.bound()       # |S_ij| <= trace S: nothing overflows (no error state)
+            if math.isfinite(exact):
+                return exact, None
         with np.errstate(over="ignore", invalid="ignore"):
             if amortised and S is None and Sv is None:
                 exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)
