@@ -299,8 +299,9 @@ class KalmanMap:
 
     def dense_abs(self) -> tuple[np.ndarray, float] | None:
         """``(|E~|, ||E~||_inf)`` of the dense map (kept), or None on the factored path."""
-        if self._sp is not None:
-            return None
+        return None if self._sp is not None else self._abs()
+
+    def _abs(self) -> tuple[np.ndarray, float]:
         if self._aE is None:
             aE = np.abs(self.E)
             self._aE = (aE, float(aE.sum(axis=1).max()))
@@ -317,7 +318,7 @@ class KalmanMap:
         sp = self._sp
         if sp is None:
             E = self.E
-            aE, mn = self.dense_abs()
+            aE, mn = self._abs()
             return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
         Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken

@@ -376,6 +376,13 @@ class ErrorEllipsoid:
         the largest double no operation can overflow and no error state is set up; elsewhere one is.
         Equal to :meth:`propagate_product`'s set within a few ``u`` of each entry (test_step_dense.py).
         """
+        if absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120:
+            self._step_dense(M, absM, rho)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._step_dense(M, absM, rho)
+
+    def _step_dense(self, M: np.ndarray, absM: tuple, rho: float) -> None:
         S, n = self.S, self.n
         aM, mn = absM
         hit = self._amd.get(id(aM))
@@ -397,14 +404,14 @@ class ErrorEllipsoid:
         tz = max(float(zd.dot(self._id2)) + rzc * Wv, 0.0) * self._gsum
         rho2 = rho * rho
         alpha, theta = 1.0, 1.0
-        if tz > 0.0 and rho > 0.0:
+        if tz > 0.0 and rho2 > 0.0:      # (the general path's added set is rho^2 D^2: none if it underflows)
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
         f = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
         coef = np.array(((alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * kw * f,
                          (theta * rho2) * f, 2.0 * _U * alpha * f, (n + 4) * n * UNDERFLOW * (2.0 + mn) * f))
         np.abs(zd, out=B[2])
-        if mn * mn * self.tr * alpha * self._dr < 1e280 and theta * rho2 * self._dr < 1e280:
+        if alpha < 1e20 and theta * rho2 * self._dr < 1e250:
             self._dense_pass(Z, alpha, coef.dot(B))
         else:
             with np.errstate(over="ignore", invalid="ignore"):
