@@ -164,12 +164,20 @@ class ErrorEllipsoid:
         self._ones = np.ones(self.n)
         self._dr = float((self.d.max() / self.d.min()) ** 2) if self.n else 1.0   # the scaling's spread
         #: The last shape matrix :meth:`step_dense` assembled (exactly symmetric while it is not changed
-        #: in place: :meth:`lam_upper` reads it without the symmetrisation).
+        #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
+        #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
         self._amd: dict = {}                # id(|M|) -> (|M|, D |M|) of step_dense's maps
         self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
         self._qrows[1] = self._d2
         self._qrows[3] = 1.0
+        # step_dense's constant factors (its docstring): W = Wv kW; R_z = kR W (v d); q's coefficients
+        kw, cz = self._gsum * (1.0 + 2.0 * _U), self._cz
+        self._kf = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
+        self._kW = kw * self._gsum * (1.0 + 4.0 * _U)
+        self._kR = cz * (1.0 + 4.0 * _U) * kw
+        self._k1 = (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * kw * self._kf
+        self._k3 = 2.0 * _U * self._kf
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -383,33 +391,29 @@ class ErrorEllipsoid:
                 self._step_dense(M, absM, rho)
 
     def _step_dense(self, M: np.ndarray, absM: tuple, rho: float) -> None:
-        S, n = self.S, self.n
+        S = self.S
         aM, mn = absM
         hit = self._amd.get(id(aM))
         if hit is None or hit[0] is not aM:
             if len(self._amd) >= 4096:
                 self._amd.clear()
-            hit = self._amd[id(aM)] = (aM, aM * self.d[:, None])
-        aMd, B = hit[1], self._qrows
+            hit = self._amd[id(aM)] = (aM, aM * self.d[:, None],
+                                       (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf)
+        aMd, c4, B = hit[1], hit[2], self._qrows
         s = np.abs(S.diagonal())            # = diag S (S is PSD)
         np.sqrt(s, out=s)
         vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
         Z = M.dot(S).dot(M.T)
         zd = Z.diagonal()
-        cz = self._cz
-        kw = self._gsum * (1.0 + 2.0 * _U)
         Wv = float(vd.dot(self._id2))
-        Wz = Wv * kw * self._gsum * (1.0 + 4.0 * _U)          # W of step 6, rounded up
-        rzc = (cz * Wz * (1.0 + 4.0 * _U)) * kw                 # R_z = rzc (v d): trace_D R_z = rzc Wv
-        tz = max(float(zd.dot(self._id2)) + rzc * Wv, 0.0) * self._gsum
+        Wz = Wv * self._kW                  # W of step 6, rounded up
+        tz = max(float(zd.dot(self._id2)) + self._kR * Wz * Wv, 0.0) * self._gsum     # trace_D (Z + R_z)
         rho2 = rho * rho
         alpha, theta = 1.0, 1.0
         if tz > 0.0 and rho2 > 0.0:      # (the general path's added set is rho^2 D^2: none if it underflows)
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
-        f = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
-        coef = np.array(((alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * kw * f,
-                         (theta * rho2) * f, 2.0 * _U * alpha * f, (n + 4) * n * UNDERFLOW * (2.0 + mn) * f))
+        coef = np.array((alpha * Wz * self._k1, theta * rho2 * self._kf, alpha * self._k3, c4))
         np.abs(zd, out=B[2])
         if alpha < 1e20 and theta * rho2 * self._dr < 1e250:
             self._dense_pass(Z, alpha, coef.dot(B))
@@ -455,12 +459,14 @@ class ErrorEllipsoid:
         S = self.S if S is None else S
         if not self.n:
             return 0.0
-        if S is not self._sym or S is not self.S:       # else exactly symmetric (step_dense)
+        if S is self._sym and S is self.S and self.tr < 1e300:
+            nS = self.tr        # exactly symmetric (step_dense) and PSD: ||S||_F <= trace S <= tr
+        else:
             S = S + S.T
             S *= 0.5
-        nS = fro_norm(S)
-        if not math.isfinite(nS):
-            return math.inf
+            nS = fro_norm(S)
+            if not math.isfinite(nS):
+                return math.inf
         lam = math.nan
         try:
             if _eigvalsh_lo is not None:

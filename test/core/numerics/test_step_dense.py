@@ -55,8 +55,10 @@ def test_fast_step_is_the_general_set(seed, n, rho, units, scale):
     assert np.all(np.abs(F - G) <= RTOL * r), float(np.max(np.abs(F - G) / r))
     assert abs(fast.tr - general.tr) <= RTOL * general.tr
     assert fast.tr >= float(np.trace(F))
-    # read without the symmetrisation: the same doubles as with it
-    assert fast.bound() == math.sqrt(ErrorEllipsoid.lam_upper(fast, F.copy()))
+    # read without the symmetrisation, the solver's error from tr (>= ||S||_F): at least the general read,
+    # within n^2 u of it (tr <= n lambda_max)
+    general_read = math.sqrt(ErrorEllipsoid.lam_upper(fast, F.copy()))
+    assert general_read <= fast.bound() <= general_read * (1.0 + n * n * UNIT_ROUNDOFF)
 
 
 @settings(max_examples=40, deadline=None)
