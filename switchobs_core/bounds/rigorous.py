@@ -474,7 +474,8 @@ class RoundingBound:
         if dense is not None:       # the exact set alone through a dense map (ErrorEllipsoid.step_dense)
             en = math.sqrt(ell.lam_scaled())
             ell.step_dense(m.E, dense, m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en)
-            self._check()
+            if not math.isfinite(ell.tr):
+                self._check()
             return
         with np.errstate(over="ignore", invalid="ignore"):
             for ell, noisy in ((self.ell, False), (self.ellv, True)):
