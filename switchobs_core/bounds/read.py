@@ -215,10 +215,10 @@ class AnchoredBound:
             return 0.0
         if self._Sa is not None and self._Sa.shape == S.shape and self._age < self.max_age \
                 and np.isfinite(self._lam_a) and self._theta_a > 0.0:
-            w = S @ self._va
-            c = float(self._va @ w) / self._theta_a    # any c >= 0 is valid (step 1)
+            w = S.dot(self._va)
+            c = float(self._va.dot(w)) / self._theta_a    # any c >= 0 is valid (step 1)
             if math.isfinite(c) and c >= 0.0:
-                nw = math.sqrt(float(w @ w))
+                nw = math.sqrt(float(w.dot(w)))
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
                 D = _minus_scaled(S, c, self._Sa)
