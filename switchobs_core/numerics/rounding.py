@@ -367,7 +367,7 @@ class ErrorEllipsoid:
         B[np.diag_indices(cols.size)] += q[cols]
         return B
 
-    def step_dense(self, M: np.ndarray, absM: tuple, rho: float) -> None:
+    def step_dense(self, M: np.ndarray, absM: tuple, rho: float, guarded: bool = False) -> None:
         """:meth:`step` through a dense ``M`` with ``absM = (|M|, ||M||_inf)`` kept by the caller, in
         fewer array operations: the set of :meth:`propagate_product` with ``Z = M S M'``,
         ``w = image_bound(|M|)`` and ``c = gamma_{2n+2}`` (step 6), rounded in another order.
@@ -381,16 +381,13 @@ class ErrorEllipsoid:
         ``a > 0`` is valid), so it is taken from the diagonal of ``Z`` and ``w`` without forming
         ``Z + R_z``; :attr:`tr` is the sum of the new diagonal, rounded up. Overflow: where
         ``||M||_inf^2 trace S alpha`` and ``theta rho^2`` (times the scaling's spread) stay far below
-        the largest double no operation can overflow and no error state is set up; elsewhere one is.
-        Equal to :meth:`propagate_product`'s set within a few ``u`` of each entry (test_step_dense.py).
+        the largest double no operation can overflow and no error state is set up; elsewhere the step
+        runs again under one (``guarded``: it is already). Equal to :meth:`propagate_product`'s set
+        within a few ``u`` of each entry (test_step_dense.py).
         """
-        if absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120:
-            self._step_dense(M, absM, rho)
-        else:
+        if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
-                self._step_dense(M, absM, rho)
-
-    def _step_dense(self, M: np.ndarray, absM: tuple, rho: float) -> None:
+                return self.step_dense(M, absM, rho, True)
         S = self.S
         aM, mn = absM
         hit = self._amd.get(id(aM))
@@ -413,17 +410,12 @@ class ErrorEllipsoid:
         if tz > 0.0 and rho2 > 0.0:      # (the general path's added set is rho^2 D^2: none if it underflows)
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
-        coef = np.array((alpha * Wz * self._k1, theta * rho2 * self._kf, alpha * self._k3, c4))
-        np.abs(zd, out=B[2])
-        if alpha < 1e20 and theta * rho2 * self._dr < 1e250:
-            self._dense_pass(Z, alpha, coef.dot(B))
-        else:
+        if not guarded and not (alpha < 1e20 and theta * rho2 * self._dr < 1e250):
             with np.errstate(over="ignore", invalid="ignore"):
-                self._dense_pass(Z, alpha, coef.dot(B))
-
-    def _dense_pass(self, Z: np.ndarray, alpha: float, q: np.ndarray) -> None:
-        """The n x n pass of :meth:`step_dense`: ``S = (Z + Z') (alpha / 2) + diag(q)``, ``tr`` its trace
-        rounded up."""
+                return self.step_dense(M, absM, rho, True)
+        np.abs(zd, out=B[2])
+        q = np.array((alpha * Wz * self._k1, theta * rho2 * self._kf, alpha * self._k3, c4)).dot(B)
+        # the n x n pass: S' = (Z + Z') (alpha / 2) + diag(q), tr its trace rounded up
         S = Z + Z.T                 # exactly symmetric
         S *= 0.5 * alpha
         dS = S.ravel()[:: self.n + 1]
