@@ -469,13 +469,18 @@ class RoundingBound:
         if self.withdrawn:
             return
         xs, xs1 = (self.xn(x0), self.xn(xm)) if norms is None else norms
-        ell = self.ell
-        dense = None if self.w or self._ellv is not None else m.dense_abs()
-        if dense is not None:       # the exact set alone through a dense map (ErrorEllipsoid.step_dense)
-            en = math.sqrt(ell.lam_scaled())
-            ell.step_dense(m.E, dense, m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en)
-            if not math.isfinite(ell.tr):
-                self._check()
+        ell, ellv = self.ell, self.ellv
+        # through a dense map without a shaped term (no stamp error; the noise set's noise and
+        # disturbance none on this channel): ErrorEllipsoid.step_dense, each set with its own residual
+        dense = None if self.w or ellv is not None and (self.reach is not None or self.noise_max[channel - 1]) \
+            else m.dense_abs()
+        if dense is not None:
+            for es in (ell, ellv):
+                if es is not None:
+                    en = math.sqrt(es.lam_scaled())
+                    es.step_dense(m.E, dense, m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en)
+                    if not math.isfinite(es.tr):
+                        self._check()
             return
         with np.errstate(over="ignore", invalid="ignore"):
             for ell, noisy in ((self.ell, False), (self.ellv, True)):
@@ -512,10 +517,12 @@ class RoundingBound:
             return math.inf, noisy0
         if self.phase is not None and self.phase.j >= 0 and S is None and Sv is None:
             return self.phase.bounds()      # finite while it holds (PhaseBound.sample withdraws otherwise)
-        if not amortised and S is None and self._ellv is None and self._ell.tr < 1e140:
+        ev = self._ellv
+        if not amortised and S is None and Sv is None and self._ell.tr < 1e140 and (ev is None or ev.tr < 1e140):
             exact = self._ell.bound()       # |S_ij| <= trace S: nothing overflows (no error state)
-            if math.isfinite(exact):
-                return exact, None
+            noisy = None if ev is None else ev.bound()
+            if math.isfinite(exact) and (noisy is None or math.isfinite(noisy)):
+                return exact, noisy
         with np.errstate(over="ignore", invalid="ignore"):
             if amortised and S is None and Sv is None:
                 exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)

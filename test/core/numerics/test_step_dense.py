@@ -3,7 +3,7 @@
 (``propagate_product`` of ``M S M'`` with ``image_bound(|M|)``): the same set within a few ``u`` of
 each entry (hypothesis over sizes, units, scales and residuals), exactly symmetric, containing the
 exact product (extended precision); and an observer with a Kalman table publishes the same exact
-bounds with it as with the general path (within 1e-12 relative)."""
+and noise bounds with it as with the general path (within 1e-12 relative)."""
 
 from __future__ import annotations
 
@@ -110,15 +110,20 @@ def agents2():
     return system, cycle, table, stream
 
 
-def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch):
+@pytest.mark.parametrize("noise_max, fast_steps", [(None, 1), (0.0, 2), (1e-3, 0)])
+def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch, noise_max, fast_steps):
+    """Without a declared noise bound, and with the node's default ``noise.max`` 0 (a noise set with no
+    noise: both sets take the fast step), the published bounds are the general path's within 1e-12;
+    a noise set with noise keeps the general path (its shaped term)."""
     system, cycle, table, stream = agents2
 
     def run():
-        obs = so.SwitchedObserver(system, table, "periodic", [cycle])
+        obs = so.SwitchedObserver(system, table, "periodic", [cycle], noise_max=noise_max)
         out = []
         for t, ch, y in stream:
             obs.update(t, ch, y)
-            out.append((obs.x_hat.copy(), obs.envelope().exact_bound))
+            env = obs.envelope()
+            out.append((obs.x_hat.copy(), env.exact_bound, env.noise_bound))
         return out
 
     calls = []
@@ -129,9 +134,13 @@ def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch):
         return real(self, *a)
     monkeypatch.setattr(ErrorEllipsoid, "step_dense", counted)
     fast = run()
-    assert len(calls) >= 100            # the table's samples took the fast step
+    table_samples = len(stream) - 20         # the first samples run the start-up's general steps
+    assert fast_steps * table_samples <= len(calls) <= fast_steps * len(stream), len(calls)
     monkeypatch.setattr(KalmanMap, "dense_abs", lambda self: None)      # the general path
     general = run()
-    for (xa, ba), (xb, bb) in zip(fast, general):
+    for (xa, ba, na), (xb, bb, nb) in zip(fast, general):
         np.testing.assert_array_equal(xa, xb)       # the estimate is not touched
         assert abs(ba - bb) <= 1e-12 * bb, (ba, bb)
+        assert (na is None) == (noise_max is None) == (nb is None)
+        if na is not None:
+            assert abs(na - nb) <= 1e-12 * nb, (na, nb)
