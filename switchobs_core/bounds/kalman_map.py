@@ -184,7 +184,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE", "_aKH")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "rho_form")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -201,6 +201,9 @@ class KalmanMap:
         self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
+        #: ``(bound, dt, coefficients)`` of the bound's residual through this map
+        #: (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused_sample`), kept with the map.
+        self.rho_form: tuple | None = None
 
     def _scaled(self) -> tuple[np.ndarray, np.ndarray]:
         """``(D^-1 K, H D)`` in the entry's balancing."""

@@ -469,19 +469,6 @@ class RoundingBound:
         if self.withdrawn:
             return
         xs, xs1 = (self.xn(x0), self.xn(xm)) if norms is None else norms
-        ell, ellv = self.ell, self.ellv
-        # through a dense map without a shaped term (no stamp error; the noise set's noise and
-        # disturbance none on this channel): ErrorEllipsoid.step_dense, each set with its own residual
-        dense = None if self.w or ellv is not None and (self.reach is not None or self.noise_max[channel - 1]) \
-            else m.dense_abs()
-        if dense is not None:
-            for es in (ell, ellv):
-                if es is not None:
-                    en = math.sqrt(es.lam_scaled())
-                    es.step_dense(m.E, dense, m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en)
-                    if not math.isfinite(es.tr):
-                        self._check()
-            return
         with np.errstate(over="ignore", invalid="ignore"):
             for ell, noisy in ((self.ell, False), (self.ellv, True)):
                 if ell is None:
@@ -497,6 +484,62 @@ class RoundingBound:
                 else:
                     ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
+
+    def fused_sample(self, f: Any, channel: int) -> bool:
+        """:meth:`fused` for a Kalman sample's :class:`~switchobs_core.runtime.error_maps.FusedMap` ``f``
+        through a dense map with no shaped term (no clock tolerance, so no stamp error; the noise set's
+        noise and disturbance none on this ``channel``): each set by
+        :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`, the residual of
+        :meth:`fused` (:meth:`_rho_step` through ``||I - K H||``, :meth:`rho_correct_norms`, the map's
+        own rounding) as one linear form in the step's norms with coefficients kept per map and step
+        (:meth:`_fused_form`). False (nothing done) where that does not apply: the caller takes
+        :meth:`fused`."""
+        m = f.m
+        ellv = self._ellv
+        if self.tolerance or self.phase is not None or self.withdrawn or (
+                ellv is not None and (self.reach is not None or self.noise_max[channel - 1])):
+            return False
+        dense = m.dense_abs()
+        if dense is None:
+            return False
+        dt = f.dt
+        hit = m.rho_form
+        if hit is None or hit[0] is not self or hit[1] != dt:
+            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size))
+        a_xs, a_xs1, a_xsp, a_yn, a_nun, a_0, a_en = hit[2]
+        xs, xs1, xsp = self.fused_norms(f.x0, f.x_minus, f.x_plus)
+        y, nu = f.y, f.nu
+        base = (a_xs * xs + a_xs1 * xs1 + a_xsp * xsp + a_yn * math.sqrt(float(y.dot(y)))
+                + a_nun * math.sqrt(float(nu.dot(nu))) + a_0)
+        self.w = 0.0
+        E = m.E
+        for ell in (self._ell, ellv):
+            if ell is not None:
+                ell.step_dense(E, dense, (base + a_en * math.sqrt(ell.lam_scaled())) * (1.0 + 32.0 * _U))
+                if not math.isfinite(ell.tr):
+                    self._check()
+        return True
+
+    def _fused_form(self, m: Any, dt: float, p: int) -> tuple[float, ...]:
+        """The coefficients of ``rho = a_xs ||x0|| + a_xs1 ||x^-|| + a_xsp ||x^+|| + a_yn ||y|| + a_nun ||nu||
+        + a_0 + a_en ||e||`` (balanced norms) that :meth:`fused` computes term by term for the map ``m`` over
+        ``dt`` with ``p`` rows: :meth:`_rho_step` (no input) times ``||I - K H||``, plus
+        :meth:`rho_correct_norms`, plus the map's own rounding ``emap ||e||``. Each is a sum of products
+        of the same constants; :meth:`fused_sample` rounds the form up by ``(1 + 32 u)`` for the
+        regrouping."""
+        e = m.e
+        delta = abs(dt - e.dt) + _U * dt
+        q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
+        k8 = 1.0 + 8.0 * _U
+        nk = m.nIKH * k8
+        fK, fH = m.fK, m.fH
+        return (nk * ((e.eps + q) + self.g_n * e.fPhi),
+                nk * 2.0 * _U + k8 * fK * self.g_n * fH,
+                k8 * _U,
+                k8 * fK * 2.0 * _U,
+                k8 * self.g_p * fK,
+                nk * self._uf + k8 * (fK * (self.n + 2) * math.sqrt(p) * UNDERFLOW + self._uf),
+                nk * ((e.eps + q) + e.emap) + m.emap)
 
     def _wc(self, p: int, v_max: float) -> float:
         """``(sqrt(p) v_max + w)^2`` rounded up: the squared norm bound of a sample's noise

@@ -123,6 +123,8 @@ class FusedMap(NamedTuple):
         if pb is not None and not bound.withdrawn and pb.sample(bound, self, channel):
             return
         if bound is not None and not bound.withdrawn:
+            if pb is None and bound.fused_sample(self, channel):     # a dense map, no shaped term
+                return
             bound.w = bound.stamp_error(m.H, self.x_minus, bound.prior_beta(m.e, self.dt, self.x0, self.x_minus,
                                                                               None)) if bound.tolerance else 0.0
             xs, xs1, xsp = bound.fused_norms(self.x0, self.x_minus, self.x_plus)
