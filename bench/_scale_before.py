@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 from bench_scale import PY, REPO, ReferenceKF, _cost_setup, _machine, _steady_from, _timed
 
+SCRIPT = Path(__file__).resolve().with_name("bench_scale.py")
+
 #: The estimators a ``--before`` child times (the node pattern, the table without a bound, the reference).
 LEAN = ("kalman table + envelope() (the node)", "kalman table, rounding_bound=False",
         "reference Kalman filter (standard form, numpy)")
@@ -66,8 +68,8 @@ def main_before(a: argparse.Namespace) -> int:
         for r in range(a.rounds):
             for M in sorted(a.cost_agents):
                 for name, tree in (trees if r % 2 == 0 else trees[::-1]):
-                    cmd = [PY, str(Path(__file__).resolve()), "--cost", "--child", str(tree), "--cache", td,
-                           "--cost-agents", str(M), "--samples", str(a.samples), "--block", str(a.block)]
+                    cmd = [PY, str(SCRIPT), "--cost", "--child", str(tree), "--cache", td, "--cost-agents", str(M),
+                           "--samples", str(a.samples), "--block", str(a.block)]
                     p = subprocess.run(cmd, env=dict(env, PYTHONPATH=str(tree)), capture_output=True, text=True,
                                        cwd=REPO)
                     if p.returncode:
