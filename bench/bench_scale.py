@@ -5,6 +5,7 @@
     python bench/bench_scale.py --agents 2 4    # a subset
     python bench/bench_scale.py --out FILE      # also write the markdown section to FILE
     python bench/bench_scale.py --cost          # only the online cost per sample
+    python bench/bench_scale.py --cost --steady --before /tmp/base9   # the node pattern beside another tree
 
 What is measured (``camera_agents`` with M agents, n = 4 (M + 1), every h_i = 1 s; one run each,
 as subprocesses, so that every number includes nothing of the others):
@@ -39,7 +40,11 @@ as subprocesses, so that every number includes nothing of the others):
    every estimator over them untimed first, so that the timed samples revisit phases. The node
    pattern is timed with ``bound='phase'`` too (:mod:`switchobs_core.runtime.bound_option`), and its
    exact bound (and, in a second untimed pass with ``noise_max`` 1 mm, its noise bound) is compared
-   with the ellipsoid's on the same samples.
+   with the ellipsoid's on the same samples. With ``--before TREE`` (:mod:`_scale_before`): the node
+   pattern, the table without a bound and the reference of this checkout and of ``TREE``, one child
+   process per (tree, M) with ``PYTHONPATH`` at its tree, the trees alternating over ``--rounds``, one
+   table per M shared; the node pattern over the reference per child, and the trees' exact bounds
+   on the same samples.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
