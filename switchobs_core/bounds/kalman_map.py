@@ -184,7 +184,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "rho_form")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "rho_form")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -198,6 +198,7 @@ class KalmanMap:
         self._Ks: np.ndarray | None = None
         self._Hs: np.ndarray | None = None
         self._aE: tuple | None = None
+        self._aEd: tuple | None = None      # (d, D |E~|) of dense_abs
         self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
@@ -300,9 +301,17 @@ class KalmanMap:
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 
-    def dense_abs(self) -> tuple[np.ndarray, float] | None:
-        """``(|E~|, ||E~||_inf)`` of the dense map (kept), or None on the factored path."""
-        return None if self._sp is not None else self._abs()
+    def dense_abs(self, d: np.ndarray | None = None) -> tuple | None:
+        """``(|E~|, ||E~||_inf)`` of the dense map, with ``D |E~|`` third for a balancing ``d`` (kept for the
+        last ``d``, compared by identity), or None on the factored path."""
+        if self._sp is not None:
+            return None
+        aE, mn = self._abs()
+        if d is None:
+            return aE, mn
+        if self._aEd is None or self._aEd[0] is not d:
+            self._aEd = (d, aE * d[:, None])
+        return aE, mn, self._aEd[1]
 
     def _abs(self) -> tuple[np.ndarray, float]:
         if self._aE is None:

@@ -499,7 +499,7 @@ class RoundingBound:
         if self.tolerance or self.phase is not None or self.withdrawn or (
                 ellv is not None and (self.reach is not None or self.noise_max[channel - 1])):
             return False
-        dense = m.dense_abs()
+        dense = m.dense_abs(self.d)
         if dense is None:
             return False
         dt = f.dt

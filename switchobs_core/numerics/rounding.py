@@ -170,7 +170,6 @@ class ErrorEllipsoid:
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
-        self._amd: dict = {}                # id(|M|) -> (|M|, D |M|) of step_dense's maps
         self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
         self._qrows[1] = self._d2
         self._qrows[3] = 1.0
@@ -371,15 +370,16 @@ class ErrorEllipsoid:
         return B
 
     def step_dense(self, M: np.ndarray, absM: tuple, rho: float, guarded: bool = False) -> None:
-        """:meth:`step` through a dense ``M`` with ``absM = (|M|, ||M||_inf)`` kept by the caller, in
-        fewer array operations: the set of :meth:`propagate_product` with ``Z = M S M'``,
-        ``w = image_bound(|M|)`` and ``c = gamma_{2n+2}`` (step 6), rounded in another order.
+        """:meth:`step` through a dense ``M`` with ``absM = (|M|, ||M||_inf)`` or ``(|M|, ||M||_inf, D |M|)``
+        (``D`` this ellipsoid's balancing) kept by the caller, in fewer array operations: the set of
+        :meth:`propagate_product` with ``Z = M S M'``, ``w = image_bound(|M|)`` and ``c = gamma_{2n+2}``
+        (step 6), rounded in another order.
 
-        ``w d`` is taken as ``(D |M|) s`` (``D |M|`` kept per map; a scaling by powers of two is exact);
-        the scalar factors of ``w`` (its sum's rounding) are folded into the coefficients of the
-        diagonal allowance ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4`` (one product of a 4 x n
-        matrix), each coefficient rounded up by ``(1 + 16 u)`` more for the fold and for that
-        product's sum of four nonnegative terms; ``(Z + Z') (alpha / 2)`` is the general path's
+        ``w d`` is taken as ``(D |M|) s`` (a scaling by powers of two is exact); the scalar factors of
+        ``w`` (its sum's rounding) are folded into the coefficients of the diagonal allowance
+        ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4`` (one product of a 4 x n matrix), each coefficient
+        rounded up by ``(1 + 16 u)`` more for the fold and for that product's sum of four nonnegative
+        terms; ``(Z + Z') (alpha / 2)`` is the general path's
         ``alpha sym Z`` (a halving is exact). The trace chooses the outer sum's ``a`` only (any
         ``a > 0`` is valid), so it is taken from the diagonal of ``Z`` and ``w`` without forming
         ``Z + R_z``; :attr:`tr` is the sum of the new diagonal, rounded up. Overflow: where
@@ -391,15 +391,10 @@ class ErrorEllipsoid:
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
-        S = self.S
-        aM, mn = absM
-        hit = self._amd.get(id(aM))
-        if hit is None or hit[0] is not aM:
-            if len(self._amd) >= 4096:
-                self._amd.clear()
-            hit = self._amd[id(aM)] = (aM, aM * self.d[:, None],
-                                       (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf)
-        aMd, c4, B = hit[1], hit[2], self._qrows
+        S, B = self.S, self._qrows
+        aM, mn = absM[0], absM[1]
+        aMd = absM[2] if len(absM) > 2 else aM * self.d[:, None]
+        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf
         s = np.abs(S.diagonal())            # = diag S (S is PSD)
         np.sqrt(s, out=s)
         vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
