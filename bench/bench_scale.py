@@ -5,6 +5,7 @@
     python bench/bench_scale.py --agents 2 4    # a subset
     python bench/bench_scale.py --out FILE      # also write the markdown section to FILE
     python bench/bench_scale.py --cost          # only the online cost per sample
+    python bench/bench_scale.py --cost --steady --before /tmp/base9   # the node pattern beside another tree
 
 What is measured (``camera_agents`` with M agents, n = 4 (M + 1), every h_i = 1 s; one run each,
 as subprocesses, so that every number includes nothing of the others):
@@ -39,7 +40,11 @@ as subprocesses, so that every number includes nothing of the others):
    every estimator over them untimed first, so that the timed samples revisit phases. The node
    pattern is timed with ``bound='phase'`` too (:mod:`switchobs_core.runtime.bound_option`), and its
    exact bound (and, in a second untimed pass with ``noise_max`` 1 mm, its noise bound) is compared
-   with the ellipsoid's on the same samples.
+   with the ellipsoid's on the same samples. With ``--before TREE`` (:mod:`_scale_before`): the node
+   pattern, the table without a bound and the reference of this checkout and of ``TREE``, one child
+   process per (tree, M) with ``PYTHONPATH`` at its tree, the trees alternating over ``--rounds``, one
+   table per M shared; the node pattern over the reference per child, and the trees' exact bounds
+   on the same samples.
 
 The machine is shared: the load average before and after is printed with the results, and CPU
 time is the number that does not depend on the other users. A script, not a test: nothing is
@@ -60,9 +65,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_design import machine_info  # the one machine description of the benchmarks
 
 REPO = Path(__file__).resolve().parents[1]
+if "--child" in sys.argv:   # a --before child: its tree's package ahead of this checkout's (bench_design adds REPO)
+    sys.path[:0] = [sys.argv[sys.argv.index("--child") + 1], str(REPO)]
+from bench_design import machine_info  # noqa: E402  (the one machine description of the benchmarks)
+
 PY = sys.executable
 ENV = dict(os.environ, PYTHONPATH=str(REPO), OPENBLAS_NUM_THREADS="1")
 
@@ -197,15 +205,22 @@ def _lift_design_budget(budget: int = 4 << 30) -> None:
         kalman.check_size = functools.partial(ranges.check_size, budget=budget)
 
 
-def _cost_setup(M: int, samples: int, h: float, rate: float = 50.0) -> tuple:
+def _cost_setup(M: int, samples: int, h: float, rate: float = 50.0, cache: Path | None = None) -> tuple:
     """(system, cycle, Kalman table, stream of (t, channel, H, y)) for ``camera_agents(M)``, every
-    channel active ``h`` seconds."""
+    channel active ``h`` seconds; ``cache``: a directory where the table is saved at its design and
+    loaded from afterwards (the trees of ``--before`` share one design)."""
     import switchobs_core as so
 
     system = so.camera_agents(M)
     cycle = so.Cycle([h] * M)
-    _lift_design_budget()
-    table = so.kalman_table(system, [so.design_kalman(system, cycle, rate)])
+    path = None if cache is None else cache / f"kalman_{M}_{h:g}_{rate:g}.npz"
+    if path is not None and path.exists():
+        table = so.GainTable.load(path, system=system)
+    else:
+        _lift_design_budget()
+        table = so.kalman_table(system, [so.design_kalman(system, cycle, rate)])
+        if path is not None:
+            table.save(path)
     sched = so.PeriodicSchedule(cycle)
     rng = np.random.default_rng(M)
     x = np.zeros(system.n)
@@ -318,16 +333,9 @@ def noise_tightness(system, cycle, table, stream, warm: int, noise_max: float = 
     return (float(np.median(ratio)), float(np.max(ratio))) if ratio else (np.nan, np.nan)
 
 
-def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = False) -> dict:
-    """Median CPU time per sample of each estimator (interleaved blocks; module docstring, item 4);
-    ``steady``: every estimator first runs untimed over the table's start-up phases and one period
-    (:func:`_steady_from`), so each timed sample revisits a phase."""
-    warm = 0
-    if steady:
-        system, cycle, table, _ = _cost_setup(M, 1, h)
-        warm = _steady_from(system, cycle, table)
-    system, cycle, table, stream = _cost_setup(M, warm + samples, h)
-    est, tables = _estimators(system, cycle, table, stream)
+def _timed(est: dict, warm: int, samples: int, block: int) -> dict:
+    """CPU time per sample of each estimator in interleaved blocks (the order rotated), after ``warm``
+    untimed samples: name -> the blocks' times (us per sample)."""
     names = list(est)
     times: dict = {name: [] for name in names}
     for k in range(warm):
@@ -341,6 +349,21 @@ def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = 
             for k in range(start, start + block):
                 f(k)
             times[name].append((time.process_time_ns() - c) / block / 1e3)
+    return times
+
+
+def bench_cost(M: int, samples: int, block: int, h: float = 1.0, steady: bool = False) -> dict:
+    """Median CPU time per sample of each estimator (interleaved blocks; module docstring, item 4);
+    ``steady``: every estimator first runs untimed over the table's start-up phases and one period
+    (:func:`_steady_from`), so each timed sample revisits a phase."""
+    warm = 0
+    if steady:
+        system, cycle, table, _ = _cost_setup(M, 1, h)
+        warm = _steady_from(system, cycle, table)
+    system, cycle, table, stream = _cost_setup(M, warm + samples, h)
+    est, tables = _estimators(system, cycle, table, stream)
+    names = list(est)
+    times = _timed(est, warm, samples, block)
     # the table observers must have stayed on the table (a departure would time the online recursion)
     departures = [getattr(o, "kalman_departures", None) for o in tables]
     bd = tables[-1].bounds           # the phase bound over the node's (the ellipsoid), the timed samples
@@ -421,7 +444,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--label", default="", help="--cost: what code is measured (default: its git commit)")
     ap.add_argument("--steady", action="store_true",
                     help="--cost: time after every phase of the table was visited once (start-up and one period)")
+    ap.add_argument("--before", type=Path, default=None,
+                    help="--cost: a checkout to compare with (e.g. /tmp/base9): the node pattern, the table without "
+                         "a bound and the reference of both trees, one child process each, interleaved rounds")
+    ap.add_argument("--rounds", type=int, default=3, help="--before: rounds (default 3)")
+    ap.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--cache", type=Path, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    if a.child is not None:
+        import json
+
+        import switchobs_core
+        from switchobs_core.threads import single_threaded_blas
+
+        assert switchobs_core.__file__.startswith(str(a.child)), switchobs_core.__file__
+
+        single_threaded_blas()
+        from _scale_before import bench_cost_lean
+
+        print(json.dumps(bench_cost_lean(a.cost_agents[0], a.samples, a.block, a.cache)))
+        return 0
+    if a.cost and a.before is not None:
+        from _scale_before import main_before
+
+        return main_before(a)
     if a.cost:
         return main_cost(a)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,

@@ -184,7 +184,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE", "_aKH")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "rho_form")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -198,9 +198,13 @@ class KalmanMap:
         self._Ks: np.ndarray | None = None
         self._Hs: np.ndarray | None = None
         self._aE: tuple | None = None
+        self._aEd: tuple | None = None      # (d, D |E~|) of dense_abs
         self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
+        #: ``(bound, dt, coefficients)`` of the bound's residual through this map
+        #: (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused_sample`), kept with the map.
+        self.rho_form: tuple | None = None
 
     def _scaled(self) -> tuple[np.ndarray, np.ndarray]:
         """``(D^-1 K, H D)`` in the entry's balancing."""
@@ -297,6 +301,24 @@ class KalmanMap:
             return PX - self.K @ (self.H @ PX)
         return self.E @ other
 
+    def dense_abs(self, d: np.ndarray | None = None) -> tuple | None:
+        """``(|E~|, ||E~||_inf)`` of the dense map, with ``D |E~|`` third for a balancing ``d`` (kept for the
+        last ``d``, compared by identity), or None on the factored path."""
+        if self._sp is not None:
+            return None
+        aE, mn = self._abs()
+        if d is None:
+            return aE, mn
+        if self._aEd is None or self._aEd[0] is not d:
+            self._aEd = (d, aE * d[:, None])
+        return aE, mn, self._aEd[1]
+
+    def _abs(self) -> tuple[np.ndarray, float]:
+        if self._aE is None:
+            aE = np.abs(self.E)
+            self._aE = (aE, float(aE.sum(axis=1).max()))
+        return self._aE
+
     def sandwich(self, ell: Any) -> tuple[np.ndarray, np.ndarray, float, float]:
         """``(Z, w, c, mn)``: ``|Z - M S M'| <= c w w'`` entrywise for the ellipsoid's ``S`` (up to
         underflow), ``mn >= ||M||_inf`` for its underflow allowance.
@@ -308,10 +330,7 @@ class KalmanMap:
         sp = self._sp
         if sp is None:
             E = self.E
-            if self._aE is None:
-                aE = np.abs(E)
-                self._aE = (aE, float(aE.sum(axis=1).max()))
-            aE, mn = self._aE
+            aE, mn = self._abs()
             return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
         Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken

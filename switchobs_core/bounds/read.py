@@ -187,6 +187,31 @@ def positive_definite(A: np.ndarray, gn: float | None = None) -> bool:
     return info == 0
 
 
+def _eigen_anchor(S: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(lam, v)`` below :data:`CHOLESKY_MIN_N` states: one symmetric eigenvalue problem with its
+    vectors gives both the anchor's ``lam`` (the largest eigenvalue of ``T = fl(sym S)`` plus the
+    model of the solver's error, ``2 n u ||T||_F + 4 n eta`` as
+    :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.lam_upper` has it, plus
+    :data:`_SOLVER_MARGIN` ``u ||S||_F``, rounded up) and its leading direction ``v``; ``inf`` and the
+    uniform direction where ``S`` is not finite or the solver does not converge."""
+    n = S.shape[0]
+    u = UNIT_ROUNDOFF
+    T = S + S.T
+    T *= 0.5
+    nT, nS = fro_norm(T), fro_norm(S)
+    flat = np.full(n, 1.0 / math.sqrt(n))
+    if not (math.isfinite(nT) and math.isfinite(nS)):
+        return math.inf, flat
+    try:
+        w, V = np.linalg.eigh(T)
+    except np.linalg.LinAlgError:
+        return math.inf, flat
+    top = float(w[-1])
+    if not math.isfinite(top):
+        return math.inf, flat
+    return (max(top, 0.0) + 2 * n * u * nT + 4 * n * UNDERFLOW + _SOLVER_MARGIN * u * nS) * (1.0 + 2.0 * u), V[:, -1]
+
+
 class AnchoredBound:
     """``sqrt(lambda_max(sym S))`` upper bounds of an :class:`~switchobs_core.numerics.rounding.ErrorEllipsoid`'s
     current ``S``, amortised (module docstring). ``AnchoredBound(tol=0.05, max_age=256)``;
@@ -215,10 +240,10 @@ class AnchoredBound:
             return 0.0
         if self._Sa is not None and self._Sa.shape == S.shape and self._age < self.max_age \
                 and np.isfinite(self._lam_a) and self._theta_a > 0.0:
-            w = S @ self._va
-            c = float(self._va @ w) / self._theta_a    # any c >= 0 is valid (step 1)
+            w = S.dot(self._va)
+            c = float(self._va.dot(w)) / self._theta_a    # any c >= 0 is valid (step 1)
             if math.isfinite(c) and c >= 0.0:
-                nw = math.sqrt(float(w @ w))
+                nw = math.sqrt(float(w.dot(w)))
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
                 D = _minus_scaled(S, c, self._Sa)
@@ -241,6 +266,8 @@ class AnchoredBound:
         if got is not None:
             lam, v = got
             self.verified += 1
+        elif ell.n < CHOLESKY_MIN_N:
+            lam, v = _eigen_anchor(S)
         else:
             # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
             # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
@@ -248,15 +275,15 @@ class AnchoredBound:
             lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * fro_norm(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
             T = S + S.T
             T *= 0.5
-            if np.all(np.isfinite(T)):      # the leading direction (below CHOLESKY_MIN_N: cheap)
-                v = np.linalg.eigh(T)[1][:, -1] if ell.n < CHOLESKY_MIN_N else _leading(T, self._v, _POWER_STEPS)[1]
+            if np.all(np.isfinite(T)):      # the leading direction
+                v = _leading(T, self._v, _POWER_STEPS)[1]
             else:
                 v = np.full(ell.n, 1.0 / math.sqrt(ell.n))
         self.anchors += 1
         self._Sa = S.copy()
         self._lam_a = lam
         self._va = self._v = v
-        self._theta_a = float(v @ (S @ v))
+        self._theta_a = float(v.dot(S.dot(v)))
         self._f_a = fro_norm(S) * (1.0 + 2.0 * gamma(S.size + 4))
         A = np.abs(S)
         self._g_a = float(max(A.sum(axis=1).max(), A.sum(axis=0).max())) * (1.0 + 2.0 * gamma(ell.n + 4))

@@ -101,6 +101,8 @@ class RoundingBound:
         self.noise_max = noise_max
         self.d = balance(A) if scale is None else np.asarray(scale, dtype=float)
         self._id = 1.0 / self.d
+        self._unit = bool(np.all(self.d == 1.0))     # no scaling: ||D^-1 x|| = ||x||
+        self._xlast: tuple = (None, 0.0)     # the last x^+ of a fused step and its balanced norm (the next x0's)
         # ||A||_2 in balanced coordinates (the step quantum), gamma_{n+2}, gamma_{p+2}
         self.nA = nu2(balanced(A, self.d))
         self.g_n = gamma(self.n + 2)
@@ -192,8 +194,20 @@ class RoundingBound:
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
         """``||D^-1 x||``."""
+        if self._unit:
+            return math.sqrt(float(x.dot(x)))
         v = x * self._id
-        return math.sqrt(float(v @ v))
+        return math.sqrt(float(v.dot(v)))
+
+    def fused_norms(self, x0: np.ndarray, xm: np.ndarray, xp: np.ndarray) -> tuple[float, float, float]:
+        """``||D^-1 .||`` of a fused step's ``x0``, ``x^-`` and ``x^+``; ``x^+``'s is kept for the next
+        step, whose ``x0`` is the same array (compared by identity: an estimate changed in place by its
+        reader would move the error itself outside every set, whatever norm is taken here)."""
+        xl = self._xlast
+        xs = xl[1] if x0 is xl[0] else self.xn(x0)
+        xsp = self.xn(xp)
+        self._xlast = (xp, xsp)
+        return xs, self.xn(xm), xsp
 
     def _cd(self, C: np.ndarray) -> float:
         """``||C D||_F`` (kept per matrix)."""
@@ -304,7 +318,7 @@ class RoundingBound:
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
         ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
         and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
-        yn, nun = math.sqrt(float(y @ y)), math.sqrt(float(nu @ nu))
+        yn, nun = math.sqrt(float(y.dot(y))), math.sqrt(float(nu.dot(nu)))
         return self.rho_correct_norms(fK, fH, self.xn(x_minus) if xm is None else xm, yn, nun,
                                       self.xn(x_plus) if xp is None else xp, y.size)
 
@@ -471,6 +485,62 @@ class RoundingBound:
                     ell.S, ell.tr = ell.propagate_product(Z, w, c, rho, mn)
         self._check()
 
+    def fused_sample(self, f: Any, channel: int) -> bool:
+        """:meth:`fused` for a Kalman sample's :class:`~switchobs_core.runtime.error_maps.FusedMap` ``f``
+        through a dense map with no shaped term (no clock tolerance, so no stamp error; the noise set's
+        noise and disturbance none on this ``channel``): each set by
+        :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`, the residual of
+        :meth:`fused` (:meth:`_rho_step` through ``||I - K H||``, :meth:`rho_correct_norms`, the map's
+        own rounding) as one linear form in the step's norms with coefficients kept per map and step
+        (:meth:`_fused_form`). False (nothing done) where that does not apply: the caller takes
+        :meth:`fused`."""
+        m = f.m
+        ellv = self._ellv
+        if self.tolerance or self.phase is not None or self.withdrawn or (
+                ellv is not None and (self.reach is not None or self.noise_max[channel - 1])):
+            return False
+        dense = m.dense_abs(self.d)
+        if dense is None:
+            return False
+        dt = f.dt
+        hit = m.rho_form
+        if hit is None or hit[0] is not self or hit[1] != dt:
+            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size))
+        a_xs, a_xs1, a_xsp, a_yn, a_nun, a_0, a_en = hit[2]
+        xs, xs1, xsp = self.fused_norms(f.x0, f.x_minus, f.x_plus)
+        y, nu = f.y, f.nu
+        base = (a_xs * xs + a_xs1 * xs1 + a_xsp * xsp + a_yn * math.sqrt(float(y.dot(y)))
+                + a_nun * math.sqrt(float(nu.dot(nu))) + a_0)
+        self.w = 0.0
+        E = m.E
+        for ell in (self._ell, ellv):
+            if ell is not None:
+                ell.step_dense(E, dense, (base + a_en * math.sqrt(ell.lam_scaled())) * (1.0 + 32.0 * _U))
+                if not math.isfinite(ell.tr):
+                    self._check()
+        return True
+
+    def _fused_form(self, m: Any, dt: float, p: int) -> tuple[float, ...]:
+        """The coefficients of ``rho = a_xs ||x0|| + a_xs1 ||x^-|| + a_xsp ||x^+|| + a_yn ||y|| + a_nun ||nu||
+        + a_0 + a_en ||e||`` (balanced norms) that :meth:`fused` computes term by term for the map ``m`` over
+        ``dt`` with ``p`` rows: :meth:`_rho_step` (no input) times ``||I - K H||``, plus
+        :meth:`rho_correct_norms`, plus the map's own rounding ``emap ||e||``. Each is a sum of products
+        of the same constants; :meth:`fused_sample` rounds the form up by ``(1 + 32 u)`` for the
+        regrouping."""
+        e = m.e
+        delta = abs(dt - e.dt) + _U * dt
+        q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
+        k8 = 1.0 + 8.0 * _U
+        nk = m.nIKH * k8
+        fK, fH = m.fK, m.fH
+        return (nk * ((e.eps + q) + self.g_n * e.fPhi),
+                nk * 2.0 * _U + k8 * fK * self.g_n * fH,
+                k8 * _U,
+                k8 * fK * 2.0 * _U,
+                k8 * self.g_p * fK,
+                nk * self._uf + k8 * (fK * (self.n + 2) * math.sqrt(p) * UNDERFLOW + self._uf),
+                nk * ((e.eps + q) + e.emap) + m.emap)
+
     def _wc(self, p: int, v_max: float) -> float:
         """``(sqrt(p) v_max + w)^2`` rounded up: the squared norm bound of a sample's noise
         (``p`` rows within ``v_max``) plus its stamp error (``p v_max^2`` without one)."""
@@ -490,6 +560,12 @@ class RoundingBound:
             return math.inf, noisy0
         if self.phase is not None and self.phase.j >= 0 and S is None and Sv is None:
             return self.phase.bounds()      # finite while it holds (PhaseBound.sample withdraws otherwise)
+        ev = self._ellv
+        if not amortised and S is None and Sv is None and self._ell.tr < 1e140 and (ev is None or ev.tr < 1e140):
+            exact = self._ell.bound()       # |S_ij| <= trace S: nothing overflows (no error state)
+            noisy = None if ev is None else ev.bound()
+            if math.isfinite(exact) and (noisy is None or math.isfinite(noisy)):
+                return exact, noisy
         with np.errstate(over="ignore", invalid="ignore"):
             if amortised and S is None and Sv is None:
                 exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)

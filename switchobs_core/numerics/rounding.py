@@ -90,7 +90,10 @@ gamma_{2k}`` and ``w = |M| s`` summed over each row's nonzeros
 (:func:`~switchobs_core.bounds.rigorous.open_loop_product`); a Kalman sample with a sparse
 ``e^{A dt}`` takes it in factors, the sparse ``e^{A dt}`` and a rank-``2p`` term, O(nnz n + n^2 p),
 with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the
-bound is read in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`).
+bound is read in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`). A dense map at small n
+costs mostly the calls into numpy: :meth:`ErrorEllipsoid.step_dense` takes the same step in about
+seventeen of them (the general assembly about forty), the allowance's scalar factors folded into its
+coefficients.
 """
 
 from __future__ import annotations
@@ -157,14 +160,32 @@ class ErrorEllipsoid:
         self._ii = np.arange(self.n)
         self._gsum = 1.0 + 2.0 * gamma(self.n + 2)  # a computed sum of n nonnegative terms, rounded up
         self.c_dense = gamma(2 * self.n + 2)
+        self._cz = self.c_dense + _U * (1.0 + self.c_dense)    # with the symmetrisation's rounding
         self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
         self._kept: tuple | None = None             # (map, S, its product) for one taker (:meth:`keep_product`)
+        self._unit = bool(np.all(self.d == 1.0))    # no scaling: the products by d are exact and skipped
+        self._ones = np.ones(self.n)
+        self._dr = float((self.d.max() / self.d.min()) ** 2) if self.n else 1.0   # the scaling's spread
+        #: The last shape matrix :meth:`step_dense` assembled (exactly symmetric while it is not changed
+        #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
+        #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
+        self._sym: np.ndarray | None = None
+        self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
+        self._qrows[1] = self._d2
+        self._qrows[3] = 1.0
+        # step_dense's constant factors (its docstring): W = Wv kW; R_z = kR W (v d); q's coefficients
+        kw, cz = self._gsum * (1.0 + 2.0 * _U), self._cz
+        self._kf = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
+        self._kW = kw * self._gsum * (1.0 + 4.0 * _U)
+        self._kR = cz * (1.0 + 4.0 * _U) * kw
+        self._k1 = (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * kw * self._kf
+        self._k3 = 2.0 * _U * self._kf
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
         """``>= lambda_max(D^-1 S D^-1)``: its trace (``S`` is PSD), O(n)."""
         S = self.S if S is None else S
-        return max(float(S.diagonal() @ self._id2), 0.0) * self._gsum
+        return max(float(S.diagonal().dot(self._id2)), 0.0) * self._gsum
 
     def image_bound(self, absM: np.ndarray | Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """``w >= |M| s`` (``s = sqrt(diag S)``) for ``absM = |M|``, or a function ``x -> |M| x`` (a
@@ -348,6 +369,57 @@ class ErrorEllipsoid:
         B[np.diag_indices(cols.size)] += q[cols]
         return B
 
+    def step_dense(self, M: np.ndarray, absM: tuple, rho: float, guarded: bool = False) -> None:
+        """:meth:`step` through a dense ``M`` with ``absM = (|M|, ||M||_inf)`` or ``(|M|, ||M||_inf, D |M|)``
+        (``D`` this ellipsoid's balancing) kept by the caller, in fewer array operations: the set of
+        :meth:`propagate_product` with ``Z = M S M'``, ``w = image_bound(|M|)`` and ``c = gamma_{2n+2}``
+        (step 6), rounded in another order.
+
+        ``w d`` is taken as ``(D |M|) s`` (a scaling by powers of two is exact); the scalar factors of
+        ``w`` (its sum's rounding) are folded into the coefficients of the diagonal allowance
+        ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4`` (one product of a 4 x n matrix), each coefficient
+        rounded up by ``(1 + 16 u)`` more for the fold and for that product's sum of four nonnegative
+        terms; ``(Z + Z') (alpha / 2)`` is the general path's
+        ``alpha sym Z`` (a halving is exact). The trace chooses the outer sum's ``a`` only (any
+        ``a > 0`` is valid), so it is taken from the diagonal of ``Z`` and ``w`` without forming
+        ``Z + R_z``; :attr:`tr` is the sum of the new diagonal, rounded up. Overflow: where
+        ``||M||_inf^2 trace S alpha`` and ``theta rho^2`` (times the scaling's spread) stay far below
+        the largest double no operation can overflow and no error state is set up; elsewhere the step
+        runs again under one (``guarded``: it is already). Equal to :meth:`propagate_product`'s set
+        within a few ``u`` of each entry (test_step_dense.py).
+        """
+        if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
+            with np.errstate(over="ignore", invalid="ignore"):
+                return self.step_dense(M, absM, rho, True)
+        S, B = self.S, self._qrows
+        aM, mn = absM[0], absM[1]
+        aMd = absM[2] if len(absM) > 2 else aM * self.d[:, None]
+        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf
+        s = np.abs(S.diagonal())            # = diag S (S is PSD)
+        np.sqrt(s, out=s)
+        vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
+        Z = M.dot(S).dot(M.T)
+        zd = Z.diagonal()
+        Wv = float(vd.dot(self._id2))
+        Wz = Wv * self._kW                  # W of step 6, rounded up
+        tz = max(float(zd.dot(self._id2)) + self._kR * Wz * Wv, 0.0) * self._gsum     # trace_D (Z + R_z)
+        rho2 = rho * rho
+        alpha, theta = 1.0, 1.0
+        if tz > 0.0 and rho2 > 0.0:      # (the general path's added set is rho^2 D^2: none if it underflows)
+            alpha = 1.0 + _clamp(rho / math.sqrt(tz))
+            theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
+        if not guarded and not (alpha < 1e20 and theta * rho2 * self._dr < 1e250):
+            with np.errstate(over="ignore", invalid="ignore"):
+                return self.step_dense(M, absM, rho, True)
+        np.abs(zd, out=B[2])
+        q = np.array((alpha * Wz * self._k1, theta * rho2 * self._kf, alpha * self._k3, c4)).dot(B)
+        # the n x n pass: S' = (Z + Z') (alpha / 2) + diag(q), tr its trace rounded up
+        S = Z + Z.T                 # exactly symmetric
+        S *= 0.5 * alpha
+        dS = S.ravel()[:: self.n + 1]
+        dS += q
+        self.S, self.tr, self._sym = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
+
     def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
         self.S, self.tr = self.propagate(M, rho, absM)
@@ -375,13 +447,16 @@ class ErrorEllipsoid:
         problem's solution plus the solver's own error (relative ``n u``); ``inf`` when ``S`` is
         not finite or the solver does not converge (never raises)."""
         S = self.S if S is None else S
-        S = S + S.T
-        S *= 0.5
         if not self.n:
             return 0.0
-        nS = fro_norm(S)
-        if not math.isfinite(nS):
-            return math.inf
+        if S is self._sym and S is self.S and self.tr < 1e300:
+            nS = self.tr        # exactly symmetric (step_dense) and PSD: ||S||_F <= trace S <= tr
+        else:
+            S = S + S.T
+            S *= 0.5
+            nS = fro_norm(S)
+            if not math.isfinite(nS):
+                return math.inf
         lam = math.nan
         try:
             if _eigvalsh_lo is not None:

@@ -123,10 +123,12 @@ class FusedMap(NamedTuple):
         if pb is not None and not bound.withdrawn and pb.sample(bound, self, channel):
             return
         if bound is not None and not bound.withdrawn:
+            if pb is None and bound.fused_sample(self, channel):     # a dense map, no shaped term
+                return
             bound.w = bound.stamp_error(m.H, self.x_minus, bound.prior_beta(m.e, self.dt, self.x0, self.x_minus,
                                                                               None)) if bound.tolerance else 0.0
-            norms = (bound.xn(self.x0), bound.xn(self.x_minus))
-            rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, self.x_plus, norms[1])
-            bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel, norms=norms)
+            xs, xs1, xsp = bound.fused_norms(self.x0, self.x_minus, self.x_plus)
+            rc = bound.rho_correct(m.fK, m.fH, self.x_minus, y, self.nu, None, xs1, xsp)
+            bound.fused(m.e, self.dt, m, self.x0, self.x_minus, rc, m.K, y.size, channel, norms=(xs, xs1))
             if pb is not None:
                 pb.enter(bound, self)

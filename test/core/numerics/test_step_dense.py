@@ -1,0 +1,146 @@
+"""The exact set's step through a dense map in few array operations
+(:meth:`switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`) against the general one
+(``propagate_product`` of ``M S M'`` with ``image_bound(|M|)``): the same set within a few ``u`` of
+each entry (hypothesis over sizes, units, scales and residuals), exactly symmetric, containing the
+exact product (extended precision); and an observer with a Kalman table publishes the same exact
+and noise bounds with it as with the general path (within 1e-12 relative)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import switchobs_core as so
+from switchobs_core.bounds.kalman_map import KalmanMap
+from switchobs_core.numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid
+
+LD = np.longdouble
+#: Entrywise tolerance of the fast set against the general one, relative to ``sqrt(S_ii S_jj)`` of the
+#: general set: the two round the same quantities in another order (a few ``u`` each) and fold the
+#: allowance's factors into its coefficients (``(1 + 16 u)``); 1e-13 is about 450 ``u``.
+RTOL = 1e-13
+
+
+def _pair(seed: int, n: int, units: bool, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(M, S, d)``: a map near a contraction, a PSD exactly symmetric ``S``, a balancing or None."""
+    rng = np.random.default_rng(seed)
+    M = 0.9 * np.eye(n) + 0.3 * rng.standard_normal((n, n)) / math.sqrt(n)
+    X = rng.standard_normal((n, n))
+    S = scale * (X @ X.T / n + 1e-3 * np.eye(n))
+    S = 0.5 * (S + S.T)
+    d = np.ldexp(1.0, rng.integers(-12, 12, n)) if units else None
+    return M, S, d
+
+
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 30), rho=st.sampled_from([0.0, 1e-300, 1e-16, 1e-9, 1e-3, 10.0]),
+       units=st.booleans(), scale=st.floats(1e-30, 1e30))
+def test_fast_step_is_the_general_set(seed, n, rho, units, scale):
+    M, S, d = _pair(seed, n, units, scale)
+    aM = np.abs(M)
+    absM = (aM, float(aM.sum(axis=1).max()))
+    general, fast = ErrorEllipsoid(n, 1.0, d), ErrorEllipsoid(n, 1.0, d)
+    general.S, general.tr = S.copy(), float(np.trace(S)) * (1 + 4 * n * UNIT_ROUNDOFF)
+    fast.S, fast.tr = S.copy(), general.tr
+    general.S, general.tr = general.propagate_product(M @ S @ M.T, general.image_bound(aM), general.c_dense, rho,
+                                                      absM[1])
+    fast.step_dense(M, absM, rho)
+    G, F = general.S, fast.S
+    np.testing.assert_array_equal(F, F.T)                   # exactly symmetric
+    r = np.sqrt(np.outer(np.diagonal(G), np.diagonal(G)))
+    assert np.all(np.abs(F - G) <= RTOL * r), float(np.max(np.abs(F - G) / r))
+    assert abs(fast.tr - general.tr) <= RTOL * general.tr
+    assert fast.tr >= float(np.trace(F))
+    # read without the symmetrisation, the solver's error from tr (>= ||S||_F): at least the general read,
+    # within n^2 u of it (tr <= n lambda_max)
+    general_read = math.sqrt(ErrorEllipsoid.lam_upper(fast, F.copy()))
+    assert general_read <= fast.bound() <= general_read * (1.0 + n * n * UNIT_ROUNDOFF)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 16), units=st.booleans(), scale=st.floats(1e-20, 1e20),
+       rho=st.sampled_from([0.0, 1e-12]))
+def test_fast_step_contains_the_exact_product(seed, n, units, scale, rho):
+    """``S' - M S M'`` (the product in extended precision) is positive semidefinite: checked on its
+    diagonal-scaled form, where the allowance is a few ``u`` of the scale."""
+    M, S, d = _pair(seed, n, units, scale)
+    aM = np.abs(M)
+    ell = ErrorEllipsoid(n, 1.0, d)
+    ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 4 * n * UNIT_ROUNDOFF)
+    ell.step_dense(M, (aM, float(aM.sum(axis=1).max())), rho)
+    T = M.astype(LD) @ S.astype(LD) @ M.T.astype(LD)
+    Dm = ell.S.astype(LD) - T
+    r = np.sqrt(np.abs(np.diagonal(ell.S))) + 1e-300
+    X = (Dm / np.outer(r, r).astype(LD)).astype(float)
+    X = 0.5 * (X + X.T)
+    assert float(np.linalg.eigvalsh(X)[0]) >= -1e-12
+
+
+def test_overflow_withdraws_without_a_warning():
+    """A set near the largest double: the pass under an error state, the trace infinite."""
+    n = 6
+    M = 3.0 * np.eye(n)
+    ell = ErrorEllipsoid(n, 1.0)
+    ell.S, ell.tr = 1e307 * np.eye(n), 6e307
+    with np.errstate(all="raise"):
+        ell.step_dense(M, (np.abs(M), 3.0), 1.0)
+    assert not ell.finite()
+
+
+@pytest.fixture(scope="module")
+def agents2():
+    """camera_agents(2) (n = 12, dense maps) with its 50 Hz Kalman table for residences of 0.2 s and a
+    stream of noisy samples of bodies at rest."""
+    system = so.camera_agents(2)
+    cycle = so.Cycle((0.2, 0.2))
+    table = so.kalman_table(system, [so.design_kalman(system, cycle, 50.0)])
+    sched = so.PeriodicSchedule(cycle)
+    rng = np.random.default_rng(3)
+    x = np.zeros(system.n)
+    x[0::4], x[1::4] = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)
+    stream = []
+    for k in range(120):
+        t = k / 50.0
+        ch = sched.channel_at(t)
+        stream.append((t, ch, np.asarray(system.C[ch - 1]) @ x + 1e-3 * rng.standard_normal(4)))
+    return system, cycle, table, stream
+
+
+@pytest.mark.parametrize("noise_max, fast_steps", [(None, 1), (0.0, 2), (1e-3, 0)])
+def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch, noise_max, fast_steps):
+    """Without a declared noise bound, and with the node's default ``noise.max`` 0 (a noise set with no
+    noise: both sets take the fast step), the published bounds are the general path's within 1e-12;
+    a noise set with noise keeps the general path (its shaped term)."""
+    system, cycle, table, stream = agents2
+
+    def run():
+        obs = so.SwitchedObserver(system, table, "periodic", [cycle], noise_max=noise_max)
+        out = []
+        for t, ch, y in stream:
+            obs.update(t, ch, y)
+            env = obs.envelope()
+            out.append((obs.x_hat.copy(), env.exact_bound, env.noise_bound))
+        return out
+
+    calls = []
+    real = ErrorEllipsoid.step_dense
+
+    def counted(self, *a):
+        calls.append(1)
+        return real(self, *a)
+    monkeypatch.setattr(ErrorEllipsoid, "step_dense", counted)
+    fast = run()
+    table_samples = len(stream) - 20         # the first samples run the start-up's general steps
+    assert fast_steps * table_samples <= len(calls) <= fast_steps * len(stream), len(calls)
+    monkeypatch.setattr(KalmanMap, "dense_abs", lambda self, d=None: None)      # the general path
+    general = run()
+    for (xa, ba, na), (xb, bb, nb) in zip(fast, general):
+        np.testing.assert_array_equal(xa, xb)       # the estimate is not touched
+        assert abs(ba - bb) <= 1e-12 * bb, (ba, bb)
+        assert (na is None) == (noise_max is None) == (nb is None)
+        if na is not None:
+            assert abs(na - nb) <= 1e-12 * nb, (na, nb)
