@@ -435,11 +435,12 @@ class BagOut:
             w.write(conn, int(log_ns), data)
         self.count += 1
 
-    def write_many(self, topics: list[str], log_ns: int, datas: list[bytes]) -> None:
-        """:meth:`write` of ``datas[k]`` on ``topics[k]`` in turn, all at ``log_ns`` (the same file)."""
+    def write_many(self, topics: list[str], log_ns: int, datas: list) -> None:
+        """:meth:`write` of ``datas[k]`` on ``topics[k]`` in turn, all at ``log_ns`` (the same file);
+        a ``datas[k]`` may be a tuple of pieces of one message's bytes (:meth:`.cdr.Template.pieces`)."""
         if not self._direct:
             for topic, data in zip(topics, datas):
-                self.write(topic, log_ns, data)
+                self.write(topic, log_ns, b"".join(data) if data.__class__ is tuple else data)
             return
         w = self._w
         ts = int(log_ns)

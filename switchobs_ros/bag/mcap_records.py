@@ -61,9 +61,11 @@ def _write(self: Any, connection: Any, timestamp: int, data: bytes | memoryview)
         self.close_chunk()
 
 
-def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Sequence[bytes]) -> None:
+def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Sequence[Any]) -> None:
     """:func:`_write` for each ``(connection, data)`` in turn at one ``timestamp``, the records of a chunk
-    appended with one write (the chunk closed after the record that takes it past its size, as there)."""
+    appended with one ``writelines`` (each piece copied once; the chunk closed after the record that takes
+    it past its size, as there). A ``data`` is bytes, a byte view, or a tuple of them: a message's bytes
+    in pieces (:meth:`switchobs_ros.bag.cdr.Template.pieces`), written in turn without being joined."""
     if timestamp < self.message_start_time:
         self.message_start_time = timestamp
     if timestamp > self.message_end_time:
@@ -81,19 +83,24 @@ def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Se
         if timestamp > chunk.message_end_time:
             chunk.message_end_time = timestamp
         chunk.msgs[cid].append((timestamp, pos))
-        size = data.nbytes if isinstance(data, memoryview) else len(data)
-        parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
-        parts.append(data)
+        if data.__class__ is tuple:
+            size = sum(d.nbytes if isinstance(d, memoryview) else len(d) for d in data)
+            parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
+            parts += data
+        else:
+            size = data.nbytes if isinstance(data, memoryview) else len(data)
+            parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
+            parts.append(data)
         pos += _MESSAGE.size + size
         if pos > _CHUNK_BYTES:
-            bio.write(b"".join(parts))
+            bio.writelines(parts)
             parts = []
             self.close_chunk()
             chunk = self.chunk
             bio = chunk.bio
             pos = bio.tell()
     if parts:
-        bio.write(b"".join(parts))
+        bio.writelines(parts)
 
 
 def _close_chunk(self: Any) -> None:
