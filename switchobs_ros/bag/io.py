@@ -31,7 +31,7 @@ from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
 
 from .. import qos
-from .mcap_records import fast_records
+from .mcap_records import fast_records, message_records
 from .metadata_yaml import install as fast_yaml
 
 __all__ = [
@@ -310,15 +310,17 @@ class BagIn:
             topics = {cid: ch.topic for cid, ch in summary.channels.items()}
             heap: list[tuple[int, int, BagMessage]] = []
             seq = 0
+            types = {cid: self.topics[t] for cid, t in topics.items()}
             for j, ci in enumerate(chunks):
                 fh.seek(ci.chunk_start_offset + 1 + 8)
-                chunk = Chunk.read(ReadDataStream(fh))
-                for rec in breakup_chunk(chunk, validate_crc=False):
-                    if isinstance(rec, Message):
-                        topic = topics[rec.channel_id]
-                        heapq.heappush(heap, (rec.log_time, seq, BagMessage(topic, self.topics[topic], rec.log_time,
-                                                                             bytes(rec.data))))
-                        seq += 1
+                if ci.compression == "":    # the records read straight from the chunk's bytes (mcap_records)
+                    recs = message_records(fh.read(ci.chunk_length - 1 - 8))
+                else:
+                    recs = ((r.channel_id, r.log_time, r.data) for r in
+                            breakup_chunk(Chunk.read(ReadDataStream(fh)), validate_crc=False) if isinstance(r, Message))
+                for cid, log_time, data in recs:
+                    heapq.heappush(heap, (log_time, seq, BagMessage(topics[cid], types[cid], log_time, data)))
+                    seq += 1
                 bound = later[j + 1]
                 while heap and heap[0][0] <= bound:
                     yield heapq.heappop(heap)[2]

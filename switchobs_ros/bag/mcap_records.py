@@ -26,7 +26,7 @@ from itertools import chain
 from types import MethodType
 from typing import Any
 
-__all__ = ["fast_records"]
+__all__ = ["fast_records", "message_records"]
 
 #: op (Message, 0x05), record length, channel id, sequence (0), log time, publish time (= log time).
 _MESSAGE = struct.Struct("<BQHIQQ")
@@ -116,12 +116,14 @@ def _close_chunk(self: Any) -> None:
     del data
     chunk_end = pos = chunk_start + _CHUNK.size + size
     offsets = []
+    index = []          # the message indexes, written at once
     for cid, msgs in chunk.msgs.items():
         offsets.append((cid, pos))
         k = len(msgs)
-        bio.write(_INDEX.pack(0x07, 6 + 16 * k, cid, 16 * k))
-        bio.write(struct.pack(f"<{2 * k}Q", *chain.from_iterable(msgs)))
+        index.append(_INDEX.pack(0x07, 6 + 16 * k, cid, 16 * k))
+        index.append(struct.pack(f"<{2 * k}Q", *chain.from_iterable(msgs)))
         pos += _INDEX.size + 16 * k
+    bio.write(b"".join(index))
     rec = BytesIO()
     rec.write(struct.pack("<QQQQI", chunk.message_start_time, chunk.message_end_time, chunk_start,
                           chunk_end - chunk_start, len(offsets) * 10))
@@ -129,6 +131,43 @@ def _close_chunk(self: Any) -> None:
     rec.write(struct.pack("<QIQQ", pos - chunk_end, 0, size, size))
     self.chunks.append(rec)
     self.chunk = type(chunk)(2 ** 63 - 1, 0, BytesIO(), defaultdict(list))
+
+
+#: A Chunk record's fields after its op and length: start, end, uncompressed size, CRC, the compression's length.
+_CHUNK_HEAD = struct.Struct("<QQQII")
+#: A record's op and length; a Message record's channel id, sequence, log time, publish time.
+_RECORD = struct.Struct("<BQ")
+_MESSAGE_HEAD = struct.Struct("<HIQQ")
+
+
+def message_records(chunk: bytes) -> list[tuple[int, int, bytes]]:
+    """``(channel id, log time, data)`` of each Message record in an uncompressed Chunk record's bytes
+    (``chunk``: from the start time to the end of the records, the op and length left out), in the
+    file's order; other records skipped. What ``mcap``'s ``breakup_chunk`` yields as Message records
+    (without the CRC checked, as it is read here). Raises ``ValueError`` where the lengths do not add up."""
+    _, _, _, _, clen = _CHUNK_HEAD.unpack_from(chunk, 0)
+    if clen:
+        raise ValueError("a compressed chunk")
+    at = _CHUNK_HEAD.size
+    (size,) = struct.unpack_from("<Q", chunk, at)
+    at += 8
+    end = at + size
+    if end > len(chunk):
+        raise ValueError("the chunk's records run past its end")
+    out = []
+    unpack, head, msg = _RECORD.unpack_from, _RECORD.size, _MESSAGE_HEAD.unpack_from
+    while at < end:
+        op, length = unpack(chunk, at)
+        at += head
+        if at + length > end:
+            raise ValueError("a record runs past the chunk's end")
+        if op == _OP_MESSAGE:
+            if length < 22:
+                raise ValueError("a Message record shorter than its header")
+            cid, _, log_time, _ = msg(chunk, at)
+            out.append((cid, log_time, chunk[at + 22:at + length]))
+        at += length
+    return out
 
 
 def _same_layout(storage: Any) -> bool:
