@@ -401,6 +401,7 @@ class BagOut:
         self._direct = fast_records(self._w) and self._w.compression_mode.name == "NONE"
         self._conns: dict[str, object] = {}
         self._defs: dict[str, tuple[str, str]] = {}     # per type: (message definition, RIHS01 hash)
+        self._many: dict[tuple, tuple] = {}         # write_many: topics -> (connections, their ids)
         self.count = 0
 
     def __enter__(self) -> BagOut:
@@ -446,11 +447,18 @@ class BagOut:
             return
         w = self._w
         ts = int(log_ns)
-        conns = [self._conns[t] for t in topics]
+        key = tuple(topics)
+        hit = self._many.get(key)
+        if hit is None:         # a tick's topics repeat: their connections and ids looked up once
+            if len(self._many) >= 64:
+                self._many.clear()
+            conns = [self._conns[t] for t in topics]
+            hit = self._many[key] = (conns, [c.id for c in conns])
+        conns, ids = hit
         w.storage.write_many(conns, ts, datas)
         counts = w.counts
-        for conn in conns:
-            counts[conn.id] += 1
+        for cid in ids:
+            counts[cid] += 1
         if ts < w.min_timestamp:
             w.min_timestamp = ts
         if ts > w.max_timestamp:

@@ -75,14 +75,23 @@ def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Se
     bio = chunk.bio
     pos = bio.tell()
     parts: list = []
-    for connection, data in zip(connections, datas):
-        cid = connection.id
-        stats[cid] += 1
+    if connections:         # one log time: the chunk's span once (a chunk closed below starts anew)
         if timestamp < chunk.message_start_time:
             chunk.message_start_time = timestamp
         if timestamp > chunk.message_end_time:
             chunk.message_end_time = timestamp
-        chunk.msgs[cid].append((timestamp, pos))
+    index = chunk.msgs
+    fresh = False           # a chunk closed below: its first record sets its span
+    for connection, data in zip(connections, datas):
+        cid = connection.id
+        stats[cid] += 1
+        if fresh:
+            if timestamp < chunk.message_start_time:
+                chunk.message_start_time = timestamp
+            if timestamp > chunk.message_end_time:
+                chunk.message_end_time = timestamp
+            fresh = False
+        index[cid].append((timestamp, pos))
         if data.__class__ is tuple:
             size = sum(d.nbytes if isinstance(d, memoryview) else len(d) for d in data)
             parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
@@ -98,7 +107,9 @@ def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Se
             self.close_chunk()
             chunk = self.chunk
             bio = chunk.bio
+            index = chunk.msgs
             pos = bio.tell()
+            fresh = True
     if parts:
         bio.writelines(parts)
 

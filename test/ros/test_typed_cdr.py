@@ -27,7 +27,7 @@ def _estimate_template(n: int) -> cdr.Template:
 
 
 @settings(max_examples=40, deadline=None)
-@given(n=st.integers(1, 9), stamp=st.integers(0, 2 ** 62), seed=st.integers(0, 2 ** 32 - 1),
+@given(n=st.integers(1, 9), stamp=st.integers(0, 2_000_000_000 * 10 ** 9), seed=st.integers(0, 2 ** 32 - 1),
        transposed=st.booleans())
 def test_pieces_are_the_templates_bytes(n, stamp, seed, transposed):
     """Property: the pieces joined are the bytes of ``Template.bytes`` (any stamp, any covariance, a
@@ -54,7 +54,7 @@ def test_pieces_refuse_a_wrong_length_and_a_template_without_arrays():
 
 
 @settings(max_examples=60, deadline=None)
-@given(N=st.integers(1, 5), declared=st.booleans(), stamp=st.integers(0, 2 ** 62), data=st.data())
+@given(N=st.integers(1, 5), declared=st.booleans(), stamp=st.integers(0, 2_000_000_000 * 10 ** 9), data=st.data())
 def test_bounds_bytes_read_back_as_the_writers_message(N, declared, stamp, data):
     """Property: over a sequence of envelopes (bounds valid, withdrawn (-1), any doubles), validity and
     texts (a why and a note of any length and any characters), each message read back from
