@@ -105,11 +105,16 @@ LOOSENESS = math.sqrt(1.05 * (1.0 + _DELTAS[-1]) / (1.0 - 0.05 * (1.0 + _DELTAS[
 _ETA_MIN = 5e-324
 
 
-def _minus_scaled(S: np.ndarray, c: float, Sa: np.ndarray) -> np.ndarray:
+def _minus_scaled(S: np.ndarray, c: float, Sa: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``fl(S - c S_a)`` in two passes (a copy and one BLAS ``axpy``, fused multiply-add or not:
-    either is within step 3's allowance)."""
+    either is within step 3's allowance); ``out``: a C-ordered array of ``S``'s shape to hold it (the
+    same doubles as a new one)."""
     if S.flags.c_contiguous and Sa.flags.c_contiguous:
-        D = S.copy()
+        if out is None or out.shape != S.shape or not out.flags.c_contiguous:
+            D = S.copy()
+        else:
+            D = out
+            np.copyto(D, S)
         _daxpy(Sa.ravel(), D.ravel(), a=-c)
         return D
     return S - c * Sa
@@ -230,6 +235,7 @@ class AnchoredBound:
         self._v: np.ndarray | None = None       # the latest leading direction (warm start)
         self._f_a = self._g_a = 0.0   # ||S_a||_F and max(||S_a||_inf, ||S_a||_1), rounded up
         self._age = 0
+        self._work: np.ndarray | None = None    # scratch of S's shape for D = S - c S_a and |D| (a read's own)
 
     def read(self, ell: ErrorEllipsoid) -> float:
         """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring)."""
@@ -246,10 +252,12 @@ class AnchoredBound:
                 nw = math.sqrt(float(w.dot(w)))
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
-                D = _minus_scaled(S, c, self._Sa)
+                if self._work is None or self._work.shape != S.shape:
+                    self._work = np.empty(S.shape)
+                D = _minus_scaled(S, c, self._Sa, self._work)
                 g = (fro_norm(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
-                    A = np.abs(D)
+                    A = np.abs(D, out=D)        # D is not read again
                     gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
                     g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:

@@ -77,6 +77,8 @@ DEFAULT_DT_RESOLUTION = 1e-9
 #: rounding enter the entry's ``eps`` (:meth:`ZOHCache.step`). Measured: 296 -> see bench/RESULTS.md.
 COMPOSE_GRID = 1e-4
 COMPOSE_DEGREE = 6
+#: Exponentials kept for keys of the same ``M`` (:meth:`ZOHCache._exact`).
+SHARED_KEPT = 8
 
 
 def quantize_dt(dt: float, resolution: float | None) -> float:
@@ -297,6 +299,7 @@ class ZOHCache:
         self._scale = None if scale is None else np.asarray(scale, dtype=float)
         self._consts: dict = {}
         self._lru: OrderedDict = OrderedDict()
+        self._shared: dict = {}     # (M's bytes, step, what is formed) -> (Phi, Gamma, eps, epsG): see _exact
         self.hits = 0
         self.misses = 0
 
@@ -409,17 +412,30 @@ class ZOHCache:
     def _exact(self, key: Hashable, M, L, B, C, dtq: float) -> ZOHEntry:
         """The step over ``dtq`` by ``scipy.linalg.expm`` (the joint pair for a gain key), its error
         proven per (key, step) by :func:`~switchobs_core.numerics.expm_bound.certify_zoh` in balanced
-        coordinates (``Gamma``'s too when an input is registered)."""
-        if L is None and B is None:      # open loop, no input: Phi alone (half the expm size)
-            Phi, Gamma = expm(M * dtq), None
+        coordinates (``Gamma``'s too when an input is registered).
+
+        Keys whose ``M`` has the same values (innovation-hold keys: ``M = A`` for every channel) share
+        the exponential and its certificate, computed once per step: each entry gets its own copies of
+        the same doubles (:data:`SHARED_KEPT` kept, by ``M``'s bytes)."""
+        d = self._scale_for(M.shape[0])
+        sk = (M.shape, M.tobytes(), dtq, L is None and B is None, B is not None)
+        hit = self._shared.get(sk)
+        if hit is None:
+            if L is None and B is None:      # open loop, no input: Phi alone (half the expm size)
+                Phi, Gamma = expm(M * dtq), None
+            else:
+                Phi, Gamma = zoh_pair(M, dtq)
+            cert = certify_zoh(scaled(M, d), dtq, gamma_too=B is not None and Gamma is not None)
+            eps = expm_error_bound(scaled(Phi, d), cert.E, cert.dE)
+            epsG = expm_error_bound(scaled(Gamma, d), cert.G, cert.dG) if cert.G is not None else 0.0
+            if len(self._shared) >= SHARED_KEPT:
+                self._shared.clear()
+            self._shared[sk] = (Phi.copy(), None if Gamma is None else Gamma.copy(), eps, epsG)
         else:
-            Phi, Gamma = zoh_pair(M, dtq)
+            Phi, Gamma, eps, epsG = hit
+            Phi, Gamma = Phi.copy(), None if Gamma is None else Gamma.copy()
         GL = None if L is None else Gamma @ L
         E = None if C is None or GL is None else Phi - GL @ C
-        d = self._scale_for(M.shape[0])
-        cert = certify_zoh(scaled(M, d), dtq, gamma_too=B is not None and Gamma is not None)
-        eps = expm_error_bound(scaled(Phi, d), cert.E, cert.dE)
-        epsG = expm_error_bound(scaled(Gamma, d), cert.G, cert.dG) if cert.G is not None else 0.0
         return ZOHEntry(Phi, Gamma, GL, None if B is None else Gamma @ B, dtq, E, eps, epsG=epsG, scale=d, C=C)
 
     def _scale_for(self, n: int) -> np.ndarray:
@@ -431,6 +447,7 @@ class ZOHCache:
     def clear(self) -> None:
         """Drop every cached step (registered gains are kept)."""
         self._lru.clear()
+        self._shared.clear()
         self.hits = 0
         self.misses = 0
 

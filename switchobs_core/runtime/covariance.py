@@ -225,11 +225,14 @@ class PendingSteps:
 
 
 def _added(X: np.ndarray, Q_d: np.ndarray, held_noise: np.ndarray | None) -> np.ndarray:
-    """``symmetrize((X + Q_d) + held_noise)``."""
-    P = X + Q_d
+    """``symmetrize((X + Q_d) + held_noise)``, the sums taken in ``X`` (a product made for this call,
+    overwritten): the same elementwise operations as new arrays, hence the same doubles."""
+    X += Q_d
     if held_noise is not None:
-        P += held_noise
-    return symmetrize(P)
+        X += held_noise
+    P = X + X.T
+    P *= 0.5
+    return P
 
 
 class HeldNoise:

@@ -151,6 +151,31 @@ class Template:
                 self._arr.pack_into(b, self.array_off, *array)
         return bytes(b)
 
+    def pieces(self, stamp_ns: int | None = None, arrays: Sequence[np.ndarray] = ()) -> tuple:
+        """The bytes of :meth:`bytes` ``(stamp_ns, arrays=arrays)`` as pieces to be written in turn, the
+        last array not copied: ``(before, its doubles, after)`` (``after`` omitted when empty), the
+        middle a byte view of that array (float64, C order) valid while it is unchanged. Only for a
+        template whose last array is the last of them in the layout."""
+        if not self.arrays or len(arrays) != len(self.arrays):
+            raise ValueError(f"template: {len(arrays)} arrays for {len(self.arrays)}")
+        off, n = self.arrays[-1]
+        if any(o > off for o, _ in self.arrays[:-1]):
+            raise ValueError("template: the last array is not the last in the layout")
+        last = np.ascontiguousarray(arrays[-1], dtype="<f8").reshape(-1)
+        if last.size != n:
+            raise ValueError(f"template: {last.size} values for an array of {n}")
+        b = self.base
+        for (o, k), values in zip(self.arrays[:-1], arrays[:-1]):
+            a = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
+            if a.size != k:
+                raise ValueError(f"template: {a.size} values for an array of {k}")
+            b[o:o + 8 * k] = a.tobytes()
+        if stamp_ns is not None:
+            _STAMP.pack_into(b, self.stamp_off, *divmod(int(stamp_ns), 1_000_000_000))
+        view, mv = memoryview(last).cast("B"), memoryview(b)
+        end = off + 8 * n
+        return (bytes(mv[:off]), view) if end == len(b) else (bytes(mv[:off]), view, bytes(mv[end:]))
+
 
 def _unique(blob: bytes, pattern: bytes, what: str) -> int:
     i = blob.find(pattern)

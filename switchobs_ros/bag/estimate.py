@@ -56,6 +56,7 @@ from .cdr import Template, header_stamp
 from .io import CHANNEL_TYPES, BagError, BagIn, BagOut, channel_message, deserialize, type_name
 from .order import Ordering, evidence, order_messages
 from .order_stream import WINDOW_NS, BeyondWindow, StreamCounts, stream_order
+from .typed_cdr import ErrorBoundsBytes
 
 __all__ = ["OUTPUTS", "EstimateResult", "check_estimable", "estimate", "estimator_params", "nothing_estimated"]
 
@@ -177,7 +178,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
     t_se_tmpl = {has_P: Template(StateEstimateWriter(state_labels, cfg["world_frame"]).msg(
         np.zeros(n), 0, np.zeros((n, n)) if has_P else None), stamp=("header", "stamp"),
         arrays=[("x",), ("covariance",)] if has_P else [("x",)]) for has_P in (True, False)}
-    w_eb = ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None)
+    w_eb = ErrorBoundsBytes(ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None))
     out_topics = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}     # never copied from the input
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
         if pl.publish_covariance else None
@@ -245,10 +246,11 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                     datas += b_odom.msgs(e.x_hat, e.stamp_ns, e.P)
                 if due("typed", k):
                     topics += (t_se, t_eb)
-                    datas.append(t_se_tmpl[e.P is not None].bytes(
-                        e.stamp_ns, arrays=(e.x_hat,) if e.P is None else (e.x_hat, e.P)))
-                    datas.append(serialize_message(w_eb.msg(e.envelope, e.stamp_ns, pl.bound_valid,
-                                                            pl.bound_invalid_why, pl.bound_note)))
+                    # with P: its doubles written from the array itself (the chunk copies them once)
+                    datas.append(t_se_tmpl[False].bytes(e.stamp_ns, arrays=(e.x_hat,)) if e.P is None
+                                 else t_se_tmpl[True].pieces(e.stamp_ns, arrays=(e.x_hat, e.P)))
+                    datas.append(w_eb.bytes(e.envelope, e.stamp_ns, pl.bound_valid, pl.bound_invalid_why,
+                                            pl.bound_note))
                 writer.write_many(topics, log_ns, datas)
 
         sources = {"/" + s.topic: s for s in pl.sources}

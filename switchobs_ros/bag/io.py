@@ -31,7 +31,7 @@ from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
 
 from .. import qos
-from .mcap_records import fast_records
+from .mcap_records import fast_records, message_records
 from .metadata_yaml import install as fast_yaml
 
 __all__ = [
@@ -310,15 +310,17 @@ class BagIn:
             topics = {cid: ch.topic for cid, ch in summary.channels.items()}
             heap: list[tuple[int, int, BagMessage]] = []
             seq = 0
+            types = {cid: self.topics[t] for cid, t in topics.items()}
             for j, ci in enumerate(chunks):
                 fh.seek(ci.chunk_start_offset + 1 + 8)
-                chunk = Chunk.read(ReadDataStream(fh))
-                for rec in breakup_chunk(chunk, validate_crc=False):
-                    if isinstance(rec, Message):
-                        topic = topics[rec.channel_id]
-                        heapq.heappush(heap, (rec.log_time, seq, BagMessage(topic, self.topics[topic], rec.log_time,
-                                                                             bytes(rec.data))))
-                        seq += 1
+                if ci.compression == "":    # the records read straight from the chunk's bytes (mcap_records)
+                    recs = message_records(fh.read(ci.chunk_length - 1 - 8))
+                else:
+                    recs = ((r.channel_id, r.log_time, r.data) for r in
+                            breakup_chunk(Chunk.read(ReadDataStream(fh)), validate_crc=False) if isinstance(r, Message))
+                for cid, log_time, data in recs:
+                    heapq.heappush(heap, (log_time, seq, BagMessage(topics[cid], types[cid], log_time, data)))
+                    seq += 1
                 bound = later[j + 1]
                 while heap and heap[0][0] <= bound:
                     yield heapq.heappop(heap)[2]
@@ -399,6 +401,7 @@ class BagOut:
         self._direct = fast_records(self._w) and self._w.compression_mode.name == "NONE"
         self._conns: dict[str, object] = {}
         self._defs: dict[str, tuple[str, str]] = {}     # per type: (message definition, RIHS01 hash)
+        self._many: dict[tuple, tuple] = {}         # write_many: topics -> (connections, their ids)
         self.count = 0
 
     def __enter__(self) -> BagOut:
@@ -435,19 +438,27 @@ class BagOut:
             w.write(conn, int(log_ns), data)
         self.count += 1
 
-    def write_many(self, topics: list[str], log_ns: int, datas: list[bytes]) -> None:
-        """:meth:`write` of ``datas[k]`` on ``topics[k]`` in turn, all at ``log_ns`` (the same file)."""
+    def write_many(self, topics: list[str], log_ns: int, datas: list) -> None:
+        """:meth:`write` of ``datas[k]`` on ``topics[k]`` in turn, all at ``log_ns`` (the same file);
+        a ``datas[k]`` may be a tuple of pieces of one message's bytes (:meth:`.cdr.Template.pieces`)."""
         if not self._direct:
             for topic, data in zip(topics, datas):
-                self.write(topic, log_ns, data)
+                self.write(topic, log_ns, b"".join(data) if data.__class__ is tuple else data)
             return
         w = self._w
         ts = int(log_ns)
-        conns = [self._conns[t] for t in topics]
+        key = tuple(topics)
+        hit = self._many.get(key)
+        if hit is None:         # a tick's topics repeat: their connections and ids looked up once
+            if len(self._many) >= 64:
+                self._many.clear()
+            conns = [self._conns[t] for t in topics]
+            hit = self._many[key] = (conns, [c.id for c in conns])
+        conns, ids = hit
         w.storage.write_many(conns, ts, datas)
         counts = w.counts
-        for conn in conns:
-            counts[conn.id] += 1
+        for cid in ids:
+            counts[cid] += 1
         if ts < w.min_timestamp:
             w.min_timestamp = ts
         if ts > w.max_timestamp:

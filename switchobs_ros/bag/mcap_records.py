@@ -26,7 +26,7 @@ from itertools import chain
 from types import MethodType
 from typing import Any
 
-__all__ = ["fast_records"]
+__all__ = ["fast_records", "message_records"]
 
 #: op (Message, 0x05), record length, channel id, sequence (0), log time, publish time (= log time).
 _MESSAGE = struct.Struct("<BQHIQQ")
@@ -61,9 +61,11 @@ def _write(self: Any, connection: Any, timestamp: int, data: bytes | memoryview)
         self.close_chunk()
 
 
-def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Sequence[bytes]) -> None:
+def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Sequence[Any]) -> None:
     """:func:`_write` for each ``(connection, data)`` in turn at one ``timestamp``, the records of a chunk
-    appended with one write (the chunk closed after the record that takes it past its size, as there)."""
+    appended with one ``writelines`` (each piece copied once; the chunk closed after the record that takes
+    it past its size, as there). A ``data`` is bytes, a byte view, or a tuple of them: a message's bytes
+    in pieces (:meth:`switchobs_ros.bag.cdr.Template.pieces`), written in turn without being joined."""
     if timestamp < self.message_start_time:
         self.message_start_time = timestamp
     if timestamp > self.message_end_time:
@@ -73,27 +75,43 @@ def _write_many(self: Any, connections: Sequence[Any], timestamp: int, datas: Se
     bio = chunk.bio
     pos = bio.tell()
     parts: list = []
-    for connection, data in zip(connections, datas):
-        cid = connection.id
-        stats[cid] += 1
+    if connections:         # one log time: the chunk's span once (a chunk closed below starts anew)
         if timestamp < chunk.message_start_time:
             chunk.message_start_time = timestamp
         if timestamp > chunk.message_end_time:
             chunk.message_end_time = timestamp
-        chunk.msgs[cid].append((timestamp, pos))
-        size = data.nbytes if isinstance(data, memoryview) else len(data)
-        parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
-        parts.append(data)
+    index = chunk.msgs
+    fresh = False           # a chunk closed below: its first record sets its span
+    for connection, data in zip(connections, datas):
+        cid = connection.id
+        stats[cid] += 1
+        if fresh:
+            if timestamp < chunk.message_start_time:
+                chunk.message_start_time = timestamp
+            if timestamp > chunk.message_end_time:
+                chunk.message_end_time = timestamp
+            fresh = False
+        index[cid].append((timestamp, pos))
+        if data.__class__ is tuple:
+            size = sum(d.nbytes if isinstance(d, memoryview) else len(d) for d in data)
+            parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
+            parts += data
+        else:
+            size = data.nbytes if isinstance(data, memoryview) else len(data)
+            parts.append(_MESSAGE.pack(_OP_MESSAGE, 22 + size, cid, 0, timestamp, timestamp))
+            parts.append(data)
         pos += _MESSAGE.size + size
         if pos > _CHUNK_BYTES:
-            bio.write(b"".join(parts))
+            bio.writelines(parts)
             parts = []
             self.close_chunk()
             chunk = self.chunk
             bio = chunk.bio
+            index = chunk.msgs
             pos = bio.tell()
+            fresh = True
     if parts:
-        bio.write(b"".join(parts))
+        bio.writelines(parts)
 
 
 def _close_chunk(self: Any) -> None:
@@ -109,12 +127,14 @@ def _close_chunk(self: Any) -> None:
     del data
     chunk_end = pos = chunk_start + _CHUNK.size + size
     offsets = []
+    index = []          # the message indexes, written at once
     for cid, msgs in chunk.msgs.items():
         offsets.append((cid, pos))
         k = len(msgs)
-        bio.write(_INDEX.pack(0x07, 6 + 16 * k, cid, 16 * k))
-        bio.write(struct.pack(f"<{2 * k}Q", *chain.from_iterable(msgs)))
+        index.append(_INDEX.pack(0x07, 6 + 16 * k, cid, 16 * k))
+        index.append(struct.pack(f"<{2 * k}Q", *chain.from_iterable(msgs)))
         pos += _INDEX.size + 16 * k
+    bio.write(b"".join(index))
     rec = BytesIO()
     rec.write(struct.pack("<QQQQI", chunk.message_start_time, chunk.message_end_time, chunk_start,
                           chunk_end - chunk_start, len(offsets) * 10))
@@ -122,6 +142,43 @@ def _close_chunk(self: Any) -> None:
     rec.write(struct.pack("<QIQQ", pos - chunk_end, 0, size, size))
     self.chunks.append(rec)
     self.chunk = type(chunk)(2 ** 63 - 1, 0, BytesIO(), defaultdict(list))
+
+
+#: A Chunk record's fields after its op and length: start, end, uncompressed size, CRC, the compression's length.
+_CHUNK_HEAD = struct.Struct("<QQQII")
+#: A record's op and length; a Message record's channel id, sequence, log time, publish time.
+_RECORD = struct.Struct("<BQ")
+_MESSAGE_HEAD = struct.Struct("<HIQQ")
+
+
+def message_records(chunk: bytes) -> list[tuple[int, int, bytes]]:
+    """``(channel id, log time, data)`` of each Message record in an uncompressed Chunk record's bytes
+    (``chunk``: from the start time to the end of the records, the op and length left out), in the
+    file's order; other records skipped. What ``mcap``'s ``breakup_chunk`` yields as Message records
+    (without the CRC checked, as it is read here). Raises ``ValueError`` where the lengths do not add up."""
+    _, _, _, _, clen = _CHUNK_HEAD.unpack_from(chunk, 0)
+    if clen:
+        raise ValueError("a compressed chunk")
+    at = _CHUNK_HEAD.size
+    (size,) = struct.unpack_from("<Q", chunk, at)
+    at += 8
+    end = at + size
+    if end > len(chunk):
+        raise ValueError("the chunk's records run past its end")
+    out = []
+    unpack, head, msg = _RECORD.unpack_from, _RECORD.size, _MESSAGE_HEAD.unpack_from
+    while at < end:
+        op, length = unpack(chunk, at)
+        at += head
+        if at + length > end:
+            raise ValueError("a record runs past the chunk's end")
+        if op == _OP_MESSAGE:
+            if length < 22:
+                raise ValueError("a Message record shorter than its header")
+            cid, _, log_time, _ = msg(chunk, at)
+            out.append((cid, log_time, chunk[at + 22:at + length]))
+        at += length
+    return out
 
 
 def _same_layout(storage: Any) -> bool:

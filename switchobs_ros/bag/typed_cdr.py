@@ -1,0 +1,53 @@
+"""The typed bounds message (``switchobs_msgs/ErrorBounds``) as bytes without a message serialised per estimate.
+
+:class:`ErrorBoundsBytes` takes the message :class:`msg_bridge.typed.ErrorBoundsWriter` fills (its rules
+for the validity flags and the text stay there) and writes its bytes from a :class:`~switchobs_ros.bag.cdr.Template`
+serialised once per validity flags and text (the only fields whose bytes are not a fixed layout:
+``why_invalid`` is a string, and the flags change the text), patching the stamp, the three bounds and the
+paper's envelope. The message it reads back is the writer's (``test/ros/test_bag_stream.py``).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+
+import numpy as np
+from rclpy.serialization import serialize_message
+
+from msg_bridge.typed import ErrorBoundsWriter
+
+from .cdr import Template
+
+__all__ = ["ErrorBoundsBytes"]
+
+
+class ErrorBoundsBytes:
+    """``b.bytes(envelope_values, stamp_ns, valid, why, note)``: the serialised message of
+    ``writer.msg(...)`` with the same arguments (:class:`~msg_bridge.typed.ErrorBoundsWriter`)."""
+
+    #: Templates kept (one per validity flags and text; a re-certification's note is a new text).
+    KEEP = 64
+
+    def __init__(self, writer: ErrorBoundsWriter) -> None:
+        self._w = writer
+        self._kept: dict[tuple, Template | None] = {}
+
+    def bytes(self, envelope_values: Sequence[float], stamp_ns: int, valid: bool, why: str = "",
+              note: str = "") -> bytes:
+        m = self._w.msg(envelope_values, stamp_ns, valid, why, note)
+        key = (m.exact_bound_valid, m.noise_bound_valid, m.why_invalid)
+        t = self._kept.get(key, False)
+        if t is False:
+            if len(self._kept) >= self.KEEP:
+                self._kept.clear()
+            try:
+                t = Template(copy.deepcopy(m), stamp=("header", "stamp"),
+                             doubles=[("exact_bound",), ("noise_bound",), ("paper_bound",)], array=("paper_envelope",))
+            except ValueError:      # no envelope (N = 0): serialised per message
+                t = None
+            self._kept[key] = t
+        if t is None:
+            return serialize_message(m)
+        return t.bytes(stamp_ns, doubles=(m.exact_bound, m.noise_bound, m.paper_bound),
+                       array=np.frombuffer(m.paper_envelope, dtype=float))
