@@ -107,15 +107,19 @@ class Screening:
     def admit(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
         """The measurement to use at ``t`` (``m``, or another channel's reading of the sample), or
         None when the consistency test or the chi-square gate rejects the sample."""
+        x_p = None      # the held prediction at t, shared by the innovation and bias tests
         if self.testing:
-            m = self._consistent(pend, t, m)
+            with np.errstate(all="ignore"):
+                prior = self.observer.prior(t, lazy=True)
+            x_p = prior[0]
+            m = self._consistent(pend, t, m, prior)
             if m is None:
                 self.counters.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
                 return m
         elif self.chi2_alpha > 0 and not self._gate(pend, t, m):
             self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
             return None
-        why = self.recovery.before(t, m.channel, m.rows, m.y)
+        why = self.recovery.before(t, m.channel, m.rows, m.y, x_p)
         if why:         # the bias test: the sample is used, the bounds no longer hold
             ctr = self.counters
             ctr.bias_alarms += 1
@@ -145,12 +149,10 @@ class Screening:
     def _test(self, prior: tuple, m: Measurement) -> Consistency:
         return self.innovation.check(prior, m.channel, m.rows, m.y)
 
-    def _consistent(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
-        """``m`` when it passes the innovation test; the reading of the one other channel that
-        passes when exactly one does (only a sample whose channel came from the channel topic can
-        have another); else None: rejected, and the bounds withdrawn."""
-        with np.errstate(all="ignore"):
-            prior = self.observer.prior(t, lazy=True)
+    def _consistent(self, pend: Pending, t: float, m: Measurement, prior: tuple) -> Measurement | None:
+        """``m`` when it passes the innovation test against ``prior`` (the observer's at ``t``); the
+        reading of the one other channel that passes when exactly one does (only a sample whose channel
+        came from the channel topic can have another); else None: rejected, and the bounds withdrawn."""
         first = self._test(prior, m)
         if first.ok:
             return m

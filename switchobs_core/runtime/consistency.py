@@ -46,9 +46,9 @@ import numpy as np
 
 from ..numerics.rounding import UNIT_ROUNDOFF, PendingSet, assembled, gamma, largest_eigenvalue
 
-__all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "check_innovation", "consistent_channels",
-           "innovation_allowance", "likely_causes", "output_rows", "projected_bound", "rows_product", "seen_columns",
-           "spectral_norm", "squared_norm"]
+__all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "block_product", "check_innovation", "consistent_channels",
+           "innovation_allowance", "is_unit", "likely_causes", "output_rows", "projected_bound", "rows_product",
+           "seen_columns", "spectral_norm", "squared_norm"]
 
 #: Relative slack on the allowance, for the rounding of the allowance's own arithmetic (a few
 #: products and sums of non-negative numbers: far below 1e-12 relative).
@@ -102,6 +102,21 @@ def seen_columns(C_rows: np.ndarray) -> np.ndarray | None:
     return c if 4 * c.size <= C_rows.shape[1] else None
 
 
+def is_unit(Cc: np.ndarray) -> bool:
+    """Whether ``Cc`` (``C_r`` on its :func:`seen_columns`) is the identity: rows that each select one
+    seen state, in the columns' order (a camera's position rows)."""
+    return Cc.ndim == 2 and Cc.shape[0] == Cc.shape[1] and bool(np.array_equal(Cc, np.eye(Cc.shape[0])))
+
+
+def block_product(Cc: np.ndarray, B: np.ndarray, unit: bool = False) -> np.ndarray:
+    """``Cc B Cc'`` for a block ``B`` on the seen columns; ``unit`` (:func:`is_unit` of ``Cc``) and ``B``
+    finite: ``B`` itself (not a copy: read-only), the numbers of the product (each of its entries is
+    one entry of ``B`` times 1 plus exact zeros; a zero's sign aside), without the two products."""
+    if unit and np.isfinite(B).all():
+        return B
+    return Cc @ B @ Cc.T
+
+
 def rows_product(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = None) -> np.ndarray:
     """``C_r S C_r'``, over the columns ``cols`` of :func:`seen_columns` only when given: the
     terms of the other columns are exact zeros, so the sums are shorter (and for rows that each
@@ -113,7 +128,7 @@ def rows_product(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = No
 
 
 def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = None,
-                    fC2: float | None = None) -> float:
+                    fC2: float | None = None, unit: bool = False) -> float:
     """A rigorous bound on ``||C_r e||`` over the ellipsoid ``e in {S^(1/2) u : ||u|| <= 1}``:
     ``sqrt(lambda_max(C_r S C_r'))`` (``p x p``, cheap), inflated for the rounding of the
     product (``gamma(2n + 2) ||C_r||_F^2 trace S``, as :mod:`switchobs_core.numerics.rounding` step 6) and
@@ -122,13 +137,13 @@ def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None =
     of ``C_r`` (the product over them, :func:`rows_product`; the allowance is the dense one's);
     ``fC2``: :func:`squared_norm` of ``C_r`` when the caller keeps it. ``S`` may be a
     :class:`~switchobs_core.numerics.rounding.PendingSet`: its block and trace are read without
-    assembling it (the same doubles)."""
+    assembling it (the same doubles). ``unit``: :func:`is_unit` of ``C_r`` on ``cols`` (the block is
+    then read as it is, :func:`block_product`)."""
     p, n = C_rows.shape
     if p == 0:
         return 0.0
     if isinstance(S, PendingSet) and cols is not None:
-        Cc = C_rows[:, cols]
-        P, tr = Cc @ S.block(cols) @ Cc.T, S.trace
+        P, tr = block_product(C_rows[:, cols], S.block(cols), unit), S.trace
     else:
         S = assembled(S)
         P, tr = rows_product(C_rows, S, cols), float(np.trace(S))
@@ -147,7 +162,7 @@ def squared_norm(C_rows: np.ndarray) -> float:
 
 def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: float, x_hat: np.ndarray,
                          y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
-                         fC2: float | None = None) -> float:
+                         fC2: float | None = None, unit: bool = False) -> float:
     """The largest computed innovation ``||y - C_r x_hat||`` a model that holds allows.
 
     Parameters
@@ -167,6 +182,8 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
         :func:`seen_columns` of ``C_rows`` when the caller keeps them (:func:`projected_bound`).
     fC2 : float, optional
         :func:`squared_norm` of ``C_rows`` when the caller keeps it.
+    unit : bool
+        :func:`is_unit` of ``C_rows`` on ``cols`` when the caller keeps it (:func:`projected_bound`).
     """
     p, n = C_rows.shape
     fC2 = squared_norm(C_rows) if fC2 is None else fC2
@@ -174,18 +191,20 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
     n2 = spectral_norm(C_rows) if norm_C is None else norm_C
     xn = math.sqrt(float(x_hat @ x_hat))
     yn = math.sqrt(float(y @ y))
-    seen = projected_bound(C_rows, bound, cols, fC2) if isinstance(bound, (np.ndarray, PendingSet)) else n2 * bound
+    ellipsoid = isinstance(bound, (np.ndarray, PendingSet))
+    seen = projected_bound(C_rows, bound, cols, fC2, unit) if ellipsoid else n2 * bound
     allowance = seen + math.sqrt(p) * v_max + gamma(n + 1) * (fC * xn + yn)
     return allowance * (1.0 + _SLACK)
 
 
 def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: float, x_hat: np.ndarray,
                      y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
-                     fC2: float | None = None) -> Consistency:
-    """The test for one sample ``y`` of ``channel`` (rows ``C_rows``) against the prior ``x_hat``."""
+                     fC2: float | None = None, unit: bool = False) -> Consistency:
+    """The test for one sample ``y`` of ``channel`` (rows ``C_rows``) against the prior ``x_hat``
+    (the optional arguments: :func:`innovation_allowance`'s)."""
     nu = y - C_rows @ x_hat
     inn = math.sqrt(float(nu @ nu))
-    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2)
+    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2, unit)
     if isinstance(bound, (np.ndarray, PendingSet)):     # the largest axis, for the report of a failure only
         S = assembled(bound) if inn > allow else None
         b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (S + S.T))[-1]), 0.0)) if S is not None else math.nan
@@ -246,14 +265,15 @@ class InnovationTest:
         <switchobs_core.runtime.observer.SwitchedObserver>`); None: noise-free samples, tested against
         the exact bound.
 
-    ``C_r``, its :func:`spectral_norm`, its :func:`seen_columns` and its :func:`squared_norm` are kept
-    per ``(channel, rows)``.
+    ``C_r``, its :func:`spectral_norm`, its :func:`seen_columns`, its :func:`squared_norm` and
+    :func:`is_unit` on the seen columns are kept per ``(channel, rows)``.
     """
 
     def __init__(self, C: Sequence[np.ndarray], noise_max: Sequence[float] | None = None):
         self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
         self.noise_max = None if noise_max is None else tuple(noise_max)
-        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float, np.ndarray | None, float]] = {}
+        self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float, np.ndarray | None, float,
+                                                                   bool]] = {}
 
     def check(self, prior: tuple, channel: int, rows: Sequence[int] | None, y: np.ndarray) -> Consistency:
         """The test of the sample ``y`` of ``channel`` (``rows`` of its output, 0-based; None:
@@ -262,10 +282,13 @@ class InnovationTest:
         the exact bound's set for noise-free samples, the noise bound's with ``noise_max``."""
         x_hat, exact, noise = prior
         key = (channel, None if rows is None else tuple(rows))
-        if key not in self._rows:
+        hit = self._rows.get(key)
+        if hit is None:
             C_r = output_rows(self.C[channel - 1], rows)
-            self._rows[key] = (C_r, spectral_norm(C_r), seen_columns(C_r), squared_norm(C_r))
-        C_r, norm_C, cols, fC2 = self._rows[key]
+            cols = seen_columns(C_r)
+            hit = self._rows[key] = (C_r, spectral_norm(C_r), cols, squared_norm(C_r),
+                                     cols is not None and is_unit(C_r[:, cols]))
+        C_r, norm_C, cols, fC2, unit = hit
         if self.noise_max is None:
-            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols, fC2)
-        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols, fC2)
+            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols, fC2, unit)
+        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols, fC2, unit)

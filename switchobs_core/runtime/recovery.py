@@ -51,7 +51,7 @@ from scipy.linalg import expm
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.rounding import gamma
 from .bias import K_REF, BiasDetector, H
-from .consistency import output_rows, seen_columns
+from .consistency import block_product, is_unit, output_rows, seen_columns
 from .recertify import Certificate, DataWindow
 
 __all__ = ["Recovery", "body_states", "cycle_span"]
@@ -169,11 +169,14 @@ class Recovery:
         self._valid = True
         self._run = [0] * self.N
         self._raw: list[deque] = [deque(maxlen=5) for _ in range(self.N)]
-        self._rows: dict = {}       # (channel, rows) -> the bias test's C_r, its seen_columns, C_r on them, noise, R
+        #: (channel, rows) -> the bias test's C_r, its seen_columns, C_r on them, noise, R, is_unit of C_r on them
+        self._rows: dict = {}
 
     # ------------------------------------------------------------------ the bias test
-    def before(self, t: float, channel: int, rows: Any, y: np.ndarray) -> str:
-        """The CUSUM on the sample's normalised innovations (module docstring); "" or the alarm."""
+    def before(self, t: float, channel: int, rows: Any, y: np.ndarray, x_p: np.ndarray | None = None) -> str:
+        """The CUSUM on the sample's normalised innovations (module docstring); "" or the alarm. ``x_p``:
+        the observer's held prediction at ``t`` (``predict(t, hold=True)``, as its ``prior`` gives it) when
+        the caller has it, else it is asked for."""
         if self.bias is None:
             return ""
         obs = self.obs
@@ -183,14 +186,15 @@ class Recovery:
         if hit is None or hit[3] is not noise:
             C_r = output_rows(self.C[channel - 1], rows)
             cols = seen_columns(C_r)
-            hit = self._rows[key] = (C_r, cols, C_r if cols is None else C_r[:, cols], noise,
-                                     None if noise is None else noise.R(channel, rows))
-        C_r, cols, Cc, _, R = hit
+            Cc = C_r if cols is None else C_r[:, cols]
+            hit = self._rows[key] = (C_r, cols, Cc, noise, None if noise is None else noise.R(channel, rows),
+                                     cols is not None and is_unit(Cc))
+        C_r, cols, Cc, _, R, unit = hit
         with np.errstate(all="ignore"):
-            nu = np.asarray(y, dtype=float) - C_r @ obs.predict(t, hold=True)
+            nu = np.asarray(y, dtype=float) - C_r @ (obs.predict(t, hold=True) if x_p is None else x_p)
             P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
             if P is not None and noise is not None:
-                S = Cc @ P @ Cc.T + R
+                S = block_product(Cc, P, unit) + R
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
                 if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
                     sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread

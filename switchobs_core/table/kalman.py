@@ -42,7 +42,7 @@ from ..numerics.kalman_step import gain, joseph
 from .container import packed_size, unpack_symmetric
 from .rows import LazyRow
 
-__all__ = ["SamplePattern", "KalmanPhase", "Phase", "KalmanDesign"]
+__all__ = ["SamplePattern", "KalmanPhase", "Phase", "KalmanDesign", "packed_block_index"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,27 @@ class SamplePattern:
         return self.repeat * sum(c.tau for c in self.cycles)
 
 
+#: Index arrays of :func:`packed_block_index`, by ``(n, cols)`` (a few per channel; cleared when full).
+_BLOCK_INDEX: dict[tuple, np.ndarray] = {}
+_BLOCK_INDEX_MAX = 256
+
+
+def packed_block_index(n: int, cols: np.ndarray) -> np.ndarray:
+    """The positions of ``P[np.ix_(cols, cols)]`` in the packed upper triangle of an n x n symmetric
+    ``P`` (row-major): entry ``(i, j)`` of the block at ``min * n - min (min - 1) / 2 + (max - min)``.
+    Kept per ``(n, cols)`` (read-only): every phase of a table reads the same few blocks."""
+    key = (n, cols.dtype.str, cols.tobytes())
+    idx = _BLOCK_INDEX.get(key)
+    if idx is None:
+        i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)
+        idx = i * n - i * (i - 1) // 2 + (j - i)
+        idx.flags.writeable = False
+        if len(_BLOCK_INDEX) >= _BLOCK_INDEX_MAX:
+            _BLOCK_INDEX.clear()
+        _BLOCK_INDEX[key] = idx
+    return idx
+
+
 @dataclass(frozen=True, eq=False)
 class KalmanPhase:
     """One stored sample: ``channel`` (1-based), ``dt`` since the previous sample, prior ``P^-``, gain
@@ -113,9 +134,7 @@ class KalmanPhase:
         P = self._read()
         if P.ndim == 2:
             return P[np.ix_(cols, cols)]
-        n = self.K.shape[0]
-        i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)
-        return P[i * n - i * (i - 1) // 2 + (j - i)]         # (i, j), i <= j, in the row-major upper triangle
+        return P[packed_block_index(self.K.shape[0], cols)]
 
     def P_diagonal(self) -> np.ndarray:
         """``np.diagonal(P_prior)`` (the same doubles, a new array), from the packed row when the

@@ -183,3 +183,25 @@ def test_a_noise_free_window_with_micrometre_noise_is_refused(paper, ktable):
     """noise_max 0: samples 1e-6 off the model (noise far above the rounding level) never certify."""
     first, _, bound, rec = _noise_free_run(paper, ktable, bias_at=0.0)
     assert first is None and math.isinf(bound) and rec.window.refused > 0
+
+
+def test_the_bias_test_on_the_prior_handed_over_is_the_one_it_asks_for(paper, ktable):
+    """``before(..., x_p)`` with the prediction of ``prior(t)`` (as the screening hands it over) keeps the
+    CUSUM's statistics and alarms of ``before`` asking ``predict(t, hold=True)`` itself, bit for bit,
+    through a bias that alarms."""
+    obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=X0 + 0.05, e0=5.0, noise_max=VMAX)
+    asks, handed = Recovery(obs), Recovery(obs)
+    rng = np.random.default_rng(3)
+    alarms = 0
+    for k, t, c, x in _paper_samples(paper, 6.0):
+        y = paper.C[c - 1] @ x + rng.uniform(-VMAX, VMAX, paper.C[c - 1].shape[0]) + (0.05 if k > 150 else 0.0)
+        with np.errstate(all="ignore"):
+            x_p = obs.prior(t, lazy=True)[0]
+        why = asks.before(t, c, None, y)
+        assert handed.before(t, c, None, y, x_p) == why
+        alarms += bool(why)
+        for g in ("g_pos", "g_neg"):
+            for a, b in zip(getattr(asks.bias, g), getattr(handed.bias, g), strict=True):
+                np.testing.assert_array_equal(a, b, strict=True)
+        obs.update(t, c, y)
+    assert alarms > 0       # the bias was seen: the alarms' path ran in both
