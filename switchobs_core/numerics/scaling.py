@@ -65,8 +65,18 @@ def balance(A: np.ndarray, C: np.ndarray | None = None) -> np.ndarray:
         if np.all(np.isfinite(C)):
             x = _pinned(np.abs(A), np.abs(C), x)
     e = np.clip(np.round(x / math.log(2.0)), -MAX_LOG2_SCALE, MAX_LOG2_SCALE)
-    e -= np.round(np.median(e))         # the overall unit is the user's: the median state keeps it
+    e -= np.round(_median(e))           # the overall unit is the user's: the median state keeps it
     return np.ldexp(1.0, e.astype(int))
+
+
+def _median(e: np.ndarray) -> float:
+    """``np.median(e)`` of a 1-d array (the middle value, or the mean of the two middle ones; NaN if any is
+    NaN), without numpy's check for a masked array (which imports ``numpy.ma``)."""
+    s = np.sort(e)
+    if s.size == 0 or np.isnan(s[-1]):
+        return float("nan")
+    k = s.size // 2
+    return float(s[k]) if s.size % 2 else float((s[k - 1] + s[k]) / 2)
 
 
 def _gebal_scaling(A: np.ndarray) -> np.ndarray:

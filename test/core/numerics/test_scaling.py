@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import matrix_balance
 
-from switchobs_core.numerics.scaling import _gebal_scaling, balance
+from switchobs_core.numerics.scaling import _gebal_scaling, _median, balance
 
 
 @pytest.mark.filterwarnings("ignore:invalid value encountered in cast")    # scipy's permutation of huge scalings
@@ -24,6 +24,15 @@ def test_gebal_scaling_is_matrix_balance_scaling(n, seed, decades, density, fort
         A = np.asfortranarray(A)
     _, (d, _) = matrix_balance(A, permute=False, separate=True)
     assert _gebal_scaling(A).tobytes() == np.asarray(d, dtype=float).tobytes()
+
+
+@given(st.lists(st.one_of(st.integers(-300, 300).map(float), st.floats(allow_nan=True, allow_infinity=True)),
+                max_size=40))
+def test_median_is_numpys(values):
+    e = np.array(values, dtype=float)
+    want = np.median(e) if e.size else float("nan")
+    got = _median(e)
+    assert (np.isnan(want) and np.isnan(got)) or np.float64(got).tobytes() == np.float64(want).tobytes(), (got, want)
 
 
 def test_balance_of_a_badly_scaled_pair_is_powers_of_two_that_balance_it():
