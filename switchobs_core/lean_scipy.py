@@ -1,4 +1,5 @@
-"""scipy imported without the numpy submodules that its array-API namespace copies and nothing uses.
+"""scipy imported without the numpy submodules that its array-API namespace copies and nothing uses,
+and without rewriting the docstrings of its functions.
 
 ``import scipy.linalg`` makes ``scipy._lib.array_api_compat.numpy``, a copy of numpy's namespace
 (``from numpy import *`` and every name of ``dir(numpy)``); numpy imports its public submodules
@@ -11,11 +12,22 @@ unchanged (``numpy.testing`` and the others still import on first access), and s
 function of the copy. Like :mod:`switchobs_core.threads`, importing this module changes nothing:
 the application decides (the nodes' console scripts, :mod:`switchobs_ros.entry`, call it before they
 import the node); a process that imported scipy already keeps its copy as it is.
+
+scipy's decorators also rewrite the docstring of every function they wrap as it is defined (a note on
+array-API support or batching appended: ``scipy._lib._docscrape`` parses each docstring, 171 of them
+for ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special``, about 35 ms of a start). During
+:func:`import_scipy` that module is :data:`_KEEP_DOCS`'s stand-in (:class:`_Docstring`: every section
+empty, the docstring given back as it was), and removed again afterwards, so that a later import gets
+scipy's own; what the decorators do to the functions (their wrappers, the capability tables) is
+unchanged, only those notes are missing from ``help()``.
 """
 
 from __future__ import annotations
 
 import sys
+import types
+from collections import defaultdict, namedtuple
+from typing import Any
 
 import numpy
 
@@ -27,14 +39,48 @@ NOT_ARRAY_API = frozenset({"f2py", "testing", "test", "ma", "polynomial", "ctype
 
 #: The module whose import copies numpy's namespace.
 COPY = "scipy._lib.array_api_compat.numpy"
+#: scipy's docstring parser, replaced by a stand-in during :func:`import_scipy`.
+DOCSCRAPE = "scipy._lib._docscrape"
+
+
+class _Docstring:
+    """What scipy's decorators use of ``FunctionDoc(f)``: sections to append to (kept apart, not
+    written back) and ``str()``, a signature line and ``f``'s docstring as it was."""
+
+    def __init__(self, func: Any, *args: Any, **kwargs: Any) -> None:
+        doc = getattr(func, "__doc__", None) or ""
+        if isinstance(func, numpy.ufunc):   # numpy's generated signature line first, then the ufunc's own text
+            doc = doc.split("\n\n", 1)[-1]
+        self._doc = doc
+        self._sections: defaultdict[str, list] = defaultdict(list)
+
+    def __getitem__(self, key: str) -> list:
+        return self._sections[key]
+
+    def __setitem__(self, key: str, value: list) -> None:
+        self._sections[key] = value
+
+    def __str__(self) -> str:
+        return "\n" + self._doc
+
+
+def _docs_kept() -> types.ModuleType:
+    """The stand-in for :data:`DOCSCRAPE`: ``FunctionDoc`` (:class:`_Docstring`) and ``Parameter``."""
+    mod = types.ModuleType(DOCSCRAPE, "scipy's docstring parser, left out while scipy is imported")
+    mod.FunctionDoc = _Docstring               # type: ignore[attr-defined]
+    mod.Parameter = namedtuple("Parameter", ["name", "type", "desc"])     # type: ignore[attr-defined]
+    return mod
 
 
 def import_scipy() -> bool:
     """Import ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special`` (what every estimator start
-    needs), the namespace copy without :data:`NOT_ARRAY_API`; False (nothing changed) if the copy
-    exists already."""
+    needs), the namespace copy without :data:`NOT_ARRAY_API` and the docstrings as they are written;
+    False (nothing changed) if the copy exists already."""
     if COPY in sys.modules:
         return False
+    stand_in = DOCSCRAPE not in sys.modules
+    if stand_in:
+        sys.modules[DOCSCRAPE] = _docs_kept()
     names, listing = numpy.__all__, numpy.__dict__.get("__dir__")
     numpy.__all__ = [n for n in names if n not in NOT_ARRAY_API]
     if listing is not None:
@@ -47,4 +93,10 @@ def import_scipy() -> bool:
         numpy.__all__ = names
         if listing is not None:
             numpy.__dir__ = listing
+        if stand_in:
+            sys.modules.pop(DOCSCRAPE, None)
+            lib = sys.modules.get("scipy._lib")
+            if lib is not None and isinstance(getattr(lib, "_docscrape", None), types.ModuleType) \
+                    and not hasattr(lib._docscrape, "__file__"):
+                del lib._docscrape      # the stand-in: a later import gets scipy's own
     return True

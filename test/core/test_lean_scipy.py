@@ -24,6 +24,7 @@ else:
     import scipy.linalg, scipy.sparse, scipy.special
     first = second = None
 loaded = sorted(m for m in sys.modules if m.startswith("numpy.") and m.count(".") == 1)    # before any call
+parser_left = "scipy._lib._docscrape" in sys.modules
 import scipy._lib.array_api_compat.numpy as copy
 from scipy.linalg import expm, matrix_balance
 from scipy.special import chdtri
@@ -36,7 +37,10 @@ print(json.dumps({"first": first, "second": second, "all_same": list(np.__all__)
                   "dir_same": dir(np) == dir_before,
                   "loaded": loaded,
                   "copy": sorted(n for n in dir(copy) if not n.startswith("_")), "out": out,
-                  "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None}))
+                  "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None,
+                  "parser_left": parser_left, "expm_doc": expm.__doc__, "chdtri_doc": chdtri.__doc__,
+                  "parser_later": __import__("scipy._lib._docscrape").
+                  _lib._docscrape.FunctionDoc(expm)["Summary"]}))
 """
 
 
@@ -61,3 +65,16 @@ def test_namespace_copy_without_the_submodules_and_numpy_unchanged():
     assert missing and missing <= NOT_ARRAY_API, missing
     assert set(lean["copy"]) <= set(plain["copy"])
     assert lean["out"] == plain["out"]
+
+
+def test_docstrings_kept_as_written_and_the_parser_imported_later():
+    """The lean import leaves scipy's docstring parser out (no module left behind): the functions keep
+    the docstrings they were written with (the plain import appends scipy's notes to the same text, as to
+    the chi-square quantile's), and a later import of the parser gets scipy's own, which parses."""
+    lean, plain = _probe("lean"), _probe("plain")
+    assert not lean["parser_left"] and plain["parser_left"]
+    for name in ("expm_doc", "chdtri_doc"):
+        first = lean[name].strip().splitlines()[0]
+        assert first and first in plain[name], (name, first)
+    assert len(lean["chdtri_doc"]) < len(plain["chdtri_doc"])      # without scipy's array-API note
+    assert lean["parser_later"] == plain["parser_later"] == ["Compute the matrix exponential of an array."]
