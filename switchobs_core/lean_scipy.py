@@ -75,28 +75,50 @@ def _docs_kept() -> types.ModuleType:
 def import_scipy() -> bool:
     """Import ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special`` (what every estimator start
     needs), the namespace copy without :data:`NOT_ARRAY_API` and the docstrings as they are written;
-    False (nothing changed) if the copy exists already."""
+    False (nothing changed) if the copy exists already.
+
+    A scipy whose decorators need more of the parser than the stand-in gives fails the first
+    import: its partly imported modules are dropped and scipy is imported again with its own
+    parser (a slower start, never a failed one)."""
     if COPY in sys.modules:
         return False
-    stand_in = DOCSCRAPE not in sys.modules
-    if stand_in:
-        sys.modules[DOCSCRAPE] = _docs_kept()
     names, listing = numpy.__all__, numpy.__dict__.get("__dir__")
     numpy.__all__ = [n for n in names if n not in NOT_ARRAY_API]
     if listing is not None:
         numpy.__dir__ = lambda: [n for n in listing() if n not in NOT_ARRAY_API]
     try:
-        import scipy.linalg
-        import scipy.sparse
-        import scipy.special  # noqa: F401
+        if DOCSCRAPE in sys.modules or not _import_with_stand_in():
+            _import()
     finally:
         numpy.__all__ = names
         if listing is not None:
             numpy.__dir__ = listing
-        if stand_in:
-            sys.modules.pop(DOCSCRAPE, None)
-            lib = sys.modules.get("scipy._lib")
-            if lib is not None and isinstance(getattr(lib, "_docscrape", None), types.ModuleType) \
-                    and not hasattr(lib._docscrape, "__file__"):
-                del lib._docscrape      # the stand-in: a later import gets scipy's own
     return True
+
+
+def _import() -> None:
+    import scipy.linalg
+    import scipy.sparse
+    import scipy.special  # noqa: F401
+
+
+def _import_with_stand_in() -> bool:
+    """:func:`_import` with :data:`DOCSCRAPE` replaced by :func:`_docs_kept`; False, and no scipy
+    module left imported, if that import raised."""
+    before = set(sys.modules)
+    sys.modules[DOCSCRAPE] = _docs_kept()
+    try:
+        _import()
+        return True
+    except Exception:
+        for name in set(sys.modules) - before:
+            if name == "scipy" or name.startswith("scipy."):
+                del sys.modules[name]
+        return False
+    finally:
+        if sys.modules.get(DOCSCRAPE) is not None and not hasattr(sys.modules[DOCSCRAPE], "__file__"):
+            del sys.modules[DOCSCRAPE]
+        lib = sys.modules.get("scipy._lib")
+        if lib is not None and isinstance(getattr(lib, "_docscrape", None), types.ModuleType) \
+                and not hasattr(lib._docscrape, "__file__"):
+            del lib._docscrape      # the stand-in: a later import gets scipy's own

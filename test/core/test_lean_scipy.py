@@ -16,7 +16,11 @@ PROBE = """
 import json, sys
 import numpy as np
 all_before, dir_before = list(np.__all__), dir(np)
-lean = sys.argv[1] == "lean"
+lean = sys.argv[1] in ("lean", "broken")
+if sys.argv[1] == "broken":     # a stand-in that scipy's decorators cannot use
+    import types
+    import switchobs_core.lean_scipy as lean_scipy
+    lean_scipy._docs_kept = lambda: types.ModuleType(lean_scipy.DOCSCRAPE)
 if lean:
     from switchobs_core.lean_scipy import import_scipy
     first, second = import_scipy(), import_scipy()
@@ -78,3 +82,15 @@ def test_docstrings_kept_as_written_and_the_parser_imported_later():
         assert first and first in plain[name], (name, first)
     assert len(lean["chdtri_doc"]) < len(plain["chdtri_doc"])      # without scipy's array-API note
     assert lean["parser_later"] == plain["parser_later"] == ["Compute the matrix exponential of an array."]
+
+
+def test_a_stand_in_scipy_cannot_use_falls_back_to_scipys_parser():
+    """If scipy's import fails with the stand-in (a scipy whose decorators need more of the parser),
+    the partly imported modules are dropped and scipy is imported with its own parser: the same
+    results and docstrings as a plain import, the namespace copy still lean."""
+    broken, plain = _probe("broken"), _probe("plain")
+    assert (broken["first"], broken["second"]) == (True, False)
+    assert broken["parser_left"]
+    assert broken["out"] == plain["out"]
+    assert broken["chdtri_doc"] == plain["chdtri_doc"]
+    assert not {f"numpy.{m}" for m in NOT_ARRAY_API} & set(broken["loaded"]), broken["loaded"]
