@@ -16,10 +16,12 @@ import the node); a process that imported scipy already keeps its copy as it is.
 scipy's decorators also rewrite the docstring of every function they wrap as it is defined (a note on
 array-API support or batching appended: ``scipy._lib._docscrape`` parses each docstring, 171 of them
 for ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special``, about 35 ms of a start). During
-:func:`import_scipy` that module is :data:`_KEEP_DOCS`'s stand-in (:class:`_Docstring`: every section
-empty, the docstring given back as it was), and removed again afterwards, so that a later import gets
-scipy's own; what the decorators do to the functions (their wrappers, the capability tables) is
-unchanged, only those notes are missing from ``help()``.
+:func:`import_scipy` that module is a stand-in (:func:`_docs_kept`, :class:`_Docstring`: every
+section empty, the docstring given back as it was), removed again afterwards; the scipy modules that
+bound the stand-in by name get scipy's own parser at its first use (:func:`_function_doc`), so a
+module imported later (``scipy.stats``, ``scipy.signal``) is documented as after a plain import.
+What the decorators do to the functions (their wrappers, the capability tables) is unchanged; only
+the notes of ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special`` are missing from ``help()``.
 """
 
 from __future__ import annotations
@@ -62,6 +64,14 @@ class _Docstring:
 
     def __str__(self) -> str:
         return "\n" + self._doc
+
+
+def _function_doc(func: Any, *args: Any, **kwargs: Any) -> Any:
+    """scipy's own ``FunctionDoc``, imported at its first use: the scipy modules that bound the
+    stand-in while scipy was imported use this, so a module imported later (``scipy.stats``,
+    ``scipy.signal``) gets its docstrings written as a plain import writes them."""
+    from scipy._lib._docscrape import FunctionDoc
+    return FunctionDoc(func, *args, **kwargs)
 
 
 def _docs_kept() -> types.ModuleType:
@@ -118,6 +128,9 @@ def _import_with_stand_in() -> bool:
     finally:
         if sys.modules.get(DOCSCRAPE) is not None and not hasattr(sys.modules[DOCSCRAPE], "__file__"):
             del sys.modules[DOCSCRAPE]
+        for name, mod in list(sys.modules.items()):     # the modules that bound the stand-in by name
+            if name.startswith("scipy.") and getattr(mod, "FunctionDoc", None) is _Docstring:
+                mod.FunctionDoc = _function_doc
         lib = sys.modules.get("scipy._lib")
         if lib is not None and isinstance(getattr(lib, "_docscrape", None), types.ModuleType) \
                 and not hasattr(lib._docscrape, "__file__"):

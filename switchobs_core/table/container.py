@@ -478,7 +478,9 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
                 if isinstance(r, bool) or not isinstance(r, int) or not 1 <= r <= n:
                     raise ValueError(f"channels[{i}].r")
                 shapes[f"c{i}_T_o"] = (n, r)
-            for i in range(len(header.get("kalman", []))):
+            for i, d in enumerate(header.get("kalman", [])):
+                if not isinstance(d.get("noise"), dict):        # its matrices are put in it (_inflate)
+                    raise ValueError(f"kalman[{i}].noise")
                 for key in _NOISE_ARRAYS:
                     shapes[f"k{i}_noise_{key}"] = (n, n)
     except (KeyError, TypeError, ValueError, AttributeError) as err:

@@ -42,7 +42,9 @@ print(json.dumps({"first": first, "second": second, "all_same": list(np.__all__)
                   "loaded": loaded,
                   "copy": sorted(n for n in dir(copy) if not n.startswith("_")), "out": out,
                   "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None,
-                  "parser_left": parser_left, "expm_doc": expm.__doc__, "chdtri_doc": chdtri.__doc__,
+                  "parser_left": parser_left,
+                  "later_doc": __import__("scipy.signal").signal.convolve.__doc__,
+                  "expm_doc": expm.__doc__, "chdtri_doc": chdtri.__doc__,
                   "parser_later": __import__("scipy._lib._docscrape").
                   _lib._docscrape.FunctionDoc(expm)["Summary"]}))
 """
@@ -82,6 +84,8 @@ def test_docstrings_kept_as_written_and_the_parser_imported_later():
         assert first and first in plain[name], (name, first)
     assert len(lean["chdtri_doc"]) < len(plain["chdtri_doc"])      # without scipy's array-API note
     assert lean["parser_later"] == plain["parser_later"] == ["Compute the matrix exponential of an array."]
+    assert lean["later_doc"] == plain["later_doc"]      # a module imported later: scipy's own notes
+    assert "Array API Standard Support" in plain["later_doc"]
 
 
 def test_a_stand_in_scipy_cannot_use_falls_back_to_scipys_parser():

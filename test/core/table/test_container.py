@@ -341,3 +341,26 @@ def test_a_changed_basis_or_noise_matrix_is_refused(saved, tmp_path, member):
     bad.write_bytes(bytes(data))
     with pytest.raises(GainTableError, match="checksum mismatch: the file was modified"):
         GainTable.load(bad)
+
+
+@pytest.mark.parametrize("noise", [None, [1, 2], "Q_c"])
+def test_a_version_5_header_without_a_noise_object_is_refused_in_one_line(table, tmp_path, noise):
+    """A header (checksum made to match, as a writer with a bug would) whose design has no noise object
+    for the matrices to go in: a GainTableError naming the entry, as version 4 refuses it."""
+    path = tmp_path / "v5.npz"
+    with open(path, "wb") as fh:
+        container.encode(table_payload(table), fh, version=5)
+    zf = zipfile.ZipFile(path)
+    head = _header(path)
+    arrays = {m[:-4]: np.load(io.BytesIO(zf.read(m))) for m in zf.namelist() if m != "header.npy"}
+    head.pop("payload_sha256")
+    if noise is None:
+        head["kalman"][0].pop("noise")
+    else:
+        head["kalman"][0]["noise"] = noise
+    head["payload_sha256"] = container._digest(head, arrays)
+    bad = tmp_path / "bad.npz"
+    with open(bad, "wb") as fh:
+        np.savez(fh, header=np.frombuffer(json.dumps(head, sort_keys=True).encode(), dtype=np.uint8), **arrays)
+    with pytest.raises(GainTableError, match=r"kalman\[0\]\.noise"):
+        GainTable.load(bad, system=PAPER)
