@@ -302,6 +302,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spy", type=Path, default=None, metavar="DIR",
                     help="sample each node with py-spy --native (PY_SPY: its path), raw stacks in DIR/<node>-<i>.txt")
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: claim a free one)")
+    ap.add_argument("--table-version", type=int, default=0, metavar="V",
+                    help="write the Kalman table in container version V (4: what a --main-repo checkout "
+                         "before version 5 reads; default: the current version)")
     a = ap.parse_args(argv)
     every = {k: int(v) for k, v in (kv.split("=") for kv in a.every.split(",") if kv)}
     kinds = a.nodes.split(",")
@@ -318,7 +321,15 @@ def main(argv: list[str] | None = None) -> int:
         cycle = so.Cycle([1.0] * a.agents)
         tables = {}
         if "kalman" in bases:
-            tables["kalman"] = str(so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)]).save(d / "k.npz"))
+            kt = so.kalman_table(system, [so.design_kalman(system, cycle, a.rate)])
+            if a.table_version:             # what a --main-repo checkout of an older container reads
+                from switchobs_core.table.container import encode
+                from switchobs_core.table.io import table_payload
+                with open(d / "k.npz", "wb") as fh:
+                    encode(table_payload(kt), fh, version=a.table_version)
+                tables["kalman"] = str(d / "k.npz")
+            else:
+                tables["kalman"] = str(kt.save(d / "k.npz"))
         if "lmi" in bases:
             tables["lmi"] = str(so.design_table(system, cycles=[cycle]).save(d / "lmi.json"))
         rclpy.init()
