@@ -170,6 +170,7 @@ class ErrorEllipsoid:
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
+        self._scratch: np.ndarray | None = None     # _apply's n x n scratch (the transpose, tb Q)
         self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
         self._qrows[1] = self._d2
         self._qrows[3] = 1.0
@@ -340,14 +341,23 @@ class ErrorEllipsoid:
         return alpha, tb, Q, q, trace, max(trace, 0.0) * self._gsum
 
     def _apply(self, Z: np.ndarray, plan: tuple) -> tuple[np.ndarray, float]:
-        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`."""
+        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`:
+        ``alpha sym Z`` as ``(Z + Z') (alpha / 2)``, the transpose copied into a scratch array kept
+        with the ellipsoid (contiguous adds; ``Z += Z'`` copies the transpose into a new temporary
+        first, numpy's rule for overlapping operands) and the halving folded into the scaling: a
+        halving is exact, so ``fl(fl(x / 2) alpha) = fl(x (alpha / 2))`` for every ``x`` whose half
+        is normal, and below that one rounding (``fl(x (alpha / 2))``) replaces two, its absolute error
+        within the underflow allowance of the plan (module docstring, step 8)."""
         alpha, tb, Q, q, _, tr = plan
-        Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
-        Z *= 0.5
-        if alpha != 1.0:
-            Z *= alpha
+        T = self._scratch
+        if T is None or T.shape != Z.shape:
+            T = self._scratch = np.empty(Z.shape)
+        np.copyto(T, Z.T)
+        Z += T                      # exactly symmetric: (Z + Z')_ij = (Z + Z')_ji
+        Z *= 0.5 * alpha
         if Q is not None:
-            Z += tb * Q
+            np.multiply(Q, tb, out=T)
+            Z += T
         if Z.flags.c_contiguous or Z.flags.f_contiguous:    # the diagonal in place: a strided view
             dS = Z.ravel(order="K")[:: self.n + 1]
             dS += q
@@ -360,10 +370,8 @@ class ErrorEllipsoid:
         alpha, tb, Q, q, _, _ = plan
         ix = cols[:, None], cols
         B = Z[ix]
-        B += B.T
-        B *= 0.5
-        if alpha != 1.0:
-            B *= alpha
+        B = B + B.T
+        B *= 0.5 * alpha
         if Q is not None:
             B += tb * Q[ix]
         B[np.diag_indices(cols.size)] += q[cols]
