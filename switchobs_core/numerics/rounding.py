@@ -224,6 +224,16 @@ class ErrorEllipsoid:
         self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
         return Q, rq, wq, tq
 
+    def scratch(self) -> np.ndarray:
+        """An n x n C-ordered array of no meaning, free between steps: the assembly's scratch
+        (:meth:`_apply`), written by the last step, so a reader's temporary kept there
+        (:class:`~switchobs_core.bounds.read.AnchoredBound`'s ``S - c S_a``) finds it in cache. The next
+        assembly overwrites it."""
+        T = self._scratch
+        if T is None:
+            T = self._scratch = np.empty((self.n, self.n))
+        return T
+
     def keep_product(self, key: object, Z: np.ndarray) -> None:
         """Keep ``Z``, a product of the current ``S`` through the map ``key`` (the open-loop step's
         ``Phi~ S Phi~'`` of a prior), for the step at the same time that takes the same product first
@@ -349,9 +359,7 @@ class ErrorEllipsoid:
         is normal, and below that one rounding (``fl(x (alpha / 2))``) replaces two, its absolute error
         within the underflow allowance of the plan (module docstring, step 8)."""
         alpha, tb, Q, q, _, tr = plan
-        T = self._scratch
-        if T is None or T.shape != Z.shape:
-            T = self._scratch = np.empty(Z.shape)
+        T = self.scratch()
         np.copyto(T, Z.T)
         Z += T                      # exactly symmetric: (Z + Z')_ij = (Z + Z')_ji
         Z *= 0.5 * alpha
