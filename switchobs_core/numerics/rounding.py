@@ -225,10 +225,8 @@ class ErrorEllipsoid:
         return Q, rq, wq, tq
 
     def scratch(self) -> np.ndarray:
-        """An n x n C-ordered array of no meaning, free between steps: the assembly's scratch
-        (:meth:`_apply`), written by the last step, so a reader's temporary kept there
-        (:class:`~switchobs_core.bounds.read.AnchoredBound`'s ``S - c S_a``) finds it in cache. The next
-        assembly overwrites it."""
+        """An n x n C-ordered array of no meaning, free between steps (:meth:`_apply`'s scratch, in cache
+        after a step): a reader's or a product's temporary; the next assembly overwrites it."""
         T = self._scratch
         if T is None:
             T = self._scratch = np.empty((self.n, self.n))
@@ -351,13 +349,10 @@ class ErrorEllipsoid:
         return alpha, tb, Q, q, trace, max(trace, 0.0) * self._gsum
 
     def _apply(self, Z: np.ndarray, plan: tuple) -> tuple[np.ndarray, float]:
-        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`:
-        ``alpha sym Z`` as ``(Z + Z') (alpha / 2)``, the transpose copied into a scratch array kept
-        with the ellipsoid (contiguous adds; ``Z += Z'`` copies the transpose into a new temporary
-        first, numpy's rule for overlapping operands) and the halving folded into the scaling: a
-        halving is exact, so ``fl(fl(x / 2) alpha) = fl(x (alpha / 2))`` for every ``x`` whose half
-        is normal, and below that one rounding (``fl(x (alpha / 2))``) replaces two, its absolute error
-        within the underflow allowance of the plan (module docstring, step 8)."""
+        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`: ``alpha sym Z``
+        as ``(Z + Z') (alpha / 2)``, ``Z'`` copied into :meth:`scratch` (``Z += Z'`` makes a new temporary), the
+        halving folded into the scaling: ``fl(fl(x / 2) alpha) = fl(x (alpha / 2))`` where ``x / 2`` is normal,
+        below that one rounding instead of two, within the plan's underflow allowance (step 8)."""
         alpha, tb, Q, q, _, tr = plan
         T = self.scratch()
         np.copyto(T, Z.T)
