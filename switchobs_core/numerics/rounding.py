@@ -170,7 +170,7 @@ class ErrorEllipsoid:
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
-        self._scratch: np.ndarray | None = None     # _apply's n x n scratch (the transpose, tb Q)
+        self._scratch: np.ndarray | None = None     # scratch(): the transpose and tb Q of _apply
         self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
         self._qrows[1] = self._d2
         self._qrows[3] = 1.0
@@ -225,8 +225,7 @@ class ErrorEllipsoid:
         return Q, rq, wq, tq
 
     def scratch(self) -> np.ndarray:
-        """An n x n C-ordered array of no meaning, free between steps (:meth:`_apply`'s scratch, in cache
-        after a step): a reader's or a product's temporary; the next assembly overwrites it."""
+        """A C-ordered n x n array free between steps (:meth:`_apply`'s, in cache after a step): a temporary."""
         T = self._scratch
         if T is None:
             T = self._scratch = np.empty((self.n, self.n))
