@@ -248,8 +248,15 @@ def json_depth(text: str) -> int:
     """How deep arrays/objects nest in ``text``, JSON that parses (the top level's array or object is
     level 1; a number or string alone is 0): the largest count of open brackets outside string
     literals, what :func:`check_depth` finds walking the parsed value (tested against it), at the
-    cost of a regular expression and a few numpy calls instead of a visit of every member."""
-    brackets = _JSON_STRING.sub("", text).encode("utf-8").translate(None, _NOT_BRACKET)
+    cost of a regular expression and a few numpy calls instead of a visit of every member. Text without
+    a backslash has no escaped quote, so every quote opens or closes a literal: the text between
+    literals is every other piece of a split at the quotes (a tenth of the expression's time on a
+    table's header)."""
+    if "\\" in text:
+        outside = _JSON_STRING.sub("", text)
+    else:
+        outside = "".join(text.split('"')[::2])
+    brackets = outside.encode("utf-8").translate(None, _NOT_BRACKET)
     steps = _BRACKET_STEP[np.frombuffer(brackets, dtype=np.uint8)]
     return int(np.cumsum(steps).max(initial=0))
 

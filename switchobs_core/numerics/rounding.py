@@ -321,7 +321,7 @@ class ErrorEllipsoid:
         tn = beta * tq + kappa * n * rho2            # trace_D of the added set
         # the propagated set and the added one: alpha (Z + R_z) + (1 + 1/a) (added)
         alpha, theta = 1.0, 1.0
-        if tz > 0.0 and tn > 0.0:
+        if tz > 0.0 and (tn > 0.0 or rho > 0.0):
             a = _clamp(rho / math.sqrt(tz)) if Q is None else _clamp(math.sqrt(tn) / math.sqrt(tz))
             alpha = 1.0 + a                 # the factor applied; a' = alpha - 1 is its exact pair
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
@@ -329,8 +329,8 @@ class ErrorEllipsoid:
         # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
         # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
         q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
-        if rho2 > 0.0:
-            q += (theta * kappa * rho2) * d2
+        if rho > 0.0:
+            q += ((theta * kappa * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * d2
         tb = theta * beta
         if Q is not None:
             sd = sd + tb * Q.diagonal()
@@ -415,14 +415,15 @@ class ErrorEllipsoid:
         tz = max(float(zd.dot(self._id2)) + self._kR * Wz * Wv, 0.0) * self._gsum     # trace_D (Z + R_z)
         rho2 = rho * rho
         alpha, theta = 1.0, 1.0
-        if tz > 0.0 and rho2 > 0.0:      # (the general path's added set is rho^2 D^2: none if it underflows)
+        if tz > 0.0 and rho > 0.0:
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
             theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
         if not guarded and not (alpha < 1e20 and theta * rho2 * self._dr < 1e250):
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
         np.abs(zd, out=B[2])
-        q = np.array((alpha * Wz * self._k1, theta * rho2 * self._kf, alpha * self._k3, c4)).dot(B)
+        c2 = ((theta * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * self._kf if rho > 0.0 else 0.0
+        q = np.array((alpha * Wz * self._k1, c2, alpha * self._k3, c4)).dot(B)
         # the n x n pass: S' = (Z + Z') (alpha / 2) + diag(q), tr its trace rounded up
         S = Z + Z.T                 # exactly symmetric
         S *= 0.5 * alpha

@@ -1,7 +1,7 @@
 """The binary gain-table container: a ``.npz`` file holding the JSON header and the Kalman arrays.
 
 A gain table (:mod:`switchobs_core.table.gains`) is written as JSON text, or, when its file name ends in ``.npz``, as
-an uncompressed numpy ``.npz`` archive (``format_version = 4``; version 3 is still read) with the members
+an uncompressed numpy ``.npz`` archive (``format_version = 5``; versions 3 and 4 are still read) with the members
 
 * ``header``: the UTF-8 JSON of the table's payload (the JSON format's keys, the same format
   name and checks), in which the large matrices of every Kalman design are replaced by
@@ -10,7 +10,13 @@ an uncompressed numpy ``.npz`` archive (``format_version = 4``; version 3 is sti
   covariances ``P^-`` of the S phases as the packed upper triangles (S x n(n+1)/2; a stored
   prior is exactly symmetric, so nothing is lost), ``k{i}_{s}_K``, the gains ``K`` of all phases
   flattened (row-major) one after the other, their column counts listed in the header
-  (``K_cols``); and ``k{i}_E``, the period's error transition (n x n).
+  (``K_cols``); and ``k{i}_E``, the period's error transition (n x n);
+* (version 5) per channel ``i``, ``c{i}_T_o``, its stored observable basis (n x r_i), and per Kalman
+  design ``i`` its noise model's ``k{i}_noise_Q_c`` and ``k{i}_noise_P0`` (n x n): the header's largest
+  matrices, whose JSON (decimal text, parsed, then written again for the checksum) took 25-30 ms of
+  a 32-agent table's 45 ms load; as arrays they are read, hashed and checked for finiteness as the
+  gains are. The payload a load gives holds them as float64 arrays (the same doubles as the lists of
+  the JSON format).
 
 All arrays are float64, little-endian. Floats are stored as their 8 bytes, so a table round-trips
 bit for bit.
@@ -66,10 +72,13 @@ __all__ = ["MAGIC", "BINARY_VERSION", "READ_VERSIONS", "MAX_BINARY_BYTES", "is_b
 
 #: The first bytes of a zip archive (an ``.npz`` file).
 MAGIC = b"PK\x03\x04"
-#: ``format_version`` of the binary container written (priors verified per phase on first use).
-BINARY_VERSION = 4
-#: Versions of the binary container read (3: every array verified at load).
-READ_VERSIONS = (3, 4)
+#: ``format_version`` of the binary container written (priors verified per phase on first use; the
+#: observable bases and the noise models' matrices as arrays).
+BINARY_VERSION = 5
+#: Versions of the binary container read (3: every array verified at load; 4: bases and noise in the header).
+READ_VERSIONS = (3, 4, 5)
+#: A Kalman design's noise matrices stored as arrays from version 5 on.
+_NOISE_ARRAYS = ("Q_c", "P0")
 #: Largest binary table read (bytes), whatever its header says.
 MAX_BINARY_BYTES = 4 * 1024 ** 3
 _SEGMENTS = ("periodic", "startup")
@@ -77,7 +86,12 @@ _SEGMENTS = ("periodic", "startup")
 
 def _lazy(header: dict[str, Any], name: str) -> bool:
     """Whether array ``name`` of a container with ``header`` is verified per row on first use, not at load."""
-    return header.get("format_version") == 4 and name.endswith("_P")
+    return header.get("format_version") in (4, 5) and name.endswith("_P")
+
+
+def _matrices_apart(header: dict[str, Any]) -> bool:
+    """Whether the observable bases and the noise matrices are arrays of the container (version 5 on)."""
+    return header.get("format_version") == 5
 
 
 class PackedRows(Sequence):
@@ -150,7 +164,7 @@ def unpack_symmetric(packed: np.ndarray, n: int) -> np.ndarray:
 
 def _header_hash(header: dict[str, Any]) -> Any:
     """The checksum's SHA-256 over the canonical JSON of the header (without ``payload_sha256``)."""
-    return hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False).encode())
+    return hashlib.sha256(json.dumps(header, sort_keys=True, allow_nan=False, default=jsonable).encode())
 
 
 def _hash_array(h: Any, name: str, a: np.ndarray) -> None:
@@ -179,7 +193,7 @@ def _packed(Ps: Any, iu: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
 
 
 def encode(payload: dict[str, Any], fh: BinaryIO, *, version: int = BINARY_VERSION) -> None:
-    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring; ``version`` 3 or 4);
+    """Write the ``.npz`` container of a table payload to ``fh`` (module docstring; ``version`` 3, 4 or 5);
     ``payload`` is not modified."""
     if version not in READ_VERSIONS:
         raise ValueError(f"binary container version {version} (written: {', '.join(map(str, READ_VERSIONS))})")
@@ -187,9 +201,21 @@ def encode(payload: dict[str, Any], fh: BinaryIO, *, version: int = BINARY_VERSI
     arrays: dict[str, np.ndarray] = {}
     n = int(payload["system"]["n"])
     iu = np.triu_indices(n)
+    if _matrices_apart(header):
+        channels = []
+        for i, ch in enumerate(payload["channels"]):
+            arrays[f"c{i}_T_o"] = np.asarray(ch["T_o"], dtype=float).reshape(n, int(ch["r"]))
+            channels.append(dict(ch, T_o={"$array": f"c{i}_T_o"}))
+        header["channels"] = channels
     kalman = []
     for i, d in enumerate(payload.get("kalman", [])):
         d = dict(d)
+        if _matrices_apart(header):
+            noise = dict(d["noise"])
+            for key in _NOISE_ARRAYS:
+                arrays[f"k{i}_noise_{key}"] = np.asarray(noise[key], dtype=float).reshape(n, n)
+                noise[key] = {"$array": f"k{i}_noise_{key}"}
+            d["noise"] = noise
         for seg in _SEGMENTS:
             ph = dict(d[seg])
             Ps = ph.pop("P_prior")
@@ -210,7 +236,7 @@ def encode(payload: dict[str, Any], fh: BinaryIO, *, version: int = BINARY_VERSI
         if not np.all(np.isfinite(a)):
             raise GainTableError(f"gain table: non-finite number in {name}")
     header["payload_sha256"] = _digest(header, arrays)
-    text = json.dumps(header, sort_keys=True, allow_nan=False).encode()
+    text = json.dumps(header, sort_keys=True, allow_nan=False, default=jsonable).encode()
     np.savez(fh, header=np.frombuffer(text, dtype=np.uint8), **arrays)
 
 
@@ -446,6 +472,17 @@ def _array_refs(header: dict[str, Any], source: str) -> dict[str, Any]:
                     digests[f"k{i}_{seg}_P"] = dg
                 shapes[f"k{i}_{seg}_K"] = (n * sum(cols),)
             shapes[f"k{i}_E"] = (n, n)
+        if _matrices_apart(header):     # within MAX_FILE_BYTES, which their longer JSON text took in version 4
+            for i, ch in enumerate(header["channels"]):
+                r = ch["r"]
+                if isinstance(r, bool) or not isinstance(r, int) or not 1 <= r <= n:
+                    raise ValueError(f"channels[{i}].r")
+                shapes[f"c{i}_T_o"] = (n, r)
+            for i, d in enumerate(header.get("kalman", [])):
+                if not isinstance(d.get("noise"), dict):        # its matrices are put in it (_inflate)
+                    raise ValueError(f"kalman[{i}].noise")
+                for key in _NOISE_ARRAYS:
+                    shapes[f"k{i}_noise_{key}"] = (n, n)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise _refused(source, f"header: bad or missing {err}") from None
     return {"n": n, "p_max": p_max, "phases": phases, "shapes": shapes, "digests": digests}
@@ -462,9 +499,14 @@ def _inflate(header: dict[str, Any], arrays: dict[str, np.ndarray], n: int) -> d
     """The payload with the references replaced by the matrices (priors as packed rows, gains split)."""
     payload = dict(header, format_version=2)
     payload.pop("container", None)
+    apart = _matrices_apart(header)
+    if apart:
+        payload["channels"] = [dict(ch, T_o=arrays[f"c{i}_T_o"]) for i, ch in enumerate(header["channels"])]
     kalman = []
     for i, d in enumerate(header.get("kalman", [])):
         d = dict(d)
+        if apart:
+            d["noise"] = dict(d["noise"], **{key: arrays[f"k{i}_noise_{key}"] for key in _NOISE_ARRAYS})
         for seg in _SEGMENTS:
             ph = dict(d[seg])
             packed = arrays[f"k{i}_{seg}_P"]      # rows stay packed (or unread): KalmanPhase unpacks on use

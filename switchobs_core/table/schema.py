@@ -84,6 +84,10 @@ class _Layout:
         return x
 
     def matrix(self, x: Any, where: str, rows: int, cols: int) -> None:
+        if isinstance(x, np.ndarray):      # read from a binary table: float64, shape and finiteness checked there
+            if x.dtype != np.float64 or x.shape != (rows, cols):
+                raise self.fail(where, f"a {rows} x {cols} matrix")
+            return
         if not isinstance(x, list) or len(x) != rows:
             raise self.fail(where, f"a {rows} x {cols} matrix (a list of {rows} rows)")
         for i, row in enumerate(x):

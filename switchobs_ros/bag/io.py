@@ -310,7 +310,8 @@ class BagIn:
             topics = {cid: ch.topic for cid, ch in summary.channels.items()}
             heap: list[tuple[int, int, BagMessage]] = []
             seq = 0
-            types = {cid: self.topics[t] for cid, t in topics.items()}
+            # a channel metadata.yaml does not list is skipped, as messages() skips it
+            types = {cid: self.topics.get(t) for cid, t in topics.items()}
             for j, ci in enumerate(chunks):
                 fh.seek(ci.chunk_start_offset + 1 + 8)
                 if ci.compression == "":    # the records read straight from the chunk's bytes (mcap_records)
@@ -319,7 +320,10 @@ class BagIn:
                     recs = ((r.channel_id, r.log_time, r.data) for r in
                             breakup_chunk(Chunk.read(ReadDataStream(fh)), validate_crc=False) if isinstance(r, Message))
                 for cid, log_time, data in recs:
-                    heapq.heappush(heap, (log_time, seq, BagMessage(topics[cid], types[cid], log_time, data)))
+                    ty = types.get(cid)
+                    if ty is None:
+                        continue
+                    heapq.heappush(heap, (log_time, seq, BagMessage(topics[cid], ty, log_time, data)))
                     seq += 1
                 bound = later[j + 1]
                 while heap and heap[0][0] <= bound:

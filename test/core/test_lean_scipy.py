@@ -16,7 +16,11 @@ PROBE = """
 import json, sys
 import numpy as np
 all_before, dir_before = list(np.__all__), dir(np)
-lean = sys.argv[1] == "lean"
+lean = sys.argv[1] in ("lean", "broken")
+if sys.argv[1] == "broken":     # a stand-in that scipy's decorators cannot use
+    import types
+    import switchobs_core.lean_scipy as lean_scipy
+    lean_scipy._docs_kept = lambda: types.ModuleType(lean_scipy.DOCSCRAPE)
 if lean:
     from switchobs_core.lean_scipy import import_scipy
     first, second = import_scipy(), import_scipy()
@@ -24,6 +28,7 @@ else:
     import scipy.linalg, scipy.sparse, scipy.special
     first = second = None
 loaded = sorted(m for m in sys.modules if m.startswith("numpy.") and m.count(".") == 1)    # before any call
+parser_left = "scipy._lib._docscrape" in sys.modules
 import scipy._lib.array_api_compat.numpy as copy
 from scipy.linalg import expm, matrix_balance
 from scipy.special import chdtri
@@ -36,7 +41,12 @@ print(json.dumps({"first": first, "second": second, "all_same": list(np.__all__)
                   "dir_same": dir(np) == dir_before,
                   "loaded": loaded,
                   "copy": sorted(n for n in dir(copy) if not n.startswith("_")), "out": out,
-                  "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None}))
+                  "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None,
+                  "parser_left": parser_left,
+                  "later_doc": __import__("scipy.signal").signal.convolve.__doc__,
+                  "expm_doc": expm.__doc__, "chdtri_doc": chdtri.__doc__,
+                  "parser_later": __import__("scipy._lib._docscrape").
+                  _lib._docscrape.FunctionDoc(expm)["Summary"]}))
 """
 
 
@@ -61,3 +71,30 @@ def test_namespace_copy_without_the_submodules_and_numpy_unchanged():
     assert missing and missing <= NOT_ARRAY_API, missing
     assert set(lean["copy"]) <= set(plain["copy"])
     assert lean["out"] == plain["out"]
+
+
+def test_docstrings_kept_as_written_and_the_parser_imported_later():
+    """The lean import leaves scipy's docstring parser out (no module left behind): the functions keep
+    the docstrings they were written with (the plain import appends scipy's notes to the same text, as to
+    the chi-square quantile's), and a later import of the parser gets scipy's own, which parses."""
+    lean, plain = _probe("lean"), _probe("plain")
+    assert not lean["parser_left"] and plain["parser_left"]
+    for name in ("expm_doc", "chdtri_doc"):
+        first = lean[name].strip().splitlines()[0]
+        assert first and first in plain[name], (name, first)
+    assert len(lean["chdtri_doc"]) < len(plain["chdtri_doc"])      # without scipy's array-API note
+    assert lean["parser_later"] == plain["parser_later"] == ["Compute the matrix exponential of an array."]
+    assert lean["later_doc"] == plain["later_doc"]      # a module imported later: scipy's own notes
+    assert "Array API Standard Support" in plain["later_doc"]
+
+
+def test_a_stand_in_scipy_cannot_use_falls_back_to_scipys_parser():
+    """If scipy's import fails with the stand-in (a scipy whose decorators need more of the parser),
+    the partly imported modules are dropped and scipy is imported with its own parser: the same
+    results and docstrings as a plain import, the namespace copy still lean."""
+    broken, plain = _probe("broken"), _probe("plain")
+    assert (broken["first"], broken["second"]) == (True, False)
+    assert broken["parser_left"]
+    assert broken["out"] == plain["out"]
+    assert broken["chdtri_doc"] == plain["chdtri_doc"]
+    assert not {f"numpy.{m}" for m in NOT_ARRAY_API} & set(broken["loaded"]), broken["loaded"]

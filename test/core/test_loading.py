@@ -381,6 +381,16 @@ def test_json_depth_of_the_text_is_the_walked_depth(value, indent, ascii_only):
     assert json_depth(text) == _walked_depth(json.loads(text))
 
 
+def test_json_depth_without_a_backslash_skips_the_literals_by_their_quotes():
+    """Text without an escape (split at its quotes) and the same value with one (the expression): brackets
+    inside literals never count, either way."""
+    plain = '["[[[", {"a": "]]]]", "{": [1, "}}"]}]'
+    assert json_depth(plain) == 3 == _walked_depth(json.loads(plain))
+    escaped = '["\\"[[[", {"a": "]]]]", "{": [1, "}}"]}]'
+    assert json_depth(escaped) == 3 == _walked_depth(json.loads(escaped))
+    assert json_depth('"[[["') == 0 and json_depth("[]") == 1
+
+
 def test_parse_json_refuses_one_level_too_deep_and_reads_brackets_in_strings():
     ok = "[" * MAX_DEPTH + '"]]]{{{"' + "]" * MAX_DEPTH
     assert parse_json(ok, exc=GainTableError, source="t")

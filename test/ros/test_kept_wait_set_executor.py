@@ -152,6 +152,35 @@ def test_entries_discarded_after_a_callback_took_their_messages(ctx):
         assert got == [("first", 1), ("taken", 2), ("second", 3)]
 
 
+def test_a_discarded_entry_with_messages_left_is_served_without_a_new_message(ctx):
+    """A callback takes one of two waiting messages of another subscription and discards its queued
+    entry: the next wait reports the subscription again (rcl's wait is level-triggered), so the second
+    message is served without a new one arriving."""
+    with _spun(ctx, "kws_level") as (ex, node):
+        got = []
+
+        def first(m):
+            got.append(("first", m.data))
+            with second.handle:
+                taken = second.handle.take_message(second.msg_type, second.raw)   # one of two
+            got.append(("taken", taken[0].data))
+            ex.discard_ready((second,))
+
+        node.create_subscription(Int32, "/kws_level_a", first, RELIABLE)
+        second = node.create_subscription(Int32, "/kws_level_b", lambda m: got.append(("second", m.data)), RELIABLE)
+        pubs = [node.create_publisher(Int32, f"/kws_level_{n}", RELIABLE) for n in ("a", "b")]
+        for pub in pubs:
+            wait_matched(ex, pub)
+        for _ in range(3):
+            ex.spin_once(timeout_sec=0.05)
+        pubs[0].publish(Int32(data=1))
+        pubs[1].publish(Int32(data=2))
+        pubs[1].publish(Int32(data=3))
+        time.sleep(0.2)
+        spin_until(ex, lambda: ("second", 3) in got, limit=5.0)
+        assert got == [("first", 1), ("taken", 2), ("second", 3)]
+
+
 def test_middleware_events_of_publishers_and_subscriptions_are_served(ctx):
     """The QoS events rclpy attaches to publishers and subscriptions (waitables the kept wait set
     adds without their Python wrappers): an incompatible reliability is reported to both sides'

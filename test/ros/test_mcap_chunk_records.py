@@ -45,3 +45,42 @@ def test_chunk_records_are_the_readers(tmp_path, seed):
             bad[41:49] = (2 ** 40).to_bytes(8, "little")     # the first record's length past the chunk's end
             with pytest.raises(ValueError):
                 message_records(bytes(bad))
+
+
+@pytest.mark.parametrize("extra", [0, 3])
+def test_a_channel_metadata_does_not_list_is_skipped_in_log_order(tmp_path, extra):
+    """An MCAP file with a channel that metadata.yaml does not list (with or without messages): the log
+    order reads the listed topic's messages, as ``messages()`` does, instead of refusing the file."""
+    import yaml
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    from switchobs_ros.bag.io import BagIn
+
+    bag = tmp_path / "b"
+    bag.mkdir()
+    data = [serialize_message(Float64MultiArray(data=[float(k)])) for k in range(50)]
+    with (bag / "x.mcap").open("wb") as fh:
+        w = McapWriter(fh, chunk_size=512, compression=CompressionType.NONE)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema("std_msgs/msg/Float64MultiArray", "ros2msg", b"float64[] data")
+        listed, unlisted = w.register_channel("/a", "cdr", sid), w.register_channel("/extra", "cdr", sid)
+        for k, d in enumerate(data):
+            w.add_message(listed, log_time=1000 + k, data=d, publish_time=1000 + k, sequence=k)
+        for j in range(extra):
+            w.add_message(unlisted, log_time=1020 + j, data=data[0], publish_time=1020 + j, sequence=j)
+        w.finish()
+    topic = {"name": "/a", "type": "std_msgs/msg/Float64MultiArray", "serialization_format": "cdr",
+             "offered_qos_profiles": "", "type_description_hash": ""}
+    info = {"version": 8, "storage_identifier": "mcap", "relative_file_paths": ["x.mcap"],
+            "duration": {"nanoseconds": 50}, "starting_time": {"nanoseconds_since_epoch": 1000},
+            "message_count": 50, "topics_with_message_count": [{"topic_metadata": topic, "message_count": 50}],
+            "compression_format": "", "compression_mode": "",
+            "files": [{"path": "x.mcap", "starting_time": {"nanoseconds_since_epoch": 1000},
+                       "duration": {"nanoseconds": 50}, "message_count": 50}],
+            "custom_data": {}, "ros_distro": "jazzy"}
+    (bag / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
+    b = BagIn(bag)
+    ordered = list(b.log_order())
+    assert [m.topic for m in ordered] == ["/a"] * 50
+    assert [m.data for m in ordered] == [m.data for m in b.messages(order="log")] == data

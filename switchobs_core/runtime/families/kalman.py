@@ -71,7 +71,6 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...bounds.kalman_map import KalmanMap
-from ...design.kalman import design_kalman
 from ...exceptions import GainTableError, InvalidArgument
 from ...numerics.kalman_step import symmetrize
 from ...numerics.scaling import balance, balanced_norm
@@ -163,7 +162,9 @@ class KalmanTableGains(OnlineKalmanGains):
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, rate: float = 0.0, noise: Any = None, **_: Any) -> Any:
         """Offline periodic Kalman gains for ``cycles`` at ``rate`` Hz
-        (:func:`~switchobs_core.design.kalman.design_kalman`)."""
+        (:func:`~switchobs_core.design.kalman.design_kalman`, imported here: by the start that designs, not
+        by one that loads a table)."""
+        from ...design.kalman import design_kalman
         return kalman_table(system, [design_kalman(system, cycles, rate, noise)])
 
     # ------------------------------------------------------------------ protocol

@@ -24,7 +24,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...design.lmi import design_table
 from ...exceptions import InvalidArgument
 from ...model.noise import default_noise
 from ..covariance import CovarianceStep, HeldBlock, HeldNoise, PendingSteps
@@ -94,7 +93,9 @@ class LmiGains:
 
     @classmethod
     def design_table(cls, system: Any, cycles: Any, *, robust: Any = None, delta: float = 0.99, **_: Any) -> Any:
-        """The paper's design (:func:`~switchobs_core.design.lmi.design_table`)."""
+        """The paper's design (:func:`~switchobs_core.design.lmi.design_table`; the SDP stack imported here,
+        by the start that designs, not by one that loads a table)."""
+        from ...design.lmi import design_table
         return design_table(system, cycles=cycles, robust=robust, delta=delta)
 
     # ------------------------------------------------------------------ protocol

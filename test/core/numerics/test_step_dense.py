@@ -74,6 +74,7 @@ def test_fast_step_contains_the_exact_product(seed, n, units, scale, rho):
     ell.step_dense(M, (aM, float(aM.sum(axis=1).max())), rho)
     T = M.astype(LD) @ S.astype(LD) @ M.T.astype(LD)
     Dm = ell.S.astype(LD) - T
+    assert np.all(np.diagonal(Dm) >= 0), float(np.min(np.diagonal(Dm)))     # sharp: fails without the allowance
     r = np.sqrt(np.abs(np.diagonal(ell.S))) + 1e-300
     X = (Dm / np.outer(r, r).astype(LD)).astype(float)
     X = 0.5 * (X + X.T)

@@ -41,11 +41,9 @@ def test_the_block_as_it_is_has_the_products_numbers(seed, p, scale, bad):
     with np.errstate(all="ignore"):
         want = I @ B @ I.T
         got = block_product(I, B, unit=True)
-        general = block_product(I, B, unit=False)
     np.testing.assert_array_equal(got, want)
     if np.isfinite(B).all():
         assert got is B
-    np.testing.assert_array_equal(general, want)
 
 
 @settings(max_examples=60, deadline=None)

@@ -21,6 +21,7 @@ from switchobs_core.model.schedule import Cycle
 from switchobs_core.table import container
 from switchobs_core.table.container import MAX_BINARY_BYTES, is_binary, size_limit
 from switchobs_core.table.gains import GainTable, kalman_table
+from switchobs_core.table.io import table_payload
 
 PAPER = paper_system()
 CYCLES = [Cycle.from_ts(2.0, 0.6), Cycle((0.5, 0.5), 0.1)]
@@ -297,3 +298,69 @@ def test_any_bit_flipped_never_gives_other_numbers(table, saved, tmp_path, where
                 assert "checksum mismatch" in str(err)
                 continue
             assert P.tobytes() == x.P_prior.tobytes()
+
+
+def _header(path) -> dict:
+    return json.loads(np.load(io.BytesIO(zipfile.ZipFile(path).read("header.npy"))).tobytes())
+
+
+@pytest.mark.parametrize("version", [4, 5])
+def test_bases_and_noise_as_arrays_from_version_5_and_version_4_still_read(table, tmp_path, version):
+    """Version 5 holds every channel's observable basis and each design's noise matrices as arrays (the
+    header refers to them); version 4 holds them in the header's JSON. Either loads to the same table
+    (its JSON text, the bases' and noise matrices' bytes) and saves again in version 5."""
+    path = tmp_path / f"v{version}.npz"
+    with open(path, "wb") as fh:
+        container.encode(table_payload(table), fh, version=version)
+    head, members = _header(path), set(zipfile.ZipFile(path).namelist())
+    arrays = {f"c{i}_T_o.npy" for i in range(PAPER.N)} | {f"k{i}_noise_{k}.npy" for i in range(len(CYCLES))
+                                                          for k in ("Q_c", "P0")}
+    if version == 5:
+        assert arrays <= members
+        assert all(ch["T_o"] == {"$array": f"c{i}_T_o"} for i, ch in enumerate(head["channels"]))
+        assert head["kalman"][0]["noise"]["Q_c"] == {"$array": "k0_noise_Q_c"}
+    else:
+        assert not arrays & members and isinstance(head["channels"][0]["T_o"], list)
+    loaded = GainTable.load(path, system=PAPER)
+    assert loaded.to_json() == table.to_json()
+    for i in range(1, PAPER.N + 1):
+        assert loaded.T_o(i).tobytes() == table.T_o(i).tobytes()
+    a, b = table.kalman_design([CYCLES[0]], PAPER).noise, loaded.kalman_design([CYCLES[0]], PAPER).noise
+    assert a.Q_c.tobytes() == b.Q_c.tobytes() and a.P0.tobytes() == b.P0.tobytes()
+    assert _header(loaded.save(tmp_path / "again.npz"))["format_version"] == 5
+
+
+@pytest.mark.parametrize("member", ["c1_T_o.npy", "k0_noise_P0.npy"])
+def test_a_changed_basis_or_noise_matrix_is_refused(saved, tmp_path, member):
+    """One bit of a stored basis or noise matrix flipped: the checksum refuses the file in one line."""
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(saved.read_bytes())
+    at = _data_offset(bad, member) + 13
+    data = bytearray(bad.read_bytes())
+    data[at] ^= 0x08
+    bad.write_bytes(bytes(data))
+    with pytest.raises(GainTableError, match="checksum mismatch: the file was modified"):
+        GainTable.load(bad)
+
+
+@pytest.mark.parametrize("noise", [None, [1, 2], "Q_c"])
+def test_a_version_5_header_without_a_noise_object_is_refused_in_one_line(table, tmp_path, noise):
+    """A header (checksum made to match, as a writer with a bug would) whose design has no noise object
+    for the matrices to go in: a GainTableError naming the entry, as version 4 refuses it."""
+    path = tmp_path / "v5.npz"
+    with open(path, "wb") as fh:
+        container.encode(table_payload(table), fh, version=5)
+    zf = zipfile.ZipFile(path)
+    head = _header(path)
+    arrays = {m[:-4]: np.load(io.BytesIO(zf.read(m))) for m in zf.namelist() if m != "header.npy"}
+    head.pop("payload_sha256")
+    if noise is None:
+        head["kalman"][0].pop("noise")
+    else:
+        head["kalman"][0]["noise"] = noise
+    head["payload_sha256"] = container._digest(head, arrays)
+    bad = tmp_path / "bad.npz"
+    with open(bad, "wb") as fh:
+        np.savez(fh, header=np.frombuffer(json.dumps(head, sort_keys=True).encode(), dtype=np.uint8), **arrays)
+    with pytest.raises(GainTableError, match=r"kalman\[0\]\.noise"):
+        GainTable.load(bad, system=PAPER)

@@ -1,0 +1,86 @@
+"""What the estimator's start imports: neither its module nor the pipeline built from a cached table
+brings in what only a design, a simulation, a plot or a test needs.
+
+One fresh interpreter starts as the ``estimator`` console script does up to its node (scipy through
+:mod:`switchobs_core.lean_scipy`, then the node's module), then builds the pipeline from a Kalman table on
+disk (:meth:`~switchobs_ros.pipeline.EstimatorPipeline.from_params`, no DDS), and prints the modules
+loaded after each step. None of :data:`HEAVY` may be among them (rclpy itself imports ``yaml``, so it
+is not checked here).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from switchobs_core.design.kalman import design_kalman
+from switchobs_core.model.scenarios import paper_system
+from switchobs_core.model.schedule import Cycle
+from switchobs_core.table.gains import kalman_table
+
+REPO = Path(__file__).resolve().parents[2]
+
+#: Modules (and their submodules) a start from a cached table has no use for: the SDP and Riccati
+#: design stack, the simulator and the command line, plotting, scipy's optimisers, statistics,
+#: integrators and interpolants, numpy's submodules outside the array API, the test framework, and
+#: scipy's docstring parser (:mod:`switchobs_core.lean_scipy`).
+HEAVY = ("cvxpy", "clarabel", "matplotlib", "switchobs_core.design.lmi", "switchobs_core.design.kalman",
+         "switchobs_core.design.synthesis", "switchobs_core.design.plan", "switchobs_core.design.doubling",
+         "switchobs_core.sim", "switchobs_core.cli", "scipy.optimize", "scipy.stats", "scipy.integrate",
+         "scipy.interpolate", "numpy.f2py", "numpy.testing", "numpy.ma", "numpy.polynomial", "unittest",
+         "scipy._lib._docscrape")
+
+PROBE = """
+import json, sys
+from switchobs_core.lean_scipy import import_scipy
+import_scipy()
+import switchobs_ros.estimator
+imported = sorted(sys.modules)
+from switchobs_ros.pipeline import EstimatorPipeline
+pipe = EstimatorPipeline.from_params({"system": "paper", "gain_table": sys.argv[1], "schedule.mode": "periodic",
+                                      "schedule.tau": [2.0], "schedule.s": [0.6]})
+print(json.dumps({"imported": imported, "built": sorted(sys.modules), "family": pipe.observer.family}))
+"""
+
+
+def _heavy(modules: list[str]) -> list[str]:
+    return [m for m in modules if any(m == h or m.startswith(h + ".") for h in HEAVY)]
+
+
+@pytest.fixture(scope="module")
+def loaded(tmp_path_factory) -> dict:
+    system = paper_system()
+    path = kalman_table(system, [design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0)]).save(
+        tmp_path_factory.mktemp("imports") / "paper_kalman.npz")
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    res = subprocess.run([sys.executable, "-c", PROBE, str(path)], capture_output=True, text=True, timeout=120,
+                         env=env, cwd=str(REPO))
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_the_node_module_imports_nothing_heavy(loaded):
+    assert "switchobs_ros.estimator" in loaded["imported"]
+    assert not _heavy(loaded["imported"]), _heavy(loaded["imported"])
+
+
+def test_the_pipeline_from_a_cached_table_imports_nothing_heavy(loaded):
+    """The table's load, its check, the system's decompositions, the observer (Kalman family) and the
+    pipeline's set-up: none imports the design stack or the others."""
+    assert loaded["family"] == "kalman"
+    assert not _heavy(loaded["built"]), _heavy(loaded["built"])
+
+
+def test_the_probe_sees_a_heavy_import():
+    """The same check catches a heavy module once something imports it (here: the design of a table)."""
+    code = ("import sys; from switchobs_core.lean_scipy import import_scipy; import_scipy(); "
+            "import switchobs_core.design.kalman; print('\\n'.join(sorted(sys.modules)))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env=dict(os.environ, PYTHONPATH=str(REPO)), cwd=str(REPO))
+    assert res.returncode == 0, res.stderr
+    assert "switchobs_core.design.kalman" in _heavy(res.stdout.split())
