@@ -158,13 +158,19 @@ def main(argv: list[str] | None = None) -> int:
                 got[name].append(json.loads(r.stdout.strip().splitlines()[-1]))
     print(f"Cold caches (8 MiB written between ticks), mean thread CPU per tick (us), median of {a.rounds} "
           f"interleaved rounds [min - max], {a.ticks} ticks, load {os.getloadavg()[0]:.1f}:\n")
-    print("| piece | " + " | ".join(name for name, _ in trees) + " |")
-    print("|---|" + "---|" * len(trees))
+    paired = len(trees) > 1
+    tail = " | this / before (paired rounds) |" if paired else " |"
+    print("| piece | " + " | ".join(name for name, _ in trees) + tail)
+    print("|---|" + "---|" * (len(trees) + paired))
     for key in (*PIECES, "total"):
         cells = []
+        vals = {}
         for name, _ in trees:
-            v = [sum(g["pieces"].values()) if key == "total" else g["pieces"][key] for g in got[name]]
+            v = vals[name] = [sum(g["pieces"].values()) if key == "total" else g["pieces"][key] for g in got[name]]
             cells.append(f"{statistics.median(v):.1f} [{min(v):.1f} - {max(v):.1f}]")
+        if paired:      # each round's ratio (the two children ran back to back): the load's drift cancels
+            r = [x / y for x, y in zip(vals["this"], vals["before"])]
+            cells.append(f"{statistics.median(r):.3f} [{min(r):.3f} - {max(r):.3f}]")
         print(f"| {key} | " + " | ".join(cells) + " |")
     if a.fine:
         labels = sorted({k for g in got[trees[0][0]] for k in g["fine"]}, key=lambda k: FINE.index(

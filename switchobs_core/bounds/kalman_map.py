@@ -103,9 +103,10 @@ class SparseTransition:
         """``|Phi~| x`` (for ``x >= 0``: the factored step's ``y``)."""
         return csr_matvec(self._ip, self._ix, self._adv, (self.n, self.n), x)
 
-    def matmat(self, B: np.ndarray) -> np.ndarray:
-        """``Phi~ B`` for a dense ``B`` (n x m)."""
-        return csr_matmat(self._ip, self._ix, self._dv, (self.n, self.n), B)
+    def matmat(self, B: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``Phi~ B`` for a dense ``B`` (n x m), in ``out`` if given
+        (:func:`~switchobs_core.numerics.csr.csr_matmat`)."""
+        return csr_matmat(self._ip, self._ix, self._dv, (self.n, self.n), B, out)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """``Phi~ x`` (the sum over a row's nonzeros only: its rounding is within the dense one's)."""
@@ -116,13 +117,18 @@ class SparseTransition:
         X = self.matmat(S)
         return self.matmat(X.T).T
 
-    def sandwich_either(self, S: np.ndarray) -> np.ndarray:
-        """``Phi~ S Phi~'`` or its transpose ``Phi~ S' Phi~'`` (C-ordered), whichever needs one
-        copy less: ``S`` or ``S'`` is read where it lies in memory. The ellipsoid is ``sym S``, the
-        same for both (:mod:`switchobs_core.numerics.rounding`, step 5)."""
+    def sandwich_either(self, S: np.ndarray, scratch: np.ndarray | None = None) -> np.ndarray:
+        """``Phi~ S Phi~'`` or its transpose ``Phi~ S' Phi~'`` (C-ordered, a new array), whichever needs
+        one copy less: ``S`` or ``S'`` is read where it lies in memory. The ellipsoid is ``sym S``, the
+        same for both (:mod:`switchobs_core.numerics.rounding`, step 5). ``scratch``: a C-ordered n x n
+        array (not ``S``) for ``(Phi~ T)'``; the result is then written over ``Phi~ T`` (two n x n arrays
+        touched instead of three; the same doubles)."""
         T = S if S.flags.c_contiguous else np.ascontiguousarray(S.T)     # S.T of an F-ordered S: no copy
         X = self.matmat(T)                                 # Phi~ T
-        return self.matmat(X.T)      # Phi~ T' Phi~'
+        if scratch is None or scratch.shape != X.shape or not scratch.flags.c_contiguous or scratch is T:
+            return self.matmat(X.T)      # Phi~ T' Phi~'
+        np.copyto(scratch, X.T)
+        return self.matmat(scratch, X)
 
 
 def sparse_transition(entry: Any) -> SparseTransition | None:
@@ -335,7 +341,7 @@ class KalmanMap:
         K, H = self.K, self.H
         Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken
         if Y is None:
-            Y = sp.sandwich_either(S)   # C-ordered
+            Y = sp.sandwich_either(S, ell.scratch())   # C-ordered
         cols = self._cols
         if cols is None:
             cols = self._cols = _columns(H)

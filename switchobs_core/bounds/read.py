@@ -235,7 +235,6 @@ class AnchoredBound:
         self._v: np.ndarray | None = None       # the latest leading direction (warm start)
         self._f_a = self._g_a = 0.0   # ||S_a||_F and max(||S_a||_inf, ||S_a||_1), rounded up
         self._age = 0
-        self._work: np.ndarray | None = None    # scratch of S's shape for D = S - c S_a and |D| (a read's own)
 
     def read(self, ell: ErrorEllipsoid) -> float:
         """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring)."""
@@ -252,9 +251,7 @@ class AnchoredBound:
                 nw = math.sqrt(float(w.dot(w)))
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
-                if self._work is None or self._work.shape != S.shape:
-                    self._work = np.empty(S.shape)
-                D = _minus_scaled(S, c, self._Sa, self._work)
+                D = _minus_scaled(S, c, self._Sa, ell.scratch())     # the step's scratch: in cache
                 g = (fro_norm(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     A = np.abs(D, out=D)        # D is not read again

@@ -72,7 +72,7 @@ def open_loop_product(ell: ErrorEllipsoid, sp: SparseTransition) -> tuple[np.nda
     :mod:`~switchobs_core.bounds.kalman_map`, step 1; the dense product's is ``gamma_{2n+2}``), and
     ``mn >= ||E||_inf``: what :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product`
     takes. ``O(nnz(E) n)`` instead of two dense products."""
-    return sp.sandwich_either(ell.S), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
+    return sp.sandwich_either(ell.S, ell.scratch()), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
 
 
 def _whole(out: Any) -> tuple[np.ndarray, float]:

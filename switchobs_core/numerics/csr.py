@@ -34,13 +34,18 @@ def csr_matvec(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, shape:
 
 
 def csr_matmat(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, shape: tuple[int, int],
-               B: np.ndarray) -> np.ndarray:
+               B: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``A B`` for ``A`` given by its CSR arrays and ``shape`` and a dense ``B`` (n x r; made
-    C-contiguous if it is not)."""
+    C-contiguous if it is not); ``out``: a C-ordered float array of the result's shape (not
+    overlapping ``B``) that receives it (the same doubles as a new one)."""
     m, n = shape
     B = np.ascontiguousarray(B, dtype=float)
+    if out is None:
+        out = np.zeros((m, B.shape[1]))
+    else:
+        out.fill(0.0)
     if _csr_matvecs is None:        # pragma: no cover
-        return np.asarray(csr_array((data, indices, indptr), shape=shape) @ B)
-    out = np.zeros((m, B.shape[1]))
+        np.copyto(out, np.asarray(csr_array((data, indices, indptr), shape=shape) @ B))
+        return out
     _csr_matvecs(m, n, B.shape[1], indptr, indices, data, B.ravel(), out.ravel())
     return out

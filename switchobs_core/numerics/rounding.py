@@ -170,6 +170,7 @@ class ErrorEllipsoid:
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
+        self._scratch: np.ndarray | None = None     # scratch(): the transpose and tb Q of _apply
         self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
         self._qrows[1] = self._d2
         self._qrows[3] = 1.0
@@ -222,6 +223,13 @@ class ErrorEllipsoid:
             self._qc.clear()
         self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
         return Q, rq, wq, tq
+
+    def scratch(self) -> np.ndarray:
+        """A C-ordered n x n array free between steps (:meth:`_apply`'s, in cache after a step): a temporary."""
+        T = self._scratch
+        if T is None:
+            T = self._scratch = np.empty((self.n, self.n))
+        return T
 
     def keep_product(self, key: object, Z: np.ndarray) -> None:
         """Keep ``Z``, a product of the current ``S`` through the map ``key`` (the open-loop step's
@@ -340,14 +348,18 @@ class ErrorEllipsoid:
         return alpha, tb, Q, q, trace, max(trace, 0.0) * self._gsum
 
     def _apply(self, Z: np.ndarray, plan: tuple) -> tuple[np.ndarray, float]:
-        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`."""
+        """The n x n passes of :meth:`_assemble` on ``Z`` (overwritten) with its :meth:`_plan`: ``alpha sym Z``
+        as ``(Z + Z') (alpha / 2)``, ``Z'`` copied into :meth:`scratch` (``Z += Z'`` makes a new temporary), the
+        halving folded into the scaling: ``fl(fl(x / 2) alpha) = fl(x (alpha / 2))`` where ``x / 2`` is normal,
+        below that one rounding instead of two, within the plan's underflow allowance (step 8)."""
         alpha, tb, Q, q, _, tr = plan
-        Z += Z.T                    # exactly symmetric: ((Z + Z') / 2)_ij = ((Z + Z') / 2)_ji
-        Z *= 0.5
-        if alpha != 1.0:
-            Z *= alpha
+        T = self.scratch()
+        np.copyto(T, Z.T)
+        Z += T                      # exactly symmetric: (Z + Z')_ij = (Z + Z')_ji
+        Z *= 0.5 * alpha
         if Q is not None:
-            Z += tb * Q
+            np.multiply(Q, tb, out=T)
+            Z += T
         if Z.flags.c_contiguous or Z.flags.f_contiguous:    # the diagonal in place: a strided view
             dS = Z.ravel(order="K")[:: self.n + 1]
             dS += q
@@ -360,10 +372,8 @@ class ErrorEllipsoid:
         alpha, tb, Q, q, _, _ = plan
         ix = cols[:, None], cols
         B = Z[ix]
-        B += B.T
-        B *= 0.5
-        if alpha != 1.0:
-            B *= alpha
+        B = B + B.T
+        B *= 0.5 * alpha
         if Q is not None:
             B += tb * Q[ix]
         B[np.diag_indices(cols.size)] += q[cols]

@@ -63,9 +63,9 @@ def test_shared_prior_equals_fresh_and_the_update_is_unchanged(agents10, noise_m
         counts["propagated"] += 1
         return real_prop(self, *a, **k)
 
-    def sw(self, S):
+    def sw(self, S, *a):
         counts["sandwich"] += 1
-        return real_sw(self, S)
+        return real_sw(self, S, *a)
     monkeypatch.setattr(RoundingBound, "propagated", prop)
     monkeypatch.setattr(SparseTransition, "sandwich_either", sw)
     make = (lambda: so.SwitchedObserver(system, table, "periodic", [cycle], e0=10.0, noise_max=noise_max))
