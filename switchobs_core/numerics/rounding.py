@@ -163,7 +163,6 @@ class ErrorEllipsoid:
         self._cz = self.c_dense + _U * (1.0 + self.c_dense)    # with the symmetrisation's rounding
         self._qc: dict = {}                         # id(G) -> the added set of :meth:`_shaped`
         self._kept: tuple | None = None             # (map, S, its product) for one taker (:meth:`keep_product`)
-        self._unit = bool(np.all(self.d == 1.0))    # no scaling: the products by d are exact and skipped
         self._ones = np.ones(self.n)
         self._dr = float((self.d.max() / self.d.min()) ** 2) if self.n else 1.0   # the scaling's spread
         #: The last shape matrix :meth:`step_dense` assembled (exactly symmetric while it is not changed
@@ -396,7 +395,7 @@ class ErrorEllipsoid:
         ``||M||_inf^2 trace S alpha`` and ``theta rho^2`` (times the scaling's spread) stay far below
         the largest double no operation can overflow and no error state is set up; elsewhere the step
         runs again under one (``guarded``: it is already). Equal to :meth:`propagate_product`'s set
-        within a few ``u`` of each entry (test_step_dense.py).
+        within 1e-13 of each entry relative to the diagonal (test_step_dense.py).
         """
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):

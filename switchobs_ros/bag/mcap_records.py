@@ -156,6 +156,8 @@ def message_records(chunk: bytes) -> list[tuple[int, int, bytes]]:
     (``chunk``: from the start time to the end of the records, the op and length left out), in the
     file's order; other records skipped. What ``mcap``'s ``breakup_chunk`` yields as Message records
     (without the CRC checked, as it is read here). Raises ``ValueError`` where the lengths do not add up."""
+    if len(chunk) < _CHUNK_HEAD.size + 8:
+        raise ValueError("a chunk shorter than its header")
     _, _, _, _, clen = _CHUNK_HEAD.unpack_from(chunk, 0)
     if clen:
         raise ValueError("a compressed chunk")
@@ -168,6 +170,8 @@ def message_records(chunk: bytes) -> list[tuple[int, int, bytes]]:
     out = []
     unpack, head, msg = _RECORD.unpack_from, _RECORD.size, _MESSAGE_HEAD.unpack_from
     while at < end:
+        if at + head > end:
+            raise ValueError("a record header runs past the chunk's end")
         op, length = unpack(chunk, at)
         at += head
         if at + length > end:

@@ -3,6 +3,8 @@ its bytes are those ``mcap``'s own reader yields; lengths that do not add up are
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 import pytest
 from mcap.data_stream import ReadDataStream
@@ -84,3 +86,15 @@ def test_a_channel_metadata_does_not_list_is_skipped_in_log_order(tmp_path, extr
     ordered = list(b.log_order())
     assert [m.topic for m in ordered] == ["/a"] * 50
     assert [m.data for m in ordered] == [m.data for m in b.messages(order="log")] == data
+
+
+@pytest.mark.parametrize("keep", [0, 5, 31, 39, 41, 50])
+def test_a_cut_chunk_raises_value_error(keep):
+    """Bytes cut inside the chunk's header, a record's header or its body: ``ValueError`` (what the
+    reader turns into a clear refusal), never ``struct.error``."""
+    record = struct.pack("<BQ", 5, 22 + 3) + struct.pack("<HIQQ", 1, 0, 7, 7) + b"abc"    # a Message record
+    head = struct.pack("<QQQII", 7, 7, len(record), 0, 0)     # times, size, crc, compression "" (length 0)
+    chunk = head + struct.pack("<Q", len(record)) + record
+    assert message_records(chunk) == [(1, 7, b"abc")]
+    with pytest.raises(ValueError):
+        message_records(chunk[:keep])
