@@ -86,6 +86,12 @@ _BLOCK_INDEX: dict[tuple, np.ndarray] = {}
 _BLOCK_INDEX_MAX = 256
 
 
+def packed_position(i, j, n: int):
+    """Where entry ``(i, j)``, ``i <= j`` (ints or integer arrays), of an n x n symmetric matrix sits
+    in its packed upper triangle (row-major): ``i n - i (i - 1) / 2 + (j - i)``."""
+    return i * n - i * (i - 1) // 2 + (j - i)
+
+
 def packed_block_index(n: int, cols: np.ndarray) -> np.ndarray:
     """The positions of ``P[np.ix_(cols, cols)]`` in the packed upper triangle of an n x n symmetric
     ``P`` (row-major): entry ``(i, j)`` of the block at ``min * n - min (min - 1) / 2 + (max - min)``.
@@ -94,7 +100,7 @@ def packed_block_index(n: int, cols: np.ndarray) -> np.ndarray:
     idx = _BLOCK_INDEX.get(key)
     if idx is None:
         i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)
-        idx = i * n - i * (i - 1) // 2 + (j - i)
+        idx = packed_position(i, j, n)
         idx.flags.writeable = False
         if len(_BLOCK_INDEX) >= _BLOCK_INDEX_MAX:
             _BLOCK_INDEX.clear()
@@ -144,7 +150,7 @@ class KalmanPhase:
             return np.diagonal(P).copy()
         n = self.K.shape[0]
         i = np.arange(n)
-        return P[i * n - i * (i - 1) // 2]
+        return P[packed_position(i, i, n)]
 
     def _read(self) -> np.ndarray:
         """The stored prior as it is kept: a row not read yet is read and verified now
