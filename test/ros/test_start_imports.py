@@ -3,7 +3,8 @@ brings in what only a design, a simulation, a plot or a test needs.
 
 One fresh interpreter starts as the ``estimator`` console script does up to its node (scipy through
 :mod:`switchobs_core.lean_scipy`, then the node's module), then builds the pipeline from a Kalman table on
-disk (:meth:`~switchobs_ros.pipeline.EstimatorPipeline.from_params`, no DDS), and prints the modules
+disk (:meth:`~switchobs_ros.pipeline.EstimatorPipeline.from_params`, no DDS; a Kalman table and an
+LMI table), and prints the modules
 loaded after each step. None of :data:`HEAVY` may be among them (rclpy itself imports ``yaml``, so it
 is not checked here).
 """
@@ -19,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from switchobs_core.design.kalman import design_kalman
+from switchobs_core.design.lmi import design_table
 from switchobs_core.model.scenarios import paper_system
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.table.gains import kalman_table
@@ -52,16 +54,19 @@ def _heavy(modules: list[str]) -> list[str]:
     return [m for m in modules if any(m == h or m.startswith(h + ".") for h in HEAVY)]
 
 
-@pytest.fixture(scope="module")
-def loaded(tmp_path_factory) -> dict:
-    system = paper_system()
-    path = kalman_table(system, [design_kalman(system, Cycle.from_ts(2.0, 0.6), 50.0)]).save(
-        tmp_path_factory.mktemp("imports") / "paper_kalman.npz")
+@pytest.fixture(scope="module", params=["kalman", "lmi"])
+def loaded(request, tmp_path_factory) -> dict:
+    system, cycle = paper_system(), Cycle.from_ts(2.0, 0.6)
+    where = tmp_path_factory.mktemp("imports")
+    if request.param == "kalman":
+        path = kalman_table(system, [design_kalman(system, cycle, 50.0)]).save(where / "paper_kalman.npz")
+    else:
+        path = design_table(system, [cycle], progress=False).save(where / "paper_lmi.json")
     env = dict(os.environ, PYTHONPATH=str(REPO))
     res = subprocess.run([sys.executable, "-c", PROBE, str(path)], capture_output=True, text=True, timeout=120,
                          env=env, cwd=str(REPO))
     assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return dict(json.loads(res.stdout.strip().splitlines()[-1]), expected=request.param)
 
 
 def test_the_node_module_imports_nothing_heavy(loaded):
@@ -70,9 +75,9 @@ def test_the_node_module_imports_nothing_heavy(loaded):
 
 
 def test_the_pipeline_from_a_cached_table_imports_nothing_heavy(loaded):
-    """The table's load, its check, the system's decompositions, the observer (Kalman family) and the
-    pipeline's set-up: none imports the design stack or the others."""
-    assert loaded["family"] == "kalman"
+    """The table's load, its check, the system's decompositions, the observer (the table's family) and
+    the pipeline's set-up: none imports the design stack or the others."""
+    assert loaded["family"] == loaded["expected"]
     assert not _heavy(loaded["built"]), _heavy(loaded["built"])
 
 
