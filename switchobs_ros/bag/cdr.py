@@ -132,21 +132,14 @@ class Template:
         b = self.base
         if len(arrays) != len(self.arrays):
             raise ValueError(f"template: {len(arrays)} arrays for {len(self.arrays)}")
-        for (off, n), values in zip(self.arrays, arrays):
-            a = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
-            if a.size != n:
-                raise ValueError(f"template: {a.size} values for an array of {n}")
-            b[off:off + 8 * n] = a.tobytes()
+        _put_arrays(b, self.arrays, arrays)
         if stamp_ns is not None:
             _STAMP.pack_into(b, self.stamp_off, *divmod(int(stamp_ns), 1_000_000_000))
         for off, v in zip(self.double_offs, doubles):
             struct.pack_into("<d", b, off, v)
         if self.array_off is not None:
             if isinstance(array, np.ndarray):       # the doubles' bytes at once (a covariance: 17 424 of them)
-                a = np.ascontiguousarray(array, dtype="<f8").reshape(-1)
-                if a.size != self.array_n:
-                    raise ValueError(f"template: {a.size} values for an array of {self.array_n}")
-                b[self.array_off:self.array_off + 8 * a.size] = a.tobytes()
+                _put_arrays(b, ((self.array_off, self.array_n),), (array,))
             else:
                 self._arr.pack_into(b, self.array_off, *array)
         return bytes(b)
@@ -161,20 +154,28 @@ class Template:
         off, n = self.arrays[-1]
         if any(o > off for o, _ in self.arrays[:-1]):
             raise ValueError("template: the last array is not the last in the layout")
-        last = np.ascontiguousarray(arrays[-1], dtype="<f8").reshape(-1)
-        if last.size != n:
-            raise ValueError(f"template: {last.size} values for an array of {n}")
+        last = _doubles(arrays[-1], n)
         b = self.base
-        for (o, k), values in zip(self.arrays[:-1], arrays[:-1]):
-            a = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
-            if a.size != k:
-                raise ValueError(f"template: {a.size} values for an array of {k}")
-            b[o:o + 8 * k] = a.tobytes()
+        _put_arrays(b, self.arrays[:-1], arrays[:-1])
         if stamp_ns is not None:
             _STAMP.pack_into(b, self.stamp_off, *divmod(int(stamp_ns), 1_000_000_000))
         view, mv = memoryview(last).cast("B"), memoryview(b)
         end = off + 8 * n
         return (bytes(mv[:off]), view) if end == len(b) else (bytes(mv[:off]), view, bytes(mv[end:]))
+
+
+def _doubles(values: Sequence[float] | np.ndarray, n: int) -> np.ndarray:
+    """``values`` as n little-endian doubles in C order (a view where they are already)."""
+    a = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
+    if a.size != n:
+        raise ValueError(f"template: {a.size} values for an array of {n}")
+    return a
+
+
+def _put_arrays(b: bytearray, slots: Sequence[tuple[int, int]], arrays: Sequence) -> None:
+    """Each array's doubles written at its slot ``(offset, length)`` of ``b``."""
+    for (off, n), values in zip(slots, arrays):
+        b[off:off + 8 * n] = _doubles(values, n).tobytes()
 
 
 def _unique(blob: bytes, pattern: bytes, what: str) -> int:
