@@ -499,20 +499,20 @@ class RoundingBound:
         if self.tolerance or self.phase is not None or self.withdrawn or (
                 ellv is not None and (self.reach is not None or self.noise_max[channel - 1])):
             return False
-        dense = m.dense_abs(self.d)
-        if dense is None:
-            return False
         dt = f.dt
         hit = m.rho_form
         if hit is None or hit[0] is not self or hit[1] != dt:
-            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size))
+            dense = m.dense_abs(self.d)
+            if dense is None:
+                return False
+            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size), dense)
         a_xs, a_xs1, a_xsp, a_yn, a_nun, a_0, a_en = hit[2]
         xs, xs1, xsp = self.fused_norms(f.x0, f.x_minus, f.x_plus)
         y, nu = f.y, f.nu
         base = (a_xs * xs + a_xs1 * xs1 + a_xsp * xsp + a_yn * math.sqrt(float(y.dot(y)))
                 + a_nun * math.sqrt(float(nu.dot(nu))) + a_0)
         self.w = 0.0
-        E = m.E
+        E, dense = m.E, hit[3]
         for ell in (self._ell, ellv):
             if ell is not None:
                 ell.step_dense(E, dense, (base + a_en * math.sqrt(ell.lam_scaled())) * (1.0 + 32.0 * _U))

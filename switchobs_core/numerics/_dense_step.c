@@ -2,10 +2,11 @@
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
  * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient).
  *
- * step(M, S, aMd, aux, out, rho, mn) -> tr
+ * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
  *   aux: 2 n + 6 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf) of the ellipsoid;
- *   rho, mn: the step's residual and ||M||_inf.
+ *   rho, mn: the step's residual and ||M||_inf;
+ *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled).
  *
  * Arithmetic: every product and sum is a rounded double operation in a fixed order (no FMA
  * contraction, no reassociation: build with -O2 -ffp-contract=off), so every x86-64 CPU gives the
@@ -152,7 +153,7 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
                      const double *restrict aMd,
                      const double *restrict aux, double *restrict out, double *restrict Z,
                      double *restrict Mt, double *restrict s, double rho,
-                     double mn)
+                     double mn, double *lsum)
 {
     const double *id2 = aux, *d2 = aux + n;
     const double kW = aux[2 * n], kR = aux[2 * n + 1], gsum = aux[2 * n + 2];
@@ -192,20 +193,22 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
     /* q = c1 w d + c2 d^2 + c3 |diag Z| + c4 into s (read no more) */
     for (i = 0; i < n; i++)
         s[i] = c1 * out[i] + c2 * d2[i] + c3 * fabs(Z[i * n + i]) + c4;
-    /* S' = alpha Z + diag(q), mirrored; tr its trace rounded up */
-    double tr = 0.0;
+    /* S' = alpha Z + diag(q), mirrored; tr its trace rounded up, ls its balanced trace rounded up */
+    double tr = 0.0, ls = 0.0;
     for (i = 0; i < n; i++) {
         double *o = out + i * n;
         const double *z = Z + i * n;
         double dii = z[i] * alpha + s[i];
         o[i] = dii;
         tr = tr + dii;
+        ls = ls + dii * id2[i];
         for (k = i + 1; k < n; k++)
             o[k] = z[k] * alpha;
     }
     for (i = 1; i < n; i++)
         for (k = 0; k < i; k++)
             out[i * n + k] = out[k * n + i];
+    *lsum = pymax(ls, 0.0) * gsum;
     return pymax(tr, 0.0) * gsum;
 }
 
@@ -213,7 +216,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 {
     Py_buffer bM, bS, bA, bX, bO;
     double stack_z[2 * STACK_N * STACK_N + STACK_N];
-    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr;
+    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls;
     Py_ssize_t n, nn;
 
     if (nargs != 7) {
@@ -250,7 +253,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         Mt = Z + nn;
         s = Mt + nn;
     }
-    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn);
+    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls);
     if (n > STACK_N)
         PyMem_Free(Z);
     PyBuffer_Release(&bO);
@@ -258,7 +261,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
     PyBuffer_Release(&bS);
     PyBuffer_Release(&bM);
     PyBuffer_Release(&bX);
-    return PyFloat_FromDouble(tr);
+    return Py_BuildValue("(dd)", tr, ls);
 fail_o:
     PyBuffer_Release(&bO);
 fail_a:
@@ -274,7 +277,7 @@ fail_x:
 
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
-     "step(M, S, aMd, aux, out, rho, mn) -> tr: ErrorEllipsoid.step_dense's set into out"},
+     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
     {NULL, NULL, 0, NULL},
 };
 

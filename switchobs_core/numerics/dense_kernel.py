@@ -43,13 +43,16 @@ def required() -> bool:
 
 
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
-         mn: float) -> tuple[np.ndarray, float] | None:
-    """``(S', tr)`` of ``step_dense`` by the kernel (``S'`` a new array), or None where it does not
-    apply (no kernel, an array not C-ordered doubles of the right size): the caller steps in numpy."""
+         mn: float) -> tuple[np.ndarray, float, float] | None:
+    """``(S', tr, ls)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace and ``ls``
+    its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded up), or
+    None where it does not apply (no kernel, an array not C-ordered doubles of the right size): the
+    caller steps in numpy."""
     if STEP is None:
         return None
     out = np.empty(S.shape)
     try:
-        return out, STEP(M, S, aMd, aux, out, rho, mn)
+        tr, ls = STEP(M, S, aMd, aux, out, rho, mn)
     except (BufferError, ValueError, TypeError):
         return None
+    return out, tr, ls
