@@ -1,6 +1,7 @@
 /* The exact set's step through a dense map in one call: the loops of
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
- * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient).
+ * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
+ * and the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()).
  *
  * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
@@ -275,9 +276,103 @@ fail_x:
     return NULL;
 }
 
+/* sum_k a_k b_k over four lanes (k mod 4), the lanes added in a fixed order: the same doubles on
+ * every CPU (a computed sum in any fixed order is what the callers' allowances cover) */
+__attribute__((target_clones("avx2", "default")))
+static double dot(Py_ssize_t n, const double *restrict a, const double *restrict b)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0};
+    Py_ssize_t k = 0;
+    for (; k + 4 <= n; k += 4)
+        acc = acc + ld4(a + k) * ld4(b + k);
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < n; k++)
+        t = t + a[k] * b[k];
+    return t;
+}
+
+/* D = S - c Sa (c Sa rounded, then the difference), and sum D_ij^2 as dot's lanes */
+__attribute__((target_clones("avx2", "default")))
+static double minus_scaled(Py_ssize_t nn, const double *restrict S, const double *restrict Sa, double c,
+                           double *restrict D)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0}, cc = {c, c, c, c};
+    Py_ssize_t k = 0;
+    for (; k + 4 <= nn; k += 4) {
+        v4 d = ld4(S + k) - cc * ld4(Sa + k);
+        st4(D + k, d);
+        acc = acc + d * d;
+    }
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < nn; k++) {
+        double d = S[k] - c * Sa[k];
+        D[k] = d;
+        t = t + d * d;
+    }
+    return t;
+}
+
+/* between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors
+ * (switchobs_core/bounds/read.py): w = S va, c = va'w / theta_a, and where c is finite and >= 0,
+ * D = S - c Sa with its Frobenius norm (else nan); S, Sa, D n x n, va and w n doubles. */
+static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bS, bA, bv, bw, bD;
+    PyObject *res = NULL;
+    Py_ssize_t n, i;
+    double theta, c, nw, fd = NAN;
+
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "between(S, Sa, va, theta_a, w, D)");
+        return NULL;
+    }
+    theta = PyFloat_AsDouble(args[3]);
+    if (theta == -1.0 && PyErr_Occurred())
+        return NULL;
+    if (PyObject_GetBuffer(args[2], &bv, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    n = bv.len / 8;
+    if (!doubles(&bv) || n < 1) {
+        PyBuffer_Release(&bv);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: va of the wrong size");
+        return NULL;
+    }
+    if (get(args[0], &bS, n * n, 0) < 0)
+        goto fail_v;
+    if (get(args[1], &bA, n * n, 0) < 0)
+        goto fail_s;
+    if (get(args[4], &bw, n, PyBUF_WRITABLE) < 0)
+        goto fail_a;
+    if (get(args[5], &bD, n * n, PyBUF_WRITABLE) < 0)
+        goto fail_w;
+    {
+        const double *S = bS.buf, *Sa = bA.buf, *va = bv.buf;
+        double *w = bw.buf, *D = bD.buf;
+        for (i = 0; i < n; i++)
+            w[i] = dot(n, S + i * n, va);
+        c = dot(n, va, w) / theta;
+        nw = sqrt(dot(n, w, w));
+        if (isfinite(c) && c >= 0.0)
+            fd = sqrt(minus_scaled(n * n, S, Sa, c, D));
+    }
+    res = Py_BuildValue("(ddd)", c, nw, fd);
+    PyBuffer_Release(&bD);
+fail_w:
+    PyBuffer_Release(&bw);
+fail_a:
+    PyBuffer_Release(&bA);
+fail_s:
+    PyBuffer_Release(&bS);
+fail_v:
+    PyBuffer_Release(&bv);
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
      "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
+    {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,
+     "between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,7 +1,8 @@
 """The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`
-(``_dense_step.c``, built by ``setup.py`` where a C compiler is found: ``scripts/bootstrap.sh`` builds
-it into the checkout). The numpy step stays the reference: without the extension, or for arrays the
-kernel does not take (not C-ordered doubles), the step runs in numpy.
+and of the amortised read's pass between anchors (:func:`between`): ``_dense_step.c``, built by
+``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
+numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
+C-ordered doubles), it runs instead.
 
 The kernel computes the set of ``step_dense``'s docstring with the coefficients the ellipsoid
 computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2`` and the factors ``kW, kR, gsum, k1,
@@ -21,15 +22,16 @@ import os
 import numpy as np
 
 try:
+    from ._dense_step import between as BETWEEN
     from ._dense_step import step as STEP
 except ImportError:     # no compiler where the package was built: the numpy step
-    STEP = None
+    STEP = BETWEEN = None
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "REQUIRE_ENV", "available", "required", "step"]
+__all__ = ["STEP", "BETWEEN", "REQUIRE_ENV", "available", "required", "step", "between"]
 
 
 def available() -> bool:
@@ -56,3 +58,20 @@ def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: fl
     except (BufferError, ValueError, TypeError):
         return None
     return out, tr, ls
+
+
+def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
+            D: np.ndarray) -> tuple[np.ndarray, float, float, float] | None:
+    """``(w, c, ||w||, ||D||_F)`` of :class:`~switchobs_core.bounds.read.AnchoredBound`'s read between
+    anchors by the kernel: ``w = S v_a``, ``c = v_a' w / theta_a`` and, where ``c`` is finite and
+    ``>= 0``, ``D = fl(S - fl(c S_a))`` written into ``D`` with its Frobenius norm (else nan); every
+    sum in a fixed order (four lanes), as that module's step 3 allows. None where the kernel does
+    not apply: the caller computes them in numpy."""
+    if BETWEEN is None:
+        return None
+    w = np.empty(va.shape)
+    try:
+        c, nw, fd = BETWEEN(S, Sa, va, theta_a, w, D)
+    except (BufferError, ValueError, TypeError):
+        return None
+    return w, c, nw, fd

@@ -147,3 +147,35 @@ def test_arrays_the_kernel_does_not_take_fall_back_to_numpy():
     np.testing.assert_allclose(ell.S, ref.S, rtol=1e-15, atol=0)
     assert dense_kernel.step(M.astype(np.float32), S, absM[2], ell._aux, 1e-6, absM[1]) is None
     assert dense_kernel.step(M, S, absM[2], ell._aux[:-1], 1e-6, absM[1]) is None
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 39), scale=st.floats(1e-30, 1e30),
+       drift=st.floats(0.0, 0.2), fortran=st.booleans())
+def test_kernel_read_pass_is_the_numpy_pass(seed, n, scale, drift, fortran):
+    """The amortised read's pass between anchors (``bounds.read``): ``w``, ``c``, ``||w||`` and ``||D||_F``
+    within a few ``u`` of numpy's, ``D`` within ``u`` of each entry's scale; an ``S`` not C-ordered is
+    numpy's alone."""
+    from switchobs_core.bounds.read import _between
+
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, n))
+    Sa = scale * (X @ X.T / n + 1e-3 * np.eye(n))
+    S = Sa * (1.0 + drift) + drift * scale * np.diag(rng.uniform(0, 1, n))
+    if fortran:
+        S = np.asfortranarray(S)
+    va = rng.standard_normal(n)
+    va /= np.linalg.norm(va)
+    theta = float(va @ Sa @ va)
+    Dk, Dn = np.empty((n, n)), np.empty((n, n))
+    got = dense_kernel.between(S, Sa, va, theta, Dk)
+    ref = _between(S, Sa, va, theta, Dn)
+    if not S.flags.c_contiguous:       # (n = 1 is both)
+        assert got is None
+        return
+    w, c, nw, fd = got
+    assert np.all(np.abs(w - ref[0]) <= 1e-13 * (np.abs(S) @ np.abs(va)))
+    assert abs(c - ref[1]) <= 1e-13 * abs(ref[1]) and abs(nw - ref[2]) <= 1e-13 * ref[2]
+    assert np.all(np.abs(Dk - Dn) <= 4 * UNIT_ROUNDOFF * (np.abs(S) + c * np.abs(Sa)))
+    assert abs(fd - ref[3]) <= 1e-13 * ref[3] + 4 * UNIT_ROUNDOFF * float(np.linalg.norm(np.abs(S) + c * np.abs(Sa)))
