@@ -1,7 +1,8 @@
 /* The exact set's step through a dense map in one call: the loops of
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
  * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
- * and the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()).
+ * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
+ * balanced norm of a vector (norm(), RoundingBound.xn).
  *
  * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
@@ -368,9 +369,64 @@ fail_v:
     return res;
 }
 
+/* norm(x, s) -> ||diag(s) x|| (s None: ||x||): the square root of dot's lane sum of the squares */
+__attribute__((target_clones("avx2", "default")))
+static double sumsq(Py_ssize_t n, const double *restrict x, const double *restrict s)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0};
+    Py_ssize_t k = 0;
+    if (s != NULL) {
+        for (; k + 4 <= n; k += 4) {
+            v4 v = ld4(x + k) * ld4(s + k);
+            acc = acc + v * v;
+        }
+    } else {
+        for (; k + 4 <= n; k += 4) {
+            v4 v = ld4(x + k);
+            acc = acc + v * v;
+        }
+    }
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < n; k++) {
+        double v = s != NULL ? x[k] * s[k] : x[k];
+        t = t + v * v;
+    }
+    return t;
+}
+
+static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bx, bs;
+    double t;
+    int scaled;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "norm(x, s)");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[0], &bx, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    if (!doubles(&bx)) {
+        PyBuffer_Release(&bx);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: x is not doubles");
+        return NULL;
+    }
+    scaled = args[1] != Py_None;
+    if (scaled && get(args[1], &bs, bx.len / 8, 0) < 0) {
+        PyBuffer_Release(&bx);
+        return NULL;
+    }
+    t = sumsq(bx.len / 8, bx.buf, scaled ? bs.buf : NULL);
+    if (scaled)
+        PyBuffer_Release(&bs);
+    PyBuffer_Release(&bx);
+    return PyFloat_FromDouble(sqrt(t));
+}
+
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
      "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
+    {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
+     "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,
      "between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors"},
     {NULL, NULL, 0, NULL},

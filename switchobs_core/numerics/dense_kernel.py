@@ -1,5 +1,7 @@
-"""The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`
-and of the amortised read's pass between anchors (:func:`between`): ``_dense_step.c``, built by
+"""The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`,
+of the amortised read's pass between anchors (:func:`between`) and of a balanced norm (:data:`NORM`,
+``norm(x, s) = ||diag(s) x||``, ``s`` None for ``||x||``: its sum of squares in a fixed order, four
+lanes, as a numpy dot's in another): ``_dense_step.c``, built by
 ``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
 numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
 C-ordered doubles), it runs instead.
@@ -23,15 +25,16 @@ import numpy as np
 
 try:
     from ._dense_step import between as BETWEEN
+    from ._dense_step import norm as NORM
     from ._dense_step import step as STEP
 except ImportError:     # no compiler where the package was built: the numpy step
-    STEP = BETWEEN = None
+    STEP = BETWEEN = NORM = None
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "REQUIRE_ENV", "available", "required", "step", "between"]
+__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "step", "between"]
 
 
 def available() -> bool:

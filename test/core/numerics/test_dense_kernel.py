@@ -179,3 +179,20 @@ def test_kernel_read_pass_is_the_numpy_pass(seed, n, scale, drift, fortran):
     assert abs(c - ref[1]) <= 1e-13 * abs(ref[1]) and abs(nw - ref[2]) <= 1e-13 * ref[2]
     assert np.all(np.abs(Dk - Dn) <= 4 * UNIT_ROUNDOFF * (np.abs(S) + c * np.abs(Sa)))
     assert abs(fd - ref[3]) <= 1e-13 * ref[3] + 4 * UNIT_ROUNDOFF * float(np.linalg.norm(np.abs(S) + c * np.abs(Sa)))
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(0, 140), scale=st.floats(1e-150, 1e150), scaled=st.booleans())
+def test_kernel_norm_is_numpys(seed, n, scale, scaled):
+    """``norm(x, s) = ||diag(s) x||`` within ``(n + 2) u`` of numpy's (both sums of squares, in other orders);
+    a vector not C-ordered is refused (the caller takes numpy's)."""
+    rng = np.random.default_rng(seed)
+    x = scale * rng.standard_normal(n)
+    s = np.ldexp(1.0, rng.integers(-12, 12, n)) if scaled else None
+    v = x if s is None else x * s
+    ref = math.sqrt(float(v.dot(v)))
+    got = dense_kernel.NORM(x, s)
+    assert abs(got - ref) <= (n + 2) * UNIT_ROUNDOFF * ref
+    with pytest.raises((BufferError, ValueError)):
+        dense_kernel.NORM(np.repeat(x, 2)[::2], None) if n > 1 else dense_kernel.NORM(np.ones(n, np.float32), None)
