@@ -12,7 +12,8 @@
  *
  * Arithmetic: every product and sum is a rounded double operation in a fixed order (no FMA
  * contraction, no reassociation: build with -O2 -ffp-contract=off), so every x86-64 CPU gives the
- * same doubles. Each entry of T = M S and of Z = T M' is a dot product of length n summed in index
+ * same doubles: the hot loops are written with GCC's vector extension and compiled twice
+ * (target_clones: AVX2 where the CPU has it, SSE2 elsewhere), elementwise in the same order. Each entry of T = M S and of Z = T M' is a dot product of length n summed in index
  * order, within gamma_n |a|.|b| as any order; Z is computed on and above its diagonal and mirrored, so
  * it is exactly symmetric (the allowance for the symmetrisation's rounding stays, unused).
  */
