@@ -1,6 +1,11 @@
 """ament_python package switchobs_ros: the Python packages switchobs_core, msg_bridge and
 switchobs_ros, with the executables estimator, camera_sim and switchobs.
 
+The compiled kernel switchobs_core/numerics/_dense_step.c (the rigorous bound's dense step,
+switchobs_core/numerics/dense_kernel.py) is optional: where it does not build (no C compiler) the
+package installs without it and the numpy step runs. Its flags keep every rounding as written: no
+FMA contraction, no -ffast-math, no -march (the same doubles on every x86-64 CPU).
+
 Works both with colcon on a ROS 2 Jazzy system (``colcon build``; setup.cfg puts the
 executables in ``<prefix>/lib/switchobs_ros`` where ``ros2 run`` looks for them) and with
 ``pip install -e .`` into a virtual environment that takes ROS 2 from PyPI (the executables
@@ -9,7 +14,7 @@ then land on the environment's ``bin``). Version pins live in requirements.txt o
 
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = "switchobs_ros"
 
@@ -25,6 +30,8 @@ setup(
          + sorted(glob("config/*.xml"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
+    ext_modules=[Extension("switchobs_core.numerics._dense_step", ["switchobs_core/numerics/_dense_step.c"],
+                           extra_compile_args=["-O2", "-ffp-contract=off", "-Wno-psabi"], optional=True)],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
     # scripts/bootstrap.sh installs the pinned set from requirements.txt first.
     install_requires=["setuptools", "numpy", "scipy", "cvxpy", "PyYAML", "threadpoolctl", "tqdm"],
@@ -37,7 +44,7 @@ setup(
         "demo": ["matplotlib", "tqdm"],
         "test": ["pytest", "hypothesis", "ruff"],
     },
-    zip_safe=True,
+    zip_safe=False,
     maintainer="switchobs maintainers",
     maintainer_email="switchobs@example.org",
     description="Switched Luenberger observers for systems observed one output channel at a time",

@@ -4,12 +4,13 @@
 
     OPENBLAS_NUM_THREADS=1 python bench/bench_scale_parts.py --agents 2 8
 
-Six estimators on the stream of ``bench_scale.py --cost --steady`` (``camera_agents`` M, 50 Hz, after
+Seven estimators on the stream of ``bench_scale.py --cost --steady`` (``camera_agents`` M, 50 Hz, after
 the table's start-up and one period untimed), interleaved in blocks of 25 samples (the order
 rotated), CPU time per sample, medians over the blocks: the table without a bound; with the bound's
 step; with the step and ``envelope()`` (the node pattern); the same with the ellipsoid's dense step
 (``ErrorEllipsoid.step_dense``) a no-op (the sets stay, everything around them runs); the table
-without a bound and ``envelope()`` (the observer's part of a read); the reference filter. The
+without a bound and ``envelope()`` (the observer's part of a read); the reference filter; and the
+node pattern with the compiled kernel (:mod:`switchobs_core.numerics.dense_kernel`) set aside. The
 differences give the parts: the dense step, the rest of the bound's step (norms, residual, dispatch),
 the observer's ``envelope()`` and the bound's read. A script, not a test: nothing is asserted.
 """
@@ -44,12 +45,26 @@ def parts(M: int, samples: int = 1500, block: int = 25) -> dict:
     def up(o, k):
         return o.update(stream[k][0], stream[k][1], stream[k][3])
 
+    from switchobs_core.numerics import dense_kernel
+
+    npy = observer()
+
+    def numpy_path(k):      # the node pattern with the compiled kernel set aside (numpy's step and read)
+        kept = dense_kernel.STEP, dense_kernel.BETWEEN
+        dense_kernel.STEP = dense_kernel.BETWEEN = None
+        try:
+            up(npy, k)
+            npy.envelope()
+        finally:
+            dense_kernel.STEP, dense_kernel.BETWEEN = kept
+
     fns = {"table, no bound": lambda k: up(nob, k),
            "table + bound step": lambda k: up(bnd, k),
            "node pattern": lambda k: (up(env, k), env.envelope()),
            "node's step, step_dense a no-op": lambda k: up(nos, k),
            "table, no bound + envelope()": lambda k: (up(noe, k), noe.envelope()),
-           "reference": lambda k: ref.update(stream[k][0], stream[k][2], stream[k][3])}
+           "reference": lambda k: ref.update(stream[k][0], stream[k][2], stream[k][3]),
+           "node pattern, numpy": numpy_path}
     for k in range(warm):
         for f in fns.values():
             f(k)
@@ -64,6 +79,7 @@ def parts(M: int, samples: int = 1500, block: int = 25) -> dict:
             t[name].append((time.process_time_ns() - c) / block / 1e3)
     med = {k: float(np.median(v[2:])) for k, v in t.items()}
     med["n"] = system.n
+    med["kernel"] = dense_kernel.available()
     return med
 
 
@@ -95,6 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     row("**the node pattern**", lambda r: r["node pattern"])
     row("the reference Kalman filter", lambda r: r["reference"])
     row("node pattern / reference", lambda r: r["node pattern"] / r["reference"], ".2f")
+    if rows and rows[0]["kernel"]:
+        row("the node pattern, the compiled kernel set aside (numpy)", lambda r: r["node pattern, numpy"])
+        row("node pattern with the kernel / without", lambda r: r["node pattern"] / r["node pattern, numpy"], ".2f")
     return 0
 
 

@@ -28,8 +28,21 @@ msgs_want="$( (echo "$want"; cd "$REPO/interfaces/switchobs_msgs" \
     && cat package.xml CMakeLists.txt msg/*.msg) | sha256sum | cut -d' ' -f1)"
 py_ok() { [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && [ -x "$VENV/bin/estimator" ]; }
 msgs_ok() { [ -f "$msgs_stamp" ] && [ "$(cat "$msgs_stamp")" = "$msgs_want" ]; }
+# The optional compiled kernel (switchobs_core/numerics/_dense_step.c, setup.py) built into the checkout,
+# where tests, the demo and the node import it; again when its source is newer. Without a C compiler
+# the numpy step runs: a line says so, nothing fails (scripts/test.sh asks for it: a test fails).
+build_kernel() {
+    local so
+    so="$(ls "$REPO"/switchobs_core/numerics/_dense_step*.so 2>/dev/null | head -n 1 || true)"
+    if [ -z "$so" ] || [ "$REPO/switchobs_core/numerics/_dense_step.c" -nt "$so" ]; then
+        (cd "$REPO" && "$VENV/bin/python" setup.py -q build_ext --inplace >/dev/null 2>&1) || true
+        ls "$REPO"/switchobs_core/numerics/_dense_step*.so >/dev/null 2>&1 \
+            || echo "bootstrap: the compiled kernel did not build (no C compiler?): the numpy step runs"
+    fi
+}
 if py_ok && msgs_ok \
         && "$VENV/bin/python" -c "import rclpy, cvxpy, switchobs_ros, switchobs_msgs.msg" 2>/dev/null; then
+    build_kernel
     exit 0
 fi
 if ! py_ok || ! "$VENV/bin/python" -c "import rclpy, cvxpy, switchobs_ros" 2>/dev/null; then
@@ -48,4 +61,5 @@ if ! msgs_ok || ! "$VENV/bin/python" -c "import switchobs_msgs.msg" 2>/dev/null;
     echo "bootstrap: switchobs_msgs built in $((SECONDS - t0)) s"
     echo "$msgs_want" > "$msgs_stamp"
 fi
+build_kernel
 echo "bootstrap: done"

@@ -11,6 +11,8 @@ set -euo pipefail
 "$(dirname "$0")/bootstrap.sh"
 . "$(dirname "$0")/lib.sh"
 claim_ros_domain
+# The compiled kernel (bootstrap.sh builds it) is asked for: test_dense_kernel.py fails without it.
+export SWITCHOBS_REQUIRE_KERNEL="${SWITCHOBS_REQUIRE_KERNEL:-1}"
 cd "$REPO"
 # Bytecode as an installed package has it: compiled once, under the venv (not in the checkout), and
 # read by every test process. With PYTHONDONTWRITEBYTECODE set and no __pycache__ (a fresh clone),

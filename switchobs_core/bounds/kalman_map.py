@@ -208,7 +208,7 @@ class KalmanMap:
         self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
-        #: ``(bound, dt, coefficients)`` of the bound's residual through this map
+        #: ``(bound, dt, coefficients, dense_abs(bound.d))`` of the bound's residual through this map
         #: (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused_sample`), kept with the map.
         self.rho_form: tuple | None = None
 

@@ -73,6 +73,7 @@ import numpy as np
 from scipy.linalg.blas import daxpy as _daxpy
 from scipy.linalg.lapack import dpotrf
 
+from ..numerics import dense_kernel
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 
 __all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "LOOSENESS", "positive_definite",
@@ -118,6 +119,21 @@ def _minus_scaled(S: np.ndarray, c: float, Sa: np.ndarray, out: np.ndarray | Non
         _daxpy(Sa.ravel(), D.ravel(), a=-c)
         return D
     return S - c * Sa
+
+
+def _between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
+             D: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """:func:`~switchobs_core.numerics.dense_kernel.between` in numpy: ``(w, c, ||w||, ||D||_F)`` with
+    ``w = S v_a``, ``c = v_a' w / theta_a`` and ``D = fl(S - fl(c S_a))`` in ``D`` (:func:`_minus_scaled`;
+    its norm nan where ``c`` is not finite and ``>= 0``)."""
+    w = S.dot(va)
+    c = float(va.dot(w)) / theta_a
+    if not (math.isfinite(c) and c >= 0.0):
+        return w, c, math.sqrt(float(w.dot(w))), math.nan
+    Dm = _minus_scaled(S, c, Sa, D)
+    if Dm is not D:         # S or S_a not C-ordered: a new array, copied into the caller's
+        np.copyto(D, Dm)
+    return w, c, math.sqrt(float(w.dot(w))), fro_norm(D)
 
 
 def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np.ndarray]:
@@ -245,14 +261,14 @@ class AnchoredBound:
             return 0.0
         if self._Sa is not None and self._Sa.shape == S.shape and self._age < self.max_age \
                 and np.isfinite(self._lam_a) and self._theta_a > 0.0:
-            w = S.dot(self._va)
-            c = float(self._va.dot(w)) / self._theta_a    # any c >= 0 is valid (step 1)
+            D = ell.scratch()       # the step's scratch: in cache
+            got = dense_kernel.between(S, self._Sa, self._va, self._theta_a, D) or _between(
+                S, self._Sa, self._va, self._theta_a, D)
+            w, c, nw, fd = got      # any c >= 0 is valid (step 1)
             if math.isfinite(c) and c >= 0.0:
-                nw = math.sqrt(float(w.dot(w)))
                 if nw > 0.0 and math.isfinite(nw):
                     self._v = w / nw                    # one power iteration for the next anchor
-                D = _minus_scaled(S, c, self._Sa, ell.scratch())     # the step's scratch: in cache
-                g = (fro_norm(D) + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
+                g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     A = np.abs(D, out=D)        # D is not read again
                     gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
@@ -287,7 +303,7 @@ class AnchoredBound:
         self.anchors += 1
         self._Sa = S.copy()
         self._lam_a = lam
-        self._va = self._v = v
+        self._va = self._v = v = np.ascontiguousarray(v)      # the same doubles; what the kernel reads
         self._theta_a = float(v.dot(S.dot(v)))
         self._f_a = fro_norm(S) * (1.0 + 2.0 * gamma(S.size + 4))
         A = np.abs(S)

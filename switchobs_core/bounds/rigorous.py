@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from ..numerics import dense_kernel
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, PendingSet, fro_norm, gamma
@@ -55,6 +56,20 @@ from .read import AnchoredBound
 from .stamp import StampError
 
 __all__ = ["NO_E0", "RoundingBound", "open_loop_product"]
+
+
+def _norm(v: np.ndarray, s: np.ndarray | None = None) -> float:
+    """``||diag(s) v||`` (``s`` None: ``||v||``), by the compiled kernel where it is built and takes ``v``
+    (:data:`~switchobs_core.numerics.dense_kernel.NORM`: the sum of squares in another order), else numpy."""
+    if dense_kernel.NORM is not None:
+        try:
+            return dense_kernel.NORM(v, s)
+        except (BufferError, ValueError, TypeError):
+            pass
+    if s is not None:
+        v = v * s
+    return math.sqrt(float(v.dot(v)))
+
 
 #: Why the bounds are withdrawn from the start when no initial error bound is given (``e0`` None).
 NO_E0 = ("e0 is not known (e0 = -1): no bound until the data certify one (a window of one switching cycle "
@@ -194,10 +209,7 @@ class RoundingBound:
     # ------------------------------------------------------------------ norms in balanced units
     def xn(self, x: np.ndarray) -> float:
         """``||D^-1 x||``."""
-        if self._unit:
-            return math.sqrt(float(x.dot(x)))
-        v = x * self._id
-        return math.sqrt(float(v.dot(v)))
+        return _norm(x, None if self._unit else self._id)
 
     def fused_norms(self, x0: np.ndarray, xm: np.ndarray, xp: np.ndarray) -> tuple[float, float, float]:
         """``||D^-1 .||`` of a fused step's ``x0``, ``x^-`` and ``x^+``; ``x^+``'s is kept for the next
@@ -499,20 +511,19 @@ class RoundingBound:
         if self.tolerance or self.phase is not None or self.withdrawn or (
                 ellv is not None and (self.reach is not None or self.noise_max[channel - 1])):
             return False
-        dense = m.dense_abs(self.d)
-        if dense is None:
-            return False
         dt = f.dt
         hit = m.rho_form
         if hit is None or hit[0] is not self or hit[1] != dt:
-            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size))
+            dense = m.dense_abs(self.d)
+            if dense is None:
+                return False
+            hit = m.rho_form = (self, dt, self._fused_form(m, dt, f.y.size), dense)
         a_xs, a_xs1, a_xsp, a_yn, a_nun, a_0, a_en = hit[2]
         xs, xs1, xsp = self.fused_norms(f.x0, f.x_minus, f.x_plus)
         y, nu = f.y, f.nu
-        base = (a_xs * xs + a_xs1 * xs1 + a_xsp * xsp + a_yn * math.sqrt(float(y.dot(y)))
-                + a_nun * math.sqrt(float(nu.dot(nu))) + a_0)
+        base = a_xs * xs + a_xs1 * xs1 + a_xsp * xsp + a_yn * _norm(y) + a_nun * _norm(nu) + a_0
         self.w = 0.0
-        E = m.E
+        E, dense = m.E, hit[3]
         for ell in (self._ell, ellv):
             if ell is not None:
                 ell.step_dense(E, dense, (base + a_en * math.sqrt(ell.lam_scaled())) * (1.0 + 32.0 * _U))

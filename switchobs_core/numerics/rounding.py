@@ -104,6 +104,7 @@ from typing import Any
 
 import numpy as np
 
+from . import dense_kernel
 from .extended import expm_extended
 
 try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without its wrapper's 3 us)
@@ -169,10 +170,9 @@ class ErrorEllipsoid:
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
         self._sym: np.ndarray | None = None
+        self._ls: tuple = (None,)   # (S, tr, lam_scaled(S)) of the kernel's last step
         self._scratch: np.ndarray | None = None     # scratch(): the transpose and tb Q of _apply
-        self._qrows = np.empty((4, self.n))  # step_dense's rows of q: w d, d^2, |diag Z|, 1
-        self._qrows[1] = self._d2
-        self._qrows[3] = 1.0
+        self._qrows = np.stack((self._ones, self._d2, self._ones, self._ones))  # step_dense's q: w d, d^2, |diag Z|, 1
         # step_dense's constant factors (its docstring): W = Wv kW; R_z = kR W (v d); q's coefficients
         kw, cz = self._gsum * (1.0 + 2.0 * _U), self._cz
         self._kf = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
@@ -180,10 +180,14 @@ class ErrorEllipsoid:
         self._kR = cz * (1.0 + 4.0 * _U) * kw
         self._k1 = (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * kw * self._kf
         self._k3 = 2.0 * _U * self._kf
+        self._aux = np.concatenate((self._id2, self._d2,       # the kernel's coefficients (dense_kernel)
+                                    (self._kW, self._kR, self._gsum, self._k1, self._k3, self._kf)))
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
         """``>= lambda_max(D^-1 S D^-1)``: its trace (``S`` is PSD), O(n)."""
+        if S is None and self._ls[0] is self.S:
+            return self._ls[2]          # the kernel's, of the set it made (summed in another order)
         S = self.S if S is None else S
         return max(float(S.diagonal().dot(self._id2)), 0.0) * self._gsum
 
@@ -379,24 +383,21 @@ class ErrorEllipsoid:
         return B
 
     def step_dense(self, M: np.ndarray, absM: tuple, rho: float, guarded: bool = False) -> None:
-        """:meth:`step` through a dense ``M`` with ``absM = (|M|, ||M||_inf)`` or ``(|M|, ||M||_inf, D |M|)``
-        (``D`` this ellipsoid's balancing) kept by the caller, in fewer array operations: the set of
-        :meth:`propagate_product` with ``Z = M S M'``, ``w = image_bound(|M|)`` and ``c = gamma_{2n+2}``
-        (step 6), rounded in another order.
-
-        ``w d`` is taken as ``(D |M|) s`` (a scaling by powers of two is exact); the scalar factors of
-        ``w`` (its sum's rounding) are folded into the coefficients of the diagonal allowance
-        ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4`` (one product of a 4 x n matrix), each coefficient
-        rounded up by ``(1 + 16 u)`` more for the fold and for that product's sum of four nonnegative
-        terms; ``(Z + Z') (alpha / 2)`` is the general path's
-        ``alpha sym Z`` (a halving is exact). The trace chooses the outer sum's ``a`` only (any
-        ``a > 0`` is valid), so it is taken from the diagonal of ``Z`` and ``w`` without forming
-        ``Z + R_z``; :attr:`tr` is the sum of the new diagonal, rounded up. Overflow: where
-        ``||M||_inf^2 trace S alpha`` and ``theta rho^2`` (times the scaling's spread) stay far below
-        the largest double no operation can overflow and no error state is set up; elsewhere the step
-        runs again under one (``guarded``: it is already). Equal to :meth:`propagate_product`'s set
-        within 1e-13 of each entry relative to the diagonal (test_step_dense.py).
-        """
+        """:meth:`step` through a dense ``M``, ``absM = (|M|, ||M||_inf[, D |M|])`` kept by the caller: the set of
+        :meth:`propagate_product` (``Z = M S M'``, ``w = image_bound(|M|)``, ``c = gamma_{2n+2}``: step 6) rounded
+        in another order, by the compiled kernel where it is built (:mod:`~switchobs_core.numerics.dense_kernel`:
+        the same set and allowances), else in numpy. ``w d`` is ``(D |M|) s`` (scalings by powers of two are
+        exact); ``w``'s scalar factors fold into the coefficients of ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4``,
+        each rounded up by ``(1 + 16 u)`` more (the fold, the sum of four nonnegative terms); ``(Z + Z') alpha / 2``
+        is ``alpha sym Z``; the trace only chooses ``a`` (any ``a > 0`` is valid): from ``diag Z`` and ``w``;
+        :attr:`tr` is the new diagonal's sum rounded up. Where ``||M||_inf^2 trace S alpha`` and ``theta rho^2``
+        (times ``D``'s spread) stay far below overflow no error state is set up; elsewhere the step runs again
+        under one (``guarded``). Within 1e-13 of :meth:`propagate_product`'s set, relative to the diagonal."""
+        hit = dense_kernel.step(M, self.S, absM[2] if len(absM) > 2 else absM[0] * self.d[:, None], self._aux,
+                                rho, absM[1]) if dense_kernel.STEP is not None else None
+        if hit is not None:
+            self.S, self.tr, self._sym, self._ls = hit[0], hit[1], hit[0], hit
+            return
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)

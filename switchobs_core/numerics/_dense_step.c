@@ -1,0 +1,440 @@
+/* The exact set's step through a dense map in one call: the loops of
+ * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
+ * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
+ * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
+ * balanced norm of a vector (norm(), RoundingBound.xn).
+ *
+ * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
+ *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
+ *   aux: 2 n + 6 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf) of the ellipsoid;
+ *   rho, mn: the step's residual and ||M||_inf;
+ *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled).
+ *
+ * Arithmetic: every product and sum is a rounded double operation in a fixed order (no FMA
+ * contraction, no reassociation: build with -O2 -ffp-contract=off), so every x86-64 CPU gives the
+ * same doubles: the hot loops are written with GCC's vector extension and compiled twice
+ * (target_clones: AVX2 where the CPU has it, SSE2 elsewhere), elementwise in the same order. Each entry of T = M S and of Z = T M' is a dot product of length n summed in index
+ * order, within gamma_n |a|.|b| as any order; Z is computed on and above its diagonal and mirrored, so
+ * it is exactly symmetric (the allowance for the symmetrisation's rounding stays, unused).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+
+#define U 1.1102230246251565e-16        /* 2^-53 */
+#define UNDERFLOW 4.9406564584124654e-324 /* 2^-1074 */
+#define STACK_N 40
+
+static double pymax(double a, double b) { return b > a ? b : a; }  /* Python's max(a, b) */
+static double pymin(double a, double b) { return b < a ? b : a; }  /* Python's min(a, b) */
+
+static int doubles(const Py_buffer *b)
+{
+    const char *f = b->format;
+    if (f != NULL && (f[0] == '@' || f[0] == '=' || (!PY_BIG_ENDIAN && f[0] == '<')))
+        f++;
+    return b->itemsize == 8 && f != NULL && f[0] == 'd' && f[1] == 0;
+}
+
+static int get(PyObject *o, Py_buffer *b, Py_ssize_t len, int flags)
+{
+    if (PyObject_GetBuffer(o, b, flags | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return -1;
+    if (!doubles(b) || b->len != len * 8) {
+        PyBuffer_Release(b);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: an array of the wrong size or type");
+        return -1;
+    }
+    return 0;
+}
+
+/* c_k = sum_j a_j B_jk for k0 <= k < n (B n x n, C-ordered), each summed in the order of j: blocks
+ * of 8 columns kept in registers as pairs (GCC's vector extension: elementwise, the same order and
+ * doubles as the scalar loop) */
+typedef double v2 __attribute__((vector_size(16)));
+static inline v2 ld(const double *p) { v2 v; __builtin_memcpy(&v, p, sizeof v); return v; }
+static inline void st(double *p, v2 v) { __builtin_memcpy(p, &v, sizeof v); }
+typedef double v4 __attribute__((vector_size(32)));
+static inline v4 ld4(const double *p) { v4 v; __builtin_memcpy(&v, p, sizeof v); return v; }
+static inline void st4(double *p, v4 v) { __builtin_memcpy(p, &v, sizeof v); }
+
+static void row_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict a, const double *restrict B,
+                      double *restrict c)
+{
+    Py_ssize_t j, k;
+    for (k = k0; k + 8 <= n; k += 8) {
+        v2 a0 = {a[0], a[0]};
+        v2 c0 = a0 * ld(B + k), c1 = a0 * ld(B + k + 2), c2 = a0 * ld(B + k + 4), c3 = a0 * ld(B + k + 6);
+        for (j = 1; j < n; j++) {
+            const double *b = B + j * n + k;
+            v2 aj = {a[j], a[j]};
+            c0 = c0 + aj * ld(b);
+            c1 = c1 + aj * ld(b + 2);
+            c2 = c2 + aj * ld(b + 4);
+            c3 = c3 + aj * ld(b + 6);
+        }
+        st(c + k, c0);
+        st(c + k + 2, c1);
+        st(c + k + 4, c2);
+        st(c + k + 6, c3);
+    }
+    for (; k + 2 <= n; k += 2) {
+        v2 a0 = {a[0], a[0]};
+        v2 c0 = a0 * ld(B + k);
+        for (j = 1; j < n; j++) {
+            v2 aj = {a[j], a[j]};
+            c0 = c0 + aj * ld(B + j * n + k);
+        }
+        st(c + k, c0);
+    }
+    for (; k < n; k++) {
+        double z = a[0] * B[k];
+        for (j = 1; j < n; j++)
+            z = z + a[j] * B[j * n + k];
+        c[k] = z;
+    }
+}
+
+/* rows c = a B and e = f B from column k0 on (two rows share each load of B) */
+__attribute__((target_clones("avx2", "default")))
+static void rows_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict a, const double *restrict f,
+                       const double *restrict B, double *restrict c, double *restrict e)
+{
+    Py_ssize_t j, k;
+    for (k = k0; k + 8 <= n; k += 8) {
+        v4 a0 = {a[0], a[0], a[0], a[0]}, f0 = {f[0], f[0], f[0], f[0]}, b0 = ld4(B + k), b1 = ld4(B + k + 4);
+        v4 c0 = a0 * b0, c1 = a0 * b1, e0 = f0 * b0, e1 = f0 * b1;
+        for (j = 1; j < n; j++) {
+            const double *b = B + j * n + k;
+            v4 aj = {a[j], a[j], a[j], a[j]}, fj = {f[j], f[j], f[j], f[j]};
+            b0 = ld4(b);
+            b1 = ld4(b + 4);
+            c0 = c0 + aj * b0;
+            c1 = c1 + aj * b1;
+            e0 = e0 + fj * b0;
+            e1 = e1 + fj * b1;
+        }
+        st4(c + k, c0);
+        st4(c + k + 4, c1);
+        st4(e + k, e0);
+        st4(e + k + 4, e1);
+    }
+    for (; k + 2 <= n; k += 2) {
+        v2 a0 = {a[0], a[0]}, f0 = {f[0], f[0]}, b0 = ld(B + k);
+        v2 c0 = a0 * b0, e0 = f0 * b0;
+        for (j = 1; j < n; j++) {
+            v2 aj = {a[j], a[j]}, fj = {f[j], f[j]};
+            b0 = ld(B + j * n + k);
+            c0 = c0 + aj * b0;
+            e0 = e0 + fj * b0;
+        }
+        st(c + k, c0);
+        st(e + k, e0);
+    }
+    for (; k < n; k++) {
+        double z = a[0] * B[k], y = f[0] * B[k];
+        for (j = 1; j < n; j++) {
+            z = z + a[j] * B[j * n + k];
+            y = y + f[j] * B[j * n + k];
+        }
+        c[k] = z;
+        e[k] = y;
+    }
+}
+
+/* the rows of C = A B from row 0 (upper: row i from column i on), two at a time */
+static void times(Py_ssize_t n, int upper, const double *restrict A, const double *restrict B, double *restrict C)
+{
+    Py_ssize_t i;
+    for (i = 0; i + 2 <= n; i += 2)
+        rows_times(n, upper ? i : 0, A + i * n, A + (i + 1) * n, B, C + i * n, C + (i + 1) * n);
+    if (i < n)
+        row_times(n, upper ? i : 0, A + i * n, B, C + i * n);
+}
+
+static double kernel(Py_ssize_t n, const double *restrict M, const double *restrict S,
+                     const double *restrict aMd,
+                     const double *restrict aux, double *restrict out, double *restrict Z,
+                     double *restrict Mt, double *restrict s, double rho,
+                     double mn, double *lsum)
+{
+    const double *id2 = aux, *d2 = aux + n;
+    const double kW = aux[2 * n], kR = aux[2 * n + 1], gsum = aux[2 * n + 2];
+    const double k1 = aux[2 * n + 3], k3 = aux[2 * n + 4], kf = aux[2 * n + 5];
+    Py_ssize_t i, j, k;
+    double Wv = 0.0, tzs = 0.0;
+
+    for (i = 0; i < n; i++)
+        s[i] = sqrt(fabs(S[i * n + i]));
+    /* out <- T = M S; Z = T M' on and above the diagonal (M' in Mt), each entry summed in the order
+     * of j */
+    times(n, 0, M, S, out);
+    for (j = 0; j < n; j++)
+        for (k = 0; k < n; k++)
+            Mt[j * n + k] = M[k * n + j];
+    times(n, 1, out, Mt, Z);
+    /* w d = (D |M|) s; W and the trace that chooses alpha */
+    for (i = 0; i < n; i++) {
+        const double *a = aMd + i * n;
+        double v = 0.0;
+        for (j = 0; j < n; j++)
+            v = v + a[j] * s[j];
+        out[i] = v;                     /* T is read no more: out's first row holds w d */
+        Wv = Wv + v * id2[i];
+        tzs = tzs + Z[i * n + i] * id2[i];
+    }
+    double Wz = Wv * kW;
+    double tz = pymax(tzs + kR * Wz * Wv, 0.0) * gsum;
+    double alpha = 1.0, theta = 1.0;
+    if (tz > 0.0 && rho > 0.0) {
+        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), 0x1p-40), 1e150);
+        theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * U);
+    }
+    double c2 = rho > 0.0 ? ((theta * rho) * rho * (1.0 + 2.0 * U) + UNDERFLOW) * kf : 0.0;
+    double c1 = alpha * Wz * k1, c3 = alpha * k3;
+    double c4 = (double)((n + 4) * n) * UNDERFLOW * (2.0 + mn) * kf;
+    /* q = c1 w d + c2 d^2 + c3 |diag Z| + c4 into s (read no more) */
+    for (i = 0; i < n; i++)
+        s[i] = c1 * out[i] + c2 * d2[i] + c3 * fabs(Z[i * n + i]) + c4;
+    /* S' = alpha Z + diag(q), mirrored; tr its trace rounded up, ls its balanced trace rounded up */
+    double tr = 0.0, ls = 0.0;
+    for (i = 0; i < n; i++) {
+        double *o = out + i * n;
+        const double *z = Z + i * n;
+        double dii = z[i] * alpha + s[i];
+        o[i] = dii;
+        tr = tr + dii;
+        ls = ls + dii * id2[i];
+        for (k = i + 1; k < n; k++)
+            o[k] = z[k] * alpha;
+    }
+    for (i = 1; i < n; i++)
+        for (k = 0; k < i; k++)
+            out[i * n + k] = out[k * n + i];
+    *lsum = pymax(ls, 0.0) * gsum;
+    return pymax(tr, 0.0) * gsum;
+}
+
+static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bM, bS, bA, bX, bO;
+    double stack_z[2 * STACK_N * STACK_N + STACK_N];
+    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls;
+    Py_ssize_t n, nn;
+
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "step(M, S, aMd, aux, out, rho, mn)");
+        return NULL;
+    }
+    rho = PyFloat_AsDouble(args[5]);
+    mn = PyFloat_AsDouble(args[6]);
+    if ((rho == -1.0 || mn == -1.0) && PyErr_Occurred())
+        return NULL;
+    if (PyObject_GetBuffer(args[3], &bX, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    n = (bX.len / 8 - 6) / 2;
+    if (!doubles(&bX) || n < 1 || bX.len != (2 * n + 6) * 8) {
+        PyBuffer_Release(&bX);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: aux of the wrong size");
+        return NULL;
+    }
+    nn = n * n;
+    if (get(args[0], &bM, nn, 0) < 0)
+        goto fail_x;
+    if (get(args[1], &bS, nn, 0) < 0)
+        goto fail_m;
+    if (get(args[2], &bA, nn, 0) < 0)
+        goto fail_s;
+    if (get(args[4], &bO, nn, PyBUF_WRITABLE) < 0)
+        goto fail_a;
+    if (n > STACK_N) {
+        Z = PyMem_Malloc((size_t)(2 * nn + n) * sizeof(double));
+        if (Z == NULL) {
+            PyErr_NoMemory();
+            goto fail_o;
+        }
+        Mt = Z + nn;
+        s = Mt + nn;
+    }
+    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls);
+    if (n > STACK_N)
+        PyMem_Free(Z);
+    PyBuffer_Release(&bO);
+    PyBuffer_Release(&bA);
+    PyBuffer_Release(&bS);
+    PyBuffer_Release(&bM);
+    PyBuffer_Release(&bX);
+    return Py_BuildValue("(dd)", tr, ls);
+fail_o:
+    PyBuffer_Release(&bO);
+fail_a:
+    PyBuffer_Release(&bA);
+fail_s:
+    PyBuffer_Release(&bS);
+fail_m:
+    PyBuffer_Release(&bM);
+fail_x:
+    PyBuffer_Release(&bX);
+    return NULL;
+}
+
+/* sum_k a_k b_k over four lanes (k mod 4), the lanes added in a fixed order: the same doubles on
+ * every CPU (a computed sum in any fixed order is what the callers' allowances cover) */
+__attribute__((target_clones("avx2", "default")))
+static double dot(Py_ssize_t n, const double *restrict a, const double *restrict b)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0};
+    Py_ssize_t k = 0;
+    for (; k + 4 <= n; k += 4)
+        acc = acc + ld4(a + k) * ld4(b + k);
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < n; k++)
+        t = t + a[k] * b[k];
+    return t;
+}
+
+/* D = S - c Sa (c Sa rounded, then the difference), and sum D_ij^2 as dot's lanes */
+__attribute__((target_clones("avx2", "default")))
+static double minus_scaled(Py_ssize_t nn, const double *restrict S, const double *restrict Sa, double c,
+                           double *restrict D)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0}, cc = {c, c, c, c};
+    Py_ssize_t k = 0;
+    for (; k + 4 <= nn; k += 4) {
+        v4 d = ld4(S + k) - cc * ld4(Sa + k);
+        st4(D + k, d);
+        acc = acc + d * d;
+    }
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < nn; k++) {
+        double d = S[k] - c * Sa[k];
+        D[k] = d;
+        t = t + d * d;
+    }
+    return t;
+}
+
+/* between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors
+ * (switchobs_core/bounds/read.py): w = S va, c = va'w / theta_a, and where c is finite and >= 0,
+ * D = S - c Sa with its Frobenius norm (else nan); S, Sa, D n x n, va and w n doubles. */
+static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bS, bA, bv, bw, bD;
+    PyObject *res = NULL;
+    Py_ssize_t n, i;
+    double theta, c, nw, fd = NAN;
+
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "between(S, Sa, va, theta_a, w, D)");
+        return NULL;
+    }
+    theta = PyFloat_AsDouble(args[3]);
+    if (theta == -1.0 && PyErr_Occurred())
+        return NULL;
+    if (PyObject_GetBuffer(args[2], &bv, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    n = bv.len / 8;
+    if (!doubles(&bv) || n < 1) {
+        PyBuffer_Release(&bv);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: va of the wrong size");
+        return NULL;
+    }
+    if (get(args[0], &bS, n * n, 0) < 0)
+        goto fail_v;
+    if (get(args[1], &bA, n * n, 0) < 0)
+        goto fail_s;
+    if (get(args[4], &bw, n, PyBUF_WRITABLE) < 0)
+        goto fail_a;
+    if (get(args[5], &bD, n * n, PyBUF_WRITABLE) < 0)
+        goto fail_w;
+    {
+        const double *S = bS.buf, *Sa = bA.buf, *va = bv.buf;
+        double *w = bw.buf, *D = bD.buf;
+        for (i = 0; i < n; i++)
+            w[i] = dot(n, S + i * n, va);
+        c = dot(n, va, w) / theta;
+        nw = sqrt(dot(n, w, w));
+        if (isfinite(c) && c >= 0.0)
+            fd = sqrt(minus_scaled(n * n, S, Sa, c, D));
+    }
+    res = Py_BuildValue("(ddd)", c, nw, fd);
+    PyBuffer_Release(&bD);
+fail_w:
+    PyBuffer_Release(&bw);
+fail_a:
+    PyBuffer_Release(&bA);
+fail_s:
+    PyBuffer_Release(&bS);
+fail_v:
+    PyBuffer_Release(&bv);
+    return res;
+}
+
+/* norm(x, s) -> ||diag(s) x|| (s None: ||x||): the square root of dot's lane sum of the squares */
+__attribute__((target_clones("avx2", "default")))
+static double sumsq(Py_ssize_t n, const double *restrict x, const double *restrict s)
+{
+    v4 acc = {0.0, 0.0, 0.0, 0.0};
+    Py_ssize_t k = 0;
+    if (s != NULL) {
+        for (; k + 4 <= n; k += 4) {
+            v4 v = ld4(x + k) * ld4(s + k);
+            acc = acc + v * v;
+        }
+    } else {
+        for (; k + 4 <= n; k += 4) {
+            v4 v = ld4(x + k);
+            acc = acc + v * v;
+        }
+    }
+    double t = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (; k < n; k++) {
+        double v = s != NULL ? x[k] * s[k] : x[k];
+        t = t + v * v;
+    }
+    return t;
+}
+
+static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bx, bs;
+    double t;
+    int scaled;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "norm(x, s)");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[0], &bx, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    if (!doubles(&bx)) {
+        PyBuffer_Release(&bx);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: x is not doubles");
+        return NULL;
+    }
+    scaled = args[1] != Py_None;
+    if (scaled && get(args[1], &bs, bx.len / 8, 0) < 0) {
+        PyBuffer_Release(&bx);
+        return NULL;
+    }
+    t = sumsq(bx.len / 8, bx.buf, scaled ? bs.buf : NULL);
+    if (scaled)
+        PyBuffer_Release(&bs);
+    PyBuffer_Release(&bx);
+    return PyFloat_FromDouble(sqrt(t));
+}
+
+static PyMethodDef methods[] = {
+    {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
+     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
+    {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
+     "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
+    {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,
+     "between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_dense_step",
+                                    "ErrorEllipsoid.step_dense in one call (optional)", -1, methods,
+                                    NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__dense_step(void) { return PyModule_Create(&module); }

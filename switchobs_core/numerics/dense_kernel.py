@@ -1,0 +1,80 @@
+"""The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`,
+of the amortised read's pass between anchors (:func:`between`) and of a balanced norm (:data:`NORM`,
+``norm(x, s) = ||diag(s) x||``, ``s`` None for ``||x||``: its sum of squares in a fixed order, four
+lanes, as a numpy dot's in another): ``_dense_step.c``, built by
+``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
+numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
+C-ordered doubles), it runs instead.
+
+The kernel computes the set of ``step_dense``'s docstring with the coefficients the ellipsoid
+computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2`` and the factors ``kW, kR, gsum, k1,
+k3, kf``), in one call instead of 17 array operations and the scalar arithmetic between them:
+``T = M S`` and ``Z = T M'`` with each entry a dot product summed in index order (within
+``gamma_n |a|.|b|`` as any order, the bound the allowance ``gamma_{2n+2}`` is built on), ``Z``
+on and above its diagonal and mirrored (exactly symmetric), ``w d = (D |M|) s``, and the diagonal
+allowance and trace in the same operations as the numpy step. It is compiled with
+``-ffp-contract=off`` (no FMA contraction, no reassociation): every x86-64 CPU gives the same doubles
+(its products use AVX2 where the CPU has it and SSE2 elsewhere, elementwise, in the same order).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+try:
+    from ._dense_step import between as BETWEEN
+    from ._dense_step import norm as NORM
+    from ._dense_step import step as STEP
+except ImportError:     # no compiler where the package was built: the numpy step
+    STEP = BETWEEN = NORM = None
+
+#: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
+#: without it, so a test run cannot pass on the numpy step alone unnoticed.
+REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
+
+__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "step", "between"]
+
+
+def available() -> bool:
+    """Whether the compiled kernel is importable (and used by ``step_dense``)."""
+    return STEP is not None
+
+
+def required() -> bool:
+    """Whether the environment asks for the kernel (:data:`REQUIRE_ENV`)."""
+    return os.environ.get(REQUIRE_ENV, "") not in ("", "0")
+
+
+def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
+         mn: float) -> tuple[np.ndarray, float, float] | None:
+    """``(S', tr, ls)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace and ``ls``
+    its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded up), or
+    None where it does not apply (no kernel, an array not C-ordered doubles of the right size): the
+    caller steps in numpy."""
+    if STEP is None:
+        return None
+    out = np.empty(S.shape)
+    try:
+        tr, ls = STEP(M, S, aMd, aux, out, rho, mn)
+    except (BufferError, ValueError, TypeError):
+        return None
+    return out, tr, ls
+
+
+def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
+            D: np.ndarray) -> tuple[np.ndarray, float, float, float] | None:
+    """``(w, c, ||w||, ||D||_F)`` of :class:`~switchobs_core.bounds.read.AnchoredBound`'s read between
+    anchors by the kernel: ``w = S v_a``, ``c = v_a' w / theta_a`` and, where ``c`` is finite and
+    ``>= 0``, ``D = fl(S - fl(c S_a))`` written into ``D`` with its Frobenius norm (else nan); every
+    sum in a fixed order (four lanes), as that module's step 3 allows. None where the kernel does
+    not apply: the caller computes them in numpy."""
+    if BETWEEN is None:
+        return None
+    w = np.empty(va.shape)
+    try:
+        c, nw, fd = BETWEEN(S, Sa, va, theta_a, w, D)
+    except (BufferError, ValueError, TypeError):
+        return None
+    return w, c, nw, fd

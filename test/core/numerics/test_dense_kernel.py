@@ -1,0 +1,198 @@
+"""The compiled dense step (:mod:`switchobs_core.numerics.dense_kernel`, ``_dense_step.c``) against the
+numpy ``ErrorEllipsoid.step_dense`` (the reference): the same set within 1e-13 of each entry relative to
+the diagonal, the same trace, exactly symmetric, containing ``M S M'`` computed in extended precision
+(hypothesis over n = 1..39, units and scales 1e-30..1e30); overflow and NaN give a set that is not finite
+without a warning; arrays the kernel does not take fall back to numpy. ``scripts/test.sh`` asks for the
+kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails if it is not built."""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from switchobs_core.numerics import dense_kernel
+from switchobs_core.numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid
+
+LD = np.longdouble
+#: The two steps round the same quantities in another order (BLAS against index order, the kernel's
+#: ``alpha Z`` against numpy's ``(Z + Z') alpha / 2``): a few ``u`` of ``sqrt(S_ii S_jj)`` each; 1e-13
+#: is about 450 ``u``.
+RTOL = 1e-13
+
+needs_kernel = pytest.mark.skipif(not dense_kernel.available(), reason="the compiled kernel is not built")
+
+
+def test_kernel_is_built_where_asked_for():
+    """Under ``scripts/test.sh`` (``SWITCHOBS_REQUIRE_KERNEL=1``) the kernel must be importable."""
+    if not dense_kernel.required():
+        pytest.skip(f"{dense_kernel.REQUIRE_ENV} not set")
+    assert dense_kernel.available(), "switchobs_core/numerics/_dense_step.c is not built (scripts/bootstrap.sh)"
+
+
+@contextmanager
+def numpy_step():
+    """``step_dense`` in numpy (the kernel set aside)."""
+    kept = dense_kernel.STEP
+    dense_kernel.STEP = None
+    try:
+        yield
+    finally:
+        dense_kernel.STEP = kept
+
+
+def _case(seed: int, n: int, units: bool, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(M, S, d)``: a map near a contraction, an exactly symmetric PSD ``S``, a balancing or None."""
+    rng = np.random.default_rng(seed)
+    M = 0.9 * np.eye(n) + 0.3 * rng.standard_normal((n, n)) / math.sqrt(n)
+    X = rng.standard_normal((n, n))
+    S = scale * (X @ X.T / n + 1e-3 * np.eye(n))
+    S = 0.5 * (S + S.T)
+    d = np.ldexp(1.0, rng.integers(-12, 12, n)) if units else None
+    return M, S, d
+
+
+def _stepped(M, S, d, rho, absM, kernel: bool) -> ErrorEllipsoid:
+    n = M.shape[0]
+    ell = ErrorEllipsoid(n, 1.0, d)
+    ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 4 * n * UNIT_ROUNDOFF)
+    if kernel:
+        ell.step_dense(M, absM, rho)
+    else:
+        with numpy_step():
+            ell.step_dense(M, absM, rho)
+    return ell
+
+
+def _abs(M, d):
+    aM = np.abs(M)
+    out = (aM, float(aM.sum(axis=1).max()))
+    return out if d is None else out + (aM * d[:, None],)
+
+
+@needs_kernel
+@settings(max_examples=120, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 39), units=st.booleans(), scale=st.floats(1e-30, 1e30),
+       rho=st.sampled_from([0.0, 1e-300, 1e-16, 1e-9, 1e-3, 10.0]), with_dM=st.booleans())
+def test_kernel_is_the_numpy_step(seed, n, units, scale, rho, with_dM):
+    M, S, d = _case(seed, n, units, scale)
+    absM = _abs(M, d if with_dM else None)
+    ref, ker = _stepped(M, S, d, rho, absM, False), _stepped(M, S, d, rho, absM, True)
+    R, K = ref.S, ker.S
+    np.testing.assert_array_equal(K, K.T)                   # exactly symmetric
+    r = np.sqrt(np.outer(np.diagonal(R), np.diagonal(R)))
+    assert np.all(np.abs(K - R) <= RTOL * r), float(np.max(np.abs(K - R) / r))
+    assert abs(ker.tr - ref.tr) <= RTOL * ref.tr
+    assert ker.tr >= float(np.trace(K))
+    assert ker._sym is K                                    # read without the symmetrisation, as numpy's
+    ls, exact = ker.lam_scaled(), float(np.sum(np.diagonal(K).astype(LD) * ker._id2.astype(LD)))
+    assert exact <= ls and abs(ls - ref.lam_scaled()) <= RTOL * ref.lam_scaled()   # the kernel's, kept
+    assert ls == ErrorEllipsoid.lam_scaled(ker, K) or abs(ls / ErrorEllipsoid.lam_scaled(ker, K) - 1) < 1e-14
+    assert abs(ker.bound() - ref.bound()) <= 1e-12 * ref.bound()
+
+
+@needs_kernel
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 39), units=st.booleans(), scale=st.floats(1e-30, 1e30),
+       rho=st.sampled_from([0.0, 1e-12]))
+def test_kernel_set_contains_the_exact_product(seed, n, units, scale, rho):
+    """``S' - M S M'`` (the product in extended precision) is positive semidefinite, checked on its
+    diagonal-scaled form; its diagonal is nonnegative exactly (sharp: fails without the allowance)."""
+    M, S, d = _case(seed, n, units, scale)
+    ell = _stepped(M, S, d, rho, _abs(M, d), True)
+    T = M.astype(LD) @ S.astype(LD) @ M.T.astype(LD)
+    Dm = ell.S.astype(LD) - T
+    assert np.all(np.diagonal(Dm) >= 0), float(np.min(np.diagonal(Dm)))
+    r = np.sqrt(np.abs(np.diagonal(ell.S))) + 1e-300
+    X = (Dm / np.outer(r, r).astype(LD)).astype(float)
+    X = 0.5 * (X + X.T)
+    assert float(np.linalg.eigvalsh(X)[0]) >= -1e-12
+
+
+@needs_kernel
+def test_kernel_gives_the_same_doubles_on_every_call():
+    """The kernel's arithmetic is fixed (no threads, no reassociation): two calls, the same doubles."""
+    M, S, d = _case(5, 36, True, 1.0)
+    a, b = (_stepped(M, S, d, 1e-9, _abs(M, d), True) for _ in range(2))
+    assert np.array_equal(a.S, b.S) and a.tr == b.tr
+
+
+@needs_kernel
+@pytest.mark.parametrize("S0, tr0", [(1e307, 6e307), (math.nan, math.nan)])
+def test_overflow_and_nan_give_a_set_that_is_not_finite(S0, tr0):
+    n = 6
+    M = 3.0 * np.eye(n)
+    ell = ErrorEllipsoid(n, 1.0)
+    ell.S, ell.tr = S0 * np.eye(n), tr0
+    with np.errstate(all="raise"):
+        ell.step_dense(M, (np.abs(M), 3.0), 1.0)
+    assert not ell.finite()
+
+
+@needs_kernel
+def test_arrays_the_kernel_does_not_take_fall_back_to_numpy():
+    """An ``S`` not C-ordered (a transposed view) or a map of another type: the numpy step, the same set."""
+    M, S, d = _case(2, 7, True, 1.0)
+    absM = _abs(M, d)
+    ref = _stepped(M, S, d, 1e-6, absM, False)
+    ell = ErrorEllipsoid(7, 1.0, d)
+    ell.S, ell.tr = np.asfortranarray(S), float(np.trace(S)) * (1 + 28 * UNIT_ROUNDOFF)
+    assert not ell.S.flags.c_contiguous
+    assert dense_kernel.step(M, ell.S, absM[2], ell._aux, 1e-6, absM[1]) is None
+    ell.step_dense(M, absM, 1e-6)
+    np.testing.assert_allclose(ell.S, ref.S, rtol=1e-15, atol=0)
+    assert dense_kernel.step(M.astype(np.float32), S, absM[2], ell._aux, 1e-6, absM[1]) is None
+    assert dense_kernel.step(M, S, absM[2], ell._aux[:-1], 1e-6, absM[1]) is None
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 39), scale=st.floats(1e-30, 1e30),
+       drift=st.floats(0.0, 0.2), fortran=st.booleans())
+def test_kernel_read_pass_is_the_numpy_pass(seed, n, scale, drift, fortran):
+    """The amortised read's pass between anchors (``bounds.read``): ``w``, ``c``, ``||w||`` and ``||D||_F``
+    within a few ``u`` of numpy's, ``D`` within ``u`` of each entry's scale; an ``S`` not C-ordered is
+    numpy's alone."""
+    from switchobs_core.bounds.read import _between
+
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, n))
+    Sa = scale * (X @ X.T / n + 1e-3 * np.eye(n))
+    S = Sa * (1.0 + drift) + drift * scale * np.diag(rng.uniform(0, 1, n))
+    if fortran:
+        S = np.asfortranarray(S)
+    va = rng.standard_normal(n)
+    va /= np.linalg.norm(va)
+    theta = float(va @ Sa @ va)
+    Dk, Dn = np.empty((n, n)), np.empty((n, n))
+    got = dense_kernel.between(S, Sa, va, theta, Dk)
+    ref = _between(S, Sa, va, theta, Dn)
+    if not S.flags.c_contiguous:       # (n = 1 is both)
+        assert got is None
+        return
+    w, c, nw, fd = got
+    assert np.all(np.abs(w - ref[0]) <= 1e-13 * (np.abs(S) @ np.abs(va)))
+    assert abs(c - ref[1]) <= 1e-13 * abs(ref[1]) and abs(nw - ref[2]) <= 1e-13 * ref[2]
+    assert np.all(np.abs(Dk - Dn) <= 4 * UNIT_ROUNDOFF * (np.abs(S) + c * np.abs(Sa)))
+    assert abs(fd - ref[3]) <= 1e-13 * ref[3] + 4 * UNIT_ROUNDOFF * float(np.linalg.norm(np.abs(S) + c * np.abs(Sa)))
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(0, 140), scale=st.floats(1e-150, 1e150), scaled=st.booleans())
+def test_kernel_norm_is_numpys(seed, n, scale, scaled):
+    """``norm(x, s) = ||diag(s) x||`` within ``(n + 2) u`` of numpy's (both sums of squares, in other orders);
+    a vector not C-ordered is refused (the caller takes numpy's)."""
+    rng = np.random.default_rng(seed)
+    x = scale * rng.standard_normal(n)
+    s = np.ldexp(1.0, rng.integers(-12, 12, n)) if scaled else None
+    v = x if s is None else x * s
+    ref = math.sqrt(float(v.dot(v)))
+    got = dense_kernel.NORM(x, s)
+    assert abs(got - ref) <= (n + 2) * UNIT_ROUNDOFF * ref
+    with pytest.raises((BufferError, ValueError)):
+        dense_kernel.NORM(np.repeat(x, 2)[::2], None) if n > 1 else dense_kernel.NORM(np.ones(n, np.float32), None)
