@@ -76,7 +76,8 @@ def _median(e: np.ndarray) -> float:
     if s.size == 0 or np.isnan(s[-1]):
         return float("nan")
     k = s.size // 2
-    return float(s[k]) if s.size % 2 else float((s[k - 1] + s[k]) / 2)
+    # ``+ 0.0``: a zero median is +0.0, as numpy's (its mean starts from +0.0).
+    return (float(s[k]) if s.size % 2 else float((s[k - 1] + s[k]) / 2)) + 0.0
 
 
 def _gebal_scaling(A: np.ndarray) -> np.ndarray:

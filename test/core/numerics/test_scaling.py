@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import matrix_balance
 
@@ -28,6 +28,8 @@ def test_gebal_scaling_is_matrix_balance_scaling(n, seed, decades, density, fort
 
 @given(st.lists(st.one_of(st.integers(-300, 300).map(float), st.floats(allow_nan=True, allow_infinity=True)),
                 max_size=40))
+@example([-0.0])
+@example([0.0, -0.0])
 def test_median_is_numpys(values):
     e = np.array(values, dtype=float)
     want = np.median(e) if e.size else float("nan")
