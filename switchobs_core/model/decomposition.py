@@ -175,9 +175,15 @@ def canonical_basis(V: np.ndarray) -> np.ndarray:
     n, k = V.shape
     if k == 0:
         return np.zeros((n, 0))
-    W = np.arange(1.0, n + 1.0)
+    return _canonical(V, np.arange(1.0, n + 1.0))[0]
+
+
+def _canonical(V: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`canonical_basis` of ``V`` (k >= 1 columns) with the weights ``W`` (one per row), and the
+    compression's eigenvalues (ascending, one per column)."""
+    k = V.shape[1]
     M = V.T @ (W[:, None] * V)
-    _, R = np.linalg.eigh((M + M.T) / 2)
+    ev, R = np.linalg.eigh((M + M.T) / 2)
     B = V @ R
     # each column signed so that its first entry within 1e-8 of its largest magnitude is positive
     mag = np.abs(B)
@@ -185,7 +191,56 @@ def canonical_basis(V: np.ndarray) -> np.ndarray:
     B[:, B[idx, np.arange(k)] < 0] *= -1.0
     # Re-orthonormalise against rounding without changing the span or the signs.
     q, r = np.linalg.qr(B)
-    return q * np.sign(np.diag(r))
+    return q * np.sign(np.diag(r)), ev
+
+
+def _reached(A: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The states the output can ever depend on (sorted indices): those ``C`` reads, and every state
+    an entry of ``A`` couples into a state already reached. The others span an ``A``-invariant
+    coordinate subspace inside ker C (``A[R, out] = 0``, ``C[:, out] = 0``): unobservable, exactly."""
+    nz = A != 0
+    reach = (C != 0).any(axis=0)
+    while True:
+        grown = reach | nz[reach].any(axis=0)
+        if (grown == reach).all():
+            return np.flatnonzero(reach)
+        reach = grown
+
+
+def _bases(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np.ndarray, np.ndarray]:
+    """The canonical bases ``(T_o, T_u)`` of the observable and unobservable subspaces of (A, C).
+
+    When the output reaches only some states (:func:`_reached`, a system of decoupled bodies), the
+    subspace iteration runs on those states alone, with the same thresholds (``rtol`` times the full
+    ``||A||_2`` and ``||C||_2``): the unobservable subspace is its result plus the coordinate axes of the
+    states never reached, and the canonical rule, whose weighting is diagonal, takes the two parts
+    apart: the axes are their own canonical vectors (the weight of their coordinate as eigenvalue),
+    merged by eigenvalue with the reduced part's (weighted by its coordinates' weights). The same
+    subspaces and rule as on the whole state, at the cost of the reached states (8 of 132 for one
+    agent of ``camera_agents`` with 32 agents)."""
+    n = A.shape[0]
+    R = _reached(A, C)
+    if R.size in (0, n):
+        Vu = canonical_basis(_unobservable(A, C, rtol, norm_a))
+        To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
+        return To, Vu
+    W = np.arange(1.0, n + 1.0)
+    out = np.setdiff1d(np.arange(n), R)
+    VR = _unobservable(A[np.ix_(R, R)], C[:, R], rtol, norm_a)
+    cols = [np.eye(n)[:, out]]
+    evs = [W[out]]
+    if VR.shape[1]:
+        BR, evR = _canonical(VR, W[R])
+        emb = np.zeros((n, BR.shape[1]))
+        emb[R] = BR
+        cols.append(emb)
+        evs.append(evR)
+    order = np.argsort(np.concatenate(evs), kind="stable")
+    Vu = np.hstack(cols)[:, order]
+    BoR, _ = _canonical(_complement(VR), W[R])
+    To = np.zeros((n, BoR.shape[1]))
+    To[R] = BoR
+    return To, Vu
 
 
 def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL,
@@ -219,8 +274,7 @@ def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEF
     rtol = _check_rtol(rtol)
     n = A.shape[0]
     norm_a = float(np.linalg.norm(A, 2)) if norm_a is None else float(norm_a)
-    Vu = canonical_basis(_unobservable(A, C, rtol, norm_a))
-    To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
+    To, Vu = _bases(A, C, rtol, norm_a)
     T = np.hstack([To, Vu])
     r = To.shape[1]
     At = T.T @ A @ T
