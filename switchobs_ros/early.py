@@ -18,6 +18,14 @@ itself (:data:`init_error`); if the bare node cannot be created, the context is 
 so the entry point's Ctrl-C handler (a quiet exit 0) stays in place during the imports; ``run_node``
 installs rclpy's when it takes the context.
 
+Message type support is imported without its code generator: rclpy imports each message's C
+type support through ``rosidl_generator_py``, whose package also imports the generator of message
+modules (``rosidl_generator_py.generate_py_impl``: ``rosidl_parser``'s grammar with ``lark``, ``em``,
+``rosidl_pycommon``; 25-30 ms of a start's CPU) and carries on without it when that import fails.
+:func:`start` imports the package with the generator's module marked absent, then removes the mark,
+so that a later import of the generator in the same process gets the real one; nothing a node runs
+generates message modules.
+
 Garbage collection is off from :func:`start` until the node's module is imported (:func:`imported`,
 called by the entry point): the imports otherwise make about 130 collections, 30-35 ms of a 32-agent
 start's CPU, over objects that live as long as the process (modules, functions, classes). They are
@@ -32,7 +40,10 @@ import gc
 import sys
 from typing import Any
 
-__all__ = ["imported", "release", "start", "started", "stop"]
+__all__ = ["imported", "release", "start", "started", "stop", "type_support_only"]
+
+#: The module of ``rosidl_generator_py`` that generates message code (module docstring).
+GENERATOR = "rosidl_generator_py.generate_py_impl"
 
 _boot: Any = None       # the bare node holding the participant until the node's own exists
 #: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
@@ -47,6 +58,7 @@ def start(name: str) -> None:
     if gc.isenabled():
         gc.disable()
         _gc_paused = True
+    type_support_only()
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -65,6 +77,21 @@ def start(name: str) -> None:
             rclpy.try_shutdown()
         except Exception:
             pass
+
+
+def type_support_only() -> None:
+    """Import ``rosidl_generator_py`` (rclpy's import of message type support) without its code
+    generator (module docstring); nothing if it is imported already or not installed."""
+    if "rosidl_generator_py" in sys.modules or GENERATOR in sys.modules:
+        return
+    sys.modules[GENERATOR] = None       # its package's ``from .generate_py_impl import ...`` fails
+    try:
+        import rosidl_generator_py  # noqa: F401
+    except ImportError:
+        pass
+    finally:
+        if GENERATOR in sys.modules and sys.modules[GENERATOR] is None:
+            del sys.modules[GENERATOR]
 
 
 def imported() -> None:

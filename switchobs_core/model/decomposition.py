@@ -225,7 +225,9 @@ def _bases(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np
         To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
         return To, Vu
     W = np.arange(1.0, n + 1.0)
-    out = np.setdiff1d(np.arange(n), R)
+    unreached = np.ones(n, dtype=bool)
+    unreached[R] = False
+    out = np.flatnonzero(unreached)      # (not np.setdiff1d: its np.unique imports numpy.ma)
     VR = _unobservable(A[np.ix_(R, R)], C[:, R], rtol, norm_a)
     cols = [np.eye(n)[:, out]]
     evs = [W[out]]

@@ -20,7 +20,8 @@ from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
 from switchobs_core.model.scenarios import camera_agents
 from switchobs_core.model.schedule import Cycle
-from switchobs_core.table.check import _apply, _period_map, _transition, verify_table
+from switchobs_core.model.system import LTISystem
+from switchobs_core.table.check import _apply, _period_map, _selected, _transition, verify_table
 from switchobs_core.table.gains import GainTable, kalman_table
 from switchobs_core.table.kalman import KalmanDesign
 
@@ -165,3 +166,65 @@ def test_period_map_is_the_public_products_bit_for_bit(agents):
         PM = _transition(expm(A * ph.dt)) @ M
         M = PM - np.asarray(ph.K, dtype=float) @ (H @ PM)
     assert _period_map(kd, agents, "t").tobytes() == M.tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 4), kind=st.sampled_from(["pick", "weight", "two", "zero"]))
+def test_a_selecting_output_is_its_rows_bit_for_bit(seed, rows, kind):
+    """An ``H`` whose rows each read one state with weight 1 is applied as those rows of the map: the
+    bytes of ``H @ M`` for finite maps of any magnitudes; any other ``H`` (another weight, two states
+    in a row, a row of zeros) is not taken for a selection."""
+    rng = np.random.default_rng(seed)
+    n = 9
+    H = np.zeros((rows, n))
+    H[np.arange(rows), rng.choice(n, size=rows)] = 1.0
+    if kind == "weight":
+        H[rng.integers(rows), :] *= 2.0
+    elif kind == "two":
+        r = rng.integers(rows)
+        H[r, (np.argmax(H[r]) + 1) % n] = 0.5
+    elif kind == "zero":
+        H[rng.integers(rows)] = 0.0
+    picked = _selected(H)
+    if kind != "pick":
+        assert picked is None
+        return
+    M = rng.standard_normal((n, n)) * 10.0 ** rng.integers(-300, 300, size=(n, 1))
+    assert M[picked].tobytes() == (H @ M).tobytes()
+
+
+def test_period_map_with_weighted_outputs_is_the_public_products(agents):
+    """Outputs that are not selections (each channel's rows scaled by 2 and mixed): the period map is still
+    the public loop's bytes."""
+    mix = np.eye(4) * 2.0
+    mix[0, 1] = 0.5
+    system = LTISystem(agents.A, None, [mix @ np.asarray(C) for C in agents.C])
+    table = kalman_table(system, [design_kalman(system, Cycle([0.5, 0.5]), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], system)
+    A = np.asarray(system.A)
+    M = np.eye(system.n)
+    for ph in kd.periodic:
+        C = np.asarray(system.C[ph.channel - 1], dtype=float)
+        H = C if ph.rows is None else C[list(ph.rows)]
+        assert _selected(H) is None
+        PM = _transition(expm(A * ph.dt)) @ M
+        M = PM - np.asarray(ph.K, dtype=float) @ (H @ PM)
+    assert _period_map(kd, system, "t").tobytes() == M.tobytes()
+    verify_table(table, system)
+
+
+def test_a_non_finite_kalman_gain_is_refused_naming_its_sample(agents):
+    """One NaN in the gain of one stored sample (the gains read as views of one array): refused in one
+    line naming that sample, not as a spectral radius."""
+    table = kalman_table(agents, [design_kalman(agents, Cycle([0.5, 0.5]), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], agents)
+    K = np.array(kd.periodic[3].K, dtype=float)
+    K[2, 1] = np.nan
+    bad = replace(kd, periodic=[*kd.periodic[:3], replace(kd.periodic[3], K=K), *kd.periodic[4:]])
+    with pytest.raises(GainTableError, match=r"^t: Kalman design 20 Hz, gain of sample 3 has a non-finite entry$"):
+        _period_map(bad, agents, "t")
+    stacked = np.stack([np.asarray(ph.K, dtype=float) for ph in kd.periodic])
+    stacked[5, 0, 0] = np.inf
+    views = replace(kd, periodic=[replace(ph, K=stacked[i]) for i, ph in enumerate(kd.periodic)])
+    with pytest.raises(GainTableError, match=r"gain of sample 5 has a non-finite entry$"):
+        _period_map(views, agents, "t")
