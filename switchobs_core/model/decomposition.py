@@ -207,8 +207,10 @@ def _reached(A: np.ndarray, C: np.ndarray) -> np.ndarray:
         reach = grown
 
 
-def _bases(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np.ndarray, np.ndarray]:
-    """The canonical bases ``(T_o, T_u)`` of the observable and unobservable subspaces of (A, C).
+def _bases(A: np.ndarray, C: np.ndarray, rtol: float,
+           norm_a: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The canonical bases ``(T_o, T_u)`` of the observable and unobservable subspaces of (A, C), and
+    the states the output reaches (None: all of them).
 
     When the output reaches only some states (:func:`_reached`, a system of decoupled bodies), the
     subspace iteration runs on those states alone, with the same thresholds (``rtol`` times the full
@@ -223,7 +225,7 @@ def _bases(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np
     if R.size in (0, n):
         Vu = canonical_basis(_unobservable(A, C, rtol, norm_a))
         To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
-        return To, Vu
+        return To, Vu, None
     W = np.arange(1.0, n + 1.0)
     unreached = np.ones(n, dtype=bool)
     unreached[R] = False
@@ -242,7 +244,23 @@ def _bases(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np
     BoR, _ = _canonical(_complement(VR), W[R])
     To = np.zeros((n, BoR.shape[1]))
     To[R] = BoR
-    return To, Vu
+    return To, Vu, R
+
+
+def _transformed(A: np.ndarray, C: np.ndarray, T: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(T' A T, C T)`` when the rows of ``T`` outside ``R`` are unit rows (the unreached states' axes,
+    :func:`_bases`) and ``C`` reads only ``R``: the products over ``R``, each unit row's term placed where
+    its 1 is (added to exact zeros). For a ``T`` of signed unit entries the doubles of the full products."""
+    keep = np.zeros(A.shape[0], dtype=bool)
+    keep[R] = True
+    out = np.flatnonzero(~keep)
+    at = np.argmax(T[out], axis=1)          # the column of each unreached state's axis
+    TR = T[R]
+    AT = A[:, R] @ TR
+    AT[:, at] += A[:, out]
+    At = TR.T @ AT[R]
+    At[at] += AT[out]
+    return At, C[:, R] @ TR
 
 
 def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL,
@@ -276,11 +294,14 @@ def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEF
     rtol = _check_rtol(rtol)
     n = A.shape[0]
     norm_a = float(np.linalg.norm(A, 2)) if norm_a is None else float(norm_a)
-    To, Vu = _bases(A, C, rtol, norm_a)
+    To, Vu, R = _bases(A, C, rtol, norm_a)
     T = np.hstack([To, Vu])
     r = To.shape[1]
-    At = T.T @ A @ T
-    Ct = C @ T
+    if R is None:
+        At = T.T @ A @ T
+        Ct = C @ T
+    else:
+        At, Ct = _transformed(A, C, T, R)
     scale = max(norm_a, np.linalg.norm(C, 2) if C.size else 0.0, 1.0)
     res = 0.0
     if r < n:

@@ -160,6 +160,11 @@ def test_unreached_states_are_unobservable_axes(seed, blocks, data):
         assert np.abs(a @ a.T - b @ b.T).max() <= tol
     assert np.abs(fast.T.T @ fast.T - np.eye(n)).max() <= 1e-12
     assert fast.residual <= 1e-9
+    r = fast.r          # the blocks rebuild A and C (e:A_obs_decomp, e:C_obs_decomp)
+    At = np.block([[fast.A_o, np.zeros((r, n - r))], [fast.A_uo, fast.A_u]])
+    scale = max(1.0, np.abs(A).max(), np.abs(C).max())
+    assert np.abs(fast.T @ At @ fast.T.T - A).max() <= 10 * n * (1e-15 + fast.residual) * scale
+    assert np.abs(fast.C_o @ fast.T_o.T - C).max() <= 10 * n * (1e-15 + fast.residual) * scale
     unreached = np.setdiff1d(np.arange(n), reached)
     for i in unreached:         # e_i is a column of T_u, exactly
         assert any(np.array_equal(col, np.eye(n)[:, i]) for col in fast.T_u.T)
