@@ -153,6 +153,11 @@ class EstimatorMixin(OutputsMixin):
         return self._optional_writer("odom", lambda: RawOdometryBatch(self.bodies, self.frame, self.child_frames))
 
     @property
+    def w_cov(self) -> RawLabelledArrayWriter:
+        """The covariance's writer (``~/covariance``: n^2 labels, 17 424 at n = 132)."""
+        return self._optional_writer("cov", lambda: RawLabelledArrayWriter(mb.covariance_labels(self.state_labels)))
+
+    @property
     def w_typed(self) -> tuple[RawStateEstimateWriter, ErrorBoundsWriter]:
         """The typed outputs (switchobs_msgs: ``~/state_estimate``, ``~/error_bounds``)."""
         return self._optional_writer("typed", lambda: (RawStateEstimateWriter(self.state_labels, self.frame),
@@ -242,7 +247,6 @@ class EstimatorMixin(OutputsMixin):
         self.pub_env = pub(Float64MultiArray, "~/envelope", qos.OUTPUT)
         self.pub_cov = None
         if pl.publish_covariance:
-            self.w_cov = RawLabelledArrayWriter(mb.covariance_labels(self.state_labels))
             self.pub_cov = pub(Float64MultiArray, "~/covariance", qos.OUTPUT)
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),
