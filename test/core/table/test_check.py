@@ -21,6 +21,7 @@ from switchobs_core.exceptions import GainTableError
 from switchobs_core.model.scenarios import camera_agents
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
+from switchobs_core.table import check
 from switchobs_core.table.check import _apply, _period_map, _selected, _transition, verify_table
 from switchobs_core.table.gains import GainTable, kalman_table
 from switchobs_core.table.kalman import KalmanDesign
@@ -228,3 +229,48 @@ def test_a_non_finite_kalman_gain_is_refused_naming_its_sample(agents):
     views = replace(kd, periodic=[replace(ph, K=stacked[i]) for i, ph in enumerate(kd.periodic)])
     with pytest.raises(GainTableError, match=r"gain of sample 5 has a non-finite entry$"):
         _period_map(views, agents, "t")
+
+
+def test_runs_over_a_few_decoupled_blocks_give_the_dense_product(monkeypatch):
+    """Four agents (n = 20): each residence's gains and output touch the camera's and one agent's
+    blocks (8 states), so the residence is applied at once (the small product on those states, the
+    transition's power on the others): the dense product ``prod (I - K H) Phi`` to 1e-12 relative, every
+    run taken that way; zeroed gains are still refused."""
+    system = camera_agents(4)
+    table = kalman_table(system, [design_kalman(system, Cycle([0.5] * 4), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], system)
+    n = system.n
+    A = np.asarray(system.A)
+    ref = np.eye(n)
+    for ph in kd.periodic:
+        C = np.asarray(system.C[ph.channel - 1])
+        H = C if ph.rows is None else C[list(ph.rows)]
+        ref = (np.eye(n) - np.asarray(ph.K) @ H) @ expm(A * ph.dt) @ ref
+    runs, states = [], []
+    real_run, real_states = check._apply_run, check._run_states
+    monkeypatch.setattr(check, "_apply_run", lambda *a: runs.append(len(a[4])) or real_run(*a))
+    monkeypatch.setattr(check, "_run_states", lambda *a: states.append(real_states(*a)) or states[-1])
+    got = _period_map(kd, system, "t")
+    assert np.max(np.abs(got - ref)) <= 1e-12 * max(1.0, np.max(np.abs(ref)))
+    assert sum(runs) == len(kd.periodic) and len(runs) == 4
+    assert all(S is not None and S.size == 8 and set(S[:4]) == {0, 1, 2, 3} for S in states)
+    monkeypatch.undo()
+    verify_table(table, system)
+
+    def zero(data):
+        for k in data["kalman"]:
+            for part in ("periodic", "startup"):
+                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+    with pytest.raises(GainTableError, match="spectral radius"):
+        verify_table(_replant(table, zero), system, source="planted.json")
+
+
+def test_blocks_of_a_transition_are_its_coupled_states():
+    """The blocks of a sparse transition are the connected states (a coupling either way joins two)."""
+    Phi = np.eye(6)
+    Phi[0, 3] = 0.5          # 0 and 3 coupled one way
+    Phi[4, 1] = -2.0         # 1 and 4 the other way
+    Phi[4, 5] = 1e-300       # 5 joins them through 4
+    label = check._blocks(csr_array(Phi))
+    groups = {frozenset(np.flatnonzero(label == b).tolist()) for b in set(label.tolist())}
+    assert groups == {frozenset({0, 3}), frozenset({1, 4, 5}), frozenset({2})}
