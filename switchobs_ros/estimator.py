@@ -153,11 +153,6 @@ class EstimatorMixin(OutputsMixin):
         return self._optional_writer("odom", lambda: RawOdometryBatch(self.bodies, self.frame, self.child_frames))
 
     @property
-    def w_cov(self) -> RawLabelledArrayWriter:
-        """The covariance's writer (``~/covariance``: n^2 labels, 17 424 at n = 132)."""
-        return self._optional_writer("cov", lambda: RawLabelledArrayWriter(mb.covariance_labels(self.state_labels)))
-
-    @property
     def w_typed(self) -> tuple[RawStateEstimateWriter, ErrorBoundsWriter]:
         """The typed outputs (switchobs_msgs: ``~/state_estimate``, ``~/error_bounds``)."""
         return self._optional_writer("typed", lambda: (RawStateEstimateWriter(self.state_labels, self.frame),
