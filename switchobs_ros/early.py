@@ -31,7 +31,9 @@ called by the entry point): the imports otherwise make about 130 collections, 30
 start's CPU, over objects that live as long as the process (modules, functions, classes). They are
 then frozen (:func:`gc.freeze`, the order Python's documentation gives for objects made while
 collection is off) and collection is on again before the node is built, so a table designed at
-start-up is collected as usual.
+start-up is collected as usual, with the youngest generation collected every
+:data:`BUILD_GEN0` allocations instead of 700 until the node exists (:func:`release` puts the
+threshold back): 17 collections of a 32-agent build (2 ms) become one or two.
 """
 
 from __future__ import annotations
@@ -49,6 +51,9 @@ _boot: Any = None       # the bare node holding the participant until the node's
 #: What ``rclpy.init`` raised in :func:`start` (``run_node`` reports it instead of initialising again).
 init_error: Exception | None = None
 _gc_paused = False      # start() turned garbage collection off; imported() turns it back on
+_gc_threshold: tuple[int, ...] | None = None    # the thresholds imported() raised, release() restores
+#: The youngest generation's collection threshold while the node is built (Python's default: 700).
+BUILD_GEN0 = 20_000
 
 
 def start(name: str) -> None:
@@ -97,10 +102,12 @@ def type_support_only() -> None:
 def imported() -> None:
     """The node's module is imported: what the imports made frozen, garbage collection on again (if
     :func:`start` turned it off)."""
-    global _gc_paused
+    global _gc_paused, _gc_threshold
     if _gc_paused:
         _gc_paused = False
         gc.freeze()
+        _gc_threshold = gc.get_threshold()
+        gc.set_threshold(max(BUILD_GEN0, _gc_threshold[0]), *_gc_threshold[1:])
         gc.enable()
 
 
@@ -110,8 +117,12 @@ def started() -> bool:
 
 
 def release() -> None:
-    """Destroy the bare node (the node's own holds the participant now); nothing if there is none."""
-    global _boot
+    """Destroy the bare node (the node's own holds the participant now), nothing if there is none; the
+    garbage collector's thresholds as before :func:`imported`."""
+    global _boot, _gc_threshold
+    if _gc_threshold is not None:
+        gc.set_threshold(*_gc_threshold)
+        _gc_threshold = None
     boot, _boot = _boot, None
     if boot is not None:
         try:
