@@ -12,7 +12,8 @@ DDS participant is created before its module is imported (:mod:`switchobs_ros.ea
 discovery runs during the imports; scipy is imported without the numpy submodules its namespace copy
 would import (:mod:`switchobs_core.lean_scipy`). The estimators' console scripts first set glibc's
 malloc to keep the heap between samples (:mod:`switchobs_ros.heap`: a process-wide setting, made
-once, before the imports allocate). A ``pip install``
+once, before the imports allocate), and they and the bag tool's set one BLAS thread before numpy
+loads its BLAS (:func:`switchobs_core.threads.single_thread_before_load`). A ``pip install``
 without the interface package switchobs_msgs gets one line saying how to build it (exit code 2),
 not an import traceback.
 ``python -m switchobs_ros.estimator`` starts through :func:`estimator` as well (the module hands over
@@ -37,11 +38,17 @@ NO_MSGS = ("the interface package switchobs_msgs (the typed outputs' messages) i
            "(docs/how-to/ros2.md)")
 
 
-def _run(module: str, prog: str, participant_first: bool = False, keep_heap: bool = False) -> int:
+def _run(module: str, prog: str, participant_first: bool = False, keep_heap: bool = False,
+         one_blas_thread: bool = False) -> int:
     """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
     switchobs_msgs is one line on stderr and exit code 2. ``participant_first``: the node's DDS
     participant is created before the import (:mod:`switchobs_ros.early`); ``keep_heap``: glibc's
-    malloc keeps the heap between samples, set before anything else (:mod:`switchobs_ros.heap`)."""
+    malloc keeps the heap between samples, set before anything else (:mod:`switchobs_ros.heap`);
+    ``one_blas_thread``: one BLAS thread, set before numpy loads one
+    (:func:`switchobs_core.threads.single_thread_before_load`)."""
+    if one_blas_thread:
+        from switchobs_core.threads import single_thread_before_load
+        single_thread_before_load()
     if keep_heap:
         from .heap import keep_heap as keep
         keep()
@@ -69,12 +76,12 @@ def _run(module: str, prog: str, participant_first: bool = False, keep_heap: boo
 
 def estimator() -> int:
     """``estimator``: :mod:`switchobs_ros.estimator`, its participant created first, its heap kept."""
-    return _run("estimator", "estimator", participant_first=True, keep_heap=True)
+    return _run("estimator", "estimator", participant_first=True, keep_heap=True, one_blas_thread=True)
 
 
 def managed_estimator() -> int:
     """``managed_estimator``: :mod:`switchobs_ros.managed_estimator`, its heap kept."""
-    return _run("managed_estimator", "managed_estimator", keep_heap=True)
+    return _run("managed_estimator", "managed_estimator", keep_heap=True, one_blas_thread=True)
 
 
 def camera_sim() -> int:
@@ -84,4 +91,4 @@ def camera_sim() -> int:
 
 def switchobs_bag() -> int:
     """``switchobs_bag``: :mod:`switchobs_ros.bag.cli`."""
-    return _run("bag.cli", "switchobs_bag")
+    return _run("bag.cli", "switchobs_bag", one_blas_thread=True)

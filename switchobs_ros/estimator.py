@@ -242,7 +242,6 @@ class EstimatorMixin(OutputsMixin):
         self.pub_env = pub(Float64MultiArray, "~/envelope", qos.OUTPUT)
         self.pub_cov = None
         if pl.publish_covariance:
-            self.w_cov = RawLabelledArrayWriter(mb.covariance_labels(self.state_labels))
             self.pub_cov = pub(Float64MultiArray, "~/covariance", qos.OUTPUT)
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),

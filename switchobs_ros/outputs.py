@@ -20,6 +20,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import msg_bridge as mb
+from msg_bridge.raw import RawLabelledArrayWriter
+
 from .demand import listened
 from .pipeline import Estimate
 
@@ -44,6 +47,12 @@ class OutputsMixin:
     """Publishing the estimates (module docstring); the node provides the publishers, the writers,
     ``every`` (``output.*_every``), ``published`` (counts per output), ``n_published``, ``demand``
     and ``pipeline``."""
+
+    @property
+    def w_cov(self) -> RawLabelledArrayWriter:
+        """The covariance's writer (``~/covariance``: n^2 labels, 17 424 at n = 132), built at its first
+        use as the other optional outputs' (the node's ``_optional_writer``)."""
+        return self._optional_writer("cov", lambda: RawLabelledArrayWriter(mb.covariance_labels(self.state_labels)))
 
     def _covariance_carriers(self) -> list:
         """``(output, publisher)`` of the outputs whose messages carry ``P``, those published at all

@@ -175,9 +175,15 @@ def canonical_basis(V: np.ndarray) -> np.ndarray:
     n, k = V.shape
     if k == 0:
         return np.zeros((n, 0))
-    W = np.arange(1.0, n + 1.0)
+    return _canonical(V, np.arange(1.0, n + 1.0))[0]
+
+
+def _canonical(V: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`canonical_basis` of ``V`` (k >= 1 columns) with the weights ``W`` (one per row), and the
+    compression's eigenvalues (ascending, one per column)."""
+    k = V.shape[1]
     M = V.T @ (W[:, None] * V)
-    _, R = np.linalg.eigh((M + M.T) / 2)
+    ev, R = np.linalg.eigh((M + M.T) / 2)
     B = V @ R
     # each column signed so that its first entry within 1e-8 of its largest magnitude is positive
     mag = np.abs(B)
@@ -185,7 +191,89 @@ def canonical_basis(V: np.ndarray) -> np.ndarray:
     B[:, B[idx, np.arange(k)] < 0] *= -1.0
     # Re-orthonormalise against rounding without changing the span or the signs.
     q, r = np.linalg.qr(B)
-    return q * np.sign(np.diag(r))
+    return q * np.sign(np.diag(r)), ev
+
+
+def _reached(nz: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The states the output can ever depend on (sorted indices), ``nz`` the pattern ``A != 0``: those
+    ``C`` reads, and every state an entry of ``A`` couples into a state already reached. The others span
+    an ``A``-invariant coordinate subspace inside ker C (``A[R, out] = 0``, ``C[:, out] = 0``):
+    unobservable, exactly."""
+    reach = (C != 0).any(axis=0)
+    while True:
+        grown = reach | nz[reach].any(axis=0)
+        if (grown == reach).all():
+            return np.flatnonzero(reach)
+        reach = grown
+
+
+def _whole(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np.ndarray, int]:
+    """``(T, r)`` by the subspace iteration on every state (module docstring)."""
+    n = A.shape[0]
+    Vu = canonical_basis(_unobservable(A, C, rtol, norm_a))
+    To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
+    return np.hstack([To, Vu]), To.shape[1]
+
+
+def _reduced(A: np.ndarray, C: np.ndarray, R: np.ndarray, rtol: float,
+             norm_a: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
+    """``(T, r)`` when the output reaches only the states ``R`` (a system of decoupled bodies), with
+    the unreached states ``out`` and the column of ``T`` that is each one's axis.
+
+    The subspace iteration runs on the reached states alone, with the same thresholds (``rtol``
+    times the full ``||A||_2`` and ``||C||_2``): the unobservable subspace is its result plus the
+    coordinate axes of the states never reached, and the canonical rule, whose weighting is diagonal,
+    takes the two parts apart: the axes are their own canonical vectors (the weight of their
+    coordinate as eigenvalue), merged by eigenvalue with the reduced part's (weighted by its
+    coordinates' weights). The same subspaces and rule as on the whole state, at the cost of the
+    reached states (8 of 132 for one agent of ``camera_agents`` with 32 agents)."""
+    n = A.shape[0]
+    W = np.arange(1.0, n + 1.0)
+    unreached = np.ones(n, dtype=bool)
+    unreached[R] = False
+    out = np.flatnonzero(unreached)      # (not np.setdiff1d: its np.unique imports numpy.ma)
+    VR = _unobservable(A[np.ix_(R, R)], C[:, R], rtol, norm_a)
+    BoR, _ = _canonical(_complement(VR), W[R])
+    r = BoR.shape[1]
+    if VR.shape[1]:
+        BR, evR = _canonical(VR, W[R])
+    else:
+        BR, evR = np.zeros((R.size, 0)), np.zeros(0)
+    order = np.argsort(np.concatenate([W[out], evR]), kind="stable")
+    place = np.empty_like(order)
+    place[order] = np.arange(order.size) + r      # the column of T of each unobservable vector
+    at = place[: out.size]
+    T = np.zeros((n, n))
+    T[R, :r] = BoR
+    T[out, at] = 1.0
+    T[np.ix_(R, place[out.size:])] = BR
+    return T, r, out, at
+
+
+def _transformed(A: np.ndarray, C: np.ndarray, T: np.ndarray, R: np.ndarray, out: np.ndarray,
+                 at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(T' A T, C T)`` for a ``T`` of :func:`_reduced`: its rows outside ``R`` are the unit rows of the
+    unreached states ``out`` (a 1 in column ``at``), ``C`` reads only ``R`` and ``A[R, out] = 0``.
+
+    With the columns of ``T`` reordered as ``[inner, at]`` (``inner``: those nonzero on ``R``),
+    ``T' A T`` is ``[[T_RI' A_RR T_RI, 0], [A[out, R] T_RI, A[out, out]]]``, reordered back: the products
+    over ``R`` only; for a ``T`` of signed unit entries the doubles of the full products."""
+    n = A.shape[0]
+    inner = np.ones(n, dtype=bool)
+    inner[at] = False
+    inner = np.flatnonzero(inner)           # the columns of T nonzero on R
+    TR = T[R][:, inner]
+    AR = A[:, R]
+    m = inner.size
+    At = np.zeros((n, n))
+    At[:m, :m] = TR.T @ (AR[R] @ TR)
+    At[m:, :m] = AR[out] @ TR
+    At[m:, m:] = A[out][:, out]
+    back = np.empty(n, dtype=np.intp)
+    back[np.concatenate([inner, at])] = np.arange(n)
+    Ct = np.zeros((C.shape[0], n))
+    Ct[:, :m] = C[:, R] @ TR
+    return At.take(back, axis=0).take(back, axis=1), Ct.take(back, axis=1)
 
 
 def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEFAULT_RTOL,
@@ -217,14 +305,22 @@ def observability_decomposition(A: ArrayLike, C: ArrayLike, *, rtol: float = DEF
     A = as_matrix(A, "A", square=True)
     C = as_matrix(C, "C", cols=A.shape[0])
     rtol = _check_rtol(rtol)
-    n = A.shape[0]
     norm_a = float(np.linalg.norm(A, 2)) if norm_a is None else float(norm_a)
-    Vu = canonical_basis(_unobservable(A, C, rtol, norm_a))
-    To = canonical_basis(_complement(Vu)) if Vu.shape[1] else canonical_basis(np.eye(n))
-    T = np.hstack([To, Vu])
-    r = To.shape[1]
-    At = T.T @ A @ T
-    Ct = C @ T
+    return _decompose(A, C, rtol, norm_a, A != 0)
+
+
+def _decompose(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float, nz: np.ndarray) -> Decomposition:
+    """:func:`observability_decomposition` of checked ``A``, ``C``, ``rtol``, given ``norm_a = ||A||_2``
+    and ``nz = A != 0`` (a system decomposes every channel with the same ``A``)."""
+    n = A.shape[0]
+    R = _reached(nz, C)
+    if R.size in (0, n):
+        T, r = _whole(A, C, rtol, norm_a)
+        At = T.T @ A @ T
+        Ct = C @ T
+    else:
+        T, r, out, at = _reduced(A, C, R, rtol, norm_a)
+        At, Ct = _transformed(A, C, T, R, out, at)
     scale = max(norm_a, np.linalg.norm(C, 2) if C.size else 0.0, 1.0)
     res = 0.0
     if r < n:

@@ -39,7 +39,7 @@ from ..exceptions import InvalidSystem, UnobservableSystem
 from ..loading import load_yaml, number_matrix
 from ..numerics.scaling import balance, balanced
 from ..validation import MAX_ABS_SYSTEM_ENTRY, as_matrix
-from .decomposition import DEFAULT_RTOL, Decomposition, observability_decomposition, unobservable_subspace
+from .decomposition import DEFAULT_RTOL, Decomposition, _check_rtol, _decompose, unobservable_subspace
 
 __all__ = ["LTISystem", "ChannelInfo", "read_spec"]
 
@@ -152,8 +152,9 @@ class LTISystem:
         object.__setattr__(self, "channel_names", cnames)
         object.__setattr__(self, "output_labels", olabels)
         object.__setattr__(self, "rtol", float(rtol))
-        norm_a = float(np.linalg.norm(A, 2))         # one SVD of A for every channel
-        decomp = tuple(observability_decomposition(A, Ci, rtol=rtol, norm_a=norm_a) for Ci in C)
+        # one SVD of A and one pattern of its nonzeros for every channel (A and C checked above)
+        norm_a, nz, rtol_ = float(np.linalg.norm(A, 2)), A != 0, _check_rtol(rtol)
+        decomp = tuple(_decompose(A, Ci, rtol_, norm_a, nz) for Ci in C)
         for i, d in enumerate(decomp):
             if d.r == 0:
                 raise InvalidSystem(f"channel {i + 1} ({cnames[i]}) observes no direction of the state (r_{i + 1} = 0)")

@@ -21,6 +21,7 @@ SCRIPT = "import sys; from switchobs_ros.entry import estimator; sys.exit(estima
 PROBE = """
 import gc
 import sys
+print("gc thresholds at the start:", gc.get_threshold(), flush=True)
 import rclpy
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
 from switchobs_ros import early, entry, runner
@@ -29,14 +30,14 @@ from switchobs_ros.estimator import EstimatorNode
 class Probe(EstimatorNode):
     def __init__(self):
         print("boot before the node:", early.started(), rclpy.ok(), "gc", gc.isenabled(), gc.get_freeze_count() > 1000,
-              flush=True)
+              gc.get_threshold()[0] == early.BUILD_GEN0, flush=True)
         super().__init__()
         self.create_timer(0.0, self.report)
 
     def report(self):
         names = [n for n, _ in self.get_node_names_and_namespaces()]
         print("boot after the node:", early.started(), "estimator" in names,
-              get_current_signal_handlers_options() == SignalHandlerOptions.ALL, flush=True)
+              get_current_signal_handlers_options() == SignalHandlerOptions.ALL, "gc", gc.get_threshold(), flush=True)
         rclpy.try_shutdown()
 
 import switchobs_ros.estimator as node_module
@@ -51,14 +52,16 @@ def _run(code: str, *args: str) -> subprocess.CompletedProcess:
 
 def test_node_built_in_the_early_context(paper_tables):
     """Through the console script: the context and its bare node exist before the node is built, what the
-    imports made is frozen (collection was off during them) and garbage collection is on again; the node
-    is built in that context and ready with the table given; once it exists the bare node is gone and
+    imports made is frozen (collection was off during them) and garbage collection is on again, its youngest
+    generation's threshold raised while the node is built; the node is built in that context and ready with
+    the table given; once it exists the bare node is gone, the thresholds are Python's defaults again and
     rclpy's signal handlers are installed; the stop is exit 0."""
     res = _run(PROBE, *ros_args(params={"gain_table": paper_tables["periodic"]}))
     assert res.returncode == 0, res.stderr
     out = res.stdout + res.stderr
-    assert "boot before the node: True True gc True True" in out, out
-    assert "boot after the node: False True True" in out, out
+    assert "boot before the node: True True gc True True True" in out, out
+    start = out.split("gc thresholds at the start: ", 1)[1].split("\n", 1)[0]
+    assert f"boot after the node: False True True gc {start}" in out, out
     assert "estimator ready: system 'paper'" in out and paper_tables["periodic"] in out, out
     assert "Traceback" not in out, out
 

@@ -1,4 +1,4 @@
-"""The estimator's optional outputs' writers (odometries, typed, markers) are serialised at their
+"""The estimator's optional outputs' writers (odometries, typed, markers, covariance) are serialised at their
 first use, not at start-up: the same messages as writers built at once. (Compared decoded: the
 serialiser leaves CDR padding bytes as it finds them, so two writers' bytes differ there.)"""
 
@@ -8,11 +8,13 @@ import numpy as np
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Float64MultiArray
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
 from visualization_msgs.msg import MarkerArray
 
+import msg_bridge as mb
 from msg_bridge.markers import RawMarkersWriter
-from msg_bridge.raw import RawOdometryBatch
+from msg_bridge.raw import RawLabelledArrayWriter, RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, RawStateEstimateWriter
 from switchobs_ros.estimator import EstimatorNode
 
@@ -46,9 +48,12 @@ def test_optional_writers_are_built_at_first_use_with_the_same_messages(paper_ta
         body = est.bodies[1].name
         assert _same(est.w_markers.msg(x, stamp, P, 0.5, body), eager_markers.msg(x, stamp, P, 0.5, body),
                      MarkerArray)
+        eager_cov = RawLabelledArrayWriter(mb.covariance_labels(est.state_labels))
+        assert _same(est.w_cov.msg(P.ravel(), stamp), eager_cov.msg(P.ravel(), stamp), Float64MultiArray)
         # built once: the same objects at every later use
         assert est.w_odom is est.w_odom and est.w_markers is est.w_markers and est.w_typed is est.w_typed
-        assert set(est._writers) == {"odom", "typed", "markers"}
+        assert est.w_cov is est.w_cov
+        assert set(est._writers) == {"odom", "typed", "markers", "cov"}
     finally:
         est.destroy_node()
 

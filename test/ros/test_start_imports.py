@@ -1,12 +1,12 @@
 """What the estimator's start imports: neither its module nor the pipeline built from a cached table
 brings in what only a design, a simulation, a plot or a test needs.
 
-One fresh interpreter starts as the ``estimator`` console script does up to its node (scipy through
-:mod:`switchobs_core.lean_scipy`, then the node's module), then builds the pipeline from a Kalman table on
-disk (:meth:`~switchobs_ros.pipeline.EstimatorPipeline.from_params`, no DDS; a Kalman table and an
-LMI table), and prints the modules
-loaded after each step. None of :data:`HEAVY` may be among them (rclpy itself imports ``yaml``, so it
-is not checked here).
+One fresh interpreter starts as the ``estimator`` console script does up to its node (message type
+support without rosidl's code generator, :func:`switchobs_ros.early.type_support_only`; scipy through
+:mod:`switchobs_core.lean_scipy`, then the node's module and an output's type support), then builds
+the pipeline from a Kalman table on disk (:meth:`~switchobs_ros.pipeline.EstimatorPipeline.from_params`,
+no DDS; a Kalman table and an LMI table), and prints the modules loaded after each step. None of
+:data:`HEAVY` may be among them (rclpy itself imports ``yaml``, so it is not checked here).
 """
 
 from __future__ import annotations
@@ -35,18 +35,27 @@ HEAVY = ("cvxpy", "clarabel", "matplotlib", "switchobs_core.design.lmi", "switch
          "switchobs_core.design.synthesis", "switchobs_core.design.plan", "switchobs_core.design.doubling",
          "switchobs_core.sim", "switchobs_core.cli", "scipy.optimize", "scipy.stats", "scipy.integrate",
          "scipy.interpolate", "numpy.f2py", "numpy.testing", "numpy.ma", "numpy.polynomial", "unittest",
-         "scipy._lib._docscrape")
+         "scipy._lib._docscrape", "rosidl_generator_py.generate_py_impl", "rosidl_parser.parser", "lark", "em",
+         "rosidl_pycommon")
 
 PROBE = """
 import json, sys
+from switchobs_ros import early
+early.type_support_only()
 from switchobs_core.lean_scipy import import_scipy
 import_scipy()
 import switchobs_ros.estimator
+from nav_msgs.msg import Odometry
+from rclpy.type_support import check_for_type_support
+check_for_type_support(Odometry)
 imported = sorted(sys.modules)
 from switchobs_ros.pipeline import EstimatorPipeline
 pipe = EstimatorPipeline.from_params({"system": "paper", "gain_table": sys.argv[1], "schedule.mode": "periodic",
                                       "schedule.tau": [2.0], "schedule.s": [0.6]})
-print(json.dumps({"imported": imported, "built": sorted(sys.modules), "family": pipe.observer.family}))
+built = sorted(sys.modules)
+from rosidl_generator_py.generate_py_impl import generate_py
+print(json.dumps({"imported": imported, "built": built, "family": pipe.observer.family,
+                  "generator": callable(generate_py)}))
 """
 
 
@@ -70,7 +79,11 @@ def loaded(request, tmp_path_factory) -> dict:
 
 
 def test_the_node_module_imports_nothing_heavy(loaded):
+    """...and its outputs' type support comes without rosidl's code generator, which a later import still
+    gets whole."""
     assert "switchobs_ros.estimator" in loaded["imported"]
+    assert "nav_msgs.nav_msgs_s__rosidl_typesupport_c" in loaded["imported"]
+    assert loaded["generator"] is True
     assert not _heavy(loaded["imported"]), _heavy(loaded["imported"])
 
 

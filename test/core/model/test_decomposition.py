@@ -7,7 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from switchobs_core.model import decomposition
 from switchobs_core.model.decomposition import canonical_basis, log_norm, observability_decomposition
+from switchobs_core.model.scenarios import camera_agents
 
 
 def random_pair(seed: int, n: int, p: int, r: int, scale_exp: float):
@@ -105,3 +107,64 @@ def test_log_norm_closed_form():
 
     for t in (0.1, 1.0, 3.0):
         assert np.linalg.norm(expm(M * t), 2) <= np.exp(log_norm(M) * t) * (1 + 1e-12)
+
+
+def _whole_state(A, C):
+    """The decomposition with the subspace iteration on every state (nothing left unreached)."""
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(decomposition, "_reached", lambda nz, C: np.arange(nz.shape[0]))
+        return observability_decomposition(A, C)
+
+
+@pytest.mark.parametrize("agents", [2, 3, 32])
+def test_decoupled_bodies_give_the_whole_state_doubles(agents):
+    """camera_agents (the paper's model at M = 2): each channel reaches the camera and its agent only;
+    the decomposition from those 8 states is the whole-state one, bit for bit."""
+    system = camera_agents(agents)
+    A = np.asarray(system.A)
+    for C in system.C:
+        fast, whole = observability_decomposition(A, C), _whole_state(A, C)
+        assert decomposition._reached(A != 0, C).size == 8
+        assert fast.r == whole.r == 8 and fast.residual == whole.residual
+        for f in ("T", "A_o", "C_o", "A_uo", "A_u"):
+            assert np.array_equal(getattr(fast, f), getattr(whole, f)), f
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), blocks=st.lists(st.integers(1, 4), min_size=2, max_size=5),
+       data=st.data())
+def test_unreached_states_are_unobservable_axes(seed, blocks, data):
+    """Decoupled blocks, coordinates shuffled, an output reading some blocks: the states it never reaches
+    are unobservable coordinate axes of T_u exactly, and the subspaces, r and the blocks' structure are
+    those of the whole-state iteration (to its own accuracy: its residual, at most 1e-9)."""
+    rng = np.random.default_rng(seed)
+    n = sum(blocks)
+    A = np.zeros((n, n))
+    start = 0
+    for b in blocks:
+        A[start:start + b, start:start + b] = rng.standard_normal((b, b))
+        start += b
+    read = data.draw(st.lists(st.integers(0, len(blocks) - 1), min_size=1, max_size=len(blocks), unique=True))
+    C = np.zeros((2, n))
+    starts = np.cumsum([0, *blocks])
+    for j in read:
+        C[:, starts[j]:starts[j + 1]] = rng.standard_normal((2, blocks[j]))
+    perm = rng.permutation(n)
+    A, C = A[np.ix_(perm, perm)], C[:, perm]
+    fast, whole = observability_decomposition(A, C), _whole_state(A, C)
+    reached = decomposition._reached(A != 0, C)
+    assert set(perm[reached]) <= {i for j in read for i in range(starts[j], starts[j + 1])}
+    assert fast.r == whole.r
+    tol = 1e-8 + 100 * whole.residual
+    for a, b in ((fast.T_o, whole.T_o), (fast.T_u, whole.T_u)):
+        assert np.abs(a @ a.T - b @ b.T).max() <= tol
+    assert np.abs(fast.T.T @ fast.T - np.eye(n)).max() <= 1e-12
+    assert fast.residual <= 1e-9
+    r = fast.r          # the blocks rebuild A and C (e:A_obs_decomp, e:C_obs_decomp)
+    At = np.block([[fast.A_o, np.zeros((r, n - r))], [fast.A_uo, fast.A_u]])
+    scale = max(1.0, np.abs(A).max(), np.abs(C).max())
+    assert np.abs(fast.T @ At @ fast.T.T - A).max() <= 10 * n * (1e-15 + fast.residual) * scale
+    assert np.abs(fast.C_o @ fast.T_o.T - C).max() <= 10 * n * (1e-15 + fast.residual) * scale
+    unreached = np.setdiff1d(np.arange(n), reached)
+    for i in unreached:         # e_i is a column of T_u, exactly
+        assert any(np.array_equal(col, np.eye(n)[:, i]) for col in fast.T_u.T)

@@ -20,7 +20,9 @@ from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
 from switchobs_core.model.scenarios import camera_agents
 from switchobs_core.model.schedule import Cycle
-from switchobs_core.table.check import _apply, _period_map, _transition, verify_table
+from switchobs_core.model.system import LTISystem
+from switchobs_core.table import check
+from switchobs_core.table.check import _apply, _period_map, _selected, _transition, verify_table
 from switchobs_core.table.gains import GainTable, kalman_table
 from switchobs_core.table.kalman import KalmanDesign
 
@@ -165,3 +167,110 @@ def test_period_map_is_the_public_products_bit_for_bit(agents):
         PM = _transition(expm(A * ph.dt)) @ M
         M = PM - np.asarray(ph.K, dtype=float) @ (H @ PM)
     assert _period_map(kd, agents, "t").tobytes() == M.tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 4), kind=st.sampled_from(["pick", "weight", "two", "zero"]))
+def test_a_selecting_output_is_its_rows_bit_for_bit(seed, rows, kind):
+    """An ``H`` whose rows each read one state with weight 1 is applied as those rows of the map: the
+    bytes of ``H @ M`` for finite maps of any magnitudes; any other ``H`` (another weight, two states
+    in a row, a row of zeros) is not taken for a selection."""
+    rng = np.random.default_rng(seed)
+    n = 9
+    H = np.zeros((rows, n))
+    H[np.arange(rows), rng.choice(n, size=rows)] = 1.0
+    if kind == "weight":
+        H[rng.integers(rows), :] *= 2.0
+    elif kind == "two":
+        r = rng.integers(rows)
+        H[r, (np.argmax(H[r]) + 1) % n] = 0.5
+    elif kind == "zero":
+        H[rng.integers(rows)] = 0.0
+    picked = _selected(H)
+    if kind != "pick":
+        assert picked is None
+        return
+    M = rng.standard_normal((n, n)) * 10.0 ** rng.integers(-300, 300, size=(n, 1))
+    assert M[picked].tobytes() == (H @ M).tobytes()
+
+
+def test_period_map_with_weighted_outputs_is_the_public_products(agents):
+    """Outputs that are not selections (each channel's rows scaled by 2 and mixed): the period map is still
+    the public loop's bytes."""
+    mix = np.eye(4) * 2.0
+    mix[0, 1] = 0.5
+    system = LTISystem(agents.A, None, [mix @ np.asarray(C) for C in agents.C])
+    table = kalman_table(system, [design_kalman(system, Cycle([0.5, 0.5]), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], system)
+    A = np.asarray(system.A)
+    M = np.eye(system.n)
+    for ph in kd.periodic:
+        C = np.asarray(system.C[ph.channel - 1], dtype=float)
+        H = C if ph.rows is None else C[list(ph.rows)]
+        assert _selected(H) is None
+        PM = _transition(expm(A * ph.dt)) @ M
+        M = PM - np.asarray(ph.K, dtype=float) @ (H @ PM)
+    assert _period_map(kd, system, "t").tobytes() == M.tobytes()
+    verify_table(table, system)
+
+
+def test_a_non_finite_kalman_gain_is_refused_naming_its_sample(agents):
+    """One NaN in the gain of one stored sample (the gains read as views of one array): refused in one
+    line naming that sample, not as a spectral radius."""
+    table = kalman_table(agents, [design_kalman(agents, Cycle([0.5, 0.5]), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], agents)
+    K = np.array(kd.periodic[3].K, dtype=float)
+    K[2, 1] = np.nan
+    bad = replace(kd, periodic=[*kd.periodic[:3], replace(kd.periodic[3], K=K), *kd.periodic[4:]])
+    with pytest.raises(GainTableError, match=r"^t: Kalman design 20 Hz, gain of sample 3 has a non-finite entry$"):
+        _period_map(bad, agents, "t")
+    stacked = np.stack([np.asarray(ph.K, dtype=float) for ph in kd.periodic])
+    stacked[5, 0, 0] = np.inf
+    views = replace(kd, periodic=[replace(ph, K=stacked[i]) for i, ph in enumerate(kd.periodic)])
+    with pytest.raises(GainTableError, match=r"gain of sample 5 has a non-finite entry$"):
+        _period_map(views, agents, "t")
+
+
+def test_runs_over_a_few_decoupled_blocks_give_the_dense_product(monkeypatch):
+    """Four agents (n = 20): each residence's gains and output touch the camera's and one agent's
+    blocks (8 states), so the residence is applied at once (the small product on those states, the
+    transition's power on the others): the dense product ``prod (I - K H) Phi`` to 1e-12 relative, every
+    run taken that way; zeroed gains are still refused."""
+    system = camera_agents(4)
+    table = kalman_table(system, [design_kalman(system, Cycle([0.5] * 4), 20.0)])
+    kd = KalmanDesign.from_dict(table.kalman[0], system)
+    n = system.n
+    A = np.asarray(system.A)
+    ref = np.eye(n)
+    for ph in kd.periodic:
+        C = np.asarray(system.C[ph.channel - 1])
+        H = C if ph.rows is None else C[list(ph.rows)]
+        ref = (np.eye(n) - np.asarray(ph.K) @ H) @ expm(A * ph.dt) @ ref
+    runs, states = [], []
+    real_run, real_states = check._apply_run, check._run_states
+    monkeypatch.setattr(check, "_apply_run", lambda *a: runs.append(len(a[4])) or real_run(*a))
+    monkeypatch.setattr(check, "_run_states", lambda *a: states.append(real_states(*a)) or states[-1])
+    got = _period_map(kd, system, "t")
+    assert np.max(np.abs(got - ref)) <= 1e-12 * max(1.0, np.max(np.abs(ref)))
+    assert sum(runs) == len(kd.periodic) and len(runs) == 4
+    assert all(S is not None and S.size == 8 and set(S[:4]) == {0, 1, 2, 3} for S in states)
+    monkeypatch.undo()
+    verify_table(table, system)
+
+    def zero(data):
+        for k in data["kalman"]:
+            for part in ("periodic", "startup"):
+                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+    with pytest.raises(GainTableError, match="spectral radius"):
+        verify_table(_replant(table, zero), system, source="planted.json")
+
+
+def test_blocks_of_a_transition_are_its_coupled_states():
+    """The blocks of a sparse transition are the connected states (a coupling either way joins two)."""
+    Phi = np.eye(6)
+    Phi[0, 3] = 0.5          # 0 and 3 coupled one way
+    Phi[4, 1] = -2.0         # 1 and 4 the other way
+    Phi[4, 5] = 1e-300       # 5 joins them through 4
+    label = check._blocks(csr_array(Phi))
+    groups = {frozenset(np.flatnonzero(label == b).tolist()) for b in set(label.tolist())}
+    assert groups == {frozenset({0, 3}), frozenset({1, 4, 5}), frozenset({2})}

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import zipfile
 
 import numpy as np
@@ -364,3 +365,19 @@ def test_a_version_5_header_without_a_noise_object_is_refused_in_one_line(table,
         np.savez(fh, header=np.frombuffer(json.dumps(head, sort_keys=True).encode(), dtype=np.uint8), **arrays)
     with pytest.raises(GainTableError, match=r"kalman\[0\]\.noise"):
         GainTable.load(bad, system=PAPER)
+
+
+_DIGIT = st.sampled_from("0123456789abcdef")
+_DIGEST = st.text(_DIGIT, min_size=64, max_size=64)
+_NOT_DIGEST = st.one_of(st.text(_DIGIT, max_size=63), st.text(_DIGIT, min_size=65, max_size=70),
+                        st.text(st.sampled_from("0123456789abcdefABCDEFg \n"), min_size=64, max_size=64),
+                        st.integers(), st.none(), st.lists(st.integers(), max_size=2))
+
+
+@settings(max_examples=200, deadline=None)
+@given(xs=st.lists(st.one_of(_DIGEST, _NOT_DIGEST), max_size=6))
+def test_digest_lists_checked_at_once_as_one_by_one(xs):
+    """The header's prior digests checked in one match: the verdict of a full match of ``[0-9a-f]{64}``
+    on each item (a string, of exactly 64 lower-case hex digits)."""
+    one_by_one = all(isinstance(x, str) and re.fullmatch(r"[0-9a-f]{64}", x) is not None for x in xs)
+    assert container._all_sha256(xs) is one_by_one
