@@ -378,8 +378,6 @@ class _Kinds:
         self.pl, self.sources, self.channel_topic, self.control_topic = pl, sources, channel_topic, control_topic
 
     def __call__(self, m) -> tuple[int | None, bool, int | None, bool]:
-        from msg_bridge import BridgeError
-
         src = self.sources.get(m.topic)
         if src is not None:
             dependent = bool(self.channel_topic) and src.channel is None and not src.shared
@@ -387,7 +385,7 @@ class _Kinds:
             if st is None:
                 try:
                     st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], 1_000_000_000)
-                except (BagError, BridgeError):
+                except (BagError, mb.BridgeError):
                     return None, dependent, None, False
             ok = st[0] >= 0 and 0 <= st[1] < 1_000_000_000
             return (st[0] * 1_000_000_000 + st[1] if ok else None), dependent, None, False

@@ -31,6 +31,7 @@ from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
 
 from .. import qos
+from .cdr import decode_uint8
 from .mcap_records import fast_records, message_records
 from .metadata_yaml import install as fast_yaml
 from .msgdefs import definition
@@ -368,10 +369,14 @@ def channel_message(m: BagMessage):
     ``std_msgs/UInt8`` is read straight from its CDR bytes."""
     if m.type == CHANNEL_TYPES[0]:
         return deserialize(m, msg_class(m.type))
+    return decode_uint8(m.data, lambda d: _uint8(m))
+
+
+def _uint8(m: BagMessage):
+    """``m`` deserialised as ``std_msgs/UInt8`` (a channel message :func:`~.cdr.decode_uint8` cannot read)."""
     from std_msgs.msg import UInt8
 
-    from .cdr import decode_uint8
-    return decode_uint8(m.data, lambda d: deserialize(m, UInt8))
+    return deserialize(m, UInt8)
 
 
 # --------------------------------------------------------------------------------- writing
