@@ -15,7 +15,9 @@ sample's update then takes, by the same arithmetic from the same covariance: it 
 covariance (one propagation per sample where the test and an output both read it, the same numbers).
 A bias test reads the prior's block on a sample's columns only (:meth:`LmiGains.stored_prior`): from the
 block of ``P`` the held step maps into itself, carried step by step
-(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait.
+(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait; where ``P`` is read
+at every sample (a publisher), the block of the full prior, which the family computes from the covariance
+it keeps and keeps for the step (the same doubles as the prior of a copy of ``P``, without the copy).
 """
 
 from __future__ import annotations
