@@ -378,8 +378,6 @@ class _Kinds:
         self.pl, self.sources, self.channel_topic, self.control_topic = pl, sources, channel_topic, control_topic
 
     def __call__(self, m) -> tuple[int | None, bool, int | None, bool]:
-        from msg_bridge import BridgeError
-
         src = self.sources.get(m.topic)
         if src is not None:
             dependent = bool(self.channel_topic) and src.channel is None and not src.shared
@@ -387,7 +385,7 @@ class _Kinds:
             if st is None:
                 try:
                     st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], 1_000_000_000)
-                except (BagError, BridgeError):
+                except (BagError, mb.BridgeError):
                     return None, dependent, None, False
             ok = st[0] >= 0 and 0 <= st[1] < 1_000_000_000
             return (st[0] * 1_000_000_000 + st[1] if ok else None), dependent, None, False
@@ -460,8 +458,17 @@ class CsvWriter:
         self._f.write(",".join(("stamp_ns", *state_labels, *envelope_labels)) + "\n")
 
     def row(self, stamp_ns: int, x: np.ndarray, env: np.ndarray) -> None:
-        # repr of each float, as ",".join(map(repr, ...)) writes them, formatted by the list's own repr
-        self._f.write(f"{int(stamp_ns)},{str(x.tolist() + env.tolist())[1:-1].replace(', ', ',')}\n")
+        # repr of each float, as ",".join(map(repr, ...)) writes them, formatted by the list's own repr; the
+        # envelope's values repeat (the z of the channels at rest): each distinct one formatted once
+        e = env.tolist()
+        seen = set(e)
+        if len(seen) + 4 < len(e) and 0.0 not in seen:      # 0.0 == -0.0: their reprs differ
+            r = {v: repr(v) for v in seen}                  # a NaN is its own key (found by identity)
+            tail = ",".join(map(r.__getitem__, e))
+        else:
+            tail = str(e)[1:-1].replace(", ", ",")
+        head = str(x.tolist())[1:-1].replace(", ", ",")
+        self._f.write(f"{int(stamp_ns)},{head}{',' if head and tail else ''}{tail}\n")
 
     def close(self) -> None:
         self._f.close()

@@ -31,8 +31,10 @@ from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
 
 from .. import qos
+from .cdr import decode_uint8
 from .mcap_records import fast_records, message_records
 from .metadata_yaml import install as fast_yaml
+from .msgdefs import definition
 
 __all__ = [
     "CHANNEL_TYPES",
@@ -367,10 +369,14 @@ def channel_message(m: BagMessage):
     ``std_msgs/UInt8`` is read straight from its CDR bytes."""
     if m.type == CHANNEL_TYPES[0]:
         return deserialize(m, msg_class(m.type))
+    return decode_uint8(m.data, lambda d: _uint8(m))
+
+
+def _uint8(m: BagMessage):
+    """``m`` deserialised as ``std_msgs/UInt8`` (a channel message :func:`~.cdr.decode_uint8` cannot read)."""
     from std_msgs.msg import UInt8
 
-    from .cdr import decode_uint8
-    return decode_uint8(m.data, lambda d: deserialize(m, UInt8))
+    return deserialize(m, UInt8)
 
 
 # --------------------------------------------------------------------------------- writing
@@ -383,7 +389,6 @@ class BagOut:
 
     def __init__(self, path: str | Path, storage: str = "mcap"):
         from rosbags.rosbag2 import StoragePlugin, Writer
-        from rosbags.typesys import Stores, get_typestore
 
         if storage not in STORAGES:
             raise BagError(f"storage '{storage}' is not supported; use one of {', '.join(STORAGES)}")
@@ -391,8 +396,7 @@ class BagOut:
         if self.path.exists():
             raise BagError(f"bag {self.path} exists already; choose a new folder (bags are never overwritten)")
         self.storage = storage
-        self._typestore = get_typestore(Stores.ROS2_JAZZY)
-        register_rosbags_types(self._typestore)     # switchobs_msgs: the estimator's typed outputs
+        self._typestore = None      # rosbags' Jazzy type store, made for a type msgdefs does not keep
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
         fast_yaml()         # the same YAML, written without ruamel's emitter (switchobs_ros.bag.metadata_yaml)
         self._w = Writer(self.path, version=9, storage_plugin=plugin)
@@ -417,15 +421,27 @@ class BagOut:
     def add(self, topic: str, type_name_: str, qos=None) -> None:
         if topic in self._conns:
             return
-        if type_name_ not in self._typestore.types:
-            raise BagError(f"topic {topic}: type {type_name_} is not in the ROS 2 Jazzy type store")
-        prof = qos if qos is not None else qos_for(topic)
         if type_name_ not in self._defs:        # 33 odometry topics share one type: its definition made once
-            self._defs[type_name_] = (self._typestore.generate_msgdef(type_name_, ros_version=2)[0],
-                                      self._typestore.hash_rihs01(type_name_))
+            self._defs[type_name_] = self._definition(topic, type_name_)
+        prof = qos if qos is not None else qos_for(topic)
         msgdef, rihs01 = self._defs[type_name_]
         self._conns[topic] = self._w.add_connection(topic, type_name_, msgdef=msgdef, rihs01=rihs01,
                                                     offered_qos_profiles=[_rosbags_qos(prof)])
+
+    def _definition(self, topic: str, type_name_: str) -> tuple[str, str]:
+        """``(msgdef, rihs01)`` of a connection's type: kept (:mod:`switchobs_ros.bag.msgdefs`), else from
+        rosbags' Jazzy type store (with the switchobs_msgs types), made at its first use."""
+        kept = definition(type_name_)
+        if kept is not None:
+            return kept
+        if self._typestore is None:
+            from rosbags.typesys import Stores, get_typestore
+
+            self._typestore = get_typestore(Stores.ROS2_JAZZY)
+            register_rosbags_types(self._typestore)     # switchobs_msgs: the estimator's typed outputs
+        if type_name_ not in self._typestore.types:
+            raise BagError(f"topic {topic}: type {type_name_} is not in the ROS 2 Jazzy type store")
+        return (self._typestore.generate_msgdef(type_name_, ros_version=2)[0], self._typestore.hash_rihs01(type_name_))
 
     def write(self, topic: str, log_ns: int, data: bytes) -> None:
         conn = self._conns[topic]

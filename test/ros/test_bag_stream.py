@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 
 import numpy as np
 import pytest
@@ -200,6 +201,20 @@ def test_csv_rows_are_the_floats_reprs(tmp_path_factory, values, stamp):
     w.close()
     row = path.read_text().splitlines()[1]
     assert row == f"{stamp}," + ",".join(map(repr, [float(v) for v in values]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(x=st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=6),
+       env=st.lists(st.sampled_from([0.0, -0.0, 187.77062051064496, 3.5e-06, 1e-320, -1.0, math.inf, math.nan, 0.1]),
+                    min_size=0, max_size=40))
+def test_csv_rows_with_repeated_envelope_values(tmp_path_factory, x, env):
+    """Property: an envelope whose values repeat (each distinct value formatted once) gives the same row as
+    each float's repr, signed zeros and NaN among them; an empty state or envelope part too."""
+    path = tmp_path_factory.mktemp("csv") / "e.csv"
+    w = CsvWriter(path, tuple(f"s{i}" for i in range(len(x))), tuple(f"e{i}" for i in range(len(env))))
+    w.row(7, np.array(x, dtype=float), np.array(env, dtype=float))
+    w.close()
+    assert path.read_text().splitlines()[1] == "7," + ",".join(map(repr, [float(v) for v in x + env]))
 
 
 def test_odometry_is_the_nodes_with_the_covariance(bag, paper_tables, tmp_path):

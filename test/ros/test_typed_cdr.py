@@ -62,7 +62,7 @@ def test_bounds_bytes_read_back_as_the_writers_message(N, declared, stamp, data)
     ref = ErrorBoundsWriter(N, "world", declared)
     b = ErrorBoundsBytes(ErrorBoundsWriter(N, "world", declared))
     texts = st.sampled_from(["", "withdrawn: a gap", "re-certified from data at stamp 12"]) | st.text(max_size=30)
-    for _ in range(data.draw(st.integers(1, 6))):
+    for _ in range(data.draw(st.integers(1, 12))):       # repeats: the template patched directly
         size = N + 2 + declared
         values = data.draw(st.lists(_F | st.just(-1.0), min_size=size, max_size=size))
         valid, why, note = data.draw(st.booleans()), data.draw(texts), data.draw(texts)

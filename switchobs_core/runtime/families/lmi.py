@@ -15,7 +15,9 @@ sample's update then takes, by the same arithmetic from the same covariance: it 
 covariance (one propagation per sample where the test and an output both read it, the same numbers).
 A bias test reads the prior's block on a sample's columns only (:meth:`LmiGains.stored_prior`): from the
 block of ``P`` the held step maps into itself, carried step by step
-(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait.
+(:class:`~switchobs_core.runtime.covariance.HeldBlock`), so the full steps still wait; where ``P`` is read
+at every sample (a publisher), the block of the full prior, which the family computes from the covariance
+it keeps and keeps for the step (the same doubles as the prior of a copy of ``P``, without the copy).
 """
 
 from __future__ import annotations
@@ -144,16 +146,21 @@ class LmiGains:
     def stored_prior(self, t: float, dt: float, cols: np.ndarray | None = None) -> np.ndarray | None:
         """With ``cols`` (a bias test's block): the prior's block on them from the block of ``P`` the
         step maps into itself (:class:`~switchobs_core.runtime.covariance.HeldBlock`, started from the
-        full covariance when it is not the one kept), without the n x n prior; else None, and None
-        where ``P`` was read since the last step (a reader at every sample: the full prior is then the
-        step the sample takes, kept by :meth:`predict_covariance`, and the block would be work added)."""
+        full covariance when it is not the one kept), without the n x n prior; where ``P`` was read since
+        the last step (a reader at every sample: the full prior is then the step the sample takes, and
+        the block would be work added), the block of the full prior, computed from the covariance kept
+        and kept for the step (:meth:`predict_covariance`'s arithmetic on the same doubles, without a
+        copy of ``P`` to compare and a copy of the prior to keep); else None."""
         if cols is None or self._P is None:
-            return None
-        if self._read and not len(self._pending):
-            self._block.clear()
             return None
         h = self._held
         e = self._ctx.zoh(OPEN_LOOP if h is None else h.key, dt)
+        if self._read and not len(self._pending):
+            self._block.clear()
+            prior = self._cov.prior(self._P, e, dt, self._held_noise(e))
+            self._prior = (self._P, e, self._cov.q_d(dt), self._R_held if h is not None else None, prior)
+            ix = np.asarray(cols)
+            return prior[np.ix_(ix, ix)]
         got = self._block.closure(e, np.asarray(cols))
         if got is None:
             return None

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..generate import GenerateConfig, generate
-
 __all__ = ["register", "run"]
 
 
@@ -44,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(a: argparse.Namespace, ros_argv: list[str]) -> int:
+    # the simulator: imported by this command only
+    from ..generate import GenerateConfig, generate
+
     x0 = tuple(float(v) for v in a.initial_state.split(",")) if a.initial_state else ()
     bias = tuple(float(v) for v in a.bias.split(",")) if a.bias else ()
     cfg = GenerateConfig(schedule=a.schedule, rate=a.rate, duration=a.duration, noise_std=a.noise,

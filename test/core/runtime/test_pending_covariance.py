@@ -180,3 +180,46 @@ def test_a_sparse_error_map_is_taken_in_factors(seed, held):
     c8 = ZOHCache()
     c8.register("g", A[:8, :8], L[:8], None, C=C[:, :8])
     assert small.sparse_map(c8.step("g", 0.02)) is None
+
+
+def test_a_block_of_the_prior_read_with_p_read_at_every_sample(paper, paper_table, monkeypatch):
+    """A bias test's block of the prior read before each sample by an observer whose P is read at every
+    sample (a publisher): the block is the same doubles as the block of the full prior computed by hand
+    from the last P, the family gives it itself (no ``predict_covariance`` of a copy of P), and P after each
+    update is exactly that of an observer that reads no prior, with no step propagated again where the
+    step is the prior's; writing into the block changes nothing kept."""
+    calls = {"step": 0, "predict": 0}
+    step = CovarianceStep.step
+    predict = type(so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=default_noise(paper)).gains
+                   ).predict_covariance
+
+    def counted_step(self, *a, **k):
+        calls["step"] += 1
+        return step(self, *a, **k)
+
+    def counted_predict(self, *a, **k):
+        calls["predict"] += 1
+        return predict(self, *a, **k)
+
+    noise = default_noise(paper)
+    obs = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    ref = so.SwitchedObserver(paper, paper_table, "periodic", [CYCLE], noise=noise)
+    monkeypatch.setattr(CovarianceStep, "step", counted_step)
+    monkeypatch.setattr(type(obs.gains), "predict_covariance", counted_predict)
+    cov = CovarianceStep(obs.A, obs.B, noise, None)
+    cols = np.array([0, 2, paper.n - 1])
+    prev_t, prev_key, prev_R, kept = None, None, None, 0
+    for t, ch, y in _stream(paper, 6.0):
+        if prev_t is not None:
+            block = obs.prior_covariance(t, cols)
+            e = obs.cache.step(prev_key, t - prev_t)
+            full = cov.prior(ref.P, e, t - prev_t, None if prev_R is None else e.GL @ prev_R @ e.GL.T)
+            np.testing.assert_array_equal(block, full[np.ix_(cols, cols)])
+            block[:] = 0.0
+        before = calls["step"]
+        obs.update(t, ch, y)
+        kept += prev_t is not None and calls["step"] == before
+        ref.update(t, ch, y)
+        np.testing.assert_array_equal(obs.P, ref.P)         # read at every sample
+        prev_t, prev_key, prev_R = t, obs.gains.held.key, noise.R(ch)
+    assert calls["predict"] == 0 and kept >= 250
