@@ -6,7 +6,11 @@ and wraps the callback in a :class:`~rclpy.task.Task`), and every callback it ru
 executor's own guard condition, so the next wait returns at once with nothing but that guard
 ready: two waits per callback. :class:`KeptWaitSetExecutor` builds the entity lists and the rcl
 wait set once, again only after :meth:`wake` (rclpy's nodes call it when they create or destroy an
-entity), and calls each ready callback directly: one wait per wake-up of the middleware.
+entity), and calls each ready callback directly: one wait per wake-up of the middleware. Inside
+:meth:`~KeptWaitSetExecutor.spin` the handles of that wait set also stay entered (rclpy's use count,
+which defers a destruction) from one wait to the next, instead of 2 x 22 enter and exit calls per
+wait for the estimator: an entity destroyed meanwhile (which wakes the executor) is destroyed when
+they are released, before the next wait rebuilds the set, and all are released when ``spin`` returns.
 
 It serves what rclpy's executor serves, in the same order per wait (timers, subscriptions, guard
 conditions, clients, services, then waitables, each in its node's creation order) and one ready
@@ -57,7 +61,7 @@ class _Plan:
     reports it ready by (``kinds``: the entity kinds present), so that a wait looks up the few ready
     entities instead of testing every entity."""
 
-    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds")
+    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds", "live", "live_waitables", "entered")
 
     def __init__(self, executor: KeptWaitSetExecutor) -> None:
         timers, subs, guards, clients, services, waitables = [], [], [], [], [], []
@@ -89,6 +93,37 @@ class _Plan:
             except InvalidHandle:      # destroyed since: left out of the waits
                 pass
         self.kinds = tuple(self.index.items())
+        self.live: list = []
+        self.live_waitables: list = []
+        self.entered: list = []
+
+    def enter(self) -> None:
+        """Enter every handle (rclpy's use count: a handle destroyed meanwhile is destroyed only
+        once it is released); ``live``, the adds of those entered, ``live_waitables`` the waitables
+        entered (a handle destroyed already is left out)."""
+        entered, live, live_waitables = [], [], []
+        for add, h in self.adds:
+            try:
+                h.__enter__()
+            except InvalidHandle:
+                continue
+            entered.append(h)
+            live.append((add, h))
+        for item, ev in self.waitables:
+            h = item[1] if ev is None else ev
+            try:
+                h.__enter__()
+            except InvalidHandle:
+                continue
+            entered.append(h)
+            live_waitables.append((item, ev))
+        self.entered, self.live, self.live_waitables = entered, live, live_waitables
+
+    def release(self) -> None:
+        """Exit the handles :meth:`enter` entered (last first)."""
+        entered, self.entered, self.live, self.live_waitables = self.entered, [], [], []
+        for h in reversed(entered):
+            h.__exit__(None, None, None)
 
 
 _KINDS = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client", _SERVICE: "service"}
@@ -122,6 +157,8 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         super().__init__(context=context)
         self._plan: _Plan | None = None
         self._ready: deque = deque()
+        self._entered: _Plan | None = None      # the plan whose handles are entered
+        self._holding = False                   # inside spin(): handles kept entered between waits
         self.waits = 0
         self.calls = 0
         self.rebuilds = 0
@@ -147,6 +184,24 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         return super().shutdown(timeout_sec)
 
     # -------------------------------------------------------------- spinning
+    def spin(self) -> None:
+        """rclpy's ``spin``, with the handles of the wait set entered once for as long as it spins
+        (and the wait set is not rebuilt) rather than entered and exited around every wait; they
+        are released when it returns. A handle destroyed meanwhile (a node's ``destroy_*`` from a
+        callback, which wakes the executor) is destroyed by rclpy when it is released: before the
+        next wait, which rebuilds the wait set."""
+        self._holding = True
+        try:
+            super().spin()
+        finally:
+            self._holding = False
+            self._release()
+
+    def _release(self) -> None:
+        plan, self._entered = self._entered, None
+        if plan is not None:
+            plan.release()
+
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Run one ready callback (and one step of each pending task), waiting up to ``timeout_sec``
         (None: no limit) when none is ready."""
@@ -190,30 +245,22 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         """One wait; the ready entities queued in rclpy's order. False on timeout or shutdown."""
         plan = self._plan
         if plan is None:
+            self._release()
             plan = self._plan = _Plan(self)
             self.rebuilds += 1
+        if self._entered is not plan:
+            self._release()
+            plan.enter()
+            self._entered = plan
         ws = plan.wait_set
-        entered = []
-        keep = entered.append
         try:
             ws.clear_entities()
-            for add, h in plan.adds:
-                try:
-                    h.__enter__()
-                except InvalidHandle:
-                    continue
-                keep(h)
+            for add, h in plan.live:
                 add(h)
             add_event = ws.add_event
             live = []
-            for item, ev in plan.waitables:
+            for item, ev in plan.live_waitables:
                 w = item[1]
-                h = w if ev is None else ev
-                try:
-                    h.__enter__()
-                except InvalidHandle:
-                    continue
-                keep(h)
                 if ev is None:
                     w.add_to_wait_set(ws)
                     live.append((item, None))
@@ -250,8 +297,8 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                     continue
                 queue.append(item + (w.take_data(),))
         finally:
-            for h in reversed(entered):
-                h.__exit__(None, None, None)
+            if not self._holding:
+                self._release()
         return bool(self._ready) or timeout_sec is None or timeout_sec < 0
 
     def _serve(self, item: tuple) -> None:

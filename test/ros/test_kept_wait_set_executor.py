@@ -289,6 +289,56 @@ def test_shutdown_ends_spin_from_another_thread_and_from_the_context(ctx):
     assert not t2.is_alive() and out[-1] in ("returned2", "external2")
 
 
+def test_spin_keeps_handles_entered_and_destroys_what_a_callback_destroyed_before_the_next_wait(ctx):
+    """Inside ``spin`` the handles stay entered between waits; a subscription destroyed by a callback
+    is destroyed for real (its rcl pointer 0) once the executor rebuilds its wait set, a new one is
+    served, and every handle is released when ``spin`` returns."""
+    node = rclpy.create_node("kws_hold", context=ctx)
+    ex = KeptWaitSetExecutor(context=ctx)
+    ex.add_node(node)
+    got, late, seen = [], [], {}
+    pub = node.create_publisher(Int32, "/kws_hold", RELIABLE)
+    pub_late = node.create_publisher(Int32, "/kws_hold_late", RELIABLE)
+
+    def first(msg):
+        got.append(msg.data)
+        if len(got) == 1:
+            seen["held"] = sub.handle.pointer           # destroyed on request only once released
+            node.destroy_subscription(sub)
+            seen["after_request"] = sub.handle.pointer
+            node.create_subscription(Int32, "/kws_hold_late", lambda m: late.append(m.data), RELIABLE)
+
+    sub = node.create_subscription(Int32, "/kws_hold", first, RELIABLE)
+    timer_calls = []
+
+    def tick():
+        timer_calls.append(1)
+        if not got and pub.get_subscription_count():
+            pub.publish(Int32(data=1))
+        elif got and pub_late.get_subscription_count() and not late:
+            seen.setdefault("released", sub.handle.pointer)
+            pub_late.publish(Int32(data=2))
+        elif late:
+            ex.shutdown()
+    node.create_timer(0.01, tick)
+    t = threading.Thread(target=ex.spin)
+    t.start()
+    t.join(20.0)
+    if t.is_alive():
+        ex.shutdown()
+        t.join(5.0)
+    try:
+        assert got == [1] and late == [2]
+        assert seen["held"] != 0 and seen["after_request"] == seen["held"]     # held by the executor
+        assert seen["released"] == 0        # destroyed before the wait that served the new subscription
+        assert ex._entered is None          # spin returned: nothing held
+        handle = list(node.subscriptions)[-1].handle
+        node.destroy_node()
+        assert handle.pointer == 0          # nothing kept the node's entities alive
+    finally:
+        ex.shutdown()
+
+
 def test_polled_events_executor_delivers_messages_with_their_info_and_fires_timers(ctx):
     with _spun(ctx, "kws_events", executor=PolledEventsExecutor) as (ex, node):
         got, ticks = [], []
