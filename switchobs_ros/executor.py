@@ -9,8 +9,9 @@ wait set once, again only after :meth:`wake` (rclpy's nodes call it when they cr
 entity), and calls each ready callback directly: one wait per wake-up of the middleware. Inside
 :meth:`~KeptWaitSetExecutor.spin` the handles of that wait set also stay entered (rclpy's use count,
 which defers a destruction) from one wait to the next, instead of 2 x 22 enter and exit calls per
-wait for the estimator: an entity destroyed meanwhile (which wakes the executor) is destroyed when
-they are released, before the next wait rebuilds the set, and all are released when ``spin`` returns.
+wait for the estimator: an entity destroyed by a callback (which wakes the executor) is destroyed at
+once, as they are released then; one destroyed by another thread during a wait, as soon as that wait
+returns (rclpy's executor holds its handles during a wait too); all are released when ``spin`` returns.
 
 It serves what rclpy's executor serves, in the same order per wait (timers, subscriptions, guard
 conditions, clients, services, then waitables, each in its node's creation order) and one ready
@@ -32,6 +33,7 @@ that spins this executor again cannot re-enter a mutually exclusive group.
 from __future__ import annotations
 
 import inspect
+import threading
 import weakref
 from collections import deque
 from typing import Any
@@ -159,6 +161,8 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         self._ready: deque = deque()
         self._entered: _Plan | None = None      # the plan whose handles are entered
         self._holding = False                   # inside spin(): handles kept entered between waits
+        self._spinner = None                    # the thread spinning (its ident)
+        self._in_wait = False
         self.waits = 0
         self.calls = 0
         self.rebuilds = 0
@@ -166,8 +170,12 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
     # -------------------------------------------------------------- changes of the entity set
     def wake(self) -> None:
         """Rebuild the wait set before the next wait (an entity was created or destroyed) and wake
-        the current wait."""
+        the current wait. Called by the spinning thread outside a wait (a callback destroyed an
+        entity), the handles are released at once: the entity is destroyed now, as rclpy's
+        executor would, so that the callback can create another on its topic (of another type)."""
         self._plan = None
+        if self._holding and not self._in_wait and threading.get_ident() == self._spinner:
+            self._release()
         super().wake()
 
     def add_node(self, node) -> bool:
@@ -190,11 +198,11 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         are released when it returns. A handle destroyed meanwhile (a node's ``destroy_*`` from a
         callback, which wakes the executor) is destroyed by rclpy when it is released: before the
         next wait, which rebuilds the wait set."""
-        self._holding = True
+        self._holding, self._spinner = True, threading.get_ident()
         try:
             super().spin()
         finally:
-            self._holding = False
+            self._holding, self._spinner = False, None
             self._release()
 
     def _release(self) -> None:
@@ -253,6 +261,7 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
             plan.enter()
             self._entered = plan
         ws = plan.wait_set
+        self._in_wait = True
         try:
             ws.clear_entities()
             for add, h in plan.live:
@@ -297,6 +306,7 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                     continue
                 queue.append(item + (w.take_data(),))
         finally:
+            self._in_wait = False
             if not self._holding:
                 self._release()
         return bool(self._ready) or timeout_sec is None or timeout_sec < 0
