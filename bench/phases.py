@@ -161,20 +161,6 @@ def install(fine: bool = False) -> None:
     if hasattr(outputs, "send"):        # the outputs' own path to the publisher's handle
         outputs.send = _wrap_publish(outputs.send)
     _count_serves()
-    try:
-        from switchobs_ros import drain
-    except ImportError:         # a checkout without the drain's linger
-        drain = None
-    if drain is not None:
-        polled = _wrap(drain.linger, "drain: linger (polls for a part on its way)")
-
-        def counted_linger(*args, **kwargs):
-            got = polled(*args, **kwargs)
-            k = "count: lingers that caught a message" if got is not None else "count: lingers that caught none"
-            _calls[k] += 1
-            _own[k] += 0
-            return got
-        drain.linger = counted_linger
     orig = estimator.EstimatorMixin._input_handler
 
     def input_handler(self, index):

@@ -22,10 +22,10 @@ sample accepted after start-up or a reset (integer nanoseconds until that subtra
 Every output carries the stamp of the sample it answers.
 
 Executor cost: each input callback also takes the input messages already waiting
-(:meth:`EstimatorMixin._drain_inputs`, :mod:`switchobs_ros.drain`), so a tick's channel and poses
-cost one wait of the executor, not two or three, and a backlog none; publishers and subscriptions
-carry no default middleware event handlers (each one a waitable that rclpy's executor re-adds on
-every wait), the subscriptions keep the incompatible-QoS warning.
+(:meth:`EstimatorMixin._drain_inputs`), so a camera/target pair costs one wait of the executor,
+not two, and a backlog none; publishers and subscriptions carry no default middleware event
+handlers (each one a waitable that rclpy's executor re-adds on every wait), the subscriptions
+keep the incompatible-QoS warning.
 
 Clock jumps: a jump of the node clock backwards (with ``use_sim_time``, a looped bag restarting
 its ``/clock``) resets the estimator, so the replay's samples are accepted again and the
@@ -54,6 +54,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64MultiArray
@@ -71,7 +72,6 @@ from .channel_input import CHANNEL_MSG, channel_type
 from .config import PARAMS, EstimatorConfig, body_frame_prefix, check_runtime_value
 from .demand import Demand
 from .diagnostics import EstimatorDiagnostics, NodeState
-from .drain import LINGER_S, drain_inputs
 from .log_callers import register_log_callers
 from .outputs import OutputsMixin, channel_bodies
 from .params import ConfigError, declare_all, unknown_parameters
@@ -344,10 +344,8 @@ class EstimatorMixin(OutputsMixin):
 
     # ------------------------------------------------------------------ inputs
     #: Input messages one callback takes from the input subscriptions (its own message not
-    #: counted) before it returns to the executor, and how long it polls for one that is on its
-    #: way (s; 0: never): :mod:`switchobs_ros.drain`.
+    #: counted) before it returns to the executor (:meth:`_drain_inputs`).
     DRAIN_MAX = 32
-    LINGER_S = LINGER_S
 
     def _input_handler(self, index: int | None):
         """The handler of one input: ``handle(msg, info)`` with rclpy's MessageInfo ``info`` (its
@@ -372,20 +370,52 @@ class EstimatorMixin(OutputsMixin):
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
                 self._publish_all(pipeline.on_input(index, msg, now().nanoseconds, None, src_ns, seq))
-        handle.is_channel = index is None
         return handle
 
     def _with_drain(self, handle):
-        """The subscription callback: the handler, then the inputs waiting (:meth:`_drain_inputs`)."""
+        """The subscription callback: the handler, then the inputs already waiting."""
         def callback(msg, info) -> None:
             handle(msg, info)
-            self._drain_inputs(handle)
+            self._drain_inputs()
         return callback
 
-    def _drain_inputs(self, last=None) -> None:
-        """The input messages waiting, and those about to come, taken and handled
-        (:func:`switchobs_ros.drain.drain_inputs`)."""
-        drain_inputs(self, last)
+    def _drain_inputs(self) -> None:
+        """Take the input messages already waiting (channel, camera, target: one of each per
+        round, the channel first, as the executor orders them after one wait) and handle them,
+        up to :attr:`DRAIN_MAX`; then the executor's queued entries of the inputs are dropped
+        (``discard_ready``: each would cost an empty take; an input that holds a message again is
+        reported by the next wait, rcl's wait being level-triggered).
+
+        Every wait of the executor costs Python and middleware work (rclpy's
+        SingleThreadedExecutor rebuilds its wait set for it, about 150 us for this node;
+        :class:`~switchobs_ros.executor.KeptWaitSetExecutor`, the node's, keeps it: about a third
+        of that; bench/RESULTS.md): the target pose that arrives while the camera
+        pose is handled would cost one more wait, and a backlog one wait per message. Taking
+        them here costs a few microseconds each. The bound keeps timers and services served. Then
+        the pairing timer runs if a sample waits (:meth:`_arm_pairing_timer`).
+        """
+        hot = self._hot_inputs
+        n = 0
+        try:
+            while n < self.DRAIN_MAX:
+                took = n
+                for sub, handle in hot:
+                    try:
+                        with sub.handle:
+                            got = sub.handle.take_message(sub.msg_type, sub.raw)
+                    except InvalidHandle:       # destroyed (managed node cleanup)
+                        return
+                    if got is not None:
+                        handle(got[0], got[1])
+                        n += 1
+                if n == took:
+                    break
+            discard = getattr(getattr(self, "executor", None), "discard_ready", None)
+            if discard is not None:
+                discard(tuple(h[0] for h in self._hot_inputs))
+            self._arm_pairing_timer()
+        except Exception as err:
+            self.pipeline.internal_error("input", err)
 
     def control_callback(self, msg: Any) -> None:
         """The control topic: a command ``u`` held from its stamp on (the pipeline's
