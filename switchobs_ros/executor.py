@@ -195,9 +195,9 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
     def spin(self) -> None:
         """rclpy's ``spin``, with the handles of the wait set entered once for as long as it spins
         (and the wait set is not rebuilt) rather than entered and exited around every wait; they
-        are released when it returns. A handle destroyed meanwhile (a node's ``destroy_*`` from a
-        callback, which wakes the executor) is destroyed by rclpy when it is released: before the
-        next wait, which rebuilds the wait set."""
+        are released when it returns, and when an entity is created or destroyed (:meth:`wake`:
+        from a callback at once, from another thread before the next wait). rclpy destroys a
+        handle whose destruction was asked for once it is released."""
         self._holding, self._spinner = True, threading.get_ident()
         try:
             super().spin()
