@@ -157,6 +157,10 @@ def install(fine: bool = False) -> None:
     _patch_property(SwitchedObserver, "P", "covariance P")
     from rclpy.publisher import Publisher
     Publisher.publish = _wrap_publish(Publisher.publish)
+    from switchobs_ros import outputs
+    if hasattr(outputs, "send"):        # the outputs' own path to the publisher's handle
+        outputs.send = _wrap_publish(outputs.send)
+    _count_serves()
     orig = estimator.EstimatorMixin._input_handler
 
     def input_handler(self, index):
@@ -164,6 +168,38 @@ def install(fine: bool = False) -> None:
         return _wrap(orig(self, index), "handler (clocks, demand, loss)")
     estimator.EstimatorMixin._input_handler = input_handler
     gc.callbacks.append(_gc_callback)
+
+
+def _entity_label(item: tuple) -> str:
+    ent = item[1]
+    topic = getattr(ent, "topic_name", None) or getattr(ent, "topic", None)
+    if topic:
+        return f"count: served {topic}"
+    return f"count: served {type(ent).__name__}"
+
+
+def _count_serves() -> None:
+    """Counters without time (``count: ...``, calls per answer): each entity the executor serves,
+    by topic or kind, and the waits by how many entities each found ready."""
+    from switchobs_ros.executor import KeptWaitSetExecutor
+    serve, wait = KeptWaitSetExecutor._serve, KeptWaitSetExecutor._wait
+
+    def counted_serve(self, item):
+        _calls[_entity_label(item)] += 1
+        _own[_entity_label(item)] += 0
+        return serve(self, item)
+
+    def counted_wait(self, timeout_sec):
+        before = len(self._ready)
+        try:
+            return wait(self, timeout_sec)
+        finally:
+            found = len(self._ready) - before
+            k = f"count: waits that found {found if found < 3 else '3+'} ready"
+            _calls[k] += 1
+            _own[k] += 0
+    KeptWaitSetExecutor._serve = counted_serve
+    KeptWaitSetExecutor._wait = counted_wait
 
 
 def start() -> None:

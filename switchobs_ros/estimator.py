@@ -350,7 +350,7 @@ class EstimatorMixin(OutputsMixin):
         """The handler of one input: ``handle(msg, info)`` with rclpy's MessageInfo ``info`` (its
         ``source_timestamp``, the publisher's clock: :mod:`switchobs_ros.attribution`,
         :mod:`switchobs_ros.clocks`); ``index`` None is the channel topic."""
-        pipeline, clock = self.pipeline, self.get_clock()
+        pipeline, now = self.pipeline, self.get_clock().handle.get_now     # rcl's time point: Clock.now() less its Time
         dds = f"{pipeline.channel_topic if index is None else pipeline.sources[index].topic} (DDS source timestamp)"
 
         def handle(msg, info) -> None:
@@ -368,7 +368,7 @@ class EstimatorMixin(OutputsMixin):
             if index is None:
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
-                self._publish_all(pipeline.on_input(index, msg, clock.now().nanoseconds, None, src_ns, seq))
+                self._publish_all(pipeline.on_input(index, msg, now().nanoseconds, None, src_ns, seq))
         return handle
 
     def _with_drain(self, handle):

@@ -6,7 +6,12 @@ and wraps the callback in a :class:`~rclpy.task.Task`), and every callback it ru
 executor's own guard condition, so the next wait returns at once with nothing but that guard
 ready: two waits per callback. :class:`KeptWaitSetExecutor` builds the entity lists and the rcl
 wait set once, again only after :meth:`wake` (rclpy's nodes call it when they create or destroy an
-entity), and calls each ready callback directly: one wait per wake-up of the middleware.
+entity), and calls each ready callback directly: one wait per wake-up of the middleware. Inside
+:meth:`~KeptWaitSetExecutor.spin` the handles of that wait set also stay entered (rclpy's use count,
+which defers a destruction) from one wait to the next, instead of 2 x 22 enter and exit calls per
+wait for the estimator: an entity destroyed by a callback (which wakes the executor) is destroyed at
+once, as they are released then; one destroyed by another thread during a wait, as soon as that wait
+returns (rclpy's executor holds its handles during a wait too); all are released when ``spin`` returns.
 
 It serves what rclpy's executor serves, in the same order per wait (timers, subscriptions, guard
 conditions, clients, services, then waitables, each in its node's creation order) and one ready
@@ -28,6 +33,7 @@ that spins this executor again cannot re-enter a mutually exclusive group.
 from __future__ import annotations
 
 import inspect
+import threading
 import weakref
 from collections import deque
 from typing import Any
@@ -57,7 +63,7 @@ class _Plan:
     reports it ready by (``kinds``: the entity kinds present), so that a wait looks up the few ready
     entities instead of testing every entity."""
 
-    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds")
+    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds", "live", "live_waitables", "entered")
 
     def __init__(self, executor: KeptWaitSetExecutor) -> None:
         timers, subs, guards, clients, services, waitables = [], [], [], [], [], []
@@ -89,6 +95,37 @@ class _Plan:
             except InvalidHandle:      # destroyed since: left out of the waits
                 pass
         self.kinds = tuple(self.index.items())
+        self.live: list = []
+        self.live_waitables: list = []
+        self.entered: list = []
+
+    def enter(self) -> None:
+        """Enter every handle (rclpy's use count: a handle destroyed meanwhile is destroyed only
+        once it is released); ``live``, the adds of those entered, ``live_waitables`` the waitables
+        entered (a handle destroyed already is left out)."""
+        entered, live, live_waitables = [], [], []
+        for add, h in self.adds:
+            try:
+                h.__enter__()
+            except InvalidHandle:
+                continue
+            entered.append(h)
+            live.append((add, h))
+        for item, ev in self.waitables:
+            h = item[1] if ev is None else ev
+            try:
+                h.__enter__()
+            except InvalidHandle:
+                continue
+            entered.append(h)
+            live_waitables.append((item, ev))
+        self.entered, self.live, self.live_waitables = entered, live, live_waitables
+
+    def release(self) -> None:
+        """Exit the handles :meth:`enter` entered (last first)."""
+        entered, self.entered, self.live, self.live_waitables = self.entered, [], [], []
+        for h in reversed(entered):
+            h.__exit__(None, None, None)
 
 
 _KINDS = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client", _SERVICE: "service"}
@@ -122,6 +159,10 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         super().__init__(context=context)
         self._plan: _Plan | None = None
         self._ready: deque = deque()
+        self._entered: _Plan | None = None      # the plan whose handles are entered
+        self._holding = False                   # inside spin(): handles kept entered between waits
+        self._spinner = None                    # the thread spinning (its ident)
+        self._in_wait = False
         self.waits = 0
         self.calls = 0
         self.rebuilds = 0
@@ -129,8 +170,12 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
     # -------------------------------------------------------------- changes of the entity set
     def wake(self) -> None:
         """Rebuild the wait set before the next wait (an entity was created or destroyed) and wake
-        the current wait."""
+        the current wait. Called by the spinning thread outside a wait (a callback destroyed an
+        entity), the handles are released at once: the entity is destroyed now, as rclpy's
+        executor would, so that the callback can create another on its topic (of another type)."""
         self._plan = None
+        if self._holding and not self._in_wait and threading.get_ident() == self._spinner:
+            self._release()
         super().wake()
 
     def add_node(self, node) -> bool:
@@ -147,6 +192,24 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         return super().shutdown(timeout_sec)
 
     # -------------------------------------------------------------- spinning
+    def spin(self) -> None:
+        """rclpy's ``spin``, with the handles of the wait set entered once for as long as it spins
+        (and the wait set is not rebuilt) rather than entered and exited around every wait; they
+        are released when it returns, and when an entity is created or destroyed (:meth:`wake`:
+        from a callback at once, from another thread before the next wait). rclpy destroys a
+        handle whose destruction was asked for once it is released."""
+        self._holding, self._spinner = True, threading.get_ident()
+        try:
+            super().spin()
+        finally:
+            self._holding, self._spinner = False, None
+            self._release()
+
+    def _release(self) -> None:
+        plan, self._entered = self._entered, None
+        if plan is not None:
+            plan.release()
+
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Run one ready callback (and one step of each pending task), waiting up to ``timeout_sec``
         (None: no limit) when none is ready."""
@@ -190,30 +253,23 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         """One wait; the ready entities queued in rclpy's order. False on timeout or shutdown."""
         plan = self._plan
         if plan is None:
+            self._release()
             plan = self._plan = _Plan(self)
             self.rebuilds += 1
+        if self._entered is not plan:
+            self._release()
+            plan.enter()
+            self._entered = plan
         ws = plan.wait_set
-        entered = []
-        keep = entered.append
+        self._in_wait = True
         try:
             ws.clear_entities()
-            for add, h in plan.adds:
-                try:
-                    h.__enter__()
-                except InvalidHandle:
-                    continue
-                keep(h)
+            for add, h in plan.live:
                 add(h)
             add_event = ws.add_event
             live = []
-            for item, ev in plan.waitables:
+            for item, ev in plan.live_waitables:
                 w = item[1]
-                h = w if ev is None else ev
-                try:
-                    h.__enter__()
-                except InvalidHandle:
-                    continue
-                keep(h)
                 if ev is None:
                     w.add_to_wait_set(ws)
                     live.append((item, None))
@@ -250,8 +306,9 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                     continue
                 queue.append(item + (w.take_data(),))
         finally:
-            for h in reversed(entered):
-                h.__exit__(None, None, None)
+            self._in_wait = False
+            if not self._holding:
+                self._release()
         return bool(self._ready) or timeout_sec is None or timeout_sec < 0
 
     def _serve(self, item: tuple) -> None:

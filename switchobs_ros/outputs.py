@@ -26,7 +26,18 @@ from msg_bridge.raw import RawLabelledArrayWriter
 from .demand import listened
 from .pipeline import Estimate
 
-__all__ = ["OutputsMixin", "channel_bodies"]
+__all__ = ["OutputsMixin", "channel_bodies", "send"]
+
+
+def send(pub: Any, data: Any) -> None:
+    """Publish ``data`` on ``pub``: serialised ``bytes`` straight to rclpy's publisher handle
+    (``publish_raw``: what ``Publisher.publish(bytes)`` calls after a type test and entering the
+    handle, 0.7-1.4 us more per call measured here; the node's publishers are destroyed only by its
+    own spinning thread, between publications), a message object through ``Publisher.publish``."""
+    if type(data) is bytes:
+        pub.handle.publish_raw(data)
+    else:
+        pub.publish(data)
 
 
 def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
@@ -80,31 +91,31 @@ class OutputsMixin:
             try:     # one estimate's failure (a writer that cannot be built) costs no other estimate
                 k = self.n_published
                 self.n_published = k + 1
-                self.pub_state.publish(self.w_state.msg(e.x_hat, e.stamp_ns))
+                send(self.pub_state, self.w_state.msg(e.x_hat, e.stamp_ns))
                 n["state"] += 1
                 if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
-                    self.pub_env.publish(self.w_env.msg(e.envelope, e.stamp_ns))
+                    send(self.pub_env, self.w_env.msg(e.envelope, e.stamp_ns))
                     n["envelope"] += 1
                 if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
-                    self.pub_cov.publish(self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    send(self.pub_cov, self.w_cov.msg(e.P.ravel(), e.stamp_ns))
                     n["covariance"] += 1
                 if ev["odometry"] and k % ev["odometry"] == 0 and any(on := [listened(p) for p in self.pub_odom]):
                     for pub, m, yes in zip(self.pub_odom, self.w_odom.msgs(e.x_hat, e.stamp_ns, e.P), on):
                         if yes:
-                            pub.publish(m)
+                            send(pub, m)
                             n["odometry"] += 1
                 if ev["typed"] and k % ev["typed"] == 0:
                     pl = self.pipeline
                     if listened(self.pub_typed[0]):
-                        self.pub_typed[0].publish(self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        send(self.pub_typed[0], self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
                         n["typed"] += 1
                     if listened(self.pub_typed[1]):
-                        self.pub_typed[1].publish(self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
+                        send(self.pub_typed[1], self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
                                                                       pl.bound_invalid_why, pl.bound_note))
                         n["typed"] += 1
                 if ev["markers"] and k % ev["markers"] == 0 and listened(self.pub_markers):
                     g = e.envelope[-1]      # the guaranteed bound: noise_bound if declared, else exact_bound
-                    self.pub_markers.publish(self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
+                    send(self.pub_markers, self.w_markers.msg(e.x_hat, e.stamp_ns, e.P, g if g >= 0 else None,
                                                                 self.body_in_view.get(e.channel)))
                     n["markers"] += 1
             except Exception as err:

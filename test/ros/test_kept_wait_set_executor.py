@@ -10,7 +10,7 @@ import pytest
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Int32
+from std_msgs.msg import Int32, String
 from std_srvs.srv import Trigger
 
 from switchobs_ros.executor import KeptWaitSetExecutor, PolledEventsExecutor
@@ -287,6 +287,56 @@ def test_shutdown_ends_spin_from_another_thread_and_from_the_context(ctx):
     rclpy.shutdown(context=ctx)
     t2.join(20.0)
     assert not t2.is_alive() and out[-1] in ("returned2", "external2")
+
+
+def test_spin_keeps_handles_entered_and_a_callback_destroys_and_recreates_a_subscription(ctx):
+    """Inside ``spin`` the handles stay entered between waits; a subscription a callback destroys is
+    destroyed at once (its rcl pointer 0), so that the callback can subscribe to its topic with
+    another type (the estimator's channel subscription); the new one is served, and every handle is
+    released when ``spin`` returns."""
+    node = rclpy.create_node("kws_hold", context=ctx)
+    ex = KeptWaitSetExecutor(context=ctx)
+    ex.add_node(node)
+    got, late, seen, subs = [], [], {}, []
+    pub = node.create_publisher(Int32, "/kws_trigger", RELIABLE)
+
+    def first(msg):
+        got.append(msg.data)
+        if len(got) == 1:
+            seen["in_spin"] = ex._entered is not None       # the handles held across waits
+            node.destroy_subscription(subs[0])
+            seen["after_destroy"] = subs[0].handle.pointer
+            subs.append(node.create_subscription(String, "/kws_hold", lambda m: late.append(m.data), RELIABLE))
+
+    subs.append(node.create_subscription(Int32, "/kws_hold", lambda m: None, RELIABLE))
+    node.create_subscription(Int32, "/kws_trigger", first, RELIABLE)
+    pub_late = [None]
+
+    def tick():
+        if not got and pub.get_subscription_count():
+            pub.publish(Int32(data=1))
+        elif len(subs) == 2 and pub_late[0] is None:
+            pub_late[0] = node.create_publisher(String, "/kws_hold", RELIABLE)
+        elif pub_late[0] is not None and pub_late[0].get_subscription_count() and not late:
+            pub_late[0].publish(String(data="two"))
+        elif late:
+            ex.shutdown()
+    node.create_timer(0.01, tick)
+    t = threading.Thread(target=ex.spin)
+    t.start()
+    t.join(20.0)
+    if t.is_alive():
+        ex.shutdown()
+        t.join(5.0)
+    try:
+        assert got == [1] and late == ["two"]
+        assert seen["in_spin"] and seen["after_destroy"] == 0
+        assert ex._entered is None          # spin returned: nothing held
+        handle = subs[1].handle
+        node.destroy_node()
+        assert handle.pointer == 0          # nothing kept the node's entities alive
+    finally:
+        ex.shutdown()
 
 
 def test_polled_events_executor_delivers_messages_with_their_info_and_fires_timers(ctx):
