@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import os
 import threading
+import warnings
 import weakref
 from collections.abc import Iterator, Sequence
 from typing import Any, BinaryIO
@@ -44,6 +45,12 @@ __all__ = ["AHEAD", "LazyRow", "LazyRows", "OpenFile", "row_digest"]
 #: How many rows after the last one asked for the worker keeps verified (about 2.2 MiB at n = 132);
 #: 0: no worker (every row read and verified by the caller).
 AHEAD = 32
+#: The worker's poll (seconds) while nobody wakes it, and how many polls in a row it waits before it
+#: ends (its buffers freed); the next row asked for starts it again.
+POLL = 1.0
+IDLE_POLLS = 10
+
+_START = threading.Lock()       # one worker per table, whichever thread asks for its first row
 
 
 def row_digest(name: str, k: int, row: np.ndarray | bytes | memoryview, m: int) -> str:
@@ -75,6 +82,9 @@ class LazyRows(Sequence):
         self.source = source
         self._verified: set[int] = set()
         self._ahead: _Ahead | None = None
+        #: Why the worker stopped verifying rows ahead (an exception in it), or None; the rows are then
+        #: all read and verified by the caller.
+        self.ahead_failure: str | None = None
 
     def __len__(self) -> int:
         return len(self._digests)
@@ -93,8 +103,16 @@ class LazyRows(Sequence):
         """Row ``k``, read and verified (module docstring); read-only."""
         ahead = self._ahead
         if ahead is None or ahead.pid != os.getpid():     # the first row, or a forked child (no worker there)
-            ahead = self._ahead = _Ahead(self) if AHEAD > 0 and len(self) > 1 else None
+            with _START:
+                ahead = self._ahead
+                if ahead is None or ahead.pid != os.getpid():
+                    ahead = self._ahead = _Ahead(self) if AHEAD > 0 and len(self) > 1 else None
         a = None if ahead is None else ahead.take(k)
+        if ahead is not None and ahead.failed is not None and self.ahead_failure is None:
+            self.ahead_failure = f"{type(ahead.failed).__name__}: {ahead.failed}"
+            warnings.warn(f"{self.source}: rows of {self.name} are no longer verified ahead "
+                          f"({self.ahead_failure}); each is read and verified when it is used",
+                          RuntimeWarning, stacklevel=2)
         if a is None:
             a = self._read(k)
         self._verified.add(k)
@@ -148,7 +166,9 @@ class _Ahead:
     when half of :data:`AHEAD` rows or fewer are left ahead of ``k``; the worker then reads rows
     ``k + 1, k + 2, ...`` (cyclically: a periodic segment wraps) up to ``k + AHEAD``, skipping rows
     already returned, and keeps those that pass. It holds its table weakly and ends once the table is
-    gone or every row was returned; a later row is then read by the caller.
+    gone, every row was returned, or nobody woke it for :data:`IDLE_POLLS` polls (the next :meth:`take`
+    that needs rows ahead starts it again). An exception in it ends it for good (:attr:`failed`; the
+    caller reads every later row itself).
 
     The worker reads into a pool of ``AHEAD + 2`` buffers; :meth:`take` hands the caller the buffer of
     its row (the verified bytes, read-only) and puts a new one, allocated in the caller's thread, in
@@ -164,8 +184,13 @@ class _Ahead:
         self._want = -1                 # the last row asked for
         self._upto = -1                 # the worker was last asked to read up to this row (unwrapped)
         self._wake = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="table-rows-ahead", daemon=True)
-        self._thread.start()
+        self.failed: BaseException | None = None
+        self._thread = self._start()
+
+    def _start(self) -> threading.Thread:
+        thread = threading.Thread(target=self._run, name="table-rows-ahead", daemon=True)
+        thread.start()
+        return thread
 
     def take(self, k: int) -> np.ndarray | None:
         """Row ``k`` as the worker verified it (read-only), or None (the caller reads and verifies it)."""
@@ -176,18 +201,30 @@ class _Ahead:
         self._want = k
         if not AHEAD // 2 < self._upto - k <= AHEAD:     # half or fewer ahead, or a jump
             self._upto = k + AHEAD
-            self._wake.set()
+            if self.failed is None:
+                if not self._thread.is_alive():     # ended idle: started again
+                    self._thread = self._start()
+                self._wake.set()
         return a
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as err:        # any failure only stops the read-ahead
+            self.failed = err
+        self._done, self._free, self._buffers = {}, [], 0   # the buffers go; a later row is the caller's
+
+    def _loop(self) -> None:
+        idle = 0
         while True:
-            if not self._wake.wait(1.0):
+            if not self._wake.wait(POLL):
+                idle += 1
                 rows = self._rows()
-                if rows is None or len(rows._verified) == len(rows):
-                    self._done, self._free = {}, []     # the buffers go; a later row is the caller's
-                    return              # the table is gone, or every row was returned (kept by its phase)
+                if rows is None or len(rows._verified) == len(rows) or idle >= IDLE_POLLS:
+                    return              # the table is gone, every row was returned (kept by its phase), or idle
                 del rows                # not held while waiting
                 continue
+            idle = 0
             self._wake.clear()
             rows = self._rows()
             if rows is None:
@@ -201,7 +238,7 @@ class _Ahead:
             return self._free.pop()
         if self._buffers < AHEAD + 2:
             self._buffers += 1
-            return np.empty(m)
+            return np.empty(m, dtype="<f8")
         return None
 
     def _burst(self, rows: LazyRows, k: int) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import gc
 import threading
 import time
+import warnings
 
 import pytest
 
@@ -64,7 +65,7 @@ def test_rows_ahead_are_the_stored_doubles(table, tmp_path):
         a = rows.row(k)
         assert a.tobytes() == ref[k] and not a.flags.writeable
     assert rows.verified() == len(set(order))
-    assert [t.name for t in threading.enumerate()].count("table-rows-ahead") >= 1
+    assert rows._ahead._thread.name == "table-rows-ahead" and rows._ahead._thread in threading.enumerate()
 
 
 @pytest.mark.parametrize("ahead", [0, rows_mod.AHEAD])
@@ -114,3 +115,45 @@ def test_the_worker_ends_with_its_table(table, tmp_path):
     gc.collect()
     thread.join(timeout=10.0)
     assert not thread.is_alive()
+
+
+def test_a_worker_that_fails_leaves_every_row_to_the_caller(table, tmp_path, monkeypatch):
+    """An exception in the worker (here a MemoryError while it reads) ends the read-ahead for good: the
+    rows are still the stored doubles, read by the caller; the failure is kept and warned about once."""
+    path = table.save(tmp_path / "k.npz")
+    rows = _rows(path)
+    ref = [rows._read(k).tobytes() for k in range(8)]
+
+    def broken(k, buf):
+        raise MemoryError("no buffer")
+
+    monkeypatch.setattr(rows, "_read_into", broken)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        assert rows.row(0).tobytes() == ref[0]      # the worker starts (and fails beside the caller)
+        rows._ahead._thread.join(timeout=10.0)
+        assert not rows._ahead._thread.is_alive() and isinstance(rows._ahead.failed, MemoryError)
+        for k in range(1, 8):
+            assert rows.row(k).tobytes() == ref[k]
+    said = [str(w.message) for w in seen if issubclass(w.category, RuntimeWarning)]
+    assert len(said) == 1 and "no longer verified ahead (MemoryError: no buffer)" in said[0], said
+    assert rows.ahead_failure == "MemoryError: no buffer"
+    assert not rows._ahead._thread.is_alive()      # not started again
+
+
+def test_an_idle_worker_ends_and_starts_again(table, tmp_path, monkeypatch):
+    """A worker nobody woke for IDLE_POLLS polls ends (its buffers freed); the next row that needs rows
+    ahead starts it again, and the rows after it come verified from the worker."""
+    monkeypatch.setattr(rows_mod, "POLL", 0.01)
+    monkeypatch.setattr(rows_mod, "IDLE_POLLS", 3)
+    rows = _rows(table.save(tmp_path / "k.npz"))
+    ref = [rows._read(k).tobytes() for k in range(rows_mod.AHEAD + 4)]
+    rows.row(0)
+    _held(rows, 1)
+    first = rows._ahead._thread
+    first.join(timeout=10.0)
+    assert not first.is_alive() and rows._ahead._done == {}
+    assert rows.row(rows_mod.AHEAD + 1).tobytes() == ref[rows_mod.AHEAD + 1]     # a jump: the caller reads it
+    assert rows._ahead._thread is not first and rows._ahead.failed is None
+    _held(rows, rows_mod.AHEAD + 2)
+    assert rows.row(rows_mod.AHEAD + 2).tobytes() == ref[rows_mod.AHEAD + 2]
