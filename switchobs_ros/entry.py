@@ -43,7 +43,7 @@ def _run(module: str, prog: str, participant_first: bool = False, keep_heap: boo
     """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
     switchobs_msgs is one line on stderr and exit code 2. ``participant_first``: the node's DDS
     participant is created before the import (:mod:`switchobs_ros.early`); ``keep_heap``: glibc's
-    malloc keeps the heap between samples, set before anything else (:mod:`switchobs_ros.heap`);
+    malloc keeps the heap between samples, set before anything but the BLAS threads (:mod:`switchobs_ros.heap`);
     ``one_blas_thread``: one BLAS thread, set before numpy loads one
     (:func:`switchobs_core.threads.single_thread_before_load`)."""
     if one_blas_thread:

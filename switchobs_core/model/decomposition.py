@@ -31,6 +31,14 @@ same result (when the compression's eigenvalues are distinct, which holds
 generically), so the basis depends on the subspace only. For coordinate-aligned
 subspaces (the paper's model) the result is the coordinate axes themselves.
 
+States the output never reaches (no chain of nonzero entries of A leads from them to
+a state C reads) are unobservable coordinate axes, exactly; where there are such
+states the iteration runs on the reached ones only (:func:`_reduced`, the same
+subspaces and rule at the cost of the reached states), except where two of the
+rule's eigenvalues are within :data:`TIE` ``* n`` (identical bodies read alike): the
+rule's basis then depends on the eigenvalue solver's split of the eigenspace, and the
+whole-state iteration, the reference, runs.
+
 Paper labels (``e:...``, ``t:...``) resolve to numbers in ``docs/equations.md``.
 """
 
@@ -57,6 +65,12 @@ __all__ = [
 
 #: Relative tolerance under which a singular value counts as zero (see module docstring).
 DEFAULT_RTOL = 1e-9
+
+#: Two eigenvalues of the canonical rule's compression closer than ``TIE * n`` count as equal: there the
+#: basis the rule picks depends on how the eigenvalue solver splits the eigenspace, so the decomposition
+#: restricted to the reached states (:func:`_reduced`) gives way to the whole-state iteration, whose
+#: basis is the one tables designed on any path store.
+TIE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -216,9 +230,11 @@ def _whole(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float) -> tuple[np
 
 
 def _reduced(A: np.ndarray, C: np.ndarray, R: np.ndarray, rtol: float,
-             norm_a: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
+             norm_a: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray] | None:
     """``(T, r)`` when the output reaches only the states ``R`` (a system of decoupled bodies), with
-    the unreached states ``out`` and the column of ``T`` that is each one's axis.
+    the unreached states ``out`` and the column of ``T`` that is each one's axis; None where two
+    eigenvalues of the rule's compression are within :data:`TIE` ``* n`` (identical bodies read
+    alike): the caller takes the whole-state iteration there.
 
     The subspace iteration runs on the reached states alone, with the same thresholds (``rtol``
     times the full ``||A||_2`` and ``||C||_2``): the unobservable subspace is its result plus the
@@ -233,13 +249,16 @@ def _reduced(A: np.ndarray, C: np.ndarray, R: np.ndarray, rtol: float,
     unreached[R] = False
     out = np.flatnonzero(unreached)      # (not np.setdiff1d: its np.unique imports numpy.ma)
     VR = _unobservable(A[np.ix_(R, R)], C[:, R], rtol, norm_a)
-    BoR, _ = _canonical(_complement(VR), W[R])
+    BoR, evo = _canonical(_complement(VR), W[R])
     r = BoR.shape[1]
     if VR.shape[1]:
         BR, evR = _canonical(VR, W[R])
     else:
         BR, evR = np.zeros((R.size, 0)), np.zeros(0)
-    order = np.argsort(np.concatenate([W[out], evR]), kind="stable")
+    evu = np.concatenate([W[out], evR])
+    if _tied(evo, n) or _tied(evu, n):
+        return None
+    order = np.argsort(evu, kind="stable")
     place = np.empty_like(order)
     place[order] = np.arange(order.size) + r      # the column of T of each unobservable vector
     at = place[: out.size]
@@ -248,6 +267,11 @@ def _reduced(A: np.ndarray, C: np.ndarray, R: np.ndarray, rtol: float,
     T[out, at] = 1.0
     T[np.ix_(R, place[out.size:])] = BR
     return T, r, out, at
+
+
+def _tied(ev: np.ndarray, n: int) -> bool:
+    """Whether two of the eigenvalues ``ev`` are within :data:`TIE` ``* n`` of each other."""
+    return ev.size > 1 and bool(np.diff(np.sort(ev)).min() < TIE * n)
 
 
 def _transformed(A: np.ndarray, C: np.ndarray, T: np.ndarray, R: np.ndarray, out: np.ndarray,
@@ -314,12 +338,13 @@ def _decompose(A: np.ndarray, C: np.ndarray, rtol: float, norm_a: float, nz: np.
     and ``nz = A != 0`` (a system decomposes every channel with the same ``A``)."""
     n = A.shape[0]
     R = _reached(nz, C)
-    if R.size in (0, n):
+    reduced = None if R.size in (0, n) else _reduced(A, C, R, rtol, norm_a)
+    if reduced is None:
         T, r = _whole(A, C, rtol, norm_a)
         At = T.T @ A @ T
         Ct = C @ T
     else:
-        T, r, out, at = _reduced(A, C, R, rtol, norm_a)
+        T, r, out, at = reduced
         At, Ct = _transformed(A, C, T, R, out, at)
     scale = max(norm_a, np.linalg.norm(C, 2) if C.size else 0.0, 1.0)
     res = 0.0
