@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -77,6 +77,9 @@ class Consistency:
     innovation: float
     allowance: float
     bound: float          # the error bound's largest axis (nan when the test passed on an ellipsoid)
+    #: The innovation ``y - C_r x_hat`` the test computed (the bias test's, :meth:`Recovery.before
+    #: <switchobs_core.runtime.recovery.Recovery.before>`, shares it).
+    nu: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -210,7 +213,7 @@ def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: floa
         b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (S + S.T))[-1]), 0.0)) if S is not None else math.nan
     else:
         b = float(bound)
-    return Consistency(channel, inn, allow, b)
+    return Consistency(channel, inn, allow, b, nu)
 
 
 #: An innovation this many times its allowance points at a gross fault (a wrong channel or frame,
