@@ -59,9 +59,10 @@ def unit_normalised(nu: np.ndarray, P: np.ndarray, r_diag: list[float], v_max: f
     third = None if v_max is None else v_max / 3.0
     out = []
     for nj, pj, rj in zip(nu.tolist(), P.diagonal().tolist(), r_diag, strict=True):
-        sd = math.sqrt(max(pj + rj, 0.0))       # max keeps a NaN, as np.maximum
-        if third is not None:
-            sd = max(sd, third)
+        d = pj + rj
+        sd = math.sqrt(0.0 if 0.0 > d else d)       # np.maximum(d, 0): a NaN stays
+        if third is not None and third > sd:        # np.maximum(sd, third): a NaN stays
+            sd = third
         if sd == 0.0:
             return None
         out.append(nj / sd)
@@ -130,12 +131,14 @@ class BiasDetector:
         if len(v) != len(idx):
             raise ValueError(f"{len(v)} normalised innovations for {len(idx)} rows of channel {channel}")
         for sj in v:
-            if not math.isfinite(sj):
+            if sj - sj != 0.0:      # inf or NaN
                 return None
         k = self.k_ref
-        for j, sj in zip(idx, v):
-            gp[j] = max(0.0, gp[j] + sj - k)
-            gn[j] = max(0.0, gn[j] - sj - k)
+        for j, sj in zip(idx, v):       # finite steps: g is never NaN (an infinite g alarms and restarts)
+            a = gp[j] + sj - k
+            gp[j] = a if a > 0.0 else 0.0
+            a = gn[j] - sj - k
+            gn[j] = a if a > 0.0 else 0.0
         mp, mn = max(gp), max(gn)
         if mp <= self.h and mn <= self.h:
             return None
