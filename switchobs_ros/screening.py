@@ -41,7 +41,15 @@ from switchobs_core.runtime.recovery import Recovery
 from .counters import Counters
 from .pairing import Pairing, Pending
 
-__all__ = ["Screening"]
+__all__ = ["Screening", "same_outputs"]
+
+
+def same_outputs(C_a, C_b) -> bool:
+    """Whether two tuples of output matrices hold the same doubles, C-contiguous both (so ``C_r @ x`` gives
+    the same doubles from either)."""
+    return len(C_a) == len(C_b) and all(
+        a.shape == b.shape and a.dtype == b.dtype == np.float64 and a.flags.c_contiguous and b.flags.c_contiguous
+        and np.array_equal(a, b) for a, b in zip(C_a, C_b))
 
 
 class Screening:
@@ -75,6 +83,9 @@ class Screening:
         self.gate = ChiSquareGate(system.C, chi2_alpha)
         self.labels = getattr(system, "output_labels", None)
         self.recovery = Recovery(observer, labels=self.labels)
+        #: The innovation test's ``C`` is the bias test's (the same doubles, contiguous): its innovation is shared.
+        self.shared_innovation = same_outputs(self.innovation.C, observer.C)
+        self._nu = None         # the innovation of the sample that passed the test last (admit)
         if observer.e0 is None:     # no initial error bound: no bound until the data certify one
             counters.bound_valid, counters.bound_invalid_why = False, observer.bounds_withdrawn
 
@@ -108,18 +119,21 @@ class Screening:
         """The measurement to use at ``t`` (``m``, or another channel's reading of the sample), or
         None when the consistency test or the chi-square gate rejects the sample."""
         x_p = None      # the held prediction at t, shared by the innovation and bias tests
+        nu = None       # the innovation y - C_r x_p, shared likewise
         if self.testing:
             with np.errstate(all="ignore"):
                 prior = self.observer.prior(t, lazy=True)
             x_p = prior[0]
+            self._nu = None
             m = self._consistent(pend, t, m, prior)
             if m is None:
                 self.counters.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
                 return m
+            nu, self._nu = self._nu, None
         elif self.chi2_alpha > 0 and not self._gate(pend, t, m):
             self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
             return None
-        why = self.recovery.before(t, m.channel, m.rows, m.y, x_p)
+        why = self.recovery.before(t, m.channel, m.rows, m.y, x_p, nu)
         if why:         # the bias test: the sample is used, the bounds no longer hold
             ctr = self.counters
             ctr.bias_alarms += 1
@@ -155,6 +169,8 @@ class Screening:
         came from the channel topic can have another); else None: rejected, and the bounds withdrawn."""
         first = self._test(prior, m)
         if first.ok:
+            if self.shared_innovation:
+                self._nu = first.nu
             return m
         ctr = self.counters
         srcs = self.pairing.sources

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BiasAlarm", "BiasDetector", "cusum_delay"]
+__all__ = ["BiasAlarm", "BiasDetector", "cusum_delay", "unit_normalised"]
 
 #: The defaults: reference value (standard deviations) and threshold.
 K_REF = 1.0
@@ -48,6 +48,25 @@ def cusum_delay(b: float, k_ref: float = K_REF, h: float = H) -> float:
     """Siegmund's approximation of the CUSUM's delay (samples) for a bias of ``b`` standard
     deviations (``inf`` for ``b <= k_ref``)."""
     return (h + 1.166) / (b - k_ref) if b > k_ref else math.inf
+
+
+def unit_normalised(nu: np.ndarray, P: np.ndarray, r_diag: list[float], v_max: float | None) -> list[float] | None:
+    """The normalised innovations ``s_j = nu_j / sd_j``, ``sd_j = sqrt(max(P_jj + R_jj, 0))`` (at least
+    ``v_max / 3`` with a declared bound), for rows that each select one state (``C_r P C_r' = P``, ``P``
+    finite): the diagonal of ``S = P + R`` as the arrays compute it, one IEEE operation per entry in
+    Python floats. None when a spread is 0 (``s`` is then not finite: :meth:`BiasDetector.update`
+    ignores the sample)."""
+    third = None if v_max is None else v_max / 3.0
+    out = []
+    for nj, pj, rj in zip(nu.tolist(), P.diagonal().tolist(), r_diag, strict=True):
+        d = pj + rj
+        sd = math.sqrt(0.0 if 0.0 > d else d)       # np.maximum(d, 0): a NaN stays
+        if third is not None and third > sd:        # np.maximum(sd, third): a NaN stays
+            sd = third
+        if sd == 0.0:
+            return None
+        out.append(nj / sd)
+    return out
 
 
 @dataclass(frozen=True)
@@ -85,24 +104,46 @@ class BiasDetector:
 
     def reset(self) -> None:
         """Every statistic back to 0."""
-        self.g_pos = [np.zeros(q) for q in self.p]
-        self.g_neg = [np.zeros(q) for q in self.p]
+        self._gp = [[0.0] * q for q in self.p]
+        self._gn = [[0.0] * q for q in self.p]
 
-    def update(self, channel: int, rows: np.ndarray | list[int] | None, s: np.ndarray) -> BiasAlarm | None:
-        """One sample's normalised innovations; an alarm restarts that channel's statistics."""
+    @property
+    def g_pos(self) -> list[np.ndarray]:
+        """The statistics ``g^+`` per channel (copies)."""
+        return [np.array(g) for g in self._gp]
+
+    @property
+    def g_neg(self) -> list[np.ndarray]:
+        """The statistics ``g^-`` per channel (copies)."""
+        return [np.array(g) for g in self._gn]
+
+    def update(self, channel: int, rows: np.ndarray | list[int] | None,
+               s: np.ndarray | list[float]) -> BiasAlarm | None:
+        """One sample's normalised innovations (one per row); an alarm restarts that channel's statistics.
+        The statistics are Python floats: the same IEEE operations as the arrays' (``g + s - k_ref``, then
+        the larger of it and 0), without a numpy call per sample."""
         i = channel - 1
-        idx = slice(None) if rows is None else np.asarray(rows, dtype=int)
-        s = np.asarray(s, dtype=float)
-        if not np.isfinite(s).all():
+        v = s.tolist() if isinstance(s, np.ndarray) and s.dtype == np.float64 else np.asarray(s, dtype=float).tolist()
+        gp, gn = self._gp[i], self._gn[i]
+        idx = range(len(gp)) if rows is None else rows
+        if isinstance(v, float):        # one value for every row
+            v = [v] * len(idx)
+        if len(v) != len(idx):
+            raise ValueError(f"{len(v)} normalised innovations for {len(idx)} rows of channel {channel}")
+        for sj in v:
+            if sj - sj != 0.0:      # inf or NaN
+                return None
+        k = self.k_ref
+        for j, sj in zip(idx, v):       # finite steps: g is never NaN (an infinite g alarms and restarts)
+            a = gp[j] + sj - k
+            gp[j] = a if a > 0.0 else 0.0
+            a = gn[j] - sj - k
+            gn[j] = a if a > 0.0 else 0.0
+        mp, mn = max(gp), max(gn)
+        if mp <= self.h and mn <= self.h:
             return None
-        gp, gn = self.g_pos[i], self.g_neg[i]
-        gp[idx] = np.maximum(0.0, gp[idx] + s - self.k_ref)
-        gn[idx] = np.maximum(0.0, gn[idx] - s - self.k_ref)
-        jp, jn = int(gp.argmax()), int(gn.argmax())
-        if max(gp[jp], gn[jn]) <= self.h:
-            return None
-        sign, j, g = (1, jp, gp[jp]) if gp[jp] >= gn[jn] else (-1, jn, gn[jn])
+        sign, j, g = (1, gp.index(mp), mp) if mp >= mn else (-1, gn.index(mn), mn)
         self.alarms += 1
-        gp[:] = 0.0
-        gn[:] = 0.0
-        return BiasAlarm(channel, j, sign, float(g), self.h)
+        gp[:] = [0.0] * len(gp)
+        gn[:] = [0.0] * len(gn)
+        return BiasAlarm(channel, j, sign, g, self.h)

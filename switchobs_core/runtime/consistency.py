@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -77,6 +77,9 @@ class Consistency:
     innovation: float
     allowance: float
     bound: float          # the error bound's largest axis (nan when the test passed on an ellipsoid)
+    #: The innovation ``y - C_r x_hat`` the test computed (the bias test's, :meth:`Recovery.before
+    #: <switchobs_core.runtime.recovery.Recovery.before>`, shares it).
+    nu: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -128,7 +131,7 @@ def rows_product(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = No
 
 
 def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None = None,
-                    fC2: float | None = None, unit: bool = False) -> float:
+                    fC2: float | None = None, unit: bool = False, Cc: np.ndarray | None = None) -> float:
     """A rigorous bound on ``||C_r e||`` over the ellipsoid ``e in {S^(1/2) u : ||u|| <= 1}``:
     ``sqrt(lambda_max(C_r S C_r'))`` (``p x p``, cheap), inflated for the rounding of the
     product (``gamma(2n + 2) ||C_r||_F^2 trace S``, as :mod:`switchobs_core.numerics.rounding` step 6) and
@@ -138,18 +141,18 @@ def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None =
     ``fC2``: :func:`squared_norm` of ``C_r`` when the caller keeps it. ``S`` may be a
     :class:`~switchobs_core.numerics.rounding.PendingSet`: its block and trace are read without
     assembling it (the same doubles). ``unit``: :func:`is_unit` of ``C_r`` on ``cols`` (the block is
-    then read as it is, :func:`block_product`)."""
+    then read as it is, :func:`block_product`); ``Cc``: ``C_r[:, cols]`` when the caller keeps it."""
     p, n = C_rows.shape
     if p == 0:
         return 0.0
     if isinstance(S, PendingSet) and cols is not None:
-        P, tr = block_product(C_rows[:, cols], S.block(cols), unit), S.trace
+        P, tr = block_product(C_rows[:, cols] if Cc is None else Cc, S.block(cols), unit), S.trace
     else:
         S = assembled(S)
         P, tr = rows_product(C_rows, S, cols), float(np.trace(S))
     P = 0.5 * (P + P.T)
     fC2 = squared_norm(C_rows) if fC2 is None else fC2
-    fP = math.sqrt(float(np.sum(P * P)))
+    fP = math.sqrt(float((P * P).sum()))       # np.sum's reduction, without its wrapper
     lam = largest_eigenvalue(P)
     lam = max(lam, 0.0) + gamma(2 * n + 2) * fC2 * abs(tr) + 2 * p * UNIT_ROUNDOFF * fP
     return math.sqrt(lam) * (1.0 + _SLACK)
@@ -162,7 +165,7 @@ def squared_norm(C_rows: np.ndarray) -> float:
 
 def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: float, x_hat: np.ndarray,
                          y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
-                         fC2: float | None = None, unit: bool = False) -> float:
+                         fC2: float | None = None, unit: bool = False, Cc: np.ndarray | None = None) -> float:
     """The largest computed innovation ``||y - C_r x_hat||`` a model that holds allows.
 
     Parameters
@@ -184,6 +187,8 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
         :func:`squared_norm` of ``C_rows`` when the caller keeps it.
     unit : bool
         :func:`is_unit` of ``C_rows`` on ``cols`` when the caller keeps it (:func:`projected_bound`).
+    Cc : ndarray, optional
+        ``C_rows[:, cols]`` when the caller keeps it (:func:`projected_bound`).
     """
     p, n = C_rows.shape
     fC2 = squared_norm(C_rows) if fC2 is None else fC2
@@ -192,25 +197,25 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
     xn = math.sqrt(float(x_hat @ x_hat))
     yn = math.sqrt(float(y @ y))
     ellipsoid = isinstance(bound, (np.ndarray, PendingSet))
-    seen = projected_bound(C_rows, bound, cols, fC2, unit) if ellipsoid else n2 * bound
+    seen = projected_bound(C_rows, bound, cols, fC2, unit, Cc) if ellipsoid else n2 * bound
     allowance = seen + math.sqrt(p) * v_max + gamma(n + 1) * (fC * xn + yn)
     return allowance * (1.0 + _SLACK)
 
 
 def check_innovation(C_rows: np.ndarray, channel: int, bound: float, v_max: float, x_hat: np.ndarray,
                      y: np.ndarray, norm_C: float | None = None, cols: np.ndarray | None = None,
-                     fC2: float | None = None, unit: bool = False) -> Consistency:
+                     fC2: float | None = None, unit: bool = False, Cc: np.ndarray | None = None) -> Consistency:
     """The test for one sample ``y`` of ``channel`` (rows ``C_rows``) against the prior ``x_hat``
     (the optional arguments: :func:`innovation_allowance`'s)."""
     nu = y - C_rows @ x_hat
     inn = math.sqrt(float(nu @ nu))
-    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2, unit)
+    allow = innovation_allowance(C_rows, bound, v_max, x_hat, y, norm_C, cols, fC2, unit, Cc)
     if isinstance(bound, (np.ndarray, PendingSet)):     # the largest axis, for the report of a failure only
         S = assembled(bound) if inn > allow else None
         b = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (S + S.T))[-1]), 0.0)) if S is not None else math.nan
     else:
         b = float(bound)
-    return Consistency(channel, inn, allow, b)
+    return Consistency(channel, inn, allow, b, nu)
 
 
 #: An innovation this many times its allowance points at a gross fault (a wrong channel or frame,
@@ -265,15 +270,15 @@ class InnovationTest:
         <switchobs_core.runtime.observer.SwitchedObserver>`); None: noise-free samples, tested against
         the exact bound.
 
-    ``C_r``, its :func:`spectral_norm`, its :func:`seen_columns`, its :func:`squared_norm` and
-    :func:`is_unit` on the seen columns are kept per ``(channel, rows)``.
+    ``C_r``, its :func:`spectral_norm`, its :func:`seen_columns`, its :func:`squared_norm`, ``C_r`` on the
+    seen columns and :func:`is_unit` of it are kept per ``(channel, rows)``.
     """
 
     def __init__(self, C: Sequence[np.ndarray], noise_max: Sequence[float] | None = None):
         self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
         self.noise_max = None if noise_max is None else tuple(noise_max)
         self._rows: dict[tuple[int, tuple[int, ...] | None], tuple[np.ndarray, float, np.ndarray | None, float,
-                                                                   bool]] = {}
+                                                                   bool, np.ndarray | None]] = {}
 
     def check(self, prior: tuple, channel: int, rows: Sequence[int] | None, y: np.ndarray) -> Consistency:
         """The test of the sample ``y`` of ``channel`` (``rows`` of its output, 0-based; None:
@@ -286,9 +291,11 @@ class InnovationTest:
         if hit is None:
             C_r = output_rows(self.C[channel - 1], rows)
             cols = seen_columns(C_r)
+            Cc = None if cols is None else C_r[:, cols]
             hit = self._rows[key] = (C_r, spectral_norm(C_r), cols, squared_norm(C_r),
-                                     cols is not None and is_unit(C_r[:, cols]))
-        C_r, norm_C, cols, fC2, unit = hit
+                                     Cc is not None and is_unit(Cc), Cc)
+        C_r, norm_C, cols, fC2, unit, Cc = hit
         if self.noise_max is None:
-            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols, fC2, unit)
-        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols, fC2, unit)
+            return check_innovation(C_r, channel, exact, 0.0, x_hat, y, norm_C, cols, fC2, unit, Cc)
+        return check_innovation(C_r, channel, noise, self.noise_max[channel - 1], x_hat, y, norm_C, cols, fC2, unit,
+                                Cc)

@@ -50,7 +50,7 @@ from scipy.linalg import expm
 
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.rounding import gamma
-from .bias import K_REF, BiasDetector, H
+from .bias import K_REF, BiasDetector, H, unit_normalised
 from .consistency import block_product, is_unit, output_rows, seen_columns
 from .recertify import Certificate, DataWindow
 
@@ -173,10 +173,12 @@ class Recovery:
         self._rows: dict = {}
 
     # ------------------------------------------------------------------ the bias test
-    def before(self, t: float, channel: int, rows: Any, y: np.ndarray, x_p: np.ndarray | None = None) -> str:
+    def before(self, t: float, channel: int, rows: Any, y: np.ndarray, x_p: np.ndarray | None = None,
+               nu: np.ndarray | None = None) -> str:
         """The CUSUM on the sample's normalised innovations (module docstring); "" or the alarm. ``x_p``:
         the observer's held prediction at ``t`` (``predict(t, hold=True)``, as its ``prior`` gives it) when
-        the caller has it, else it is asked for."""
+        the caller has it, else it is asked for; ``nu``: the innovation ``y - C_r x_p`` when the caller
+        computed it with the same ``C_r`` (the same doubles), else it is computed here."""
         if self.bias is None:
             return ""
         obs = self.obs
@@ -187,20 +189,26 @@ class Recovery:
             C_r = output_rows(self.C[channel - 1], rows)
             cols = seen_columns(C_r)
             Cc = C_r if cols is None else C_r[:, cols]
-            hit = self._rows[key] = (C_r, cols, Cc, noise, None if noise is None else noise.R(channel, rows),
-                                     cols is not None and is_unit(Cc))
-        C_r, cols, Cc, _, R, unit = hit
+            R = None if noise is None else noise.R(channel, rows)
+            hit = self._rows[key] = (C_r, cols, Cc, noise, R, cols is not None and is_unit(Cc),
+                                     None if R is None else np.diagonal(R).tolist())
+        C_r, cols, Cc, _, R, unit, r_diag = hit
         with np.errstate(all="ignore"):
-            nu = np.asarray(y, dtype=float) - C_r @ (obs.predict(t, hold=True) if x_p is None else x_p)
+            if nu is None:
+                nu = np.asarray(y, dtype=float) - C_r @ (obs.predict(t, hold=True) if x_p is None else x_p)
             P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
-            if P is not None and noise is not None:
+            if P is None or noise is None:
+                return ""
+            if unit and math.isfinite(float(P.sum())):
+                s = unit_normalised(nu, P, r_diag, None if self.vmax is None else self.vmax[channel - 1])
+                if s is None:
+                    return ""       # a zero spread: the update ignores such a sample
+            else:
                 S = block_product(Cc, P, unit) + R
                 sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
                 if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
                     sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread
-            else:
-                return ""
-            s = nu / sd
+                s = nu / sd
         alarm = self.bias.update(channel, rows, s)
         if alarm is None:
             return ""

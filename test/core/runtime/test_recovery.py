@@ -14,6 +14,7 @@ from switchobs_core.bounds.rigorous import NO_E0
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.model.noise import NoiseModel
 from switchobs_core.model.schedule import Cycle, PeriodicSchedule
+from switchobs_core.runtime.consistency import InnovationTest
 from switchobs_core.runtime.observer import SwitchedObserver
 from switchobs_core.runtime.recovery import Recovery, body_states, cycle_span
 from switchobs_core.table.gains import kalman_table
@@ -186,22 +187,25 @@ def test_a_noise_free_window_with_micrometre_noise_is_refused(paper, ktable):
 
 
 def test_the_bias_test_on_the_prior_handed_over_is_the_one_it_asks_for(paper, ktable):
-    """``before(..., x_p)`` with the prediction of ``prior(t)`` (as the screening hands it over) keeps the
-    CUSUM's statistics and alarms of ``before`` asking ``predict(t, hold=True)`` itself, bit for bit,
-    through a bias that alarms."""
+    """``before(..., x_p)`` with the prediction of ``prior(t)`` (as the screening hands it over), and with the
+    innovation test's innovation too, keeps the CUSUM's statistics and alarms of ``before`` asking
+    ``predict(t, hold=True)`` itself, bit for bit, through a bias that alarms."""
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=X0 + 0.05, e0=5.0, noise_max=VMAX)
-    asks, handed = Recovery(obs), Recovery(obs)
+    asks, handed, shared = Recovery(obs), Recovery(obs), Recovery(obs)
+    test = InnovationTest(obs.C, obs.noise_max)
     rng = np.random.default_rng(3)
     alarms = 0
     for k, t, c, x in _paper_samples(paper, 6.0):
         y = paper.C[c - 1] @ x + rng.uniform(-VMAX, VMAX, paper.C[c - 1].shape[0]) + (0.05 if k > 150 else 0.0)
         with np.errstate(all="ignore"):
-            x_p = obs.prior(t, lazy=True)[0]
+            prior = obs.prior(t, lazy=True)
         why = asks.before(t, c, None, y)
-        assert handed.before(t, c, None, y, x_p) == why
+        assert handed.before(t, c, None, y, prior[0]) == why
+        assert shared.before(t, c, None, y, prior[0], test.check(prior, c, None, y).nu) == why
         alarms += bool(why)
         for g in ("g_pos", "g_neg"):
-            for a, b in zip(getattr(asks.bias, g), getattr(handed.bias, g), strict=True):
+            for a, b, d in zip(getattr(asks.bias, g), getattr(handed.bias, g), getattr(shared.bias, g), strict=True):
                 np.testing.assert_array_equal(a, b, strict=True)
+                np.testing.assert_array_equal(a, d, strict=True)
         obs.update(t, c, y)
     assert alarms > 0       # the bias was seen: the alarms' path ran in both
