@@ -72,7 +72,6 @@ from .inputs import (
     parse_inputs,
     ros_topic_error,
 )
-from .markers import MarkersWriter
 from .parse import RAW_TYPES, Parser, RawReader, raw_readable
 from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
 from .validate import (
@@ -148,3 +147,13 @@ __all__ = [
     "unpack_labelled",
     "xy_to_pose",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """``MarkersWriter`` (:mod:`msg_bridge.markers`) imported at its first use: ``visualization_msgs``' message
+    classes (3-5 ms) are not needed before the estimator's first estimate (:mod:`switchobs_ros.late_markers`)."""
+    if name == "MarkersWriter":
+        from .markers import MarkersWriter
+        return MarkersWriter
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+

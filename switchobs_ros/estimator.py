@@ -60,10 +60,8 @@ from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from switchobs_msgs.msg import ErrorBounds, StateEstimate
-from visualization_msgs.msg import MarkerArray
 
 import msg_bridge as mb
-from msg_bridge.markers import RawMarkersWriter
 from msg_bridge.raw import RawLabelledArrayWriter, RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, RawStateEstimateWriter
 
@@ -159,13 +157,6 @@ class EstimatorMixin(OutputsMixin):
                                                        ErrorBoundsWriter(self.system.N, self.frame,
                                                                          self._noise_declared)))
 
-    @property
-    def w_markers(self) -> RawMarkersWriter | None:
-        """RViz markers (``~/markers``), ``None`` for a system without bodies."""
-        if not self.bodies:
-            return None
-        return self._optional_writer("markers", lambda: RawMarkersWriter(self.bodies, self.frame))
-
     # ------------------------------------------------------------------ configuration
     def _configure(self, cfg: dict) -> None:
         # the input handling (validation, pairing, observer, counters) is the pipeline's
@@ -246,7 +237,7 @@ class EstimatorMixin(OutputsMixin):
         self.pub_odom = [pub(Odometry, f"~/{b.name}/odom", qos.OUTPUT) for b in self.bodies]
         self.pub_typed = (pub(StateEstimate, "~/state_estimate", qos.OUTPUT),
                           pub(ErrorBounds, "~/error_bounds", qos.OUTPUT))
-        self.pub_markers = pub(MarkerArray, "~/markers", qos.OUTPUT) if self.bodies else None
+        self.pub_markers, self.markers_pending = None, bool(self.bodies)    # after the first estimate: late_markers
         self.pub_diag = pub(DiagnosticArray, "/diagnostics", qos.OUTPUT)
         # sensor outage: the prediction and its exact bound, once per diagnostics period, on
         # topics of their own (~/state stays one answer per measurement)

@@ -24,6 +24,7 @@ import msg_bridge as mb
 from msg_bridge.raw import RawLabelledArrayWriter
 
 from .demand import listened
+from .late_markers import LateMarkersMixin
 from .pipeline import Estimate
 
 __all__ = ["OutputsMixin", "channel_bodies", "send"]
@@ -54,7 +55,7 @@ def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
     return out
 
 
-class OutputsMixin:
+class OutputsMixin(LateMarkersMixin):
     """Publishing the estimates (module docstring); the node provides the publishers, the writers,
     ``every`` (``output.*_every``), ``published`` (counts per output), ``n_published``, ``demand``
     and ``pipeline``."""
@@ -120,3 +121,5 @@ class OutputsMixin:
                     n["markers"] += 1
             except Exception as err:
                 self.pipeline.internal_error("publish", err)
+        if self.markers_pending:
+            self._create_markers_publisher()

@@ -28,7 +28,8 @@ def test_optional_writers_are_built_at_first_use_with_the_same_messages(paper_ta
                                              Parameter("noise.measurement_std", value=0.01)])
     try:
         assert est._writers == {}                   # nothing of the optional outputs at start-up
-        assert est.pub_markers is not None and len(est.pub_odom) == len(est.bodies) > 0
+        assert est.pub_markers is None and est.markers_pending      # ~/markers: after the first estimate
+        assert len(est.pub_odom) == len(est.bodies) > 0
         rng = np.random.default_rng(3)
         n = est.system.n
         x = rng.normal(size=n)
@@ -70,6 +71,7 @@ def test_an_optional_writer_that_fails_costs_no_other_estimate(paper_tables, ros
     try:
         monkeypatch.setattr(outputs, "listened", lambda pub: pub is not None)   # as if every output had a subscriber
         est.every.update(markers=2, envelope=1)
+        est._create_markers_publisher()                  # as after a first estimate
         calls = []
 
         def broken(*args):
@@ -88,3 +90,29 @@ def test_an_optional_writer_that_fails_costs_no_other_estimate(paper_tables, ros
         assert "t0 are found at 2 offsets" in est.pipeline.last_rejection
     finally:
         est.destroy_node()
+
+
+def test_the_markers_publisher_is_created_right_after_the_first_estimate(paper_tables, ros_node):
+    """No ``~/markers`` publisher before the first estimate; one (MarkerArray, reliable) right after it,
+    created once; a system without estimates never creates it."""
+    from types import SimpleNamespace
+
+    est = EstimatorNode(parameter_overrides=[Parameter("gain_table", value=paper_tables["periodic"])])
+    try:
+        assert est.pub_markers is None and est.markers_pending
+        assert est.count_publishers("/estimator/markers") == 0
+        est._publish_all([])                            # no estimate: nothing created
+        assert est.pub_markers is None and est.markers_pending
+        n = est.system.n
+        e = SimpleNamespace(x_hat=np.zeros(n), stamp_ns=10**9, P=None, channel=1,
+                            envelope=np.full(len(est.env_labels), 0.5))
+        est._publish_all([e])
+        pub = est.pub_markers
+        assert pub is not None and not est.markers_pending and est.published["state"] == 1
+        assert pub.topic_name == "/estimator/markers" and pub.msg_type is MarkerArray
+        assert est.count_publishers("/estimator/markers") == 1
+        est._publish_all([e])
+        assert est.pub_markers is pub and est.count_publishers("/estimator/markers") == 1
+    finally:
+        est.destroy_node()
+
