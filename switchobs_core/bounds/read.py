@@ -15,8 +15,9 @@ cost per sample). Here an upper bound ``lam_a >= lambda_max(sym S_a)`` is comput
 2. ``lambda_max(sym D) <= ||sym D||_2 <= ||D||_F`` (one pass over ``D``; as tight as the
    2-norm when ``D`` has low rank, as the change of a narrowing ellipsoid has), and when that
    is not enough Gershgorin's ``lambda_max(sym D) <= max(||D||_inf, ||D||_1)`` (largest absolute
-   row or column sum: the tighter one when ``D`` is spread over many directions): ``g`` is the
-   smaller.
+   row or column sum: the tighter one when ``D`` is spread over many directions; the rows alone when
+   ``S`` and ``S_a`` are exactly symmetric, :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.exactly_symmetric`:
+   then so is ``D``, whose row and column sums agree): ``g`` is the smaller.
 3. Floating point: ``D~ = fl(S - fl(c S_a))`` has ``|D| <= (|D~| + u c |S_a|) / (1 - u)``
    entrywise, so ``||D||_F <= (||D~||_F + u c ||S_a||_F) / (1 - u)`` and likewise for the row
    and column sums; a computed sum of ``m`` nonnegative terms (in any order) is within
@@ -260,6 +261,15 @@ class AnchoredBound:
         self._v: np.ndarray | None = None       # the latest leading direction (warm start)
         self._f_a = self._g_a = 0.0   # ||S_a||_F and max(||S_a||_inf, ||S_a||_1), rounded up
         self._age = 0
+        self._sym_a = False     # S_a exactly symmetric (step 2: Gershgorin from the rows alone)
+        self._one: np.ndarray | None = None
+
+    def _ones(self, n: int) -> np.ndarray:
+        """``n`` ones (kept)."""
+        o = self._one
+        if o is None or o.size != n:
+            o = self._one = np.ones(n)
+        return o
 
     def read(self, ell: ErrorEllipsoid) -> float:
         """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring)."""
@@ -280,7 +290,10 @@ class AnchoredBound:
                 g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     A = np.abs(D, out=D)        # D is not read again
-                    gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
+                    if self._sym_a and ell.exactly_symmetric(S):    # so is S - c S_a: its rows' sums are its columns'
+                        gg = float(A.dot(self._ones(n)).max())
+                    else:
+                        gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
                     g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:
                     self._age += 1
@@ -311,6 +324,7 @@ class AnchoredBound:
                 v = np.full(ell.n, 1.0 / math.sqrt(ell.n))
         self.anchors += 1
         self._Sa = S.copy()
+        self._sym_a = ell.exactly_symmetric(S)
         self._lam_a = lam
         self._va = self._v = v = np.ascontiguousarray(v)      # the same doubles; what the kernel reads
         self._theta_a = float(v.dot(S.dot(v)))

@@ -227,6 +227,12 @@ class ErrorEllipsoid:
         self._qc[id(G)] = (G.copy(), c, given, (Q, rq, wq, tq))
         return Q, rq, wq, tq
 
+    def exactly_symmetric(self, S: np.ndarray | None = None) -> bool:
+        """Whether ``S`` (default the current one) is the current shape matrix as :meth:`step_dense` assembled
+        it: exactly symmetric (``S' = S`` in floating point), as :meth:`lam_upper` reads it."""
+        S = self.S if S is None else S
+        return S is self._sym and S is self.S
+
     def scratch(self) -> np.ndarray:
         """A C-ordered n x n array free between steps (:meth:`_apply`'s, in cache after a step): a temporary."""
         T = self._scratch
@@ -460,7 +466,7 @@ class ErrorEllipsoid:
         S = self.S if S is None else S
         if not self.n:
             return 0.0
-        if S is self._sym and S is self.S and self.tr < 1e300:
+        if self.exactly_symmetric(S) and self.tr < 1e300:
             nS = self.tr        # exactly symmetric (step_dense) and PSD: ||S||_F <= trace S <= tr
         else:
             S = S + S.T
