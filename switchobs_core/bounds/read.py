@@ -16,7 +16,7 @@ cost per sample). Here an upper bound ``lam_a >= lambda_max(sym S_a)`` is comput
    2-norm when ``D`` has low rank, as the change of a narrowing ellipsoid has), and when that
    is not enough Gershgorin's ``lambda_max(sym D) <= max(||D||_inf, ||D||_1)`` (largest absolute
    row or column sum: the tighter one when ``D`` is spread over many directions; the rows alone when
-   ``S`` and ``S_a`` are exactly symmetric, :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.exactly_symmetric`:
+   ``S`` and ``S_a`` are exactly symmetric, :attr:`~switchobs_core.numerics.rounding.ErrorEllipsoid.symmetric`:
    then so is ``D``, whose row and column sums agree): ``g`` is the smaller.
 3. Floating point: ``D~ = fl(S - fl(c S_a))`` has ``|D| <= (|D~| + u c |S_a|) / (1 - u)``
    entrywise, so ``||D||_F <= (||D~||_F + u c ||S_a||_F) / (1 - u)`` and likewise for the row
@@ -290,7 +290,7 @@ class AnchoredBound:
                 g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     A = np.abs(D, out=D)        # D is not read again
-                    if self._sym_a and ell.exactly_symmetric(S):    # so is S - c S_a: its rows' sums are its columns'
+                    if self._sym_a and S is ell.symmetric:      # so is S - c S_a: its rows' sums are its columns'
                         gg = float(A.dot(self._ones(n)).max())
                     else:
                         gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
@@ -324,7 +324,7 @@ class AnchoredBound:
                 v = np.full(ell.n, 1.0 / math.sqrt(ell.n))
         self.anchors += 1
         self._Sa = S.copy()
-        self._sym_a = ell.exactly_symmetric(S)
+        self._sym_a = S is ell.symmetric
         self._lam_a = lam
         self._va = self._v = v = np.ascontiguousarray(v)      # the same doubles; what the kernel reads
         self._theta_a = float(v.dot(S.dot(v)))

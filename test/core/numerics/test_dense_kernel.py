@@ -89,7 +89,7 @@ def test_kernel_is_the_numpy_step(seed, n, units, scale, rho, with_dM):
     assert np.all(np.abs(K - R) <= RTOL * r), float(np.max(np.abs(K - R) / r))
     assert abs(ker.tr - ref.tr) <= RTOL * ref.tr
     assert ker.tr >= float(np.trace(K))
-    assert ker._sym is K                                    # read without the symmetrisation, as numpy's
+    assert ker.symmetric is K                                    # read without the symmetrisation, as numpy's
     ls, exact = ker.lam_scaled(), float(np.sum(np.diagonal(K).astype(LD) * ker._id2.astype(LD)))
     assert exact <= ls and abs(ls - ref.lam_scaled()) <= RTOL * ref.lam_scaled()   # the kernel's, kept
     assert ls == ErrorEllipsoid.lam_scaled(ker, K) or abs(ls / ErrorEllipsoid.lam_scaled(ker, K) - 1) < 1e-14
