@@ -140,6 +140,18 @@ def _between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     return w, c, math.sqrt(float(w.dot(w))), fro_norm(D)
 
 
+def _abs_rows(D: np.ndarray, n: int, ones: np.ndarray) -> float:
+    """``max_i sum_j |D_ij|`` of the n x n ``D`` (a computed sum, any order: step 3), by the compiled kernel
+    where it takes ``D``, else numpy (``D`` then overwritten by ``|D|``); NaN where a row's sum is."""
+    if dense_kernel.ABSROWS is not None:
+        try:
+            return dense_kernel.ABSROWS(D, n)
+        except (BufferError, ValueError, TypeError):
+            pass
+    r = np.abs(D, out=D).dot(ones)
+    return math.nan if np.isnan(r).any() else float(r.max())
+
+
 def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np.ndarray]:
     """``(theta, v)``: a lower bound of ``lambda_max(T)`` (up to rounding): the larger of the
     Rayleigh quotient ``v' T v`` after ``steps`` power iterations and the largest diagonal entry
@@ -289,10 +301,10 @@ class AnchoredBound:
                     self._v = w / nw                    # one power iteration for the next anchor
                 g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
-                    A = np.abs(D, out=D)        # D is not read again
                     if self._sym_a and S is ell.symmetric:      # so is S - c S_a: its rows' sums are its columns'
-                        gg = float(A.dot(self._ones(n)).max())
+                        gg = _abs_rows(D, n, self._ones(n))
                     else:
+                        A = np.abs(D, out=D)        # D is not read again
                         gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
                     g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:

@@ -478,7 +478,45 @@ fail:
     return NULL;
 }
 
+/* absrows(D, n) -> max_i sum_j |D_ij| (D n x n C-ordered doubles; each row summed in index order, the
+ * rows' maximum as Python's max: a NaN row gives NaN only where numpy's would too, see the wrapper) */
+static PyObject *absrows(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bD;
+    Py_ssize_t n, i, j;
+    double best = 0.0;
+    int nan = 0;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "absrows(D, n)");
+        return NULL;
+    }
+    n = PyLong_AsSsize_t(args[1]);
+    if (n < 1) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "_dense_step: n < 1");
+        return NULL;
+    }
+    if (get(args[0], &bD, n * n, 0) < 0)
+        return NULL;
+    {
+        const double *D = bD.buf;
+        for (i = 0; i < n; i++) {
+            double t = 0.0;
+            for (j = 0; j < n; j++)
+                t = t + fabs(D[i * n + j]);
+            if (isnan(t))
+                nan = 1;
+            else if (t > best)
+                best = t;
+        }
+    }
+    PyBuffer_Release(&bD);
+    return PyFloat_FromDouble(nan ? NAN : best);
+}
+
 static PyMethodDef methods[] = {
+    {"absrows", (PyCFunction)(void (*)(void))absrows, METH_FASTCALL,
+     "absrows(D, n) -> the largest absolute row sum of the n x n D (each row in index order; NaN if any is)"},
     {"correct", (PyCFunction)(void (*)(void))correct, METH_FASTCALL,
      "correct(Phi, H, K, x0, y, xm, nu, xp): xm = Phi x0, nu = y - H xm, xp = xm + K nu (fixed-order sums)"},
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,

@@ -25,18 +25,19 @@ import os
 import numpy as np
 
 try:
+    from ._dense_step import absrows as ABSROWS
     from ._dense_step import between as BETWEEN
     from ._dense_step import correct as CORRECT
     from ._dense_step import norm as NORM
     from ._dense_step import step as STEP
 except ImportError:     # no compiler where the package was built: the numpy step
-    STEP = BETWEEN = NORM = CORRECT = None
+    STEP = BETWEEN = NORM = CORRECT = ABSROWS = None
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "REQUIRE_ENV", "available", "required", "step", "between",
+__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "REQUIRE_ENV", "available", "required", "step", "between",
            "correct"]
 
 

@@ -231,3 +231,25 @@ def test_kernel_correction_is_the_numpy_correction(seed, n, p, scale):
         dense_kernel.CORRECT = kept
     tol = 1e-12 * (np.abs(Phi) @ np.abs(x0) + 1e-300)
     assert np.all(np.abs(nm - xm) <= tol)
+
+
+@needs_kernel
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 60), scale=st.floats(1e-150, 1e150), nan=st.booleans())
+def test_kernel_largest_absolute_row_sum_is_numpys(seed, n, scale, nan):
+    """``absrows(D, n)``: the largest ``sum_j |D_ij|`` within ``n u`` of numpy's (other orders of the same
+    sums); NaN where a row holds one; ``D`` is not changed; a wrong size is refused."""
+    rng = np.random.default_rng(seed)
+    D = scale * rng.standard_normal((n, n))
+    if nan:
+        D[rng.integers(n), rng.integers(n)] = math.nan
+    kept = D.copy()
+    got = dense_kernel.ABSROWS(D, n)
+    ref = float(np.abs(D).sum(axis=1).max())
+    assert np.array_equal(D, kept, equal_nan=True)
+    if nan:
+        assert math.isnan(got)
+    else:
+        assert abs(got - ref) <= n * UNIT_ROUNDOFF * ref
+    with pytest.raises(ValueError):
+        dense_kernel.ABSROWS(D, n + 1)
