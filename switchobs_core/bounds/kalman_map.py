@@ -63,6 +63,7 @@ import numpy as np
 from scipy.linalg.blas import dgemm as _dgemm
 from scipy.sparse import csr_array
 
+from ..numerics import dense_kernel
 from ..numerics.csr import csr_matmat, csr_matvec
 from ..numerics.expm_bound import nu
 from ..numerics.rounding import fro_norm, gamma
@@ -190,7 +191,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "rho_form")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "_dense", "rho_form")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -208,6 +209,7 @@ class KalmanMap:
         self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
+        self._dense: tuple | None = None    # (Phi~, H, K) C-ordered for the kernel's correct()
         #: ``(bound, dt, coefficients, dense_abs(bound.d))`` of the bound's residual through this map
         #: (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused_sample`), kept with the map.
         self.rho_form: tuple | None = None
@@ -296,6 +298,22 @@ class KalmanMap:
         """``x^- = Phi~ x`` (a new array; sparse when ``Phi~`` is)."""
         sp = self._sp
         return self.Phi @ x if sp is None else sp.matvec(x)
+
+    def correct(self, x0: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x^-, nu, x^+)`` of a sample ``y``: ``x^- = Phi~ x0``, ``nu = y - H x^-`` (innovation first:
+        rounding at the level of the error, not of ``||x||``), ``x^+ = x^- + K nu``; new arrays, by the compiled
+        kernel where it takes the dense arrays (:func:`~switchobs_core.numerics.dense_kernel.correct`: its
+        sums in another order, within the same ``gamma`` allowances), else numpy."""
+        if self._sp is None and dense_kernel.CORRECT is not None:
+            dn = self._dense
+            if dn is None:
+                dn = self._dense = tuple(np.ascontiguousarray(a, dtype=float) for a in (self.Phi, self.H, self.K))
+            got = dense_kernel.correct(*dn, x0, y)
+            if got is not None:
+                return got
+        x = self.predict(x0)
+        nu = y - self.H @ x
+        return x, nu, x + self.K @ nu
 
     @property
     def nbytes(self) -> int:

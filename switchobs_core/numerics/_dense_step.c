@@ -2,7 +2,8 @@
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
  * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
  * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
- * balanced norm of a vector (norm(), RoundingBound.xn).
+ * balanced norm of a vector (norm(), RoundingBound.xn); and a Kalman sample's estimate through a
+ * fused map (correct(), KalmanMap.correct).
  *
  * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
@@ -423,7 +424,101 @@ static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
     return PyFloat_FromDouble(sqrt(t));
 }
 
+/* correct(Phi, H, K, x0, y, xm, nu, xp): a Kalman sample through a fused map (KalmanMap.correct):
+ * xm = Phi x0, nu = y - H xm, xp = xm + K nu, each entry a dot product in dot()'s fixed order (within
+ * gamma_n |a|.|b| as any order: the allowances of the bound's residual, RoundingBound.fused_sample);
+ * Phi n x n, H p x n, K n x p C-ordered, x0, xm, xp n and y, nu p doubles (outputs not aliased). */
+static PyObject *correct(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer b[8];
+    Py_ssize_t n, p, i, got = 0;
+    if (nargs != 8) {
+        PyErr_SetString(PyExc_TypeError, "correct(Phi, H, K, x0, y, xm, nu, xp)");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[3], &b[0], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    got = 1;
+    n = b[0].len / 8;
+    if (!doubles(&b[0]) || n < 1 || n > 4096)
+        goto bad;
+    if (PyObject_GetBuffer(args[4], &b[1], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        goto fail;
+    got = 2;
+    p = b[1].len / 8;
+    if (!doubles(&b[1]) || p < 1 || p > 4096)
+        goto bad;
+    {
+        const Py_ssize_t lens[6] = {n * n, p * n, n * p, n, p, n};
+        const int idx[6] = {0, 1, 2, 5, 6, 7};
+        for (i = 0; i < 6; i++) {
+            if (get(args[idx[i]], &b[2 + i], lens[i], i >= 3 ? PyBUF_WRITABLE : 0) < 0)
+                goto fail;
+            got = 3 + i;
+        }
+    }
+    {
+        const double *Phi = b[2].buf, *H = b[3].buf, *K = b[4].buf, *x0 = b[0].buf, *y = b[1].buf;
+        double *xm = b[5].buf, *nu = b[6].buf, *xp = b[7].buf;
+        for (i = 0; i < n; i++)
+            xm[i] = dot(n, Phi + i * n, x0);
+        for (i = 0; i < p; i++)
+            nu[i] = y[i] - dot(n, H + i * n, xm);
+        for (i = 0; i < n; i++)
+            xp[i] = xm[i] + dot(p, K + i * p, nu);
+    }
+    for (i = 0; i < got; i++)
+        PyBuffer_Release(&b[i]);
+    Py_RETURN_NONE;
+bad:
+    PyErr_SetString(PyExc_ValueError, "_dense_step: x0 or y of the wrong size or type");
+fail:
+    for (i = 0; i < got; i++)
+        PyBuffer_Release(&b[i]);
+    return NULL;
+}
+
+/* absrows(D, n) -> max_i sum_j |D_ij| (D n x n C-ordered doubles; each row summed in index order, the
+ * rows' maximum as Python's max: a NaN row gives NaN only where numpy's would too, see the wrapper) */
+static PyObject *absrows(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bD;
+    Py_ssize_t n, i, j;
+    double best = 0.0;
+    int nan = 0;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "absrows(D, n)");
+        return NULL;
+    }
+    n = PyLong_AsSsize_t(args[1]);
+    if (n < 1) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "_dense_step: n < 1");
+        return NULL;
+    }
+    if (get(args[0], &bD, n * n, 0) < 0)
+        return NULL;
+    {
+        const double *D = bD.buf;
+        for (i = 0; i < n; i++) {
+            double t = 0.0;
+            for (j = 0; j < n; j++)
+                t = t + fabs(D[i * n + j]);
+            if (isnan(t))
+                nan = 1;
+            else if (t > best)
+                best = t;
+        }
+    }
+    PyBuffer_Release(&bD);
+    return PyFloat_FromDouble(nan ? NAN : best);
+}
+
 static PyMethodDef methods[] = {
+    {"absrows", (PyCFunction)(void (*)(void))absrows, METH_FASTCALL,
+     "absrows(D, n) -> the largest absolute row sum of the n x n D (each row in index order; NaN if any is)"},
+    {"correct", (PyCFunction)(void (*)(void))correct, METH_FASTCALL,
+     "correct(Phi, H, K, x0, y, xm, nu, xp): xm = Phi x0, nu = y - H xm, xp = xm + K nu (fixed-order sums)"},
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
      "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
     {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,

@@ -1,7 +1,8 @@
 """The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`,
 of the amortised read's pass between anchors (:func:`between`) and of a balanced norm (:data:`NORM`,
 ``norm(x, s) = ||diag(s) x||``, ``s`` None for ``||x||``: its sum of squares in a fixed order, four
-lanes, as a numpy dot's in another): ``_dense_step.c``, built by
+lanes, as a numpy dot's in another) and of a Kalman sample's estimate through a fused map (:func:`correct`):
+``_dense_step.c``, built by
 ``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
 numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
 C-ordered doubles), it runs instead.
@@ -24,17 +25,20 @@ import os
 import numpy as np
 
 try:
+    from ._dense_step import absrows as ABSROWS
     from ._dense_step import between as BETWEEN
+    from ._dense_step import correct as CORRECT
     from ._dense_step import norm as NORM
     from ._dense_step import step as STEP
 except ImportError:     # no compiler where the package was built: the numpy step
-    STEP = BETWEEN = NORM = None
+    STEP = BETWEEN = NORM = CORRECT = ABSROWS = None
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "step", "between"]
+__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "REQUIRE_ENV", "available", "required", "step", "between",
+           "correct"]
 
 
 def available() -> bool:
@@ -78,3 +82,19 @@ def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     except (BufferError, ValueError, TypeError):
         return None
     return w, c, nw, fd
+
+
+def correct(Phi: np.ndarray, H: np.ndarray, K: np.ndarray, x0: np.ndarray,
+            y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``(x^-, nu, x^+)`` with ``x^- = Phi x0``, ``nu = y - H x^-`` and ``x^+ = x^- + K nu`` (new arrays) by the
+    kernel, each entry a dot product in a fixed order (four lanes; within ``gamma_n |a|.|b|`` as any
+    order), or None where it does not apply (no kernel, arrays not C-ordered doubles of matching sizes):
+    the caller computes them in numpy."""
+    if CORRECT is None:
+        return None
+    xm, nu, xp = np.empty(x0.shape), np.empty(y.shape), np.empty(x0.shape)
+    try:
+        CORRECT(Phi, H, K, x0, y, xm, nu, xp)
+    except (BufferError, ValueError, TypeError):
+        return None
+    return xm, nu, xp

@@ -169,7 +169,7 @@ class ErrorEllipsoid:
         #: The last shape matrix :meth:`step_dense` assembled (exactly symmetric while it is not changed
         #: in place: :meth:`lam_upper` reads it without the symmetrisation, the solver's error from
         #: :attr:`tr`, ``>= ||S||_F`` for a PSD ``S``).
-        self._sym: np.ndarray | None = None
+        self.symmetric: np.ndarray | None = None
         self._ls: tuple = (None,)   # (S, tr, lam_scaled(S)) of the kernel's last step
         self._scratch: np.ndarray | None = None     # scratch(): the transpose and tb Q of _apply
         self._qrows = np.stack((self._ones, self._d2, self._ones, self._ones))  # step_dense's q: w d, d^2, |diag Z|, 1
@@ -396,7 +396,7 @@ class ErrorEllipsoid:
         hit = dense_kernel.step(M, self.S, absM[2] if len(absM) > 2 else absM[0] * self.d[:, None], self._aux,
                                 rho, absM[1]) if dense_kernel.STEP is not None else None
         if hit is not None:
-            self.S, self.tr, self._sym, self._ls = hit[0], hit[1], hit[0], hit
+            self.S, self.tr, self.symmetric, self._ls = hit[0], hit[1], hit[0], hit
             return
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
@@ -429,7 +429,7 @@ class ErrorEllipsoid:
         S *= 0.5 * alpha
         dS = S.ravel()[:: self.n + 1]
         dS += q
-        self.S, self.tr, self._sym = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
+        self.S, self.tr, self.symmetric = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
 
     def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
@@ -460,7 +460,7 @@ class ErrorEllipsoid:
         S = self.S if S is None else S
         if not self.n:
             return 0.0
-        if S is self._sym and S is self.S and self.tr < 1e300:
+        if S is self.symmetric and S is self.S and self.tr < 1e300:
             nS = self.tr        # exactly symmetric (step_dense) and PSD: ||S||_F <= trace S <= tr
         else:
             S = S + S.T

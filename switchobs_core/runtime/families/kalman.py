@@ -439,13 +439,11 @@ class KalmanTableGains(OnlineKalmanGains):
                 hit = KalmanMap(hit.e, K, H, self._I)
         # x^- = e^{A dt} x^+; x^+ = x^- + K (y - H x^-) (innovation first: rounding at the
         # level of the error, not of ||x||); the map (I - K H) e^{A dt} for Phi and the bound
-        x0, y = s.x, s.y
-        x = hit.predict(x0)
-        nu = y - H @ x
-        xp = x + K @ nu
+        x0 = s.x
+        x, nu, xp = hit.correct(x0, s.y)
         self._last_k, self._last_channel = k, channel
         self._kgain = (startup, idx, k, channel)     # Phase built only if P is asked for
-        return Correction(xp, (FusedMap(hit, dt, x0, x, xp, y, nu, -1 if startup else idx),))
+        return Correction(xp, (FusedMap(hit, dt, x0, x, xp, s.y, nu, -1 if startup else idx),))
 
     def periodic_maps(self) -> list[KalmanMap]:
         """The fused maps of the periodic phases at the design's step (the objects the locked path

@@ -113,3 +113,31 @@ def test_verified_anchors_keep_the_proven_factor_on_a_dense_system():
     rd = obs._bound._read
     assert worst <= LOOSENESS * (1 + 1e-9), worst
     assert rd.verified >= 0.9 * rd.anchors, (rd.verified, rd.anchors)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 39), seed=st.integers(0, 2**31), spread=st.floats(0.0, 12.0),
+       scale=st.floats(-30.0, 30.0), asym=st.booleans())
+def test_eigen_anchor_bounds_the_largest_eigenvalue_within_its_model(n, seed, spread, scale, asym):
+    """Below 40 states the anchor's eigenvalue problem (the largest pair alone) bounds
+    ``lambda_max(sym S)`` (certified in extended precision) and exceeds it by no more than its
+    model, ``(2 n + 16) u ||S||_F`` twice over; its direction is a unit eigenvector (residual within
+    ``n u ||S||_F``), on spectra spread over ``10^spread``, scaled by ``10^scale``."""
+    from switchobs_core.bounds.read import _eigen_anchor
+
+    rng = np.random.default_rng(seed)
+    Qm, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    ev = 10.0 ** (scale - spread * rng.random(n))
+    S = (Qm * ev) @ Qm.T
+    S = (S + S.T) / 2
+    if asym:
+        S = S + 1e-15 * float(np.abs(S).max()) * rng.standard_normal((n, n))
+    lam, v = _eigen_anchor(S)
+    assert _psd_certificate(math.sqrt(lam), S), (lam, S)
+    T = (S + S.T) / 2
+    nS = float(np.linalg.norm(S))
+    top = float(np.linalg.eigvalsh(T)[-1])
+    u = np.finfo(float).eps / 2
+    assert lam <= top + 2 * (2 * n + 16) * u * nS * (1 + 1e-12) + 1e-300, (lam, top)
+    assert abs(float(v @ v) - 1.0) <= 1e-12
+    assert float(np.linalg.norm(T @ v - float(v @ T @ v) * v)) <= 4 * n * u * nS + 1e-300

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from contextlib import contextmanager
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -88,7 +89,7 @@ def test_kernel_is_the_numpy_step(seed, n, units, scale, rho, with_dM):
     assert np.all(np.abs(K - R) <= RTOL * r), float(np.max(np.abs(K - R) / r))
     assert abs(ker.tr - ref.tr) <= RTOL * ref.tr
     assert ker.tr >= float(np.trace(K))
-    assert ker._sym is K                                    # read without the symmetrisation, as numpy's
+    assert ker.symmetric is K                                    # read without the symmetrisation, as numpy's
     ls, exact = ker.lam_scaled(), float(np.sum(np.diagonal(K).astype(LD) * ker._id2.astype(LD)))
     assert exact <= ls and abs(ls - ref.lam_scaled()) <= RTOL * ref.lam_scaled()   # the kernel's, kept
     assert ls == ErrorEllipsoid.lam_scaled(ker, K) or abs(ls / ErrorEllipsoid.lam_scaled(ker, K) - 1) < 1e-14
@@ -196,3 +197,59 @@ def test_kernel_norm_is_numpys(seed, n, scale, scaled):
     assert abs(got - ref) <= (n + 2) * UNIT_ROUNDOFF * ref
     with pytest.raises((BufferError, ValueError)):
         dense_kernel.NORM(np.repeat(x, 2)[::2], None) if n > 1 else dense_kernel.NORM(np.ones(n, np.float32), None)
+
+
+@needs_kernel
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 60), p=st.integers(1, 12), scale=st.floats(1e-100, 1e100))
+def test_kernel_correction_is_the_numpy_correction(seed, n, p, scale):
+    """``correct``: ``x^- = Phi x0``, ``nu = y - H x^-``, ``x^+ = x^- + K nu`` within ``gamma`` of each dot
+    product's ``|a|.|b|`` (computed in extended precision) of the exact values from the computed inputs;
+    arrays not C-ordered are refused (``KalmanMap.correct`` takes numpy's, with a C-ordered copy kept)."""
+    from switchobs_core.bounds.kalman_map import KalmanMap
+
+    rng = np.random.default_rng(seed)
+    Phi, H, K = rng.standard_normal((n, n)), rng.standard_normal((p, n)), rng.standard_normal((n, p))
+    x0, y = scale * rng.standard_normal(n), scale * rng.standard_normal(p)
+    xm, nu, xp = dense_kernel.correct(Phi, H, K, x0, y)
+    g = lambda m: 1.01 * m * UNIT_ROUNDOFF / (1 - m * UNIT_ROUNDOFF)
+    L = lambda a: a.astype(LD)
+    assert np.all(np.abs(L(xm) - L(Phi) @ L(x0)) <= g(n + 1) * (np.abs(L(Phi)) @ np.abs(L(x0))))
+    assert np.all(np.abs(L(nu) - (L(y) - L(H) @ L(xm))) <= g(n + 2) * (np.abs(L(y)) + np.abs(L(H)) @ np.abs(L(xm))))
+    assert np.all(np.abs(L(xp) - (L(xm) + L(K) @ L(nu))) <= g(p + 2) * (np.abs(L(xm)) + np.abs(L(K)) @ np.abs(L(nu))))
+    assert dense_kernel.correct(Phi, H, np.asfortranarray(K), x0, y) is None or p == 1 or n == 1
+    assert dense_kernel.correct(Phi, H, K, x0, y[:-1]) is None if p > 1 else True
+
+    m = KalmanMap(SimpleNamespace(Phi=Phi), np.asfortranarray(K), H, np.eye(n))
+    km, knu, kp = m.correct(x0, y)
+    assert np.array_equal(km, xm) and np.array_equal(knu, nu) and np.array_equal(kp, xp)
+    kept = dense_kernel.CORRECT
+    dense_kernel.CORRECT = None
+    try:
+        nm, nnu, npl = m.correct(x0, y)
+    finally:
+        dense_kernel.CORRECT = kept
+    tol = 1e-12 * (np.abs(Phi) @ np.abs(x0) + 1e-300)
+    assert np.all(np.abs(nm - xm) <= tol)
+
+
+@needs_kernel
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 60), scale=st.floats(1e-150, 1e150), nan=st.booleans())
+def test_kernel_largest_absolute_row_sum_is_numpys(seed, n, scale, nan):
+    """``absrows(D, n)``: the largest ``sum_j |D_ij|`` within ``n u`` of numpy's (other orders of the same
+    sums); NaN where a row holds one; ``D`` is not changed; a wrong size is refused."""
+    rng = np.random.default_rng(seed)
+    D = scale * rng.standard_normal((n, n))
+    if nan:
+        D[rng.integers(n), rng.integers(n)] = math.nan
+    kept = D.copy()
+    got = dense_kernel.ABSROWS(D, n)
+    ref = float(np.abs(D).sum(axis=1).max())
+    assert np.array_equal(D, kept, equal_nan=True)
+    if nan:
+        assert math.isnan(got)
+    else:
+        assert abs(got - ref) <= n * UNIT_ROUNDOFF * ref
+    with pytest.raises(ValueError):
+        dense_kernel.ABSROWS(D, n + 1)
