@@ -17,6 +17,10 @@ from glob import glob
 from setuptools import Extension, find_packages, setup
 
 package_name = "switchobs_ros"
+#: The kernel's flags, after the environment's CFLAGS on the command line (so they win): -fno-fast-math
+#: undoes a -ffast-math there (-ffp-contract=off alone does not: it would drop the isfinite tests and
+#: reassociate sums); _dense_step.c refuses to compile under __FAST_MATH__ / __FINITE_MATH_ONLY__.
+KERNEL_FLAGS = ["-O2", "-fno-fast-math", "-ffp-contract=off", "-Wno-psabi"]
 
 setup(
     name=package_name,
@@ -31,7 +35,7 @@ setup(
         ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
     ext_modules=[Extension("switchobs_core.numerics._dense_step", ["switchobs_core/numerics/_dense_step.c"],
-                           extra_compile_args=["-O2", "-ffp-contract=off", "-Wno-psabi"], optional=True)],
+                           extra_compile_args=KERNEL_FLAGS, optional=True)],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
     # scripts/bootstrap.sh installs the pinned set from requirements.txt first.
     install_requires=["setuptools", "numpy", "scipy", "cvxpy", "PyYAML", "threadpoolctl", "tqdm"],

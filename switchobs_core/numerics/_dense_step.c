@@ -17,6 +17,9 @@
  * order, within gamma_n |a|.|b| as any order; Z is computed on and above its diagonal and mirrored, so
  * it is exactly symmetric (the allowance for the symmetrisation's rounding stays, unused).
  */
+#if defined(__FAST_MATH__) || (defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__)
+#error "_dense_step.c needs IEEE arithmetic (no -ffast-math / -ffinite-math-only): setup.py's KERNEL_FLAGS"
+#endif
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>

@@ -7,8 +7,13 @@ kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails if it is not b
 
 from __future__ import annotations
 
+import ast
 import math
+import shutil
+import subprocess
+import sysconfig
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -32,6 +37,33 @@ def test_kernel_is_built_where_asked_for():
     if not dense_kernel.required():
         pytest.skip(f"{dense_kernel.REQUIRE_ENV} not set")
     assert dense_kernel.available(), "switchobs_core/numerics/_dense_step.c is not built (scripts/bootstrap.sh)"
+
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def _kernel_flags() -> list[str]:
+    """setup.py's ``KERNEL_FLAGS`` (read from its source: importing it would run ``setup()``)."""
+    for node in ast.parse((ROOT / "setup.py").read_text()).body:
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "KERNEL_FLAGS":
+            return ast.literal_eval(node.value)
+    raise AssertionError("setup.py has no KERNEL_FLAGS")
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+@pytest.mark.parametrize("env_flags", [["-ffast-math"], ["-ffinite-math-only"], ["-O3", "-ffast-math"]])
+def test_fast_math_from_the_environment_is_undone_or_refused(env_flags):
+    """The environment's CFLAGS come first on the compiler's command line, setup.py's flags after: with
+    them the source preprocesses (IEEE arithmetic restored); without them it refuses to compile (its
+    ``#error``), so a fast-math kernel is never built (the numpy step runs)."""
+    src = ROOT / "switchobs_core" / "numerics" / "_dense_step.c"
+    cmd = ["cc", "-E", "-o", "/dev/null", "-I", sysconfig.get_paths()["include"], str(src)]
+
+    def rc(flags):
+        return subprocess.run(cmd[:1] + flags + cmd[1:], capture_output=True, text=True).returncode
+    assert rc([]) == 0
+    assert rc(env_flags) != 0
+    assert rc(env_flags + _kernel_flags()) == 0
 
 
 @contextmanager
