@@ -230,8 +230,10 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         return NULL;
     }
     rho = PyFloat_AsDouble(args[5]);
+    if (rho == -1.0 && PyErr_Occurred())    /* before the next conversion runs Python code */
+        return NULL;
     mn = PyFloat_AsDouble(args[6]);
-    if ((rho == -1.0 || mn == -1.0) && PyErr_Occurred())
+    if (mn == -1.0 && PyErr_Occurred())
         return NULL;
     if (PyObject_GetBuffer(args[3], &bX, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;

@@ -182,6 +182,25 @@ def test_arrays_the_kernel_does_not_take_fall_back_to_numpy():
 
 
 @needs_kernel
+def test_a_bad_scalar_argument_raises_before_the_next_is_read():
+    """A ``rho`` that is not a number raises its own TypeError; ``mn`` is not converted (no Python code
+    runs with an exception pending, no value stands for the failed one)."""
+    n = 3
+    M, aux, out = np.eye(n), np.ones(2 * n + 6), np.empty((n, n))
+    converted = []
+
+    class Mn:
+        def __float__(self):
+            converted.append(1)
+            return 1.0
+    with pytest.raises(TypeError, match="must be real number"):
+        dense_kernel.STEP(M, M, M, aux, out, "x", Mn())
+    assert converted == []
+    with pytest.raises(TypeError, match="must be real number"):
+        dense_kernel.STEP(M, M, M, aux, out, 0.0, None)
+
+
+@needs_kernel
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**31), n=st.integers(1, 39), scale=st.floats(1e-30, 1e30),
        drift=st.floats(0.0, 0.2), fortran=st.booleans())
