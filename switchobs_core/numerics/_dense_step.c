@@ -4,11 +4,12 @@
  * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
  * balanced norm of a vector (norm(), RoundingBound.xn).
  *
- * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
+ * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls, alpha, theta)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
  *   aux: 2 n + 6 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf) of the ellipsoid;
  *   rho, mn: the step's residual and ||M||_inf;
- *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled).
+ *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled);
+ *   alpha, theta: the outer sum's factors (the caller's overflow guard reads them).
  *
  * Arithmetic: every product and sum is a rounded double operation in a fixed order (no FMA
  * contraction, no reassociation: build with -O2 -ffp-contract=off), so every x86-64 CPU gives the
@@ -159,7 +160,7 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
                      const double *restrict aMd,
                      const double *restrict aux, double *restrict out, double *restrict Z,
                      double *restrict Mt, double *restrict s, double rho,
-                     double mn, double *lsum)
+                     double mn, double *lsum, double *fac)
 {
     const double *id2 = aux, *d2 = aux + n;
     const double kW = aux[2 * n], kR = aux[2 * n + 1], gsum = aux[2 * n + 2];
@@ -167,6 +168,8 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
     Py_ssize_t i, j, k;
     double Wv = 0.0, tzs = 0.0;
 
+    if (!(rho >= 0.0))                  /* NaN (or negative): no residual bound, a set not finite */
+        rho = INFINITY;
     for (i = 0; i < n; i++)
         s[i] = sqrt(fabs(S[i * n + i]));
     /* out <- T = M S; Z = T M' on and above the diagonal (M' in Mt), each entry summed in the order
@@ -193,6 +196,8 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
         alpha = 1.0 + pymin(pymax(rho / sqrt(tz), 0x1p-40), 1e150);
         theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * U);
     }
+    fac[0] = alpha;
+    fac[1] = theta;
     double c2 = rho > 0.0 ? ((theta * rho) * rho * (1.0 + 2.0 * U) + UNDERFLOW) * kf : 0.0;
     double c1 = alpha * Wz * k1, c3 = alpha * k3;
     double c4 = (double)((n + 4) * n) * UNDERFLOW * (2.0 + mn) * kf;
@@ -222,7 +227,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 {
     Py_buffer bM, bS, bA, bX, bO;
     double stack_z[2 * STACK_N * STACK_N + STACK_N];
-    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls;
+    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls, fac[2];
     Py_ssize_t n, nn;
 
     if (nargs != 7) {
@@ -261,7 +266,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         Mt = Z + nn;
         s = Mt + nn;
     }
-    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls);
+    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls, fac);
     if (n > STACK_N)
         PyMem_Free(Z);
     PyBuffer_Release(&bO);
@@ -269,7 +274,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
     PyBuffer_Release(&bS);
     PyBuffer_Release(&bM);
     PyBuffer_Release(&bX);
-    return Py_BuildValue("(dd)", tr, ls);
+    return Py_BuildValue("(dddd)", tr, ls, fac[0], fac[1]);
 fail_o:
     PyBuffer_Release(&bO);
 fail_a:
@@ -430,7 +435,7 @@ static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
-     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
+     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls, alpha, theta): ErrorEllipsoid.step_dense's set into out"},
     {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
      "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,

@@ -20,6 +20,8 @@ allowance and trace in the same operations as the numpy step. It is compiled wit
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -34,7 +36,7 @@ except ImportError:     # no compiler where the package was built: the numpy ste
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "step", "between"]
+__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "numpy_step", "step", "between"]
 
 
 def available() -> bool:
@@ -47,20 +49,33 @@ def required() -> bool:
     return os.environ.get(REQUIRE_ENV, "") not in ("", "0")
 
 
+@contextmanager
+def numpy_step() -> Iterator[None]:
+    """``step_dense`` in numpy within the block (the kernel set aside): the reference path, for tests
+    and benchmarks where the kernel is built."""
+    global STEP
+    kept, STEP = STEP, None
+    try:
+        yield
+    finally:
+        STEP = kept
+
+
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
-         mn: float) -> tuple[np.ndarray, float, float] | None:
-    """``(S', tr, ls)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace and ``ls``
-    its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded up), or
+         mn: float) -> tuple[np.ndarray, float, float, float, float] | None:
+    """``(S', tr, ls, alpha, theta)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace
+    and ``ls`` its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded
+    up; ``alpha, theta`` the outer sum's factors, for the caller's overflow guard), or
     None where it does not apply (no kernel, an array not C-ordered doubles of the right size): the
     caller steps in numpy."""
     if STEP is None:
         return None
     out = np.empty(S.shape)
     try:
-        tr, ls = STEP(M, S, aMd, aux, out, rho, mn)
+        tr, ls, alpha, theta = STEP(M, S, aMd, aux, out, rho, mn)
     except (BufferError, ValueError, TypeError):
         return None
-    return out, tr, ls
+    return out, tr, ls, alpha, theta
 
 
 def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,

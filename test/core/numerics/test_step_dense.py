@@ -8,6 +8,7 @@ and noise bounds with it as with the general path (within 1e-12 relative)."""
 from __future__ import annotations
 
 import math
+from contextlib import nullcontext
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ from hypothesis import strategies as st
 
 import switchobs_core as so
 from switchobs_core.bounds.kalman_map import KalmanMap
+from switchobs_core.bounds.rigorous import RoundingBound
+from switchobs_core.numerics import dense_kernel
 from switchobs_core.numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid
 
 LD = np.longdouble
@@ -23,6 +26,14 @@ LD = np.longdouble
 #: general set: the two round the same quantities in another order (a few ``u`` each) and fold the
 #: allowance's factors into its coefficients (``(1 + 16 u)``); 1e-13 is about 450 ``u``.
 RTOL = 1e-13
+#: ``step_dense``'s two paths: the compiled kernel (where built) and numpy (the kernel set aside).
+PATHS = [pytest.param(True, id="kernel", marks=pytest.mark.skipif(not dense_kernel.available(),
+                                                                 reason="the compiled kernel is not built")),
+         pytest.param(False, id="numpy")]
+
+
+def _path(kernel: bool):
+    return nullcontext() if kernel else dense_kernel.numpy_step()
 
 
 def _pair(seed: int, n: int, units: bool, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -81,15 +92,47 @@ def test_fast_step_contains_the_exact_product(seed, n, units, scale, rho):
     assert float(np.linalg.eigvalsh(X)[0]) >= -1e-12
 
 
-def test_overflow_withdraws_without_a_warning():
-    """A set near the largest double: the pass under an error state, the trace infinite."""
-    n = 6
-    M = 3.0 * np.eye(n)
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("n, m, S0, tr0, rho", [(6, 3.0, 1e307, 6e307, 1.0), (1, 1.0, 1e308, 1e308, 0.0),
+                                                (6, 3.0, math.nan, math.nan, 1.0)])
+def test_overflow_withdraws_without_a_warning(kernel, n, m, S0, tr0, rho):
+    """A set near the largest double (or NaN): on either path the step under an error state, the set not
+    finite (the kernel runs only where numpy's unguarded branch would)."""
+    M = m * np.eye(n)
     ell = ErrorEllipsoid(n, 1.0)
-    ell.S, ell.tr = 1e307 * np.eye(n), 6e307
-    with np.errstate(all="raise"):
-        ell.step_dense(M, (np.abs(M), 3.0), 1.0)
-    assert not ell.finite()
+    ell.S, ell.tr = S0 * np.eye(n), tr0
+    with np.errstate(all="raise"), _path(kernel):
+        ell.step_dense(M, (np.abs(M), m), rho)
+    assert not ell.finite() and ell.bound() == math.inf
+
+
+def test_a_step_past_the_guards_is_numpys():
+    """``alpha >= 1e20`` (a residual far above the set) fails the unguarded branch's condition: the
+    kernel's result is not taken, the step is numpy's to the last bit."""
+    M, S, d = _pair(7, 9, True, 1e-60)
+    aM = np.abs(M)
+    absM = (aM, float(aM.sum(axis=1).max()), aM * d[:, None])
+    sets = []
+    for kernel in (True, False):
+        ell = ErrorEllipsoid(9, 1.0, d)
+        ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 36 * UNIT_ROUNDOFF)
+        with _path(kernel):
+            ell.step_dense(M, absM, 1e-5)
+        sets.append((ell.S, ell.tr))
+    assert np.array_equal(sets[0][0], sets[1][0]) and sets[0][1] == sets[1][1]
+
+
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("rho", [math.nan, -1.0])
+def test_a_residual_that_bounds_nothing_gives_a_set_that_is_not_finite(kernel, rho):
+    """A NaN residual (from a NaN in the sample) is no bound on the step's error: the set is not finite,
+    its bound infinite (not the set of ``rho = 0``), without a warning."""
+    n = 4
+    M = 0.5 * np.eye(n)
+    ell = ErrorEllipsoid(n, 1.0)
+    with np.errstate(all="raise"), _path(kernel):
+        ell.step_dense(M, (np.abs(M), 0.5), rho)
+    assert not ell.finite() and ell.bound() == math.inf
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +188,28 @@ def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch, noise
         assert (na is None) == (noise_max is None) == (nb is None)
         if na is not None:
             assert abs(na - nb) <= 1e-12 * nb, (na, nb)
+
+
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("field", ["x0", "y", "nu"])
+def test_a_nan_in_a_fused_sample_withdraws_the_bound(agents2, monkeypatch, kernel, field):
+    """``RoundingBound.fused_sample`` with a NaN in the estimate, the measurement or the innovation: its
+    residual is NaN, the step's set not finite, the bound withdrawn (not a finite bound of ``rho = 0``)."""
+    system, cycle, table, stream = agents2
+    seen = []
+    real = RoundingBound.fused_sample
+
+    def kept(self, f, channel):
+        seen.append((self, f, channel))
+        return real(self, f, channel)
+    monkeypatch.setattr(RoundingBound, "fused_sample", kept)
+    obs = so.SwitchedObserver(system, table, "periodic", [cycle])
+    for t, ch, y in stream[:40]:
+        obs.update(t, ch, y)
+    bound, f, channel = seen[-1]
+    assert not bound.withdrawn and math.isfinite(bound.bounds()[0])
+    bad = getattr(f, field).copy()
+    bad[0] = math.nan
+    with _path(kernel):
+        assert real(bound, f._replace(**{field: bad}), channel)
+    assert bound.withdrawn and bound.bounds()[0] == math.inf
