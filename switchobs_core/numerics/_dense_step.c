@@ -4,10 +4,12 @@
  * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
  * balanced norm of a vector (norm(), RoundingBound.xn).
  *
- * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls, alpha, theta)
+ * step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
- *   aux: 2 n + 6 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf) of the ellipsoid;
- *   rho, mn: the step's residual and ||M||_inf;
+ *   aux: 2 n + 11 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf, alo, ahi, kth, k2, eta) of the ellipsoid:
+ *   every coefficient of the error analysis (a's clamp [alo, ahi], theta's factor kth, c2's k2 and eta)
+ *   comes from Python (ErrorEllipsoid._aux), none is written here;
+ *   rho, c4: the step's residual and the diagonal's underflow allowance;
  *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled);
  *   alpha, theta: the outer sum's factors (the caller's overflow guard reads them).
  *
@@ -25,8 +27,6 @@
 #include <Python.h>
 #include <math.h>
 
-#define U 1.1102230246251565e-16        /* 2^-53 */
-#define UNDERFLOW 4.9406564584124654e-324 /* 2^-1074 */
 #define STACK_N 40
 
 static double pymax(double a, double b) { return b > a ? b : a; }  /* Python's max(a, b) */
@@ -160,11 +160,13 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
                      const double *restrict aMd,
                      const double *restrict aux, double *restrict out, double *restrict Z,
                      double *restrict Mt, double *restrict s, double rho,
-                     double mn, double *lsum, double *fac)
+                     double c4, double *lsum, double *fac)
 {
     const double *id2 = aux, *d2 = aux + n;
     const double kW = aux[2 * n], kR = aux[2 * n + 1], gsum = aux[2 * n + 2];
     const double k1 = aux[2 * n + 3], k3 = aux[2 * n + 4], kf = aux[2 * n + 5];
+    const double alo = aux[2 * n + 6], ahi = aux[2 * n + 7], kth = aux[2 * n + 8], k2 = aux[2 * n + 9];
+    const double eta = aux[2 * n + 10];
     Py_ssize_t i, j, k;
     double Wv = 0.0, tzs = 0.0;
 
@@ -193,14 +195,13 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
     double tz = pymax(tzs + kR * Wz * Wv, 0.0) * gsum;
     double alpha = 1.0, theta = 1.0;
     if (tz > 0.0 && rho > 0.0) {
-        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), 0x1p-40), 1e150);
-        theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * U);
+        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), alo), ahi);
+        theta = (1.0 + 1.0 / (alpha - 1.0)) * kth;
     }
     fac[0] = alpha;
     fac[1] = theta;
-    double c2 = rho > 0.0 ? ((theta * rho) * rho * (1.0 + 2.0 * U) + UNDERFLOW) * kf : 0.0;
+    double c2 = rho > 0.0 ? ((theta * rho) * rho * k2 + eta) * kf : 0.0;
     double c1 = alpha * Wz * k1, c3 = alpha * k3;
-    double c4 = (double)((n + 4) * n) * UNDERFLOW * (2.0 + mn) * kf;
     /* q = c1 w d + c2 d^2 + c3 |diag Z| + c4 into s (read no more) */
     for (i = 0; i < n; i++)
         s[i] = c1 * out[i] + c2 * d2[i] + c3 * fabs(Z[i * n + i]) + c4;
@@ -227,23 +228,23 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 {
     Py_buffer bM, bS, bA, bX, bO;
     double stack_z[2 * STACK_N * STACK_N + STACK_N];
-    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls, fac[2];
+    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, c4, tr, ls, fac[2];
     Py_ssize_t n, nn;
 
     if (nargs != 7) {
-        PyErr_SetString(PyExc_TypeError, "step(M, S, aMd, aux, out, rho, mn)");
+        PyErr_SetString(PyExc_TypeError, "step(M, S, aMd, aux, out, rho, c4)");
         return NULL;
     }
     rho = PyFloat_AsDouble(args[5]);
     if (rho == -1.0 && PyErr_Occurred())    /* before the next conversion runs Python code */
         return NULL;
-    mn = PyFloat_AsDouble(args[6]);
-    if (mn == -1.0 && PyErr_Occurred())
+    c4 = PyFloat_AsDouble(args[6]);
+    if (c4 == -1.0 && PyErr_Occurred())
         return NULL;
     if (PyObject_GetBuffer(args[3], &bX, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;
-    n = (bX.len / 8 - 6) / 2;
-    if (!doubles(&bX) || n < 1 || bX.len != (2 * n + 6) * 8) {
+    n = (bX.len / 8 - 11) / 2;
+    if (!doubles(&bX) || n < 1 || bX.len != (2 * n + 11) * 8) {
         PyBuffer_Release(&bX);
         PyErr_SetString(PyExc_ValueError, "_dense_step: aux of the wrong size");
         return NULL;
@@ -266,7 +267,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         Mt = Z + nn;
         s = Mt + nn;
     }
-    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls, fac);
+    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, c4, &ls, fac);
     if (n > STACK_N)
         PyMem_Free(Z);
     PyBuffer_Release(&bO);
@@ -435,7 +436,7 @@ static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
-     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls, alpha, theta): ErrorEllipsoid.step_dense's set into out"},
+     "step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta): ErrorEllipsoid.step_dense's set into out"},
     {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
      "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,

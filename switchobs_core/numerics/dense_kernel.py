@@ -7,8 +7,10 @@ numpy code stays the reference: without the extension, or for arrays the kernel 
 C-ordered doubles), it runs instead.
 
 The kernel computes the set of ``step_dense``'s docstring with the coefficients the ellipsoid
-computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2`` and the factors ``kW, kR, gsum, k1,
-k3, kf``), in one call instead of 17 array operations and the scalar arithmetic between them:
+computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2``, the factors ``kW, kR, gsum, k1, k3, kf``,
+``a``'s clamp, ``theta``'s and ``c_2``'s factors and ``eta``; ``c_4`` as an argument): every coefficient
+of the error analysis has its one owner in :mod:`~switchobs_core.numerics.rounding`), in one call instead
+of 17 array operations and the scalar arithmetic between them:
 ``T = M S`` and ``Z = T M'`` with each entry a dot product summed in index order (within
 ``gamma_n |a|.|b|`` as any order, the bound the allowance ``gamma_{2n+2}`` is built on), ``Z``
 on and above its diagonal and mirrored (exactly symmetric), ``w d = (D |M|) s``, and the diagonal
@@ -62,7 +64,7 @@ def numpy_step() -> Iterator[None]:
 
 
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
-         mn: float) -> tuple[np.ndarray, float, float, float, float] | None:
+         c4: float) -> tuple[np.ndarray, float, float, float, float] | None:
     """``(S', tr, ls, alpha, theta)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace
     and ``ls`` its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded
     up; ``alpha, theta`` the outer sum's factors, for the caller's overflow guard), or
@@ -72,7 +74,7 @@ def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: fl
         return None
     out = np.empty(S.shape)
     try:
-        tr, ls, alpha, theta = STEP(M, S, aMd, aux, out, rho, mn)
+        tr, ls, alpha, theta = STEP(M, S, aMd, aux, out, rho, c4)
     except (BufferError, ValueError, TypeError):
         return None
     return out, tr, ls, alpha, theta

@@ -121,6 +121,8 @@ _U = UNIT_ROUNDOFF
 #: The smallest subnormal double, ``2^-1074``: the absolute error of an underflowing product is at
 #: most half of it (module docstring, step 8).
 UNDERFLOW = 2.0**-1074
+#: :func:`_clamp`'s range; step_dense's factors of ``theta`` and of ``c_2`` (the kernel's too, by ``_aux``)
+_ALO, _AHI, _KTH, _K2 = 2.0**-40, 1e150, 1.0 + 4.0 * _U, 1.0 + 2.0 * _U
 
 
 def gamma(m: int) -> float:
@@ -138,7 +140,7 @@ def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
 def _clamp(a: float) -> float:
     """A coefficient of an outer sum kept in ``[2^-40, 1e150]`` (any ``a > 0`` is valid; from
     ``2^-40`` on, ``fl(1 + a) - 1`` is exact and positive)."""
-    return min(max(a, 2.0**-40), 1e150)
+    return min(max(a, _ALO), _AHI)
 
 
 class ErrorEllipsoid:
@@ -180,7 +182,8 @@ class ErrorEllipsoid:
         self._kR = cz * (1.0 + 4.0 * _U) * kw
         self._k1 = (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * kw * self._kf
         self._k3 = 2.0 * _U * self._kf
-        self._aux = np.concatenate((self._id2, self._d2, (self._kW, self._kR, self._gsum, self._k1, self._k3, self._kf)))
+        self._aux = np.concatenate((self._id2, self._d2, (self._kW, self._kR, self._gsum, self._k1, self._k3,
+                                                          self._kf, _ALO, _AHI, _KTH, _K2, UNDERFLOW)))
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -396,15 +399,13 @@ class ErrorEllipsoid:
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
-        hit = None if guarded or dense_kernel.STEP is None else dense_kernel.step(
-            M, self.S, absM[2] if len(absM) > 2 else absM[0] * self.d[:, None], self._aux, rho, absM[1])
+        aMd = absM[2] if len(absM) > 2 else absM[0] * self.d[:, None]
+        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + absM[1]) * self._kf
+        hit = None if guarded or dense_kernel.STEP is None else dense_kernel.step(M, self.S, aMd, self._aux, rho, c4)
         if hit is not None and hit[3] < 1e20 and hit[4] * (rho * rho) * self._dr < 1e250:   # the guards below
             self.S, self.tr, self._sym, self._ls = hit[0], hit[1], hit[0], hit
             return
         S, B = self.S, self._qrows
-        aM, mn = absM[0], absM[1]
-        aMd = absM[2] if len(absM) > 2 else aM * self.d[:, None]
-        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf
         s = np.abs(S.diagonal())            # = diag S (S is PSD)
         np.sqrt(s, out=s)
         vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
@@ -413,16 +414,15 @@ class ErrorEllipsoid:
         Wv = float(vd.dot(self._id2))
         Wz = Wv * self._kW                  # W of step 6, rounded up
         tz = max(float(zd.dot(self._id2)) + self._kR * Wz * Wv, 0.0) * self._gsum     # trace_D (Z + R_z)
-        rho2 = rho * rho
         alpha, theta = 1.0, 1.0
         if tz > 0.0 and rho > 0.0:
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
-            theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
-        if not guarded and not (alpha < 1e20 and theta * rho2 * self._dr < 1e250):     # (the kernel's too)
+            theta = (1.0 + 1.0 / (alpha - 1.0)) * _KTH
+        if not guarded and not (alpha < 1e20 and theta * (rho * rho) * self._dr < 1e250):     # (the kernel's too)
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
         np.abs(zd, out=B[2])
-        c2 = ((theta * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * self._kf if rho > 0.0 else 0.0
+        c2 = ((theta * rho) * rho * _K2 + UNDERFLOW) * self._kf if rho > 0.0 else 0.0
         q = np.array((alpha * Wz * self._k1, c2, alpha * self._k3, c4)).dot(B)
         # the n x n pass: S' = (Z + Z') (alpha / 2) + diag(q), tr its trace rounded up
         S = Z + Z.T                 # exactly symmetric

@@ -2,7 +2,8 @@
 numpy ``ErrorEllipsoid.step_dense`` (the reference): the same set within 1e-13 of each entry relative to
 the diagonal, the same trace, exactly symmetric, containing ``M S M'`` computed in extended precision
 (hypothesis over n = 1..39, units and scales 1e-30..1e30); arrays the kernel does not take fall back to
-numpy. ``scripts/test.sh`` asks for the kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails if it is not built."""
+numpy. ``scripts/test.sh`` asks for the kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails
+if it is not built."""
 
 from __future__ import annotations
 
@@ -169,11 +170,28 @@ def test_kernel_takes_a_residual_that_bounds_nothing_as_infinite(rho):
 
 
 @needs_kernel
+@pytest.mark.parametrize("name, value", [("_KTH", 3.0), ("_K2", 5.0), ("_ALO", 0.5), ("_AHI", 1e-8)])
+def test_kernel_follows_the_python_coefficients(monkeypatch, name, value):
+    """Each coefficient of the error analysis has one owner (``rounding``): changed there, the kernel's set
+    follows numpy's (both move away from the set of the unchanged coefficient)."""
+    from switchobs_core.numerics import rounding
+
+    M, S, d = _case(11, 7, True, 1.0)
+    absM = _abs(M, d)
+    before = _stepped(M, S, d, 1e-3, absM, False).S
+    monkeypatch.setattr(rounding, name, value)
+    ref, ker = _stepped(M, S, d, 1e-3, absM, False).S, _stepped(M, S, d, 1e-3, absM, True).S
+    r = np.sqrt(np.outer(np.diagonal(ref), np.diagonal(ref)))
+    assert np.max(np.abs(ref - before) / r) > 1e-6              # the change matters
+    assert np.all(np.abs(ker - ref) <= RTOL * r), float(np.max(np.abs(ker - ref) / r))
+
+
+@needs_kernel
 def test_a_bad_scalar_argument_raises_before_the_next_is_read():
     """A ``rho`` that is not a number raises its own TypeError; ``mn`` is not converted (no Python code
     runs with an exception pending, no value stands for the failed one)."""
     n = 3
-    M, aux, out = np.eye(n), np.ones(2 * n + 6), np.empty((n, n))
+    M, aux, out = np.eye(n), np.ones(2 * n + 11), np.empty((n, n))
     converted = []
 
     class Mn:
