@@ -4,7 +4,11 @@ of the amortised read's pass between anchors (:func:`between`) and of a balanced
 lanes, as a numpy dot's in another): ``_dense_step.c``, built by
 ``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
 numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
-C-ordered doubles), it runs instead.
+C-ordered doubles), it runs instead. The module carries the SHA-256 of the source it was built from
+(``SOURCE_SHA256``, from ``setup.py``); where ``_dense_step.c`` lies beside this file (a checkout) a
+module built from another source is refused with a warning (the numpy step runs):
+``python -m switchobs_core.numerics.dense_kernel`` exits 1 then (``bootstrap.sh`` rebuilds). The
+kernel is x86-64 only (``target_clones``); elsewhere it does not build and the numpy step runs.
 
 The kernel computes the set of ``step_dense``'s docstring with the coefficients the ellipsoid
 computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2``, the factors ``kW, kR, gsum, k1, k3, kf``,
@@ -21,24 +25,50 @@ allowance and trace in the same operations as the numpy step. It is compiled wit
 
 from __future__ import annotations
 
+import hashlib
 import os
+import sys
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
+#: The kernel's source beside this module (absent from an installed package: the module as built).
+SOURCE = Path(__file__).with_name("_dense_step.c")
+
+
+def built_from(module: ModuleType, source: Path = SOURCE) -> bool:
+    """Whether ``module`` was built from ``source`` (its ``SOURCE_SHA256`` is the file's), or ``source``
+    is absent; else False with a warning: a stale build (an older source, or another kernel's)."""
+    try:
+        digest = hashlib.sha256(source.read_bytes()).hexdigest()
+    except OSError:
+        return True
+    if getattr(module, "SOURCE_SHA256", None) == digest:
+        return True
+    warnings.warn(f"{getattr(module, '__file__', module)} was not built from {source} (a stale build): the "
+                  "numpy step runs; rebuild it (scripts/bootstrap.sh)", RuntimeWarning, stacklevel=2)
+    return False
+
+
 try:
-    from ._dense_step import between as BETWEEN
-    from ._dense_step import norm as NORM
-    from ._dense_step import step as STEP
-except ImportError:     # no compiler where the package was built: the numpy step
+    from . import _dense_step
+except ImportError:     # not built (no compiler, not x86-64), or built for another Python: the numpy step
+    _dense_step = None
+if _dense_step is not None and built_from(_dense_step):
+    STEP, BETWEEN, NORM = _dense_step.step, _dense_step.between, _dense_step.norm
+else:
     STEP = BETWEEN = NORM = None
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "available", "required", "numpy_step", "step", "between"]
+__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "SOURCE", "available", "built_from", "required", "numpy_step",
+           "step", "between"]
 
 
 def available() -> bool:
@@ -95,3 +125,7 @@ def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     except (BufferError, ValueError, TypeError):
         return None
     return w, c, nw, fd
+
+
+if __name__ == "__main__":      # exit 0 where the kernel is built from the source beside it (bootstrap.sh)
+    sys.exit(0 if available() else 1)

@@ -8,11 +8,14 @@ if it is not built."""
 from __future__ import annotations
 
 import ast
+import hashlib
 import math
 import shutil
 import subprocess
+import sys
 import sysconfig
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -40,6 +43,28 @@ def test_kernel_is_built_where_asked_for():
 
 
 ROOT = Path(__file__).resolve().parents[3]
+
+
+@needs_kernel
+def test_the_kernel_is_built_from_the_source_beside_it():
+    """The module carries its source's SHA-256 (setup.py); ``python -m ...dense_kernel`` (bootstrap.sh's
+    check) exits 0 for it."""
+    assert dense_kernel._dense_step.SOURCE_SHA256 == hashlib.sha256(dense_kernel.SOURCE.read_bytes()).hexdigest()
+    run = subprocess.run([sys.executable, "-m", "switchobs_core.numerics.dense_kernel"], cwd=ROOT)
+    assert run.returncode == 0
+
+
+def test_a_module_built_from_another_source_is_refused(tmp_path):
+    """A stale build (an older source, or one with the same names and other arithmetic): refused with a
+    warning; without the source beside it (an installed package) the module is taken as built."""
+    src = tmp_path / "_dense_step.c"
+    src.write_bytes(b"/* the kernel */")
+    good = SimpleNamespace(SOURCE_SHA256=hashlib.sha256(b"/* the kernel */").hexdigest(), __file__="k.so")
+    assert dense_kernel.built_from(good, src)
+    for stale in (SimpleNamespace(SOURCE_SHA256="0" * 64, __file__="k.so"), SimpleNamespace(__file__="k.so")):
+        with pytest.warns(RuntimeWarning, match="not built from"):
+            assert not dense_kernel.built_from(stale, src)
+        assert dense_kernel.built_from(stale, tmp_path / "absent.c")
 
 
 def _kernel_flags() -> list[str]:
