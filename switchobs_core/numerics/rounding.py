@@ -391,10 +391,11 @@ class ErrorEllipsoid:
         exact); ``w``'s scalar factors fold into the coefficients of ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4``,
         each rounded up by ``(1 + 16 u)`` more (the fold, the sum of four nonnegative terms); ``(Z + Z') alpha / 2``
         is ``alpha sym Z``; the trace only chooses ``a`` (any ``a > 0`` is valid): from ``diag Z`` and ``w``;
-        :attr:`tr` is the new diagonal's sum rounded up. Where ``||M||_inf^2 trace S alpha`` and ``theta rho^2``
-        (times ``D``'s spread) stay far below overflow no error state is set up and the kernel may run; elsewhere
-        the step runs in numpy under one (``guarded``). A NaN (or negative) ``rho`` bounds nothing: ``rho = inf``,
-        a set that is not finite. Within 1e-13 of :meth:`propagate_product`'s set, relative to the diagonal."""
+        :attr:`tr` is the new diagonal's sum rounded up. Where ``||M||_inf^2 trace S alpha``, ``theta rho^2`` (times
+        ``D``'s spread) stay far below overflow no error state is set up and the kernel may run; elsewhere numpy
+        runs under one (``guarded``). A NaN (or negative) ``rho`` bounds nothing: ``rho = inf``, a set not finite.
+        Differs from :meth:`propagate_product`'s set within ``2 gamma_{2n+2} alpha |M||S||M'|`` + the diagonal's
+        allowance (relative to the diagonal ~1e-13 for a well-conditioned ``M`` and ``S``, not in general)."""
         rho = rho if rho >= 0.0 else math.inf
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
@@ -406,8 +407,7 @@ class ErrorEllipsoid:
             self.S, self.tr, self._sym, self._ls = hit[0], hit[1], hit[0], hit
             return
         S, B = self.S, self._qrows
-        s = np.abs(S.diagonal())            # = diag S (S is PSD)
-        np.sqrt(s, out=s)
+        s = np.sqrt(np.abs(S.diagonal()))   # diag S = |diag S| (S is PSD)
         vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
         Z = M.dot(S).dot(M.T)
         zd = Z.diagonal()
