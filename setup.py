@@ -4,7 +4,8 @@ switchobs_ros, with the executables estimator, camera_sim and switchobs.
 The compiled kernel switchobs_core/numerics/_dense_step.c (the rigorous bound's dense step,
 switchobs_core/numerics/dense_kernel.py) is optional: where it does not build (no C compiler) the
 package installs without it and the numpy step runs. Its flags keep every rounding as written: no
-FMA contraction, no -ffast-math, no -march (the same doubles on every x86-64 CPU).
+FMA contraction, no -ffast-math, no -march (the same doubles on every x86-64 CPU). It is x86-64 only
+(GCC's target_clones): elsewhere it does not build and the numpy step runs.
 
 Works both with colcon on a ROS 2 Jazzy system (``colcon build``; setup.cfg puts the
 executables in ``<prefix>/lib/switchobs_ros`` where ``ros2 run`` looks for them) and with

@@ -40,16 +40,30 @@ static int doubles(const Py_buffer *b)
     return b->itemsize == 8 && f != NULL && f[0] == 'd' && f[1] == 0;
 }
 
-static int get(PyObject *o, Py_buffer *b, Py_ssize_t len, int flags)
+/* o as C-ordered doubles of shape (n,) (ndim 1) or (n, n) (ndim 2) */
+static int get(PyObject *o, Py_buffer *b, Py_ssize_t n, int ndim, int flags)
 {
     if (PyObject_GetBuffer(o, b, flags | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return -1;
-    if (!doubles(b) || b->len != len * 8) {
+    if (!doubles(b) || b->ndim != ndim || b->shape[0] != n || (ndim == 2 && b->shape[1] != n)) {
         PyBuffer_Release(b);
-        PyErr_SetString(PyExc_ValueError, "_dense_step: an array of the wrong size or type");
+        PyErr_SetString(PyExc_ValueError, "_dense_step: an array of the wrong shape or type");
         return -1;
     }
     return 0;
+}
+
+/* whether the memory of a written buffer o and of another b do not overlap (the loops take them restrict) */
+static int apart(const Py_buffer *o, const Py_buffer *b)
+{
+    const char *o0 = o->buf, *b0 = b->buf;
+    return o0 + o->len <= b0 || b0 + b->len <= o0;
+}
+
+static int aliased(void)
+{
+    PyErr_SetString(PyExc_ValueError, "_dense_step: an output shares memory with an input");
+    return -1;
 }
 
 /* c_k = sum_j a_j B_jk for k0 <= k < n (B n x n, C-ordered), each summed in the order of j: blocks
@@ -244,20 +258,22 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
     if (PyObject_GetBuffer(args[3], &bX, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;
     n = (bX.len / 8 - 11) / 2;
-    if (!doubles(&bX) || n < 1 || bX.len != (2 * n + 11) * 8) {
+    if (!doubles(&bX) || bX.ndim != 1 || n < 1 || bX.len != (2 * n + 11) * 8) {
         PyBuffer_Release(&bX);
         PyErr_SetString(PyExc_ValueError, "_dense_step: aux of the wrong size");
         return NULL;
     }
     nn = n * n;
-    if (get(args[0], &bM, nn, 0) < 0)
+    if (get(args[0], &bM, n, 2, 0) < 0)
         goto fail_x;
-    if (get(args[1], &bS, nn, 0) < 0)
+    if (get(args[1], &bS, n, 2, 0) < 0)
         goto fail_m;
-    if (get(args[2], &bA, nn, 0) < 0)
+    if (get(args[2], &bA, n, 2, 0) < 0)
         goto fail_s;
-    if (get(args[4], &bO, nn, PyBUF_WRITABLE) < 0)
+    if (get(args[4], &bO, n, 2, PyBUF_WRITABLE) < 0)
         goto fail_a;
+    if (!(apart(&bO, &bM) && apart(&bO, &bS) && apart(&bO, &bA) && apart(&bO, &bX)) && aliased() < 0)
+        goto fail_o;
     if (n > STACK_N) {
         Z = PyMem_Malloc((size_t)(2 * nn + n) * sizeof(double));
         if (Z == NULL) {
@@ -345,19 +361,22 @@ static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
     if (PyObject_GetBuffer(args[2], &bv, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;
     n = bv.len / 8;
-    if (!doubles(&bv) || n < 1) {
+    if (!doubles(&bv) || bv.ndim != 1 || n < 1) {
         PyBuffer_Release(&bv);
         PyErr_SetString(PyExc_ValueError, "_dense_step: va of the wrong size");
         return NULL;
     }
-    if (get(args[0], &bS, n * n, 0) < 0)
+    if (get(args[0], &bS, n, 2, 0) < 0)
         goto fail_v;
-    if (get(args[1], &bA, n * n, 0) < 0)
+    if (get(args[1], &bA, n, 2, 0) < 0)
         goto fail_s;
-    if (get(args[4], &bw, n, PyBUF_WRITABLE) < 0)
+    if (get(args[4], &bw, n, 1, PyBUF_WRITABLE) < 0)
         goto fail_a;
-    if (get(args[5], &bD, n * n, PyBUF_WRITABLE) < 0)
+    if (get(args[5], &bD, n, 2, PyBUF_WRITABLE) < 0)
         goto fail_w;
+    if (!(apart(&bw, &bS) && apart(&bw, &bA) && apart(&bw, &bv) && apart(&bw, &bD) && apart(&bD, &bS)
+          && apart(&bD, &bA) && apart(&bD, &bv)) && aliased() < 0)
+        goto fail_d;
     {
         const double *S = bS.buf, *Sa = bA.buf, *va = bv.buf;
         double *w = bw.buf, *D = bD.buf;
@@ -369,6 +388,7 @@ static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
             fd = sqrt(minus_scaled(n * n, S, Sa, c, D));
     }
     res = Py_BuildValue("(ddd)", c, nw, fd);
+fail_d:
     PyBuffer_Release(&bD);
 fail_w:
     PyBuffer_Release(&bw);
@@ -423,7 +443,7 @@ static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         return NULL;
     }
     scaled = args[1] != Py_None;
-    if (scaled && get(args[1], &bs, bx.len / 8, 0) < 0) {
+    if (scaled && get(args[1], &bs, bx.len / 8, 1, 0) < 0) {
         PyBuffer_Release(&bx);
         return NULL;
     }

@@ -63,12 +63,16 @@ if _dense_step is not None and built_from(_dense_step):
 else:
     STEP = BETWEEN = NORM = None
 
+#: Calls the kernel refused (an array not C-ordered doubles of the right shape, an output sharing memory
+#: with an input) and numpy computed instead, by function: read by benchmarks and tests.
+FALLBACKS = {"step": 0, "between": 0}
+
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "REQUIRE_ENV", "SOURCE", "available", "built_from", "required", "numpy_step",
-           "step", "between"]
+__all__ = ["STEP", "BETWEEN", "NORM", "FALLBACKS", "REQUIRE_ENV", "SOURCE", "available", "built_from", "required",
+           "numpy_step", "step", "between"]
 
 
 def available() -> bool:
@@ -106,6 +110,7 @@ def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: fl
     try:
         tr, ls, alpha, theta = STEP(M, S, aMd, aux, out, rho, c4)
     except (BufferError, ValueError, TypeError):
+        FALLBACKS["step"] += 1
         return None
     return out, tr, ls, alpha, theta
 
@@ -123,6 +128,7 @@ def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     try:
         c, nw, fd = BETWEEN(S, Sa, va, theta_a, w, D)
     except (BufferError, ValueError, TypeError):
+        FALLBACKS["between"] += 1
         return None
     return w, c, nw, fd
 

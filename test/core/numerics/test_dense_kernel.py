@@ -178,8 +178,18 @@ def test_arrays_the_kernel_does_not_take_fall_back_to_numpy():
     assert dense_kernel.step(M, ell.S, absM[2], ell._aux, 1e-6, absM[1]) is None
     ell.step_dense(M, absM, 1e-6)
     np.testing.assert_allclose(ell.S, ref.S, rtol=1e-15, atol=0)
+    before = dense_kernel.FALLBACKS["step"]
     assert dense_kernel.step(M.astype(np.float32), S, absM[2], ell._aux, 1e-6, absM[1]) is None
     assert dense_kernel.step(M, S, absM[2], ell._aux[:-1], 1e-6, absM[1]) is None
+    assert dense_kernel.step(M.ravel(), S, absM[2], ell._aux, 1e-6, absM[1]) is None       # n^2 doubles, 1-D
+    assert dense_kernel.FALLBACKS["step"] == before + 3
+    with pytest.raises(ValueError, match="shares memory"):      # the output over an input
+        dense_kernel.STEP(M, S, absM[2], ell._aux, S, 1e-6, 1.0)
+    w, D = np.empty(7), np.empty((7, 7))
+    with pytest.raises(ValueError, match="shares memory"):
+        dense_kernel.BETWEEN(S, S, D[0], 1.0, w, D)
+    with pytest.raises(ValueError, match="wrong shape"):
+        dense_kernel.BETWEEN(S, S.reshape(49, 1), w, 1.0, np.empty(7), D)
 
 
 @needs_kernel
