@@ -4,7 +4,8 @@ switchobs_ros, with the executables estimator, camera_sim and switchobs.
 The compiled kernel switchobs_core/numerics/_dense_step.c (the rigorous bound's dense step,
 switchobs_core/numerics/dense_kernel.py) is optional: where it does not build (no C compiler) the
 package installs without it and the numpy step runs. Its flags keep every rounding as written: no
-FMA contraction, no -ffast-math, no -march (the same doubles on every x86-64 CPU).
+FMA contraction, no -ffast-math, no -march (the same doubles on every x86-64 CPU). It is x86-64 only
+(GCC's target_clones): elsewhere it does not build and the numpy step runs.
 
 Works both with colcon on a ROS 2 Jazzy system (``colcon build``; setup.cfg puts the
 executables in ``<prefix>/lib/switchobs_ros`` where ``ros2 run`` looks for them) and with
@@ -12,11 +13,21 @@ executables in ``<prefix>/lib/switchobs_ros`` where ``ros2 run`` looks for them)
 then land on the environment's ``bin``). Version pins live in requirements.txt only.
 """
 
+import hashlib
+import os
 from glob import glob
 
 from setuptools import Extension, find_packages, setup
 
 package_name = "switchobs_ros"
+#: The kernel's flags, after the environment's CFLAGS on the command line (so they win): -fno-fast-math
+#: undoes a -ffast-math there (-ffp-contract=off alone does not: it would drop the isfinite tests and
+#: reassociate sums); _dense_step.c refuses to compile under __FAST_MATH__ / __FINITE_MATH_ONLY__.
+KERNEL_FLAGS = ["-O2", "-fno-fast-math", "-ffp-contract=off", "-Wno-psabi"]
+KERNEL_SOURCE = "switchobs_core/numerics/_dense_step.c"
+#: The module carries the SHA-256 of the source it was built from (dense_kernel refuses another's).
+with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), KERNEL_SOURCE), "rb") as _f:
+    KERNEL_SHA256 = hashlib.sha256(_f.read()).hexdigest()
 
 setup(
     name=package_name,
@@ -30,8 +41,8 @@ setup(
          + sorted(glob("config/*.xml"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
-    ext_modules=[Extension("switchobs_core.numerics._dense_step", ["switchobs_core/numerics/_dense_step.c"],
-                           extra_compile_args=["-O2", "-ffp-contract=off", "-Wno-psabi"], optional=True)],
+    ext_modules=[Extension("switchobs_core.numerics._dense_step", [KERNEL_SOURCE], extra_compile_args=KERNEL_FLAGS,
+                           define_macros=[("SOURCE_SHA256", f'"{KERNEL_SHA256}"')], optional=True)],
     # Unpinned: colcon on a ROS system resolves these through package.xml / rosdep; in a venv
     # scripts/bootstrap.sh installs the pinned set from requirements.txt first.
     install_requires=["setuptools", "numpy", "scipy", "cvxpy", "PyYAML", "threadpoolctl", "tqdm"],

@@ -29,16 +29,17 @@ msgs_want="$( (echo "$want"; cd "$REPO/interfaces/switchobs_msgs" \
 py_ok() { [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && [ -x "$VENV/bin/estimator" ]; }
 msgs_ok() { [ -f "$msgs_stamp" ] && [ "$(cat "$msgs_stamp")" = "$msgs_want" ]; }
 # The optional compiled kernel (switchobs_core/numerics/_dense_step.c, setup.py) built into the checkout,
-# where tests, the demo and the node import it; again when its source is newer. Without a C compiler
-# the numpy step runs: a line says so, nothing fails (scripts/test.sh asks for it: a test fails).
+# where tests, the demo and the node import it; built again (--force) unless the module imported is the
+# one built from the source there (its SHA-256: python -m switchobs_core.numerics.dense_kernel), not by
+# file times. Without a C compiler (or off x86-64) the numpy step runs: a line says so and where the
+# compiler's messages are, nothing fails (scripts/test.sh asks for it: a test fails).
 build_kernel() {
-    local so
-    so="$(ls "$REPO"/switchobs_core/numerics/_dense_step*.so 2>/dev/null | head -n 1 || true)"
-    if [ -z "$so" ] || [ "$REPO/switchobs_core/numerics/_dense_step.c" -nt "$so" ]; then
-        (cd "$REPO" && "$VENV/bin/python" setup.py -q build_ext --inplace >/dev/null 2>&1) || true
-        ls "$REPO"/switchobs_core/numerics/_dense_step*.so >/dev/null 2>&1 \
-            || echo "bootstrap: the compiled kernel did not build (no C compiler?): the numpy step runs"
-    fi
+    local log="$REPO/build/kernel-build.log"
+    (cd "$REPO" && "$VENV/bin/python" -W ignore -m switchobs_core.numerics.dense_kernel) && return 0
+    mkdir -p "$REPO/build"
+    (cd "$REPO" && "$VENV/bin/python" setup.py build_ext --inplace --force >"$log" 2>&1) || true
+    (cd "$REPO" && "$VENV/bin/python" -W ignore -m switchobs_core.numerics.dense_kernel) \
+        || echo "bootstrap: the compiled kernel did not build (its log: $log): the numpy step runs"
 }
 if py_ok && msgs_ok \
         && "$VENV/bin/python" -c "import rclpy, cvxpy, switchobs_ros, switchobs_msgs.msg" 2>/dev/null; then

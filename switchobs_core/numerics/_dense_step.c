@@ -5,11 +5,14 @@
  * balanced norm of a vector (norm(), RoundingBound.xn); and a Kalman sample's estimate through a
  * fused map (correct(), KalmanMap.correct).
  *
- * step(M, S, aMd, aux, out, rho, mn) -> (tr, ls)
+ * step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
- *   aux: 2 n + 6 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf) of the ellipsoid;
- *   rho, mn: the step's residual and ||M||_inf;
- *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled).
+ *   aux: 2 n + 11 doubles, (1 / d^2, d^2, kW, kR, gsum, k1, k3, kf, alo, ahi, kth, k2, eta) of the ellipsoid:
+ *   every coefficient of the error analysis (a's clamp [alo, ahi], theta's factor kth, c2's k2 and eta)
+ *   comes from Python (ErrorEllipsoid._aux), none is written here;
+ *   rho, c4: the step's residual and the diagonal's underflow allowance;
+ *   tr: the trace of out rounded up, ls: its balanced trace rounded up (ErrorEllipsoid.lam_scaled);
+ *   alpha, theta: the outer sum's factors (the caller's overflow guard reads them).
  *
  * Arithmetic: every product and sum is a rounded double operation in a fixed order (no FMA
  * contraction, no reassociation: build with -O2 -ffp-contract=off), so every x86-64 CPU gives the
@@ -18,12 +21,13 @@
  * order, within gamma_n |a|.|b| as any order; Z is computed on and above its diagonal and mirrored, so
  * it is exactly symmetric (the allowance for the symmetrisation's rounding stays, unused).
  */
+#if defined(__FAST_MATH__) || (defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__)
+#error "_dense_step.c needs IEEE arithmetic (no -ffast-math / -ffinite-math-only): setup.py's KERNEL_FLAGS"
+#endif
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
 
-#define U 1.1102230246251565e-16        /* 2^-53 */
-#define UNDERFLOW 4.9406564584124654e-324 /* 2^-1074 */
 #define STACK_N 40
 
 static double pymax(double a, double b) { return b > a ? b : a; }  /* Python's max(a, b) */
@@ -37,7 +41,22 @@ static int doubles(const Py_buffer *b)
     return b->itemsize == 8 && f != NULL && f[0] == 'd' && f[1] == 0;
 }
 
-static int get(PyObject *o, Py_buffer *b, Py_ssize_t len, int flags)
+/* o as C-ordered doubles of shape (n,) (ndim 1) or (n, n) (ndim 2) */
+static int get(PyObject *o, Py_buffer *b, Py_ssize_t n, int ndim, int flags)
+{
+    if (PyObject_GetBuffer(o, b, flags | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return -1;
+    if (!doubles(b) || b->ndim != ndim || b->shape[0] != n || (ndim == 2 && b->shape[1] != n)) {
+        PyBuffer_Release(b);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: an array of the wrong shape or type");
+        return -1;
+    }
+    return 0;
+}
+
+/* getlen: a C-ordered buffer of exactly len doubles, whatever its shape (correct's and absrows' arrays,
+ * whose sizes the caller states), else ValueError. */
+static int getlen(PyObject *o, Py_buffer *b, Py_ssize_t len, int flags)
 {
     if (PyObject_GetBuffer(o, b, flags | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return -1;
@@ -47,6 +66,19 @@ static int get(PyObject *o, Py_buffer *b, Py_ssize_t len, int flags)
         return -1;
     }
     return 0;
+}
+
+/* whether the memory of a written buffer o and of another b do not overlap (the loops take them restrict) */
+static int apart(const Py_buffer *o, const Py_buffer *b)
+{
+    const char *o0 = o->buf, *b0 = b->buf;
+    return o0 + o->len <= b0 || b0 + b->len <= o0;
+}
+
+static int aliased(void)
+{
+    PyErr_SetString(PyExc_ValueError, "_dense_step: an output shares memory with an input");
+    return -1;
 }
 
 /* c_k = sum_j a_j B_jk for k0 <= k < n (B n x n, C-ordered), each summed in the order of j: blocks
@@ -157,14 +189,18 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
                      const double *restrict aMd,
                      const double *restrict aux, double *restrict out, double *restrict Z,
                      double *restrict Mt, double *restrict s, double rho,
-                     double mn, double *lsum)
+                     double c4, double *lsum, double *fac)
 {
     const double *id2 = aux, *d2 = aux + n;
     const double kW = aux[2 * n], kR = aux[2 * n + 1], gsum = aux[2 * n + 2];
     const double k1 = aux[2 * n + 3], k3 = aux[2 * n + 4], kf = aux[2 * n + 5];
+    const double alo = aux[2 * n + 6], ahi = aux[2 * n + 7], kth = aux[2 * n + 8], k2 = aux[2 * n + 9];
+    const double eta = aux[2 * n + 10];
     Py_ssize_t i, j, k;
     double Wv = 0.0, tzs = 0.0;
 
+    if (!(rho >= 0.0))                  /* NaN (or negative): no residual bound, a set not finite */
+        rho = INFINITY;
     for (i = 0; i < n; i++)
         s[i] = sqrt(fabs(S[i * n + i]));
     /* out <- T = M S; Z = T M' on and above the diagonal (M' in Mt), each entry summed in the order
@@ -188,12 +224,13 @@ static double kernel(Py_ssize_t n, const double *restrict M, const double *restr
     double tz = pymax(tzs + kR * Wz * Wv, 0.0) * gsum;
     double alpha = 1.0, theta = 1.0;
     if (tz > 0.0 && rho > 0.0) {
-        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), 0x1p-40), 1e150);
-        theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * U);
+        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), alo), ahi);
+        theta = (1.0 + 1.0 / (alpha - 1.0)) * kth;
     }
-    double c2 = rho > 0.0 ? ((theta * rho) * rho * (1.0 + 2.0 * U) + UNDERFLOW) * kf : 0.0;
+    fac[0] = alpha;
+    fac[1] = theta;
+    double c2 = rho > 0.0 ? ((theta * rho) * rho * k2 + eta) * kf : 0.0;
     double c1 = alpha * Wz * k1, c3 = alpha * k3;
-    double c4 = (double)((n + 4) * n) * UNDERFLOW * (2.0 + mn) * kf;
     /* q = c1 w d + c2 d^2 + c3 |diag Z| + c4 into s (read no more) */
     for (i = 0; i < n; i++)
         s[i] = c1 * out[i] + c2 * d2[i] + c3 * fabs(Z[i * n + i]) + c4;
@@ -220,34 +257,38 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
 {
     Py_buffer bM, bS, bA, bX, bO;
     double stack_z[2 * STACK_N * STACK_N + STACK_N];
-    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, mn, tr, ls;
+    double *Z = stack_z, *Mt = Z + STACK_N * STACK_N, *s = Mt + STACK_N * STACK_N, rho, c4, tr, ls, fac[2];
     Py_ssize_t n, nn;
 
     if (nargs != 7) {
-        PyErr_SetString(PyExc_TypeError, "step(M, S, aMd, aux, out, rho, mn)");
+        PyErr_SetString(PyExc_TypeError, "step(M, S, aMd, aux, out, rho, c4)");
         return NULL;
     }
     rho = PyFloat_AsDouble(args[5]);
-    mn = PyFloat_AsDouble(args[6]);
-    if ((rho == -1.0 || mn == -1.0) && PyErr_Occurred())
+    if (rho == -1.0 && PyErr_Occurred())    /* before the next conversion runs Python code */
+        return NULL;
+    c4 = PyFloat_AsDouble(args[6]);
+    if (c4 == -1.0 && PyErr_Occurred())
         return NULL;
     if (PyObject_GetBuffer(args[3], &bX, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;
-    n = (bX.len / 8 - 6) / 2;
-    if (!doubles(&bX) || n < 1 || bX.len != (2 * n + 6) * 8) {
+    n = (bX.len / 8 - 11) / 2;
+    if (!doubles(&bX) || bX.ndim != 1 || n < 1 || bX.len != (2 * n + 11) * 8) {
         PyBuffer_Release(&bX);
         PyErr_SetString(PyExc_ValueError, "_dense_step: aux of the wrong size");
         return NULL;
     }
     nn = n * n;
-    if (get(args[0], &bM, nn, 0) < 0)
+    if (get(args[0], &bM, n, 2, 0) < 0)
         goto fail_x;
-    if (get(args[1], &bS, nn, 0) < 0)
+    if (get(args[1], &bS, n, 2, 0) < 0)
         goto fail_m;
-    if (get(args[2], &bA, nn, 0) < 0)
+    if (get(args[2], &bA, n, 2, 0) < 0)
         goto fail_s;
-    if (get(args[4], &bO, nn, PyBUF_WRITABLE) < 0)
+    if (get(args[4], &bO, n, 2, PyBUF_WRITABLE) < 0)
         goto fail_a;
+    if (!(apart(&bO, &bM) && apart(&bO, &bS) && apart(&bO, &bA) && apart(&bO, &bX)) && aliased() < 0)
+        goto fail_o;
     if (n > STACK_N) {
         Z = PyMem_Malloc((size_t)(2 * nn + n) * sizeof(double));
         if (Z == NULL) {
@@ -257,7 +298,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         Mt = Z + nn;
         s = Mt + nn;
     }
-    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, mn, &ls);
+    tr = kernel(n, bM.buf, bS.buf, bA.buf, bX.buf, bO.buf, Z, Mt, s, rho, c4, &ls, fac);
     if (n > STACK_N)
         PyMem_Free(Z);
     PyBuffer_Release(&bO);
@@ -265,7 +306,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
     PyBuffer_Release(&bS);
     PyBuffer_Release(&bM);
     PyBuffer_Release(&bX);
-    return Py_BuildValue("(dd)", tr, ls);
+    return Py_BuildValue("(dddd)", tr, ls, fac[0], fac[1]);
 fail_o:
     PyBuffer_Release(&bO);
 fail_a:
@@ -335,19 +376,22 @@ static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
     if (PyObject_GetBuffer(args[2], &bv, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return NULL;
     n = bv.len / 8;
-    if (!doubles(&bv) || n < 1) {
+    if (!doubles(&bv) || bv.ndim != 1 || n < 1) {
         PyBuffer_Release(&bv);
         PyErr_SetString(PyExc_ValueError, "_dense_step: va of the wrong size");
         return NULL;
     }
-    if (get(args[0], &bS, n * n, 0) < 0)
+    if (get(args[0], &bS, n, 2, 0) < 0)
         goto fail_v;
-    if (get(args[1], &bA, n * n, 0) < 0)
+    if (get(args[1], &bA, n, 2, 0) < 0)
         goto fail_s;
-    if (get(args[4], &bw, n, PyBUF_WRITABLE) < 0)
+    if (get(args[4], &bw, n, 1, PyBUF_WRITABLE) < 0)
         goto fail_a;
-    if (get(args[5], &bD, n * n, PyBUF_WRITABLE) < 0)
+    if (get(args[5], &bD, n, 2, PyBUF_WRITABLE) < 0)
         goto fail_w;
+    if (!(apart(&bw, &bS) && apart(&bw, &bA) && apart(&bw, &bv) && apart(&bw, &bD) && apart(&bD, &bS)
+          && apart(&bD, &bA) && apart(&bD, &bv)) && aliased() < 0)
+        goto fail_d;
     {
         const double *S = bS.buf, *Sa = bA.buf, *va = bv.buf;
         double *w = bw.buf, *D = bD.buf;
@@ -359,6 +403,7 @@ static PyObject *between(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
             fd = sqrt(minus_scaled(n * n, S, Sa, c, D));
     }
     res = Py_BuildValue("(ddd)", c, nw, fd);
+fail_d:
     PyBuffer_Release(&bD);
 fail_w:
     PyBuffer_Release(&bw);
@@ -413,7 +458,7 @@ static PyObject *norm(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize
         return NULL;
     }
     scaled = args[1] != Py_None;
-    if (scaled && get(args[1], &bs, bx.len / 8, 0) < 0) {
+    if (scaled && get(args[1], &bs, bx.len / 8, 1, 0) < 0) {
         PyBuffer_Release(&bx);
         return NULL;
     }
@@ -452,7 +497,7 @@ static PyObject *correct(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
         const Py_ssize_t lens[6] = {n * n, p * n, n * p, n, p, n};
         const int idx[6] = {0, 1, 2, 5, 6, 7};
         for (i = 0; i < 6; i++) {
-            if (get(args[idx[i]], &b[2 + i], lens[i], i >= 3 ? PyBUF_WRITABLE : 0) < 0)
+            if (getlen(args[idx[i]], &b[2 + i], lens[i], i >= 3 ? PyBUF_WRITABLE : 0) < 0)
                 goto fail;
             got = 3 + i;
         }
@@ -496,7 +541,7 @@ static PyObject *absrows(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
             PyErr_SetString(PyExc_ValueError, "_dense_step: n < 1");
         return NULL;
     }
-    if (get(args[0], &bD, n * n, 0) < 0)
+    if (getlen(args[0], &bD, n * n, 0) < 0)
         return NULL;
     {
         const double *D = bD.buf;
@@ -520,7 +565,7 @@ static PyMethodDef methods[] = {
     {"correct", (PyCFunction)(void (*)(void))correct, METH_FASTCALL,
      "correct(Phi, H, K, x0, y, xm, nu, xp): xm = Phi x0, nu = y - H xm, xp = xm + K nu (fixed-order sums)"},
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
-     "step(M, S, aMd, aux, out, rho, mn) -> (tr, ls): ErrorEllipsoid.step_dense's set into out"},
+     "step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta): ErrorEllipsoid.step_dense's set into out"},
     {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
      "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,
@@ -532,4 +577,16 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_dense_step",
                                     "ErrorEllipsoid.step_dense in one call (optional)", -1, methods,
                                     NULL, NULL, NULL, NULL};
 
-PyMODINIT_FUNC PyInit__dense_step(void) { return PyModule_Create(&module); }
+#ifndef SOURCE_SHA256
+#define SOURCE_SHA256 "" /* setup.py passes the SHA-256 of this file: dense_kernel compares it with the file */
+#endif
+
+PyMODINIT_FUNC PyInit__dense_step(void)
+{
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddStringConstant(m, "SOURCE_SHA256", SOURCE_SHA256) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -5,11 +5,17 @@ lanes, as a numpy dot's in another) and of a Kalman sample's estimate through a 
 ``_dense_step.c``, built by
 ``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
 numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
-C-ordered doubles), it runs instead.
+C-ordered doubles), it runs instead. The module carries the SHA-256 of the source it was built from
+(``SOURCE_SHA256``, from ``setup.py``); where ``_dense_step.c`` lies beside this file (a checkout) a
+module built from another source is refused with a warning (the numpy step runs):
+``python -m switchobs_core.numerics.dense_kernel`` exits 1 then (``bootstrap.sh`` rebuilds). The
+kernel is x86-64 only (``target_clones``); elsewhere it does not build and the numpy step runs.
 
 The kernel computes the set of ``step_dense``'s docstring with the coefficients the ellipsoid
-computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2`` and the factors ``kW, kR, gsum, k1,
-k3, kf``), in one call instead of 17 array operations and the scalar arithmetic between them:
+computed (:attr:`ErrorEllipsoid._aux`: ``1 / d^2``, ``d^2``, the factors ``kW, kR, gsum, k1, k3, kf``,
+``a``'s clamp, ``theta``'s and ``c_2``'s factors and ``eta``; ``c_4`` as an argument): every coefficient
+of the error analysis has its one owner in :mod:`~switchobs_core.numerics.rounding`), in one call instead
+of 17 array operations and the scalar arithmetic between them:
 ``T = M S`` and ``Z = T M'`` with each entry a dot product summed in index order (within
 ``gamma_n |a|.|b|`` as any order, the bound the allowance ``gamma_{2n+2}`` is built on), ``Z``
 on and above its diagonal and mirrored (exactly symmetric), ``w d = (D |M|) s``, and the diagonal
@@ -20,25 +26,55 @@ allowance and trace in the same operations as the numpy step. It is compiled wit
 
 from __future__ import annotations
 
+import hashlib
 import os
+import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
+#: The kernel's source beside this module (absent from an installed package: the module as built).
+SOURCE = Path(__file__).with_name("_dense_step.c")
+
+
+def built_from(module: ModuleType, source: Path = SOURCE) -> bool:
+    """Whether ``module`` was built from ``source`` (its ``SOURCE_SHA256`` is the file's), or ``source``
+    is absent; else False with a warning: a stale build (an older source, or another kernel's)."""
+    try:
+        digest = hashlib.sha256(source.read_bytes()).hexdigest()
+    except OSError:
+        return True
+    if getattr(module, "SOURCE_SHA256", None) == digest:
+        return True
+    warnings.warn(f"{getattr(module, '__file__', module)} was not built from {source} (a stale build): the "
+                  "numpy step runs; rebuild it (scripts/bootstrap.sh)", RuntimeWarning, stacklevel=2)
+    return False
+
+
 try:
-    from ._dense_step import absrows as ABSROWS
-    from ._dense_step import between as BETWEEN
-    from ._dense_step import correct as CORRECT
-    from ._dense_step import norm as NORM
-    from ._dense_step import step as STEP
-except ImportError:     # no compiler where the package was built: the numpy step
+    from . import _dense_step
+except ImportError:     # not built (no compiler, not x86-64), or built for another Python: the numpy step
+    _dense_step = None
+if _dense_step is not None and built_from(_dense_step):
+    STEP, BETWEEN, NORM = _dense_step.step, _dense_step.between, _dense_step.norm
+    CORRECT, ABSROWS = _dense_step.correct, _dense_step.absrows
+else:
     STEP = BETWEEN = NORM = CORRECT = ABSROWS = None
+
+#: Calls the kernel refused (an array not C-ordered doubles of the right shape, an output sharing memory
+#: with an input) and numpy computed instead, by function: read by benchmarks and tests.
+FALLBACKS = {"step": 0, "between": 0, "correct": 0}
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "REQUIRE_ENV", "available", "required", "step", "between",
-           "correct"]
+__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "FALLBACKS", "REQUIRE_ENV", "SOURCE", "available",
+           "built_from", "required", "numpy_step", "step", "between", "correct"]
 
 
 def available() -> bool:
@@ -51,20 +87,34 @@ def required() -> bool:
     return os.environ.get(REQUIRE_ENV, "") not in ("", "0")
 
 
+@contextmanager
+def numpy_step() -> Iterator[None]:
+    """``step_dense`` in numpy within the block (the kernel set aside): the reference path, for tests
+    and benchmarks where the kernel is built."""
+    global STEP
+    kept, STEP = STEP, None
+    try:
+        yield
+    finally:
+        STEP = kept
+
+
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
-         mn: float) -> tuple[np.ndarray, float, float] | None:
-    """``(S', tr, ls)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace and ``ls``
-    its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded up), or
+         c4: float) -> tuple[np.ndarray, float, float, float, float] | None:
+    """``(S', tr, ls, alpha, theta)`` of ``step_dense`` by the kernel (``S'`` a new array, ``tr`` its trace
+    and ``ls`` its balanced trace ``ErrorEllipsoid.lam_scaled``, each summed in index order and rounded
+    up; ``alpha, theta`` the outer sum's factors, for the caller's overflow guard), or
     None where it does not apply (no kernel, an array not C-ordered doubles of the right size): the
     caller steps in numpy."""
     if STEP is None:
         return None
     out = np.empty(S.shape)
     try:
-        tr, ls = STEP(M, S, aMd, aux, out, rho, mn)
+        tr, ls, alpha, theta = STEP(M, S, aMd, aux, out, rho, c4)
     except (BufferError, ValueError, TypeError):
+        FALLBACKS["step"] += 1
         return None
-    return out, tr, ls
+    return out, tr, ls, alpha, theta
 
 
 def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
@@ -80,6 +130,7 @@ def between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     try:
         c, nw, fd = BETWEEN(S, Sa, va, theta_a, w, D)
     except (BufferError, ValueError, TypeError):
+        FALLBACKS["between"] += 1
         return None
     return w, c, nw, fd
 
@@ -96,5 +147,10 @@ def correct(Phi: np.ndarray, H: np.ndarray, K: np.ndarray, x0: np.ndarray,
     try:
         CORRECT(Phi, H, K, x0, y, xm, nu, xp)
     except (BufferError, ValueError, TypeError):
+        FALLBACKS["correct"] += 1
         return None
     return xm, nu, xp
+
+
+if __name__ == "__main__":      # exit 0 where the kernel is built from the source beside it (bootstrap.sh)
+    sys.exit(0 if available() else 1)

@@ -121,6 +121,8 @@ _U = UNIT_ROUNDOFF
 #: The smallest subnormal double, ``2^-1074``: the absolute error of an underflowing product is at
 #: most half of it (module docstring, step 8).
 UNDERFLOW = 2.0**-1074
+#: :func:`_clamp`'s range; step_dense's factors of ``theta`` and of ``c_2`` (the kernel's too, by ``_aux``)
+_ALO, _AHI, _KTH, _K2 = 2.0**-40, 1e150, 1.0 + 4.0 * _U, 1.0 + 2.0 * _U
 
 
 def gamma(m: int) -> float:
@@ -138,7 +140,7 @@ def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
 def _clamp(a: float) -> float:
     """A coefficient of an outer sum kept in ``[2^-40, 1e150]`` (any ``a > 0`` is valid; from
     ``2^-40`` on, ``fl(1 + a) - 1`` is exact and positive)."""
-    return min(max(a, 2.0**-40), 1e150)
+    return min(max(a, _ALO), _AHI)
 
 
 class ErrorEllipsoid:
@@ -173,15 +175,15 @@ class ErrorEllipsoid:
         self._ls: tuple = (None,)   # (S, tr, lam_scaled(S)) of the kernel's last step
         self._scratch: np.ndarray | None = None     # scratch(): the transpose and tb Q of _apply
         self._qrows = np.stack((self._ones, self._d2, self._ones, self._ones))  # step_dense's q: w d, d^2, |diag Z|, 1
-        # step_dense's constant factors (its docstring): W = Wv kW; R_z = kR W (v d); q's coefficients
+        # step_dense's constant factors (its docstring): W = Wv kW; R_z = kR W (v d); q's coefficients; aux
         kw, cz = self._gsum * (1.0 + 2.0 * _U), self._cz
         self._kf = (1.0 + 8.0 * _U) * (1.0 + 16.0 * _U)
         self._kW = kw * self._gsum * (1.0 + 4.0 * _U)
         self._kR = cz * (1.0 + 4.0 * _U) * kw
         self._k1 = (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * kw * self._kf
         self._k3 = 2.0 * _U * self._kf
-        self._aux = np.concatenate((self._id2, self._d2,       # the kernel's coefficients (dense_kernel)
-                                    (self._kW, self._kR, self._gsum, self._k1, self._k3, self._kf)))
+        self._aux = np.concatenate((self._id2, self._d2, (self._kW, self._kR, self._gsum, self._k1, self._k3,
+                                                          self._kf, _ALO, _AHI, _KTH, _K2, UNDERFLOW)))
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -229,10 +231,9 @@ class ErrorEllipsoid:
 
     def scratch(self) -> np.ndarray:
         """A C-ordered n x n array free between steps (:meth:`_apply`'s, in cache after a step): a temporary."""
-        T = self._scratch
-        if T is None:
-            T = self._scratch = np.empty((self.n, self.n))
-        return T
+        if self._scratch is None:
+            self._scratch = np.empty((self.n, self.n))
+        return self._scratch
 
     def keep_product(self, key: object, Z: np.ndarray) -> None:
         """Keep ``Z``, a product of the current ``S`` through the map ``key`` (the open-loop step's
@@ -390,39 +391,38 @@ class ErrorEllipsoid:
         exact); ``w``'s scalar factors fold into the coefficients of ``q = c_1 w d + c_2 d^2 + c_3 |diag Z| + c_4``,
         each rounded up by ``(1 + 16 u)`` more (the fold, the sum of four nonnegative terms); ``(Z + Z') alpha / 2``
         is ``alpha sym Z``; the trace only chooses ``a`` (any ``a > 0`` is valid): from ``diag Z`` and ``w``;
-        :attr:`tr` is the new diagonal's sum rounded up. Where ``||M||_inf^2 trace S alpha`` and ``theta rho^2``
-        (times ``D``'s spread) stay far below overflow no error state is set up; elsewhere the step runs again
-        under one (``guarded``). Within 1e-13 of :meth:`propagate_product`'s set, relative to the diagonal."""
-        hit = dense_kernel.step(M, self.S, absM[2] if len(absM) > 2 else absM[0] * self.d[:, None], self._aux,
-                                rho, absM[1]) if dense_kernel.STEP is not None else None
-        if hit is not None:
-            self.S, self.tr, self.symmetric, self._ls = hit[0], hit[1], hit[0], hit
-            return
+        :attr:`tr` is the new diagonal's sum rounded up. Where ``||M||_inf^2 trace S alpha``, ``theta rho^2`` (times
+        ``D``'s spread) stay far below overflow no error state is set up and the kernel may run; elsewhere numpy
+        runs under one (``guarded``). A NaN (or negative) ``rho`` bounds nothing: ``rho = inf``, a set not finite.
+        Differs from :meth:`propagate_product`'s set within ``2 gamma_{2n+2} alpha |M||S||M'|`` + the diagonal's
+        allowance (relative to the diagonal ~1e-13 for a well-conditioned ``M`` and ``S``, not in general)."""
+        rho = rho if rho >= 0.0 else math.inf
         if not guarded and not (absM[1] * absM[1] * self.tr * self._dr < 1e250 and rho < 1e120):
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
+        aMd = absM[2] if len(absM) > 2 else absM[0] * self.d[:, None]
+        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + absM[1]) * self._kf
+        hit = None if guarded or dense_kernel.STEP is None else dense_kernel.step(M, self.S, aMd, self._aux, rho, c4)
+        if hit is not None and hit[3] < 1e20 and hit[4] * (rho * rho) * self._dr < 1e250:   # the guards below
+            self.S, self.tr, self.symmetric, self._ls = hit[0], hit[1], hit[0], hit
+            return
         S, B = self.S, self._qrows
-        aM, mn = absM[0], absM[1]
-        aMd = absM[2] if len(absM) > 2 else aM * self.d[:, None]
-        c4 = (self.n + 4) * self.n * UNDERFLOW * (2.0 + mn) * self._kf
-        s = np.abs(S.diagonal())            # = diag S (S is PSD)
-        np.sqrt(s, out=s)
+        s = np.sqrt(np.abs(S.diagonal()))   # diag S = |diag S| (S is PSD)
         vd = np.dot(aMd, s, out=B[0])       # w d = vd gsum (1 + 2 u)  (image_bound)
         Z = M.dot(S).dot(M.T)
         zd = Z.diagonal()
         Wv = float(vd.dot(self._id2))
         Wz = Wv * self._kW                  # W of step 6, rounded up
         tz = max(float(zd.dot(self._id2)) + self._kR * Wz * Wv, 0.0) * self._gsum     # trace_D (Z + R_z)
-        rho2 = rho * rho
         alpha, theta = 1.0, 1.0
         if tz > 0.0 and rho > 0.0:
             alpha = 1.0 + _clamp(rho / math.sqrt(tz))
-            theta = (1.0 + 1.0 / (alpha - 1.0)) * (1.0 + 4.0 * _U)
-        if not guarded and not (alpha < 1e20 and theta * rho2 * self._dr < 1e250):
+            theta = (1.0 + 1.0 / (alpha - 1.0)) * _KTH
+        if not guarded and not (alpha < 1e20 and theta * (rho * rho) * self._dr < 1e250):     # (the kernel's too)
             with np.errstate(over="ignore", invalid="ignore"):
                 return self.step_dense(M, absM, rho, True)
         np.abs(zd, out=B[2])
-        c2 = ((theta * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * self._kf if rho > 0.0 else 0.0
+        c2 = ((theta * rho) * rho * _K2 + UNDERFLOW) * self._kf if rho > 0.0 else 0.0
         q = np.array((alpha * Wz * self._k1, c2, alpha * self._k3, c4)).dot(B)
         # the n x n pass: S' = (Z + Z') (alpha / 2) + diag(q), tr its trace rounded up
         S = Z + Z.T                 # exactly symmetric

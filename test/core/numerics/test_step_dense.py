@@ -1,46 +1,52 @@
 """The exact set's step through a dense map in few array operations
 (:meth:`switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`) against the general one
-(``propagate_product`` of ``M S M'`` with ``image_bound(|M|)``): the same set within a few ``u`` of
-each entry (hypothesis over sizes, units, scales and residuals), exactly symmetric, containing the
-exact product (extended precision); and an observer with a Kalman table publishes the same exact
+(``propagate_product`` of ``M S M'`` with ``image_bound(|M|)``), on both of its paths (the compiled
+kernel, numpy): the same set up to the rounding of ``M S M'`` and the allowances (entrywise within
+``2 gamma_{2n+2} |M| |S| |M'|`` plus the diagonal allowance; about 1e-13 of the diagonal for a map near a
+contraction and ``S`` of full rank, hypothesis over sizes, units, scales and residuals, not in general:
+a rank-one ``S`` through a Gaussian map), exactly symmetric, containing the exact product (extended
+precision); overflow and NaN withdraw the set; and an observer with a Kalman table publishes the same exact
 and noise bounds with it as with the general path (within 1e-12 relative)."""
 
 from __future__ import annotations
 
 import math
+from contextlib import nullcontext
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from _dense_cases import allowance_ratio, pair
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import switchobs_core as so
 from switchobs_core.bounds.kalman_map import KalmanMap
+from switchobs_core.bounds.rigorous import RoundingBound
+from switchobs_core.numerics import dense_kernel
 from switchobs_core.numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid
 
 LD = np.longdouble
 #: Entrywise tolerance of the fast set against the general one, relative to ``sqrt(S_ii S_jj)`` of the
-#: general set: the two round the same quantities in another order (a few ``u`` each) and fold the
-#: allowance's factors into its coefficients (``(1 + 16 u)``); 1e-13 is about 450 ``u``.
+#: general set, for :func:`pair`'s well-conditioned cases: the two round the same quantities in another
+#: order and fold the allowance's factors into its coefficients (``(1 + 16 u)``); 1e-13 is about 450 ``u``.
+#: In general the bound is the allowance (:func:`allowance_ratio`, the rank-one test below).
 RTOL = 1e-13
+#: ``step_dense``'s two paths: the compiled kernel (where built) and numpy (the kernel set aside).
+PATHS = [pytest.param(True, id="kernel", marks=pytest.mark.skipif(not dense_kernel.available(),
+                                                                 reason="the compiled kernel is not built")),
+         pytest.param(False, id="numpy")]
 
 
-def _pair(seed: int, n: int, units: bool, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(M, S, d)``: a map near a contraction, a PSD exactly symmetric ``S``, a balancing or None."""
-    rng = np.random.default_rng(seed)
-    M = 0.9 * np.eye(n) + 0.3 * rng.standard_normal((n, n)) / math.sqrt(n)
-    X = rng.standard_normal((n, n))
-    S = scale * (X @ X.T / n + 1e-3 * np.eye(n))
-    S = 0.5 * (S + S.T)
-    d = np.ldexp(1.0, rng.integers(-12, 12, n)) if units else None
-    return M, S, d
+def _path(kernel: bool):
+    return nullcontext() if kernel else dense_kernel.numpy_step()
 
 
-@settings(max_examples=80, deadline=None)
+@pytest.mark.parametrize("kernel", PATHS)
+@settings(max_examples=50, deadline=None)
 @given(seed=st.integers(0, 2**31), n=st.integers(1, 30), rho=st.sampled_from([0.0, 1e-300, 1e-16, 1e-9, 1e-3, 10.0]),
        units=st.booleans(), scale=st.floats(1e-30, 1e30))
-def test_fast_step_is_the_general_set(seed, n, rho, units, scale):
-    M, S, d = _pair(seed, n, units, scale)
+def test_fast_step_is_the_general_set(kernel, seed, n, rho, units, scale):
+    M, S, d = pair(seed, n, units, scale)
     aM = np.abs(M)
     absM = (aM, float(aM.sum(axis=1).max()))
     general, fast = ErrorEllipsoid(n, 1.0, d), ErrorEllipsoid(n, 1.0, d)
@@ -48,7 +54,8 @@ def test_fast_step_is_the_general_set(seed, n, rho, units, scale):
     fast.S, fast.tr = S.copy(), general.tr
     general.S, general.tr = general.propagate_product(M @ S @ M.T, general.image_bound(aM), general.c_dense, rho,
                                                       absM[1])
-    fast.step_dense(M, absM, rho)
+    with _path(kernel):
+        fast.step_dense(M, absM, rho)
     G, F = general.S, fast.S
     np.testing.assert_array_equal(F, F.T)                   # exactly symmetric
     r = np.sqrt(np.outer(np.diagonal(G), np.diagonal(G)))
@@ -61,17 +68,42 @@ def test_fast_step_is_the_general_set(seed, n, rho, units, scale):
     assert general_read <= fast.bound() <= general_read * (1.0 + n * n * UNIT_ROUNDOFF)
 
 
+@pytest.mark.parametrize("kernel", PATHS)
 @settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(1, 64), scale=st.floats(1e-20, 1e20))
+@example(seed=3, n=39, scale=1.0)
+@example(seed=0, n=64, scale=1.0)
+def test_fast_step_differs_from_the_general_set_within_the_allowance(kernel, seed, n, scale):
+    """A rank-one ``S`` through a Gaussian map (cancellation in ``M S M'``): relative to the diagonal the
+    two sets differ by far more than 1e-13 (6e-13 at n = 39, 9e-11 at n = 64), but within the rounding
+    of ``Z`` and the diagonal allowances (``rho = 0``, ``alpha = 1``)."""
+    rng = np.random.default_rng(seed)
+    v = scale * rng.standard_normal(n)
+    S, M = np.outer(v, v), rng.standard_normal((n, n))
+    aM = np.abs(M)
+    absM = (aM, float(aM.sum(axis=1).max()))
+    general, fast = ErrorEllipsoid(n, 1.0), ErrorEllipsoid(n, 1.0)
+    for ell in (general, fast):
+        ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 4 * n * UNIT_ROUNDOFF)
+    G, _ = general.propagate(M, 0.0, absM)
+    with _path(kernel):
+        fast.step_dense(M, absM, 0.0)
+    assert allowance_ratio(fast.S, G, M, S) <= 1.0
+
+
+@pytest.mark.parametrize("kernel", PATHS)
+@settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**31), n=st.integers(1, 16), units=st.booleans(), scale=st.floats(1e-20, 1e20),
        rho=st.sampled_from([0.0, 1e-12]))
-def test_fast_step_contains_the_exact_product(seed, n, units, scale, rho):
+def test_fast_step_contains_the_exact_product(kernel, seed, n, units, scale, rho):
     """``S' - M S M'`` (the product in extended precision) is positive semidefinite: checked on its
     diagonal-scaled form, where the allowance is a few ``u`` of the scale."""
-    M, S, d = _pair(seed, n, units, scale)
+    M, S, d = pair(seed, n, units, scale)
     aM = np.abs(M)
     ell = ErrorEllipsoid(n, 1.0, d)
     ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 4 * n * UNIT_ROUNDOFF)
-    ell.step_dense(M, (aM, float(aM.sum(axis=1).max())), rho)
+    with _path(kernel):
+        ell.step_dense(M, (aM, float(aM.sum(axis=1).max())), rho)
     T = M.astype(LD) @ S.astype(LD) @ M.T.astype(LD)
     Dm = ell.S.astype(LD) - T
     assert np.all(np.diagonal(Dm) >= 0), float(np.min(np.diagonal(Dm)))     # sharp: fails without the allowance
@@ -81,15 +113,47 @@ def test_fast_step_contains_the_exact_product(seed, n, units, scale, rho):
     assert float(np.linalg.eigvalsh(X)[0]) >= -1e-12
 
 
-def test_overflow_withdraws_without_a_warning():
-    """A set near the largest double: the pass under an error state, the trace infinite."""
-    n = 6
-    M = 3.0 * np.eye(n)
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("n, m, S0, tr0, rho", [(6, 3.0, 1e307, 6e307, 1.0), (1, 1.0, 1e308, 1e308, 0.0),
+                                                (6, 3.0, math.nan, math.nan, 1.0)])
+def test_overflow_withdraws_without_a_warning(kernel, n, m, S0, tr0, rho):
+    """A set near the largest double (or NaN): on either path the step under an error state, the set not
+    finite (the kernel runs only where numpy's unguarded branch would)."""
+    M = m * np.eye(n)
     ell = ErrorEllipsoid(n, 1.0)
-    ell.S, ell.tr = 1e307 * np.eye(n), 6e307
-    with np.errstate(all="raise"):
-        ell.step_dense(M, (np.abs(M), 3.0), 1.0)
-    assert not ell.finite()
+    ell.S, ell.tr = S0 * np.eye(n), tr0
+    with np.errstate(all="raise"), _path(kernel):
+        ell.step_dense(M, (np.abs(M), m), rho)
+    assert not ell.finite() and ell.bound() == math.inf
+
+
+def test_a_step_past_the_guards_is_numpys():
+    """``alpha >= 1e20`` (a residual far above the set) fails the unguarded branch's condition: the
+    kernel's result is not taken, the step is numpy's to the last bit."""
+    M, S, d = pair(7, 9, True, 1e-60)
+    aM = np.abs(M)
+    absM = (aM, float(aM.sum(axis=1).max()), aM * d[:, None])
+    sets = []
+    for kernel in (True, False):
+        ell = ErrorEllipsoid(9, 1.0, d)
+        ell.S, ell.tr = S.copy(), float(np.trace(S)) * (1 + 36 * UNIT_ROUNDOFF)
+        with _path(kernel):
+            ell.step_dense(M, absM, 1e-5)
+        sets.append((ell.S, ell.tr))
+    assert np.array_equal(sets[0][0], sets[1][0]) and sets[0][1] == sets[1][1]
+
+
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("rho", [math.nan, -1.0])
+def test_a_residual_that_bounds_nothing_gives_a_set_that_is_not_finite(kernel, rho):
+    """A NaN residual (from a NaN in the sample) is no bound on the step's error: the set is not finite,
+    its bound infinite (not the set of ``rho = 0``), without a warning."""
+    n = 4
+    M = 0.5 * np.eye(n)
+    ell = ErrorEllipsoid(n, 1.0)
+    with np.errstate(all="raise"), _path(kernel):
+        ell.step_dense(M, (np.abs(M), 0.5), rho)
+    assert not ell.finite() and ell.bound() == math.inf
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +209,28 @@ def test_observer_publishes_the_general_paths_bounds(agents2, monkeypatch, noise
         assert (na is None) == (noise_max is None) == (nb is None)
         if na is not None:
             assert abs(na - nb) <= 1e-12 * nb, (na, nb)
+
+
+@pytest.mark.parametrize("kernel", PATHS)
+@pytest.mark.parametrize("field", ["x0", "y", "nu"])
+def test_a_nan_in_a_fused_sample_withdraws_the_bound(agents2, monkeypatch, kernel, field):
+    """``RoundingBound.fused_sample`` with a NaN in the estimate, the measurement or the innovation: its
+    residual is NaN, the step's set not finite, the bound withdrawn (not a finite bound of ``rho = 0``)."""
+    system, cycle, table, stream = agents2
+    seen = []
+    real = RoundingBound.fused_sample
+
+    def kept(self, f, channel):
+        seen.append((self, f, channel))
+        return real(self, f, channel)
+    monkeypatch.setattr(RoundingBound, "fused_sample", kept)
+    obs = so.SwitchedObserver(system, table, "periodic", [cycle])
+    for t, ch, y in stream[:40]:
+        obs.update(t, ch, y)
+    bound, f, channel = seen[-1]
+    assert not bound.withdrawn and math.isfinite(bound.bounds()[0])
+    bad = getattr(f, field).copy()
+    bad[0] = math.nan
+    with _path(kernel):
+        assert real(bound, f._replace(**{field: bad}), channel)
+    assert bound.withdrawn and bound.bounds()[0] == math.inf
