@@ -271,6 +271,7 @@ class AnchoredBound:
         self._va: np.ndarray | None = None      # the anchor's leading direction (unit)
         self._theta_a = 0.0                     # v_a' S_a v_a
         self._v: np.ndarray | None = None       # the latest leading direction (warm start)
+        self._w: tuple | None = None            # (w, ||w||) of the latest read: v = w / ||w||, formed when anchoring
         self._f_a = self._g_a = 0.0   # ||S_a||_F and max(||S_a||_inf, ||S_a||_1), rounded up
         self._age = 0
         self._sym_a = False     # S_a exactly symmetric (step 2: Gershgorin from the rows alone)
@@ -298,7 +299,7 @@ class AnchoredBound:
             w, c, nw, fd = got      # any c >= 0 is valid (step 1)
             if math.isfinite(c) and c >= 0.0:
                 if nw > 0.0 and math.isfinite(nw):
-                    self._v = w / nw                    # one power iteration for the next anchor
+                    self._w = (w, nw)                   # one power iteration for the next anchor
                 g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     if self._sym_a and S is ell.symmetric:      # so is S - c S_a: its rows' sums are its columns'
@@ -317,6 +318,9 @@ class AnchoredBound:
     def _anchor(self, ell: ErrorEllipsoid) -> float:
         """A new anchor at the current ``S``: its ``lam_a`` (module docstring) is published."""
         S = ell.S
+        if self._w is not None:     # the latest read's power iteration, normalised
+            w, nw = self._w
+            self._v, self._w = w / nw, None
         got = verified_lambda_max(S, self._v) if ell.n >= CHOLESKY_MIN_N else None
         if got is not None:
             lam, v = got
