@@ -129,6 +129,17 @@ def _wrap_publish(fn):
     return publish
 
 
+def _send_timed(send):
+    """``outputs.send`` with its bytes timed as a publish; a message object goes on to
+    ``Publisher.publish``, timed (and counted) there once."""
+    timed = _wrap_publish(send)
+
+    @functools.wraps(send)
+    def send_timed(pub, data):
+        return (timed if type(data) is bytes else send)(pub, data)
+    return send_timed
+
+
 #: Finer phases inside the screening and the update (:func:`install` with ``fine=True``).
 FINE = (
     ("switchobs_core.runtime.observer", "SwitchedObserver.prior", "screening: prior (x, rigorous sets at t)"),
@@ -159,7 +170,7 @@ def install(fine: bool = False) -> None:
     Publisher.publish = _wrap_publish(Publisher.publish)
     from switchobs_ros import outputs
     if hasattr(outputs, "send"):        # the outputs' own path to the publisher's handle
-        outputs.send = _wrap_publish(outputs.send)
+        outputs.send = _send_timed(outputs.send)
     _count_serves()
     orig = estimator.EstimatorMixin._input_handler
 

@@ -10,7 +10,8 @@ writers here keep the serialised message of :mod:`msg_bridge.convert` /
 :mod:`msg_bridge.typed` and rewrite only the numbers that change, in place, with numpy
 assignments (no per-element Python); each publish then costs one ``bytes`` copy of the buffer.
 The bytes are those ``rclpy.serialization.serialize_message`` gives for the message the
-corresponding writer builds (test/bridge/test_raw.py compares them byte for byte).
+corresponding writer builds, the CDR alignment padding zeroed (:mod:`msg_bridge.cdr_padding`;
+test/bridge/test_raw.py compares them byte for byte).
 
 * :class:`RawMessage`: the serialised message and views of its stamp and float64 fields, found
   by serialising sentinel values (little-endian CDR, as rmw_fastrtps writes it on x86 and ARM).
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from .cdr_padding import zero_padding
 from .convert import STAMP_PAD, Body, body_odometry, labelled_array
 
 __all__ = ["DTYPES", "RawLabelledArrayWriter", "RawMessage", "RawOdometryBatch"]
@@ -86,10 +88,12 @@ class RawMessage:
 
     Offsets are found by serialising the message with distinct sets of sentinel values in the
     fields: a field is at the offsets where every set's sentinel is found, and must end at exactly
-    one. CDR padding bytes are not initialised: they hold what memory held, which may be a
-    sentinel serialised earlier in the process, at any offset (measured: a marker array's stamp
-    sentinel found twice after a few dozen writers had been built). Two sets always, up to
-    :data:`SALTS` while a field is still found at more than one offset. Raises ValueError when a
+    one. rclpy leaves the CDR padding bytes as memory held them, which may be a sentinel serialised
+    earlier in the process, at any offset (measured: a marker array's stamp sentinel found twice
+    after a few dozen writers had been built): the message kept has them zeroed
+    (:func:`~msg_bridge.cdr_padding.zero_padding`), the serialisations searched (one walk of the
+    fields fewer each) do not. Two sets always, up to :data:`SALTS` while a field is still found at
+    more than one offset. Raises ValueError when a
     field cannot be located that way or the encoding is not little-endian CDR.
     """
 
@@ -101,9 +105,8 @@ class RawMessage:
         spec.update(fields or {})
         if stamp is not None:
             spec["stamp"] = (f"{stamp}.sec", "<i4", 2)
-        base = serialize_message(msg)
-        if base[:2] != b"\x00\x01":
-            raise ValueError("raw message: not little-endian CDR")
+        # its alignment padding zeroed (rclpy leaves heap bytes there); ValueError but for little-endian CDR
+        base = bytes(zero_padding(msg, serialize_message(msg)))
         at: dict[str, set[int]] = {}
         for salt in range(SALTS):
             marked, patterns = self._marked(msg, spec, salt, serialize_message)

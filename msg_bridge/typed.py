@@ -50,6 +50,7 @@ __all__ = [
     "StateEstimateWriter",
     "StateReading",
     "msg_dir",
+    "msg_files",
     "read_error_bounds",
     "read_state_estimate",
     "register_rosbags_types",
@@ -263,8 +264,13 @@ def register_rosbags_types(typestore) -> None:
     """
     from rosbags.typesys import get_types_from_msg
 
-    d = msg_dir()
     types: dict = {}
-    for name in (*MSG_TYPES, ACTIVE_CHANNEL):
-        types.update(get_types_from_msg((d / f"{name.rsplit('/', 1)[1]}.msg").read_text(), name))
+    for name, path in msg_files():
+        types.update(get_types_from_msg(path.read_text(), name))
     typestore.register(types)
+
+
+def msg_files() -> list[tuple[str, Path]]:
+    """``(type name, installed .msg file)`` of each switchobs_msgs type :func:`register_rosbags_types` reads."""
+    d = msg_dir()
+    return [(name, d / f"{name.rsplit('/', 1)[1]}.msg") for name in (*MSG_TYPES, ACTIVE_CHANNEL)]

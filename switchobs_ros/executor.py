@@ -9,9 +9,12 @@ wait set once, again only after :meth:`wake` (rclpy's nodes call it when they cr
 entity), and calls each ready callback directly: one wait per wake-up of the middleware. Inside
 :meth:`~KeptWaitSetExecutor.spin` the handles of that wait set also stay entered (rclpy's use count,
 which defers a destruction) from one wait to the next, instead of 2 x 22 enter and exit calls per
-wait for the estimator: an entity destroyed by a callback (which wakes the executor) is destroyed at
-once, as they are released then; one destroyed by another thread during a wait, as soon as that wait
-returns (rclpy's executor holds its handles during a wait too); all are released when ``spin`` returns.
+wait for the estimator. An entity destroyed while they are held is destroyed as rclpy's executor
+destroys it: by a callback or by another thread while the spinner runs a callback, at once (the
+handles are released in :meth:`~KeptWaitSetExecutor.wake`, so that the destroying thread can
+subscribe to the topic with another type); by another thread during a wait, as soon as that wait
+returns (rclpy's executor holds its handles during a wait too). All are released when ``spin``
+returns.
 
 It serves what rclpy's executor serves, in the same order per wait (timers, subscriptions, guard
 conditions, clients, services, then waitables, each in its node's creation order) and one ready
@@ -102,23 +105,17 @@ class _Plan:
     def enter(self) -> None:
         """Enter every handle (rclpy's use count: a handle destroyed meanwhile is destroyed only
         once it is released); ``live``, the adds of those entered, ``live_waitables`` the waitables
-        entered (a handle destroyed already is left out)."""
-        entered, live, live_waitables = [], [], []
-        for add, h in self.adds:
-            try:
-                h.__enter__()
-            except InvalidHandle:
-                continue
-            entered.append(h)
-            live.append((add, h))
-        for item, ev in self.waitables:
-            h = item[1] if ev is None else ev
-            try:
-                h.__enter__()
-            except InvalidHandle:
-                continue
-            entered.append(h)
-            live_waitables.append((item, ev))
+        entered (a handle destroyed already is left out). Interrupted (any exception), it exits the
+        handles it entered before re-raising."""
+        entered: list = []
+        try:
+            live = [(add, h) for add, h in self.adds if _enter(h, entered)]
+            live_waitables = [(item, ev) for item, ev in self.waitables
+                              if _enter(item[1] if ev is None else ev, entered)]
+        except BaseException:
+            for h in reversed(entered):
+                h.__exit__(None, None, None)
+            raise
         self.entered, self.live, self.live_waitables = entered, live, live_waitables
 
     def release(self) -> None:
@@ -126,6 +123,16 @@ class _Plan:
         entered, self.entered, self.live, self.live_waitables = self.entered, [], [], []
         for h in reversed(entered):
             h.__exit__(None, None, None)
+
+
+def _enter(handle: Any, entered: list) -> bool:
+    """Enter ``handle`` and append it to ``entered``; False if it is destroyed already."""
+    try:
+        handle.__enter__()
+    except InvalidHandle:
+        return False
+    entered.append(handle)
+    return True
 
 
 _KINDS = {_TIMER: "timer", _SUB: "subscription", _GUARD: "guard_condition", _CLIENT: "client", _SERVICE: "service"}
@@ -161,8 +168,11 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         self._ready: deque = deque()
         self._entered: _Plan | None = None      # the plan whose handles are entered
         self._holding = False                   # inside spin(): handles kept entered between waits
-        self._spinner = None                    # the thread spinning (its ident)
         self._in_wait = False
+        # guards the spinner's entering (up to _in_wait = True) and its release after a wait
+        # against wake() from another thread; _release_after_wait: a wake came during the wait
+        self._hold_lock = threading.Lock()
+        self._release_after_wait = False
         self.waits = 0
         self.calls = 0
         self.rebuilds = 0
@@ -170,12 +180,16 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
     # -------------------------------------------------------------- changes of the entity set
     def wake(self) -> None:
         """Rebuild the wait set before the next wait (an entity was created or destroyed) and wake
-        the current wait. Called by the spinning thread outside a wait (a callback destroyed an
-        entity), the handles are released at once: the entity is destroyed now, as rclpy's
-        executor would, so that the callback can create another on its topic (of another type)."""
+        the current wait. Outside a wait (called by a callback, or by another thread while the
+        spinner runs a callback) the held handles are released at once: a destroyed entity is
+        destroyed now, as rclpy's executor would, so that the caller can create another on its
+        topic (of another type); during a wait they are released as soon as the wait returns."""
         self._plan = None
-        if self._holding and not self._in_wait and threading.get_ident() == self._spinner:
-            self._release()
+        with self._hold_lock:
+            if self._in_wait:
+                self._release_after_wait = True
+            else:
+                self._release()
         super().wake()
 
     def add_node(self, node) -> bool:
@@ -196,14 +210,15 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         """rclpy's ``spin``, with the handles of the wait set entered once for as long as it spins
         (and the wait set is not rebuilt) rather than entered and exited around every wait; they
         are released when it returns, and when an entity is created or destroyed (:meth:`wake`:
-        from a callback at once, from another thread before the next wait). rclpy destroys a
-        handle whose destruction was asked for once it is released."""
-        self._holding, self._spinner = True, threading.get_ident()
+        outside a wait at once, during a wait as soon as it returns). rclpy destroys a handle whose
+        destruction was asked for once it is released."""
+        self._holding = True
         try:
             super().spin()
         finally:
-            self._holding, self._spinner = False, None
-            self._release()
+            with self._hold_lock:
+                self._holding = False
+                self._release()
 
     def _release(self) -> None:
         plan, self._entered = self._entered, None
@@ -251,17 +266,18 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
 
     def _wait(self, timeout_sec: float | None) -> bool:
         """One wait; the ready entities queued in rclpy's order. False on timeout or shutdown."""
-        plan = self._plan
-        if plan is None:
-            self._release()
-            plan = self._plan = _Plan(self)
-            self.rebuilds += 1
-        if self._entered is not plan:
-            self._release()
-            plan.enter()
-            self._entered = plan
+        with self._hold_lock:
+            plan = self._plan
+            if plan is None:
+                self._release()
+                plan = self._plan = _Plan(self)
+                self.rebuilds += 1
+            if self._entered is not plan:
+                self._release()
+                plan.enter()
+                self._entered = plan
+            self._in_wait = True
         ws = plan.wait_set
-        self._in_wait = True
         try:
             ws.clear_entities()
             for add, h in plan.live:
@@ -306,9 +322,11 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                     continue
                 queue.append(item + (w.take_data(),))
         finally:
-            self._in_wait = False
-            if not self._holding:
-                self._release()
+            with self._hold_lock:
+                self._in_wait = False
+                if self._release_after_wait or not self._holding:
+                    self._release_after_wait = False
+                    self._release()
         return bool(self._ready) or timeout_sec is None or timeout_sec < 0
 
     def _serve(self, item: tuple) -> None:

@@ -86,6 +86,8 @@ class Template:
                  array: Sequence[str] | None = None, arrays: Sequence[Sequence[str]] = ()):
         from rclpy.serialization import serialize_message
 
+        from msg_bridge.cdr_padding import zero_padding
+
         def setattr_path(obj, path, value):
             for p in path[:-1]:
                 obj = getattr(obj, p)
@@ -116,7 +118,7 @@ class Template:
                 obj = getattr(obj, p)
             sizes.append(len(getattr(obj, path[-1])))
             setattr(obj, path[-1], [(4.0 + j) * 1.0e-300 * (k + 1.5) for k in range(sizes[-1])])
-        blob = serialize_message(msg)
+        blob = bytes(zero_padding(msg, serialize_message(msg)))      # no heap bytes in the padding
         if stamp is not None:
             self.stamp_off = _unique(blob, _STAMP.pack(0x5A3C5A3C, 0x3C5A3C5A), "stamp")
         for v in sentinels:

@@ -25,7 +25,6 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from msg_bridge.typed import register_rosbags_types
 from switchobs_core.exceptions import SwitchobsError, one_line
 from switchobs_core.files import MAX_BAG_BYTES, MAX_METADATA_BYTES, check_input
 from switchobs_core.loading import load_yaml
@@ -34,7 +33,7 @@ from .. import qos
 from .cdr import decode_uint8
 from .mcap_records import fast_records, message_records
 from .metadata_yaml import install as fast_yaml
-from .msgdefs import definition
+from .msgdefs import definition, from_store, typestore
 
 __all__ = [
     "CHANNEL_TYPES",
@@ -435,13 +434,10 @@ class BagOut:
         if kept is not None:
             return kept
         if self._typestore is None:
-            from rosbags.typesys import Stores, get_typestore
-
-            self._typestore = get_typestore(Stores.ROS2_JAZZY)
-            register_rosbags_types(self._typestore)     # switchobs_msgs: the estimator's typed outputs
+            self._typestore = typestore()       # with switchobs_msgs: the estimator's typed outputs
         if type_name_ not in self._typestore.types:
             raise BagError(f"topic {topic}: type {type_name_} is not in the ROS 2 Jazzy type store")
-        return (self._typestore.generate_msgdef(type_name_, ros_version=2)[0], self._typestore.hash_rihs01(type_name_))
+        return from_store(self._typestore, type_name_)
 
     def write(self, topic: str, log_ns: int, data: bytes) -> None:
         conn = self._conns[topic]

@@ -2,6 +2,8 @@
 
 #: rosbags' version that made :data:`DEFINITIONS`.
 ROSBAGS = '0.11.9'
+#: sha256 of the switchobs_msgs .msg files they were made from (msgdefs.msgs_digest).
+SWITCHOBS_MSGS = 'c0f826b07cbb13de8e11b9b39255f302df96a46aa9c108ec317530cb2b8d1ef6'
 
 #: ``{type: (msgdef, rihs01)}``.
 DEFINITIONS: dict[str, tuple[str, str]] = {

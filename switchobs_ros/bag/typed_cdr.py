@@ -21,6 +21,7 @@ from collections.abc import Sequence
 import numpy as np
 from rclpy.serialization import serialize_message
 
+from msg_bridge.cdr_padding import zero_padding
 from msg_bridge.typed import ErrorBoundsWriter
 
 from .cdr import Template
@@ -66,7 +67,7 @@ class ErrorBoundsBytes:
                 t = None
             self._kept[key] = t
         if t is None:
-            return serialize_message(m)
+            return bytes(zero_padding(m, serialize_message(m)))
         if given is not None:
             if len(self._given) >= self.KEEP:
                 self._given.clear()

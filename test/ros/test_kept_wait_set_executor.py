@@ -351,3 +351,78 @@ def test_polled_events_executor_delivers_messages_with_their_info_and_fires_time
             pub.publish(Int32(data=i))
         spin_until(ex, lambda: len(got) == 10 and len(ticks) >= 3)
         assert [d for d, _ in got] == list(range(10)) and all(ts > 0 for _, ts in got)
+
+
+def test_a_subscription_another_thread_destroys_during_a_callback_is_destroyed_at_once(ctx):
+    """While the spinner runs a callback, another thread destroys a subscription: it is destroyed
+    at once (rcl pointer 0), as with rclpy's executor, and that thread can subscribe to the topic
+    with another type; spinning goes on and serves the new subscription."""
+    with _spun(ctx, "kws_thread") as (ex, node):
+        busy, go, late = threading.Event(), threading.Event(), []
+        sub = node.create_subscription(Int32, "/kws_thread", lambda m: None, RELIABLE)
+
+        def slow():
+            busy.set()
+            go.wait(20.0)
+        timer = node.create_timer(0.01, slow)
+        t = threading.Thread(target=ex.spin)
+        t.start()
+        try:
+            assert busy.wait(20.0)
+            node.destroy_subscription(sub)
+            pointer = sub.handle.pointer
+            node.create_subscription(String, "/kws_thread", lambda m: late.append(m.data), RELIABLE)
+            node.destroy_timer(timer)
+        finally:
+            go.set()
+        pub = node.create_publisher(String, "/kws_thread", RELIABLE)
+        end = time.monotonic() + 20.0       # ends a broken run only
+        while not late and time.monotonic() < end:
+            if pub.get_subscription_count():
+                pub.publish(String(data="x"))
+            time.sleep(0.01)
+        ex.shutdown()
+        t.join(20.0)
+        assert pointer == 0 and late and late[0] == "x"
+        assert ex._entered is None
+
+
+def test_a_subscription_another_thread_destroys_during_a_wait_is_destroyed_when_it_returns(ctx):
+    """Destroyed by another thread while the spinner waits, a subscription is destroyed once that
+    wait returns (the wake-up ends it), without a callback or a further wait."""
+    with _spun(ctx, "kws_thread_wait") as (ex, node):
+        sub = node.create_subscription(Int32, "/kws_thread_wait", lambda m: None, RELIABLE)
+        t = threading.Thread(target=ex.spin)
+        t.start()
+        try:
+            end = time.monotonic() + 20.0    # ends a broken run only
+            while not (ex._in_wait and ex._entered is not None) and time.monotonic() < end:
+                time.sleep(0.005)
+            node.destroy_subscription(sub)
+            while sub.handle.pointer != 0 and time.monotonic() < end:
+                time.sleep(0.005)
+            assert sub.handle.pointer == 0
+        finally:
+            ex.shutdown()
+            t.join(20.0)
+
+
+def test_entering_interrupted_exits_the_handles_it_entered(ctx):
+    """An exception other than InvalidHandle while the handles are entered (a KeyboardInterrupt
+    between two enters) leaves none of them entered: a subscription destroyed afterwards is
+    destroyed at once."""
+    from switchobs_ros.executor import _Plan
+
+    class Interrupting:
+        def __enter__(self):
+            raise KeyboardInterrupt
+
+    with _spun(ctx, "kws_interrupt") as (ex, node):
+        sub = node.create_subscription(Int32, "/kws_interrupt", lambda m: None, RELIABLE)
+        plan = _Plan(ex)
+        plan.adds.append((None, Interrupting()))
+        with pytest.raises(KeyboardInterrupt):
+            plan.enter()
+        node.destroy_subscription(sub)
+        assert sub.handle.pointer == 0
+        assert plan.entered == [] and plan.live == []

@@ -10,24 +10,72 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
 
 from switchobs_ros.bag import io as bag_io
-from switchobs_ros.bag import msgdefs
+from switchobs_ros.bag import msgdefs, msgdefs_data
 from switchobs_ros.bag.io import BagError, BagOut
-from switchobs_ros.bag.msgdefs_data import DEFINITIONS, ROSBAGS
+from switchobs_ros.bag.msgdefs_data import DEFINITIONS, ROSBAGS, SWITCHOBS_MSGS
 
 
 def test_the_kept_definitions_are_the_type_stores():
     """Every kept ``(msgdef, rihs01)`` is what rosbags' Jazzy store makes (switchobs_msgs registered), for the
     installed rosbags (else ``python -m switchobs_ros.bag.msgdefs`` writes them again); all of TYPES are kept."""
-    assert ROSBAGS == version("rosbags")
+    assert ROSBAGS == version("rosbags") and SWITCHOBS_MSGS == msgdefs.msgs_digest()
     assert set(DEFINITIONS) == set(msgdefs.TYPES)
     assert msgdefs.generated() == DEFINITIONS
     assert msgdefs.definition("std_msgs/msg/UInt8") == DEFINITIONS["std_msgs/msg/UInt8"]
     assert msgdefs.definition("sensor_msgs/msg/Imu") is None
 
 
+def _unasked(monkeypatch) -> None:
+    """``definition`` asks the installed packages again (and forgets the answers after the test)."""
+    monkeypatch.setattr(msgdefs, "_valid", {False: None, True: None})
+
+
 def test_another_rosbags_asks_the_type_store(monkeypatch):
-    monkeypatch.setattr(msgdefs, "_installed", "0.0.0")
+    _unasked(monkeypatch)
+    monkeypatch.setattr(msgdefs_data, "ROSBAGS", "0.0.0")
     assert msgdefs.definition("std_msgs/msg/UInt8") is None
+    assert msgdefs.definition("switchobs_msgs/msg/ErrorBounds") is None
+
+
+def test_no_rosbags_installed_asks_the_type_store(monkeypatch):
+    import importlib.metadata
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+    _unasked(monkeypatch)
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    assert msgdefs.definition("std_msgs/msg/UInt8") is None
+
+
+def test_a_changed_switchobs_msgs_is_asked_of_the_type_store(monkeypatch, tmp_path):
+    """A field added to an installed switchobs_msgs ``.msg`` (a changed, rebuilt package): its types are not
+    handed out from the kept ones (the type store's differ: the bag declares the new definition and hash), the
+    other kept types still are; ``write_data`` records the new digest, and with it they are kept again."""
+    import shutil
+
+    import msg_bridge.typed as typed
+
+    changed = tmp_path / "msg"
+    shutil.copytree(typed.msg_dir(), changed)
+    (changed / "ErrorBounds.msg").write_text((changed / "ErrorBounds.msg").read_text() + "\nfloat64 extra_bound\n")
+    monkeypatch.setattr(typed, "msg_dir", lambda: changed)
+    _unasked(monkeypatch)
+    t = "switchobs_msgs/msg/ErrorBounds"
+    store = msgdefs.generated((t,))[t]
+    assert store != DEFINITIONS[t]
+    assert msgdefs.definition(t) is None
+    assert msgdefs.definition("switchobs_msgs/msg/StateEstimate") is None
+    assert msgdefs.definition("std_msgs/msg/UInt8") == DEFINITIONS["std_msgs/msg/UInt8"]
+    data = tmp_path / "data.py"
+    msgdefs.write_data(data)
+    written: dict = {}
+    exec(data.read_text(), written)
+    assert written["SWITCHOBS_MSGS"] == msgdefs.msgs_digest() != SWITCHOBS_MSGS
+    assert written["DEFINITIONS"][t] == store
+    _unasked(monkeypatch)
+    monkeypatch.setattr(msgdefs_data, "SWITCHOBS_MSGS", written["SWITCHOBS_MSGS"])
+    monkeypatch.setattr(msgdefs_data, "DEFINITIONS", written["DEFINITIONS"])
+    assert msgdefs.definition(t) == store
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

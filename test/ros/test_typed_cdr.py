@@ -101,3 +101,34 @@ def test_a_message_in_pieces_is_written_whole(tmp_path, storage):
                 got = deserialize_message(want[-1][2], StateEstimate)
                 assert np.array_equal(np.asarray(got.covariance), P.ravel()) and list(got.x) == x.tolist()
     assert [(m.topic, m.log_ns, m.data) for m in BagIn(tmp_path / "b").messages(order="file")] == want
+
+
+def test_template_bytes_have_their_padding_zeroed():
+    """The bags' templates (the typed estimate with and without P, a labelled array, the bounds message from
+    a template and, with no envelope, serialised per message) write zeros in the CDR alignment padding: the
+    bytes of the message serialised with its padding zeroed (msg_bridge.cdr_padding, rosbags' bytes), after
+    memory full of other bytes was freed (where rclpy's padding comes from)."""
+    import copy
+
+    from msg_bridge.cdr_padding import zero_padding
+    from msg_bridge.convert import labelled_array
+
+    junk = [bytes([0xAB]) * 4096 for _ in range(200)]
+    del junk
+    x, P = np.linspace(1.0, 2.0, 3), np.eye(3)
+    writer = StateEstimateWriter(("a.p", "b.p_x", "b.p_y"), "world")
+    for arrays in ((x, P), (x,)):       # (the writer's message is one object, rewritten by each call)
+        t = cdr.Template(copy.deepcopy(writer.msg(x, 0, *arrays[1:])), stamp=("header", "stamp"),
+                         arrays=[("x",), ("covariance",)][:len(arrays)])
+        m5 = writer.msg(x, 5, *arrays[1:])
+        assert t.bytes(5, arrays=arrays) == bytes(zero_padding(m5, serialize_message(m5)))
+    arr = labelled_array(x, ("a", "b", "c"), 5)
+    got = cdr.Template(labelled_array(np.zeros(3), ("a", "b", "c"), 0), array=("data",)).bytes(array=arr.data)
+    assert got == bytes(zero_padding(arr, serialize_message(arr)))
+    for N in (0, 2):
+        w = ErrorBoundsWriter(N, "world", True)
+        values = list(np.linspace(1.0, 2.0, N + 3))
+        for why in ("", "ab", "abcde"):
+            m = w.msg(values, 5, False, why, "n")
+            got = ErrorBoundsBytes(ErrorBoundsWriter(N, "world", True)).bytes(values, 5, False, why, "n")
+            assert got == bytes(zero_padding(m, serialize_message(m)))

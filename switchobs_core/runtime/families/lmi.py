@@ -149,14 +149,17 @@ class LmiGains:
         full covariance when it is not the one kept), without the n x n prior; where ``P`` was read since
         the last step (a reader at every sample: the full prior is then the step the sample takes, and
         the block would be work added), the block of the full prior, computed from the covariance kept
-        and kept for the step (:meth:`predict_covariance`'s arithmetic on the same doubles, without a
-        copy of ``P`` to compare and a copy of the prior to keep); else None."""
+        and kept for the step (:meth:`predict_covariance`'s arithmetic on the same doubles, those of a
+        reader's copy, in C order, without a copy of ``P`` to compare and a copy of the prior to
+        keep); else None."""
         if cols is None or self._P is None:
             return None
         h = self._held
         e = self._ctx.zoh(OPEN_LOOP if h is None else h.key, dt)
         if self._read and not len(self._pending):
             self._block.clear()
+            # C order: the doubles of the reader's copy of P (the products' rounding depends on the layout)
+            self._P = np.ascontiguousarray(self._P)
             prior = self._cov.prior(self._P, e, dt, self._held_noise(e))
             self._prior = (self._P, e, self._cov.q_d(dt), self._R_held if h is not None else None, prior)
             ix = np.asarray(cols)

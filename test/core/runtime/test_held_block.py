@@ -174,3 +174,35 @@ def test_the_observers_prior_block_is_the_full_priors_and_keeps_the_covariance(a
     assert worst <= 1e-11
     P, Po = obs.P, other.P
     assert float(np.abs(P - Po).max() / np.abs(Po).max()) <= 1e-12
+
+
+
+def test_a_read_covariance_in_fortran_order_gives_the_full_priors_doubles(agents8):
+    """Where ``P`` is read, the prior's block is taken from the full prior, kept for the step: that
+    prior is the one a reader's copy of ``P`` gives (the same doubles), also when the covariance kept
+    is in Fortran order (the products' rounding depends on the layout: C order is used), so the
+    covariance after the step is the same whichever path the prior took."""
+    system, table = agents8
+    cyc = so.Cycle([1.0] * 8)
+    reader = so.SwitchedObserver(system, table, "periodic", [cyc], noise=default_noise(system))
+    other = so.SwitchedObserver(system, table, "periodic", [cyc], noise=default_noise(system))
+    sched = so.PeriodicSchedule(cyc)
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-1, 1, system.n)
+    X = rng.standard_normal((system.n, system.n))
+    P = X @ X.T + system.n * np.eye(system.n)
+    for k in range(8):
+        t = k * DT
+        ch = sched.channel_at(t)
+        if k:
+            cols = seen_columns(np.asarray(system.C[ch - 1]))
+            full = other.prior_covariance(t)[np.ix_(cols, cols)]        # from the copy other.P gave
+            np.testing.assert_array_equal(reader.prior_covariance(t, cols), full)
+        y = np.asarray(system.C[ch - 1]) @ x
+        reader.update(t, ch, y)
+        other.update(t, ch, y)
+        np.testing.assert_array_equal(reader.P, other.P)               # read at every sample
+        if k % 2 == 0:
+            reader.gains.set_covariance(np.asfortranarray(P))
+            other.gains.set_covariance(np.ascontiguousarray(P))
+            assert reader.P is not None and other.P is not None
