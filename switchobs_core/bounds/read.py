@@ -140,6 +140,18 @@ def _between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     return w, c, math.sqrt(float(w.dot(w))), fro_norm(D)
 
 
+#: ``sqrt(eta)``: a computed ``||X||_F`` of ``m`` entries is below the true one by at most ``sqrt(m eta)`` beyond
+#: its relative error (each square under the normal range loses up to ``eta / 2``; ``sqrt(a + b) <=
+#: sqrt(a) + sqrt(b)``).
+_SQRT_ETA = math.sqrt(UNDERFLOW)
+
+
+def fro_upper(X: np.ndarray) -> float:
+    """``||X||_F`` computed (:func:`~switchobs_core.numerics.rounding.fro_norm`) plus what underflow can hide
+    from it, ``sqrt(X.size eta)``: an upper bound up to the relative rounding the callers allow for."""
+    return fro_norm(X) + math.sqrt(X.size) * _SQRT_ETA
+
+
 def _abs_rows(D: np.ndarray, n: int, ones: np.ndarray) -> float:
     """``max_i sum_j |D_ij|`` of the n x n ``D`` (a computed sum, any order: step 3), by the compiled kernel
     where it takes ``D``, else numpy (``D`` then overwritten by ``|D|``); NaN where a row's sum is."""
@@ -189,7 +201,7 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
     theta, v = _leading(T, v, _POWER_STEPS)
     d = np.diagonal(T)
     dmax = float(np.abs(d).max())
-    nS = fro_norm(S)
+    nS = fro_upper(S)
     if not (theta > 0.0 and math.isfinite(theta) and math.isfinite(nS)):
         return None
     gn = gamma(n + 1)
@@ -236,7 +248,7 @@ def _eigen_anchor(S: np.ndarray) -> tuple[float, np.ndarray]:
     u = UNIT_ROUNDOFF
     T = S + S.T
     T *= 0.5
-    nT, nS = fro_norm(T), fro_norm(S)
+    nT, nS = fro_upper(T), fro_upper(S)
     flat = np.full(n, 1.0 / math.sqrt(n))
     if not (math.isfinite(nT) and math.isfinite(nS)):
         return math.inf, flat
@@ -300,7 +312,7 @@ class AnchoredBound:
             if math.isfinite(c) and c >= 0.0:
                 if nw > 0.0 and math.isfinite(nw):
                     self._w = (w, nw)                   # one power iteration for the next anchor
-                g = (fd + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
+                g = (fd + n * _SQRT_ETA + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     if self._sym_a and S is ell.symmetric:      # so is S - c S_a: its rows' sums are its columns'
                         gg = _abs_rows(D, n, self._ones(n))
@@ -331,7 +343,7 @@ class AnchoredBound:
             # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
             # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
             # solver's model (module docstring): 16 u ||S||_F more in all
-            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * fro_norm(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * fro_upper(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
             T = S + S.T
             T *= 0.5
             if np.all(np.isfinite(T)):      # the leading direction
@@ -344,7 +356,7 @@ class AnchoredBound:
         self._lam_a = lam
         self._va = self._v = v = np.ascontiguousarray(v)      # the same doubles; what the kernel reads
         self._theta_a = float(v.dot(S.dot(v)))
-        self._f_a = fro_norm(S) * (1.0 + 2.0 * gamma(S.size + 4))
+        self._f_a = fro_upper(S) * (1.0 + 2.0 * gamma(S.size + 4))
         A = np.abs(S)
         self._g_a = float(max(A.sum(axis=1).max(), A.sum(axis=0).max())) * (1.0 + 2.0 * gamma(ell.n + 4))
         self._age = 0

@@ -502,6 +502,14 @@ static PyObject *correct(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
             got = 3 + i;
         }
     }
+    for (i = 5; i < 8; i++) {       /* the outputs xm, nu, xp apart from every other buffer */
+        Py_ssize_t j;
+        for (j = 0; j < 8; j++)
+            if (j != i && !apart(&b[i], &b[j])) {
+                aliased();
+                goto fail;
+            }
+    }
     {
         const double *Phi = b[2].buf, *H = b[3].buf, *K = b[4].buf, *x0 = b[0].buf, *y = b[1].buf;
         double *xm = b[5].buf, *nu = b[6].buf, *xp = b[7].buf;
@@ -536,9 +544,9 @@ static PyObject *absrows(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
         return NULL;
     }
     n = PyLong_AsSsize_t(args[1]);
-    if (n < 1) {
+    if (n < 1 || n > 46340) {       /* n * n stays within a Py_ssize_t on every platform */
         if (!PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "_dense_step: n < 1");
+            PyErr_SetString(PyExc_ValueError, "_dense_step: n < 1 or n > 46340");
         return NULL;
     }
     if (getlen(args[0], &bD, n * n, 0) < 0)

@@ -8,11 +8,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import switchobs_core as so
-from switchobs_core.bounds.read import AnchoredBound
+from switchobs_core.bounds import read as read_mod
+from switchobs_core.bounds.read import AnchoredBound, verified_lambda_max
 from switchobs_core.numerics.rounding import ErrorEllipsoid
 
 TOL = 0.05
@@ -141,3 +143,44 @@ def test_eigen_anchor_bounds_the_largest_eigenvalue_within_its_model(n, seed, sp
     assert lam <= top + 2 * (2 * n + 16) * u * nS * (1 + 1e-12) + 1e-300, (lam, top)
     assert abs(float(v @ v) - 1.0) <= 1e-12
     assert float(np.linalg.norm(T @ v - float(v @ T @ v) * v)) <= 4 * n * u * nS + 1e-300
+
+
+@pytest.mark.parametrize("scale", [1e-82, 1e-150])
+def test_a_read_between_anchors_of_a_tiny_set_bounds_it(scale):
+    """Entries of S below the square root of the smallest normal (1e-164, 1e-300): the Frobenius norms the
+    read's tests use underflow (squares become subnormal or 0); what underflow can hide is added, so the
+    read between anchors still bounds the set (certified in long double)."""
+    n = 4
+    ell = ErrorEllipsoid(n, scale)          # S = scale^2 I
+    rb = AnchoredBound()
+    rb.read(ell)                            # the anchor at S_a = S
+    S = ell.S.copy()
+    S[0, 0] *= 4.0                          # lambda_max(S) = 4 scale^2
+    ell.S, ell.tr = S, float(np.trace(S))
+    r = rb.read(ell)
+    assert _psd_certificate(r, S), (r, math.sqrt(S[0, 0]))
+
+
+def test_anchors_and_lam_upper_of_sets_below_the_normal_range_bound_them():
+    """S = 1e-290 G G' (n = 2..39, then 40..44 through the Cholesky-verified read): the one-eigenpair anchor,
+    the verified lambda_max and ErrorEllipsoid.lam_upper of a set not made by step_dense all bound
+    lambda_max (certified in long double), though ||S||_F underflows to about 1e-290."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(2, 40))
+        G = rng.standard_normal((n, n))
+        S = 1e-290 * (G @ G.T)
+        S = np.ascontiguousarray((S + S.T) / 2)
+        lam, _ = read_mod._eigen_anchor(S)
+        assert _psd_certificate(math.sqrt(lam), S), ("anchor", n, lam)
+        ell = ErrorEllipsoid(n, 1.0)
+        ell.S, ell.tr = S, float(np.trace(S))
+        lam = ell.lam_upper()
+        assert _psd_certificate(math.sqrt(lam), S), ("lam_upper", n, lam)
+    for n in range(40, 45):
+        G = rng.standard_normal((n, n))
+        S = 1e-290 * (G @ G.T)
+        S = np.ascontiguousarray((S + S.T) / 2)
+        got = verified_lambda_max(S)
+        if got is not None:
+            assert _psd_certificate(math.sqrt(got[0]), S), ("verified", n, got[0])

@@ -346,3 +346,17 @@ def test_kernel_largest_absolute_row_sum_is_numpys(seed, n, scale, nan):
         assert abs(got - ref) <= n * UNIT_ROUNDOFF * ref
     with pytest.raises(ValueError):
         dense_kernel.ABSROWS(D, n + 1)
+
+
+@pytest.mark.skipif(not dense_kernel.available(), reason="the compiled kernel is not built")
+def test_kernel_correction_refuses_an_output_on_an_input():
+    """``correct`` writes x^-, nu and x^+ while it reads Phi, H, K, x0 and y: an output sharing memory with
+    any other buffer is a ValueError (the wrapper's fresh outputs are taken)."""
+    Phi, H, K = np.eye(2), np.ones((1, 2)), np.ones((2, 1))
+    x0, y = np.array([1.0, 2.0]), np.array([1.0])
+    xm, nu, xp = dense_kernel.correct(Phi, H, K, x0, y)
+    assert np.array_equal(xm, x0) and np.array_equal(nu, [-2.0]) and np.array_equal(xp, [-1.0, 0.0])
+    for args in ((x0, np.empty(1), np.empty(2)), (np.empty(2), y, np.empty(2)), (np.empty(2), np.empty(1), Phi[0]),
+                 (xp, np.empty(1), xp)):
+        with pytest.raises(ValueError, match="shares memory"):
+            dense_kernel.CORRECT(Phi, H, K, x0, y, *args)
