@@ -65,7 +65,10 @@ class _Walk:
         return new
 
     def fields(self, msg: Any, pos: int) -> int:
-        for name, t in zip(msg.get_fields_and_field_types(), type(msg).SLOT_TYPES):
+        names = msg.get_fields_and_field_types()
+        if not names:       # a message without fields carries rosidl's hidden uint8 (one byte)
+            return pos + 1
+        for name, t in zip(names, type(msg).SLOT_TYPES):
             pos = self.value(getattr(msg, name), t, pos)
         return pos
 

@@ -36,6 +36,7 @@ that spins this executor again cannot re-enter a mutually exclusive group.
 from __future__ import annotations
 
 import inspect
+import itertools
 import threading
 import weakref
 from collections import deque
@@ -66,7 +67,8 @@ class _Plan:
     reports it ready by (``kinds``: the entity kinds present), so that a wait looks up the few ready
     entities instead of testing every entity."""
 
-    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds", "live", "live_waitables", "entered")
+    __slots__ = ("entities", "adds", "waitables", "wait_set", "index", "kinds", "live", "live_waitables", "entered",
+                 "gen")
 
     def __init__(self, executor: KeptWaitSetExecutor) -> None:
         timers, subs, guards, clients, services, waitables = [], [], [], [], [], []
@@ -101,6 +103,7 @@ class _Plan:
         self.live: list = []
         self.live_waitables: list = []
         self.entered: list = []
+        self.gen = 0        # the executor's change number when this plan was built
 
     def enter(self) -> None:
         """Enter every handle (rclpy's use count: a handle destroyed meanwhile is destroyed only
@@ -165,6 +168,10 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
     def __init__(self, *, context=None) -> None:
         super().__init__(context=context)
         self._plan: _Plan | None = None
+        # every change of the entity set takes a new number (next() of a count is atomic): a plan built
+        # after reading the number _changes held is rebuilt once it holds another
+        self._gen = itertools.count(1)
+        self._changes = 0
         self._ready: deque = deque()
         self._entered: _Plan | None = None      # the plan whose handles are entered
         self._holding = False                   # inside spin(): handles kept entered between waits
@@ -184,7 +191,7 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         spinner runs a callback) the held handles are released at once: a destroyed entity is
         destroyed now, as rclpy's executor would, so that the caller can create another on its
         topic (of another type); during a wait they are released as soon as the wait returns."""
-        self._plan = None
+        self._changes = next(self._gen)
         with self._hold_lock:
             if self._in_wait:
                 self._release_after_wait = True
@@ -193,12 +200,13 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         super().wake()
 
     def add_node(self, node) -> bool:
-        self._plan = None
-        return super().add_node(node)
+        added = super().add_node(node)
+        self._changes = next(self._gen)     # after the node is in the list the next plan reads
+        return added
 
     def remove_node(self, node) -> None:
-        self._plan = None
         super().remove_node(node)
+        self._changes = next(self._gen)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
         self._plan = None
@@ -268,9 +276,11 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
         """One wait; the ready entities queued in rclpy's order. False on timeout or shutdown."""
         with self._hold_lock:
             plan = self._plan
-            if plan is None:
+            if plan is None or plan.gen != self._changes:
                 self._release()
+                gen = self._changes                 # read before the nodes' entities are
                 plan = self._plan = _Plan(self)
+                plan.gen = gen
                 self.rebuilds += 1
             if self._entered is not plan:
                 self._release()

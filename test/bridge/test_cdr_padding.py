@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Empty, Float64MultiArray, String
 from switchobs_msgs.msg import StateEstimate
 from visualization_msgs.msg import MarkerArray
 
@@ -105,3 +105,10 @@ def test_bytes_that_are_not_the_message_are_refused():
         zero_padding(Odometry(), data)
     with pytest.raises(ValueError, match="fields end"):
         zero_padding(String(data="abcdef"), data + bytes(4))
+
+
+def test_a_message_without_fields_is_walked_as_its_hidden_byte():
+    """std_msgs/Empty: rosidl gives it one hidden uint8 that its field list does not name; the walk takes it
+    (a field after a nested empty message stays where it is) and zeroes what follows."""
+    data = serialize_message(Empty())
+    assert bytes(zero_padding(Empty(), data)) == bytes(data[:5]) + bytes(len(data) - 5)

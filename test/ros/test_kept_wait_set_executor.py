@@ -426,3 +426,38 @@ def test_entering_interrupted_exits_the_handles_it_entered(ctx):
         node.destroy_subscription(sub)
         assert sub.handle.pointer == 0
         assert plan.entered == [] and plan.live == []
+
+
+def test_an_entity_another_thread_creates_during_a_rebuild_is_served(ctx, monkeypatch):
+    """Another thread creates a timer while the spinner builds its wait set, after the build read the
+    node's entities: the change is not lost under the plan being built (the next wait rebuilds), and
+    the timer fires."""
+    import switchobs_ros.executor as executor_module
+    with _spun(ctx, "kws_rebuild") as (ex, node):
+        fired, armed = [], threading.Event()
+        build = executor_module._Plan.__init__
+
+        def build_while_another_thread_creates(self, executor):
+            build(self, executor)
+            if armed.is_set():
+                armed.clear()
+                count = len(list(node.timers))
+                threading.Thread(target=lambda: node.create_timer(0.01, lambda: fired.append(1))).start()
+                end = time.monotonic() + 20.0       # ends a broken run only
+                while len(list(node.timers)) == count and time.monotonic() < end:
+                    time.sleep(0.001)
+                time.sleep(0.05)                    # the other thread on to its wake()
+
+        monkeypatch.setattr(executor_module._Plan, "__init__", build_while_another_thread_creates)
+        t = threading.Thread(target=ex.spin)
+        t.start()
+        try:
+            armed.set()
+            ex.wake()
+            end = time.monotonic() + 20.0
+            while not fired and time.monotonic() < end:
+                time.sleep(0.01)
+        finally:
+            ex.shutdown()
+            t.join(20.0)
+        assert fired
