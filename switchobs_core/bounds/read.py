@@ -75,6 +75,8 @@ from scipy.linalg.blas import daxpy as _daxpy
 from scipy.linalg.lapack import dpotrf, dsyevr
 
 from ..numerics import dense_kernel
+from ..numerics.frobenius import SQRT_ETA as _SQRT_ETA
+from ..numerics.frobenius import fro_upper
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, fro_norm, gamma
 
 __all__ = ["AnchoredBound", "AMORTISED_MIN_N", "CHOLESKY_MIN_N", "LOOSENESS", "positive_definite",
@@ -138,18 +140,6 @@ def _between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
     if Dm is not D:         # S or S_a not C-ordered: a new array, copied into the caller's
         np.copyto(D, Dm)
     return w, c, math.sqrt(float(w.dot(w))), fro_norm(D)
-
-
-#: ``sqrt(eta)``: a computed ``||X||_F`` of ``m`` entries is below the true one by at most ``sqrt(m eta)`` beyond
-#: its relative error (each square under the normal range loses up to ``eta / 2``; ``sqrt(a + b) <=
-#: sqrt(a) + sqrt(b)``).
-_SQRT_ETA = math.sqrt(UNDERFLOW)
-
-
-def fro_upper(X: np.ndarray) -> float:
-    """``||X||_F`` computed (:func:`~switchobs_core.numerics.rounding.fro_norm`) plus what underflow can hide
-    from it, ``sqrt(X.size eta)``: an upper bound up to the relative rounding the callers allow for."""
-    return fro_norm(X) + math.sqrt(X.size) * _SQRT_ETA
 
 
 def _abs_rows(D: np.ndarray, n: int, ones: np.ndarray) -> float:

@@ -465,7 +465,7 @@ class ErrorEllipsoid:
         else:
             S = S + S.T
             S *= 0.5
-            nS = fro_norm(S) + math.sqrt(S.size * UNDERFLOW)   # + what underflow hides (read.fro_upper)
+            nS = fro_norm(S) + math.sqrt(S.size * UNDERFLOW)   # + what underflow hides (frobenius.fro_upper)
             if not math.isfinite(nS):
                 return math.inf
         lam = math.nan
