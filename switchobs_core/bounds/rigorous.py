@@ -49,7 +49,8 @@ import numpy as np
 from ..numerics import dense_kernel
 from ..numerics.disturbance_reach import DisturbanceReach
 from ..numerics.expm_bound import nu as nu2
-from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, PendingSet, fro_norm, gamma
+from ..numerics.frobenius import SQRT_ETA, fro_upper, underflow_slack
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, PendingSet, gamma
 from ..numerics.scaling import balance, balanced
 from .kalman_map import SparseTransition, sparse_map
 from .read import AnchoredBound
@@ -58,17 +59,24 @@ from .stamp import StampError
 __all__ = ["NO_E0", "RoundingBound", "open_loop_product"]
 
 
+#: Per entry of a scaled norm: what underflow hides from the square (``sqrt(eta)``) and the product ``s_i v_i``.
+_NORM_SLACK = SQRT_ETA + UNDERFLOW
+
+
 def _norm(v: np.ndarray, s: np.ndarray | None = None) -> float:
     """``||diag(s) v||`` (``s`` None: ``||v||``), by the compiled kernel where it is built and takes ``v``
-    (:data:`~switchobs_core.numerics.dense_kernel.NORM`: the sum of squares in another order), else numpy."""
+    (:data:`~switchobs_core.numerics.dense_kernel.NORM`: the sum of squares in another order), else numpy;
+    either plus what underflow can hide, ``sqrt(n) (sqrt(eta) + eta)``: an upper bound up to the relative
+    rounding the residuals allow for."""
+    slack = math.sqrt(v.size) * _NORM_SLACK
     if dense_kernel.NORM is not None:
         try:
-            return dense_kernel.NORM(v, s)
+            return dense_kernel.NORM(v, s) + slack
         except (BufferError, ValueError, TypeError):
             pass
     if s is not None:
         v = v * s
-    return math.sqrt(float(v.dot(v)))
+    return math.sqrt(float(v.dot(v))) + slack
 
 
 #: Why the bounds are withdrawn from the start when no initial error bound is given (``e0`` None).
@@ -125,7 +133,7 @@ class RoundingBound:
         #: The reachable set of the declared disturbance per step (None: none declared).
         self.reach = (DisturbanceReach(A, disturbance.B_w, disturbance.w_max, self.d)
                       if disturbance is not None and disturbance.active and noise_max else None)
-        self.fB = 0.0 if B is None or B.size == 0 else fro_norm(B / self.d[:, None])
+        self.fB = 0.0 if B is None or B.size == 0 else fro_upper(B / self.d[:, None])
         self.g_m = gamma((0 if B is None else B.shape[1]) + 2)
         self._CD: dict = {}
         self._AB = (A, B)
@@ -227,7 +235,7 @@ class RoundingBound:
         if hit is None or hit[0] is not C:
             if len(self._CD) > 256:
                 self._CD.clear()
-            hit = self._CD[id(C)] = (C, fro_norm(C * self.d[None, :]))
+            hit = self._CD[id(C)] = (C, fro_upper(C * self.d[None, :]))
         return hit[1]
 
     def gain_norms(self, K: np.ndarray, H: np.ndarray) -> tuple[float, float, float]:
@@ -238,15 +246,15 @@ class RoundingBound:
         one = float((aK.sum(axis=0) @ aH).max()) if aH.size else 0.0
         inf = float((aK @ aH.sum(axis=1)).max()) if aK.size else 0.0
         kappa = 1.0 + math.sqrt(one * inf) * (1.0 + 2.0 * gamma(K.shape[0] + 2 * H.shape[0] + 2))
-        return fro_norm(Ks), fro_norm(Hs), kappa
+        return fro_upper(Ks), fro_upper(Hs), kappa
 
     # ------------------------------------------------------------------ residuals
     def hold(self, C: np.ndarray, x: np.ndarray, y: np.ndarray, channel: int, p: int,
              u: np.ndarray | None = None) -> None:
         """A held innovation ``nu = y - C x_hat`` (LMI gains): its rounding, its noise's norm and
         its stamp error's (:meth:`stamp_error`, from the sets at the sample; ``u`` the held input)."""
-        self.nu_err = (self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * math.sqrt(float(y @ y))
-                       + (self.n + 2) * math.sqrt(p) * UNDERFLOW)
+        yn = math.sqrt(float(y @ y)) + underflow_slack(y.size)
+        self.nu_err = self.g_n * self._cd(C) * self.xn(x) + 2.0 * _U * yn + (self.n + 2) * math.sqrt(p) * UNDERFLOW
         self.w = self.stamp_error(C, x, u=u) if self.tolerance else 0.0
         if self.ellv is not None:
             self.vn = math.sqrt(p) * self.noise_max[channel - 1]
@@ -270,10 +278,10 @@ class RoundingBound:
         q = (e.nPhi + e.eps) * math.expm1(self.nA * delta) * (1.0 + 4.0 * _U) if delta > 0.0 else 0.0
         rho = (e.eps + q) * (xs + en) + e.emap * en + self.g_n * e.fPhi * xs + 2.0 * _U * xs1 + self._uf
         if nu is not None:
-            nun = math.sqrt(float(nu @ nu))
+            nun = math.sqrt(float(nu @ nu)) + underflow_slack(nu.size)
             rho += self.g_p * e.fGL * nun + e.fGL * self.nu_err
         if u is not None:
-            un = math.sqrt(float(u @ u))
+            un = math.sqrt(float(u @ u)) + underflow_slack(u.size)
             rho += (e.epsG * self.fB + self.g_m * e.fGB) * un
         return rho * (1.0 + 8.0 * _U)
 
@@ -297,11 +305,11 @@ class RoundingBound:
             err = (gamma(self.n + 2) + gamma(H.shape[0] + 2) + _U) * (np.abs(K) @ (np.abs(H) @ np.abs(Gd))) \
                 + _U * (np.abs(Gd) + np.abs(KHG))
             Gd = Gd - KHG
-            r += 2.0 * fro_norm(err * idc)
-        fd = fro_norm(Gd * idc)
+            r += 2.0 * fro_upper(err * idc)
+        fd = fro_upper(Gd * idc)
         if G1 is None or not c1 > 0.0 or G1.size == 0:
             return Gd, 1.0, r * (1.0 + 8.0 * _U)
-        f1 = fro_norm(G1 * idc) * math.sqrt(c1)
+        f1 = fro_upper(G1 * idc) * math.sqrt(c1)
         a = min(max(fd / f1, 1e-8), 1e8) if f1 > 0.0 else 1e8
         s1 = math.sqrt(c1 * (1.0 + a)) * (1.0 + 4.0 * _U)
         s2 = math.sqrt(1.0 + 1.0 / a) * (1.0 + 4.0 * _U)
@@ -318,7 +326,7 @@ class RoundingBound:
         the product ``Gamma B d`` and the difference ``d`` (``gamma_{m+2} + u``), and the sum
         (``u ||D^-1 x||``, ``x`` after it). The error map does not change: the plant receives the
         same input, so ``B u`` cancels in the error."""
-        dn = math.sqrt(float(d @ d))
+        dn = math.sqrt(float(d @ d)) + underflow_slack(d.size)
         delta = abs(dt - e.dt) + _U * dt
         quant = delta * (e.nPhi + e.eps) * math.exp(min(self.nA * delta, 700.0)) if delta > 0.0 else 0.0
         rho = ((e.epsG + quant) * self.fB + (self.g_m + _U) * e.fGB) * dn + _U * self.xn(x) + self._uf
@@ -330,7 +338,8 @@ class RoundingBound:
         point (products ``H x^-`` and ``K nu``, the two sums, and the data's own rounding ``u
         ||y||``); ``fK = ||D^-1 K||_F``, ``fH = ||H D||_F``; ``xm`` and ``xp`` are ``||D^-1 x^-||``
         and ``||D^-1 x^+||`` if the caller has them (then ``x_plus`` is not read)."""
-        yn, nun = math.sqrt(float(y.dot(y))), math.sqrt(float(nu.dot(nu)))
+        yn = math.sqrt(float(y.dot(y))) + underflow_slack(y.size)
+        nun = math.sqrt(float(nu.dot(nu))) + underflow_slack(nu.size)
         return self.rho_correct_norms(fK, fH, self.xn(x_minus) if xm is None else xm, yn, nun,
                                       self.xn(x_plus) if xp is None else xp, y.size)
 
