@@ -66,10 +66,11 @@ from scipy.sparse import csr_array
 from ..numerics import dense_kernel
 from ..numerics.csr import csr_matmat, csr_matvec
 from ..numerics.expm_bound import nu
-from ..numerics.rounding import fro_norm, gamma
+from ..numerics.frobenius import fro_upper
+from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_form", "sparse_map", "sparse_transition",
-           "KalmanMap"]
+           "KalmanMap", "frobenius_bound"]
 
 #: Fewest states for which the factored form is used (below, dense products are as fast).
 SPARSE_MIN_N = 40
@@ -165,6 +166,21 @@ def sparse_map(entry: Any) -> SparseTransition | None:
 _COLUMNS: dict[int, tuple] = {}
 
 
+def frobenius_bound(F: float, fK: float, fH: float, p: int, n: int) -> float:
+    """``>= ||I - K H||_2`` (balanced) from ``F = fro_upper(fl(I - K H))`` there, ``fK = ||D^-1 K||_F``,
+    ``fH = ||H D||_F`` (upper bounds) and ``H``'s shape ``(p, n)``. ``F`` misses what rounding takes
+    from it, ``err``: the product's and difference's (``gamma_{p+2} fK fH`` and their underflow, ``D``
+    being powers of two) and the norm's own (``gamma_{n^2+2} F``). ``I - K H`` is the identity on ``H``'s
+    null space, of dimension ``>= n - p``: ``n - p`` singular values are ``>= 1``, so
+    ``||.||_F^2 >= ||.||_2^2 + n - p - 1`` and ``||.||_F - ||.||_2 >= (n - p - 1) / (2 ||.||_F)``. Where
+    that slack (with ``F + err`` for ``||.||_F``) covers ``err``, ``F`` itself bounds ``||.||_2``;
+    else ``F + err``, rounded up."""
+    err = (gamma(p + 2) * fK * fH + gamma(n * n + 2) * F + n * (p + 2) * UNDERFLOW) * (1.0 + 8.0 * UNIT_ROUNDOFF)
+    if n - p >= 2 and err * (2.0 * (F + err)) * (1.0 + 8.0 * UNIT_ROUNDOFF) <= n - p - 1:
+        return F
+    return (F + err) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+
+
 def _columns(H: np.ndarray) -> tuple[tuple, int]:
     """``((c, H[:, c]), h)`` with ``c`` the columns of ``H`` that hold a nonzero (a channel sees a few
     states; ``()`` instead when they are more than a quarter of the columns) and ``h`` the most
@@ -226,14 +242,14 @@ class KalmanMap:
     def fK(self) -> float:
         """``||D^-1 K||_F`` (for the bound only: computed at its first read)."""
         if self._fK is None:
-            self._fK = fro_norm(self._scaled()[0])
+            self._fK = fro_upper(self._scaled()[0])
         return self._fK
 
     @property
     def fH(self) -> float:
         """``||H D||_F`` (computed at its first read)."""
         if self._fH is None:
-            self._fH = fro_norm(self._scaled()[1])
+            self._fH = fro_upper(self._scaled()[1])
         return self._fH
 
     @property
@@ -269,14 +285,15 @@ class KalmanMap:
 
     @property
     def nIKH(self) -> float:
-        """An upper bound of ``||I - K H||_2`` (balanced): ``||I - K H||_F`` there on the dense path,
-        :attr:`kappa` on the factored one (no n x n matrix formed)."""
+        """An upper bound of ``||I - K H||_2`` (balanced): ``||I - K H||_F`` there on the dense path
+        (:func:`frobenius_bound`), :attr:`kappa` on the factored one (no n x n matrix formed)."""
         if self._nIKH is None:
             if self._sp is not None:
                 self._nIKH = self.kappa
             else:
                 d = self.e.scale
-                self._nIKH = min(fro_norm((self._ikh() / d[:, None]) * d[None, :]), self.kappa)
+                F = fro_upper((self._ikh() / d[:, None]) * d[None, :])
+                self._nIKH = min(frobenius_bound(F, self.fK, self.fH, *self.H.shape), self.kappa)
         return self._nIKH
 
     @property
