@@ -31,7 +31,8 @@ import math
 import numpy as np
 
 from ..numerics.expm_bound import nu as nu2
-from ..numerics.rounding import UNIT_ROUNDOFF, fro_norm, gamma
+from ..numerics.frobenius import fro_upper, underflow_slack
+from ..numerics.rounding import UNIT_ROUNDOFF, gamma
 from ..numerics.scaling import balance, balanced
 
 __all__ = ["StampError", "stamp_error_bound"]
@@ -67,7 +68,7 @@ class StampError:
         self._id = 1.0 / self.d
         self.Ab = balanced(A, self.d)
         self.a = nu2(self.Ab)                       # >= ||D^-1 A D||_2, rounded up
-        self.fA = fro_norm(self.Ab) * (1.0 + 2.0 * gamma(self.n))
+        self.fA = fro_upper(self.Ab) * (1.0 + 2.0 * gamma(self.n))
         self.B = None if B is None or np.asarray(B).size == 0 else np.asarray(B, dtype=float) * self._id[:, None]
         self._CD: dict = {}
 
@@ -78,7 +79,7 @@ class StampError:
             if len(self._CD) > 256:
                 self._CD.clear()
             Cb = np.asarray(C, dtype=float) * self.d[None, :]
-            hit = self._CD[id(C)] = (C, Cb, nu2(Cb), fro_norm(Cb) * (1.0 + 2.0 * gamma(Cb.shape[1])))
+            hit = self._CD[id(C)] = (C, Cb, nu2(Cb), fro_upper(Cb) * (1.0 + 2.0 * gamma(Cb.shape[1])))
         return hit[1], hit[2], hit[3]
 
     def bound(self, C: np.ndarray, x_hat: np.ndarray, beta_d: float, d: float,
@@ -89,16 +90,18 @@ class StampError:
             return 0.0
         Cb, nC, fC = self._cd(C)
         xb = np.asarray(x_hat, dtype=float) * self._id
-        xn = math.sqrt(float(xb @ xb)) * (1.0 + 2.0 * gamma(self.n))
+        xn = (math.sqrt(float(xb @ xb)) + underflow_slack(xb.size)) * (1.0 + 2.0 * gamma(self.n))
         cax = Cb @ (self.Ab @ xb)
         # |fl(C (A x)) - C A x| <= gamma_{2n} |C| |A| |x| entrywise (two products), in 2-norm
         # at most gamma_{2n} ||C||_F ||A||_F ||x||
-        lin = math.sqrt(float(cax @ cax)) * (1.0 + 2.0 * gamma(cax.size)) + gamma(2 * self.n + 2) * fC * self.fA * xn
+        lin = ((math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size))
+               + gamma(2 * self.n + 2) * fC * self.fA * xn)
         z = self.a * d * (1.0 + 2.0 * _U)
         w = d * lin + nC * xn * _phi2(z) + nC * beta_d * _phi1(z)
         if self.B is not None and u is not None:
             bu = self.B @ np.asarray(u, dtype=float)
-            bun = math.sqrt(float(bu @ bu)) * (1.0 + 2.0 * gamma(bu.size + self.B.shape[1]))
+            bun = math.sqrt(float(bu @ bu)) + underflow_slack(bu.size)
+            bun *= 1.0 + 2.0 * gamma(bu.size + self.B.shape[1])
             w += nC * bun * d * math.exp(z) * (1.0 + 4.0 * _U)
         return w * (1.0 + 16.0 * _U)
 

@@ -56,7 +56,8 @@ from scipy.linalg import expm
 from ..exceptions import InvalidArgument
 from ..validation import as_matrix
 from .expm_bound import certify_zoh, expm_error_bound, nu
-from .rounding import UNIT_ROUNDOFF, fro_norm, gamma
+from .frobenius import fro_upper
+from .rounding import UNIT_ROUNDOFF, gamma
 
 __all__ = [
     "zoh_pair",
@@ -182,10 +183,10 @@ class ZOHEntry:
         self.eps = eps           # bound on ||Phi - e^{M dt}||_2, balanced (expm_bound)
         self.epsG = epsG
         Ps = scaled(Phi, d)
-        self.fPhi = fro_norm(Ps)
+        self.fPhi = fro_upper(Ps)
         self.nPhi = nu(Ps)
-        self.fGL = 0.0 if GL is None else fro_norm(GL / d[:, None])
-        self.fGB = 0.0 if GB is None else fro_norm(GB / d[:, None])
+        self.fGL = 0.0 if GL is None else fro_upper(GL / d[:, None])
+        self.fGB = 0.0 if GB is None else fro_upper(GB / d[:, None])
         self.Phi = Phi
         self.Gamma = Gamma
         self.GL = GL
@@ -385,13 +386,13 @@ class ZOHCache:
         d = base.scale
         consts = self._consts.get(id(M))
         if consts is None or consts[0] is not M:     # ||M||_F and the gammas, per registered M
-            consts = self._consts[id(M)] = (M, fro_norm(scaled(M, d)), math.factorial(m + 1), gamma(m * (n + 2) + 4),
+            consts = self._consts[id(M)] = (M, fro_upper(scaled(M, d)), math.factorial(m + 1), gamma(m * (n + 2) + 4),
                                             gamma(n + 1), gamma(4))
         _, nM, fact, g_sum, g_n1, g_4 = consts
         x = nM * r
         tail = x ** (m + 1) / fact / (1.0 - x / (m + 2))
         rnd = g_sum * (math.sqrt(n) + math.exp(x))
-        nPs, nPb = fro_norm(scaled(Ps, d)), base.fPhi
+        nPs, nPb = fro_upper(scaled(Ps, d)), base.fPhi
         Phi = base.Phi @ Ps
         # (a + r) is dtq up to the rounding of the two floats: that step difference, too
         split = abs(base.dt + r - dtq) + 2 * math.ulp(dtq)
@@ -400,7 +401,7 @@ class ZOHCache:
         Gamma = epsG = None
         if base.Gamma is not None:
             Gamma = base.Phi @ Gs + base.Gamma
-            nGs, nGb = fro_norm(scaled(Gs, d)), fro_norm(scaled(base.Gamma, d))
+            nGs, nGb = fro_upper(scaled(Gs, d)), fro_upper(scaled(base.Gamma, d))
             eg = r * (tail + rnd)
             epsG = (base.eps * (nGs + eg) + nPb * eg + base.epsG + g_n1 * (nPb * nGs + nGb)
                     + split * (nPb + base.eps) * (nPs + tail + rnd) * math.exp(nM * split)) * (1 + g_4)
