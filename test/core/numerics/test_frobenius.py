@@ -42,3 +42,27 @@ def test_normal_range_unchanged_beyond_the_slack() -> None:
     assert fro_upper(x) >= fro_norm(x)
     assert underflow_slack(50) < 1e-160
     assert abs(fro_upper(x) - np.linalg.norm(x)) <= 1e-15 * np.linalg.norm(x)
+
+
+@settings(max_examples=100, deadline=None)
+@given(m=st.integers(1, 30), exp=st.integers(-175, 2), seed=st.integers(0, 2**31 - 1), scaled=st.booleans())
+def test_balanced_vector_norm_bounds_the_exact_one_on_both_paths(m: int, exp: int, seed: int, scaled: bool) -> None:
+    """The residuals' ``||diag(s) v||`` (the compiled kernel's and numpy's) at scales where the squares
+    underflow (a state near 1e-165 in balanced units computes to a norm of 0 without the slack)."""
+    from switchobs_core.bounds import rigorous
+    from switchobs_core.numerics import dense_kernel
+
+    rng = np.random.default_rng(seed)
+    v = rng.standard_normal(m) * 10.0 ** exp
+    s = np.ldexp(1.0, rng.integers(-3, 4, size=m)) if scaled else None
+    # the exact sum of squares of diag(s) v (s holds powers of two: s_i v_i is exact unless it underflows)
+    exact = sum(((Fraction(float(a)) * Fraction(1 if s is None else float(s[i]))) ** 2 for i, a in enumerate(v)),
+                Fraction(0))
+    for kernel in (dense_kernel.NORM, None):
+        saved = dense_kernel.NORM
+        dense_kernel.NORM = kernel
+        try:
+            got = rigorous._norm(v, s)
+        finally:
+            dense_kernel.NORM = saved
+        assert Fraction(got * (1.0 + 2.0 * gamma(m + 2))) ** 2 >= exact, (kernel, got)
