@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..numerics.expm_bound import nu
+from ..numerics.frobenius import underflow_slack
 from ..numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma
 from .phase_norm import PhaseNorms, dominates, lyapunov_shapes, verified_factor
 
@@ -196,7 +197,8 @@ class PhaseBound:
         xl = self._xlast
         xs = xl[1] if f.x0 is xl[0] else b.xn(f.x0)
         y, nu_ = f.y, f.nu
-        xs1, yn, nun = b.xn(f.x_minus), math.sqrt(float(y @ y)), math.sqrt(float(nu_ @ nu_))
+        yn = math.sqrt(float(y @ y)) + underflow_slack(y.size)      # + what underflow hides (numerics.frobenius)
+        xs1, nun = b.xn(f.x_minus), math.sqrt(float(nu_ @ nu_)) + underflow_slack(nu_.size)
         fK = m.fK
         # ||D^-1 x^+|| <= (||D^-1 x^-|| + (1 + gamma_p) ||D^-1 K||_F ||nu||) (1 + u), x^+ = fl(x^- + fl(K nu))
         xsp = (xs1 + fK * nun * (1.0 + b.g_p)) * (1.0 + 2.0 * _U)
