@@ -24,3 +24,12 @@ def lying_member(path, member: str = "k0_E.npy", count: int = 2**33, *, deflate:
                 b = head.getvalue() + a.tobytes()
             z.writestr(info.filename, b, compress_type=zipfile.ZIP_DEFLATED if deflate else zipfile.ZIP_STORED)
     return out.getvalue()
+
+
+def flip_bit(path, at: int) -> None:
+    """Flip the lowest bit of the byte at offset ``at`` of the file ``path`` (in place)."""
+    with open(path, "r+b") as fh:
+        fh.seek(at)
+        b = fh.read(1)
+        fh.seek(at)
+        fh.write(bytes([b[0] ^ 0x01]))

@@ -43,6 +43,12 @@ def _zero_lmi(data):
             ch["L_o"] = [[0.0] * len(r) for r in ch["L_o"]]
 
 
+def _zero_kalman(data):
+    for k in data["kalman"]:
+        for part in ("periodic", "startup"):
+            k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
+
+
 @pytest.fixture(scope="module")
 def kalman(paper):
     return kalman_table(paper, [design_kalman(paper, [Cycle.from_ts(2.0, 0.6)], 20.0)])
@@ -64,11 +70,7 @@ def test_zeroed_lmi_gains_with_a_recomputed_checksum_are_refused(paper, paper_ta
 
 
 def test_zeroed_kalman_gains_are_refused(paper, kalman):
-    def zero(data):
-        for k in data["kalman"]:
-            for part in ("periodic", "startup"):
-                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
-    planted = _replant(kalman, zero)
+    planted = _replant(kalman, _zero_kalman)
     with pytest.raises(GainTableError, match=r"Kalman design at 20 Hz: the error map over one period has spectral "
                                              r"radius .* >= 1"):
         verify_table(planted, paper, source="planted.json")
@@ -87,11 +89,7 @@ def test_the_check_and_the_observer_read_one_design_built_once(paper, kalman):
         assert a.channel == b.channel and a.dt == b.dt and np.array_equal(a.K, b.K)
     assert np.array_equal(_period_map(kd, paper, "x"), _period_map(fresh, paper, "x"))
 
-    def zero(data):
-        for k in data["kalman"]:
-            for part in ("periodic", "startup"):
-                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
-    planted = _replant(table, zero)
+    planted = _replant(table, _zero_kalman)
     with pytest.raises(GainTableError, match="spectral radius"):
         verify_table(planted, paper, source="planted.json")
     assert not np.array_equal(planted.stored_kalman(planted.kalman[0], paper).periodic[0].K, kd.periodic[0].K)
@@ -131,12 +129,8 @@ def test_period_map_equals_the_dense_product(agents):
     assert np.max(np.abs(got - ref)) <= 1e-12 * max(1.0, np.max(np.abs(ref)))
     verify_table(table, agents)
 
-    def zero(data):
-        for k in data["kalman"]:
-            for part in ("periodic", "startup"):
-                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
     with pytest.raises(GainTableError, match="spectral radius"):
-        verify_table(_replant(table, zero), agents, source="planted.json")
+        verify_table(_replant(table, _zero_kalman), agents, source="planted.json")
 
 
 @settings(max_examples=30, deadline=None)
@@ -257,12 +251,8 @@ def test_runs_over_a_few_decoupled_blocks_give_the_dense_product(monkeypatch):
     monkeypatch.undo()
     verify_table(table, system)
 
-    def zero(data):
-        for k in data["kalman"]:
-            for part in ("periodic", "startup"):
-                k[part]["K"] = [[[0.0] * len(r) for r in K] for K in k[part]["K"]]
     with pytest.raises(GainTableError, match="spectral radius"):
-        verify_table(_replant(table, zero), system, source="planted.json")
+        verify_table(_replant(table, _zero_kalman), system, source="planted.json")
 
 
 def test_blocks_of_a_transition_are_its_coupled_states():

@@ -11,7 +11,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from _binary_tables import lying_member
+from _binary_tables import flip_bit, lying_member
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -219,14 +219,6 @@ def test_a_member_header_that_lies_is_refused_before_allocating(saved, tmp_path,
     assert "\n" not in str(err.value)
 
 
-def _flip(path, at):
-    with open(path, "r+b") as fh:
-        fh.seek(at)
-        b = fh.read(1)
-        fh.seek(at)
-        fh.write(bytes([b[0] ^ 0x01]))
-
-
 @pytest.mark.parametrize("seg, k, byte", [("startup", 0, 0), ("startup", 3, 77), ("periodic", -1, 8 * 78 - 1)])
 @pytest.mark.parametrize("when", ["before_load", "after_load"])
 def test_a_flipped_prior_is_refused_at_its_first_use(table, saved, seg, k, byte, when):
@@ -242,12 +234,12 @@ def test_a_flipped_prior_is_refused_at_its_first_use(table, saved, seg, k, byte,
     m = PAPER.n * (PAPER.n + 1) // 2
     at = _data_offset(saved, f"k0_{seg}_P.npy") + 8 * m * k + byte
     if when == "before_load":
-        _flip(saved, at)
+        flip_bit(saved, at)
     loaded = GainTable.load(saved, system=PAPER)      # the gains are checked (table/check.py); no prior read
     rows = loaded.kalman[0][seg]["P_prior"]
     assert rows.verified() == 0
     if when == "after_load":
-        _flip(saved, at)
+        flip_bit(saved, at)
     kd = loaded.kalman_design([c], PAPER)
     for j, (x, y) in enumerate(zip(phases, getattr(kd, seg), strict=True)):
         assert x.K.tobytes() == y.K.tobytes()

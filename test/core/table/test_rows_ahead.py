@@ -11,6 +11,7 @@ import time
 import warnings
 
 import pytest
+from _binary_tables import flip_bit
 
 from switchobs_core.design.kalman import design_kalman
 from switchobs_core.exceptions import GainTableError
@@ -42,14 +43,6 @@ def _held(rows, k, timeout=10.0):
         time.sleep(0.002)
 
 
-def _flip(path, at):
-    with open(path, "r+b") as fh:
-        fh.seek(at)
-        b = fh.read(1)
-        fh.seek(at)
-        fh.write(bytes([b[0] ^ 0x01]))
-
-
 def test_rows_ahead_are_the_stored_doubles(table, tmp_path):
     """In order, with a jump and across the wrap of the periodic segment: every row equals the one read
     without a worker, bit for bit, read-only; the rows after the first come from the worker."""
@@ -76,7 +69,7 @@ def test_a_row_that_fails_ahead_raises_in_the_caller(table, tmp_path, monkeypatc
     path = table.save(tmp_path / "k.npz")
     rows = _rows(path)
     ref = {k: rows._read(k).tobytes() for k in range(10)}
-    _flip(path, rows._offset + 5 * 8 * rows.m + 17)
+    flip_bit(path, rows._offset + 5 * 8 * rows.m + 17)
     assert rows.row(0).tobytes() == ref[0]
     if ahead:
         _held(rows, 6)
@@ -99,7 +92,7 @@ def test_a_row_verified_ahead_keeps_the_bytes_that_matched(table, tmp_path):
     stored = rows._read(3).tobytes()
     rows.row(0)
     _held(rows, 3)
-    _flip(path, rows._offset + 3 * 8 * rows.m)
+    flip_bit(path, rows._offset + 3 * 8 * rows.m)
     assert rows.row(3).tobytes() == stored
     with pytest.raises(GainTableError, match="checksum mismatch"):
         rows.row(3)
