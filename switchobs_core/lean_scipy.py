@@ -14,14 +14,15 @@ the application decides (the nodes' console scripts, :mod:`switchobs_ros.entry`,
 import the node); a process that imported scipy already keeps its copy as it is.
 
 scipy's decorators also rewrite the docstring of every function they wrap as it is defined (a note on
-array-API support or batching appended: ``scipy._lib._docscrape`` parses each docstring, 171 of them
-for ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special``, about 35 ms of a start). During
+array-API support or batching appended: ``scipy._lib._docscrape`` parses each docstring, 77 of them
+for ``scipy.linalg`` and ``scipy.sparse``, 171 with ``scipy.special``: about 35 ms of a start with it). During
 :func:`import_scipy` that module is a stand-in (:func:`_docs_kept`, :class:`_Docstring`: every
 section empty, the docstring given back as it was), removed again afterwards; the scipy modules that
 bound the stand-in by name get scipy's own parser at its first use (:func:`_function_doc`), so a
 module imported later (``scipy.stats``, ``scipy.signal``) is documented as after a plain import.
 What the decorators do to the functions (their wrappers, the capability tables) is unchanged; only
-the notes of ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special`` are missing from ``help()``.
+the notes of ``scipy.linalg`` and ``scipy.sparse`` are missing from ``help()`` (``scipy.special``,
+imported later by the chi-square gate, :mod:`switchobs_core.runtime.gate`, has its notes).
 """
 
 from __future__ import annotations
@@ -83,9 +84,10 @@ def _docs_kept() -> types.ModuleType:
 
 
 def import_scipy() -> bool:
-    """Import ``scipy.linalg``, ``scipy.sparse`` and ``scipy.special`` (what every estimator start
-    needs), the namespace copy without :data:`NOT_ARRAY_API` and the docstrings as they are written;
-    False (nothing changed) if the copy exists already.
+    """Import ``scipy.linalg`` and ``scipy.sparse`` (what every estimator start needs; ``scipy.special``,
+    the chi-square gate's quantile, is imported at the gate's first threshold), the namespace copy
+    without :data:`NOT_ARRAY_API` and the docstrings as they are written; False (nothing changed) if the
+    copy exists already.
 
     A scipy whose decorators need more of the parser than the stand-in gives fails the first
     import: its partly imported modules are dropped and scipy is imported again with its own
@@ -108,8 +110,7 @@ def import_scipy() -> bool:
 
 def _import() -> None:
     import scipy.linalg
-    import scipy.sparse
-    import scipy.special  # noqa: F401
+    import scipy.sparse  # noqa: F401
 
 
 def _import_with_stand_in() -> bool:

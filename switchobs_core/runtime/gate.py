@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import chdtri
 
 from .consistency import output_rows
 
@@ -45,8 +44,11 @@ def nis(C_rows: np.ndarray, P_prior: np.ndarray, R: np.ndarray, x_hat: np.ndarra
 
 def chi2_gate(p: int, alpha: float) -> float:
     """The threshold ``chi2.ppf(1 - alpha, p)``: a sample of a model that holds exceeds it with
-    probability ``alpha`` (the gate's false-alarm rate per sample)."""
-    return float(chdtri(p, alpha))      # the upper-tail inverse of the chi-square distribution
+    probability ``alpha`` (the gate's false-alarm rate per sample). ``scipy.special`` is imported here, at
+    the first threshold asked for (a gated sample), not with this module: an estimator start without
+    the gate (``chi2_alpha`` 0, the default) never pays its 15-35 ms."""
+    from scipy.special import chdtri  # the upper-tail inverse of the chi-square distribution
+    return float(chdtri(p, alpha))
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,9 @@ else:
     first = second = None
 loaded = sorted(m for m in sys.modules if m.startswith("numpy.") and m.count(".") == 1)    # before any call
 parser_left = "scipy._lib._docscrape" in sys.modules
+special_at_start = "scipy.special" in sys.modules
 import scipy._lib.array_api_compat.numpy as copy
-from scipy.linalg import expm, matrix_balance
+from scipy.linalg import cholesky, expm, matrix_balance
 from scipy.special import chdtri
 from scipy.sparse import csr_array
 rng = np.random.default_rng(7)
@@ -42,9 +43,9 @@ print(json.dumps({"first": first, "second": second, "all_same": list(np.__all__)
                   "loaded": loaded,
                   "copy": sorted(n for n in dir(copy) if not n.startswith("_")), "out": out,
                   "testing_later": __import__("numpy.testing").testing.assert_array_equal is not None,
-                  "parser_left": parser_left,
+                  "parser_left": parser_left, "special_at_start": special_at_start,
                   "later_doc": __import__("scipy.signal").signal.convolve.__doc__,
-                  "expm_doc": expm.__doc__, "chdtri_doc": chdtri.__doc__,
+                  "expm_doc": expm.__doc__, "cholesky_doc": cholesky.__doc__, "chdtri_doc": chdtri.__doc__,
                   "parser_later": __import__("scipy._lib._docscrape").
                   _lib._docscrape.FunctionDoc(expm)["Summary"]}))
 """
@@ -76,13 +77,17 @@ def test_namespace_copy_without_the_submodules_and_numpy_unchanged():
 def test_docstrings_kept_as_written_and_the_parser_imported_later():
     """The lean import leaves scipy's docstring parser out (no module left behind): the functions keep
     the docstrings they were written with (the plain import appends scipy's notes to the same text, as to
-    the chi-square quantile's), and a later import of the parser gets scipy's own, which parses."""
+    ``cholesky``'s), and a later import of the parser gets scipy's own, which parses. ``scipy.special`` is not
+    imported (the chi-square gate imports it at its first threshold, with scipy's notes)."""
     lean, plain = _probe("lean"), _probe("plain")
     assert not lean["parser_left"] and plain["parser_left"]
-    for name in ("expm_doc", "chdtri_doc"):
+    for name in ("expm_doc", "cholesky_doc"):
         first = lean[name].strip().splitlines()[0]
         assert first and first in plain[name], (name, first)
-    assert len(lean["chdtri_doc"]) < len(plain["chdtri_doc"])      # without scipy's array-API note
+    assert len(lean["cholesky_doc"]) < len(plain["cholesky_doc"])      # without scipy's array-API note
+    # scipy.special is left to the chi-square gate's first threshold: imported then, with scipy's notes
+    assert not lean["special_at_start"] and plain["special_at_start"]
+    assert lean["chdtri_doc"] == plain["chdtri_doc"]
     assert lean["parser_later"] == plain["parser_later"] == ["Compute the matrix exponential of an array."]
     assert lean["later_doc"] == plain["later_doc"]      # a module imported later: scipy's own notes
     assert "Array API Standard Support" in plain["later_doc"]

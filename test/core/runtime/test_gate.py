@@ -90,3 +90,24 @@ def test_describe_names_the_numbers():
     assert not g.ok
     assert g.describe() == "NIS 12.5 > 9.49 (chi-square, 4 rows, alpha 0.05)"
     assert GateResult(1, 9.49, 9.49, 4, 0.05).ok
+
+
+def test_scipy_special_imported_at_the_first_threshold_only():
+    """The gate's module and a gate made (the estimator's start, gate on or off) leave ``scipy.special``
+    unimported; the first threshold imports it and is ``chdtri``'s number, byte for byte."""
+    import json
+    import subprocess
+    import sys
+
+    probe = (
+        "import json, sys\n"
+        "import numpy as np\n"
+        "from switchobs_core.runtime.gate import ChiSquareGate\n"
+        "g = ChiSquareGate([np.eye(3)], 0.01)\n"
+        "before = 'scipy.special' in sys.modules\n"
+        "t = g.threshold(3)\n"
+        "from scipy.special import chdtri\n"
+        "print(json.dumps([before, 'scipy.special' in sys.modules, t == float(chdtri(3, 0.01))]))\n")
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout) == [False, True, True]
