@@ -51,11 +51,12 @@ inputs lies in the ellipsoid ``q diag(m^2)``) and only the third-order remainder
 Rounding. The products ``Y = fl(A_b X)`` and ``Z = fl(A_b Y)`` err by at most
 ``gamma_n |A_b| |X|`` entrywise (Higham, eq. 3.11), so ``||A_b X - Y|| <= gamma_n a ||X||``; the
 axpy ``fl(X + h Y)`` by ``gamma_2 (|X| + h |Y|)``; a computed norm is a sum of nonnegative terms
-rounded up by ``1 + gamma_{n+2}``; a matrix's 2-norm is bounded by ``min(nu, ||.||_F)``, both
-rounded up; ``h`` is taken as ``dt (1 + 2u)`` (the true step is within ``u dt`` of the double
-``dt``), and every line of the bookkeeping is inflated by a relative ``8 u``. The result is an
-upper bound of the quantities above (``inf`` when a bound is ``inf``: the disturbance then makes
-the bound infinite and the caller withdraws it).
+rounded up by ``1 + gamma_{n+2}``, plus what underflow hides from it (``sqrt(m eta)`` for ``m``
+squares, :mod:`switchobs_core.numerics.frobenius`; the Gram bound's form likewise); a matrix's
+2-norm is bounded by ``min(nu, ||.||_F)``, both rounded up; ``h`` is taken as ``dt (1 + 2u)`` (the
+true step is within ``u dt`` of the double ``dt``), and every line of the bookkeeping is inflated
+by a relative ``8 u``. The result is an upper bound of the quantities above (``inf`` when a bound
+is ``inf``: the disturbance then makes the bound infinite and the caller withdraws it).
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .expm_bound import nu
+from .frobenius import underflow_slack
 from .rounding import UNIT_ROUNDOFF, gamma
 
 __all__ = ["DisturbanceReach", "brute_force_reach"]
@@ -78,16 +80,16 @@ _CACHE = 256
 
 
 def _norm_up(v: np.ndarray) -> float:
-    """``>= ||v||_2`` (a sum of squares rounded up)."""
-    return math.sqrt(float(v @ v)) * (1.0 + gamma(v.size + 2)) * _UP
+    """``>= ||v||_2`` (a sum of squares rounded up, plus what underflow hides from it:
+    :func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
+    return math.sqrt(float(v @ v)) * (1.0 + gamma(v.size + 2)) * _UP + underflow_slack(v.size)
 
 
 def _mat_norm_up(X: np.ndarray) -> float:
-    """``>= ||X||_2``: the smaller of ``nu(X)`` and ``||X||_F``, each rounded up."""
+    """``>= ||X||_2``: the smaller of ``nu(X)`` and ``||X||_F`` (:func:`_mat_fro_up`), each rounded up."""
     if X.size == 0:
         return 0.0
-    fro = math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP
-    return min(nu(X), fro)
+    return min(nu(X), _mat_fro_up(X))
 
 
 class DisturbanceReach:
@@ -134,10 +136,17 @@ class DisturbanceReach:
         self._shaped: dict[float, tuple[np.ndarray, float]] = {}
 
     def _gram(self, X: np.ndarray, gn: float) -> float:
-        """``>= sqrt(m' |X'X| m)`` (the product's rounding ``gamma_n |X|'|X|`` added)."""
+        """``>= sqrt(m' |X'X| m)`` (the product's rounding ``gamma_n |X|'|X|`` added) plus what underflow
+        hides from it: each entry of ``G`` (``n`` products, two more for the rounding term) loses at most
+        ``(n + 2) eta``, the form ``m' G m`` (``q`` products a row, ``q`` more, two scalings) at most
+        ``q eta (sum m + 1) + eta``: with ``s = sum m``, ``(n + 2) s^2 + q (s + 1) + 1`` times ``eta``
+        under the root, :func:`~switchobs_core.numerics.frobenius.underflow_slack` of that count."""
         aX = np.abs(X)
         G = np.abs(X.T @ X) + gn * (aX.T @ aX) * _UP
-        return math.sqrt(float(self.w_max @ G @ self.w_max) * (1.0 + gamma(2 * self.q + 2)) * _UP) * _UP
+        s = float(self.w_max.sum()) * (1.0 + gamma(self.q + 2))
+        count = ((X.shape[0] + 2) * s * s + self.q * (s + 1.0) + 1.0) * _UP
+        return (math.sqrt(float(self.w_max @ G @ self.w_max) * (1.0 + gamma(2 * self.q + 2)) * _UP) * _UP
+                + underflow_slack(count))
 
     @property
     def active(self) -> bool:
@@ -220,8 +229,11 @@ class DisturbanceReach:
 
 
 def _mat_fro_up(X: np.ndarray) -> float:
-    """``>= ||X||_F`` (rounded up)."""
-    return math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP if X.size else 0.0
+    """``>= ||X||_F`` (rounded up, plus what underflow hides:
+    :func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
+    if not X.size:
+        return 0.0
+    return math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP + underflow_slack(X.size)
 
 
 def brute_force_reach(A: np.ndarray, B_w: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:

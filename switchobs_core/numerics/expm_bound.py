@@ -9,7 +9,9 @@ matrices (``m`` Taylor terms, ``s`` squarings; 2-4 ms at n = 132).
 
 Norms. ``nu(X) = sqrt(||X||_1 ||X||_inf)`` bounds ``||X||_2`` and ``|| |X| ||_2`` (``|X|`` entrywise);
 for nonnegative matrices ``|| |X| |Y| ||_1 <= ||X||_1 ||Y||_1`` and likewise for ``inf``. Every
-computed norm is a sum of nonnegative terms, rounded up by ``(1 + gamma_{n+2})``.
+computed norm is a sum of nonnegative terms, rounded up by ``(1 + gamma_{n+2})`` (sums of nonnegative
+doubles do not underflow); ``sqrt(a b)`` of two of them is taken so that it does not either, where
+``a b`` falls below the normal range (:func:`_sqrt_prod`).
 
 Argument, for ``X = M dt`` (``M`` and ``dt`` the doubles given; the caller passes ``M`` in the
 coordinates it wants the bound in, e.g. balanced ones, :mod:`switchobs_core.numerics.scaling`):
@@ -45,7 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .rounding import UNIT_ROUNDOFF, gamma
+from .rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["nu", "CertifiedStep", "certify_zoh", "expm_error_bound"]
 
@@ -55,6 +57,8 @@ THETA = 0.25
 #: Most Taylor terms (step 2 stops before: ``0.25^18 / 18! < 1e-26``).
 MAX_TERMS = 18
 _UP = 1.0 + 8.0 * _U      # each line of bookkeeping rounded up
+#: The smallest normal double, ``2^-1022``: a product at or above it is rounded relative ``u``.
+_NORMAL = 2.0**-1022
 
 
 def _nu1inf(X: np.ndarray) -> tuple[float, float]:
@@ -66,10 +70,23 @@ def _nu1inf(X: np.ndarray) -> tuple[float, float]:
     return float(A.sum(axis=0).max()) * f, float(A.sum(axis=1).max()) * f
 
 
+def _sqrt_prod(a: float, b: float) -> float:
+    """``>= sqrt(a b)`` for ``a, b >= 0``, also where ``a b`` underflows (below ``~1e-162`` each, a
+    product under the normal range loses up to ``eta / 2`` and is 0 below ``eta``): there
+    ``sqrt(a) sqrt(b)``, each factor normal (``sqrt(eta) = 2^-537``), plus ``2 eta`` for the product's
+    absolute rounding and the factors' relative ``2 u`` of a result below ``2^-1022`` (``eta``,
+    :data:`~switchobs_core.numerics.rounding.UNDERFLOW`). In the normal range ``sqrt(a b)`` as it was."""
+    p = a * b
+    if p >= _NORMAL or not p == p or a == 0.0 or b == 0.0:
+        return math.sqrt(p) * _UP
+    return math.sqrt(a) * math.sqrt(b) * _UP + 2.0 * UNDERFLOW
+
+
 def nu(X: np.ndarray) -> float:
-    """``sqrt(||X||_1 ||X||_inf) >= ||X||_2`` (and ``>= || |X| ||_2``), rounded up."""
+    """``sqrt(||X||_1 ||X||_inf) >= ||X||_2`` (and ``>= || |X| ||_2``), rounded up (:func:`_sqrt_prod`:
+    also where the product of the two norms underflows)."""
     a, b = _nu1inf(X)
-    return math.sqrt(a * b) * _UP
+    return _sqrt_prod(a, b)
 
 
 class CertifiedStep(NamedTuple):
@@ -140,11 +157,11 @@ def certify_zoh(M: np.ndarray, dt: float, gamma_too: bool = False) -> CertifiedS
     # 4. squarings
     for _ in range(s):
         e1, einf = _nu1inf(E)
-        nE = math.sqrt(e1 * einf) * _UP
+        nE = _sqrt_prod(e1, einf)
         if G is not None:
             g1, ginf = _nu1inf(G)
-            nG = math.sqrt(g1 * ginf) * _UP
-            rnd = math.sqrt((e1 * g1 + g1) * (einf * ginf + ginf)) * _UP
+            nG = _sqrt_prod(g1, ginf)
+            rnd = _sqrt_prod(e1 * g1 + g1, einf * ginf + ginf)
             dG = (dG * (nE + delta + 1.0) + delta * nG + gn1 * rnd) * _UP
             G = E @ G + G
         delta = (delta * (2.0 * nE + delta) + gn * e1 * einf) * _UP

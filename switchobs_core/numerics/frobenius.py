@@ -24,8 +24,9 @@ __all__ = ["SQRT_ETA", "fro_upper", "underflow_slack"]
 SQRT_ETA = math.sqrt(UNDERFLOW)
 
 
-def underflow_slack(m: int) -> float:
-    """``sqrt(m eta)``: what underflow can hide from a computed 2-norm / Frobenius norm of ``m`` entries."""
+def underflow_slack(m: float) -> float:
+    """``sqrt(m eta)``: what underflow can hide from a computed 2-norm / Frobenius norm of ``m`` entries
+    (or from a square root of any sum whose underflows lose at most ``m eta`` in all)."""
     return math.sqrt(m) * SQRT_ETA
 
 

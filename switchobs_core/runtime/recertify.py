@@ -83,6 +83,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..numerics.expm_bound import certify_zoh, nu
+from ..numerics.frobenius import underflow_slack
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["Certificate", "DataWindow", "chebyshev"]
@@ -92,8 +93,9 @@ _UP = 1.0 + 8.0 * _U
 
 
 def _norm(v: np.ndarray) -> float:
-    """``||v||_2`` rounded up (a sum of squares and a square root: relative ``gamma_{k+2}``)."""
-    return math.sqrt(float(v.ravel() @ v.ravel())) * (1.0 + gamma(v.size + 2))
+    """``||v||_2`` rounded up (a sum of squares and a square root: relative ``gamma_{k+2}``) plus what
+    underflow hides from it (:func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
+    return math.sqrt(float(v.ravel() @ v.ravel())) * (1.0 + gamma(v.size + 2)) + underflow_slack(v.size)
 
 
 @dataclass(frozen=True)
