@@ -252,14 +252,6 @@ def _selected(H: np.ndarray) -> np.ndarray | None:
     return np.argmax(ones, axis=1)
 
 
-def _apply(Phi: np.ndarray | csr_array, M: np.ndarray) -> np.ndarray:
-    """``Phi @ M`` (``M`` dense, n x n); a sparse ``Phi`` through scipy's kernel
-    (:mod:`~switchobs_core.numerics.csr`)."""
-    if not isinstance(Phi, csr_array):
-        return Phi @ M
-    return csr_matmat(Phi.indptr, Phi.indices, Phi.data, Phi.shape, M)
-
-
 def _transition(Phi: np.ndarray) -> np.ndarray | csr_array:
     """``Phi`` as it is applied: sparse when at most :data:`SPARSE_DENSITY` of it is nonzero and finite."""
     if np.isfinite(Phi).all() and np.count_nonzero(Phi) <= SPARSE_DENSITY * Phi.size:

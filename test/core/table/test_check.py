@@ -22,7 +22,7 @@ from switchobs_core.model.scenarios import camera_agents
 from switchobs_core.model.schedule import Cycle
 from switchobs_core.model.system import LTISystem
 from switchobs_core.table import check
-from switchobs_core.table.check import _apply, _period_map, _selected, _transition, verify_table
+from switchobs_core.table.check import _apply_phase, _period_map, _selected, _transition, verify_table
 from switchobs_core.table.gains import GainTable, kalman_table
 from switchobs_core.table.kalman import KalmanDesign
 
@@ -134,17 +134,28 @@ def test_period_map_equals_the_dense_product(agents):
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), dt=st.sampled_from([0.01, 0.05, 0.5]), cols=st.integers(1, 12))
-def test_sparse_transition_applied_as_scipys_product(agents, seed, dt, cols):
-    """``_apply`` of a sparse transition (scipy's kernel called directly) gives the bytes of
-    ``csr_array @ dense``, for dense factors of any values and widths; a dense transition is a plain product."""
+@given(seed=st.integers(0, 2**32 - 1), dt=st.sampled_from([0.01, 0.05, 0.5]), cols=st.integers(1, 12),
+       select=st.booleans())
+def test_sparse_transition_applied_as_scipys_product(agents, seed, dt, cols, select):
+    """A phase ``(I - K H) Phi M`` with a sparse transition (scipy's kernel called directly,
+    :func:`_apply_phase`) gives the bytes of ``csr_array @ dense`` followed by the correction, for dense
+    factors of any values and widths, with a general ``H`` or one that selects states; a dense transition
+    is a plain product."""
     rng = np.random.default_rng(seed)
+    n = agents.n
     Phi = _transition(expm(np.asarray(agents.A) * dt))
     assert isinstance(Phi, csr_array)
-    M = rng.standard_normal((agents.n, cols)) * 10.0 ** rng.integers(-8, 8)
-    assert _apply(Phi, M).tobytes() == np.asarray(Phi @ M).tobytes()
-    dense = Phi.toarray()
-    assert _apply(dense, M).tobytes() == (dense @ M).tobytes()
+    M = rng.standard_normal((n, cols)) * 10.0 ** rng.integers(-8, 8)
+    p = int(rng.integers(1, 5))
+    H = np.eye(n)[rng.choice(n, p, replace=False)] if select else rng.standard_normal((p, n))
+    picked = _selected(H)
+    assert (picked is not None) == select
+    K = rng.standard_normal((n, p))
+    for T in (Phi, Phi.toarray()):
+        PM = np.asarray(T @ M)
+        ref = PM - K @ (H @ PM)
+        got, _ = _apply_phase(T, K, H, picked, M.copy(), np.empty((n, cols)))
+        assert got.tobytes() == ref.tobytes()
 
 
 def test_period_map_is_the_public_products_bit_for_bit(agents):
