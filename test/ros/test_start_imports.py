@@ -30,14 +30,15 @@ REPO = Path(__file__).resolve().parents[2]
 #: Modules (and their submodules) a start from a cached table has no use for: the SDP and Riccati
 #: design stack, the simulator and the command line, plotting, scipy's optimisers, statistics,
 #: integrators and interpolants, numpy's submodules outside the array API, the test framework, and
-#: scipy's docstring parser (:mod:`switchobs_core.lean_scipy`), and the RViz markers' message classes (made after
-#: the first estimate: :mod:`switchobs_ros.late_markers`).
+#: scipy's docstring parser (:mod:`switchobs_core.lean_scipy`), the RViz markers' message classes (made after
+#: the first estimate: :mod:`switchobs_ros.late_markers`), and ``scipy.special`` (the chi-square gate's
+#: quantile, imported at the gate's first threshold: :mod:`switchobs_core.runtime.gate`).
 HEAVY = ("cvxpy", "clarabel", "matplotlib", "switchobs_core.design.lmi", "switchobs_core.design.kalman",
          "switchobs_core.design.synthesis", "switchobs_core.design.plan", "switchobs_core.design.doubling",
          "switchobs_core.sim", "switchobs_core.cli", "scipy.optimize", "scipy.stats", "scipy.integrate",
          "scipy.interpolate", "numpy.f2py", "numpy.testing", "numpy.ma", "numpy.polynomial", "unittest",
          "scipy._lib._docscrape", "rosidl_generator_py.generate_py_impl", "rosidl_parser.parser", "lark", "em",
-         "rosidl_pycommon", "visualization_msgs")
+         "rosidl_pycommon", "visualization_msgs", "scipy.special")
 
 PROBE = """
 import json, sys
