@@ -140,13 +140,14 @@ class DisturbanceReach:
         hides from it: each entry of ``G`` (``n`` products, two more for the rounding term) loses at most
         ``(n + 2) eta``, the form ``m' G m`` (``q`` products a row, ``q`` more, two scalings) at most
         ``q eta (sum m + 1) + eta``: with ``s = sum m``, ``(n + 2) s^2 + q (s + 1) + 1`` times ``eta``
-        under the root, :func:`~switchobs_core.numerics.frobenius.underflow_slack` of that count."""
+        under the root, which adds at most ``s sqrt((n + 2) eta) + sqrt((q (s + 1) + 1) eta)``
+        (:func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
         aX = np.abs(X)
         G = np.abs(X.T @ X) + gn * (aX.T @ aX) * _UP
         s = float(self.w_max.sum()) * (1.0 + gamma(self.q + 2))
-        count = ((X.shape[0] + 2) * s * s + self.q * (s + 1.0) + 1.0) * _UP
+        slack = (s * underflow_slack(X.shape[0] + 2) + underflow_slack((self.q * (s + 1.0) + 1.0) * _UP)) * _UP
         return (math.sqrt(float(self.w_max @ G @ self.w_max) * (1.0 + gamma(2 * self.q + 2)) * _UP) * _UP
-                + underflow_slack(count))
+                + slack)
 
     @property
     def active(self) -> bool:
