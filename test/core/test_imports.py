@@ -17,11 +17,12 @@ PKG = Path(switchobs_core.__file__).parent
 LAZY_OK = {"cvxpy", "matplotlib", "tqdm", "threadpoolctl", "yaml", "scipy.optimize", "scipy.interpolate"}
 #: Modules whose function is an import made under conditions it sets first (and so inside a function):
 #: ``lean_scipy`` imports scipy with numpy's star-export trimmed, and scipy's docstring parser at its
-#: first use after that import.
+#: first use after that import. The chi-square gate imports ``scipy.special`` (its quantile) when it is
+#: made with a false-alarm rate > 0: an estimator start without the gate (the default) does not.
 #: The gain families design a table only when none is given: the design stack (the SDP solver's modules,
 #: the Riccati doubling) is imported by the start that designs, not by every start that loads a table.
-LAZY_BY_PURPOSE = {"switchobs_core.lean_scipy": {"scipy.linalg", "scipy.sparse", "scipy.special",
-                                                 "scipy._lib._docscrape"},
+LAZY_BY_PURPOSE = {"switchobs_core.lean_scipy": {"scipy.linalg", "scipy.sparse", "scipy._lib._docscrape"},
+                   "switchobs_core.runtime.gate": {"scipy.special"},
                    "switchobs_core.runtime.families.lmi": {"switchobs_core.design.lmi"},
                    "switchobs_core.runtime.families.kalman": {"switchobs_core.design.kalman"}}
 

@@ -92,9 +92,10 @@ def test_describe_names_the_numbers():
     assert GateResult(1, 9.49, 9.49, 4, 0.05).ok
 
 
-def test_scipy_special_imported_at_the_first_threshold_only():
-    """The gate's module and a gate made (the estimator's start, gate on or off) leave ``scipy.special``
-    unimported; the first threshold imports it and is ``chdtri``'s number, byte for byte."""
+def test_scipy_special_imported_only_with_the_gate_on():
+    """The gate's module and a gate made with ``alpha = 0`` (the estimator's start without the gate)
+    leave ``scipy.special`` unimported; a gate made with ``alpha > 0`` imports it and holds its channels'
+    thresholds, ``chdtri``'s numbers byte for byte."""
     import json
     import subprocess
     import sys
@@ -103,11 +104,13 @@ def test_scipy_special_imported_at_the_first_threshold_only():
         "import json, sys\n"
         "import numpy as np\n"
         "from switchobs_core.runtime.gate import ChiSquareGate\n"
-        "g = ChiSquareGate([np.eye(3)], 0.01)\n"
+        "off = ChiSquareGate([np.eye(3), np.eye(2)], 0.0)\n"
         "before = 'scipy.special' in sys.modules\n"
-        "t = g.threshold(3)\n"
+        "on = ChiSquareGate([np.eye(3), np.eye(2)], 0.01)\n"
+        "after = 'scipy.special' in sys.modules\n"
         "from scipy.special import chdtri\n"
-        "print(json.dumps([before, 'scipy.special' in sys.modules, t == float(chdtri(3, 0.01))]))\n")
+        "same = on._thresholds == {3: float(chdtri(3, 0.01)), 2: float(chdtri(2, 0.01))}\n"
+        "print(json.dumps([before, after, same, on.threshold(1) == float(chdtri(1, 0.01))]))\n")
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout) == [False, True, True]
+    assert json.loads(res.stdout) == [False, True, True, True]
