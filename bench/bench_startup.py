@@ -23,8 +23,8 @@ with ``--early``, ``early``: this estimator started by ``bench/startup_early_dri
 the process's DDS participant (a bare node) before importing the estimator, so that discovery runs
 during the imports and the table's load (an experiment; the node's own entry point does not);
 with ``--floor``, ``floor``: the same bare republisher that first imports what every estimator start
-needs of scipy (``scipy.linalg``, ``scipy.sparse``, ``scipy.special``: the runtime's BLAS/LAPACK
-wrappers, matrix exponentials, sparse transitions, chi-square quantiles), the least any estimator
+needs of scipy (``scipy.linalg``, ``scipy.sparse``: the runtime's BLAS/LAPACK wrappers, matrix
+exponentials, sparse transitions; ``scipy.special`` only with the chi-square gate), the least any estimator
 start built on scipy takes; and, with ``--before DIR``, the same estimator from another checkout
 (``PYTHONPATH=DIR``; the same 32-agent table, or with ``--before-version 3`` the table written in
 version 3 of the container for a checkout that reads only that).
@@ -99,7 +99,7 @@ class First(Node):
 
 
 #: The bare republisher after importing the scipy modules every estimator start needs (``--floor``).
-FLOOR = ("import sys; sys.path.insert(0, {bench!r}); import scipy.linalg, scipy.sparse, scipy.special; "
+FLOOR = ("import sys; sys.path.insert(0, {bench!r}); import scipy.linalg, scipy.sparse; "
          "from bench_node import republisher_main; republisher_main()")
 
 #: The line each node writes once its subscriptions and publishers exist.
