@@ -136,41 +136,28 @@ static void rows4_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict A, c
 {
     const double *a0 = A, *a1 = A + n, *a2 = A + 2 * n, *a3 = A + 3 * n;
     Py_ssize_t j, k, r, w;
+/* one row's pair of accumulators: (c0, c1) = a_j (b0, b1), or (c0, c1) += a_j (b0, b1) */
+#define FIRST(a, c0, c1) v4 c0 = a[0] * b0, c1 = a[0] * b1
+#define ADD(a, c0, c1) c0 = c0 + a[j] * b0, c1 = c1 + a[j] * b1
     for (k = k0; k + 8 <= n; k += 8) {
-        v4 b0 = ld4(B + k), b1 = ld4(B + k + 4), x = {a0[0], a0[0], a0[0], a0[0]};
-        v4 c00 = x * b0, c01 = x * b1;
-        x = (v4){a1[0], a1[0], a1[0], a1[0]};
-        v4 c10 = x * b0, c11 = x * b1;
-        x = (v4){a2[0], a2[0], a2[0], a2[0]};
-        v4 c20 = x * b0, c21 = x * b1;
-        x = (v4){a3[0], a3[0], a3[0], a3[0]};
-        v4 c30 = x * b0, c31 = x * b1;
+        v4 b0 = ld4(B + k), b1 = ld4(B + k + 4);
+        FIRST(a0, c00, c01);
+        FIRST(a1, c10, c11);
+        FIRST(a2, c20, c21);
+        FIRST(a3, c30, c31);
         for (j = 1; j < n; j++) {
-            const double *b = B + j * n + k;
-            b0 = ld4(b);
-            b1 = ld4(b + 4);
-            x = (v4){a0[j], a0[j], a0[j], a0[j]};
-            c00 = c00 + x * b0;
-            c01 = c01 + x * b1;
-            x = (v4){a1[j], a1[j], a1[j], a1[j]};
-            c10 = c10 + x * b0;
-            c11 = c11 + x * b1;
-            x = (v4){a2[j], a2[j], a2[j], a2[j]};
-            c20 = c20 + x * b0;
-            c21 = c21 + x * b1;
-            x = (v4){a3[j], a3[j], a3[j], a3[j]};
-            c30 = c30 + x * b0;
-            c31 = c31 + x * b1;
+            b0 = ld4(B + j * n + k);
+            b1 = ld4(B + j * n + k + 4);
+            ADD(a0, c00, c01);
+            ADD(a1, c10, c11);
+            ADD(a2, c20, c21);
+            ADD(a3, c30, c31);
         }
-        st4(C + k, c00);
-        st4(C + k + 4, c01);
-        st4(C + n + k, c10);
-        st4(C + n + k + 4, c11);
-        st4(C + 2 * n + k, c20);
-        st4(C + 2 * n + k + 4, c21);
-        st4(C + 3 * n + k, c30);
-        st4(C + 3 * n + k + 4, c31);
+        st4(C + k, c00), st4(C + k + 4, c01), st4(C + n + k, c10), st4(C + n + k + 4, c11);
+        st4(C + 2 * n + k, c20), st4(C + 2 * n + k + 4, c21), st4(C + 3 * n + k, c30), st4(C + 3 * n + k + 4, c31);
     }
+#undef FIRST
+#undef ADD
     for (; k + 4 <= n; k += 4) {
         v4 b0 = ld4(B + k);
         v4 c0 = a0[0] * b0, c1 = a1[0] * b0, c2 = a2[0] * b0, c3 = a3[0] * b0;
