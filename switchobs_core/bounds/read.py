@@ -144,14 +144,16 @@ def _between(S: np.ndarray, Sa: np.ndarray, va: np.ndarray, theta_a: float,
 
 def _abs_rows(D: np.ndarray, n: int, ones: np.ndarray) -> float:
     """``max_i sum_j |D_ij|`` of the n x n ``D`` (a computed sum, any order: step 3), by the compiled kernel
-    where it takes ``D``, else numpy (``D`` then overwritten by ``|D|``); NaN where a row's sum is."""
+    where it takes ``D``, else numpy (``D`` then overwritten by ``|D|``; no overflow warns); NaN where a row's
+    sum is."""
     if dense_kernel.ABSROWS is not None:
         try:
             return dense_kernel.ABSROWS(D, n)
         except (BufferError, ValueError, TypeError):
             pass
-    r = np.abs(D, out=D).dot(ones)
-    return math.nan if np.isnan(r).any() else float(r.max())
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = np.abs(D, out=D).dot(ones)
+        return math.nan if np.isnan(r).any() else float(r.max())
 
 
 def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np.ndarray]:
@@ -278,6 +280,7 @@ class AnchoredBound:
         self._age = 0
         self._sym_a = False     # S_a exactly symmetric (step 2: Gershgorin from the rows alone)
         self._one: np.ndarray | None = None
+        self._k: tuple | None = None
 
     def _ones(self, n: int) -> np.ndarray:
         """``n`` ones (kept)."""
@@ -286,36 +289,53 @@ class AnchoredBound:
             o = self._one = np.ones(n)
         return o
 
+    def _constants(self, n: int) -> tuple[int, float, float, float, float]:
+        """``(n, 1 + 2 gamma_{n^2+4}, 1 + 2 gamma_{n+4}, n sqrt(eta), 8 n eta)``: step 3's factors for ``n``
+        states (kept: the same doubles as computed at each read)."""
+        k = self._k
+        if k is None or k[0] != n:
+            k = self._k = (n, 1.0 + 2.0 * gamma(n * n + 4), 1.0 + 2.0 * gamma(n + 4), n * _SQRT_ETA,
+                           8 * n * UNDERFLOW)
+        return k
+
     def read(self, ell: ErrorEllipsoid) -> float:
-        """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring)."""
+        """An upper bound of ``||e||`` for the ellipsoid's current ``S`` (module docstring). Sets no
+        floating-point error state of its own on the kernel's path between anchors (no numpy operation
+        runs there); numpy's paths (the fallbacks, the anchor) run under one, so no overflow warns."""
         S = ell.S
         n = ell.n
         self.reads += 1
         if not n:
             return 0.0
-        if self._Sa is not None and self._Sa.shape == S.shape and self._age < self.max_age \
-                and np.isfinite(self._lam_a) and self._theta_a > 0.0:
+        Sa = self._Sa
+        if Sa is not None and Sa.shape == S.shape and self._age < self.max_age \
+                and math.isfinite(self._lam_a) and self._theta_a > 0.0:
             D = ell.scratch()       # the step's scratch: in cache
-            got = dense_kernel.between(S, self._Sa, self._va, self._theta_a, D) or _between(
-                S, self._Sa, self._va, self._theta_a, D)
+            got = dense_kernel.between(S, Sa, self._va, self._theta_a, D)
+            if got is None:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    got = _between(S, Sa, self._va, self._theta_a, D)
             w, c, nw, fd = got      # any c >= 0 is valid (step 1)
             if math.isfinite(c) and c >= 0.0:
                 if nw > 0.0 and math.isfinite(nw):
                     self._w = (w, nw)                   # one power iteration for the next anchor
-                g = (fd + n * _SQRT_ETA + UNIT_ROUNDOFF * c * self._f_a) * (1.0 + 2.0 * gamma(n * n + 4))
+                _, kf, kg, nsq, uf = self._constants(n)
+                g = (fd + nsq + UNIT_ROUNDOFF * c * self._f_a) * kf
                 if not g <= self.tol * c * self._lam_a:         # Gershgorin, before a new anchor
                     if self._sym_a and S is ell.symmetric:      # so is S - c S_a: its rows' sums are its columns'
                         gg = _abs_rows(D, n, self._ones(n))
                     else:
-                        A = np.abs(D, out=D)        # D is not read again
-                        gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
-                    g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * (1.0 + 2.0 * gamma(n + 4)))
+                        with np.errstate(over="ignore", invalid="ignore"):
+                            A = np.abs(D, out=D)        # D is not read again
+                            gg = float(max(A.sum(axis=1).max(), A.sum(axis=0).max()))
+                    g = min(g, (gg + UNIT_ROUNDOFF * c * self._g_a) * kg)
                 if math.isfinite(g) and g <= self.tol * c * self._lam_a:
                     self._age += 1
-                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF) + 8 * n * UNDERFLOW
+                    lam = (c * self._lam_a + g) * (1.0 + 4.0 * UNIT_ROUNDOFF) + uf
                     lam = min(lam, max(ell.tr, 0.0))
                     return math.sqrt(lam) * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        return self._anchor(ell)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._anchor(ell)
 
     def _anchor(self, ell: ErrorEllipsoid) -> float:
         """A new anchor at the current ``S``: its ``lam_a`` (module docstring) is published."""

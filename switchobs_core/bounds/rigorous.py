@@ -586,10 +586,10 @@ class RoundingBound:
             noisy = None if ev is None else ev.bound()
             if math.isfinite(exact) and (noisy is None or math.isfinite(noisy)):
                 return exact, noisy
-        with np.errstate(over="ignore", invalid="ignore"):
-            if amortised and S is None and Sv is None:
-                exact, noisy = self._read.read(self.ell), None if self.ellv is None else self._readv.read(self.ellv)
-            else:
+        if amortised and S is None and Sv is None:     # the read sets up its own error state where numpy runs
+            exact, noisy = self._read.read(self._ell), None if ev is None else self._readv.read(ev)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
                 exact = self.ell.bound(S)
                 noisy = None if self.ellv is None else self.ellv.bound(Sv)
         if not math.isfinite(exact) or (noisy is not None and not math.isfinite(noisy)):

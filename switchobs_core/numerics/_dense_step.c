@@ -128,60 +128,69 @@ static void row_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict a, con
     }
 }
 
-/* rows c = a B and e = f B from column k0 on (two rows share each load of B) */
+/* rows c_r = a_r B (r = 0..3, a_r = A[r n ..]) from column k0 on: blocks of 4 rows by 8 columns kept in
+ * registers (eight accumulators: each load of B serves four rows), then 4, 2 and 1 columns */
 __attribute__((target_clones("avx2", "default")))
-static void rows_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict a, const double *restrict f,
-                       const double *restrict B, double *restrict c, double *restrict e)
+static void rows4_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict A, const double *restrict B,
+                        double *restrict C)
 {
-    Py_ssize_t j, k;
+    const double *a0 = A, *a1 = A + n, *a2 = A + 2 * n, *a3 = A + 3 * n;
+    Py_ssize_t j, k, r, w;
+/* one row's pair of accumulators: (c0, c1) = a_j (b0, b1), or (c0, c1) += a_j (b0, b1) */
+#define FIRST(a, c0, c1) v4 c0 = a[0] * b0, c1 = a[0] * b1
+#define ADD(a, c0, c1) c0 = c0 + a[j] * b0, c1 = c1 + a[j] * b1
     for (k = k0; k + 8 <= n; k += 8) {
-        v4 a0 = {a[0], a[0], a[0], a[0]}, f0 = {f[0], f[0], f[0], f[0]}, b0 = ld4(B + k), b1 = ld4(B + k + 4);
-        v4 c0 = a0 * b0, c1 = a0 * b1, e0 = f0 * b0, e1 = f0 * b1;
+        v4 b0 = ld4(B + k), b1 = ld4(B + k + 4);
+        FIRST(a0, c00, c01);
+        FIRST(a1, c10, c11);
+        FIRST(a2, c20, c21);
+        FIRST(a3, c30, c31);
         for (j = 1; j < n; j++) {
-            const double *b = B + j * n + k;
-            v4 aj = {a[j], a[j], a[j], a[j]}, fj = {f[j], f[j], f[j], f[j]};
-            b0 = ld4(b);
-            b1 = ld4(b + 4);
-            c0 = c0 + aj * b0;
-            c1 = c1 + aj * b1;
-            e0 = e0 + fj * b0;
-            e1 = e1 + fj * b1;
+            b0 = ld4(B + j * n + k);
+            b1 = ld4(B + j * n + k + 4);
+            ADD(a0, c00, c01);
+            ADD(a1, c10, c11);
+            ADD(a2, c20, c21);
+            ADD(a3, c30, c31);
         }
-        st4(c + k, c0);
-        st4(c + k + 4, c1);
-        st4(e + k, e0);
-        st4(e + k + 4, e1);
+        st4(C + k, c00), st4(C + k + 4, c01), st4(C + n + k, c10), st4(C + n + k + 4, c11);
+        st4(C + 2 * n + k, c20), st4(C + 2 * n + k + 4, c21), st4(C + 3 * n + k, c30), st4(C + 3 * n + k + 4, c31);
     }
-    for (; k + 2 <= n; k += 2) {
-        v2 a0 = {a[0], a[0]}, f0 = {f[0], f[0]}, b0 = ld(B + k);
-        v2 c0 = a0 * b0, e0 = f0 * b0;
+#undef FIRST
+#undef ADD
+    for (; k + 4 <= n; k += 4) {
+        v4 b0 = ld4(B + k);
+        v4 c0 = a0[0] * b0, c1 = a1[0] * b0, c2 = a2[0] * b0, c3 = a3[0] * b0;
         for (j = 1; j < n; j++) {
-            v2 aj = {a[j], a[j]}, fj = {f[j], f[j]};
-            b0 = ld(B + j * n + k);
-            c0 = c0 + aj * b0;
-            e0 = e0 + fj * b0;
+            b0 = ld4(B + j * n + k);
+            c0 = c0 + a0[j] * b0;
+            c1 = c1 + a1[j] * b0;
+            c2 = c2 + a2[j] * b0;
+            c3 = c3 + a3[j] * b0;
         }
-        st(c + k, c0);
-        st(e + k, e0);
+        st4(C + k, c0);
+        st4(C + n + k, c1);
+        st4(C + 2 * n + k, c2);
+        st4(C + 3 * n + k, c3);
     }
-    for (; k < n; k++) {
-        double z = a[0] * B[k], y = f[0] * B[k];
-        for (j = 1; j < n; j++) {
-            z = z + a[j] * B[j * n + k];
-            y = y + f[j] * B[j * n + k];
+    for (r = 0; r < 4; r++)         /* the last columns, row by row */
+        for (w = k; w < n; w++) {
+            const double *a = A + r * n;
+            double z = a[0] * B[w];
+            for (j = 1; j < n; j++)
+                z = z + a[j] * B[j * n + w];
+            C[r * n + w] = z;
         }
-        c[k] = z;
-        e[k] = y;
-    }
 }
 
-/* the rows of C = A B from row 0 (upper: row i from column i on), two at a time */
+/* the rows of C = A B from row 0 (upper: row i from column i on, or from the first row of its block
+ * of four: entries below the diagonal may be written too), four at a time */
 static void times(Py_ssize_t n, int upper, const double *restrict A, const double *restrict B, double *restrict C)
 {
     Py_ssize_t i;
-    for (i = 0; i + 2 <= n; i += 2)
-        rows_times(n, upper ? i : 0, A + i * n, A + (i + 1) * n, B, C + i * n, C + (i + 1) * n);
-    if (i < n)
+    for (i = 0; i + 4 <= n; i += 4)
+        rows4_times(n, upper ? i : 0, A + i * n, B, C + i * n);
+    for (; i < n; i++)
         row_times(n, upper ? i : 0, A + i * n, B, C + i * n);
 }
 

@@ -145,8 +145,8 @@ def check_sample(t: Any, t_now: float, channel: Any, y: Any, u: Any, rows: Any, 
                               f"t must be a finite time; got {t!r}")
     if dt == math.inf:
         raise InvalidArgument(f"t must be a finite time; got {t!r}")
-    if isinstance(channel, (bool, np.bool_)) or not isinstance(channel, (int, np.integer)) \
-            or not 1 <= channel <= len(p):
+    if type(channel) is not int and (isinstance(channel, (bool, np.bool_))        # a plain int: checked
+                                     or not isinstance(channel, (int, np.integer))) or not 1 <= channel <= len(p):
         raise InvalidArgument(f"channel must be an integer in 1..{len(p)}; got {channel!r}")
     y = np.asarray(y, dtype=float)
     if rows is not None:
@@ -157,9 +157,9 @@ def check_sample(t: Any, t_now: float, channel: Any, y: Any, u: Any, rows: Any, 
         if y.size != q:
             raise InvalidArgument(f"y must have {q} entries for channel {channel}"
                                   f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
-    # one dot product checks both (hot path; 0.3 us vs 2 us for max|y|): y'y <= bound^2 is
-    # False for NaN, for inf and for any entry beyond the bound
-    if q and not float(y @ y) <= _MAX_SQ:
+    # one dot product checks both (hot path; ndarray.dot 0.25 us, the operator @ 0.6 us, max|y| 2 us):
+    # y'y <= bound^2 is False for NaN, for inf and for any entry beyond the bound
+    if q and not float(y.dot(y)) <= _MAX_SQ:
         if not np.isfinite(y).all():
             raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
         raise InvalidArgument(f"y is too large (||y|| = {float(np.linalg.norm(y)):.3g} > {MAX_ABS_SAMPLE:g}): "

@@ -380,15 +380,15 @@ class SwitchedObserver:
         self._bounds.changed()
         self._t = t
         self._in.settle(t)
-        # 2. switching instant
-        if channel != self.channel:
+        # 2. switching instant (the channel and the design index as their properties read them)
+        if channel != (seq := self._seq).cycles.channel:
             self._switch(t, channel)
         # 3. hold the new sample's input from t on; the family takes the sample (holds its
         #    innovation, or corrects) and the observer applies what it returns (x, Phi, the bound)
         if u is not None:
             self._in.u = u if u.any() else None
         self._apply(self._gains.sample(Sample(self._x, t, dt if fuse else 0.0, t - self._ts, channel, y, rows,
-                                              self.design_index, t < self._blind_until, self._in.u)),
+                                              seq.index, t < self._blind_until, self._in.u)),
                     channel)
         self._ts = t
         return self._x

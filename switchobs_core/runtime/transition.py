@@ -86,12 +86,14 @@ class Transition:
             return
         if mode != "held":
             return
-        self._pending.append((K, H))
-        for X in (K, H):
-            if X is not None and id(X) not in self._pending_ids:
-                self._pending_ids.add(id(X))
-                self._pending_bytes += X.nbytes
-        if len(self._pending) > self.pending_max or self._pending_bytes > PENDING_BYTES:
+        pending, ids = self._pending, self._pending_ids
+        pending.append((K, H))
+        if id(K) not in ids or H is not None and id(H) not in ids:     # a map not held yet (most samples repeat one)
+            for X in (K, H):
+                if X is not None and id(X) not in ids:
+                    ids.add(id(X))
+                    self._pending_bytes += X.nbytes
+        if len(pending) > self.pending_max or self._pending_bytes > PENDING_BYTES:
             self._mode = "dropped"      # nobody read it: stop paying for it
             self._clear()
 

@@ -183,9 +183,9 @@ class Held(NamedTuple):
     y: np.ndarray
 
 
-@dataclass(frozen=True, slots=True)
-class Correction:
-    """What a family returns for one sample (:meth:`GainFamily.sample`).
+class Correction(NamedTuple):
+    """What a family returns for one sample (:meth:`GainFamily.sample`; a named tuple as :class:`Sample`: built
+    once per sample, at half a frozen dataclass's cost).
 
     Attributes
     ----------

@@ -184,3 +184,30 @@ def test_anchors_and_lam_upper_of_sets_below_the_normal_range_bound_them():
         got = verified_lambda_max(S)
         if got is not None:
             assert _psd_certificate(math.sqrt(got[0]), S), ("verified", n, got[0])
+
+
+@pytest.mark.parametrize("kernel", [True, False])
+@pytest.mark.parametrize("n", [5, 36])
+def test_reads_of_sets_near_overflow_warn_nothing(monkeypatch, kernel, n):
+    """The read sets up numpy's error state itself where numpy runs (the fallbacks between anchors, the
+    anchor), not around the kernel's pass: a set whose sums overflow reads ``inf`` or a finite bound that
+    holds, with no warning, on the kernel's path and on numpy's."""
+    import warnings
+
+    from switchobs_core.numerics import dense_kernel
+
+    if kernel and not dense_kernel.available():
+        pytest.skip("the compiled kernel is not built")
+    if not kernel:
+        monkeypatch.setattr(dense_kernel, "BETWEEN", None)
+        monkeypatch.setattr(dense_kernel, "ABSROWS", None)
+    rng = np.random.default_rng(n)
+    ell, rd = ErrorEllipsoid(n, 1.0), AnchoredBound(tol=TOL)
+    X = rng.standard_normal((n, n))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for scale in (1e300, 1e305, 1e306, 1e307, 1e308):
+            S = (X @ X.T) / n * scale       # entries near the largest double: their squares overflow
+            ell.S, ell.tr = S, math.inf
+            r = rd.read(ell)
+            assert math.isinf(r) or r * r >= float(np.linalg.eigvalsh(S / scale)[-1]) * scale * (1 - 1e-9)

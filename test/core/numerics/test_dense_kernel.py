@@ -2,11 +2,11 @@
 numpy ``ErrorEllipsoid.step_dense`` (the reference): the same set up to the rounding of ``M S M'`` and
 the allowances (``_dense_cases.allowance_ratio``; for its well-conditioned cases within 1e-13 of each
 entry relative to the diagonal, not in general: ``test_step_dense``'s rank-one case), the same trace,
-exactly symmetric, containing ``M S M'`` computed in extended precision (hypothesis over n = 1..64, the
-stack's last size 40 and the heap's first 41, units and scales 1e-30..1e30); every coefficient from
-Python; a stale build refused; bad arguments raise; arrays the kernel does not take fall back to
-numpy. ``scripts/test.sh`` asks for the kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails
-if it is not built."""
+exactly symmetric, its products the index-order sums its source states (bit for bit), containing ``M S
+M'`` computed in extended precision (hypothesis over n = 1..64, the stack's last size 40 and the heap's
+first 41, units and scales 1e-30..1e30); every coefficient from Python; a stale build refused; bad
+arguments raise; arrays the kernel does not take fall back to numpy. ``scripts/test.sh`` asks for the
+kernel (``SWITCHOBS_REQUIRE_KERNEL``): there the first test fails if it is not built."""
 
 from __future__ import annotations
 
@@ -156,6 +156,30 @@ def test_kernel_set_contains_the_exact_product(seed, n, units, scale, rho):
     X = (Dm / np.outer(r, r).astype(LD)).astype(float)
     X = 0.5 * (X + X.T)
     assert float(np.linalg.eigvalsh(X)[0]) >= -1e-12
+
+
+def _index_order(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A B`` with each entry ``sum_j A_ij B_jk`` summed in the order of ``j``, every product and sum one
+    rounding (elementwise numpy operations: no FMA, no reassociation)."""
+    C = A[:, :1] * B[:1, :]
+    for j in range(1, A.shape[1]):
+        C = C + A[:, j:j + 1] * B[j:j + 1, :]
+    return C
+
+
+@needs_kernel
+@pytest.mark.parametrize("n", [*range(1, 20), 36, 41])
+def test_kernel_products_are_sums_in_index_order(n):
+    """The entries of ``Z = (M S) M'`` are the dot products summed in the order of ``j``, as the kernel's
+    source states (blocks of rows and columns in registers change nothing of it): with ``rho = 0``
+    (``alpha = 1``) the off-diagonal entries of the new set are exactly those doubles, for every split of
+    n into the kernel's blocks (4 rows; 8, 4, 2 and 1 columns; the stack and the heap)."""
+    M, S, d = pair(n, n, False, 1.0)
+    ell = _stepped(M, S, d, 0.0, _abs(M, d), True)
+    Z = _index_order(_index_order(M, S), M.T)
+    iu = np.triu_indices(n, 1)
+    assert np.array_equal(ell.S[iu], Z[iu])
+    assert np.array_equal(ell.S.T[iu], Z[iu])
 
 
 @needs_kernel
