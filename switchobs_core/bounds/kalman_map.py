@@ -169,8 +169,9 @@ _COLUMNS: dict[int, tuple] = {}
 def frobenius_bound(F: float, fK: float, fH: float, p: int, n: int) -> float:
     """``>= ||I - K H||_2`` (balanced) from ``F = fro_upper(fl(I - K H))`` there, ``fK = ||D^-1 K||_F``,
     ``fH = ||H D||_F`` (upper bounds) and ``H``'s shape ``(p, n)``. ``F`` misses what rounding takes
-    from it, ``err``: the product's and difference's (``gamma_{p+2} fK fH`` and their underflow, ``D``
-    being powers of two) and the norm's own (``gamma_{n^2+2} F``). ``I - K H`` is the identity on ``H``'s
+    from it, ``err``: the product's (``gamma_{p+2} fK fH`` and its underflow ``n (p + 2) eta``, ``D``
+    being powers of two) and, with the norm's own rounding, the difference's (``u`` relative to each entry
+    of ``fl(I - K H)``): both within ``gamma_{n^2+2} F``. ``I - K H`` is the identity on ``H``'s
     null space, of dimension ``>= n - p``: ``n - p`` singular values are ``>= 1``, so
     ``||.||_F^2 >= ||.||_2^2 + n - p - 1`` and ``||.||_F - ||.||_2 >= (n - p - 1) / (2 ||.||_F)``. Where
     that slack (with ``F + err`` for ``||.||_F``) covers ``err``, ``F`` itself bounds ``||.||_2``;
