@@ -129,7 +129,8 @@ static void row_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict a, con
 }
 
 /* rows c_r = a_r B (r = 0..3, a_r = A[r n ..]) from column k0 on: blocks of 4 rows by 8 columns kept in
- * registers (eight accumulators: each load of B serves four rows), then 4, 2 and 1 columns */
+ * registers (eight accumulators: each load of B serves four rows), then 4 columns, then the last 1-3
+ * columns row by row */
 __attribute__((target_clones("avx2", "default")))
 static void rows4_times(Py_ssize_t n, Py_ssize_t k0, const double *restrict A, const double *restrict B,
                         double *restrict C)

@@ -148,7 +148,10 @@ def check_sample(t: Any, t_now: float, channel: Any, y: Any, u: Any, rows: Any, 
     if type(channel) is not int and (isinstance(channel, (bool, np.bool_))        # a plain int: checked
                                      or not isinstance(channel, (int, np.integer))) or not 1 <= channel <= len(p):
         raise InvalidArgument(f"channel must be an integer in 1..{len(p)}; got {channel!r}")
-    y = np.asarray(y, dtype=float)
+    try:
+        y = np.asarray(y, dtype=float)
+    except (TypeError, ValueError, OverflowError) as exc:       # complex, text, an int beyond a double
+        raise InvalidArgument(f"y must be real numbers: {exc}") from None
     if rows is not None:
         rows = check_rows(rows, channel, p[channel - 1])
     q = p[channel - 1] if rows is None else len(rows)
@@ -157,14 +160,21 @@ def check_sample(t: Any, t_now: float, channel: Any, y: Any, u: Any, rows: Any, 
         if y.size != q:
             raise InvalidArgument(f"y must have {q} entries for channel {channel}"
                                   f"{'' if rows is None else f' rows {rows}'}; got {y.size}")
-    # one dot product checks both (hot path; ndarray.dot 0.25 us, the operator @ 0.6 us, max|y| 2 us):
-    # y'y <= bound^2 is False for NaN, for inf and for any entry beyond the bound
-    if q and not float(y.dot(y)) <= _MAX_SQ:
+    # One norm checks both (hot path): ||y|| <= bound is False for NaN, for inf and for any entry beyond
+    # the bound. math.hypot cannot overflow for a finite y and is the fastest for a few entries (0.13 us
+    # at 4 against ndarray.dot's 0.3 us, max|y| 2 us); above 16 entries y'y, its overflow kept quiet.
+    if q and not (math.hypot(*y.tolist()) <= MAX_ABS_SAMPLE if q <= 16 else _quiet_sq(y) <= _MAX_SQ):
         if not np.isfinite(y).all():
             raise InvalidArgument(f"y has a non-finite entry: {y.tolist()}")
-        raise InvalidArgument(f"y is too large (||y|| = {float(np.linalg.norm(y)):.3g} > {MAX_ABS_SAMPLE:g}): "
+        raise InvalidArgument(f"y is too large (||y|| = {math.hypot(*y.tolist()):.3g} > {MAX_ABS_SAMPLE:g}): "
                               "the update would overflow")
     return dt, y, None if u is None else check_input(u, m), rows
+
+
+def _quiet_sq(y: np.ndarray) -> float:
+    """``y'y``, ``inf`` where it overflows, without numpy's warning."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return float(y.dot(y))
 
 
 def check_input(u: Any, m: int) -> np.ndarray:

@@ -211,3 +211,34 @@ def test_reads_of_sets_near_overflow_warn_nothing(monkeypatch, kernel, n):
             ell.S, ell.tr = S, math.inf
             r = rd.read(ell)
             assert math.isinf(r) or r * r >= float(np.linalg.eigvalsh(S / scale)[-1]) * scale * (1 - 1e-9)
+
+
+@pytest.mark.parametrize("kernel", [True, False])
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_gershgorin_rows_of_a_set_near_overflow_warn_nothing(monkeypatch, kernel, symmetric):
+    """A read between anchors that reaches Gershgorin's rows (the anchor's direction no longer fits): a set
+    with a block of entries near the largest double reads ``inf`` or a bound that holds, with no warning,
+    on the kernel's row sums and on numpy's, with the set's symmetric part given and without."""
+    import warnings
+
+    from switchobs_core.numerics import dense_kernel
+
+    if kernel and not dense_kernel.available():
+        pytest.skip("the compiled kernel is not built")
+    if not kernel:
+        monkeypatch.setattr(dense_kernel, "BETWEEN", None)
+        monkeypatch.setattr(dense_kernel, "ABSROWS", None)
+    n = 5
+    Sa = np.diag([1.0, 1e-3, 1e-3, 1e-3, 1e-3])          # the anchor: its direction is e_1
+    S = Sa.copy()
+    S[1:, 1:] += 1e308                                   # then a set whose mass lies off that direction
+    ell, rd = ErrorEllipsoid(n, 1.0), AnchoredBound(tol=TOL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for X in (Sa, S):
+            ell.S = X.copy()
+            if symmetric:
+                ell.symmetric = ell.S
+            ell.tr = math.inf
+            r = rd.read(ell)
+    assert r * r == math.inf       # the block's largest eigenvalue, 4e308, is above the largest double

@@ -173,7 +173,8 @@ def test_kernel_products_are_sums_in_index_order(n):
     """The entries of ``Z = (M S) M'`` are the dot products summed in the order of ``j``, as the kernel's
     source states (blocks of rows and columns in registers change nothing of it): with ``rho = 0``
     (``alpha = 1``) the off-diagonal entries of the new set are exactly those doubles, for every split of
-    n into the kernel's blocks (4 rows; 8, 4, 2 and 1 columns; the stack and the heap)."""
+    n into the kernel's blocks (4 rows: 8 and 4 columns, then the last 1-3 columns row by row; the
+    leftover rows: 2 and 1 columns; the stack and the heap)."""
     M, S, d = pair(n, n, False, 1.0)
     ell = _stepped(M, S, d, 0.0, _abs(M, d), True)
     Z = _index_order(_index_order(M, S), M.T)

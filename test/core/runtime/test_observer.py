@@ -253,3 +253,42 @@ def test_update_refuses_samples_that_would_overflow(paper, table, y, match):
     with pytest.raises(InvalidArgument, match=match):
         obs.update(0.01, 1, np.array(y, dtype=float))
     obs.update(0.01, 1, np.array([1e149, 0.0, 0.0, -1e149]))  # large but representable: accepted
+
+
+@pytest.mark.parametrize("y, match", [
+    ([1e200, 1e200, 0, 0], r"too large \(\|\|y\|\| = 1.41e\+200"),   # y'y overflows: the message's norm does not
+    ([1j, 0, 0, 0], "y must be real numbers"), ([2 ** 1100, 0, 0, 0], "y must be real numbers"),
+    (["a", 0, 0, 0], "y must be real numbers"),
+])
+def test_update_refuses_samples_it_cannot_read_with_a_clear_error(paper, table, y, match):
+    obs = SwitchedObserver(paper, table, mode="periodic", cycles=[PERIODIC])
+    obs.update(0.0, 1, np.zeros(4))
+    with pytest.raises(InvalidArgument, match=match):
+        obs.update(0.01, 1, y)
+    assert np.all(np.isfinite(obs.update(0.02, 1, np.zeros(4))))      # the observer goes on
+
+
+@settings(max_examples=200, deadline=None)
+@given(q=st.integers(1, 40), scale=st.sampled_from([1.0, 1e100, 1e149, 1e150, 1e151, 1e200, 1e300]),
+       seed=st.integers(0, 2**32 - 1))
+def test_sample_size_check_matches_the_norm_at_any_length(q, scale, seed):
+    """:func:`check_sample` accepts ``y`` exactly when ``||y|| <= MAX_ABS_SAMPLE`` (up to the norm's
+    rounding), on both of its paths (a few entries and many), without a warning."""
+    import warnings
+    from fractions import Fraction
+
+    from switchobs_core.runtime.arguments import MAX_ABS_SAMPLE, check_sample
+
+    y = np.random.default_rng(seed).standard_normal(q) * scale / math.sqrt(q)
+    exact_sq = sum(Fraction(v) ** 2 for v in y.tolist())
+    limit_sq = Fraction(MAX_ABS_SAMPLE) ** 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            check_sample(1.0, 0.0, 1, y, None, None, (q,), 0)
+            accepted = True
+        except InvalidArgument as exc:
+            assert "too large" in str(exc)
+            accepted = False
+    if abs(exact_sq / limit_sq - 1) > Fraction(1, 10**12):       # away from the bound's rounding
+        assert accepted == (exact_sq <= limit_sq)
