@@ -47,6 +47,7 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from msg_bridge.cdr_padding import zero_padding
 from msg_bridge.raw import RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
@@ -327,7 +328,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
             arr.header.stamp = mb.ns_to_stamp(last_ns)
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",
                                            message="switchobs_bag estimate", hardware_id="switchobs", values=vals)]
-            writer.write("/diagnostics", last_ns, serialize_message(arr))
+            writer.write("/diagnostics", last_ns, bytes(zero_padding(arr, serialize_message(arr))))  # no heap bytes
     except BaseException as err:
         bag.close()
         if writer is not None:
