@@ -181,9 +181,11 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
         arrays=[("x",), ("covariance",)] if has_P else [("x",)]) for has_P in (True, False)}
     w_eb = ErrorBoundsBytes(ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None))
     out_topics = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}     # never copied from the input
+    has_cov = pl.publish_covariance          # the estimates carry P
+    bag_cov = has_cov and "covariance" in chosen and out is not None      # <node>/covariance in the bag
+    # its template (17 424 labels at n = 132) made only for the bag that has the topic
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
-        if pl.publish_covariance else None
-    bag_cov = w_cov is not None and "covariance" in chosen      # <node>/covariance in the bag
+        if bag_cov else None
 
     writer = BagOut(out, storage) if out is not None else None
     table = CsvWriter(csv, state_labels, env_labels) if csv is not None else None
@@ -226,7 +228,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                     stamps.append(e.stamp_ns)
                     xs.append(e.x_hat)
                     envs.append(e.envelope)
-                    if w_cov is not None:
+                    if has_cov:
                         covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
                 if table is not None:
                     table.row(e.stamp_ns, e.x_hat, e.envelope)
@@ -346,7 +348,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
     res = EstimateResult(
         stamps=np.array(stamps, dtype=np.int64), x_hat=np.array(xs).reshape(-1, n),
         envelope=np.array(envs).reshape(-1, len(env_labels)), state_labels=state_labels,
-        P=np.array(covs).reshape(-1, n, n) if w_cov is not None and keep else None,
+        P=np.array(covs).reshape(-1, n, n) if has_cov and keep else None,
         envelope_labels=env_labels, messages_in=n_msgs, inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,
