@@ -103,18 +103,20 @@ with BagIn(sys.argv[1]) as bag, open(sys.argv[3], "w") as out:
 """
 
 
-def peak(cmd: list[str], repo: Path = REPO) -> tuple[float, float]:
-    """(CPU seconds, peak RSS MiB) measured in a wrapper process of its own (``ru_maxrss`` of
-    RUSAGE_CHILDREN is the largest over all children so far, so each measurement gets a fresh parent)."""
+def peak(cmd: list[str], repo: Path = REPO) -> tuple[float, float, float]:
+    """(CPU seconds, peak RSS MiB, system CPU seconds) measured in a wrapper process of its own (``ru_maxrss``
+    of RUSAGE_CHILDREN is the largest over all children so far, so each measurement gets a fresh parent).
+    The system part is mostly the kernel copying the output bag into the page cache (500 MB a minute of a
+    32-agent bag): it depends on the machine's memory as much as on the command (bench/RESULTS.md, replay11)."""
     code = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:]); "
             "u = resource.getrusage(resource.RUSAGE_CHILDREN); "
-            "print(u.ru_utime + u.ru_stime, u.ru_maxrss / 1024.0); sys.exit(r.returncode)")
+            "print(u.ru_utime + u.ru_stime, u.ru_maxrss / 1024.0, u.ru_stime); sys.exit(r.returncode)")
     r = subprocess.run([sys.executable, "-c", code, *cmd], env=dict(ENV, PYTHONPATH=str(repo)), capture_output=True,
                        text=True)
     if r.returncode:
         raise SystemExit(f"{cmd[:4]} failed: {r.stderr[-2000:]}")
-    cpu, rss = r.stdout.split()[-2:]
-    return float(cpu), float(rss)
+    cpu, rss, sys_cpu = r.stdout.split()[-3:]
+    return float(cpu), float(rss), float(sys_cpu)
 
 
 def main() -> None:
@@ -226,6 +228,11 @@ def main() -> None:
                      f" {statistics.median(o[0] / b[0] for o, b in zip(ours[d], before[d])):.2f} |")
         print(f"| {d:g} s | {oc:.2f} s | {om:.0f} MiB | {kc:.2f} s | {km:.0f} MiB | {oc / kc:.2f}x | {ac:.2f} s | "
               f"{ac / kc:.2f}x |" + extra)
+    print("\nOf the CPU, system time (medians): " + "; ".join(
+        f"{d:g} s bag: estimate {statistics.median(x[2] for x in ours[d]):.2f} s, script "
+        f"{statistics.median(x[2] for x in alt[d]):.2f} s"
+        + (f", --before {statistics.median(x[2] for x in before[d]):.2f} s" if a.before else "") for d in a.durations)
+        + ".")
     if len(a.durations) > 1:
         d0, d1 = min(a.durations), max(a.durations)
         g = (med[d1][1] - med[d0][1]) / (d1 - d0)

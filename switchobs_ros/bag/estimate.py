@@ -47,6 +47,7 @@ from switchobs_msgs.msg import ErrorBounds, StateEstimate
 
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
+from msg_bridge.cdr_padding import zero_padding
 from msg_bridge.raw import RawOdometryBatch
 from msg_bridge.typed import ErrorBoundsWriter, StateEstimateWriter
 
@@ -180,9 +181,11 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
         arrays=[("x",), ("covariance",)] if has_P else [("x",)]) for has_P in (True, False)}
     w_eb = ErrorBoundsBytes(ErrorBoundsWriter(sys_.N, cfg["world_frame"], pl.observer.noise_max is not None))
     out_topics = {t_state, t_env, t_cov, t_se, t_eb, *t_odom}     # never copied from the input
+    has_cov = pl.publish_covariance          # the estimates carry P
+    bag_cov = has_cov and "covariance" in chosen and out is not None      # <node>/covariance in the bag
+    # its template (17 424 labels at n = 132) made only for the bag that has the topic
     w_cov = Template(mb.labelled_array(np.zeros(n * n), mb.covariance_labels(state_labels), 0), array=("data",)) \
-        if pl.publish_covariance else None
-    bag_cov = w_cov is not None and "covariance" in chosen      # <node>/covariance in the bag
+        if bag_cov else None
 
     writer = BagOut(out, storage) if out is not None else None
     table = CsvWriter(csv, state_labels, env_labels) if csv is not None else None
@@ -225,7 +228,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                     stamps.append(e.stamp_ns)
                     xs.append(e.x_hat)
                     envs.append(e.envelope)
-                    if w_cov is not None:
+                    if has_cov:
                         covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
                 if table is not None:
                     table.row(e.stamp_ns, e.x_hat, e.envelope)
@@ -327,7 +330,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
             arr.header.stamp = mb.ns_to_stamp(last_ns)
             arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{node}: inputs (offline)",
                                            message="switchobs_bag estimate", hardware_id="switchobs", values=vals)]
-            writer.write("/diagnostics", last_ns, serialize_message(arr))
+            writer.write("/diagnostics", last_ns, bytes(zero_padding(arr, serialize_message(arr))))  # no heap bytes
     except BaseException as err:
         bag.close()
         if writer is not None:
@@ -345,7 +348,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
     res = EstimateResult(
         stamps=np.array(stamps, dtype=np.int64), x_hat=np.array(xs).reshape(-1, n),
         envelope=np.array(envs).reshape(-1, len(env_labels)), state_labels=state_labels,
-        P=np.array(covs).reshape(-1, n, n) if w_cov is not None and keep else None,
+        P=np.array(covs).reshape(-1, n, n) if has_cov and keep else None,
         envelope_labels=env_labels, messages_in=n_msgs, inputs=n_inputs, accepted=dict(pl.accepted),
         rejected={f"{t} {r}": c for (t, r), c in pl.rejected.items()}, updates=pl.updates,
         partial_updates=pl.partial_updates, switches=pl.switches, inconsistent=pl.inconsistent,

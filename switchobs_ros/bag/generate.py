@@ -169,6 +169,8 @@ def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap", progre
     from rclpy.serialization import serialize_message
     from tqdm import tqdm
 
+    from msg_bridge.cdr_padding import zero_padding
+
     ticks = 0
     first = last = None
     it = scenario_ticks(cfg)
@@ -183,7 +185,7 @@ def generate(out: str | Path, cfg: GenerateConfig, storage: str = "mcap", progre
                 if topic not in added:          # the system's topics, each with its message type
                     bag.add(topic, type_name(type(msg)))
                     added.add(topic)
-                bag.write(topic, stamp_ns, serialize_message(msg))
+                bag.write(topic, stamp_ns, bytes(zero_padding(msg, serialize_message(msg))))   # no heap bytes
             ticks += 1
             first = stamp_ns if first is None else first
             last = stamp_ns
