@@ -77,3 +77,20 @@ def test_error_transitions_match_expm_product():
               expm(M1 * 0.5) @ expm(M2 * 0.6) @ expm(M1 * 0.4)]
     for P, E in zip(Ph, expect):
         np.testing.assert_allclose(P, E, rtol=1e-11, atol=1e-13)
+
+
+def test_envelope_init_takes_the_dataclass_fields_in_order_with_their_defaults():
+    """``Envelope`` writes its ``__init__`` by hand (half the dataclass's cost per sample): its parameters
+    are the dataclass's fields, in order, with the same defaults, so ``replace`` and pickling keep working
+    when a field is added to one of them."""
+    import dataclasses
+    import inspect
+
+    from switchobs_core.bounds.envelope import Envelope
+
+    params = list(inspect.signature(Envelope.__init__).parameters.values())[1:]
+    fields = dataclasses.fields(Envelope)
+    assert [p.name for p in params] == [f.name for f in fields]
+    for p, f in zip(params, fields):
+        want = f.default if f.default is not dataclasses.MISSING else inspect.Parameter.empty
+        assert p.default == want or (p.default is want), (p.name, p.default, want)
