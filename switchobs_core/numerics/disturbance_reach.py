@@ -57,6 +57,13 @@ squares, :mod:`switchobs_core.numerics.frobenius`; the Gram bound's form likewis
 true step is within ``u dt`` of the double ``dt``), and every line of the bookkeeping is inflated
 by a relative ``8 u``. The result is an upper bound of the quantities above (``inf`` when a bound
 is ``inf``: the disturbance then makes the bound infinite and the caller withdraws it).
+
+Underflow. ``d`` is linear in ``B_w`` and in ``m``: both are scaled by powers of two to largest entries
+in ``[1/2, 1)`` (exactly), the bounds computed and multiplied back by ``2^k``, so a product falls under
+``2^-1022`` only where it is that small against the problem's own scale; there it loses at most
+``eta / 2``, allowed for by an absolute ``2 (q + 2) eta`` before the scaling back (:func:`_back`). A step
+below ``2^-1022`` is taken as ``2^-1022`` (the reach grows with the step), and the growth bound's
+``(e^{a h} - 1) / a`` is ``h`` where ``a h`` is below ``2^-1022`` (:func:`_growth`).
 """
 
 from __future__ import annotations
@@ -111,7 +118,7 @@ class DisturbanceReach:
         Bb = Bw / d[:, None]        # exact: powers of two
         self._Bw, self._id, self._d = Bw, 1.0 / d, d
         # B_b and m scaled by powers of two to largest entries in [1/2, 1): R is linear in each, so
-        # the reach of the scaled pair times 2^k is R's (Rounding, in the module docstring)
+        # the reach of the scaled pair times 2^k is R's (Underflow, in the module docstring)
         kb, kw = _exponent(Bb), _exponent(self.w_max)
         Bb, self._m = np.ldexp(Bb, -kb), np.ldexp(self.w_max, -kw)
         self._kb, self._k = kb, kb + kw
@@ -247,13 +254,14 @@ def _gram(X: np.ndarray, m: np.ndarray, gn: float) -> float:
 
 
 def _exponent(x: np.ndarray) -> int:
-    """``k`` with ``max |x| 2^-k`` in ``[1/2, 1)`` (0 for no entry, a zero or nonfinite one, or where
-    ``x 2^-k`` would lose an entry to underflow)."""
-    top = float(np.max(np.abs(x))) if x.size else 0.0
-    if not (top > 0.0 and math.isfinite(top)):
+    """``k`` with ``max |x| 2^-k`` in ``[1/2, 1)`` (0 without a finite nonzero entry), or where that
+    scales down, no more than keeps the least nonzero entry at or above ``2^-1022``: ``x 2^-k`` is exact."""
+    a = np.abs(x[x != 0.0]) if x.size else x
+    top = float(a.max()) if a.size else 0.0
+    if not math.isfinite(top) or top == 0.0:
         return 0
     k = math.frexp(top)[1]
-    return k if k <= 0 or np.array_equal(np.ldexp(np.ldexp(x, -k), k), x) else 0
+    return k if k <= 0 else min(k, max(math.frexp(float(a.min()))[1] + 1021, 0))
 
 
 def _back(x: float, k: int, q: int) -> float:
