@@ -32,12 +32,15 @@ import numpy as np
 
 from ..numerics.expm_bound import nu as nu2
 from ..numerics.frobenius import fro_upper, underflow_slack
-from ..numerics.rounding import UNIT_ROUNDOFF, gamma
+from ..numerics.rounding import NORMAL, UNDERFLOW, UNIT_ROUNDOFF, gamma
 from ..numerics.scaling import balance, balanced
 
 __all__ = ["StampError", "stamp_error_bound"]
 
 _U = UNIT_ROUNDOFF
+#: Factors at or above it (or 0) keep every partial product of the bound's terms (four factors at most,
+#: ``phi_2`` two) in the normal range: the products err relative ``u`` (:func:`_product_up` below).
+_SMALL = 2.0**-250
 
 
 def _phi1(z: float) -> float:
@@ -49,6 +52,21 @@ def _phi2(z: float) -> float:
     """``>= e^z - 1 - z`` for ``z >= 0``: ``z^2 e^z / 2`` (``sum_{k>=2} z^k / k! <= z^2 / 2 sum_j
     z^j / j!``), rounded up."""
     return 0.5 * z * z * math.exp(z) * (1.0 + 8.0 * _U)
+
+
+def _product_up(*f: float) -> float:
+    """``>= f_1 ... f_k`` (nonnegative doubles) wherever partial products fall under ``2^-1022``: the
+    mantissas' product (each in ``[1/2, 1)``: no underflow, relative ``gamma_{k-1}``) times ``2^(sum of
+    the exponents)``, which rounds once (absolute ``eta / 2`` under the normal range), rounded up."""
+    m, e = 1.0, 0
+    for x in f:
+        mx, ex = math.frexp(x)
+        m, e = m * mx, e + ex
+    try:
+        r = math.ldexp(m * (1.0 + 2.0 * gamma(len(f))), e)
+    except OverflowError:
+        return math.inf
+    return r + UNDERFLOW if r < NORMAL else r
 
 
 class StampError:
@@ -97,12 +115,21 @@ class StampError:
         lin = ((math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size))
                + gamma(2 * self.n + 2) * fC * self.fA * xn)
         z = self.a * d * (1.0 + 2.0 * _U)
-        w = d * lin + nC * xn * _phi2(z) + nC * beta_d * _phi1(z)
+        if z < NORMAL and self.a > 0.0:
+            z = NORMAL      # a d <= fl(fl(a d) (1 + 2u)) + eta <= 2^-1022; phi_1, phi_2 grow with z
+        bun = 0.0
         if self.B is not None and u is not None:
             bu = self.B @ np.asarray(u, dtype=float)
             bun = math.sqrt(float(bu @ bu)) + underflow_slack(bu.size)
             bun *= 1.0 + 2.0 * gamma(bu.size + self.B.shape[1])
-            w += nC * bun * d * math.exp(z) * (1.0 + 4.0 * _U)
+        if min(d, z or _SMALL, lin or _SMALL, nC or _SMALL, xn or _SMALL, beta_d or _SMALL, bun or _SMALL) >= _SMALL:
+            w = d * lin + nC * xn * _phi2(z) + nC * beta_d * _phi1(z)
+            if bun:
+                w += nC * bun * d * math.exp(z) * (1.0 + 4.0 * _U)
+        else:       # a partial product may fall under 2^-1022 and a later factor magnify its loss
+            ez = math.exp(z)
+            w = (_product_up(d, lin) + _product_up(nC, xn, 0.5, z, z, ez) * (1.0 + 8.0 * _U)
+                 + _product_up(nC, beta_d, _phi1(z)) + _product_up(nC, bun, d, ez) * (1.0 + 4.0 * _U))
         return w * (1.0 + 16.0 * _U)
 
 

@@ -57,6 +57,13 @@ squares, :mod:`switchobs_core.numerics.frobenius`; the Gram bound's form likewis
 true step is within ``u dt`` of the double ``dt``), and every line of the bookkeeping is inflated
 by a relative ``8 u``. The result is an upper bound of the quantities above (``inf`` when a bound
 is ``inf``: the disturbance then makes the bound infinite and the caller withdraws it).
+
+Underflow. ``d`` is linear in ``B_w`` and in ``m``: both are scaled by powers of two to largest entries
+in ``[1/2, 1)`` (exactly), the bounds computed and multiplied back by ``2^k``, so a product falls under
+``2^-1022`` only where it is that small against the problem's own scale; there it loses at most
+``eta / 2``, allowed for by an absolute ``2 (q + 2) eta`` before the scaling back (:func:`_back`). A step
+below ``2^-1022`` is taken as ``2^-1022`` (the reach grows with the step), and the growth bound's
+``(e^{a h} - 1) / a`` is ``h`` where ``a h`` is below ``2^-1022`` (:func:`_growth`).
 """
 
 from __future__ import annotations
@@ -68,8 +75,8 @@ import numpy as np
 from scipy.linalg import expm
 
 from .expm_bound import nu
-from .frobenius import underflow_slack
-from .rounding import UNIT_ROUNDOFF, gamma
+from .frobenius import sum_slack, underflow_slack
+from .rounding import NORMAL, UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["DisturbanceReach", "brute_force_reach"]
 
@@ -81,8 +88,9 @@ _CACHE = 256
 
 def _norm_up(v: np.ndarray) -> float:
     """``>= ||v||_2`` (a sum of squares rounded up, plus what underflow hides from it:
-    :func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
-    return math.sqrt(float(v @ v)) * (1.0 + gamma(v.size + 2)) * _UP + underflow_slack(v.size)
+    :func:`~switchobs_core.numerics.frobenius.sum_slack`)."""
+    s = float(v @ v)
+    return math.sqrt(s) * (1.0 + gamma(v.size + 2)) * _UP + sum_slack(s, v.size)
 
 
 def _mat_norm_up(X: np.ndarray) -> float:
@@ -109,6 +117,11 @@ class DisturbanceReach:
         self.w_max, Bw = self.w_max[keep], Bw[:, keep]
         Bb = Bw / d[:, None]        # exact: powers of two
         self._Bw, self._id, self._d = Bw, 1.0 / d, d
+        # B_b and m scaled by powers of two to largest entries in [1/2, 1): R is linear in each, so
+        # the reach of the scaled pair times 2^k is R's (Underflow, in the module docstring)
+        kb, kw = _exponent(Bb), _exponent(self.w_max)
+        Bb, self._m = np.ldexp(Bb, -kb), np.ldexp(self.w_max, -kw)
+        self._kb, self._k = kb, kb + kw
         self.q = Bb.shape[1]
         Ab = A * (1.0 / d)[:, None] * d[None, :]
         self.a = nu(Ab)
@@ -127,27 +140,13 @@ class DisturbanceReach:
         mY = _mat_norm_up(Y)
         self._meY = gn * self.a * self._mB * _UP
         self._mZ = (_mat_norm_up(Z) + gn * self.a * mY + self.a * self._meY) * _UP
-        self._mnorm = _norm_up(self.w_max)
+        self._mnorm = _norm_up(self._m)
         # Gram: g(B_b), g(Y) (its rounding and Y's error included), sum_j m_j ||A_b^2 b_j||
-        self._gB = self._gram(Bb, gn)
-        self._gY = (self._gram(Y, gn) + float(self.w_max @ self._ey)) * _UP
-        self._gZ = float(self.w_max @ self._nz) * (1.0 + gamma(self.q + 2)) * _UP
+        self._gB = _gram(Bb, self._m, gn)
+        self._gY = (_gram(Y, self._m, gn) + float(self._m @ self._ey)) * _UP
+        self._gZ = float(self._m @ self._nz) * (1.0 + gamma(self.q + 2)) * _UP
         self._cache: dict[float, float] = {}
         self._shaped: dict[float, tuple[np.ndarray, float]] = {}
-
-    def _gram(self, X: np.ndarray, gn: float) -> float:
-        """``>= sqrt(m' |X'X| m)`` (the product's rounding ``gamma_n |X|'|X|`` added) plus what underflow
-        hides from it: each entry of ``G`` (``n`` products, two more for the rounding term) loses at most
-        ``(n + 2) eta``, the form ``m' G m`` (``q`` products a row, ``q`` more, two scalings) at most
-        ``q eta (sum m + 1) + eta``: with ``s = sum m``, ``(n + 2) s^2 + q (s + 1) + 1`` times ``eta``
-        under the root, which adds at most ``s sqrt((n + 2) eta) + sqrt((q (s + 1) + 1) eta)``
-        (:func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
-        aX = np.abs(X)
-        G = np.abs(X.T @ X) + gn * (aX.T @ aX) * _UP
-        s = float(self.w_max.sum()) * (1.0 + gamma(self.q + 2))
-        slack = (s * underflow_slack(X.shape[0] + 2) + underflow_slack((self.q * (s + 1.0) + 1.0) * _UP)) * _UP
-        return (math.sqrt(float(self.w_max @ G @ self.w_max) * (1.0 + gamma(2 * self.q + 2)) * _UP) * _UP
-                + slack)
 
     @property
     def active(self) -> bool:
@@ -162,17 +161,19 @@ class DisturbanceReach:
         ah = a * h
         taylor = (h * (nX + nXh) / 2.0 + h * h * eY / 2.0
                   + (nZ * h ** 3 * math.exp(ah) / 6.0 if nZ > 0.0 else 0.0)) * _UP * _UP
-        growth = nX * (math.expm1(ah) / a if a > 0.0 else h) * _UP * _UP
+        growth = nX * _growth(a, h) * _UP * _UP
         return min(taylor, growth)
 
     def radius(self, dt: float) -> float:
-        """``R(dt)`` (balanced units) for a step of length ``dt >= 0``."""
+        """``R(dt)`` (balanced units) for a step of length ``dt >= 0``: the scaled pair's (:func:`_back`).
+        ``R`` grows with ``dt``: a step below ``2^-1022`` is taken as ``2^-1022``, so ``h`` and ``h`` times
+        the scaled norms (about 1) do not underflow."""
         if self.q == 0 or not dt > 0.0:
             return 0.0
         r = self._cache.get(dt)
         if r is not None:
             return r
-        h = dt * (1.0 + 2.0 * _U)
+        h = max(dt, NORMAL) * (1.0 + 2.0 * _U)
         g2 = gamma(2)
         if not math.isfinite(h) or self.a * h > 700.0:
             return math.inf
@@ -181,14 +182,14 @@ class DisturbanceReach:
         per = 0.0
         for j in range(self.q):
             nxh = _norm_up(XhY[:, j]) + g2 * (self._nb[j] + h * _norm_up(self._Y[:, j])) * _UP
-            per += self.w_max[j] * self._integral(self._nb[j], nxh, self._ey[j], self._nz[j], h) * _UP
+            per += self._m[j] * self._integral(self._nb[j], nxh, self._ey[j], self._nz[j], h) * _UP
         # joint
         mxh = _mat_norm_up(XhY) + g2 * (self._mB + h * _mat_norm_up(self._Y)) * _UP
         joint = self._mnorm * self._integral(self._mB, mxh, self._meY, self._mZ, h) * _UP
         a, ah = self.a, self.a * h
         gram = (h * self._gB + h * h * self._gY / 2.0 + self._gZ * h ** 3 * math.exp(ah) / 6.0) * _UP * _UP
-        gram = min(gram, self._gB * (math.expm1(ah) / a if a > 0.0 else h) * _UP * _UP)
-        r = min(per, joint, gram) * _UP
+        gram = min(gram, self._gB * _growth(a, h) * _UP * _UP)
+        r = _back(min(per, joint, gram), self._k, self.q)
         if len(self._cache) >= _CACHE:
             self._cache.clear()
         self._cache[dt] = r
@@ -213,14 +214,15 @@ class DisturbanceReach:
         if not math.isfinite(h) or self.a * h > 1.0:
             return np.zeros((n, 0)), self.radius(dt)
         G1 = self._Bw * (dt * self.w_max)[None, :]
-        G2 = (self._Y * self._d[:, None]) * ((dt * dt / 2.0) * self.w_max)[None, :]
+        G2 = (np.ldexp(self._Y, self._kb) * self._d[:, None]) * ((dt * dt / 2.0) * self.w_max)[None, :]
         t1 = _mat_fro_up(G1 * self._id[:, None])
         t2 = _mat_fro_up(G2 * self._id[:, None])
         a = min(max(t2 / t1, 1e-12), 1e12) if t1 > 0.0 else 1e12
         s1 = math.sqrt(self.q * (1.0 + a)) * (1.0 + 4.0 * _U)
         s2 = math.sqrt(self.q * (1.0 + 1.0 / a)) * (1.0 + 4.0 * _U)
         G = np.hstack([G1 * s1, G2 * s2])
-        rem = (self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self.w_max @ self._ey)) * _UP
+        rem = _back(self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self._m @ self._ey),
+                    self._k, self.q)
         r = (rem + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
         G.setflags(write=False)
         if len(self._shaped) >= _CACHE:
@@ -229,12 +231,65 @@ class DisturbanceReach:
         return G, r
 
 
+def _gram(X: np.ndarray, m: np.ndarray, gn: float) -> float:
+    """``>= sqrt(m' |X'X| m)``, :class:`DisturbanceReach`'s Gram bound (the product's rounding ``gamma_n
+    |X|'|X|`` added), plus what underflow hides from it: each entry of ``G`` (``n`` products, two more
+    for the rounding term) loses at most ``(n + 2) eta``, the form ``m' G m`` (``q`` products a row,
+    ``q`` more, two scalings) at most ``q eta (sum m + 1) + eta``: with ``s = sum m``, ``L eta`` under the
+    root, ``L = (n + 2) s^2 + q (s + 1) + 1``, which adds at most ``s sqrt((n + 2) eta) + sqrt((q (s + 1)
+    + 1) eta)`` (:func:`~switchobs_core.numerics.frobenius.underflow_slack`). Where ``L eta <= u v``
+    (``v`` the computed form) one more unit in the form's factor covers ``L eta`` instead, and the
+    smaller of the two bounds is taken (between the number without either term and the one with it)."""
+    q = m.size
+    aX = np.abs(X)
+    G = np.abs(X.T @ X) + gn * (aX.T @ aX) * _UP
+    s = float(m.sum()) * (1.0 + gamma(q + 2))
+    slack = (s * underflow_slack(X.shape[0] + 2) + underflow_slack((q * (s + 1.0) + 1.0) * _UP)) * _UP
+    v = float(m @ G @ m)
+    g = math.sqrt(v * (1.0 + gamma(2 * q + 2)) * _UP) * _UP + slack
+    loss = ((X.shape[0] + 2) * s * s + q * (s + 1.0) + 1.0) * UNDERFLOW * _UP
+    if loss <= _U * v:
+        g = min(g, math.sqrt(v * (1.0 + gamma(2 * q + 3)) * _UP) * _UP)
+    return g
+
+
+def _exponent(x: np.ndarray) -> int:
+    """``k`` with ``max |x| 2^-k`` in ``[1/2, 1)`` (0 without a finite nonzero entry), or where that
+    scales down, no more than keeps the least nonzero entry at or above ``2^-1022``: ``x 2^-k`` is exact."""
+    a = np.abs(x[x != 0.0]) if x.size else x
+    top = float(a.max()) if a.size else 0.0
+    if not math.isfinite(top) or top == 0.0:
+        return 0
+    k = math.frexp(top)[1]
+    return k if k <= 0 else min(k, max(math.frexp(float(a.min()))[1] + 1021, 0))
+
+
+def _back(x: float, k: int, q: int) -> float:
+    """``(x + 2 (q + 2) eta) 2^k`` rounded up, ``x`` a bound in the scaled units (``B_b`` and ``m`` to
+    largest entries near 1): a product there that falls under ``2^-1022`` loses at most ``eta / 2``, four
+    a column (or for the joint and Gram bounds), each times ``m_j <= 1``; one more ``eta`` where the
+    result is subnormal (``2^k`` rounds it). In the normal range the terms vanish in the rounding."""
+    try:
+        r = math.ldexp((x + 2.0 * (q + 2) * UNDERFLOW) * _UP, k)
+    except OverflowError:
+        return math.inf
+    return r + UNDERFLOW if r < NORMAL else r
+
+
+def _growth(a: float, h: float) -> float:
+    """``(e^{a h} - 1) / a`` (``h`` for ``a = 0``), ``h`` where ``a h`` is below ``2^-1022``: a product
+    there loses up to all of itself, and ``(e^x - 1) / x <= 1 + x`` is 1 up to the callers' margin."""
+    ah = a * h
+    return math.expm1(ah) / a if ah >= NORMAL else h
+
+
 def _mat_fro_up(X: np.ndarray) -> float:
     """``>= ||X||_F`` (rounded up, plus what underflow hides:
-    :func:`~switchobs_core.numerics.frobenius.underflow_slack`)."""
+    :func:`~switchobs_core.numerics.frobenius.sum_slack`)."""
     if not X.size:
         return 0.0
-    return math.sqrt(float(np.sum(X * X))) * (1.0 + gamma(X.size + 2)) * _UP + underflow_slack(X.size)
+    s = float(np.sum(X * X))
+    return math.sqrt(s) * (1.0 + gamma(X.size + 2)) * _UP + sum_slack(s, X.size)
 
 
 def brute_force_reach(A: np.ndarray, B_w: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:

@@ -47,7 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
+from .rounding import NORMAL, UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["nu", "CertifiedStep", "certify_zoh", "expm_error_bound"]
 
@@ -57,8 +57,6 @@ THETA = 0.25
 #: Most Taylor terms (step 2 stops before: ``0.25^18 / 18! < 1e-26``).
 MAX_TERMS = 18
 _UP = 1.0 + 8.0 * _U      # each line of bookkeeping rounded up
-#: The smallest normal double, ``2^-1022``: a product at or above it is rounded relative ``u``.
-_NORMAL = 2.0**-1022
 
 
 def _nu1inf(X: np.ndarray) -> tuple[float, float]:
@@ -77,7 +75,7 @@ def _sqrt_prod(a: float, b: float) -> float:
     absolute rounding and the factors' relative ``2 u`` of a result below ``2^-1022`` (``eta``,
     :data:`~switchobs_core.numerics.rounding.UNDERFLOW`). In the normal range ``sqrt(a b)`` as it was."""
     p = a * b
-    if p >= _NORMAL or not p == p or a == 0.0 or b == 0.0:
+    if p >= NORMAL or not p == p or a == 0.0 or b == 0.0:
         return math.sqrt(p) * _UP
     return math.sqrt(a) * math.sqrt(b) * _UP + 2.0 * UNDERFLOW
 

@@ -6,8 +6,18 @@ underflow loses: each square under the normal range loses up to ``eta / 2`` (``e
 subnormal, :data:`~switchobs_core.numerics.rounding.UNDERFLOW`), so ``fl(v . v)`` of ``m`` entries is
 below the rounded true sum by at most ``m eta`` and, with ``sqrt(a + b) <= sqrt(a) + sqrt(b)``, the norm
 by at most ``sqrt(m eta)``. The functions here add that term; the relative rounding stays the caller's
-(a ``(1 + gamma)`` factor where the bound is formed). In normal ranges the term is ``~1e-160`` and a
-published number does not change.
+(a ``(1 + gamma)`` factor where the bound is formed).
+
+Where the computed sum is large enough the term is not needed (:func:`sum_slack`). Let ``t_i = fl(x_i^2)``
+and ``s = fl(sum t_i)``, ``m`` terms, round to nearest. A square errs by ``|t_i - x_i^2| <= u x_i^2 +
+eta / 2`` (the absolute part only under ``2^-1022``, :data:`~switchobs_core.numerics.rounding.NORMAL`),
+so ``x_i^2 <= (t_i + eta / 2) / (1 - u)``; an addition does not underflow, so ``sum t_i <= s (1 -
+u)^-(m-1)`` (any order, fused or not). Hence ``T = sum x_i^2 <= (s (1 - u)^-(m-1) + m eta / 2) / (1 -
+u)``. If ``s >= m 2^-1022`` then ``m eta / 2 = u m 2^-1022 <= u s`` and, as ``(1 - u)^-(m-1) + u <= (1 -
+u)^-m``, ``T <= s (1 - u)^-(m+1) <= s (1 + gamma_{m+1})``; with ``fl(sqrt(s)) >= sqrt(s) (1 - u)``,
+``sqrt(T) <= fl(sqrt(s)) (1 + gamma_{m+1})^(1/2) / (1 - u) <= fl(sqrt(s)) (1 + gamma_{m+2})``: the
+factor the callers apply without underflow (``(1 + gamma_{m+2})``, its own product rounded up) covers
+it, and a published number is the one computed without the term.
 """
 
 from __future__ import annotations
@@ -16,9 +26,9 @@ import math
 
 import numpy as np
 
-from .rounding import UNDERFLOW, fro_norm
+from .rounding import NORMAL, UNDERFLOW, fro_norm
 
-__all__ = ["SQRT_ETA", "fro_upper", "underflow_slack"]
+__all__ = ["SQRT_ETA", "fro_upper", "sum_slack", "underflow_slack"]
 
 #: ``sqrt(eta)``: the norm of ``m`` entries hides at most ``sqrt(m) SQRT_ETA`` under the normal range.
 SQRT_ETA = math.sqrt(UNDERFLOW)
@@ -28,6 +38,13 @@ def underflow_slack(m: float) -> float:
     """``sqrt(m eta)``: what underflow can hide from a computed 2-norm / Frobenius norm of ``m`` entries
     (or from a square root of any sum whose underflows lose at most ``m eta`` in all)."""
     return math.sqrt(m) * SQRT_ETA
+
+
+def sum_slack(s: float, m: float) -> float:
+    """What underflow can hide from ``sqrt(s)``, ``s`` a computed sum of ``m`` squares: 0 when ``s >= m
+    2^-1022`` (the factor ``(1 + gamma_{m+2})`` the caller applies covers it: module docstring), else
+    :func:`underflow_slack`."""
+    return 0.0 if s >= m * NORMAL else underflow_slack(m)
 
 
 def fro_upper(X: np.ndarray) -> float:

@@ -112,15 +112,15 @@ try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without it
 except ImportError:     # pragma: no cover - another numpy layout: the public function
     _eigvalsh_lo = None
 
-__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "gamma", "expm_extended", "ErrorEllipsoid", "PendingSet", "assembled",
-           "largest_eigenvalue", "verify_against_extended"]
+__all__ = ["UNIT_ROUNDOFF", "UNDERFLOW", "NORMAL", "gamma", "expm_extended", "ErrorEllipsoid", "PendingSet",
+           "assembled", "largest_eigenvalue", "verify_against_extended"]
 
 #: Unit roundoff of IEEE double precision, ``u = 2^-53``.
 UNIT_ROUNDOFF = 2.0**-53
 _U = UNIT_ROUNDOFF
-#: The smallest subnormal double, ``2^-1074``: the absolute error of an underflowing product is at
-#: most half of it (module docstring, step 8).
-UNDERFLOW = 2.0**-1074
+#: The smallest subnormal double, ``2^-1074`` (an underflowing product errs by at most half of it: module
+#: docstring, step 8), and the smallest normal one, ``2^-1022`` (a product at or above it errs relative ``u``).
+UNDERFLOW, NORMAL = 2.0**-1074, 2.0**-1022
 #: :func:`_clamp`'s range; step_dense's factors of ``theta`` and of ``c_2`` (the kernel's too, by ``_aux``)
 _ALO, _AHI, _KTH, _K2 = 2.0**-40, 1e150, 1.0 + 4.0 * _U, 1.0 + 2.0 * _U
 

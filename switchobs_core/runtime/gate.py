@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..exceptions import InvalidArgument
 from .consistency import output_rows
 
 __all__ = ["ChiSquareGate", "GateResult", "chi2_gate", "nis"]
@@ -80,7 +81,8 @@ class ChiSquareGate:
     C : sequence of (p_i, n) array_like
         The channels' output matrices ``C_1..C_N`` (e:outputs).
     alpha : float
-        The false-alarm rate per sample, in (0, 1).
+        The false-alarm rate per sample, in [0, 1) (0: no gate); else :class:`InvalidArgument` (a rate
+        of 1 or more, or NaN, would reject every sample, a negative one turn the gate off silently).
 
     The thresholds are computed once per number of rows: those of the channels' full outputs when the
     gate is made with ``alpha > 0`` (so the first gated sample does not wait for ``scipy.special``'s
@@ -90,6 +92,9 @@ class ChiSquareGate:
     def __init__(self, C: Sequence[np.ndarray], alpha: float):
         self.C = tuple(np.asarray(C_i, dtype=float) for C_i in C)
         self.alpha = float(alpha)
+        if not 0.0 <= self.alpha < 1.0:
+            raise InvalidArgument(f"the chi-square gate's false-alarm rate alpha must be in [0, 1) (0: no gate); "
+                                  f"got {alpha!r}")
         self._thresholds: dict[int, float] = {}
         if self.alpha > 0.0:
             for C_i in self.C:

@@ -327,7 +327,7 @@ class DataWindow:
             root_m = math.sqrt(m) * _UP
             radius = ((Rtr_n + Delta * (rn + er)) / (s * s) + (Delta * xn + root_m + ey + dw) / s) * _UP * _UP
             a, b = self._clock_rows(R, x_c, xn)
-            na, nb = _norm(a), _norm(b)
+            na, nb = (_norm(a), _norm(b)) if self.clock else (0.0, 0.0)      # no clock: no stamp error
             if nb:
                 q = nb / s * _UP
                 if not q < 1.0:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
+from _exact import bounds_spectral as _bounds_spectral
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -24,32 +25,6 @@ def _exact(K: np.ndarray, H: np.ndarray) -> list[list[Fraction]]:
     Hf = [[Fraction(float(v)) for v in row] for row in H]
     return [[(1 if i == j else 0) - sum((Kf[i][k] * Hf[k][j] for k in range(p)), Fraction(0)) for j in range(n)]
             for i in range(n)]
-
-
-def _psd(M: list[list[Fraction]]) -> bool:
-    """Whether the symmetric rational matrix ``M`` is positive semidefinite (exact symmetric elimination:
-    every pivot >= 0, a zero pivot with a zero row)."""
-    M = [row[:] for row in M]
-    n = len(M)
-    for k in range(n):
-        piv = M[k][k]
-        if piv < 0 or (piv == 0 and any(M[k][j] != 0 for j in range(k + 1, n))):
-            return False
-        if piv == 0:
-            continue
-        for i in range(k + 1, n):
-            f = M[i][k] / piv
-            for j in range(k + 1, n):
-                M[i][j] -= f * M[k][j]
-    return True
-
-
-def _bounds_spectral(b: float, X: list[list[Fraction]]) -> bool:
-    """``b >= ||X||_2`` exactly: ``b^2 I - X' X`` is positive semidefinite."""
-    n = len(X)
-    b2 = Fraction(b) ** 2
-    return _psd([[(b2 if i == j else 0) - sum((X[k][i] * X[k][j] for k in range(n)), Fraction(0))
-                  for j in range(n)] for i in range(n)])
 
 
 @settings(max_examples=80, deadline=None)

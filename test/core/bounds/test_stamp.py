@@ -4,6 +4,8 @@ direction in the ball, for random systems (hypothesis)."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import scipy.linalg as sla
 from hypothesis import given, settings
@@ -85,3 +87,16 @@ def test_a_constant_velocity_track_gives_speed_times_offset():
     C = np.array([[1.0, 0.0]])
     got = stamp_error_bound(A, C, np.array([3.0, 22.0]), 0.0, 0.05)
     assert 1.1 <= got <= 1.1 * 1.2, got
+
+
+def test_a_subnormal_rate_times_a_large_ball() -> None:
+    """``A = [[k eta]]`` (``a d`` under ``2^-1022``) and a ball of ``1e300``, with a zero estimate or one
+    of 1e150: the bound is at least ``a d beta`` (``<= (e^{a d} - 1) beta``) and ``d |A x_hat|``, exactly
+    in rationals (``a d`` rounded down or to 0 gave 1e-164 for 7.8e-25)."""
+    rng = np.random.default_rng(1)
+    for _ in range(800):
+        a = int(rng.integers(1, 2000)) * 5e-324
+        d = float(rng.uniform(0.001, 1.0))
+        x = float(rng.choice([0.0, 1e150]))
+        b = StampError(np.array([[a]]), scale=np.ones(1)).bound(np.array([[1.0]]), np.array([x]), 1e300, d)
+        assert Fraction(b) >= Fraction(a) * Fraction(d) * (Fraction(1e300) + Fraction(x)), (a, d, x, b)

@@ -11,6 +11,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from _exact import bounds_spectral
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -86,27 +87,44 @@ def test_nu_unchanged_in_the_normal_range() -> None:
 @pytest.mark.parametrize("scale", SCALES)
 def test_reach_norms_bound_the_exact_ones(scale: float) -> None:
     """The disturbance's vector norm, Frobenius norm and 2-norm bound (``min(nu, ||.||_F)``) are above
-    the exact norms."""
+    the exact norms (the 2-norm: ``b^2 I - X'X`` positive semidefinite in rationals)."""
     rng = np.random.default_rng(5)
     for shape in ((4, 1), (6, 3), (2, 2)):
         X = _matrix(rng, shape, scale)
-        exact = _sq(X)
         assert _F(dr._norm_up(X[:, 0])) ** 2 >= _sq(X[:, 0])
-        assert _F(dr._mat_fro_up(X)) ** 2 >= exact
-        assert _F(dr._mat_norm_up(X)) ** 2 >= exact / min(shape)      # ||X||_2^2 >= ||X||_F^2 / rank
+        assert _F(dr._mat_fro_up(X)) ** 2 >= _sq(X)
+        assert bounds_spectral(dr._mat_norm_up(X), [[_F(a) for a in row] for row in X]), (shape, scale)
 
 
-@pytest.mark.parametrize("scale", SCALES)
-def test_reach_gram_bounds_the_exact_form(scale: float) -> None:
-    """``g(X) >= sqrt(m' |X'X| m)`` exactly, also where the Gram matrix's products underflow."""
-    rng = np.random.default_rng(6)
-    X = _matrix(rng, (5, 3), scale)
-    m = np.array([1.0, 0.5, 2.0])
-    r = dr.DisturbanceReach(np.zeros((5, 5)), X, m)
+def _gram_exact(X: np.ndarray, m: np.ndarray) -> Fraction:
+    """``m' |X'X| m`` exactly."""
     Xf = [[_F(a) for a in row] for row in X]
-    G = [[abs(sum((Xf[k][i] * Xf[k][j] for k in range(5)), Fraction(0))) for j in range(3)] for i in range(3)]
-    exact = sum((_F(m[i]) * G[i][j] * _F(m[j]) for i in range(3) for j in range(3)), Fraction(0))
-    assert _F(r._gram(X, 0.0)) ** 2 >= exact
+    n, q = X.shape
+    G = [[abs(sum((Xf[k][i] * Xf[k][j] for k in range(n)), Fraction(0))) for j in range(q)] for i in range(q)]
+    return sum((_F(m[i]) * G[i][j] * _F(m[j]) for i in range(q) for j in range(q)), Fraction(0))
+
+
+@pytest.mark.parametrize("weight", [1.0, 1e100, 1e-150])
+@pytest.mark.parametrize("scale", SCALES)
+def test_reach_gram_bounds_the_exact_form(scale: float, weight: float) -> None:
+    """``g(X) >= sqrt(m' |X'X| m)`` exactly, also where the Gram matrix's products underflow, with
+    weights of 1 (neither underflow term needed alone), 1e100 (the entries' term) and 1e-150 (the
+    form's term)."""
+    rng = np.random.default_rng(6)
+    m = np.array([1.0, 0.5, 2.0]) * weight
+    X = _matrix(rng, (5, 3), scale)
+    assert _F(dr._gram(X, m, 0.0)) ** 2 >= _gram_exact(X, m), (scale, weight)
+
+
+@pytest.mark.parametrize(("entry", "weight"), [(1e-165, 1e100), (1e-100, 1e-150)])
+def test_reach_gram_needs_each_underflow_term(entry: float, weight: float) -> None:
+    """Entries of 1e-165 (their products underflow) with weights 1e100: the entries' term
+    ``s sqrt((n + 2) eta)``; entries of 1e-100 (normal products) with weights 1e-150 (the form's
+    products underflow): the form's term."""
+    X = np.full((5, 3), entry)
+    X[1] *= -1.0
+    m = np.full(3, weight)
+    assert _F(dr._gram(X, m, 0.0)) ** 2 >= _gram_exact(X, m)
 
 
 @pytest.mark.parametrize("scale", [1e-160, 1e-170, 1e-300, 1e-310])

@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
+from switchobs_core.exceptions import InvalidArgument
 from switchobs_core.runtime.gate import ChiSquareGate, GateResult, chi2_gate, nis
 
 
@@ -114,3 +115,12 @@ def test_scipy_special_imported_only_with_the_gate_on():
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout) == [False, True, True, True]
+
+
+@pytest.mark.parametrize("alpha", [1.0, 1.5, float("nan"), -0.01, float("inf")])
+def test_a_rate_outside_0_1_is_refused(alpha):
+    """A rate of 1 or more or NaN would give NaN thresholds that reject every sample ("NIS 0 > nan"), a
+    negative one would turn the gate off: refused when the gate is made, naming the range."""
+    with pytest.raises(InvalidArgument, match=r"alpha must be in \[0, 1\)"):
+        ChiSquareGate([np.eye(2)], alpha)
+    assert ChiSquareGate([np.eye(2)], 0.0).alpha == 0.0       # 0: no gate

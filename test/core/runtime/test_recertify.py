@@ -91,3 +91,36 @@ def test_the_rows_error_allowance_covers_the_rows_real_error(paper):
         real = np.sqrt(np.sum(np.asarray(w.R[sel] - exact, dtype=float) ** 2, axis=1))
         assert np.all(real <= w.delta[sel])
     assert w.delta.max() < 1e-10        # the allowance stays near the rounding level
+
+
+def _radius_without_stamps(w: DataWindow) -> float:
+    """The radius of the module docstring (``||R' r|| + Delta ||r||`` over ``s^2`` plus ``Delta ||x_c|| +
+    sqrt(m) + eps_y`` over ``s``) from the window's rows, with no stamp error: each quantity from its
+    definition, as the certificate bounds it."""
+    from switchobs_core.numerics.rounding import UNDERFLOW, gamma
+    from switchobs_core.runtime.recertify import _U, _UP, _norm
+
+    R, y = w.R, w.y
+    m, n = R.shape
+    x = np.linalg.lstsq(R, y, rcond=None)[0]
+    G = R.T @ R
+    fro2 = float(np.einsum("ij,ij->", R, R)) * (1.0 + gamma(m * n + 2))
+    low = (float(np.linalg.eigvalsh(0.5 * (G + G.T))[0]) - gamma(m + 2) * fro2
+           - 2 * n * _U * _norm(0.5 * (G + G.T)) - 4 * n * UNDERFLOW) / _UP
+    delta = _norm(w.delta)
+    s = np.sqrt(low) / _UP - delta
+    res = y - R @ x
+    err = _norm(gamma(n + 1) * (np.abs(R) @ np.abs(x) + np.abs(y))) * _UP
+    nres = _norm(res)
+    top = _norm(R.T @ res) + gamma(m + 2) * np.sqrt(fro2) * nres + np.sqrt(fro2) * err
+    tail = delta * _norm(x) + np.sqrt(m) * _UP + _norm(w.ey) + _norm(np.zeros(m))
+    return ((top + delta * (nres + err)) / (s * s) + tail / s) * _UP * _UP
+
+
+def test_the_radius_without_a_clock_tolerance_has_no_stamp_term(paper):
+    """No clock tolerance declared: the certificate's radius is the docstring's, bit for bit (not divided
+    by ``1 - q`` of a stamp term that is 0, as an underflow allowance on the zero rows would make it)."""
+    rng = np.random.default_rng(0)
+    w, _ = _fill(paper, rng.normal(scale=3.0, size=paper.n), 2.0, lambda k, p: rng.uniform(-VMAX, VMAX, size=p))
+    cert = w.certificate([1, 2])
+    assert cert is not None and cert.radius == _radius_without_stamps(w)
