@@ -8,13 +8,16 @@ below the rounded true sum by at most ``m eta`` and, with ``sqrt(a + b) <= sqrt(
 by at most ``sqrt(m eta)``. The functions here add that term; the relative rounding stays the caller's
 (a ``(1 + gamma)`` factor where the bound is formed).
 
-Where the computed sum is large enough the term is not needed (:func:`sum_slack`). Let ``t_i = fl(x_i^2)``
-and ``s = fl(sum t_i)``, ``m`` terms, round to nearest. A square errs by ``|t_i - x_i^2| <= u x_i^2 +
-eta / 2`` (the absolute part only under ``2^-1022``, :data:`~switchobs_core.numerics.rounding.NORMAL`),
-so ``x_i^2 <= (t_i + eta / 2) / (1 - u)``; an addition does not underflow, so ``sum t_i <= s (1 -
-u)^-(m-1)`` (any order, fused or not). Hence ``T = sum x_i^2 <= (s (1 - u)^-(m-1) + m eta / 2) / (1 -
-u)``. If ``s >= m 2^-1022`` then ``m eta / 2 = u m 2^-1022 <= u s`` and, as ``(1 - u)^-(m-1) + u <= (1 -
-u)^-m``, ``T <= s (1 - u)^-(m+1) <= s (1 + gamma_{m+1})``; with ``fl(sqrt(s)) >= sqrt(s) (1 - u)``,
+Where the computed sum is large enough the term is not needed (:func:`sum_slack`). Let ``s`` be the
+computed sum of the ``m`` squares ``x_i^2``, round to nearest, in any order, fused or not (OpenBLAS
+on an FMA machine forms ``fl(x_i x_i + acc)`` in one step). Each step, a square, an addition or a
+fused multiply-add, errs by at most ``u`` relative or ``eta / 2`` absolute (``eta`` the smallest
+subnormal; the absolute part only where its result falls under ``2^-1022``,
+:data:`~switchobs_core.numerics.rounding.NORMAL`, and a plain addition of doubles is exact there): at
+most ``m`` steps carry an absolute part (one per square, fused or not), and each ``x_i^2`` passes
+through at most ``m`` roundings. Hence ``T = sum x_i^2 <= (s + m eta / 2) (1 - u)^-m``. If ``s >= m
+2^-1022`` then ``m eta / 2 = u m 2^-1022 <= u s`` and, as ``(1 + u) (1 - u)^-m <= (1 - u)^-(m+1)``,
+``T <= s (1 - u)^-(m+1) <= s (1 + gamma_{m+1})``; with ``fl(sqrt(s)) >= sqrt(s) (1 - u)``,
 ``sqrt(T) <= fl(sqrt(s)) (1 + gamma_{m+1})^(1/2) / (1 - u) <= fl(sqrt(s)) (1 + gamma_{m+2})``: the
 factor the callers apply without underflow (``(1 + gamma_{m+2})``, its own product rounded up) covers
 it, and a published number is the one computed without the term.
