@@ -59,11 +59,15 @@ by a relative ``8 u``. The result is an upper bound of the quantities above (``i
 is ``inf``: the disturbance then makes the bound infinite and the caller withdraws it).
 
 Underflow. ``d`` is linear in ``B_w`` and in ``m``: both are scaled by powers of two to largest entries
-in ``[1/2, 1)`` (exactly), the bounds computed and multiplied back by ``2^k``, so a product falls under
+in ``[1/2, 1)``, the bounds computed and multiplied back by ``2^k``, so a product falls under
 ``2^-1022`` only where it is that small against the problem's own scale; there it loses at most
-``eta / 2``, allowed for by an absolute ``2 (q + 2) eta`` before the scaling back (:func:`_back`). A step
-below ``2^-1022`` is taken as ``2^-1022`` (the reach grows with the step), and the growth bound's
-``(e^{a h} - 1) / a`` is ``h`` where ``a h`` is below ``2^-1022`` (:func:`_growth`).
+``eta / 2``, allowed for by an absolute ``2 (q + 2) eta`` before the scaling back (:func:`_back`). An
+entry more than ``2^1021`` below its largest scales under ``2^-1022`` and rounds: ``m_j`` is rounded
+up (the reach grows with each ``m_j``), and ``B_b``'s rounding ``E`` (``||E|| <= sqrt(n q) eta / 2``)
+reaches at most ``||E|| ||m|| (e^{a h} - 1) / a``, added to every bound. A step below ``2^-1022`` is
+taken as ``2^-1022`` (the reach grows with the step), and the growth bound's ``(e^{a h} - 1) / a`` is
+``h`` where ``a h`` is below ``2^-1022`` (:func:`_growth`). A bound that is ``nan`` (an ``inf`` times
+0) bounds nothing and is dropped; without another the result is ``inf``.
 """
 
 from __future__ import annotations
@@ -117,11 +121,17 @@ class DisturbanceReach:
         self.w_max, Bw = self.w_max[keep], Bw[:, keep]
         Bb = Bw / d[:, None]        # exact: powers of two
         self._Bw, self._id, self._d = Bw, 1.0 / d, d
+        self._e = np.frexp(d)[1] - 1            # d = 2^e
         # B_b and m scaled by powers of two to largest entries in [1/2, 1): R is linear in each, so
         # the reach of the scaled pair times 2^k is R's (Underflow, in the module docstring)
         kb, kw = _exponent(Bb), _exponent(self.w_max)
-        Bb, self._m = np.ldexp(Bb, -kb), np.ldexp(self.w_max, -kw)
-        self._kb, self._k = kb, kb + kw
+        Bs, self._m = np.ldexp(Bb, -kb), np.ldexp(self.w_max, -kw)
+        # an entry scaled under 2^-1022 rounds: m_j up (R grows with each m_j), B_b's by <= eta / 2 each,
+        # ||E||_2 <= sqrt(n q) eta / 2: its reach, ||E|| ||m|| (e^{a h} - 1) / a, joins every bound
+        low = np.ldexp(self._m, kw) != self.w_max
+        self._m[low] = np.nextafter(self._m[low], math.inf)
+        self._eB = math.sqrt(Bs.size) * _UP if np.any(np.ldexp(Bs, kb) != Bb) else 0.0
+        Bb, self._kb, self._k = Bs, kb, kb + kw
         self.q = Bb.shape[1]
         Ab = A * (1.0 / d)[:, None] * d[None, :]
         self.a = nu(Ab)
@@ -131,7 +141,7 @@ class DisturbanceReach:
         self._B, self._Y = Bb, Y
         # columns: ||b_j||, the error of y_j, ||A_b^2 b_j||
         self._nb = np.array([_norm_up(Bb[:, j]) for j in range(self.q)])
-        ny = np.array([_norm_up(Y[:, j]) for j in range(self.q)])
+        self._ny = ny = np.array([_norm_up(Y[:, j]) for j in range(self.q)])
         self._ey = gn * self.a * self._nb * _UP
         self._nz = np.array([_norm_up(Z[:, j]) + gn * self.a * ny[j] + self.a * self._ey[j]
                              for j in range(self.q)]) * _UP
@@ -160,9 +170,9 @@ class DisturbanceReach:
         a = self.a
         ah = a * h
         taylor = (h * (nX + nXh) / 2.0 + h * h * eY / 2.0
-                  + (nZ * h ** 3 * math.exp(ah) / 6.0 if nZ > 0.0 else 0.0)) * _UP * _UP
+                  + (nZ * _cube(h) * math.exp(ah) / 6.0 if nZ > 0.0 else 0.0)) * _UP * _UP
         growth = nX * _growth(a, h) * _UP * _UP
-        return min(taylor, growth)
+        return _least(taylor, growth)
 
     def radius(self, dt: float) -> float:
         """``R(dt)`` (balanced units) for a step of length ``dt >= 0``: the scaled pair's (:func:`_back`).
@@ -175,7 +185,7 @@ class DisturbanceReach:
             return r
         h = max(dt, NORMAL) * (1.0 + 2.0 * _U)
         g2 = gamma(2)
-        if not math.isfinite(h) or self.a * h > 700.0:
+        if not (math.isfinite(h) and self.a * h <= 700.0):
             return math.inf
         XhY = self._B + h * self._Y
         # per column
@@ -187,14 +197,21 @@ class DisturbanceReach:
         mxh = _mat_norm_up(XhY) + g2 * (self._mB + h * _mat_norm_up(self._Y)) * _UP
         joint = self._mnorm * self._integral(self._mB, mxh, self._meY, self._mZ, h) * _UP
         a, ah = self.a, self.a * h
-        gram = (h * self._gB + h * h * self._gY / 2.0 + self._gZ * h ** 3 * math.exp(ah) / 6.0) * _UP * _UP
-        gram = min(gram, self._gB * _growth(a, h) * _UP * _UP)
-        r = _back(min(per, joint, gram), self._k, self.q)
+        gram = (h * self._gB + h * h * self._gY / 2.0 + self._gZ * _cube(h) * math.exp(ah) / 6.0) * _UP * _UP
+        gram = _least(gram, self._gB * _growth(a, h) * _UP * _UP)
+        r = _back(_least(per, joint, gram) + self._lost_b(h), self._k, self.q)
         if len(self._cache) >= _CACHE:
             self._cache.clear()
         self._cache[dt] = r
         return r
 
+
+    def _lost_b(self, h: float) -> float:
+        """``>= sqrt(n q) eta ||m|| (e^{a h} - 1) / a`` (0 where the scaling of ``B_b`` is exact): the
+        reach of its rounding (``__init__``), scaled units, rounded up (``+ eta`` where it is subnormal)."""
+        if not self._eB:
+            return 0.0
+        return self._eB * self._mnorm * _growth(self.a, h) * _UP * UNDERFLOW * _UP + UNDERFLOW
 
     def shaped(self, dt: float) -> tuple[np.ndarray, float]:
         """``(G, r)``: ``d(dt)`` lies in ``E(G G')`` plus the ball of radius ``r`` (balanced units;
@@ -211,24 +228,68 @@ class DisturbanceReach:
         if hit is not None:
             return hit
         h = dt * (1.0 + 2.0 * _U)
-        if not math.isfinite(h) or self.a * h > 1.0:
+        if not (math.isfinite(h) and self.a * h <= 1.0):
             return np.zeros((n, 0)), self.radius(dt)
-        G1 = self._Bw * (dt * self.w_max)[None, :]
-        G2 = (np.ldexp(self._Y, self._kb) * self._d[:, None]) * ((dt * dt / 2.0) * self.w_max)[None, :]
-        t1 = _mat_fro_up(G1 * self._id[:, None])
-        t2 = _mat_fro_up(G2 * self._id[:, None])
-        a = min(max(t2 / t1, 1e-12), 1e12) if t1 > 0.0 else 1e12
-        s1 = math.sqrt(self.q * (1.0 + a)) * (1.0 + 4.0 * _U)
-        s2 = math.sqrt(self.q * (1.0 + 1.0 / a)) * (1.0 + 4.0 * _U)
-        G = np.hstack([G1 * s1, G2 * s2])
-        rem = _back(self._gZ * h ** 3 * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(self._m @ self._ey),
-                    self._k, self.q)
-        r = (rem + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
+        G, r = self._shape(dt, h)
+        if not (r <= math.inf and np.all(np.isfinite(G))):
+            G, r = np.zeros((n, 0)), self.radius(dt)
         G.setflags(write=False)
         if len(self._shaped) >= _CACHE:
             self._shaped.clear()
         self._shaped[dt] = (G, r)
         return G, r
+
+
+    def _shape(self, dt: float, h: float) -> tuple[np.ndarray, float]:
+        """:meth:`shaped`'s ``(G, r)`` for ``a h <= 1``. ``G1``, ``G2`` and the factors are formed from the
+        scaled pair (B_b, m), then scaled back to the user's units by ``2^k D`` (one rounding, exact in the
+        normal range). Where a result falls under ``2^-1022`` it errs by at most ``eta / 2``. In the scaled
+        units (the box's vertices weigh each column by at most 1): the factors ``dt m_j`` (one rounding)
+        and ``dt^2 m_j / 2`` (three, ``m_j <= 1``) by ``eta / 2`` and ``2 eta``, times ``||b_j||`` and
+        ``||y_j||``; the products' entries ``q sqrt(n) eta / 2`` per block; the factors ``s1``, ``s2``
+        ``sqrt(2 q n) eta / 2`` (the ellipsoid's unit ball): ``eta (sum_j (||b_j|| + 2 ||y_j||) + 2 q
+        sqrt(n))`` in all, added to the remainder before :func:`_back`. The scaling back, ``sqrt(2 q)
+        ||D^-1 1|| eta / 2``, in the balanced units."""
+        Bs, m, q, k = self._B, self._m, self.q, self._k
+        c1, c2 = dt * m, (dt * dt / 2.0) * m
+        G1 = Bs * c1[None, :]
+        G2 = self._Y * c2[None, :]
+        t1 = _mat_fro_up(G1)
+        t2 = _mat_fro_up(G2)
+        a = min(max(t2 / t1, 1e-12), 1e12) if t1 > 0.0 else 1e12
+        s1 = math.sqrt(q * (1.0 + a)) * (1.0 + 4.0 * _U)
+        s2 = math.sqrt(q * (1.0 + 1.0 / a)) * (1.0 + 4.0 * _U)
+        Gs = np.hstack([G1 * s1, G2 * s2])
+        ls = 0.0
+        if (min(float(c1.min()), float(c2.min())) < NORMAL or _lossy(G1, Bs, c1) or _lossy(G2, self._Y, c2)
+                or _lossy(Gs, np.hstack([G1, G2]), np.full(2 * q, 1.0))):
+            ls = float(np.sum(self._nb + 2.0 * self._ny)) + 2.0 * q * math.sqrt(Bs.shape[0])
+            ls = ls * (1.0 + gamma(q + 2)) * _UP * UNDERFLOW * _UP + UNDERFLOW
+        rem = _back(self._gZ * _cube(h) * math.exp(self.a * h) / 6.0 + h * h / 2.0 * float(m @ self._ey)
+                    + self._lost_b(h) + ls, k, q)
+        G = np.ldexp(Gs, k + self._e[:, None])
+        back = 0.0
+        if _lossy(G, Gs, np.full(2 * q, 1.0)):
+            back = math.sqrt(2.0 * q) * _norm_up(self._id) * UNDERFLOW * _UP + UNDERFLOW
+        r = (rem + back + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
+        return G, r
+
+
+def _lossy(P: np.ndarray, X: np.ndarray, c: np.ndarray) -> bool:
+    """Whether a product ``P = X diag(c)`` (or a scaling of ``X``) may have lost to underflow: an entry
+    under ``2^-1022`` whose factors are nonzero."""
+    return bool(np.any((np.abs(P) < NORMAL) & (X != 0.0) & (c != 0.0)[None, :]))
+
+
+def _least(*v: float) -> float:
+    """The least of the bounds ``v`` that are numbers (``nan``, an ``inf`` times 0, bounds nothing),
+    ``inf`` without one."""
+    return min((x for x in v if x == x), default=math.inf)
+
+
+def _cube(h: float) -> float:
+    """``h^3``, ``inf`` where it overflows."""
+    return h ** 3 if h < 1e100 else math.inf
 
 
 def _gram(X: np.ndarray, m: np.ndarray, gn: float) -> float:
@@ -254,21 +315,22 @@ def _gram(X: np.ndarray, m: np.ndarray, gn: float) -> float:
 
 
 def _exponent(x: np.ndarray) -> int:
-    """``k`` with ``max |x| 2^-k`` in ``[1/2, 1)`` (0 without a finite nonzero entry), or where that
-    scales down, no more than keeps the least nonzero entry at or above ``2^-1022``: ``x 2^-k`` is exact."""
-    a = np.abs(x[x != 0.0]) if x.size else x
-    top = float(a.max()) if a.size else 0.0
+    """``k`` with ``max |x| 2^-k`` in ``[1/2, 1)`` (0 without a finite nonzero entry). An entry more
+    than ``2^1021`` below the largest then falls under ``2^-1022`` and rounds (``__init__``)."""
+    top = float(np.max(np.abs(x))) if x.size else 0.0
     if not math.isfinite(top) or top == 0.0:
         return 0
-    k = math.frexp(top)[1]
-    return k if k <= 0 else min(k, max(math.frexp(float(a.min()))[1] + 1021, 0))
+    return math.frexp(top)[1]
 
 
 def _back(x: float, k: int, q: int) -> float:
-    """``(x + 2 (q + 2) eta) 2^k`` rounded up, ``x`` a bound in the scaled units (``B_b`` and ``m`` to
-    largest entries near 1): a product there that falls under ``2^-1022`` loses at most ``eta / 2``, four
-    a column (or for the joint and Gram bounds), each times ``m_j <= 1``; one more ``eta`` where the
-    result is subnormal (``2^k`` rounds it). In the normal range the terms vanish in the rounding."""
+    """``(x + 2 (q + 2) eta) 2^k`` rounded up (``inf`` for ``x`` nan), ``x`` a bound in the scaled units
+    (every entry of ``B_b`` and ``m`` at most 1): a product there that falls under ``2^-1022`` loses at
+    most ``eta / 2``, four a column (or for the joint and Gram bounds), each times ``m_j <= 1``; one more
+    ``eta`` where the result is subnormal (``2^k`` rounds it). In the normal range the terms vanish in
+    the rounding."""
+    if x != x:
+        return math.inf
     try:
         r = math.ldexp((x + 2.0 * (q + 2) * UNDERFLOW) * _UP, k)
     except OverflowError:

@@ -101,3 +101,45 @@ def test_norm_slack_only_where_the_sum_is_small() -> None:
     v = np.full(4, 1e-160)
     assert s >= 4 * NORMAL > float(v @ v) and sum_slack(float(v @ v), 4) > 0.0
     assert Fraction(dr._norm_up(v)) ** 2 >= sum(Fraction(float(a)) ** 2 for a in v)
+
+
+@pytest.mark.parametrize(("B", "w", "dt"), [([[1e-150, 1.0]], [1e300, 1e-300], 1e-200),
+                                            ([[1e-216, 0.0], [1e121, 3e-31]], [1e-305, 2e62], 2.859025574650785e-188),
+                                            ([[1e300, 1e-300]], [1.0, 1.0], 1e-3)])
+def test_entries_more_than_2_1021_apart(B: list, w: list, dt: float) -> None:
+    """``B_w`` or ``w`` spanning more than ``2^1021``: the least entries scale under ``2^-1022`` (``m_j``
+    rounded up, ``B_b``'s rounding added), and the radius bounds the exact worst case (a scaling that
+    kept the least entry normal left scaled entries far above 1: 2.65e-315 for 1e-50, 3.8e-15 relative
+    below, NaN)."""
+    B, w = np.array(B), np.array(w)
+    R = dr.DisturbanceReach(np.zeros((B.shape[0],) * 2), B, w)
+    r = R.radius(dt)
+    assert math.isfinite(r) and Fraction(r) ** 2 >= Fraction(dt) ** 2 * _worst(B, w), r
+    G, rs = R.shaped(dt)
+    assert rs == rs and not np.any(np.isnan(G))
+
+
+def _in_shaped_1d(G: np.ndarray, r: float, d: Fraction) -> bool:
+    """Whether ``d`` (one state) lies in ``E(G G') + [-r, r]``: ``|d| <= ||G|| + r``, exactly."""
+    excess = abs(d) - Fraction(r)
+    return excess <= 0 or excess ** 2 <= sum(Fraction(float(g)) ** 2 for g in G.reshape(-1))
+
+
+@pytest.mark.parametrize(("b", "w", "dt"), [(1e300, 1e-300, 1e-20), (1e250, 3e-250, 7e-71),
+                                            (1e-300, 1e300, 1e-20), (1.0, 1e-300, 1e-30)])
+def test_shaped_where_the_step_times_w_is_subnormal(b: float, w: float, dt: float) -> None:
+    """``A = 0``, ``d = dt b w``: ``dt w`` under ``2^-1022`` loses up to ``eta / 2``, which ``b``
+    magnifies; the set ``E(G G') + ball(r)`` holds ``d`` (``G`` formed in the user's units missed 1e-20
+    by 1.1e-25)."""
+    G, r = dr.DisturbanceReach(np.zeros((1, 1)), np.array([[b]]), [w]).shaped(dt)
+    assert _in_shaped_1d(G, r, Fraction(dt) * Fraction(b) * Fraction(w)), (G, r)
+
+
+def test_no_nan_from_an_overflowing_rate() -> None:
+    """``A`` and ``B_w`` whose products overflow: ``radius`` and ``shaped`` give numbers or ``inf``, never
+    ``nan`` (``G`` and ``r`` were ``nan``)."""
+    R = dr.DisturbanceReach(np.array([[3.6e-256, -3.7e-62], [-2.66e-4, -9.2e-285]]),
+                            np.array([[-6.87e137], [-2.37e-16]]), [4.6e125])
+    G, r = R.shaped(1.84e-5)
+    assert r == r and not np.any(np.isnan(G)) and R.radius(1.84e-5) == R.radius(1.84e-5)
+    assert dr.DisturbanceReach(np.zeros((1, 1)), [[1.0]], [1.0]).radius(1e200) >= 1e200
