@@ -38,26 +38,23 @@ from ..numerics.scaling import balance, balanced
 __all__ = ["StampError", "stamp_error_bound"]
 
 _U = UNIT_ROUNDOFF
-#: Factors at or above it (or 0) keep every partial product of the bound's terms (four factors at most,
-#: ``phi_2`` two) in the normal range: the products err relative ``u`` (:func:`_product_up` below).
-_SMALL = 2.0**-250
 
 
 def _phi1(z: float) -> float:
-    """``>= e^z - 1`` for ``z >= 0`` (``expm1`` is faithful: one ulp, here four)."""
-    return math.expm1(z) * (1.0 + 4.0 * _U)
-
-
-def _phi2(z: float) -> float:
-    """``>= e^z - 1 - z`` for ``z >= 0``: ``z^2 e^z / 2`` (``sum_{k>=2} z^k / k! <= z^2 / 2 sum_j
-    z^j / j!``), rounded up."""
-    return 0.5 * z * z * math.exp(z) * (1.0 + 8.0 * _U)
+    """``>= e^z - 1`` for ``z >= 0`` (``expm1`` is faithful: one ulp, here four; ``inf`` where it
+    overflows)."""
+    return math.expm1(z) * (1.0 + 4.0 * _U) if z < 709.0 else math.inf
 
 
 def _product_up(*f: float) -> float:
     """``>= f_1 ... f_k`` (nonnegative doubles) wherever partial products fall under ``2^-1022``: the
     mantissas' product (each in ``[1/2, 1)``: no underflow, relative ``gamma_{k-1}``) times ``2^(sum of
-    the exponents)``, which rounds once (absolute ``eta / 2`` under the normal range), rounded up."""
+    the exponents)``, which rounds once (absolute ``eta / 2`` under the normal range), rounded up; 0 with
+    a factor 0, ``inf`` with one ``inf``."""
+    if 0.0 in f:
+        return 0.0
+    if math.inf in f:
+        return math.inf
     m, e = 1.0, 0
     for x in f:
         mx, ex = math.frexp(x)
@@ -113,7 +110,7 @@ class StampError:
         # |fl(C (A x)) - C A x| <= gamma_{2n} |C| |A| |x| entrywise (two products), in 2-norm
         # at most gamma_{2n} ||C||_F ||A||_F ||x||
         lin = ((math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size))
-               + gamma(2 * self.n + 2) * fC * self.fA * xn)
+               + (gamma(2 * self.n + 2) * fC * self.fA * xn if fC and self.fA else 0.0))
         z = self.a * d * (1.0 + 2.0 * _U)
         if z < NORMAL and self.a > 0.0:
             z = NORMAL      # a d <= fl(fl(a d) (1 + 2u)) + eta <= 2^-1022; phi_1, phi_2 grow with z
@@ -122,12 +119,24 @@ class StampError:
             bu = self.B @ np.asarray(u, dtype=float)
             bun = math.sqrt(float(bu @ bu)) + underflow_slack(bu.size)
             bun *= 1.0 + 2.0 * gamma(bu.size + self.B.shape[1])
-        if min(d, z or _SMALL, lin or _SMALL, nC or _SMALL, xn or _SMALL, beta_d or _SMALL, bun or _SMALL) >= _SMALL:
-            w = d * lin + nC * xn * _phi2(z) + nC * beta_d * _phi1(z)
-            if bun:
-                w += nC * bun * d * math.exp(z) * (1.0 + 4.0 * _U)
-        else:       # a partial product may fall under 2^-1022 and a later factor magnify its loss
-            ez = math.exp(z)
+        # the terms as formed, phi_2(z) <= z^2 e^z / 2 (sum_{k>=2} z^k / k! <= z^2 / 2 sum_j z^j / j!)
+        # rounded up, each 0 with a zero factor (exactly, whatever another factor's overflow). Where a
+        # partial product falls under 2^-1022 a later factor may magnify its loss: _product_up forms
+        # the terms then (the partials checked are the least of each term's: e^z >= 1, phi_1(z) >= z)
+        ez = math.exp(z) if z < 709.0 else math.inf
+        has1 = z > 0.0 < nC
+        has2, has3 = has1 and beta_d > 0.0, nC > 0.0 < bun
+        q, nx, nb, ni = 0.5 * z * z, nC * xn, nC * beta_d, nC * bun
+        nid = ni * d
+        t0 = d * lin
+        t1 = nx * (q * ez * (1.0 + 8.0 * _U)) if has1 else 0.0
+        t2 = nb * _phi1(z) if has2 else 0.0
+        if min(t0, min(q, nx, t1) if has1 else NORMAL, min(nb, t2) if has2 else NORMAL,
+               min(ni, nid) if has3 else NORMAL) >= NORMAL:
+            w = t0 + t1 + t2
+            if has3:
+                w += nid * ez * (1.0 + 4.0 * _U)
+        else:
             w = (_product_up(d, lin) + _product_up(nC, xn, 0.5, z, z, ez) * (1.0 + 8.0 * _U)
                  + _product_up(nC, beta_d, _phi1(z)) + _product_up(nC, bun, d, ez) * (1.0 + 4.0 * _U))
         return w * (1.0 + 16.0 * _U)
