@@ -248,8 +248,8 @@ class DisturbanceReach:
         and ``dt^2 m_j / 2`` (three, ``m_j <= 1``) by ``eta / 2`` and ``2 eta``, times ``||b_j||`` and
         ``||y_j||``; the products' entries ``q sqrt(n) eta / 2`` per block; the factors ``s1``, ``s2``
         ``sqrt(2 q n) eta / 2`` (the ellipsoid's unit ball): ``eta (sum_j (||b_j|| + 2 ||y_j||) + 2 q
-        sqrt(n))`` in all, added to the remainder before :func:`_back`. The scaling back, ``sqrt(2 q)
-        ||D^-1 1|| eta / 2``, in the balanced units."""
+        sqrt(n))`` in all, added to the remainder before :func:`_back`. The scaling back, ``sqrt(2 q n)
+        max_i (1 / d_i) eta / 2``, in the balanced units."""
         Bs, m, q, k = self._B, self._m, self.q, self._k
         c1, c2 = dt * m, (dt * dt / 2.0) * m
         G1 = Bs * c1[None, :]
@@ -270,7 +270,7 @@ class DisturbanceReach:
         G = np.ldexp(Gs, k + self._e[:, None])
         back = 0.0
         if _lossy(G, Gs, np.full(2 * q, 1.0)):
-            back = math.sqrt(2.0 * q) * _norm_up(self._id) * UNDERFLOW * _UP + UNDERFLOW
+            back = math.sqrt(2.0 * q * Bs.shape[0]) * float(self._id.max()) * _UP * UNDERFLOW + UNDERFLOW
         r = (rem + back + 8.0 * _U * _mat_fro_up(G * self._id[:, None])) * _UP * _UP
         return G, r
 

@@ -142,4 +142,13 @@ def test_no_nan_from_an_overflowing_rate() -> None:
                             np.array([[-6.87e137], [-2.37e-16]]), [4.6e125])
     G, r = R.shaped(1.84e-5)
     assert r == r and not np.any(np.isnan(G)) and R.radius(1.84e-5) == R.radius(1.84e-5)
-    assert dr.DisturbanceReach(np.zeros((1, 1)), [[1.0]], [1.0]).radius(1e200) >= 1e200
+    assert math.inf > dr.DisturbanceReach(np.zeros((1, 1)), [[1.0]], [1.0]).radius(1e200) >= 1e200
+
+
+def test_shaped_where_g_is_subnormal_in_the_users_units() -> None:
+    """``G`` in the user's units ``1.4 eta`` (rounds to ``eta``) with ``D = 2^-600``: the lost ``0.4 eta``
+    is ``0.4 eta 2^600`` (1.7e-143) in the balanced units of the ball, and the set still holds ``d``."""
+    dt, w = 2.0**-74, 1.4 * 2.0**-1000
+    R = dr.DisturbanceReach(np.zeros((1, 1)), np.array([[1.0]]), [w], scale=np.array([2.0**-600]))
+    G, r = R.shaped(dt)
+    assert _in_shaped_1d(G * 2.0**600, r, Fraction(dt) * Fraction(w) * 2**600), (G, r)
