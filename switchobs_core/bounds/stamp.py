@@ -108,9 +108,13 @@ class StampError:
         xn = (math.sqrt(float(xb @ xb)) + underflow_slack(xb.size)) * (1.0 + 2.0 * gamma(self.n))
         cax = Cb @ (self.Ab @ xb)
         # |fl(C (A x)) - C A x| <= gamma_{2n} |C| |A| |x| entrywise (two products), in 2-norm
-        # at most gamma_{2n} ||C||_F ||A||_F ||x||
-        lin = ((math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size))
-               + (gamma(2 * self.n + 2) * fC * self.fA * xn if fC and self.fA else 0.0))
+        # at most gamma_{2n} ||C||_F ||A||_F ||x|| (by _product_up where a partial product is subnormal)
+        g = gamma(2 * self.n + 2) * fC
+        gf = g * self.fA
+        err = gf * xn
+        if min(g, gf, err) < NORMAL:
+            err = _product_up(gamma(2 * self.n + 2), fC, self.fA, xn)
+        lin = (math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size)) + err
         z = self.a * d * (1.0 + 2.0 * _U)
         if z < NORMAL and self.a > 0.0:
             z = NORMAL      # a d <= fl(fl(a d) (1 + 2u)) + eta <= 2^-1022; phi_1, phi_2 grow with z

@@ -153,11 +153,13 @@ def test_normal_range_is_the_plain_formula(monkeypatch: pytest.MonkeyPatch) -> N
     ([[0.0]], None, [[-7.7e160]], [5.4e277], None, 2.7e-49),
     ([[0.0]], [[1e200]], [[0.0]], [0.0], [1e200], 1.0),
     ([[1.0]], [[1e200]], [[0.0]], [1.0], [1e200], 1e3),
+    ([[0.0]], None, [[-0.0]], [1.881243722374132e234], None, 3.778781935618507e-231),
 ])
 def test_an_overflowing_norm_times_a_zero_factor(A: list, B: list | None, C: list, x: list, u: list | None,
                                                   d: float) -> None:
     """A norm that overflows (``||C||``, ``||x_hat||``, ``||B u||``) meets a zero factor (``A = 0``,
-    ``C = 0``): the bound is a number at least 0 or ``inf``, never ``nan`` (the exact error is 0)."""
+    ``C = 0``) or a product of two norms' underflow slacks that underflows (``gamma ||C|| ||A||``): the
+    bound is a number at least 0 or ``inf``, never ``nan`` (the exact error is 0)."""
     se = StampError(np.array(A), None if B is None else np.array(B), scale=np.ones(1))
     got = se.bound(np.array(C), np.array(x), 0.0, d, None if u is None else np.array(u))
     assert got >= 0.0, got
