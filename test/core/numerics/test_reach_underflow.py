@@ -152,3 +152,16 @@ def test_shaped_where_g_is_subnormal_in_the_users_units() -> None:
     R = dr.DisturbanceReach(np.zeros((1, 1)), np.array([[1.0]]), [w], scale=np.array([2.0**-600]))
     G, r = R.shaped(dt)
     assert _in_shaped_1d(G * 2.0**600, r, Fraction(dt) * Fraction(w) * 2**600), (G, r)
+
+
+def test_shaped_where_the_scaled_factors_underflow() -> None:
+    """``A = 0``, ``n = 1000`` states each moved by ``B_w = 2^1000``, ``w = 1``, a step of ``5 eta``: in the
+    scaled units ``dt m = 2.5 eta`` rounds to ``2 eta`` (``G`` is ``4/5`` of ``d``, ``||d - G|| = sqrt(n)
+    2^-74``, more than the ``24 2^-74`` of the remainder's allowance). ``d`` is a multiple of ``G``'s first
+    column (the second is 0), so it lies in the set where ``||d|| - ||g|| <= r``, exactly."""
+    n, dt = 1000, 5 * 5e-324
+    G, r = dr.DisturbanceReach(np.zeros((n, n)), np.full((n, 1), 2.0**1000), [1.0]).shaped(dt)
+    g = float(G[0, 0])
+    assert np.all(G[:, 0] == g) and not np.any(G[:, 1:])
+    excess = Fraction(dt) * 2**1000 - Fraction(g)        # per state
+    assert excess <= 0 or n * excess**2 <= Fraction(r) ** 2, (g, r)
