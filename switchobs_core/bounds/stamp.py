@@ -87,15 +87,19 @@ class StampError:
         self.B = None if B is None or np.asarray(B).size == 0 else np.asarray(B, dtype=float) * self._id[:, None]
         self._CD: dict = {}
 
-    def _cd(self, C: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """``(C D, ||C D||_2 upper, ||C D||_F upper)``, kept per matrix."""
+    def _cd(self, C: np.ndarray) -> tuple[np.ndarray, float, float, float | None]:
+        """``(C D, ||C D||_2 upper, ||C D||_F upper, gamma_{2n+2} ||C D||_F ||A_b||_F)``, kept per matrix
+        (the last None where a partial product of it is under ``2^-1022``)."""
         hit = self._CD.get(id(C))
         if hit is None or hit[0] is not C:
             if len(self._CD) > 256:
                 self._CD.clear()
             Cb = np.asarray(C, dtype=float) * self.d[None, :]
-            hit = self._CD[id(C)] = (C, Cb, nu2(Cb), fro_upper(Cb) * (1.0 + 2.0 * gamma(Cb.shape[1])))
-        return hit[1], hit[2], hit[3]
+            fC = fro_upper(Cb) * (1.0 + 2.0 * gamma(Cb.shape[1]))
+            g = gamma(2 * self.n + 2) * fC
+            gf = g * self.fA
+            hit = self._CD[id(C)] = (C, Cb, nu2(Cb), fC, gf if min(g, gf) >= NORMAL else None)
+        return hit[1], hit[2], hit[3], hit[4]
 
     def bound(self, C: np.ndarray, x_hat: np.ndarray, beta_d: float, d: float,
               u: np.ndarray | None = None) -> float:
@@ -103,16 +107,14 @@ class StampError:
         ``||D^-1 (x - x_hat)|| <= beta_d`` (module docstring), rounded up."""
         if d <= 0.0:
             return 0.0
-        Cb, nC, fC = self._cd(C)
+        Cb, nC, fC, gf = self._cd(C)
         xb = np.asarray(x_hat, dtype=float) * self._id
         xn = (math.sqrt(float(xb @ xb)) + underflow_slack(xb.size)) * (1.0 + 2.0 * gamma(self.n))
         cax = Cb @ (self.Ab @ xb)
         # |fl(C (A x)) - C A x| <= gamma_{2n} |C| |A| |x| entrywise (two products), in 2-norm
         # at most gamma_{2n} ||C||_F ||A||_F ||x|| (by _product_up where a partial product is subnormal)
-        g = gamma(2 * self.n + 2) * fC
-        gf = g * self.fA
-        err = gf * xn
-        if min(g, gf, err) < NORMAL:
+        err = gf * xn if gf is not None else 0.0
+        if not err >= NORMAL:
             err = _product_up(gamma(2 * self.n + 2), fC, self.fA, xn)
         lin = (math.sqrt(float(cax @ cax)) + underflow_slack(cax.size)) * (1.0 + 2.0 * gamma(cax.size)) + err
         z = self.a * d * (1.0 + 2.0 * _U)
