@@ -120,7 +120,7 @@ class DisturbanceReach:
         keep = self.w_max > 0.0
         self.w_max, Bw = self.w_max[keep], Bw[:, keep]
         Bb = Bw / d[:, None]        # exact: powers of two
-        self._Bw, self._id, self._d = Bw, 1.0 / d, d
+        self._id = 1.0 / d
         self._e = np.frexp(d)[1] - 1            # d = 2^e
         # B_b and m scaled by powers of two to largest entries in [1/2, 1): R is linear in each, so
         # the reach of the scaled pair times 2^k is R's (Underflow, in the module docstring)
