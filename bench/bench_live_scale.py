@@ -148,7 +148,7 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
              listen: bool = False, every: dict | None = None, profile: Path | None = None,
              main_repo: Path | None = None, threads: bool = False, spy_dir: Path | None = None,
              tag: str = "", counter: str = "process", dds_profile: Path | None = None,
-             phases: Path | None = None) -> dict:
+             phases: Path | None = None, split: float = 0.0) -> dict:
     """One node under test: ``listen`` subscribes to every optional output of the estimator (a
     ``+listen`` / ``+quiet`` suffix of ``kind`` overrides it), counted by ``bench/output_counter.py``
     (``counter`` ``process``) or by this process (``inline``); ``every`` sets its
@@ -157,7 +157,8 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
     ``threads`` records the node's CPU per thread name, ``spy_dir`` samples it with py-spy; a
     ``+dds`` suffix runs the node (only) with the Fast DDS profile ``dds_profile``; ``+once`` runs the
     estimator with ``switch_horizon`` 1 (every sample of a residence answered at once); ``phases``
-    runs it under bench/phase_node.py (its CPU by phase, JSON in that file)."""
+    runs it under bench/phase_node.py (its CPU by phase, JSON in that file); ``split`` (s) also takes the
+    node's CPU (and per thread) that long after the first tick, to report both windows apart."""
     base, executor, listened, own_profile = parse_kind(kind)
     listen = listen if listened is None else listened
     repo = main_repo if base.startswith("main:") else REPO
@@ -215,12 +216,16 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
                                                              wait_for_truth_subscribers=1,
                                                              initial_state=list(map(float, x0)))),
                           log=logs / f"camera_{stem}.log")
-        cpu0 = th0 = sampler = None
+        cpu0 = th0 = sampler = mid = None
+        t_first = 0.0
         while cam.alive():
             ex.spin_once(timeout_sec=0.05)
+            if cpu0 is not None and split and mid is None and time.monotonic() >= t_first + split:
+                mid = (cpu_seconds(node.pid), thread_cpu(node.pid) if threads else None, len(rec.answers))
             if cpu0 is None and len(rec.truth):
                 cpu0 = cpu_seconds(node.pid)
                 th0 = thread_cpu(node.pid) if threads else None
+                t_first = time.monotonic()
                 if spy_dir is not None:
                     sampler = spy(node.pid, seconds, spy_dir / f"{tag}.txt")
         t_end = time.monotonic() + 2.0
@@ -256,8 +261,25 @@ def run_node(kind: str, m: int, seconds: float, rate: float, sys_path: Path, tab
             "pub_p50": pub50, "pub_p99": pub99, "split": split,
             "cam_p50": cam50, "cam_p99": cam99,
             "cpu_ms": 1e3 * (cpu1 - (cpu0 or cpu1)) / max(len(answered), 1), "counts": counts,
+            "windows": None if mid is None else _windows(cpu0, th0, mid, cpu1, th1, len(rec.answers)),
             "threads": ({k: [v - th0.get(k, [0.0] * 3)[i] for i, v in enumerate(row)] for k, row in th1.items()}
                         if th0 is not None and th1 is not None else None)}
+
+
+def _windows(cpu0: float, th0: dict | None, mid: tuple, cpu1: float, th1: dict | None, n1: int) -> list[dict]:
+    """CPU per answer before and after ``mid`` (its process CPU, thread CPU and answers so far): per
+    window the answers, ms per answer and, with threads, the Python thread's user, system (ms per
+    answer) and minor faults per answer."""
+    out = []
+    for (c_a, t_a, n_a), (c_b, t_b, n_b) in (((cpu0, th0, 0), mid), (mid, (cpu1, th1, n1))):
+        k = max(n_b - n_a, 1)
+        row = {"answers": n_b - n_a, "cpu_ms": 1e3 * (c_b - c_a) / k}
+        if t_a is not None and t_b is not None and "python" in t_b:
+            a = t_a.get("python", [0.0] * 3)
+            row["python"] = [1e3 * (t_b["python"][0] - a[0]) / k, 1e3 * (t_b["python"][1] - a[1]) / k,
+                             (t_b["python"][2] - a[2]) / k]
+        out.append(row)
+    return out
 
 
 def ratios(r: dict, bare: dict | None, latency: str = "") -> str:
@@ -302,6 +324,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spy", type=Path, default=None, metavar="DIR",
                     help="sample each node with py-spy --native (PY_SPY: its path), raw stacks in DIR/<node>-<i>.txt")
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: claim a free one)")
+    ap.add_argument("--split", type=float, default=0.0, metavar="S",
+                    help="also report each node's CPU per answer in the first S seconds from the first tick and "
+                         "after (e.g. 32: one period of the 32-agent schedule, the Kalman table's first visits)")
     ap.add_argument("--table-version", type=int, default=0, metavar="V",
                     help="write the Kalman table in container version V (4: what a --main-repo checkout "
                          "before version 5 reads; default: the current version)")
@@ -344,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
                                      a.profile / f"{tag}.prof" if a.profile and parse_kind(k)[0] != "bare" else None,
                                      a.main_repo, a.threads, a.spy, tag, a.counter, a.node_dds_profile,
                                      a.phases / f"{tag}.json" if a.phases and parse_kind(k)[0] not in ("bare", "sink")
-                                     else None))
+                                     else None, a.split))
                 r = rows[-1]
                 sys.stderr.write(f"{k}: {r['answered']}/{r['sent']} ({r['skipped']} skipped), p50 {r['p50']:.1f} ms, "
                                  f"p99 {r['p99']:.1f} ms (Python arrival {r['py_p99']:.1f} ms), "
@@ -399,6 +424,18 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         print(f"| {r['node']} | " + " | ".join(f"{r['split'][k][0]:.1f} / {r['split'][k][1]:.1f}"
                                            for k in ("node", "delivery", "queue")) + " |")
+    if a.split:
+        print(f"\nCPU per answer before and after {a.split:g} s from the first tick (ms; with --threads the Python "
+              "thread's user + system and its minor faults per answer):\n")
+        print("| node | answers before | CPU before | Python thread before | answers after | CPU after "
+              "| Python thread after |")
+        print("|---|---|---|---|---|---|---|")
+        for r in rows:
+            if r["windows"]:
+                cells = [f"{w['answers']} | {w['cpu_ms']:.2f} | " + (
+                    f"{w['python'][0]:.3f} + {w['python'][1]:.3f}, {w['python'][2]:.1f} faults" if "python" in w
+                    else "-") for w in r["windows"]]
+                print(f"| {r['node']} | " + " | ".join(cells) + " |")
     for r in rows:
         if r["threads"]:
             k = max(r["answered"], 1)

@@ -2,8 +2,9 @@
 """The estimator node under cProfile (not a test; started by ``bench/bench_live_scale.py --profile``).
 
 ``python bench/profile_node.py OUT.prof --ros-args ...``: runs the estimator exactly as its entry
-point does (:func:`switchobs_ros.runner.run_node`), with cProfile enabled once the node is built
-(start-up and table loading left out), and writes the statistics to
+point does (:func:`switchobs_ros.runner.run_node`), with cProfile enabled at the node's first input message
+(start-up, table loading and the idle wait for the sender left out: what a CPU per answer counts
+from the first tick), and writes the statistics to
 ``OUT.prof`` at exit (SIGINT). Read them with ``python -m pstats OUT.prof`` or
 :func:`summary`. The clock is the thread's CPU time (waits and descheduling do not count; the
 middleware's own threads are not seen). cProfile adds its own cost to every Python call, so the
@@ -21,6 +22,9 @@ from pathlib import Path
 
 #: The checkout whose estimator runs (``SWITCHOBS_PROFILE_REPO``; default: this one).
 sys.path.insert(0, os.environ.get("SWITCHOBS_PROFILE_REPO") or str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from first_input import at_first_input  # bench/first_input.py
 
 
 def summary(path: str | Path, k: int = 30, sort: str = "tottime") -> None:
@@ -36,11 +40,11 @@ def main() -> int:
     prof = cProfile.Profile(time.thread_time)      # CPU of the node's thread, not wall time
 
     class ProfiledEstimator(EstimatorNode):
-        """The estimator, profiled from the end of its construction (start-up left out)."""
+        """The estimator, profiled from its first input message (start-up and idle wait left out)."""
 
         def __init__(self, **kwargs):
             super().__init__(**kwargs)
-            prof.enable()
+            at_first_input(self.pipeline, prof.enable)
 
     try:
         return run_node(ProfiledEstimator, "estimator", [sys.argv[0], *sys.argv[2:]])

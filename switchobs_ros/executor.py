@@ -116,16 +116,28 @@ class _Plan:
             live_waitables = [(item, ev) for item, ev in self.waitables
                               if _enter(item[1] if ev is None else ev, entered)]
         except BaseException:
-            for h in reversed(entered):
-                h.__exit__(None, None, None)
+            _exit_all(entered)
             raise
         self.entered, self.live, self.live_waitables = entered, live, live_waitables
 
     def release(self) -> None:
-        """Exit the handles :meth:`enter` entered (last first)."""
+        """Exit the handles :meth:`enter` entered (last first), every one of them also when an
+        exception comes between two exits (:func:`_exit_all`)."""
         entered, self.entered, self.live, self.live_waitables = self.entered, [], [], []
-        for h in reversed(entered):
-            h.__exit__(None, None, None)
+        _exit_all(entered)
+
+
+def _exit_all(handles: list) -> None:
+    """Exit every handle of ``handles`` (last first), each popped from the list as it is exited. An
+    exception between two exits or from one (a KeyboardInterrupt: Python runs the signal's handler
+    between two calls) does not leave the rest entered, which would hold their destruction off for
+    good: they are exited before it propagates (a second exception meanwhile likewise)."""
+    try:
+        while handles:
+            handles.pop().__exit__(None, None, None)
+    finally:
+        if handles:
+            _exit_all(handles)
 
 
 def _enter(handle: Any, entered: list) -> bool:

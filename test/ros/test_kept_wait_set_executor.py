@@ -428,6 +428,40 @@ def test_entering_interrupted_exits_the_handles_it_entered(ctx):
         assert plan.entered == [] and plan.live == []
 
 
+def test_release_interrupted_still_exits_every_handle(ctx):
+    """A KeyboardInterrupt between the exits of :meth:`_Plan.release` (here raised by one handle's exit,
+    after it exited) propagates, and every other handle entered is exited all the same: a subscription
+    destroyed afterwards is destroyed at once, and nothing stays held."""
+    from switchobs_ros.executor import _Plan
+
+    class InterruptedAfterExit:
+        exits = 0
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.exits += 1
+            raise KeyboardInterrupt
+
+    with _spun(ctx, "kws_release") as (ex, node):
+        sub = node.create_subscription(Int32, "/kws_release", lambda m: None, RELIABLE)
+        plan = _Plan(ex)
+        first, last = InterruptedAfterExit(), InterruptedAfterExit()
+        plan.adds.insert(0, (None, first))      # exited last: two interrupts, one in the middle
+        plan.adds.insert(len(plan.adds) // 2, (None, last))
+        plan.enter()
+        held = len(plan.entered)
+        assert held >= 3 and sub.handle in plan.entered
+        node.destroy_subscription(sub)
+        assert sub.handle.pointer != 0          # entered: its destruction waits for the release
+        with pytest.raises(KeyboardInterrupt):
+            plan.release()
+        assert sub.handle.pointer == 0          # exited despite the interrupts, destroyed then
+        assert first.exits == 1 and last.exits == 1
+        assert plan.entered == [] and plan.live == [] and plan.live_waitables == []
+
+
 def test_an_entity_another_thread_creates_during_a_rebuild_is_served(ctx, monkeypatch):
     """Another thread creates a timer while the spinner builds its wait set, after the build read the
     node's entities: the change is not lost under the plan being built (the next wait rebuilds), and
