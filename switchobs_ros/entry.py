@@ -22,6 +22,7 @@ before its imports); ``python -m`` of the other nodes runs the module directly.
 
 from __future__ import annotations
 
+import gc
 import importlib
 import os
 import signal
@@ -39,13 +40,19 @@ NO_MSGS = ("the interface package switchobs_msgs (the typed outputs' messages) i
 
 
 def _run(module: str, prog: str, participant_first: bool = False, keep_heap: bool = False,
-         one_blas_thread: bool = False) -> int:
+         one_blas_thread: bool = False, frozen_imports: bool = False) -> int:
     """Import ``switchobs_ros.<module>`` with a Ctrl-C meaning "stop", then run its ``main``; a missing
     switchobs_msgs is one line on stderr and exit code 2. ``participant_first``: the node's DDS
     participant is created before the import (:mod:`switchobs_ros.early`); ``keep_heap``: glibc's
     malloc keeps the heap between samples, set before anything but the BLAS threads (:mod:`switchobs_ros.heap`);
     ``one_blas_thread``: one BLAS thread, set before numpy loads one
-    (:func:`switchobs_core.threads.single_thread_before_load`)."""
+    (:func:`switchobs_core.threads.single_thread_before_load`); ``frozen_imports``: garbage collection
+    off while the module is imported (numpy's and scipy's namespaces, rclpy, the tool's modules and
+    their dataclasses: about a hundred collections over objects that live as long as the process,
+    50-100 ms of a replay's CPU, bench/RESULTS.md section replay11), then what the imports made frozen
+    (:func:`gc.freeze`) and collection on again, as :mod:`switchobs_ros.early` does for the estimator.
+    Here, in the console script, not in the module: a library that imports the module keeps its own
+    collection."""
     if one_blas_thread:
         from switchobs_core.threads import single_thread_before_load
         single_thread_before_load()
@@ -53,7 +60,10 @@ def _run(module: str, prog: str, participant_first: bool = False, keep_heap: boo
         from .heap import keep_heap as keep
         keep()
     previous = signal.signal(signal.SIGINT, _stop_quietly)
+    paused = frozen_imports and gc.isenabled()
     try:
+        if paused:
+            gc.disable()
         if participant_first:
             from . import early
             early.start(prog)
@@ -71,6 +81,11 @@ def _run(module: str, prog: str, participant_first: bool = False, keep_heap: boo
         return 2
     finally:
         signal.signal(signal.SIGINT, previous)
+        if paused:
+            try:
+                gc.freeze()
+            finally:
+                gc.enable()
     return node.main()
 
 
@@ -91,4 +106,4 @@ def camera_sim() -> int:
 
 def switchobs_bag() -> int:
     """``switchobs_bag``: :mod:`switchobs_ros.bag.cli`."""
-    return _run("bag.cli", "switchobs_bag", one_blas_thread=True)
+    return _run("bag.cli", "switchobs_bag", one_blas_thread=True, frozen_imports=True)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import inspect
 import itertools
+import operator
 import threading
 import weakref
 from collections import deque
@@ -122,19 +123,29 @@ class _Plan:
 
     def release(self) -> None:
         """Exit the handles :meth:`enter` entered (last first), every one of them also when an
-        exception comes between two exits (:func:`_exit_all`)."""
-        entered, self.entered, self.live, self.live_waitables = self.entered, [], [], []
-        _exit_all(entered)
+        exception comes between two exits (:func:`_exit_all`). They are exited from
+        :attr:`entered` itself: an interrupted release leaves there what a later one exits."""
+        self.live, self.live_waitables = [], []
+        _exit_all(self.entered)
+
+
+#: ``h.__exit__(None, None, None)``, called from C (:func:`_exit_all`).
+_EXIT = operator.methodcaller("__exit__", None, None, None)
 
 
 def _exit_all(handles: list) -> None:
     """Exit every handle of ``handles`` (last first), each popped from the list as it is exited. An
     exception between two exits or from one (a KeyboardInterrupt: Python runs the signal's handler
-    between two calls) does not leave the rest entered, which would hold their destruction off for
-    good: they are exited before it propagates (a second exception meanwhile likewise)."""
+    between two bytecodes) does not leave the rest entered, which would hold their destruction off
+    for good: they are exited before it propagates (a second exception meanwhile likewise). The pops
+    and the exits run in one C loop (``deque`` over ``map`` over ``iter(handles.pop, ...)``), so no
+    bytecode lies between a handle's pop and its exit where a signal's handler could run: a handle
+    off the list is one being exited (``pop`` ends the loop with IndexError when the list is empty)."""
     try:
-        while handles:
-            handles.pop().__exit__(None, None, None)
+        deque(map(_EXIT, iter(handles.pop, None)), maxlen=0)
+    except IndexError:
+        if handles:                 # not the end of the list: an exit raised it
+            raise
     finally:
         if handles:
             _exit_all(handles)
@@ -241,9 +252,10 @@ class KeptWaitSetExecutor(SingleThreadedExecutor):
                 self._release()
 
     def _release(self) -> None:
-        plan, self._entered = self._entered, None
-        if plan is not None:
+        plan = self._entered
+        if plan is not None:        # interrupted, the plan stays: the next release exits what is left
             plan.release()
+        self._entered = None
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Run one ready callback (and one step of each pending task), waiting up to ``timeout_sec``

@@ -448,15 +448,16 @@ def test_release_interrupted_still_exits_every_handle(ctx):
         sub = node.create_subscription(Int32, "/kws_release", lambda m: None, RELIABLE)
         plan = _Plan(ex)
         first, last = InterruptedAfterExit(), InterruptedAfterExit()
-        plan.adds.insert(0, (None, first))      # exited last: two interrupts, one in the middle
-        plan.adds.insert(len(plan.adds) // 2, (None, last))
+        plan.adds.append((None, first))         # both exited before the subscription: an interrupt,
+        plan.adds.append((None, last))          # then a second one while the rest is exited
         plan.enter()
         held = len(plan.entered)
-        assert held >= 3 and sub.handle in plan.entered
+        assert held >= 3 and plan.entered.index(sub.handle) < plan.entered.index(first)
         node.destroy_subscription(sub)
         assert sub.handle.pointer != 0          # entered: its destruction waits for the release
-        with pytest.raises(KeyboardInterrupt):
+        with pytest.raises(KeyboardInterrupt) as raised:
             plan.release()
+        assert isinstance(raised.value.__context__, KeyboardInterrupt)     # the second, during the first
         assert sub.handle.pointer == 0          # exited despite the interrupts, destroyed then
         assert first.exits == 1 and last.exits == 1
         assert plan.entered == [] and plan.live == [] and plan.live_waitables == []

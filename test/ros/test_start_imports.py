@@ -104,3 +104,38 @@ def test_the_probe_sees_a_heavy_import():
                          env=dict(os.environ, PYTHONPATH=str(REPO)), cwd=str(REPO))
     assert res.returncode == 0, res.stderr
     assert "switchobs_core.design.kalman" in _heavy(res.stdout.split())
+
+
+def test_the_bag_tool_freezes_its_imports_only_as_a_console_script():
+    """The bag tool's console script (``switchobs_ros.entry.switchobs_bag``) imports with garbage
+    collection off and freezes what the imports made; a library importing ``switchobs_ros.bag.cli`` keeps
+    its own collection (nothing frozen, collection on)."""
+    code = r"""
+import gc, json, sys
+import switchobs_ros.entry as entry
+out = {"before": [gc.isenabled(), gc.get_freeze_count()]}
+import switchobs_ros.bag.cli
+out["library"] = [gc.isenabled(), gc.get_freeze_count()]
+sys.modules.pop("switchobs_ros.bag.cli")
+seen = []
+class Probe:
+    @staticmethod
+    def main():
+        seen.append([gc.isenabled(), gc.get_freeze_count()])
+        return 0
+import importlib
+real = importlib.import_module
+importlib.import_module = lambda name: (seen.append(gc.isenabled()), real(name), Probe)[2]
+rc = entry._run("bag.cli", "switchobs_bag", frozen_imports=True)
+out["console"] = [rc, *seen]
+print(json.dumps(out))
+"""
+    repo = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([repo, os.environ.get("PYTHONPATH", "")]))
+    got = json.loads(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                    check=True, timeout=120).stdout.strip().splitlines()[-1])
+    assert got["before"] == [True, 0]
+    assert got["library"] == [True, 0]                 # imported as a library: nothing frozen
+    rc, during, (after_on, frozen) = got["console"]
+    assert rc == 0 and during is False                 # the module imported with collection off
+    assert after_on is True and frozen > 1000          # then frozen, and collection on again

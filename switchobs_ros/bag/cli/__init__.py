@@ -18,28 +18,14 @@ publishers exits 3.
 from __future__ import annotations
 
 import argparse
-import gc
 import sys
 
-# Garbage collection off while the subcommands' modules are imported (numpy's and scipy's namespaces, rclpy, the
-# estimator's modules and their dataclasses): about a hundred collections over objects that live as long as the
-# process, 50-100 ms of a replay's CPU (bench/RESULTS.md, section replay11). They are then frozen (gc.freeze, the
-# order Python's documentation gives for objects made while collection is off: no later collection walks them)
-# and collection is on again before any command runs. The estimator's console script does the same
-# (switchobs_ros.early).
-_collecting = gc.isenabled()
-gc.disable()
-try:
-    from switchobs_core.cli._common import OneLineParser
-    from switchobs_core.exceptions import SwitchobsError, one_line
-    from switchobs_core.threads import single_threaded_blas
+from switchobs_core.cli._common import OneLineParser
+from switchobs_core.exceptions import SwitchobsError, one_line
+from switchobs_core.threads import single_threaded_blas
 
-    from . import estimate, generate, info, play, record, report
-    from ._common import PROG, split_ros_args
-finally:
-    if _collecting:
-        gc.freeze()
-        gc.enable()
+from . import estimate, generate, info, play, record, report
+from ._common import PROG, split_ros_args
 
 __all__ = ["main", "build_parser", "SUBCOMMANDS"]
 
