@@ -73,7 +73,7 @@ from .inputs import (
     ros_topic_error,
 )
 from .parse import RAW_TYPES, Parser, RawReader, raw_readable
-from .stamps import ns_to_stamp, stamp_to_ns, stamp_to_sec
+from .stamps import NS_PER_S, float_time_ns, ns_to_stamp, stamp_to_ns, stamp_to_sec, time_ns
 from .validate import (
     BridgeError,
     Reason,
@@ -139,10 +139,13 @@ __all__ = [
     "check_values",
     "envelope_labels",
     "labelled_array",
+    "NS_PER_S",
+    "float_time_ns",
     "ns_to_stamp",
     "pose_to_xy",
     "stamp_to_ns",
     "stamp_to_sec",
+    "time_ns",
     "state_odometries",
     "unpack_labelled",
     "xy_to_pose",

@@ -33,7 +33,7 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
-from .stamps import ns_to_stamp
+from .stamps import NS_PER_S, float_time_ns, ns_to_stamp
 from .validate import BridgeError
 
 __all__ = [
@@ -109,7 +109,7 @@ def labelled_array(values: Sequence[float], labels: Sequence[str], stamp_ns: int
         dim=[MultiArrayDimension(label=",".join(labels), size=n, stride=n)], data_offset=STAMP_PAD
     )
     data = np.empty(STAMP_PAD + n)
-    data[0], data[1] = divmod(stamp_ns, 1_000_000_000)
+    data[0], data[1] = divmod(stamp_ns, NS_PER_S)
     data[STAMP_PAD:] = values
     msg.data = data.tolist()
     return msg
@@ -136,12 +136,13 @@ def unpack_labelled(msg: Float64MultiArray) -> LabelledArray:
 
 def labelled_stamp_ns(sec: float, nsec: float) -> int:
     """The stamp (ns) a labelled array carries as two doubles; :class:`~msg_bridge.validate.BridgeError`
-    unless whole numbers with ``0 <= sec``, ``0 <= nsec < 1e9`` and the stamp an int64 of ns."""
-    sec, nsec = float(sec), float(nsec)
-    if not (0.0 <= sec < 2.0**63 / 1e9 and 0.0 <= nsec < 1e9 and sec.is_integer() and nsec.is_integer()):
-        raise BridgeError(f"labelled array stamp ({sec!r}, {nsec!r}) is not a valid time "
+    unless a valid time (:func:`msg_bridge.stamps.float_time_ns`: whole numbers with ``0 <= sec``,
+    ``0 <= nsec < 1e9`` and the stamp an int64 of ns)."""
+    ns = float_time_ns(sec, nsec)
+    if ns is None:
+        raise BridgeError(f"labelled array stamp ({float(sec)!r}, {float(nsec)!r}) is not a valid time "
                           "(whole sec >= 0, whole nanosec < 1e9)")
-    return int(sec) * 1_000_000_000 + int(nsec)
+    return ns
 
 
 def envelope_labels(N: int, noise_bound: bool = False) -> tuple[str, ...]:
@@ -324,7 +325,7 @@ class LabelledArrayWriter:
 
     def msg(self, values: np.ndarray, stamp_ns: int) -> Float64MultiArray:
         v = self._view
-        v[0], v[1] = divmod(int(stamp_ns), 1_000_000_000)
+        v[0], v[1] = divmod(int(stamp_ns), NS_PER_S)
         v[STAMP_PAD:] = values
         return self._msg
 
@@ -346,7 +347,7 @@ class OdometryWriter:
             pc, tc = m.pose.covariance, m.twist.covariance
             for k, (e, i, j) in enumerate(self._cov):
                 (pc if k < self._n_pose else tc)[e] = P[i, j]
-        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
         m.header.stamp.sec = sec
         m.header.stamp.nanosec = nsec
         m.pose.pose.position.x = float(x[b.p_x])

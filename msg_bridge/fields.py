@@ -39,7 +39,7 @@ from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
 
 from .convert import STAMP_PAD, labelled_array, labelled_stamp_ns
-from .stamps import ns_to_stamp
+from .stamps import ns_to_stamp, time_ns
 from .validate import BridgeError, SpecError, check_time
 
 __all__ = [
@@ -52,8 +52,6 @@ __all__ = [
     "float64_fields",
     "message_class",
 ]
-
-_NS = 1_000_000_000
 
 #: Most fields one reader or writer takes (a labelled array of more elements can still be read:
 #: only the fields named here are picked out of it).
@@ -194,10 +192,10 @@ def _compile_getter(fields: tuple[str, ...], head: Sequence[str], result: Callab
 
 def _compile_reader(fields: tuple[str, ...]) -> Callable[[object], tuple[int, str, np.ndarray]]:
     """``msg -> (stamp_ns, frame_id, y)`` for a header type (:func:`_compile_getter`)."""
-    return _compile_getter(fields, ["    sec, nsec = st.sec, st.nanosec", f"    if sec < 0 or nsec >= {_NS}:",
-                                    "        _bad_stamp(sec, nsec)"],
-                           lambda leaves: f"sec * {_NS} + nsec, h.frame_id, _array(({', '.join(leaves)},), _float)",
-                           {"_array": np.array, "_float": float, "_bad_stamp": _bad_stamp})
+    return _compile_getter(fields, ["    ns = _time_ns(st.sec, st.nanosec)", "    if ns is None:",
+                                    "        _bad_stamp(st.sec, st.nanosec)"],
+                           lambda leaves: f"ns, h.frame_id, _array(({', '.join(leaves)},), _float)",
+                           {"_array": np.array, "_float": float, "_bad_stamp": _bad_stamp, "_time_ns": time_ns})
 
 
 def compile_parse(fields: tuple[str, ...]) -> Callable[[object], tuple]:

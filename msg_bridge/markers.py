@@ -36,6 +36,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from switchobs_core.numerics.ellipse import covariance_ellipse, covariance_ellipses
 
 from .convert import Body
+from .stamps import NS_PER_S
 from .validate import BridgeError
 
 __all__ = [
@@ -113,7 +114,7 @@ class MarkersWriter:
             active_body: str | None = None) -> MarkerArray:
         if active_body is not None and active_body not in self._names:
             raise BridgeError(f"active body '{active_body}' is not one of {', '.join(self._names)}")
-        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
         draw_bound = bound is not None and math.isfinite(bound) and bound >= 0.0
         for b, (pos, lab, cov, bnd) in zip(self.bodies, self._sets):
             for m in (pos, lab, cov, bnd):
@@ -251,7 +252,7 @@ class RawMarkersWriter:
         if active_body is not None and active_body not in self._names:
             raise BridgeError(f"active body '{active_body}' is not one of {', '.join(self._names)}")
         f8, i4, f4 = self._f8, self._i4, self._f4
-        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
         i4[self._sec] = sec
         i4[self._sec + 1] = nsec
         xz = np.append(np.asarray(x, dtype=float), 0.0)

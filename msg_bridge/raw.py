@@ -34,10 +34,10 @@ import numpy as np
 
 from .cdr_padding import zero_padding
 from .convert import STAMP_PAD, Body, body_odometry, labelled_array
+from .stamps import NS_PER_S
 
 __all__ = ["DTYPES", "RawLabelledArrayWriter", "RawMessage", "RawOdometryBatch"]
 
-_NS = 1_000_000_000
 #: numpy dtypes of the fields a :class:`RawMessage` can locate (little-endian CDR).
 DTYPES = ("<f8", "<f4", "<i4")
 
@@ -155,7 +155,7 @@ class RawMessage:
 
     def stamp(self, stamp_ns: int) -> None:
         """Write the header stamp (integer nanoseconds)."""
-        self._stamp[0], self._stamp[1] = divmod(int(stamp_ns), _NS)
+        self._stamp[0], self._stamp[1] = divmod(int(stamp_ns), NS_PER_S)
 
     def bytes(self) -> bytes:
         """The serialised message as it is now (a copy: the caller may publish it while the views are rewritten)."""
@@ -198,7 +198,7 @@ class RawLabelledArrayWriter:
 
     def msg(self, values: np.ndarray, stamp_ns: int) -> bytes:
         d = self._data
-        d[0], d[1] = divmod(int(stamp_ns), _NS)
+        d[0], d[1] = divmod(int(stamp_ns), NS_PER_S)
         d[STAMP_PAD:] = values
         return self._raw.bytes()
 
@@ -265,7 +265,7 @@ class RawOdometryBatch:
         elif self._has_P:                       # back to "not known"
             f[self._cov] = self._unknown
             self._has_P = False
-        sec, nsec = divmod(int(stamp_ns), _NS)
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
         self._i[self._sec] = sec
         self._i[self._sec + 1] = nsec
         mv = self._mv

@@ -1,17 +1,47 @@
-"""Header stamps <-> integer nanoseconds (exact; floats only at the very end)."""
+"""Header stamps <-> integer nanoseconds (exact; floats only at the very end).
+
+This module owns the stamp's constant (:data:`NS_PER_S`) and the rule "a header stamp is a valid
+time" (:func:`time_ns` for a header's two integers, :func:`float_time_ns` for the two doubles a
+labelled array carries): every layer that turns a ``(sec, nanosec)`` pair into nanoseconds calls
+them, each keeping its own rejection (a :class:`~msg_bridge.validate.Rejection`, a
+:class:`~msg_bridge.validate.BridgeError`, or no evidence).
+"""
 
 from __future__ import annotations
 
 from builtin_interfaces.msg import Time
 
-__all__ = ["ns_to_stamp", "stamp_to_ns", "stamp_to_sec"]
+__all__ = ["NS_PER_S", "float_time_ns", "ns_to_stamp", "stamp_to_ns", "stamp_to_sec", "time_ns"]
 
-_NS = 1_000_000_000
+#: Nanoseconds per second: ``builtin_interfaces/Time`` is ``sec * NS_PER_S + nanosec`` ns.
+NS_PER_S = 1_000_000_000
+#: Labelled-array seconds below this keep the stamp's nanoseconds an int64 (as float64 compares).
+_MAX_FLOAT_SEC = 2.0**63 / 1e9
+
+
+def time_ns(sec: int, nsec: int) -> int | None:
+    """``sec * NS_PER_S + nsec`` of a header stamp's two integers, or None unless they are a valid
+    time: ``sec >= 0`` and ``0 <= nsec < NS_PER_S`` (``int32 sec``, ``uint32 nanosec``: the types
+    make them integers, so they are not checked here; this runs once per message received)."""
+    if sec >= 0 and 0 <= nsec < NS_PER_S:
+        return sec * NS_PER_S + nsec
+    return None
+
+
+def float_time_ns(sec: float, nsec: float) -> int | None:
+    """:func:`time_ns` of the two doubles a labelled array carries as its stamp
+    (:mod:`msg_bridge.convert`), or None unless both are finite whole numbers, a valid time, and
+    ``sec`` below ``2**63 / 1e9``."""
+    sec, nsec = float(sec), float(nsec)
+    # time_ns's comparisons on the doubles (false for NaN), written out: this runs once per labelled array read
+    if 0.0 <= sec < _MAX_FLOAT_SEC and 0.0 <= nsec < NS_PER_S and sec.is_integer() and nsec.is_integer():
+        return int(sec) * NS_PER_S + int(nsec)
+    return None
 
 
 def stamp_to_ns(stamp: Time) -> int:
     """``builtin_interfaces/Time`` -> integer nanoseconds since the clock's epoch."""
-    return int(stamp.sec) * _NS + int(stamp.nanosec)
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
 
 
 def ns_to_stamp(ns: int) -> Time:
@@ -19,7 +49,7 @@ def ns_to_stamp(ns: int) -> Time:
     ns = int(ns)
     if ns < 0:
         raise ValueError(f"a stamp must be >= 0 ns; got {ns}")
-    return Time(sec=ns // _NS, nanosec=ns % _NS)
+    return Time(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
 
 
 def stamp_to_sec(stamp: Time) -> float:

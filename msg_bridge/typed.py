@@ -35,7 +35,7 @@ import switchobs_msgs
 from switchobs_msgs.msg import ActiveChannel, ErrorBounds, StateEstimate
 
 from .raw import RawMessage
-from .stamps import stamp_to_ns
+from .stamps import NS_PER_S, stamp_to_ns
 from .validate import BridgeError
 
 __all__ = [
@@ -89,7 +89,7 @@ class StateEstimateWriter:
 
     def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> StateEstimate:
         m = self._msg
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), NS_PER_S)
         self._x[:] = x
         if P is None:
             m.covariance = self._empty
@@ -132,7 +132,7 @@ class ErrorBoundsWriter:
                               f"(z_1..z_{self.N}, paper_bound, exact_bound"
                               f"{', noise_bound' if self.noise_declared else ''})")
         m, N = self._msg, self.N
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), NS_PER_S)
         self._z[:] = v[:N]
         m.paper_bound = float(v[N])
         m.exact_bound = float(v[N + 1])
@@ -233,7 +233,7 @@ def active_channel(channel: int, switch_ns: int, frame_id: str = "") -> ActiveCh
     """An ``ActiveChannel``: ``channel`` holds from ``switch_ns`` (the switching instant, ns on the
     sensor's clock) on."""
     m = ActiveChannel(channel=int(channel))
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(switch_ns), 1_000_000_000)
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(switch_ns), NS_PER_S)
     m.header.frame_id = frame_id
     return m
 

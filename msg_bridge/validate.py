@@ -19,6 +19,8 @@ from std_msgs.msg import UInt8
 
 from switchobs_core.exceptions import SwitchobsError
 
+from .stamps import time_ns
+
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
            "check_pose", "check_stamp", "check_time", "check_values"]
 
@@ -125,12 +127,12 @@ def check_pose(
                 return Rejection(Reason.TOO_LARGE, _POSE_FIELDS[k], f"|{x:g}| > {max_abs:g}")
     if frame_id and frame != frame_id:
         return Rejection(Reason.WRONG_FRAME, "header.frame_id", f"'{frame}' (expected '{frame_id}')")
-    if sec < 0 or nsec >= _NS:
+    stamp_ns = time_ns(sec, nsec)
+    if stamp_ns is None:
         return check_time(sec, nsec)
-    return check_stamp(sec * _NS + nsec, last_ns=last_ns, now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
+    return check_stamp(stamp_ns, last_ns=last_ns, now_ns=now_ns, future_tolerance_ns=future_tolerance_ns)
 
 
-_NS = 1_000_000_000
 #: A PoseStamped's float64 fields, in the order of its parsed ``values``.
 _POSE_FIELDS = ("pose.position.x", "pose.position.y", "pose.position.z",
                 "pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w")
@@ -147,8 +149,8 @@ def _pose_parser() -> Any:
 
 
 def check_time(sec: int, nsec: int) -> Rejection | None:
-    """A header stamp's ``sec`` and ``nanosec`` a valid time (``sec >= 0``, ``nanosec < 1e9``)."""
-    if sec < 0 or nsec >= _NS:
+    """A header stamp's ``sec`` and ``nanosec`` a valid time (:func:`msg_bridge.stamps.time_ns`)."""
+    if time_ns(sec, nsec) is None:
         return Rejection(Reason.BAD_STAMP, "header.stamp",
                          f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)")
     return None

@@ -18,6 +18,7 @@ import numpy as np
 import msg_bridge as mb
 from msg_bridge import Reason, Rejection
 from msg_bridge.frames import FramedFields
+from msg_bridge.stamps import NS_PER_S, time_ns
 
 __all__ = ["Source", "sources_from_specs"]
 
@@ -82,10 +83,10 @@ class Source:
             if tf is not None and rej is None:
                 values = self.framed.apply(every, values, tf)
                 rej = mb.check_values(values, self.fields, max_abs=max_abs)
-            return sec * _NS + nsec, values, _named(rej)
-        if sec < 0 or nsec >= _NS:
+            return sec * NS_PER_S + nsec, values, _named(rej)      # as sent: a valid time when rej is None
+        stamp_ns = time_ns(sec, nsec)
+        if stamp_ns is None:
             return 0, _EMPTY, mb.check_time(sec, nsec)
-        stamp_ns = sec * _NS + nsec
         values = self.parser.values(every)
         rej = mb.check_values(values, self.fields, max_abs=max_abs)
         if rej is None and tf is not None:
@@ -116,7 +117,6 @@ class Source:
         return self.parser is not None and self.parser.raw is not None
 
 
-_NS = 1_000_000_000
 _EMPTY = np.empty(0)
 _EMPTY.flags.writeable = False
 

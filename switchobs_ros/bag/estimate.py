@@ -232,7 +232,7 @@ def _estimate(bag_path: str | Path, cfg: dict, *, out: str | Path | None, csv: s
                         covs.append(np.full((n, n), np.nan) if e.P is None else e.P)
                 if table is not None:
                     table.row(e.stamp_ns, e.x_hat, e.envelope)
-                sec, nsec = divmod(e.stamp_ns, 1_000_000_000)
+                sec, nsec = divmod(e.stamp_ns, mb.NS_PER_S)
                 if writer is None:
                     continue
                 topics, datas = [], []          # the estimate's messages, in this order, at one log time
@@ -387,18 +387,18 @@ class _Kinds:
             st = header_stamp(m.data) if src.type != mb.LABELLED_ARRAY else None
             if st is None:
                 try:
-                    st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], 1_000_000_000)
+                    st = divmod(src.read(deserialize(m, mb.message_class(src.type)))[0], mb.NS_PER_S)
                 except (BagError, mb.BridgeError):
                     return None, dependent, None, False
-            ok = st[0] >= 0 and 0 <= st[1] < 1_000_000_000
-            return (st[0] * 1_000_000_000 + st[1] if ok else None), dependent, None, False
+            return mb.time_ns(*st), dependent, None, False
         if m.topic == self.channel_topic:
             c = mb.channel_value(channel_message(m))
             return None, False, (c if 1 <= c <= self.pl.N else None), True
         if m.topic == self.control_topic:       # a command: taken in stamp order in a tie the file does not prove
             st = header_stamp(m.data)
-            if st is not None and st[0] >= 0 and 0 <= st[1] < 1_000_000_000:
-                return st[0] * 1_000_000_000 + st[1], False, None, False
+            ns = mb.time_ns(*st) if st is not None else None
+            if ns is not None:
+                return ns, False, None, False
         return None, False, None, False
 
 
