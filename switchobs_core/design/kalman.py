@@ -297,8 +297,12 @@ def design_kalman(
     su_P, su_K, su_change = [], [], rel_change(noise.P0, sol.P_prior[0])
     if max_startup > 0:
         su_P, su_K, su_change = startup_run(steps, sol.P_prior, noise.P0, rtol=startup_rtol, max_samples=max_startup)
-    periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], sol.K[k], rows[k]) for k in range(K)]
-    startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, Kk, rows[k % K])
+    # the gains in C order, as a loaded table holds them (a solve's transpose is in Fortran order): the
+    # bound sums ||D^-1 K||_F in memory order (numerics.rounding.fro_norm), so a designed table and the
+    # same table loaded would publish bounds an ulp apart
+    c = np.ascontiguousarray
+    periodic = [KalmanPhase(pattern.channels[k], dt, sol.P_prior[k], c(sol.K[k]), rows[k]) for k in range(K)]
+    startup = [KalmanPhase(pattern.channels[k % K], 0.0 if k == 0 else dt, P, c(Kk), rows[k % K])
                for k, (P, Kk) in enumerate(zip(su_P, su_K))]
     # 4. error transition over one period: e+_{k+1} = (I - K H) Phi e+_k, phases 1..K-1 then 0
     bar.next()
