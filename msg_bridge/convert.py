@@ -141,7 +141,7 @@ def labelled_stamp_ns(sec: float, nsec: float) -> int:
     ns = float_time_ns(sec, nsec)
     if ns is None:
         raise BridgeError(f"labelled array stamp ({float(sec)!r}, {float(nsec)!r}) is not a valid time "
-                          "(whole sec >= 0, whole nanosec < 1e9)")
+                          "(whole sec in 0..2147483647, whole nanosec < 1e9)")
     return ns
 
 

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Time
 
-__all__ = ["NS_PER_S", "float_time_ns", "ns_to_stamp", "stamp_to_ns", "stamp_to_sec", "time_ns"]
+__all__ = ["MAX_SEC", "NS_PER_S", "float_time_ns", "ns_to_stamp", "stamp_to_ns", "stamp_to_sec", "time_ns"]
 
 #: Nanoseconds per second: ``builtin_interfaces/Time`` is ``sec * NS_PER_S + nanosec`` ns.
 NS_PER_S = 1_000_000_000
-#: Labelled-array seconds below this keep the stamp's nanoseconds an int64 (as float64 compares).
-_MAX_FLOAT_SEC = 2.0**63 / 1e9
+#: The largest ``sec`` a header stamp holds (``builtin_interfaces/Time.sec`` is an int32): a labelled
+#: array's stamp above it could not be published in a header (it would wrap), and its nanoseconds
+#: stay far inside an int64.
+MAX_SEC = 2**31 - 1
 
 
 def time_ns(sec: int, nsec: int) -> int | None:
@@ -31,10 +33,10 @@ def time_ns(sec: int, nsec: int) -> int | None:
 def float_time_ns(sec: float, nsec: float) -> int | None:
     """:func:`time_ns` of the two doubles a labelled array carries as its stamp
     (:mod:`msg_bridge.convert`), or None unless both are finite whole numbers, a valid time, and
-    ``sec`` below ``2**63 / 1e9``."""
+    ``sec <= MAX_SEC`` (what a header can carry)."""
     sec, nsec = float(sec), float(nsec)
     # time_ns's comparisons on the doubles (false for NaN), written out: this runs once per labelled array read
-    if 0.0 <= sec < _MAX_FLOAT_SEC and 0.0 <= nsec < NS_PER_S and sec.is_integer() and nsec.is_integer():
+    if 0.0 <= sec <= MAX_SEC and 0.0 <= nsec < NS_PER_S and sec.is_integer() and nsec.is_integer():
         return int(sec) * NS_PER_S + int(nsec)
     return None
 

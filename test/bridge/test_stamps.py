@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import msg_bridge as mb
 from msg_bridge import Reason
 from msg_bridge.convert import labelled_stamp_ns
-from msg_bridge.stamps import NS_PER_S, float_time_ns, time_ns
+from msg_bridge.stamps import MAX_SEC, NS_PER_S, float_time_ns, time_ns
 
 # around each edge of the rule (0, NS_PER_S) and of int32 / uint32, plus anything in between
 _edges = [-(2**31), -1, 0, 1, NS_PER_S - 1, NS_PER_S, NS_PER_S + 1, 2**31 - 1, 2**32 - 1]
@@ -28,8 +28,10 @@ def test_rule_edges():
     assert time_ns(0, 0) == 0 and time_ns(3, NS_PER_S - 1) == 4 * NS_PER_S - 1
     assert time_ns(-1, 0) is None and time_ns(0, NS_PER_S) is None and time_ns(0, -1) is None
     assert float_time_ns(2.0, 5.0) == 2 * NS_PER_S + 5
-    for bad in ((math.nan, 0.0), (0.0, math.inf), (-math.inf, 0.0), (1.5, 0.0), (0.0, 0.5), (2.0**63 / 1e9, 0.0)):
+    for bad in ((math.nan, 0.0), (0.0, math.inf), (-math.inf, 0.0), (1.5, 0.0), (0.0, 0.5),
+                (9223372036.0, 999999999.0), (2.0**31, 0.0)):      # whole, but beyond a header's int32 sec
         assert float_time_ns(*bad) is None, bad
+    assert float_time_ns(2.0**31 - 1, 999999999.0) == (2**31 - 1) * NS_PER_S + 999999999 < 2**63
 
 
 @settings(max_examples=400, deadline=None)
@@ -61,8 +63,9 @@ def test_every_path_applies_the_one_rule(sec, nsec):
         got, frame, y = reader.read(msg)
         assert (got, frame, list(y)) == (ns, "map", [1.5])
 
-    # the labelled array's doubles: the same rule once they are whole numbers (these ints are exact)
-    if ns is None:
+    # the labelled array's doubles: the same rule once they are whole numbers (these ints are exact), and
+    # at most a header's int32 sec (a header's own type bounds it on the paths above)
+    if ns is None or sec > MAX_SEC:
         with pytest.raises(mb.BridgeError, match="is not a valid time"):
             labelled_stamp_ns(float(sec), float(nsec))
     else:

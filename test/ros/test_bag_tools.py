@@ -396,13 +396,15 @@ def test_estimate_writes_the_typed_outputs(tmp_path):
     assert all(b.exact_bound_valid for b in eb)
 
 
-@pytest.mark.parametrize("sec", [math.inf, math.nan, -1.0, 0.5])
+@pytest.mark.parametrize("sec", [math.inf, math.nan, -1.0, 0.5, 9223372036.0, 2.0**31])
 def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
     """A state message whose stamp (in the labelled array's padding) is not a time: one line naming the
-    topic and the message, exit code 2 (it was an OverflowError traceback for an infinite stamp)."""
+    topic and the message, exit code 2 (it was an OverflowError traceback for an infinite stamp, and for
+    a whole sec whose nanoseconds leave an int64)."""
     bag = tmp_path / "bad"
     msg = mb.labelled_array([1.0, 2.0], ("a.p_x", "a.p_y"), 5)
     msg.data[0] = sec
+    msg.data[1] = 999999999.0 if sec == 9223372036.0 else msg.data[1]      # 9223372036999999999 ns > 2^63
     env = mb.labelled_array([0.5, 1.0, 0.25, 0.1], mb.envelope_labels(2), 5)
     with BagOut(bag, "mcap") as out:
         out.add("/estimator/state", "std_msgs/msg/Float64MultiArray")
@@ -412,7 +414,7 @@ def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
     assert bag_main(["report", str(bag)]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith("switchobs_bag: error: /estimator/state: the message logged at 1000 ns: labelled array "
-                           f"stamp ({sec!r}, 5.0) is not a valid time"), line
+                           f"stamp ({sec!r}, {msg.data[1]!r}) is not a valid time"), line
 
 
 def test_error_ratios_leave_out_cycles_at_the_rounding_floor():
