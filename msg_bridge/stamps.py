@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Time
 
-__all__ = ["MAX_SEC", "NS_PER_S", "float_time_ns", "ns_to_stamp", "stamp_to_ns", "stamp_to_sec", "time_ns"]
+__all__ = ["MAX_SEC", "NS_PER_S", "float_time_ns", "ns_to_stamp", "stamp_to_ns", "stamp_to_sec", "time_ns",
+           "valid_time"]
 
 #: Nanoseconds per second: ``builtin_interfaces/Time`` is ``sec * NS_PER_S + nanosec`` ns.
 NS_PER_S = 1_000_000_000
@@ -21,12 +22,18 @@ NS_PER_S = 1_000_000_000
 MAX_SEC = 2**31 - 1
 
 
+def valid_time(sec: int, nsec: int) -> bool:
+    """Whether a header stamp's two integers are a valid time: ``sec >= 0`` and ``0 <= nsec < NS_PER_S``
+    (``int32 sec``, ``uint32 nanosec``: the types make them integers, so they are not checked here)."""
+    return sec >= 0 and 0 <= nsec < NS_PER_S
+
+
 def time_ns(sec: int, nsec: int) -> int | None:
-    """``sec * NS_PER_S + nsec`` of a header stamp's two integers, or None unless they are a valid
-    time: ``sec >= 0`` and ``0 <= nsec < NS_PER_S`` (``int32 sec``, ``uint32 nanosec``: the types
-    make them integers, so they are not checked here; this runs once per message received)."""
+    """``sec * NS_PER_S + nsec`` of a header stamp's two integers as a Python int (numpy integers too:
+    no int32 wrap), or None unless :func:`valid_time`. Its comparisons are written out here: this runs
+    once per message received."""
     if sec >= 0 and 0 <= nsec < NS_PER_S:
-        return sec * NS_PER_S + nsec
+        return int(sec) * NS_PER_S + int(nsec)
     return None
 
 

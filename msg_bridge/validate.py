@@ -19,7 +19,7 @@ from std_msgs.msg import UInt8
 
 from switchobs_core.exceptions import SwitchobsError
 
-from .stamps import time_ns
+from .stamps import time_ns, valid_time
 
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
            "check_pose", "check_stamp", "check_time", "check_values"]
@@ -149,8 +149,8 @@ def _pose_parser() -> Any:
 
 
 def check_time(sec: int, nsec: int) -> Rejection | None:
-    """A header stamp's ``sec`` and ``nanosec`` a valid time (:func:`msg_bridge.stamps.time_ns`)."""
-    if time_ns(sec, nsec) is None:
+    """A header stamp's ``sec`` and ``nanosec`` a valid time (:func:`msg_bridge.stamps.valid_time`)."""
+    if not valid_time(sec, nsec):
         return Rejection(Reason.BAD_STAMP, "header.stamp",
                          f"sec {sec}, nanosec {nsec} is not a valid time (sec >= 0, nanosec < 1e9)")
     return None

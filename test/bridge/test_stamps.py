@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -15,7 +16,7 @@ from hypothesis import strategies as st
 import msg_bridge as mb
 from msg_bridge import Reason
 from msg_bridge.convert import labelled_stamp_ns
-from msg_bridge.stamps import MAX_SEC, NS_PER_S, float_time_ns, time_ns
+from msg_bridge.stamps import MAX_SEC, NS_PER_S, float_time_ns, time_ns, valid_time
 
 # around each edge of the rule (0, NS_PER_S) and of int32 / uint32, plus anything in between
 _edges = [-(2**31), -1, 0, 1, NS_PER_S - 1, NS_PER_S, NS_PER_S + 1, 2**31 - 1, 2**32 - 1]
@@ -70,3 +71,14 @@ def test_every_path_applies_the_one_rule(sec, nsec):
             labelled_stamp_ns(float(sec), float(nsec))
     else:
         assert labelled_stamp_ns(float(sec), float(nsec)) == ns
+
+
+@pytest.mark.parametrize("kind", [np.int32, np.int64, np.uint32, int])
+def test_numpy_integers_neither_wrap_nor_raise(kind):
+    """A stamp's integers given as numpy scalars (a direct caller's): the same nanoseconds as Python ints,
+    no int32 wrap (5 s is 5e9 ns, beyond an int32), no OverflowError, the same decision."""
+    sec, nsec = kind(5), kind(7)
+    assert time_ns(sec, nsec) == 5 * NS_PER_S + 7 and type(time_ns(sec, nsec)) is int
+    assert valid_time(sec, nsec) and mb.check_time(sec, nsec) is None
+    assert mb.check_time(5, kind(7)) is None and mb.check_time(kind(5), NS_PER_S) is not None
+
