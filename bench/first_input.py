@@ -15,7 +15,7 @@ _INPUTS = ("on_input", "on_channel")
 
 def at_first_input(pipeline: Any, start: Callable[[], None]) -> None:
     """Call ``start()`` once, at the first call of ``pipeline.on_input`` or ``pipeline.on_channel``
-    (before it runs); the pipeline's own methods are called as before, then and after."""
+    (before it runs); the pipeline's own methods run unchanged, then and after."""
     def hooked(name: str):
         fn = getattr(pipeline, name)
 

@@ -73,7 +73,7 @@ def _sqrt_prod(a: float, b: float) -> float:
     product under the normal range loses up to ``eta / 2`` and is 0 below ``eta``): there
     ``sqrt(a) sqrt(b)``, each factor normal (``sqrt(eta) = 2^-537``), plus ``2 eta`` for the product's
     absolute rounding and the factors' relative ``2 u`` of a result below ``2^-1022`` (``eta``,
-    :data:`~switchobs_core.numerics.rounding.UNDERFLOW`). In the normal range ``sqrt(a b)`` as it was."""
+    :data:`~switchobs_core.numerics.rounding.UNDERFLOW`). In the normal range ``sqrt(a b)`` rounded up."""
     p = a * b
     if p >= NORMAL or not p == p or a == 0.0 or b == 0.0:
         return math.sqrt(p) * _UP

@@ -399,8 +399,8 @@ def test_estimate_writes_the_typed_outputs(tmp_path):
 @pytest.mark.parametrize("sec", [math.inf, math.nan, -1.0, 0.5, 9223372036.0, 2.0**31])
 def test_report_on_an_invalid_stamp_is_one_line(tmp_path, capsys, sec):
     """A state message whose stamp (in the labelled array's padding) is not a time: one line naming the
-    topic and the message, exit code 2 (it was an OverflowError traceback for an infinite stamp, and for
-    a whole sec whose nanoseconds leave an int64)."""
+    topic and the message, exit code 2, not an OverflowError traceback (an infinite stamp, or a whole sec whose
+    nanoseconds would leave an int64)."""
     bag = tmp_path / "bad"
     msg = mb.labelled_array([1.0, 2.0], ("a.p_x", "a.p_y"), 5)
     msg.data[0] = sec

@@ -54,8 +54,8 @@ def test_tiny_rates_against_the_exact_worst_case() -> None:
                                             (1.4441009015293509e-121, 1e300, 5e-324),
                                             (1e-200, 1e-130, 0.01), (0.5, 1e300, 7 * 5e-324)])
 def test_products_under_the_normal_range(b: float, w: float, dt: float) -> None:
-    """``dt b`` subnormal, then times a large ``w`` (1.8774e-22 for 1.9107e-22, 0 for 4.9e-25 before the
-    scaling): the radius is at least the exact ``dt b w``."""
+    """``dt b`` subnormal, then times a large ``w`` (without the power-of-two scaling of ``B_w`` and ``w``:
+    1.8774e-22 for 1.9107e-22, 0 for 4.9e-25): the radius is at least the exact ``dt b w``."""
     r = dr.DisturbanceReach(np.zeros((1, 1)), np.array([[b]]), [w]).radius(dt)
     assert Fraction(r) >= Fraction(dt) * Fraction(b) * Fraction(w), r
 

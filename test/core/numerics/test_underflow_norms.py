@@ -76,7 +76,7 @@ def test_nu_bounds_the_exact_product_at_any_scale(n: int, m: int, exp: int, seed
 
 
 def test_nu_unchanged_in_the_normal_range() -> None:
-    """Where ``a b`` is normal the number is ``sqrt(a b)`` rounded up as before, bit for bit."""
+    """Where ``a b`` is normal the number is ``sqrt(a b)`` rounded up, bit for bit."""
     rng = np.random.default_rng(4)
     for exp in (-150, -20, 0, 20, 150):
         X = rng.standard_normal((5, 5)) * 10.0 ** exp
