@@ -129,21 +129,30 @@ class _Clock:
 
     def __init__(self):
         self.t = _Now()
+        self.handle = self       # rclpy's Clock.handle: get_now() is rcl's time point, as the node reads it
 
     def now(self):
+        return self.t
+
+    def get_now(self):
         return self.t
 
 
 class _Publisher:
     """A publisher with one matched subscription that drops what it is given (counts it)."""
 
-    def __init__(self):
+    def __init__(self, topic_name: str = "/estimator/out"):
         self.n = 0
+        self.topic_name = topic_name     # what bench/phases.py names a publish by
+        self.handle = self               # the rcl publisher: the node's serialised writes (publish_raw)
 
     def get_subscription_count(self) -> int:
         return 1
 
     def publish(self, msg) -> None:
+        self.n += 1
+
+    def publish_raw(self, data) -> None:
         self.n += 1
 
 
@@ -197,9 +206,10 @@ def _bench_node(cfg: dict):
     node = BenchNode()
     node.cfg = cfg
     node._configure(cfg)
-    node.pub_state, node.pub_env, node.pub_cov, node.pub_markers = (_Publisher() for _ in range(4))
-    node.pub_odom = [_Publisher() for _ in node.bodies]
-    node.pub_typed = (_Publisher(), _Publisher())
+    node.pub_state, node.pub_env, node.pub_cov, node.pub_markers = (
+        _Publisher(f"/estimator/{k}") for k in ("state", "envelope", "covariance", "markers"))
+    node.pub_odom = [_Publisher(f"/estimator/body{i}/odom") for i in range(len(node.bodies))]
+    node.pub_typed = (_Publisher("/estimator/typed/estimate"), _Publisher("/estimator/typed/bounds"))
     if not hasattr(node, "w_cov"):        # made with the covariance's publisher (_create_interfaces)
         import msg_bridge as mb
         from msg_bridge.raw import RawLabelledArrayWriter
