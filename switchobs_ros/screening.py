@@ -118,22 +118,26 @@ class Screening:
     def admit(self, pend: Pending, t: float, m: Measurement) -> Measurement | None:
         """The measurement to use at ``t`` (``m``, or another channel's reading of the sample), or
         None when the consistency test or the chi-square gate rejects the sample."""
-        x_p = None      # the held prediction at t, shared by the innovation and bias tests
-        nu = None       # the innovation y - C_r x_p, shared likewise
-        if self.testing:
-            with np.errstate(all="ignore"):
-                prior = self.observer.prior(t, lazy=True)
-            x_p = prior[0]
+        if not self.testing:
+            if self.chi2_alpha > 0 and not self._gate(pend, t, m):
+                self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
+                return None
+            return self._bias(pend, t, m, None, None)
+        with np.errstate(all="ignore"):     # the prior, both tests and the bias test's covariance: one error state
+            prior = self.observer.prior(t, lazy=True)
             self._nu = None
             m = self._consistent(pend, t, m, prior)
             if m is None:
                 self.counters.dropped[Reason.INCONSISTENT.value] += len(pend.parts)
                 return m
             nu, self._nu = self._nu, None
-        elif self.chi2_alpha > 0 and not self._gate(pend, t, m):
-            self.counters.dropped[Reason.OUTLIER.value] += len(pend.parts)
-            return None
-        why = self.recovery.before(t, m.channel, m.rows, m.y, x_p, nu)
+            return self._bias(pend, t, m, prior[0], nu, quiet=True)
+
+    def _bias(self, pend: Pending, t: float, m: Measurement, x_p, nu, quiet: bool = False) -> Measurement:
+        """``m`` through the bias test (``x_p``: the held prediction at ``t`` and ``nu``: the innovation
+        ``y - C_r x_p`` when the innovation test computed them, else None; ``quiet``: the caller holds
+        ``np.errstate(all="ignore")``): an alarm withdraws the bounds, the sample is used."""
+        why = self.recovery.before(t, m.channel, m.rows, m.y, x_p, nu, quiet=quiet)
         if why:         # the bias test: the sample is used, the bounds no longer hold
             ctr = self.counters
             ctr.bias_alarms += 1

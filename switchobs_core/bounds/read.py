@@ -182,10 +182,12 @@ def _leading(T: np.ndarray, v: np.ndarray | None, steps: int) -> tuple[float, np
     return max(theta, float(d[i])), v
 
 
-def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:
+def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None,
+                        nS: float | None = None) -> tuple[float, np.ndarray] | None:
     """``(lam, v)`` with ``lam >= lambda_max((S + S') / 2)`` proved by a Cholesky factorisation
     (module docstring), ``v`` the leading direction found on the way; None if no candidate of
-    :data:`_DELTAS` could be verified (the caller solves the eigenvalue problem)."""
+    :data:`_DELTAS` could be verified (the caller solves the eigenvalue problem). ``nS``: ``fro_upper(S)``
+    when the caller has it."""
     n = S.shape[0]
     u = UNIT_ROUNDOFF
     T = S + S.T
@@ -193,7 +195,8 @@ def verified_lambda_max(S: np.ndarray, v: np.ndarray | None = None) -> tuple[flo
     theta, v = _leading(T, v, _POWER_STEPS)
     d = np.diagonal(T)
     dmax = float(np.abs(d).max())
-    nS = fro_upper(S)
+    if nS is None:
+        nS = fro_upper(S)
     if not (theta > 0.0 and math.isfinite(theta) and math.isfinite(nS)):
         return None
     gn = gamma(n + 1)
@@ -343,7 +346,8 @@ class AnchoredBound:
         if self._w is not None:     # the latest read's power iteration, normalised
             w, nw = self._w
             self._v, self._w = w / nw, None
-        got = verified_lambda_max(S, self._v) if ell.n >= CHOLESKY_MIN_N else None
+        nS = fro_upper(S)           # the anchor's ||S_a||_F (below), the candidate's too
+        got = verified_lambda_max(S, self._v, nS) if ell.n >= CHOLESKY_MIN_N else None
         if got is not None:
             lam, v = got
             self.verified += 1
@@ -353,7 +357,7 @@ class AnchoredBound:
             # the eigenvalue problem, plus the rounding of the symmetrisation (S + S') / 2 when S is
             # not exactly symmetric (entrywise relative u: ||.||_2 <= u ||S||_F) and a margin on the
             # solver's model (module docstring): 16 u ||S||_F more in all
-            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * fro_upper(S)) * (1.0 + 2.0 * UNIT_ROUNDOFF)
+            lam = (ell.lam_upper(S) + _SOLVER_MARGIN * UNIT_ROUNDOFF * nS) * (1.0 + 2.0 * UNIT_ROUNDOFF)
             T = S + S.T
             T *= 0.5
             if np.all(np.isfinite(T)):      # the leading direction
@@ -366,7 +370,7 @@ class AnchoredBound:
         self._lam_a = lam
         self._va = self._v = v = np.ascontiguousarray(v)      # the same doubles; what the kernel reads
         self._theta_a = float(v.dot(S.dot(v)))
-        self._f_a = fro_upper(S) * (1.0 + 2.0 * gamma(S.size + 4))
+        self._f_a = nS * (1.0 + 2.0 * gamma(S.size + 4))
         A = np.abs(S)
         self._g_a = float(max(A.sum(axis=1).max(), A.sum(axis=0).max())) * (1.0 + 2.0 * gamma(ell.n + 4))
         self._age = 0

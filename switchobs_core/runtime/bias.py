@@ -123,7 +123,11 @@ class BiasDetector:
         The statistics are Python floats: the same IEEE operations as the arrays' (``g + s - k_ref``, then
         the larger of it and 0), without a numpy call per sample."""
         i = channel - 1
-        v = s.tolist() if isinstance(s, np.ndarray) and s.dtype == np.float64 else np.asarray(s, dtype=float).tolist()
+        if type(s) is list and all(type(sj) is float for sj in s):     # unit_normalised's: taken as it is
+            v = s
+        else:
+            v = s.tolist() if isinstance(s, np.ndarray) and s.dtype == np.float64 else \
+                np.asarray(s, dtype=float).tolist()
         gp, gn = self._gp[i], self._gn[i]
         idx = range(len(gp)) if rows is None else rows
         if isinstance(v, float):        # one value for every row

@@ -65,7 +65,7 @@ def spectral_norm(C_rows: np.ndarray) -> float:
     return float(np.linalg.norm(C_rows, 2)) * (1.0 + NORM_SLACK)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Consistency:
     """The outcome of the test for one sample and one channel.
 
@@ -80,6 +80,12 @@ class Consistency:
     #: The innovation ``y - C_r x_hat`` the test computed (the bias test's, :meth:`Recovery.before
     #: <switchobs_core.runtime.recovery.Recovery.before>`, shares it).
     nu: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def __init__(self, channel: int, innovation: float, allowance: float, bound: float,
+                 nu: np.ndarray | None = None) -> None:
+        # the fields into the instance's dict (frozen: no __setattr__), as Envelope's: one test a sample
+        d = self.__dict__
+        d["channel"], d["innovation"], d["allowance"], d["bound"], d["nu"] = channel, innovation, allowance, bound, nu
 
     @property
     def ok(self) -> bool:
@@ -145,14 +151,24 @@ def projected_bound(C_rows: np.ndarray, S: np.ndarray, cols: np.ndarray | None =
     p, n = C_rows.shape
     if p == 0:
         return 0.0
+    B = None
     if isinstance(S, PendingSet) and cols is not None:
-        P, tr = block_product(C_rows[:, cols] if Cc is None else Cc, S.block(cols), unit), S.trace
+        B, tr = S.block(cols), S.trace
+        if Cc is None:
+            Cc = C_rows[:, cols]
+        P = B if unit else block_product(Cc, B)     # unit: B's finiteness is read off fP below
     else:
         S = assembled(S)
         P, tr = rows_product(C_rows, S, cols), float(np.trace(S))
     P = 0.5 * (P + P.T)
     fC2 = squared_norm(C_rows) if fC2 is None else fC2
     fP = math.sqrt(float((P * P).sum()))       # np.sum's reduction, without its wrapper
+    if unit and B is not None and not math.isfinite(fP):
+        # a finite fP has every entry of P = (B + B') / 2 finite, so B's: block_product(Cc, B, True) is B
+        # itself, as taken above; else it decides (B finite: the same P; not: the product)
+        P = block_product(Cc, B, unit)
+        P = 0.5 * (P + P.T)
+        fP = math.sqrt(float((P * P).sum()))
     lam = largest_eigenvalue(P)
     lam = max(lam, 0.0) + gamma(2 * n + 2) * fC2 * abs(tr) + 2 * p * UNIT_ROUNDOFF * fP
     return math.sqrt(lam) * (1.0 + _SLACK)

@@ -65,11 +65,13 @@ class PriorCache:
 
     def block(self, cols: np.ndarray) -> np.ndarray | None:
         """A copy of the covariance's block kept for the columns ``cols``, or None."""
-        hit = self._blocks.get((cols.dtype.str, cols.tobytes()))
+        if not self._blocks:        # none kept at this time (one reader a sample): no key to make
+            return None
+        hit = self._blocks.get((cols.dtype, cols.tobytes()))
         return None if hit is None else hit.copy()
 
     def keep_block(self, cols: np.ndarray, P: np.ndarray | None) -> np.ndarray | None:
         """Keep a copy of ``P``, the block for ``cols`` (None: nothing kept); returns ``P``."""
         if P is not None:
-            self._blocks[(cols.dtype.str, cols.tobytes())] = np.array(P, dtype=float, copy=True)
+            self._blocks[(cols.dtype, cols.tobytes())] = np.array(P, dtype=float, copy=True)
         return P

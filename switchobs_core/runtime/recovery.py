@@ -174,11 +174,12 @@ class Recovery:
 
     # ------------------------------------------------------------------ the bias test
     def before(self, t: float, channel: int, rows: Any, y: np.ndarray, x_p: np.ndarray | None = None,
-               nu: np.ndarray | None = None) -> str:
+               nu: np.ndarray | None = None, *, quiet: bool = False) -> str:
         """The CUSUM on the sample's normalised innovations (module docstring); "" or the alarm. ``x_p``:
         the observer's held prediction at ``t`` (``predict(t, hold=True)``, as its ``prior`` gives it) when
         the caller has it, else it is asked for; ``nu``: the innovation ``y - C_r x_p`` when the caller
-        computed it with the same ``C_r`` (the same doubles), else it is computed here."""
+        computed it with the same ``C_r`` (the same doubles), else it is computed here. ``quiet``: the caller
+        holds ``np.errstate(all="ignore")`` (the screening's), so none is set up here."""
         if self.bias is None:
             return ""
         obs = self.obs
@@ -192,23 +193,13 @@ class Recovery:
             R = None if noise is None else noise.R(channel, rows)
             hit = self._rows[key] = (C_r, cols, Cc, noise, R, cols is not None and is_unit(Cc),
                                      None if R is None else np.diagonal(R).tolist())
-        C_r, cols, Cc, _, R, unit, r_diag = hit
-        with np.errstate(all="ignore"):
-            if nu is None:
-                nu = np.asarray(y, dtype=float) - C_r @ (obs.predict(t, hold=True) if x_p is None else x_p)
-            P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
-            if P is None or noise is None:
-                return ""
-            if unit and math.isfinite(float(P.sum())):
-                s = unit_normalised(nu, P, r_diag, None if self.vmax is None else self.vmax[channel - 1])
-                if s is None:
-                    return ""       # a zero spread: the update ignores such a sample
-            else:
-                S = block_product(Cc, P, unit) + R
-                sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
-                if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
-                    sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread
-                s = nu / sd
+        if quiet:
+            s = self._normalised(t, channel, y, x_p, nu, hit)
+        else:
+            with np.errstate(all="ignore"):
+                s = self._normalised(t, channel, y, x_p, nu, hit)
+        if s is None:
+            return ""
         alarm = self.bias.update(channel, rows, s)
         if alarm is None:
             return ""
@@ -220,6 +211,26 @@ class Recovery:
         if self._valid:     # a withdrawal: the window starts here (while withdrawn, the window's own
             self.withdrawn()    # residual test judges its data: the filter's transient alarms too)
         return alarm.describe(label)
+
+    def _normalised(self, t: float, channel: int, y: np.ndarray, x_p: np.ndarray | None, nu: np.ndarray | None,
+                    hit: tuple) -> Any:
+        """The bias test's normalised innovations (``hit``: the rows' entry of :attr:`_rows`), or None when
+        there is no covariance or a spread is 0 (the update ignores such a sample). Runs under an error
+        state that ignores overflow (the caller's)."""
+        obs = self.obs
+        C_r, cols, Cc, noise, R, unit, r_diag = hit
+        if nu is None:
+            nu = np.asarray(y, dtype=float) - C_r @ (obs.predict(t, hold=True) if x_p is None else x_p)
+        P = obs.prior_covariance(t, cols)       # the block on the states the rows see (rows_product)
+        if P is None or noise is None:
+            return None
+        if unit and math.isfinite(float(P.sum())):
+            return unit_normalised(nu, P, r_diag, None if self.vmax is None else self.vmax[channel - 1])
+        S = block_product(Cc, P, unit) + R
+        sd = np.sqrt(np.maximum(np.diagonal(S), 0.0))
+        if self.vmax is not None:   # a noise model tighter than the declared bound: the bound's
+            sd = np.maximum(sd, self.vmax[channel - 1] / 3.0)       # 3 sigma is the spread
+        return nu / sd
 
     # ------------------------------------------------------------------ re-certification
     def withdrawn(self) -> None:

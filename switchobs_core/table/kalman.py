@@ -96,7 +96,7 @@ def packed_block_index(n: int, cols: np.ndarray) -> np.ndarray:
     """The positions of ``P[np.ix_(cols, cols)]`` in the packed upper triangle of an n x n symmetric
     ``P`` (row-major): entry ``(i, j)`` of the block at ``min * n - min (min - 1) / 2 + (max - min)``.
     Kept per ``(n, cols)`` (read-only): every phase of a table reads the same few blocks."""
-    key = (n, cols.dtype.str, cols.tobytes())
+    key = (n, cols.dtype, cols.tobytes())        # the dtype itself: equal (and hashed alike) as its .str
     idx = _BLOCK_INDEX.get(key)
     if idx is None:
         i, j = np.minimum.outer(cols, cols), np.maximum.outer(cols, cols)

@@ -51,6 +51,10 @@ POLL = 1.0
 IDLE_POLLS = 10
 
 _START = threading.Lock()       # one worker per table, whichever thread asks for its first row
+#: This process's id, kept by a fork hook (a forked child has no worker: :meth:`LazyRows.row` starts its own)
+#: instead of a system call per row.
+_PID = [os.getpid()]
+os.register_at_fork(after_in_child=lambda: _PID.__setitem__(0, os.getpid()))
 
 
 def row_digest(name: str, k: int, row: np.ndarray | bytes | memoryview, m: int) -> str:
@@ -102,10 +106,10 @@ class LazyRows(Sequence):
     def row(self, k: int) -> np.ndarray:
         """Row ``k``, read and verified (module docstring); read-only."""
         ahead = self._ahead
-        if ahead is None or ahead.pid != os.getpid():     # the first row, or a forked child (no worker there)
+        if ahead is None or ahead.pid != _PID[0]:     # the first row, or a forked child (no worker there)
             with _START:
                 ahead = self._ahead
-                if ahead is None or ahead.pid != os.getpid():
+                if ahead is None or ahead.pid != _PID[0]:
                     ahead = self._ahead = _Ahead(self) if AHEAD > 0 and len(self) > 1 else None
         a = None if ahead is None else ahead.take(k)
         if ahead is not None and ahead.failed is not None and self.ahead_failure is None:
@@ -176,7 +180,7 @@ class _Ahead:
     would give it fresh pages to fault in for every row, about 35 us a row here)."""
 
     def __init__(self, rows: LazyRows) -> None:
-        self.pid = os.getpid()
+        self.pid = _PID[0]
         self._rows = weakref.ref(rows)
         self._done: dict[int, np.ndarray] = {}      # row -> the buffer holding its verified bytes
         self._free: list[np.ndarray] = []

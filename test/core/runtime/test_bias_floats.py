@@ -57,6 +57,24 @@ def test_the_float_cusum_is_the_array_cusum(samples, ref):
                 np.testing.assert_array_equal(x, y, strict=True)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.lists(_S, min_size=4, max_size=4), min_size=1, max_size=30), st.booleans())
+def test_a_list_of_floats_is_the_array_it_lists(samples, mixed):
+    """``unit_normalised``'s list of Python floats is taken as it is, and a list of other numbers (ints,
+    float32, ``np.float64``) as its array: the statistics and alarms of the arrays of the same doubles."""
+    d, a = BiasDetector((4,)), BiasDetector((4,))
+    for s in samples:
+        s = [float(v) for v in s]
+        if mixed:
+            s[0], s[1] = np.float64(s[0]), np.float32(s[1]) if np.isfinite(s[1]) else s[1]
+        arr = np.asarray(s, dtype=float)
+        got, want = d.update(1, None, s), a.update(1, None, arr)
+        assert (got is None) == (want is None) and (got is None or (got.row, got.sign, got.g) ==
+                                                     (want.row, want.sign, want.g))
+        for x, y in zip(d.g_pos + d.g_neg, a.g_pos + a.g_neg, strict=True):
+            np.testing.assert_array_equal(x, y, strict=True)
+
+
 def test_a_wrong_number_of_innovations_is_refused():
     d = BiasDetector((4,))
     try:

@@ -191,7 +191,7 @@ def test_the_bias_test_on_the_prior_handed_over_is_the_one_it_asks_for(paper, kt
     innovation test's innovation too, keeps the CUSUM's statistics and alarms of ``before`` asking
     ``predict(t, hold=True)`` itself, bit for bit, through a bias that alarms."""
     obs = SwitchedObserver(paper, ktable, "periodic", [CYC], x0=X0 + 0.05, e0=5.0, noise_max=VMAX)
-    asks, handed, shared = Recovery(obs), Recovery(obs), Recovery(obs)
+    asks, handed, shared, quiet = Recovery(obs), Recovery(obs), Recovery(obs), Recovery(obs)
     test = InnovationTest(obs.C, obs.noise_max)
     rng = np.random.default_rng(3)
     alarms = 0
@@ -202,10 +202,14 @@ def test_the_bias_test_on_the_prior_handed_over_is_the_one_it_asks_for(paper, kt
         why = asks.before(t, c, None, y)
         assert handed.before(t, c, None, y, prior[0]) == why
         assert shared.before(t, c, None, y, prior[0], test.check(prior, c, None, y).nu) == why
+        with np.errstate(all="ignore"):     # the screening's: the caller's error state, none of its own
+            assert quiet.before(t, c, None, y, prior[0], test.check(prior, c, None, y).nu, quiet=True) == why
         alarms += bool(why)
         for g in ("g_pos", "g_neg"):
-            for a, b, d in zip(getattr(asks.bias, g), getattr(handed.bias, g), getattr(shared.bias, g), strict=True):
+            for a, b, d, q in zip(getattr(asks.bias, g), getattr(handed.bias, g), getattr(shared.bias, g),
+                                  getattr(quiet.bias, g), strict=True):
                 np.testing.assert_array_equal(a, b, strict=True)
                 np.testing.assert_array_equal(a, d, strict=True)
+                np.testing.assert_array_equal(a, q, strict=True)
         obs.update(t, c, y)
     assert alarms > 0       # the bias was seen: the alarms' path ran in both

@@ -4,18 +4,22 @@ products ``C_r B C_r'`` (hypothesis), and the innovation test's outcome is the g
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from switchobs_core.numerics.rounding import ErrorEllipsoid
+from switchobs_core.numerics.rounding import UNIT_ROUNDOFF, ErrorEllipsoid, gamma, largest_eigenvalue
 from switchobs_core.runtime.consistency import (
     InnovationTest,
     block_product,
     check_innovation,
     is_unit,
+    projected_bound,
     seen_columns,
     spectral_norm,
+    squared_norm,
 )
 
 
@@ -75,3 +79,44 @@ def test_selector_rows_on_a_pending_set_give_the_general_outcome(seed, agents, n
                             unit=False)
     assert (got.innovation, got.allowance) == (want.innovation, want.allowance)
     assert got.ok == want.ok
+
+
+def _projected_reference(C_r, S, cols, unit):
+    """``projected_bound`` on a pending set as written with the block's finiteness checked first
+    (``block_product``, then the symmetric part, its norm and its eigenvalue)."""
+    p, n = C_r.shape
+    P = block_product(C_r[:, cols], S.block(cols), unit)
+    P = 0.5 * (P + P.T)
+    fP = math.sqrt(float((P * P).sum()))
+    lam = largest_eigenvalue(P)
+    lam = max(lam, 0.0) + gamma(2 * n + 2) * squared_norm(C_r) * abs(S.trace) + 2 * p * UNIT_ROUNDOFF * fP
+    return math.sqrt(lam) * (1.0 + 1e-12)
+
+
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31), bad=st.sampled_from([None, np.inf, -np.inf, np.nan, 1e308, -1e308]),
+       diagonal=st.booleans())
+def test_unit_rows_read_the_block_finiteness_off_its_norm(seed, bad, diagonal):
+    """The unit path takes the block as it is and reads its finiteness off the norm of its symmetric part
+    (finite only when every entry is): the doubles of the path that checks the block first, for finite
+    blocks, blocks with an infinite or NaN entry (the products' numbers) and finite ones whose norm
+    overflows (the block itself)."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    C_r = np.zeros((2, n))
+    C_r[0, 4], C_r[1, 5] = 1.0, 1.0
+    cols = seen_columns(C_r)
+    ell = ErrorEllipsoid(n, 1.0, None)
+    X = rng.standard_normal((n, n))
+    Z = X @ X.T
+    if bad is not None:
+        i, j = (4, 4) if diagonal else (4, 5)
+        Z[i, j] = bad
+    S = ell.pending(Z, np.abs(rng.standard_normal(n)), 3e-15, 0.0, 2.5)
+    with np.errstate(all="ignore"):
+        want = _projected_reference(C_r, S, cols, True)
+        got = projected_bound(C_r, S, cols, unit=True)
+        general = projected_bound(C_r, S, cols, unit=False)
+    assert got == want or (math.isnan(got) and math.isnan(want))
+    if bad is None:
+        assert got == general

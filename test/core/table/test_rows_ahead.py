@@ -6,6 +6,7 @@ matched its digest, whatever the file holds later."""
 from __future__ import annotations
 
 import gc
+import os
 import threading
 import time
 import warnings
@@ -150,3 +151,32 @@ def test_an_idle_worker_ends_and_starts_again(table, tmp_path, monkeypatch):
     assert rows._ahead._thread is not first and rows._ahead.failed is None
     _held(rows, rows_mod.AHEAD + 2)
     assert rows.row(rows_mod.AHEAD + 2).tobytes() == ref[rows_mod.AHEAD + 2]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_a_forked_child_reads_rows_with_a_worker_of_its_own(table, tmp_path):
+    """The process id the rows compare with is kept by a fork hook (no system call per row): in a forked
+    child it is the child's, the parent's worker is not used there (its thread does not exist in the
+    child), and the child's rows are the stored doubles from a worker of its own."""
+    rows = _rows(table.save(tmp_path / "k.npz"))
+    ref = [rows._read(k).tobytes() for k in range(4)]
+    rows.row(0)
+    parent = rows._ahead
+    assert parent is not None and parent.pid == os.getpid() == rows_mod._PID[0]
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:        # the child: exit code 0 only if every check holds
+        ok = False
+        try:
+            got = [rows.row(k).tobytes() for k in (1, 2, 3)]
+            ok = (rows_mod._PID[0] == os.getpid() and rows._ahead is not parent
+                  and rows._ahead.pid == os.getpid() and got == ref[1:])
+        finally:
+            os.write(w, b"1" if ok else b"0")
+            os._exit(0)
+    os.close(w)
+    verdict = os.read(r, 1)
+    os.close(r)
+    os.waitpid(pid, 0)
+    assert verdict == b"1"
+    assert rows_mod._PID[0] == os.getpid() and rows._ahead is parent     # the parent's own, unchanged
