@@ -8,7 +8,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from switchobs_core.runtime.consistency import InnovationTest, check_innovation, output_rows, spectral_norm
+from switchobs_core.numerics.rounding import ErrorEllipsoid
+from switchobs_core.runtime.consistency import (
+    InnovationTest,
+    check_innovation,
+    innovation_allowance,
+    is_unit,
+    output_rows,
+    seen_columns,
+    spectral_norm,
+)
 
 
 @settings(max_examples=200, deadline=None)
@@ -85,3 +94,38 @@ def test_likely_causes_are_ordered_by_the_evidence():
     gross = likely_causes(False, GROSS_RATIO * 2, e0=2.0, noise_max=None, disturbance_max=None)
     assert order(gross) == ["channel", "bias", "clock", "disturbance", "noise"]
     assert "no disturbance.max declared" in gross and "noise (none declared)" in gross
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), p=st.integers(1, 4), pending=st.booleans(), noisy=st.booleans(),
+       f=st.sampled_from([0.0, 0.3, 0.9, 1.0 - 1e-12, 1.0, 1.0 + 1e-12, 1.1, 3.0]))
+def test_the_allowance_a_passing_sample_is_within_decides_as_the_full_one(seed, p, pending, noisy, f):
+    """On an ellipsoid the test stops at the allowance with the block's largest diagonal entry (less the
+    solver's error) in place of its eigenvalue when the innovation is within it: never above the full
+    allowance, and the outcome is the full allowance's, for innovations of any size up to and around it."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    C_r = np.zeros((p, n))
+    cols = np.sort(rng.choice(n, size=p, replace=False))
+    C_r[np.arange(p), cols] = 1.0 if rng.random() < 0.5 else rng.standard_normal(p)
+    X = rng.standard_normal((n, n)) * 10.0 ** rng.uniform(-6, 3)
+    Z = X @ X.T
+    if pending:
+        S = ErrorEllipsoid(n, 1.0, None).pending(Z, np.abs(rng.standard_normal(n)), 3e-15, 0.0, 2.5)
+    else:
+        S = Z
+    sc = seen_columns(C_r)
+    unit = sc is not None and is_unit(C_r[:, sc])
+    x = rng.standard_normal(n)
+    v_max = float(rng.uniform(0.0, 1e-2)) if noisy else 0.0
+    d = rng.standard_normal(p)
+    args = (spectral_norm(C_r), sc, None, unit, None if sc is None else C_r[:, sc])
+    y0 = C_r @ x
+    full = innovation_allowance(C_r, S, v_max, x, y0, *args)
+    y = y0 + f * full * d / np.linalg.norm(d)
+    full = innovation_allowance(C_r, S, v_max, x, y, *args)           # the allowance of this sample
+    got = check_innovation(C_r, 1, S, v_max, x, y, *args)
+    assert got.ok == (got.innovation <= full)
+    assert got.allowance <= full
+    if got.allowance < full:        # stopped early: only for a sample within it
+        assert got.ok and got.innovation <= got.allowance
