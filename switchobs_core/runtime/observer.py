@@ -310,9 +310,8 @@ class SwitchedObserver:
 
     @property
     def Phi(self) -> np.ndarray:
-        """Error transition ``Phi(t, t0)``, the product of the steps' error maps ``E``: with innovation hold
-        exact for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)`` with no noise and a known input); with
-        measurement hold the error-to-error part."""
+        """Error transition ``Phi(t, t0)``, the product of the steps' error maps ``E``: with innovation hold exact
+        for sampled outputs (``x_tilde(t) = Phi x_tilde(t0)``, no noise, a known input); else error to error."""
         return self._phi.read().copy()
 
     def apply_map(self, E: np.ndarray) -> None:
@@ -406,8 +405,7 @@ class SwitchedObserver:
             self._in.settle(self._t)
 
     def _apply(self, c: Correction, channel: int) -> None:
-        """A family's correction: the held innovation's rounding and each error map into the bound,
-        each map into ``Phi``, and the estimate."""
+        """A family's correction: the held innovation's rounding, each map into the bound and ``Phi``, the estimate."""
         b = self._bound
         h = c.held
         if h is not None and b is not None:    # rounding of nu = y - C x_hat, and of the data y itself
@@ -452,6 +450,8 @@ class SwitchedObserver:
         estimate (the input's changes added) and their rounding's residual."""
         e = self._cache.step(key, dt)
         x = zoh_step(e, self._x, v, self._in.u)
+        if not self._in.changes:        # no input change ahead: nothing to add, no residual
+            return e, x, 0.0
         return (e, *self._in.add(x, t, lambda d: self._cache.step(key, d), self._bound and self._bound.rho_input))
 
     def _step(self, dt: float, t: float) -> None:
