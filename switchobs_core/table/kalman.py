@@ -139,7 +139,7 @@ class KalmanPhase:
         has not been unpacked (a phase whose covariance is not published: no n x n matrix made)."""
         P = self._read()
         if P.ndim == 2:
-            return P[np.ix_(cols, cols)]
+            return P[cols[:, None], cols]       # np.ix_'s block, without its checks
         return P[packed_block_index(self.K.shape[0], cols)]
 
     def P_diagonal(self) -> np.ndarray:
