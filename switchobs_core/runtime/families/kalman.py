@@ -225,9 +225,10 @@ class KalmanTableGains(OnlineKalmanGains):
         k = self._next_k(t, dt)
         if k is None:
             return None
-        ent = self._gap.entry(k)
-        try:
-            V = self._gap.prior(self._last_k, k)
+        gap = self._gap
+        ent = gap.entry(k)
+        try:        # none held and none missing (the grid's next sample): no deviation, as prior() finds
+            V = None if gap.U is None and k == self._last_k + 1 else gap.prior(self._last_k, k)
         except GainTableError:      # a missing phase's row is unreadable: the sample will depart
             return None
         if V is not None:
