@@ -147,7 +147,7 @@ FINE = (
     ("switchobs_core.runtime.recovery", "Recovery.before", "screening: bias test"),
     ("switchobs_core.runtime.observer", "SwitchedObserver.prior_covariance", "screening: bias test's prior covariance"),
     ("switchobs_core.table.kalman", "KalmanPhase.P_block", "screening: table rows (P_block)"),
-    # the core's per-sample Python around the rigorous set (branch scr12)
+    # the core's per-sample Python around the rigorous set, its innovation test's block and the amortised read
     ("switchobs_core.numerics.rounding", "PendingSet.block", "screening: innovation test's block of the set"),
     ("switchobs_core.runtime.families.kalman", "KalmanTableGains._locked", "update: locked Kalman sample"),
     ("switchobs_core.runtime.observer", "SwitchedObserver.envelope", "envelope: observer"),
