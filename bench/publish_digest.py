@@ -86,12 +86,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drop", type=float, default=0.0)
     ap.add_argument("--table", default="/tmp/boot/k32v5.npz")
     ap.add_argument("--before", type=Path, default=None, help="a checkout to compare with")
-    ap.add_argument("--stream", type=Path, default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
+    for hidden in ("--stream", "--child"):      # a child's: the stream's file, its tree
+        ap.add_argument(hidden, type=Path, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    if a.child is not None:
-        print(json.dumps(run_child(a)))
-        return 0
+    if a.child is None:
+        return compare(a)
+    print(json.dumps(run_child(a)))
+    return 0
+
+
+def compare(a: argparse.Namespace) -> int:
+    """The trees' digests on one stream, side by side."""
     sys.path.insert(0, str(REPO / "bench"))
     import bench_pipeline as bp
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
