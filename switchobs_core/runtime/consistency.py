@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from ..numerics.frobenius import underflow_slack
 from ..numerics.rounding import UNIT_ROUNDOFF, PendingSet, assembled, gamma, largest_eigenvalue
 
 __all__ = ["NORM_SLACK", "Consistency", "InnovationTest", "block_product", "check_innovation", "consistent_channels",
@@ -224,9 +225,10 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
         ``C_rows[:, cols]`` when the caller keeps it (:func:`projected_bound`).
     within : float, optional
         A computed innovation (the test's): on an ellipsoid, when it is within the allowance with the
-        block's largest diagonal entry ``d`` less ``4 p u ||P||_F`` in place of its computed largest
-        eigenvalue, that allowance is returned and the eigenvalue problem is not solved. It is at most
-        the full one: ``lambda_max(P) >= d``, and the solver's eigenvalue is within ``2 p u ||P||_F`` of
+        block's largest diagonal entry ``d`` less ``4 p u (||P||_F + p sqrt(eta))`` (the norm as computed
+        plus what underflow hides from it) in place of its computed largest eigenvalue, that allowance
+        is returned and the eigenvalue problem is not solved. It is at most the full one:
+        ``lambda_max(P) >= d``, and the solver's eigenvalue is within ``2 p u ||P||_F`` of
         ``lambda_max`` (the model :func:`projected_bound` allows for); so the test's outcome is the full
         allowance's.
     """
@@ -244,7 +246,10 @@ def innovation_allowance(C_rows: np.ndarray, bound: float | np.ndarray, v_max: f
     else:
         P, tr, fP = _projected_block(C_rows, bound, cols, unit, Cc)
         if math.isfinite(fP):       # every entry of P finite
-            low = _seen(max(P.diagonal().tolist()) - 4.0 * p * UNIT_ROUNDOFF * fP, n, p, fC2, tr, fP)
+            # fP with what underflow hides from it (p sqrt(eta)): LAPACK scales a block whose squares
+            # underflow, and its eigenvalue may then fall below the largest diagonal entry
+            low = _seen(max(P.diagonal().tolist()) - 4.0 * p * UNIT_ROUNDOFF * (fP + underflow_slack(p * p)),
+                        n, p, fC2, tr, fP)
             low = (low + noise + rounding) * (1.0 + _SLACK)
             if within <= low:
                 return low

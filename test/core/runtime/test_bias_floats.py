@@ -105,3 +105,14 @@ def test_unit_normalised_is_the_arrays_diagonal(rows, v_max):
         assert not np.isfinite(want).all() and (sd == 0.0).any()
     else:
         np.testing.assert_array_equal(np.array(got), want)
+
+def test_float32_innovations_are_summed_as_doubles():
+    """float32 entries of a list are taken as the doubles they hold (as the array's), not summed in single
+    precision: three values whose float32 running sum differs from the doubles'."""
+    d, a = BiasDetector((4,)), BiasDetector((4,))
+    for v in (2.6100058555603027, 2.6158816814422607, 2.030651092529297):
+        s = [0.0, np.float32(v), 0.0, 0.0]
+        d.update(1, None, s)
+        a.update(1, None, np.asarray(s, dtype=float))
+    for x, y in zip(d.g_pos + d.g_neg, a.g_pos + a.g_neg, strict=True):
+        np.testing.assert_array_equal(x, y, strict=True)

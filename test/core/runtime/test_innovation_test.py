@@ -129,3 +129,29 @@ def test_the_allowance_a_passing_sample_is_within_decides_as_the_full_one(seed, 
     assert got.allowance <= full
     if got.allowance < full:        # stopped early: only for a sample within it
         assert got.ok and got.innovation <= got.allowance
+
+
+def test_a_block_whose_squares_underflow_decides_as_the_full_one():
+    """A 6 x 6 block near 2e-181 (its squares underflow: the computed ``||P||_F`` is 0) whose eigenvalue LAPACK
+    puts below the largest diagonal entry: the early stop keeps the solver's error term (with what underflow
+    hides), so a sample the full allowance rejects is rejected."""
+    P = np.array([
+        [2.40991986510293e-181, 3.871867898743924e-194, 8.584661763692456e-194,
+         -7.563954482487255e-194, 3.570574305959242e-195, 2.958578604272695e-194],
+        [3.871867898743924e-194, 1.2465278480694844e-181, 4.485865304578662e-195,
+         -1.2737256992559256e-194, -2.249032334485394e-194, 3.6007177370979274e-194],
+        [8.584661763692456e-194, 4.485865304578662e-195, 1.2730824886087327e-181,
+         -1.5059858184852805e-194, 5.968082705313699e-194, 3.794734834876325e-194],
+        [-7.563954482487255e-194, -1.2737256992559256e-194, -1.5059858184852805e-194,
+         2.3434405287666358e-181, 2.1402026358941004e-194, 2.7283653225665394e-194],
+        [3.570574305959242e-195, -2.249032334485394e-194, 5.968082705313699e-194,
+         2.1402026358941004e-194, 2.2312344549508603e-181, -1.1399427342849382e-194],
+        [2.958578604272695e-194, 3.6007177370979274e-194, 3.794734834876325e-194,
+         2.7283653225665394e-194, -1.1399427342849382e-194, 2.3348401739852207e-181]])
+    C, x = np.eye(6), np.zeros(6)
+    y = np.array([4.909093465307709e-91, 0.0, 0.0, 0.0, 0.0, 0.0])
+    full = innovation_allowance(C, P, 0.0, x, y)
+    got = check_innovation(C, 1, P, 0.0, x, y)
+    assert got.allowance <= full
+    assert got.ok == (got.innovation <= full)
+    assert not got.ok
