@@ -100,12 +100,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from . import dense_kernel
 from .extended import expm_extended
+from .pending import PendingSet, assembled
 
 try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without its wrapper's 3 us)
     from numpy.linalg._umath_linalg import eigvalsh_lo as _eigvalsh_lo
@@ -184,6 +184,12 @@ class ErrorEllipsoid:
         self._k3 = 2.0 * _U * self._kf
         self._aux = np.concatenate((self._id2, self._d2, (self._kW, self._kR, self._gsum, self._k1, self._k3,
                                                           self._kf, _ALO, _AHI, _KTH, _K2, UNDERFLOW)))
+        # step_factored's: d, 1/d, 1/d^2, d^2 and _plan's factors (gsum, 1 + 4u, a's clamp, theta's, c_2's, eta,
+        # 1 + 8u, 2u); (n + 4) n eta of the diagonal's underflow allowance
+        self._faux = np.concatenate((self.d, self._id, self._id2, self._d2, (self._gsum, 1.0 + 4.0 * _U, _ALO, _AHI,
+                                                                             _KTH, _K2, UNDERFLOW, 1.0 + 8.0 * _U,
+                                                                             2.0 * _U)))
+        self._c4f = (self.n + 4) * self.n * UNDERFLOW
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -295,6 +301,21 @@ class ErrorEllipsoid:
         forms ``Z`` again should it be handed over before (:meth:`PendingSet.take`)."""
         return PendingSet(self, Z, self._plan(Z.diagonal(), w, cz, rho, None if G is None else (G, c, None), mn),
                           remake)
+
+    def pending_open(self, Z: np.ndarray, phi: tuple, c: float, rho: float, mn: float,
+                     remake: Callable[[], np.ndarray] | None = None) -> PendingSet | None:
+        """:meth:`pending` of an open-loop step through a sparse ``Phi~`` (``phi = (indptr, indices, |data|)``,
+        ``Z = Phi~ S Phi~'`` with allowance ``c``, ``mn >= ||Phi~||_inf``) planned by the compiled kernel:
+        ``w = image_bound(|Phi~|)`` and :meth:`_plan`'s operations with the factors of :attr:`_faux`, its sums in
+        index order (rounded up as :meth:`step_factored` says); None where the kernel is not built or refuses."""
+        cz = c + _U * (1.0 + c)
+        c1f = cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
+        hit = dense_kernel.open_plan(Z, self.S, *phi, self._faux, rho, self._gsum * (1.0 + 2.0 * _U), cz, c1f,
+                                     self._c4f, mn)
+        if hit is None:
+            return None
+        q, alpha, theta, trace, tr = hit
+        return PendingSet(self, Z, (alpha, theta, None, q, trace, tr), remake)
 
     def _plan(self, zd: np.ndarray, w: np.ndarray, cz: float, rho: float, noise: tuple | None,
               mn: float) -> tuple:
@@ -431,6 +452,26 @@ class ErrorEllipsoid:
         dS += q
         self.S, self.tr, self.symmetric = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
 
+    def step_factored(self, Y: np.ndarray, phi: tuple, inf_norm: float, K: np.ndarray, H: tuple, wf: float,
+                      c: float, rho: float) -> bool:
+        """:meth:`propagate_product` of a Kalman sample's factored map (:meth:`~switchobs_core.bounds.kalman_map.
+        KalmanMap.step`) by the compiled kernel, kept: ``Y = Phi~ S Phi~'`` (overwritten with the new ``S``),
+        ``phi = (indptr, indices, |data|)`` of ``Phi~`` (``||Phi~||_inf <= inf_norm``), ``K`` (n x p, C-ordered),
+        ``H = (indptr, indices, data)`` in compressed rows, ``w``'s factor ``wf`` and the product's allowance
+        ``c``: the kernel forms ``Z`` and ``w`` as the map's docstring says (steps 1-3) and assembles the set of
+        :meth:`_plan` and :meth:`_apply` (steps 5-8) with the factors below and in :attr:`_faux`, every sum in index
+        order (the allowances hold for any order: the standard model's ``gamma_m`` bounds a sum of ``m`` terms
+        in any order, and each scalar sum of nonnegative terms is rounded up by ``gsum`` whatever its order), so
+        the set differs from numpy's in its last bits only; :attr:`tr` and :meth:`lam_scaled` from its diagonal.
+        False (nothing changed, ``Y`` intact) where the kernel is not built or refuses the arrays."""
+        cz = c + _U * (1.0 + c)       # the symmetrisation's rounding, relative u of |sym Z| (as _plan)
+        c1f = cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
+        hit = dense_kernel.factored(Y, self.S, *phi, K, *H, self._faux, rho, wf, cz, c1f, self._c4f, inf_norm)
+        if hit is None:
+            return False
+        self.S, self.tr, self._ls = Y, hit[0], (Y, hit[0], hit[1])
+        return True
+
     def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
         self.S, self.tr = self.propagate(M, rho, absM)
@@ -479,59 +520,6 @@ class ErrorEllipsoid:
         if not math.isfinite(lam):
             return math.inf
         return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
-
-
-class PendingSet:
-    """A step's set ``S'`` whose n x n assembly waits for a reader of the whole matrix
-    (:meth:`ErrorEllipsoid.pending`): :meth:`block` and :attr:`trace` read it in O(p^2 + n),
-    :meth:`full` assembles it once; every read gives the doubles of the eager assembly. Its product
-    ``Z`` may be handed over once before (:meth:`take`: a step that starts from the same product);
-    a later read forms ``Z`` again (``remake``)."""
-
-    __slots__ = ("_ell", "_Z", "_plan", "_S", "_remake", "tr", "trace", "kept")
-
-    def __init__(self, ell: ErrorEllipsoid, Z: np.ndarray, plan: tuple,
-                 remake: Callable[[], np.ndarray] | None) -> None:
-        self._ell, self._Z, self._plan, self._S, self._remake = ell, Z, plan, None, remake
-        #: Kept for a taker (:meth:`ErrorEllipsoid.keep_product`): :meth:`full` assembles a copy of ``Z``.
-        self.kept = False
-        #: ``trace S'`` (the sum of its diagonal, as ``np.trace``) and that rounded up (``ErrorEllipsoid.tr``).
-        self.trace, self.tr = plan[4], plan[5]
-
-    def _product(self) -> np.ndarray:
-        if self._Z is None:
-            self._Z = self._remake()
-        return self._Z
-
-    def full(self) -> np.ndarray:
-        """``S'`` (n x n, assembled at the first call; read-only)."""
-        if self._S is None:
-            Z = self._product()
-            if self.kept:       # Z stays for the taker
-                Z = Z.copy(order="K")
-            else:
-                self._Z = None
-            self._S = self._ell._apply(Z, self._plan)[0]
-        return self._S
-
-    def block(self, cols: np.ndarray) -> np.ndarray:
-        """``S'[np.ix_(cols, cols)]`` (a new array)."""
-        if self._S is not None:
-            return self._S[cols[:, None], cols]
-        return self._ell._block(self._product(), self._plan, cols)
-
-    def take(self) -> np.ndarray | None:
-        """The product ``Z``, handed over once (the taker may overwrite it), or None when it is gone
-        (assembled in place, or taken) or could not be formed again."""
-        if self._Z is None or self._remake is None:
-            return None
-        Z, self._Z = self._Z, None
-        return Z
-
-
-def assembled(s: Any) -> Any:
-    """``s.full()`` of a :class:`PendingSet`, else ``s`` (an array, a float, None)."""
-    return s.full() if isinstance(s, PendingSet) else s
 
 
 def largest_eigenvalue(S: np.ndarray) -> float:
