@@ -46,6 +46,14 @@ symmetric and positive semidefinite (:mod:`switchobs_core.numerics.rounding`, st
    gamma_16 (1 + gamma_4) = 2.2e-15``, where counting every sum as ``n`` long gives
    ``2.01 gamma_{2n+4p+4} = 6.3e-14``.
 
+Where the compiled kernel is built (:mod:`switchobs_core.numerics.dense_kernel`), ``Phi~ S Phi~'`` is its
+:func:`~switchobs_core.numerics.dense_kernel.sandwich` (scipy's doubles) and the rest of a sample's step, ``Z``,
+``w`` and the assembly of :mod:`switchobs_core.numerics.rounding` (steps 5-8), one call of
+:func:`~switchobs_core.numerics.dense_kernel.factored` (:meth:`KalmanMap.step`): the same products, their sums
+in index order. The counts above hold for any order of each sum (the standard model's ``gamma_m`` bounds a sum
+of ``m`` terms however it is ordered), so both paths carry the same ``c`` and ``w``; their sets differ in the
+last bits.
+
 The residual's factor ``||I - K H||`` is taken in the balanced coordinates of the entry's
 ``scale`` (``kappa >= 1 + || |D^-1 K| |H D| ||_2``, by ``sqrt(||.||_1 ||.||_inf)``), like every
 norm of the rigorous bound. The dense form is kept below :data:`SPARSE_MIN_N` states or above

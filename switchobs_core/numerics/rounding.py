@@ -89,7 +89,11 @@ nonzeros, deterministically) takes step 6's product in compressed rows, O(nnz n)
 gamma_{2k}`` and ``w = |M| s`` summed over each row's nonzeros
 (:func:`~switchobs_core.bounds.rigorous.open_loop_product`); a Kalman sample with a sparse
 ``e^{A dt}`` takes it in factors, the sparse ``e^{A dt}`` and a rank-``2p`` term, O(nnz n + n^2 p),
-with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the
+with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`; where the compiled kernel is built, the
+whole step in one call, :meth:`ErrorEllipsoid.step_factored`, and an open-loop prior's plan in another,
+:meth:`ErrorEllipsoid.pending_open`: sums in index order, which the allowances above cover as any order, since
+``gamma_m`` bounds a sum of ``m`` terms in any order and every scalar sum of nonnegative terms is rounded up by
+``1 + 2 gamma_{n+2}``), and from 32 states on the
 bound is read in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`). A dense map at small n
 costs mostly the calls into numpy: :meth:`ErrorEllipsoid.step_dense` takes the same step in about
 seventeen of them (the general assembly about forty), the allowance's scalar factors folded into its
