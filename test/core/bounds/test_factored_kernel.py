@@ -232,3 +232,33 @@ def test_observer_with_the_kernel_is_numpys_to_the_last_bits(agents10):
         np.testing.assert_array_equal(xa, xb)
         assert abs(ba - bb) <= TOL * bb
         assert err <= ba
+
+
+@needs_kernel
+def test_the_kernel_refuses_what_it_cannot_read():
+    """Indices of another type, compressed rows out of range, an output sharing an input's memory: ValueError
+    from the module, None from the wrappers (counted), and nothing written."""
+    Phi, H, K, S, d = _case(3, 20, 2, 4, False, False)
+    n = Phi.shape[0]
+    sp = SparseTransition(Phi)
+    ip, ix, adv = sp.abs_rows
+    ell = ErrorEllipsoid(n, 1.0, d)
+    hp, hj, hv = np.array([0, 1, 2, 3, 4], dtype=np.intp), np.arange(4, dtype=np.intp), np.ones(4)
+    args = (ip, ix, adv, K, hp, hj, hv, ell._faux, 1e-6, 1.0, 1e-15, 1e-15, 1e-300, 1.0)
+    Y = S.copy()
+    for bad in ({0: ip.astype(np.int32)}, {1: np.where(ix == ix.max(), n, ix)}, {4: np.array([0, 1, 2, 3, 5])}):
+        a = list(args)
+        for i, v in bad.items():
+            a[i] = v
+        before = dense_kernel.FALLBACKS["factored"]
+        assert dense_kernel.factored(Y, S, *a) is None
+        assert dense_kernel.FALLBACKS["factored"] == before + 1
+        np.testing.assert_array_equal(Y, S)
+    with pytest.raises(ValueError):         # a gain of float32
+        dense_kernel.FACTORED(S.copy(), S.copy(), *args[:3], K.astype(np.float32), *args[4:])
+    with pytest.raises(ValueError):         # Y is the gain's memory: an output sharing an input's
+        Kbig = np.zeros((n, n))
+        dense_kernel.FACTORED(Kbig, S, ip, ix, adv, Kbig.reshape(-1)[: n * 4].reshape(n, 4), *args[4:])
+    X = np.empty((n, n))
+    assert dense_kernel.sandwich(ip.astype(np.int32), ix, sp._dv, S, X) is None
+    assert dense_kernel.sandwich(ip, ix, sp._dv, S, S) is None          # the scratch is the input
