@@ -156,6 +156,7 @@ FINE = (
     ("switchobs_core.bounds.kalman_map", "KalmanMap.step", "sets: factored step, kernel (KalmanMap.step)"),
     ("switchobs_core.numerics.rounding", "ErrorEllipsoid._plan", "sets: ErrorEllipsoid._plan"),
     ("switchobs_core.numerics.rounding", "ErrorEllipsoid._apply", "sets: ErrorEllipsoid._apply"),
+    ("switchobs_core.numerics.rounding", "ErrorEllipsoid._block", "sets: ErrorEllipsoid._block (a prior's block)"),
 )
 
 
