@@ -1095,6 +1095,130 @@ fail:
     return res;
 }
 
+/* block(Z, cols, ha, q, B): B[a, b] = (Z[c_a, c_b] + Z[c_b, c_a]) ha, then q[c_a] added on the diagonal: a block of
+ * (Z + Z') (alpha / 2) + diag(q) without the n x n passes (ErrorEllipsoid._block without a shaped set), the
+ * operations of numpy's path in its order, so its doubles; Z n x n (any strides), cols m np.intp in [0, n),
+ * q n doubles, B m x m C-ordered (written, apart from the inputs) */
+static PyObject *block(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bZ, bc, bq, bB;
+    Py_ssize_t n, m, a, b;
+    double ha;
+    PyObject *res = NULL;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "block(Z, cols, ha, q, B)");
+        return NULL;
+    }
+    ha = PyFloat_AsDouble(args[2]);
+    if (ha == -1.0 && PyErr_Occurred())
+        return NULL;
+    if ((n = getsq(args[0], &bZ)) < 0)
+        return NULL;
+    if (getidx(args[1], &bc, -1) < 0)
+        goto fail_z;
+    m = bc.len / 8;
+    if (getlen(args[3], &bq, n, 0) < 0)
+        goto fail_c;
+    if (getlen(args[4], &bB, m * m, PyBUF_WRITABLE) < 0)
+        goto fail_q;
+    if (!(apart(&bB, &bZ) && apart(&bB, &bc) && apart(&bB, &bq)) && aliased() < 0)
+        goto fail_b;
+    {
+        const Py_ssize_t *cols = bc.buf, z0 = bZ.strides[0] / 8, z1 = bZ.strides[1] / 8;
+        const double *Z = bZ.buf, *q = bq.buf;
+        double *B = bB.buf;
+        for (a = 0; a < m; a++)
+            if (cols[a] < 0 || cols[a] >= n) {
+                PyErr_SetString(PyExc_ValueError, "_dense_step: a column out of range");
+                goto fail_b;
+            }
+        for (a = 0; a < m; a++)
+            for (b = 0; b < m; b++)
+                B[a * m + b] = (Z[cols[a] * z0 + cols[b] * z1] + Z[cols[b] * z0 + cols[a] * z1]) * ha;
+        for (a = 0; a < m; a++)
+            B[a * m + a] = B[a * m + a] + q[cols[a]];
+    }
+    res = Py_None;
+    Py_INCREF(res);
+fail_b:
+    PyBuffer_Release(&bB);
+fail_q:
+    PyBuffer_Release(&bq);
+fail_c:
+    PyBuffer_Release(&bc);
+fail_z:
+    PyBuffer_Release(&bZ);
+    return res;
+}
+
+/* kappa(K, H, d) -> (one, inf): the 1- and inf-norms of |D^-1 K| |H D| (K n x p, H p x n C-ordered, d n doubles;
+ * KalmanMap.kappa's sums, each in index order, the scalings as numpy's: K_ir / d_i and H_rc d_c):
+ * one = max_c sum_r (sum_i |K_ir / d_i|) |H_rc d_c|, inf = max_i sum_r |K_ir / d_i| (sum_c |H_rc d_c|) */
+static PyObject *kappa(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bK, bH, bd;
+    Py_ssize_t n, p, i, r, k;
+    double one = 0.0, inf = 0.0, *cs;
+    PyObject *res = NULL;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "kappa(K, H, d)");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[2], &bd, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    n = bd.len / 8;
+    if (!doubles(&bd) || n < 1) {
+        PyBuffer_Release(&bd);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: d of the wrong size or type");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[1], &bH, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        goto fail_d;
+    p = bH.len / 8 / n;
+    if (!doubles(&bH) || p < 1 || bH.len != p * n * 8) {
+        PyErr_SetString(PyExc_ValueError, "_dense_step: H of the wrong size or type");
+        goto fail_h;
+    }
+    if (getlen(args[0], &bK, n * p, 0) < 0)
+        goto fail_h;
+    cs = PyMem_Malloc((size_t)(2 * p) * sizeof(double));
+    if (cs == NULL) {
+        PyErr_NoMemory();
+        goto fail_k;
+    }
+    {
+        const double *K = bK.buf, *H = bH.buf, *d = bd.buf;
+        double *hs = cs + p;
+        for (r = 0; r < p; r++) {
+            double a = fabs(K[r] / d[0]), h = fabs(H[r * n] * d[0]);
+            for (i = 1; i < n; i++) {
+                a = a + fabs(K[i * p + r] / d[i]);
+                h = h + fabs(H[r * n + i] * d[i]);
+            }
+            cs[r] = a;
+            hs[r] = h;
+        }
+        for (k = 0; k < n; k++) {
+            double o = cs[0] * fabs(H[k] * d[k]), t = fabs(K[k * p] / d[k]) * hs[0];
+            for (r = 1; r < p; r++) {
+                o = o + cs[r] * fabs(H[r * n + k] * d[k]);
+                t = t + fabs(K[k * p + r] / d[k]) * hs[r];
+            }
+            one = k ? npmax(one, o) : o;
+            inf = k ? npmax(inf, t) : t;
+        }
+    }
+    PyMem_Free(cs);
+    res = Py_BuildValue("(dd)", one, inf);
+fail_k:
+    PyBuffer_Release(&bK);
+fail_h:
+    PyBuffer_Release(&bH);
+fail_d:
+    PyBuffer_Release(&bd);
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"absrows", (PyCFunction)(void (*)(void))absrows, METH_FASTCALL,
      "absrows(D, n) -> the largest absolute row sum of the n x n D (each row in index order; NaN if any is)"},
@@ -1108,6 +1232,10 @@ static PyMethodDef methods[] = {
      "sandwich(ip, ix, dv, S, X, Y): Y = Phi (Phi S)' for Phi in compressed rows (csr_matvecs' doubles)"},
     {"factored", (PyCFunction)(void (*)(void))factored, METH_FASTCALL,
      "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm) -> (tr, ls, alpha, theta)"},
+    {"kappa", (PyCFunction)(void (*)(void))kappa, METH_FASTCALL,
+     "kappa(K, H, d) -> (one, inf): the 1- and inf-norms of |D^-1 K| |H D| (sums in index order)"},
+    {"block", (PyCFunction)(void (*)(void))block, METH_FASTCALL,
+     "block(Z, cols, ha, q, B): B = ((Z + Z') ha + diag(q))[cols, cols] (numpy's operations, its doubles)"},
     {"open_plan", (PyCFunction)(void (*)(void))open_plan, METH_FASTCALL,
      "open_plan(Z, S, ip, ix, adv, aux, q, rho, wf, czp, c1f, c4f, mn) -> (alpha, theta, trace, tr)"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,

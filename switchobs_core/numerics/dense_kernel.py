@@ -66,20 +66,22 @@ if _dense_step is not None and built_from(_dense_step):
     STEP, BETWEEN, NORM = _dense_step.step, _dense_step.between, _dense_step.norm
     CORRECT, ABSROWS = _dense_step.correct, _dense_step.absrows
     SANDWICH, FACTORED, OPEN_PLAN = _dense_step.sandwich, _dense_step.factored, _dense_step.open_plan
+    BLOCK, KAPPA = _dense_step.block, _dense_step.kappa
 else:
-    STEP = BETWEEN = NORM = CORRECT = ABSROWS = SANDWICH = FACTORED = OPEN_PLAN = None
+    STEP = BETWEEN = NORM = CORRECT = ABSROWS = SANDWICH = FACTORED = OPEN_PLAN = BLOCK = KAPPA = None
 
 #: Calls the kernel refused (an array not C-ordered doubles of the right shape, an output sharing memory
 #: with an input) and numpy computed instead, by function: read by benchmarks and tests.
-FALLBACKS = {"step": 0, "between": 0, "correct": 0, "sandwich": 0, "factored": 0, "open_plan": 0}
+FALLBACKS = {"step": 0, "between": 0, "correct": 0, "sandwich": 0, "factored": 0, "open_plan": 0, "block": 0,
+             "kappa": 0}
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "SANDWICH", "FACTORED", "OPEN_PLAN", "FALLBACKS",
-           "REQUIRE_ENV", "SOURCE", "available", "built_from", "required", "numpy_step", "numpy_factored", "step",
-           "between", "correct", "sandwich", "factored", "open_plan"]
+__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "SANDWICH", "FACTORED", "OPEN_PLAN", "BLOCK", "KAPPA",
+           "FALLBACKS", "REQUIRE_ENV", "SOURCE", "available", "built_from", "required", "numpy_step", "numpy_factored",
+           "step", "between", "correct", "sandwich", "factored", "open_plan", "block", "kappa"]
 
 
 def available() -> bool:
@@ -106,14 +108,15 @@ def numpy_step() -> Iterator[None]:
 
 @contextmanager
 def numpy_factored() -> Iterator[None]:
-    """The sparse maps' sets (:func:`sandwich`, :func:`factored`, :func:`open_plan`) in numpy within the block:
-    the reference path, for tests and benchmarks where the kernel is built."""
-    global SANDWICH, FACTORED, OPEN_PLAN
-    kept, SANDWICH, FACTORED, OPEN_PLAN = (SANDWICH, FACTORED, OPEN_PLAN), None, None, None
+    """The sparse maps' sets (:func:`sandwich`, :func:`factored`, :func:`open_plan`, :func:`block`, :func:`kappa`) in
+    numpy inside the ``with``: the reference path, for tests and benchmarks where the kernel is built."""
+    global SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA
+    kept = SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA
+    SANDWICH = FACTORED = OPEN_PLAN = BLOCK = KAPPA = None
     try:
         yield
     finally:
-        SANDWICH, FACTORED, OPEN_PLAN = kept
+        SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA = kept
 
 
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
@@ -215,6 +218,34 @@ def open_plan(Z: np.ndarray, S: np.ndarray, ip: np.ndarray, ix: np.ndarray, adv:
         FALLBACKS["open_plan"] += 1
         return None
     return q, alpha, theta, trace, tr
+
+
+def block(Z: np.ndarray, cols: np.ndarray, ha: float, q: np.ndarray) -> np.ndarray | None:
+    """``((Z + Z') ha + diag(q))[np.ix_(cols, cols)]`` (a new array) by the kernel, numpy's operations in its order
+    (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid._block`: the same doubles), or None where it does not
+    apply (``cols`` not ``np.intp``, ``q`` not C-ordered doubles): the caller takes numpy's path."""
+    if BLOCK is None:
+        return None
+    B = np.empty((cols.size, cols.size))
+    try:
+        BLOCK(Z, cols, ha, q, B)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["block"] += 1
+        return None
+    return B
+
+
+def kappa(K: np.ndarray, H: np.ndarray, d: np.ndarray) -> tuple[float, float] | None:
+    """``(||.||_1, ||.||_inf)`` of ``|D^-1 K| |H D|`` by the kernel (:attr:`~switchobs_core.bounds.kalman_map.
+    KalmanMap.kappa`'s sums, in index order), or None where it does not apply (arrays not C-ordered doubles of
+    matching sizes): the caller computes them in numpy."""
+    if KAPPA is None:
+        return None
+    try:
+        return KAPPA(K, H, d)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["kappa"] += 1
+        return None
 
 
 if __name__ == "__main__":      # exit 0 where the kernel is built from the source beside it (bootstrap.sh)

@@ -397,8 +397,11 @@ class ErrorEllipsoid:
         return Z, tr
 
     def _block(self, Z: np.ndarray, plan: tuple, cols: np.ndarray) -> np.ndarray:
-        """``S'[np.ix_(cols, cols)]`` of :meth:`_apply` without the n x n passes (the same doubles)."""
+        """``S'[np.ix_(cols, cols)]`` of :meth:`_apply` without the n x n passes (the same doubles; without a shaped
+        set by the compiled kernel where it is built, :func:`~switchobs_core.numerics.dense_kernel.block`)."""
         alpha, tb, Q, q, _, _ = plan
+        if Q is None and (B := dense_kernel.block(Z, cols, 0.5 * alpha, q)) is not None:
+            return B
         ix = cols[:, None], cols
         B = Z[ix]
         B = B + B.T
