@@ -2,8 +2,10 @@
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
  * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
  * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
- * balanced norm of a vector (norm(), RoundingBound.xn); and a Kalman sample's estimate through a
- * fused map (correct(), KalmanMap.correct).
+ * balanced norm of a vector (norm(), RoundingBound.xn); a Kalman sample's estimate through a
+ * fused map (correct(), KalmanMap.correct); and the exact set's step through a Kalman sample's factored map
+ * (sandwich(): Phi~ S Phi~' with scipy's doubles; factored(): the rest of the step and its assembly;
+ * open_plan(): an open-loop prior's plan; block(): a prior's block; kappa(): KalmanMap.kappa's sums).
  *
  * step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);

@@ -141,6 +141,13 @@ def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
     return aM, float(aM.sum(axis=1).max()) if aM.size else 0.0
 
 
+def _zfactors(c: float) -> tuple[float, float]:
+    """``(c', k_1)`` of a product with ``|Z - M S M'| <= c w w'`` (step 6): ``c' = c + u (1 + c)`` (with the
+    symmetrisation's rounding) and ``q``'s factor ``c' (1 + 4u) + 3u (1 + c') (1 + 4u)`` (``_plan``, the kernel)."""
+    cz = c + _U * (1.0 + c)
+    return cz, cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
+
+
 def _clamp(a: float) -> float:
     """A coefficient of an outer sum kept in ``[2^-40, 1e150]`` (any ``a > 0`` is valid; from
     ``2^-40`` on, ``fl(1 + a) - 1`` is exact and positive)."""
@@ -312,8 +319,7 @@ class ErrorEllipsoid:
         ``Z = Phi~ S Phi~'`` with allowance ``c``, ``mn >= ||Phi~||_inf``) planned by the compiled kernel:
         ``w = image_bound(|Phi~|)`` and :meth:`_plan`'s operations with the factors of :attr:`_faux`, its sums in
         index order (rounded up as :meth:`step_factored` says); None where the kernel is not built or refuses."""
-        cz = c + _U * (1.0 + c)
-        c1f = cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
+        cz, c1f = _zfactors(c)
         hit = dense_kernel.open_plan(Z, self.S, *phi, self._faux, rho, self._gsum * (1.0 + 2.0 * _U), cz, c1f,
                                      self._c4f, mn)
         if hit is None:
@@ -329,7 +335,7 @@ class ErrorEllipsoid:
         n, d2, id2 = self.n, self._d2, self._id2
         zs = zd + zd                # the diagonal of sym Z = (Z + Z') / 2, as the full pass rounds it
         zs *= 0.5
-        cz = cz + _U * (1.0 + cz)       # the symmetrisation's rounding, relative u of |sym Z|
+        cz, c1f = _zfactors(cz)         # the symmetrisation's rounding, relative u of |sym Z|; q's factor
         wd = w * self.d
         Wz = float(w @ self._id) * self._gsum
         rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
@@ -357,7 +363,7 @@ class ErrorEllipsoid:
         sd = zs * alpha if alpha != 1.0 else zs
         # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
         # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
-        q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
+        q = (alpha * c1f * Wz) * wd
         if rho > 0.0:
             q += ((theta * kappa * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * d2
         tb = theta * beta
@@ -471,8 +477,7 @@ class ErrorEllipsoid:
         in any order, and each scalar sum of nonnegative terms is rounded up by ``gsum`` whatever its order), so
         the set differs from numpy's in its last bits only; :attr:`tr` and :meth:`lam_scaled` from its diagonal.
         False (nothing changed, ``Y`` intact) where the kernel is not built or refuses the arrays."""
-        cz = c + _U * (1.0 + c)       # the symmetrisation's rounding, relative u of |sym Z| (as _plan)
-        c1f = cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
+        cz, c1f = _zfactors(c)
         hit = dense_kernel.factored(Y, self.S, *phi, K, *H, self._faux, rho, wf, cz, c1f, self._c4f, inf_norm)
         if hit is None:
             return False
