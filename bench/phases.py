@@ -152,6 +152,16 @@ FINE = (
     ("switchobs_core.runtime.families.kalman", "KalmanTableGains._locked", "update: locked Kalman sample"),
     ("switchobs_core.runtime.observer", "SwitchedObserver.envelope", "envelope: observer"),
     ("switchobs_core.bounds.read", "AnchoredBound.read", "envelope: amortised read"),
+    # the rigorous set's step through a Kalman sample's factored map (a tree without one of these skips it)
+    ("switchobs_core.bounds.rigorous", "RoundingBound.propagated", "sets: propagated (prior's sets, own)"),
+    ("switchobs_core.bounds.rigorous", "RoundingBound._noise", "sets: _noise (own)"),
+    ("switchobs_core.bounds.rigorous", "RoundingBound.fused", "sets: fused (update's sets, own)"),
+    ("switchobs_core.bounds.kalman_map", "SparseTransition.sandwich_either", "sets: Phi S Phi' (sandwich_either)"),
+    ("switchobs_core.bounds.kalman_map", "KalmanMap.sandwich", "sets: factored Z, numpy (KalmanMap.sandwich)"),
+    ("switchobs_core.bounds.kalman_map", "KalmanMap.step", "sets: factored step, kernel (KalmanMap.step)"),
+    ("switchobs_core.numerics.rounding", "ErrorEllipsoid._plan", "sets: ErrorEllipsoid._plan"),
+    ("switchobs_core.numerics.rounding", "ErrorEllipsoid._apply", "sets: ErrorEllipsoid._apply"),
+    ("switchobs_core.numerics.rounding", "ErrorEllipsoid._block", "sets: ErrorEllipsoid._block (a prior's block)"),
 )
 
 
@@ -167,6 +177,8 @@ def install(fine: bool = False) -> None:
         owner = mod
         for o in owners:
             owner = getattr(owner, o)
+        if fine and not hasattr(owner, name):     # a FINE entry this tree does not have (another tree's)
+            continue
         _patch(owner, name, phase)
     from switchobs_core.runtime.observer import SwitchedObserver
     from switchobs_ros import estimator

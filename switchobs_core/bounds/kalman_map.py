@@ -46,6 +46,14 @@ symmetric and positive semidefinite (:mod:`switchobs_core.numerics.rounding`, st
    gamma_16 (1 + gamma_4) = 2.2e-15``, where counting every sum as ``n`` long gives
    ``2.01 gamma_{2n+4p+4} = 6.3e-14``.
 
+Where the compiled kernel is built (:mod:`switchobs_core.numerics.dense_kernel`), ``Phi~ S Phi~'`` is its
+:func:`~switchobs_core.numerics.dense_kernel.sandwich` (scipy's doubles) and the rest of a sample's step, ``Z``,
+``w`` and the assembly of :mod:`switchobs_core.numerics.rounding` (steps 5-8), one call of
+:func:`~switchobs_core.numerics.dense_kernel.factored` (:meth:`KalmanMap.step`): the same products, their sums
+in index order. The counts above hold for any order of each sum (the standard model's ``gamma_m`` bounds a sum
+of ``m`` terms however it is ordered), so both paths carry the same ``c`` and ``w``; their sets differ in the
+last bits.
+
 The residual's factor ``||I - K H||`` is taken in the balanced coordinates of the entry's
 ``scale`` (``kappa >= 1 + || |D^-1 K| |H D| ||_2``, by ``sqrt(||.||_1 ||.||_inf)``), like every
 norm of the rigorous bound. The dense form is kept below :data:`SPARSE_MIN_N` states or above
@@ -70,7 +78,7 @@ from ..numerics.frobenius import fro_upper
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, gamma
 
 __all__ = ["SPARSE_MIN_N", "SPARSE_MAX_FILL", "SparseTransition", "sparse_form", "sparse_map", "sparse_transition",
-           "KalmanMap", "frobenius_bound"]
+           "KalmanMap", "frobenius_bound", "open_loop_product"]
 
 #: Fewest states for which the factored form is used (below, dense products are as fast).
 SPARSE_MIN_N = 40
@@ -84,7 +92,7 @@ class SparseTransition:
     :meth:`sandwich`: ``|fl(Phi~ S Phi~') - Phi~ S Phi~'| <= c y y'`` entrywise for a PSD ``S``,
     ``y = |Phi~| sqrt(diag S)`` (module docstring, step 1: ``c = gamma_{2k}``)."""
 
-    __slots__ = ("n", "csr", "nu", "inf_norm", "k", "c", "_ip", "_ix", "_dv", "_adv")
+    __slots__ = ("n", "csr", "nu", "inf_norm", "k", "c", "_ip", "_ix", "_dv", "_adv", "abs_rows")
 
     def __init__(self, Phi: np.ndarray) -> None:
         self.n = n = Phi.shape[0]
@@ -100,6 +108,9 @@ class SparseTransition:
         self.k = int(np.diff(self._ip).max()) if n else 0
         self.c = gamma(2 * self.k)
         self._adv = a
+        #: ``|Phi~|`` as ``(indptr, indices, data)``, the indices as ``np.intp``: the compiled kernel's
+        #: (:mod:`~switchobs_core.numerics.dense_kernel`).
+        self.abs_rows = (self._ip.astype(np.intp), self._ix.astype(np.intp), a)
 
     def abs_matvec(self, x: np.ndarray) -> np.ndarray:
         """``|Phi~| x`` (for ``x >= 0``: the factored step's ``y``)."""
@@ -124,8 +135,14 @@ class SparseTransition:
         one copy less: ``S`` or ``S'`` is read where it lies in memory. The ellipsoid is ``sym S``, the
         same for both (:mod:`switchobs_core.numerics.rounding`, step 5). ``scratch``: a C-ordered n x n
         array (not ``S``) for ``(Phi~ T)'``; the result is then written over ``Phi~ T`` (two n x n arrays
-        touched instead of three; the same doubles)."""
+        touched instead of three; the same doubles). By the compiled kernel where it is built
+        (:func:`~switchobs_core.numerics.dense_kernel.sandwich`: the same doubles), else scipy's products."""
         T = S if S.flags.c_contiguous else np.ascontiguousarray(S.T)     # S.T of an F-ordered S: no copy
+        if dense_kernel.SANDWICH is not None:       # the same doubles in one call
+            use = scratch is not None and scratch.shape == T.shape and scratch.flags.c_contiguous and scratch is not T
+            Y = dense_kernel.sandwich(*self.abs_rows[:2], self._dv, T, scratch if use else np.empty(T.shape))
+            if Y is not None:
+                return Y
         X = self.matmat(T)                                 # Phi~ T
         if scratch is None or scratch.shape != X.shape or not scratch.flags.c_contiguous or scratch is T:
             return self.matmat(X.T)      # Phi~ T' Phi~'
@@ -163,7 +180,48 @@ def sparse_map(entry: Any) -> SparseTransition | None:
     return sp
 
 
+def open_loop_product(ell: Any, sp: SparseTransition) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """``(Z, w, c, mn)`` of the ellipsoid's step through a sparse map ``E`` (compressed rows,
+    :class:`SparseTransition`: an open-loop ``Phi~``, or the error map ``Phi~ - Gamma L C`` of a held
+    innovation): ``Z = E S E'`` in two sparse products, with ``|Z - E S E'| <= c w w'`` entrywise for
+    ``w >= |E| s`` and ``c = gamma_{2k}``, ``k`` the most nonzeros in a row of ``E`` (each sum of the two
+    products has at most ``k`` terms: the module docstring's step 1; the dense product's is ``gamma_{2n+2}``), and
+    ``mn >= ||E||_inf``: what :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product`
+    takes. ``O(nnz(E) n)`` instead of two dense products."""
+    return sp.sandwich_either(ell.S, ell.scratch()), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
+
+
 _COLUMNS: dict[int, tuple] = {}
+_ROWS: dict[int, tuple] = {}
+
+
+def _rows(H: np.ndarray) -> tuple[tuple, int]:
+    """``((indptr, indices, data), h)``: ``H`` in compressed rows (``np.intp`` indices, each row's columns in
+    ascending order) and ``h`` the most nonzeros in a row, for the compiled kernel; kept per ``H`` array."""
+    hit = _ROWS.get(id(H))
+    if hit is not None and hit[0] is H:
+        return hit[1]
+    r, c = np.nonzero(H)        # row by row, columns ascending
+    ip = np.zeros(H.shape[0] + 1, dtype=np.intp)
+    np.cumsum(np.bincount(r, minlength=H.shape[0]), out=ip[1:])
+    out = ((ip, c.astype(np.intp), np.ascontiguousarray(H[r, c], dtype=float)),
+           int(np.diff(ip).max()) if H.shape[0] else 0)
+    if len(_ROWS) > 256:
+        _ROWS.clear()
+    _ROWS[id(H)] = (H, out)
+    return out
+
+
+def _allowance(sp: SparseTransition, h: int, p: int) -> float:
+    """``c`` of the module docstring's step 3 (rounded up) for ``Phi~``'s sparse form ``sp``, ``h`` the most
+    nonzeros in a row of ``H`` and ``p`` its rows: ``gamma_{2k} + gamma_m (1 + gamma_{2k})``, ``m = 2h + 3p + 2``."""
+    g1, gm = sp.c, gamma(2 * h + 3 * p + 2)         # steps 1 and 2
+    return (g1 + gm * (1.0 + g1)) * (1.0 + 4.0 * gamma(1))
+
+
+def _w_factor(n: int, p: int) -> float:
+    """``w``'s factor: ``y + |K| (|H| y)`` rounded up, sums of at most ``n + p + 4`` nonnegative terms (step 3)."""
+    return 1.0 + 2.0 * gamma(n + p + 4)
 
 
 def frobenius_bound(F: float, fK: float, fH: float, p: int, n: int) -> float:
@@ -208,7 +266,7 @@ class KalmanMap:
     """
 
     __slots__ = ("Phi", "K", "H", "e", "_fK", "_fH", "_kappa", "_I", "_IKH", "_E", "_nIKH", "_sp", "_cols",
-                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "_dense", "rho_form")
+                 "_emap", "_Ks", "_Hs", "_aE", "_aKH", "_aEd", "_dense", "rho_form", "_kern")
 
     def __init__(self, entry: Any, K: np.ndarray, H: np.ndarray, identity: np.ndarray) -> None:
         self.Phi, self.K, self.H, self.e, self._I = entry.Phi, K, H, entry, identity
@@ -227,6 +285,7 @@ class KalmanMap:
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
         self._dense: tuple | None = None    # (Phi~, H, K) C-ordered for the kernel's correct()
+        self._kern: tuple | None = None     # (K C-ordered, H's rows, w's factor, c) for the kernel's factored step
         #: ``(bound, dt, coefficients, dense_abs(bound.d))`` of the bound's residual through this map
         #: (:meth:`~switchobs_core.bounds.rigorous.RoundingBound.fused_sample`), kept with the map.
         self.rho_form: tuple | None = None
@@ -256,12 +315,20 @@ class KalmanMap:
     @property
     def kappa(self) -> float:
         """``>= || I + |D^-1 K| |H D| ||_2 >= ||I - K H||_2`` (balanced): ``1 + sqrt(||.||_1 ||.||_inf)``
-        of ``|K| |H|`` there, in O(n p) (module docstring)."""
+        of ``|K| |H|`` there, in O(n p) (module docstring); its sums rounded up by ``1 + 2 gamma_{n+2p+2}`` (in any
+        order: on the factored path by the compiled kernel, :func:`~switchobs_core.numerics.dense_kernel.kappa`)."""
         if self._kappa is None:
-            K, H = self._scaled()
-            aK, aH = np.abs(K), np.abs(H)
-            one = float((aK.sum(axis=0) @ aH).max()) if aH.size else 0.0
-            inf = float((aK @ aH.sum(axis=1)).max()) if aK.size else 0.0
+            K, H = self.K, self.H
+            hit = None      # the compiled kernel's sums on the factored path (in index order), where it runs
+            if self._sp is not None and K.size and H.size:
+                d = getattr(self.e, "scale", None)
+                hit = dense_kernel.kappa(K, H, np.ones(K.shape[0]) if d is None else d)
+            if hit is None:
+                K, H = self._scaled()
+                aK, aH = np.abs(K), np.abs(H)
+                hit = (float((aK.sum(axis=0) @ aH).max()) if aH.size else 0.0,
+                       float((aK @ aH.sum(axis=1)).max()) if aK.size else 0.0)
+            one, inf = hit
             self._kappa = 1.0 + math.sqrt(one * inf) * (1.0 + 2.0 * gamma(K.shape[0] + 2 * H.shape[0] + 2))
         return self._kappa
 
@@ -375,7 +442,7 @@ class KalmanMap:
             aE, mn = self._abs()
             return E @ S @ E.T, ell.image_bound(aE), ell.c_dense, mn
         K, H = self.K, self.H
-        Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was taken
+        Y = ell.take_product(sp)        # the prior's Phi~ S Phi~' at this sample, if it was kept
         if Y is None:
             Y = sp.sandwich_either(S, ell.scratch())   # C-ordered
         cols = self._cols
@@ -405,6 +472,28 @@ class KalmanMap:
             aK, aH = np.abs(K), np.abs(H)
             self._aKH = (aK, aH, (1.0 + float((aK @ aH.sum(axis=1)).max())) * sp.inf_norm)    # ||J |Phi~| ||_inf
         aK, aH, mn = self._aKH
-        w = (y + aK @ (aH @ y)) * (1.0 + 2.0 * gamma(n + p + 4))
-        g1, gm = sp.c, gamma(2 * h + 3 * p + 2)         # steps 1 and 2 of the module docstring
-        return Z, w, (g1 + gm * (1.0 + g1)) * (1.0 + 4.0 * gamma(1)), mn
+        w = (y + aK @ (aH @ y)) * _w_factor(n, p)
+        return Z, w, _allowance(sp, h, p), mn
+
+    def step(self, ell: Any, rho: float) -> bool:
+        """The ellipsoid ``ell`` through this map with a residual ``rho`` (balanced), kept: :meth:`sandwich` and
+        :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product` in one call of the compiled
+        kernel (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_factored`: the same products,
+        allowances ``c`` and ``w``, every sum in index order). False (nothing changed; a product taken from the
+        prior is kept again for :meth:`sandwich`) on the dense path or where the kernel is not built or refuses."""
+        sp = self._sp
+        if sp is None or dense_kernel.FACTORED is None:
+            return False
+        kh = self._kern
+        if kh is None:
+            p, n = self.H.shape
+            rows, h = _rows(self.H)
+            kh = self._kern = (np.ascontiguousarray(self.K, dtype=float), rows, _w_factor(n, p),
+                               _allowance(sp, h, p))
+        Y = ell.take_product(sp)
+        if Y is None:
+            Y = sp.sandwich_either(ell.S, ell.scratch())
+        if ell.step_factored(Y, sp.abs_rows, sp.inf_norm, *kh, rho):
+            return True
+        ell.keep_product(sp, Y)
+        return False

@@ -52,11 +52,11 @@ from ..numerics.expm_bound import nu as nu2
 from ..numerics.frobenius import SQRT_ETA, fro_upper, underflow_slack
 from ..numerics.rounding import UNDERFLOW, UNIT_ROUNDOFF, ErrorEllipsoid, PendingSet, gamma
 from ..numerics.scaling import balance, balanced
-from .kalman_map import SparseTransition, sparse_map
+from .kalman_map import open_loop_product, sparse_map
 from .read import AnchoredBound
 from .stamp import StampError
 
-__all__ = ["NO_E0", "RoundingBound", "open_loop_product"]
+__all__ = ["NO_E0", "RoundingBound", "open_loop_product"]     # open_loop_product: kalman_map's
 
 
 #: Per entry of a scaled norm: what underflow hides from the square (``sqrt(eta)``) and the product ``s_i v_i``.
@@ -84,18 +84,6 @@ NO_E0 = ("e0 is not known (e0 = -1): no bound until the data certify one (a wind
          "of consistent samples, switchobs_core.runtime.recertify)")
 
 _U = UNIT_ROUNDOFF
-
-
-def open_loop_product(ell: ErrorEllipsoid, sp: SparseTransition) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """``(Z, w, c, mn)`` of the ellipsoid's step through a sparse map ``E`` (compressed rows,
-    :class:`~switchobs_core.bounds.kalman_map.SparseTransition`: an open-loop ``Phi~``, or the error
-    map ``Phi~ - Gamma L C`` of a held innovation): ``Z = E S E'`` in two sparse products, with
-    ``|Z - E S E'| <= c w w'`` entrywise for ``w >= |E| s`` and ``c = gamma_{2k}``, ``k`` the most
-    nonzeros in a row of ``E`` (each sum of the two products has at most ``k`` terms:
-    :mod:`~switchobs_core.bounds.kalman_map`, step 1; the dense product's is ``gamma_{2n+2}``), and
-    ``mn >= ||E||_inf``: what :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.propagate_product`
-    takes. ``O(nnz(E) n)`` instead of two dense products."""
-    return sp.sandwich_either(ell.S, ell.scratch()), ell.image_bound(sp.abs_matvec), sp.c, sp.inf_norm
 
 
 def _whole(out: Any) -> tuple[np.ndarray, float]:
@@ -379,15 +367,17 @@ class RoundingBound:
         G, c, r = self.disturbed(dt, G, c)
         rho += r
         sp = sparse_map(e)
-        if sp is not None:
-            Z, w, cz, mn = open_loop_product(ell, sp)
+        if sp is not None:      # open_loop_product's set, planned by the kernel where it runs
+            remake = (lambda S=ell.S: sp.sandwich_either(S))
+            Z = sp.sandwich_either(ell.S, ell.scratch())
+            out = None if G is not None else ell.pending_open(Z, sp.abs_rows, sp.c, rho, sp.inf_norm, remake)
+            if out is None:
+                out = ell.pending(Z, ell.image_bound(sp.abs_matvec), sp.c, rho, sp.inf_norm, G, c, remake)
             if not keep:        # assembled for a reader of the whole set only (PendingSet)
-                out = ell.pending(Z, w, cz, rho, mn, G, c, lambda S=ell.S: sp.sandwich_either(S))
                 if e.E is e.Phi:    # a prior's open-loop product: a Kalman sample's step takes it
                     ell.keep_product(sp, out)       # (KalmanMap.sandwich) unless the set was assembled
                 return out
-            out = (ell.propagate_shaped_product(Z, w, cz, rho, mn, G, c) if G is not None
-                   else ell.propagate_product(Z, w, cz, rho, mn))
+            out = (out.full(), out.tr)
         else:
             absE = e.abs_E() if hasattr(e, "abs_E") else None
             out = (ell.propagate_shaped(e.E, rho, G, c, absM=absE) if G is not None
@@ -496,6 +486,8 @@ class RoundingBound:
                     continue
                 en = math.sqrt(ell.lam_scaled())
                 rho = m.nIKH * self._rho_step(e, dt, xs, xs1, en, None, u) + rc + m.emap * en
+                if not noisy and not self.w and m.step(ell, rho):     # the compiled factored step, where it runs
+                    continue
                 Z, w, c, mn = m.sandwich(ell)
                 if noisy:       # e^+ = (I - K H) (e^- + d) + K (v + w)
                     G, cg, r = self.disturbed(dt, K, self._wc(p, self.noise_max[channel - 1]), K, m.H, m.nIKH)

@@ -2,8 +2,10 @@
  * switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense (its docstring states the set and its
  * allowances; switchobs_core/numerics/dense_kernel.py calls this and passes every coefficient);
  * the O(n^2) pass of switchobs_core.bounds.read's amortised read between anchors (between()); and the
- * balanced norm of a vector (norm(), RoundingBound.xn); and a Kalman sample's estimate through a
- * fused map (correct(), KalmanMap.correct).
+ * balanced norm of a vector (norm(), RoundingBound.xn); a Kalman sample's estimate through a
+ * fused map (correct(), KalmanMap.correct); and the exact set's step through a Kalman sample's factored map
+ * (sandwich(): Phi~ S Phi~' with scipy's doubles; factored(): the rest of the step and its assembly;
+ * open_plan(): an open-loop prior's plan; block(): a prior's block; kappa(): KalmanMap.kappa's sums).
  *
  * step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta)
  *   M, S, aMd, out: C-ordered n x n doubles (out written, not aliased with the others);
@@ -577,6 +579,648 @@ static PyObject *absrows(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ss
     return PyFloat_FromDouble(nan ? NAN : best);
 }
 
+/* ---- the factored step of a Kalman sample (switchobs_core.bounds.kalman_map, steps 1-3;
+ * switchobs_core.numerics.rounding, steps 5-8): sandwich() and factored() ---- */
+
+/* an index array: C-ordered 8-byte signed integers (np.intp on x86-64) of len entries */
+static int getidx(PyObject *o, Py_buffer *b, Py_ssize_t len)
+{
+    const char *f;
+    if (PyObject_GetBuffer(o, b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return -1;
+    f = b->format;
+    if (f != NULL && (f[0] == '@' || f[0] == '=' || (!PY_BIG_ENDIAN && f[0] == '<')))
+        f++;
+    if (b->itemsize != 8 || f == NULL || (f[0] != 'l' && f[0] != 'q') || f[1] != 0 || (len >= 0 && b->len != len * 8)) {
+        PyBuffer_Release(b);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: an index array of the wrong size or type");
+        return -1;
+    }
+    return 0;
+}
+
+/* whether (ip, ix) are compressed rows of `rows` rows over `cols` columns: ip[0] = 0, ip nondecreasing,
+ * ip[rows] = nnz, every column index in [0, cols) (else ValueError: no read outside the arrays) */
+static int csr_ok(Py_ssize_t rows, Py_ssize_t cols, const Py_ssize_t *ip, const Py_ssize_t *ix, Py_ssize_t nnz)
+{
+    Py_ssize_t i;
+    if (ip[0] != 0 || ip[rows] != nnz)
+        goto bad;
+    for (i = 0; i < rows; i++)
+        if (ip[i + 1] < ip[i])
+            goto bad;
+    for (i = 0; i < nnz; i++)
+        if (ix[i] < 0 || ix[i] >= cols)
+            goto bad;
+    return 0;
+bad:
+    PyErr_SetString(PyExc_ValueError, "_dense_step: compressed rows out of range");
+    return -1;
+}
+
+/* (ip, ix, dv) of args[0..2] into b[0..2]: compressed rows of `rows` rows over `cols` columns (csr_ok) with nnz
+ * values; b[0..2] held on success (nnz returned), none on failure (-1) */
+static Py_ssize_t getcsr(PyObject *const *args, Py_buffer *b, Py_ssize_t rows, Py_ssize_t cols)
+{
+    Py_ssize_t nnz;
+    if (getidx(args[0], &b[0], rows + 1) < 0)
+        return -1;
+    if (getidx(args[1], &b[1], -1) < 0)
+        goto fail_p;
+    nnz = b[1].len / 8;
+    if (csr_ok(rows, cols, b[0].buf, b[1].buf, nnz) < 0 || getlen(args[2], &b[2], nnz, 0) < 0)
+        goto fail_i;
+    return nnz;
+fail_i:
+    PyBuffer_Release(&b[1]);
+fail_p:
+    PyBuffer_Release(&b[0]);
+    return -1;
+}
+
+/* o as an n x n array of doubles with any strides (a diagonal is read): n, or -1 with ValueError */
+static Py_ssize_t getsq(PyObject *o, Py_buffer *b)
+{
+    Py_ssize_t n;
+    if (PyObject_GetBuffer(o, b, PyBUF_STRIDES | PyBUF_FORMAT) < 0)
+        return -1;
+    n = b->ndim == 2 ? b->shape[0] : 0;
+    if (!doubles(b) || n < 1 || b->shape[1] != n || b->strides[0] % 8 || b->strides[1] % 8) {
+        PyBuffer_Release(b);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: a square array of the wrong shape or type");
+        return -1;
+    }
+    return n;
+}
+
+/* C = A B for A in compressed rows (n x n) and B n x n C-ordered: row i of C is 0.0 plus a_ij B[j, :] added
+ * over the row's nonzeros in their stored order: the doubles of scipy's csr_matvecs (switchobs_core.numerics.csr),
+ * each entry on its own (four columns at a time, elementwise) */
+__attribute__((target_clones("avx2", "default")))
+static void csr_times(Py_ssize_t n, const Py_ssize_t *restrict ip, const Py_ssize_t *restrict ix,
+                      const double *restrict dv, const double *restrict B, double *restrict C)
+{
+    Py_ssize_t i, jj, k;
+    for (i = 0; i < n; i++) {
+        double *c = C + i * n;
+        for (k = 0; k < n; k++)
+            c[k] = 0.0;
+        for (jj = ip[i]; jj < ip[i + 1]; jj++) {
+            const double a = dv[jj];
+            const double *b = B + ix[jj] * n;
+            v4 a4 = {a, a, a, a};
+            for (k = 0; k + 4 <= n; k += 4)
+                st4(c + k, ld4(c + k) + a4 * ld4(b + k));
+            for (; k < n; k++)
+                c[k] = c[k] + a * b[k];
+        }
+    }
+}
+
+/* T = X' (n x n, C-ordered both), in tiles of 8 x 8 */
+static void transpose(Py_ssize_t n, const double *restrict X, double *restrict T)
+{
+    Py_ssize_t ib, kb, i, k;
+    for (ib = 0; ib < n; ib += 8)
+        for (kb = 0; kb < n; kb += 8)
+            for (i = ib; i < ib + 8 && i < n; i++)
+                for (k = kb; k < kb + 8 && k < n; k++)
+                    T[k * n + i] = X[i * n + k];
+}
+
+/* sandwich(ip, ix, dv, S, X, Y): Y = Phi (Phi S)' (SparseTransition.sandwich_either): X = Phi S written into Y,
+ * its transpose into X, then Y = Phi X; Phi in compressed rows (ip n + 1, ix and dv nnz), S, X, Y n x n
+ * C-ordered doubles (X and Y written, apart from each other and from the inputs). The doubles of the two
+ * csr_matvecs products and the copy of numpy's path. */
+static PyObject *sandwich(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bp, bi, bd, bS, bX, bY;
+    Py_ssize_t n, nnz;
+    PyObject *res = NULL;
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "sandwich(ip, ix, dv, S, X, Y)");
+        return NULL;
+    }
+    if (getidx(args[0], &bp, -1) < 0)
+        return NULL;
+    n = bp.len / 8 - 1;
+    if (n < 1) {
+        PyErr_SetString(PyExc_ValueError, "_dense_step: ip of the wrong size");
+        goto fail_p;
+    }
+    if (getidx(args[1], &bi, -1) < 0)
+        goto fail_p;
+    nnz = bi.len / 8;
+    if (csr_ok(n, n, bp.buf, bi.buf, nnz) < 0)
+        goto fail_i;
+    if (getlen(args[2], &bd, nnz, 0) < 0)
+        goto fail_i;
+    if (get(args[3], &bS, n, 2, 0) < 0)
+        goto fail_d;
+    if (get(args[4], &bX, n, 2, PyBUF_WRITABLE) < 0)
+        goto fail_s;
+    if (get(args[5], &bY, n, 2, PyBUF_WRITABLE) < 0)
+        goto fail_x;
+    if (!(apart(&bX, &bY) && apart(&bX, &bS) && apart(&bY, &bS) && apart(&bX, &bd) && apart(&bY, &bd)
+          && apart(&bX, &bp) && apart(&bY, &bp) && apart(&bX, &bi) && apart(&bY, &bi)) && aliased() < 0)
+        goto fail_y;
+    csr_times(n, bp.buf, bi.buf, bd.buf, bS.buf, bY.buf);
+    transpose(n, bY.buf, bX.buf);
+    csr_times(n, bp.buf, bi.buf, bd.buf, bX.buf, bY.buf);
+    res = Py_None;
+    Py_INCREF(res);
+fail_y:
+    PyBuffer_Release(&bY);
+fail_x:
+    PyBuffer_Release(&bX);
+fail_s:
+    PyBuffer_Release(&bS);
+fail_d:
+    PyBuffer_Release(&bd);
+fail_i:
+    PyBuffer_Release(&bi);
+fail_p:
+    PyBuffer_Release(&bp);
+    return res;
+}
+
+/* Y <- Y - A B (Y n x n, A n x m, B m x n, C-ordered), each entry's sum over l = 0..m-1 in that order, then the
+ * difference: blocks of 4 rows by 8 columns in registers, elementwise (rows4_times' pattern) */
+__attribute__((target_clones("avx2", "default")))
+static void minus_product(Py_ssize_t n, Py_ssize_t m, const double *restrict A, const double *restrict B,
+                          double *restrict Y)
+{
+    Py_ssize_t i, k, l, r;
+    for (i = 0; i + 4 <= n; i += 4) {
+        const double *a0 = A + i * m, *a1 = a0 + m, *a2 = a1 + m, *a3 = a2 + m;
+        double *y0 = Y + i * n, *y1 = y0 + n, *y2 = y1 + n, *y3 = y2 + n;
+        for (k = 0; k + 8 <= n; k += 8) {
+            v4 b0 = ld4(B + k), b1 = ld4(B + k + 4);
+            v4 c00 = a0[0] * b0, c01 = a0[0] * b1, c10 = a1[0] * b0, c11 = a1[0] * b1;
+            v4 c20 = a2[0] * b0, c21 = a2[0] * b1, c30 = a3[0] * b0, c31 = a3[0] * b1;
+            for (l = 1; l < m; l++) {
+                b0 = ld4(B + l * n + k);
+                b1 = ld4(B + l * n + k + 4);
+                c00 = c00 + a0[l] * b0, c01 = c01 + a0[l] * b1;
+                c10 = c10 + a1[l] * b0, c11 = c11 + a1[l] * b1;
+                c20 = c20 + a2[l] * b0, c21 = c21 + a2[l] * b1;
+                c30 = c30 + a3[l] * b0, c31 = c31 + a3[l] * b1;
+            }
+            st4(y0 + k, ld4(y0 + k) - c00), st4(y0 + k + 4, ld4(y0 + k + 4) - c01);
+            st4(y1 + k, ld4(y1 + k) - c10), st4(y1 + k + 4, ld4(y1 + k + 4) - c11);
+            st4(y2 + k, ld4(y2 + k) - c20), st4(y2 + k + 4, ld4(y2 + k + 4) - c21);
+            st4(y3 + k, ld4(y3 + k) - c30), st4(y3 + k + 4, ld4(y3 + k + 4) - c31);
+        }
+        for (r = 0; r < 4; r++)
+            for (l = k; l < n; l++) {         /* the last columns, one at a time */
+                const double *a = A + (i + r) * m;
+                double z = a[0] * B[l];
+                Py_ssize_t j;
+                for (j = 1; j < m; j++)
+                    z = z + a[j] * B[j * n + l];
+                Y[(i + r) * n + l] = Y[(i + r) * n + l] - z;
+            }
+    }
+    for (; i < n; i++)                          /* the last rows, one at a time */
+        for (k = 0; k < n; k++) {
+            const double *a = A + i * m;
+            double z = a[0] * B[k];
+            for (l = 1; l < m; l++)
+                z = z + a[l] * B[l * n + k];
+            Y[i * n + k] = Y[i * n + k] - z;
+        }
+}
+
+/* numpy's max: NaN once any value is NaN */
+static double npmax(double acc, double v) { return (v > acc || isnan(v)) ? v : acc; }
+
+/* rounding.ErrorEllipsoid._plan without an added shaped set, its operations in its order (every sum in index
+ * order): from the diagonal zd of Z (before its symmetrisation) and w, q into q and fac = (alpha, theta, the
+ * sum of the new diagonal sd + q); aux as factored()'s, c4 = (n + 4) n eta (2 + ||M||_inf) */
+static void plan_core(Py_ssize_t n, const double *zd, const double *w, const double *aux, double rho, double czp,
+                      double c1f, double c4, double *q, double *fac)
+{
+    const double *d = aux, *id = aux + n, *id2 = aux + 2 * n, *d2 = aux + 3 * n;
+    const double gsum = aux[4 * n], k4 = aux[4 * n + 1], alo = aux[4 * n + 2], ahi = aux[4 * n + 3];
+    const double kth = aux[4 * n + 4], k2 = aux[4 * n + 5], eta = aux[4 * n + 6], k8 = aux[4 * n + 7];
+    const double u2 = aux[4 * n + 8];
+    double Wv = 0.0, tzs = 0.0, alpha = 1.0, theta = 1.0, c1, c2 = 0.0, trace = 0.0, Wz, rzf, tz;
+    Py_ssize_t i;
+    for (i = 0; i < n; i++)
+        Wv = Wv + w[i] * id[i];
+    Wz = Wv * gsum;                             /* W of step 6, rounded up */
+    rzf = (czp * Wz) * k4;                      /* R_z = rzf (w d): _diag(w, cz) */
+    for (i = 0; i < n; i++)
+        tzs = tzs + (((zd[i] + zd[i]) * 0.5) + rzf * (w[i] * d[i])) * id2[i];
+    tz = pymax(tzs, 0.0) * gsum;                /* trace_D of E(Z + R_z) */
+    if (tz > 0.0 && ((double)n * (rho * rho) > 0.0 || rho > 0.0)) {
+        alpha = 1.0 + pymin(pymax(rho / sqrt(tz), alo), ahi);
+        theta = (1.0 + 1.0 / (alpha - 1.0)) * kth;
+    }
+    c1 = (alpha * c1f) * Wz;
+    if (rho > 0.0)
+        c2 = ((theta * rho) * rho * k2 + eta);
+    for (i = 0; i < n; i++) {
+        double zs = (zd[i] + zd[i]) * 0.5, sd = alpha != 1.0 ? zs * alpha : zs;
+        double qi = c1 * (w[i] * d[i]);
+        if (rho > 0.0)
+            qi = qi + c2 * d2[i];
+        qi = qi + (fabs(sd) * u2 + c4);
+        qi = qi * k8;
+        q[i] = qi;
+        trace = trace + (sd + qi);
+    }
+    fac[0] = alpha;
+    fac[1] = theta;
+    fac[2] = trace;
+}
+
+/* The factored step's work: see factored() */
+static void factored_kernel(Py_ssize_t n, Py_ssize_t p, double *restrict Y, const double *S, Py_ssize_t s0,
+                            Py_ssize_t s1, const Py_ssize_t *ip, const Py_ssize_t *ix, const double *adv,
+                            const double *restrict K, const Py_ssize_t *hp, const Py_ssize_t *hj,
+                            const double *hv, const double *aux, const double *cf, double *restrict work,
+                            double *out)
+{
+    const double *id2 = aux + 2 * n, gsum = aux[4 * n];
+    const double rho = cf[0], wf = cf[1], czp = cf[2], c1f = cf[3], c4f = cf[4], inf_norm = cf[5];
+    const Py_ssize_t m = 2 * p;
+    double *s = work, *w = s + n, *zd = w + n, *Bm = zd + n, *Am = Bm + m * n, *Cm = Am + n * m, *hy = Cm + p * p;
+    Py_ssize_t i, k, r, q, jj;
+    double mx = 0.0, tr = 0.0, ls = 0.0;
+
+    /* w = (y + |K| (|H| y)) wf, y = |Phi~| s, s = sqrt(max(diag S, 0)) (step 3); |H|'s row sums for ||M||_inf */
+    for (i = 0; i < n; i++)
+        s[i] = sqrt(pymax(S[i * s0 + i * s1], 0.0));
+    for (i = 0; i < n; i++) {
+        double t = 0.0;
+        for (jj = ip[i]; jj < ip[i + 1]; jj++)
+            t = t + adv[jj] * s[ix[jj]];
+        w[i] = t;                               /* y */
+    }
+    for (r = 0; r < p; r++) {
+        double t = 0.0, a = 0.0;
+        for (jj = hp[r]; jj < hp[r + 1]; jj++) {
+            t = t + fabs(hv[jj]) * w[hj[jj]];
+            a = a + fabs(hv[jj]);
+        }
+        hy[r] = t;
+        Cm[r] = a;                              /* |H| 1, read before Cm is formed */
+    }
+    for (i = 0; i < n; i++) {
+        const double *ki = K + i * p;
+        double t = fabs(ki[0]) * hy[0], a = fabs(ki[0]) * Cm[0];
+        for (r = 1; r < p; r++) {
+            t = t + fabs(ki[r]) * hy[r];
+            a = a + fabs(ki[r]) * Cm[r];
+        }
+        w[i] = (w[i] + t) * wf;
+        mx = npmax(mx, a);
+    }
+    /* G = H Y into Bm's first p rows, K' into its last p; Am's rows [K_i, V_i], V = Y H' - K (G H') (step 2) */
+    for (r = 0; r < p; r++) {
+        double *g = Bm + r * n;
+        if (hp[r] == hp[r + 1])
+            for (k = 0; k < n; k++)
+                g[k] = 0.0;
+        for (jj = hp[r]; jj < hp[r + 1]; jj++) {
+            const double h = hv[jj], *yr = Y + hj[jj] * n;
+            if (jj == hp[r])
+                for (k = 0; k < n; k++)
+                    g[k] = h * yr[k];
+            else
+                for (k = 0; k < n; k++)
+                    g[k] = g[k] + h * yr[k];
+        }
+        for (k = 0; k < n; k++)
+            Bm[(p + r) * n + k] = K[k * p + r];
+    }
+    for (r = 0; r < p; r++)                     /* C = G H': C[r][q] = sum_c G_rc H_qc */
+        for (q = 0; q < p; q++) {
+            double t = 0.0;
+            for (jj = hp[q]; jj < hp[q + 1]; jj++)
+                t = jj == hp[q] ? hv[jj] * Bm[r * n + hj[jj]] : t + hv[jj] * Bm[r * n + hj[jj]];
+            Cm[r * p + q] = t;
+        }
+    for (i = 0; i < n; i++) {
+        const double *ki = K + i * p, *yi = Y + i * n;
+        double *a = Am + i * m;
+        for (r = 0; r < p; r++) {
+            double yh = 0.0, kc = ki[0] * Cm[r];
+            for (jj = hp[r]; jj < hp[r + 1]; jj++)
+                yh = jj == hp[r] ? hv[jj] * yi[hj[jj]] : yh + hv[jj] * yi[hj[jj]];
+            for (q = 1; q < p; q++)
+                kc = kc + ki[q] * Cm[q * p + r];
+            a[r] = ki[r];
+            a[p + r] = yh - kc;
+        }
+    }
+    /* Z = Y - [K V] [G; K'] in place (one product of inner dimension 2p), its diagonal */
+    minus_product(n, m, Am, Bm, Y);
+    for (i = 0; i < n; i++)
+        zd[i] = Y[i * n + i];
+    /* the plan (rounding.ErrorEllipsoid._plan without an added shaped set): q into s (read no more) */
+    {
+        double fac[3], alpha, ha;
+        plan_core(n, zd, w, aux, rho, czp, c1f, c4f * (2.0 + (1.0 + mx) * inf_norm), s, fac);
+        alpha = fac[0];
+        /* S' = (Z + Z') (alpha / 2) + diag(q) in place, exactly symmetric, in tiles of 8 x 8 */
+        ha = 0.5 * alpha;
+        for (i = 0; i < n; i += 8)
+            for (k = i; k < n; k += 8) {
+                Py_ssize_t a, b;
+                for (a = i; a < i + 8 && a < n; a++)
+                    for (b = (k == i ? a + 1 : k); b < k + 8 && b < n; b++) {
+                        double v = (Y[a * n + b] + Y[b * n + a]) * ha;
+                        Y[a * n + b] = v;
+                        Y[b * n + a] = v;
+                    }
+            }
+        for (i = 0; i < n; i++) {
+            double v = (zd[i] + zd[i]) * ha + s[i];
+            Y[i * n + i] = v;
+            tr = tr + v;
+            ls = ls + v * id2[i];
+        }
+        out[2] = alpha;
+        out[3] = fac[1];
+    }
+    out[0] = pymax(tr, 0.0) * gsum;
+    out[1] = pymax(ls, 0.0) * gsum;
+}
+
+/* factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm) -> (tr, ls, alpha, theta):
+ * a Kalman sample's step of the exact set through its factored map (KalmanMap.sandwich and
+ * ErrorEllipsoid.propagate_product in one call, switchobs_core.numerics.rounding.ErrorEllipsoid.step_factored):
+ * Y (n x n C-ordered, the prior's Phi~ S Phi~') is overwritten with S'; S (n x n, any strides) gives diag S;
+ * (ip, ix, adv) |Phi~| and (hp, hj, hv) H in compressed rows, K n x p C-ordered; aux the ellipsoid's
+ * (d, 1/d, 1/d^2, d^2, gsum, 1 + 4u, alo, ahi, kth, k2, eta, 1 + 8u, 2u); the scalars: the residual rho, w's
+ * factor, cz + u (1 + cz), q's factor of W (w d), (n + 4) n eta, ||Phi~||_inf rounded up. Every sum in index
+ * order (within the gamma_m of the docstrings' standard model, as any order); tr and ls the trace and the
+ * balanced trace of S' rounded up by gsum. */
+static PyObject *factored(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer b[10];
+    Py_ssize_t n, p = 0, got = 0, i;
+    double cf[6], out[4], *work;
+    PyObject *res = NULL;
+    if (nargs != 16) {
+        PyErr_SetString(PyExc_TypeError, "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, "
+                                         "inf_norm)");
+        return NULL;
+    }
+    for (i = 0; i < 6; i++) {
+        cf[i] = PyFloat_AsDouble(args[10 + i]);
+        if (cf[i] == -1.0 && PyErr_Occurred())
+            return NULL;
+    }
+    if ((n = getsq(args[1], &b[1])) < 0)
+        return NULL;
+    if (get(args[0], &b[0], n, 2, PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&b[1]);
+        return NULL;
+    }
+    got = 2;
+    if (getcsr(args + 2, b + 2, n, n) < 0)
+        goto fail;
+    {       /* H's rows: p from hp's length (getcsr then checks it) */
+        Py_buffer bh;
+        if (PyObject_GetBuffer(args[6], &bh, PyBUF_C_CONTIGUOUS) < 0)
+            goto fail;
+        p = bh.len / 8 - 1;
+        PyBuffer_Release(&bh);
+    }
+    if (p < 1 || p > 4096) {
+        PyErr_SetString(PyExc_ValueError, "_dense_step: hp of the wrong size");
+        goto fail;
+    }
+    if (getcsr(args + 6, b + 5, p, n) < 0)
+        goto fail;
+    got = 8;
+    if (getlen(args[5], &b[8], n * p, 0) < 0)
+        goto fail;
+    got = 9;
+    if (getlen(args[9], &b[9], 4 * n + 9, 0) < 0)
+        goto fail;
+    got = 10;
+    for (i = 1; i < 10; i++)            /* Y (written) apart from every input */
+        if (!apart(&b[0], &b[i])) {
+            aliased();
+            goto fail;
+        }
+    work = PyMem_Malloc((size_t)(3 * n + 4 * p * n + p * p + p) * sizeof(double));
+    if (work == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    factored_kernel(n, p, b[0].buf, b[1].buf, b[1].strides[0] / 8, b[1].strides[1] / 8, b[2].buf, b[3].buf,
+                    b[4].buf, b[8].buf, b[5].buf, b[6].buf, b[7].buf, b[9].buf, cf, work, out);
+    PyMem_Free(work);
+    res = Py_BuildValue("(dddd)", out[0], out[1], out[2], out[3]);
+fail:
+    for (i = 0; i < got; i++)
+        PyBuffer_Release(&b[i]);
+    return res;
+}
+
+/* open_plan(Z, S, ip, ix, adv, aux, q, rho, wf, czp, c1f, c4f, mn) -> (alpha, theta, trace, tr): the plan of an
+ * open-loop step's set (ErrorEllipsoid.pending_open, a prior's PendingSet): w = (|Phi~| s) wf with s =
+ * sqrt(max(diag S, 0)) (ErrorEllipsoid.image_bound, the sum as scipy's csr_matvec), then plan_core on Z's
+ * diagonal with c4 = c4f (2 + mn); q (n doubles) written; trace the sum of the new diagonal, tr it rounded up. */
+static PyObject *open_plan(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer b[7];
+    Py_ssize_t n, got = 0, i, jj;
+    double cf[6], fac[3], *work;
+    PyObject *res = NULL;
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "open_plan(Z, S, ip, ix, adv, aux, q, rho, wf, czp, c1f, c4f, mn)");
+        return NULL;
+    }
+    for (i = 0; i < 6; i++) {
+        cf[i] = PyFloat_AsDouble(args[7 + i]);
+        if (cf[i] == -1.0 && PyErr_Occurred())
+            return NULL;
+    }
+    if ((n = getsq(args[0], &b[0])) < 0)
+        return NULL;
+    got = 1;
+    if (getsq(args[1], &b[1]) != n) {
+        if (!PyErr_Occurred()) {
+            PyBuffer_Release(&b[1]);
+            PyErr_SetString(PyExc_ValueError, "_dense_step: S and Z of different sizes");
+        }
+        goto fail;
+    }
+    got = 2;
+    if (getcsr(args + 2, b + 2, n, n) < 0)
+        goto fail;
+    got = 5;
+    if (getlen(args[5], &b[5], 4 * n + 9, 0) < 0)
+        goto fail;
+    got = 6;
+    if (getlen(args[6], &b[6], n, PyBUF_WRITABLE) < 0)
+        goto fail;
+    got = 7;
+    for (i = 0; i < 6; i++)
+        if (!apart(&b[6], &b[i])) {
+            aliased();
+            goto fail;
+        }
+    work = PyMem_Malloc((size_t)(3 * n) * sizeof(double));
+    if (work == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    {
+        const double *Z = b[0].buf, *S = b[1].buf, *adv = b[4].buf, wf = cf[1];
+        const Py_ssize_t z0 = b[0].strides[0] / 8, z1 = b[0].strides[1] / 8, s0 = b[1].strides[0] / 8,
+                         s1 = b[1].strides[1] / 8, *ip = b[2].buf, *ix = b[3].buf;
+        double *s = work, *w = s + n, *zd = w + n;
+        for (i = 0; i < n; i++) {
+            s[i] = sqrt(pymax(S[i * s0 + i * s1], 0.0));
+            zd[i] = Z[i * z0 + i * z1];
+        }
+        for (i = 0; i < n; i++) {
+            double t = 0.0;
+            for (jj = ip[i]; jj < ip[i + 1]; jj++)
+                t = t + adv[jj] * s[ix[jj]];
+            w[i] = t * wf;
+        }
+        plan_core(n, zd, w, b[5].buf, cf[0], cf[2], cf[3], cf[4] * (2.0 + cf[5]), b[6].buf, fac);
+    }
+    PyMem_Free(work);
+    res = Py_BuildValue("(dddd)", fac[0], fac[1], fac[2], pymax(fac[2], 0.0) * ((const double *)b[5].buf)[4 * n]);
+fail:
+    for (i = 0; i < got; i++)
+        PyBuffer_Release(&b[i]);
+    return res;
+}
+
+/* block(Z, cols, ha, q, B): B[a, b] = (Z[c_a, c_b] + Z[c_b, c_a]) ha, then q[c_a] added on the diagonal: a block of
+ * (Z + Z') (alpha / 2) + diag(q) without the n x n passes (ErrorEllipsoid._block without a shaped set), the
+ * operations of numpy's path in its order, so its doubles; Z n x n (any strides), cols m np.intp in [0, n),
+ * q n doubles, B m x m C-ordered (written, apart from the inputs) */
+static PyObject *block(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bZ, bc, bq, bB;
+    Py_ssize_t n, m, a, b;
+    double ha;
+    PyObject *res = NULL;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "block(Z, cols, ha, q, B)");
+        return NULL;
+    }
+    ha = PyFloat_AsDouble(args[2]);
+    if (ha == -1.0 && PyErr_Occurred())
+        return NULL;
+    if ((n = getsq(args[0], &bZ)) < 0)
+        return NULL;
+    if (getidx(args[1], &bc, -1) < 0)
+        goto fail_z;
+    m = bc.len / 8;
+    if (getlen(args[3], &bq, n, 0) < 0)
+        goto fail_c;
+    if (getlen(args[4], &bB, m * m, PyBUF_WRITABLE) < 0)
+        goto fail_q;
+    if (!(apart(&bB, &bZ) && apart(&bB, &bc) && apart(&bB, &bq)) && aliased() < 0)
+        goto fail_b;
+    {
+        const Py_ssize_t *cols = bc.buf, z0 = bZ.strides[0] / 8, z1 = bZ.strides[1] / 8;
+        const double *Z = bZ.buf, *q = bq.buf;
+        double *B = bB.buf;
+        for (a = 0; a < m; a++)
+            if (cols[a] < 0 || cols[a] >= n) {
+                PyErr_SetString(PyExc_ValueError, "_dense_step: a column out of range");
+                goto fail_b;
+            }
+        for (a = 0; a < m; a++)
+            for (b = 0; b < m; b++)
+                B[a * m + b] = (Z[cols[a] * z0 + cols[b] * z1] + Z[cols[b] * z0 + cols[a] * z1]) * ha;
+        for (a = 0; a < m; a++)
+            B[a * m + a] = B[a * m + a] + q[cols[a]];
+    }
+    res = Py_None;
+    Py_INCREF(res);
+fail_b:
+    PyBuffer_Release(&bB);
+fail_q:
+    PyBuffer_Release(&bq);
+fail_c:
+    PyBuffer_Release(&bc);
+fail_z:
+    PyBuffer_Release(&bZ);
+    return res;
+}
+
+/* kappa(K, H, d) -> (one, inf): the 1- and inf-norms of |D^-1 K| |H D| (K n x p, H p x n C-ordered, d n doubles;
+ * KalmanMap.kappa's sums, each in index order, the scalings as numpy's: K_ir / d_i and H_rc d_c):
+ * one = max_c sum_r (sum_i |K_ir / d_i|) |H_rc d_c|, inf = max_i sum_r |K_ir / d_i| (sum_c |H_rc d_c|) */
+static PyObject *kappa(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_buffer bK, bH, bd;
+    Py_ssize_t n, p, i, r, k;
+    double one = 0.0, inf = 0.0, *cs;
+    PyObject *res = NULL;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "kappa(K, H, d)");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[2], &bd, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return NULL;
+    n = bd.len / 8;
+    if (!doubles(&bd) || n < 1) {
+        PyBuffer_Release(&bd);
+        PyErr_SetString(PyExc_ValueError, "_dense_step: d of the wrong size or type");
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[1], &bH, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        goto fail_d;
+    p = bH.len / 8 / n;
+    if (!doubles(&bH) || p < 1 || bH.len != p * n * 8) {
+        PyErr_SetString(PyExc_ValueError, "_dense_step: H of the wrong size or type");
+        goto fail_h;
+    }
+    if (getlen(args[0], &bK, n * p, 0) < 0)
+        goto fail_h;
+    cs = PyMem_Malloc((size_t)(2 * p) * sizeof(double));
+    if (cs == NULL) {
+        PyErr_NoMemory();
+        goto fail_k;
+    }
+    {
+        const double *K = bK.buf, *H = bH.buf, *d = bd.buf;
+        double *hs = cs + p;
+        for (r = 0; r < p; r++) {
+            double a = fabs(K[r] / d[0]), h = fabs(H[r * n] * d[0]);
+            for (i = 1; i < n; i++) {
+                a = a + fabs(K[i * p + r] / d[i]);
+                h = h + fabs(H[r * n + i] * d[i]);
+            }
+            cs[r] = a;
+            hs[r] = h;
+        }
+        for (k = 0; k < n; k++) {
+            double o = cs[0] * fabs(H[k] * d[k]), t = fabs(K[k * p] / d[k]) * hs[0];
+            for (r = 1; r < p; r++) {
+                o = o + cs[r] * fabs(H[r * n + k] * d[k]);
+                t = t + fabs(K[k * p + r] / d[k]) * hs[r];
+            }
+            one = k ? npmax(one, o) : o;
+            inf = k ? npmax(inf, t) : t;
+        }
+    }
+    PyMem_Free(cs);
+    res = Py_BuildValue("(dd)", one, inf);
+fail_k:
+    PyBuffer_Release(&bK);
+fail_h:
+    PyBuffer_Release(&bH);
+fail_d:
+    PyBuffer_Release(&bd);
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"absrows", (PyCFunction)(void (*)(void))absrows, METH_FASTCALL,
      "absrows(D, n) -> the largest absolute row sum of the n x n D (each row in index order; NaN if any is)"},
@@ -586,6 +1230,16 @@ static PyMethodDef methods[] = {
      "step(M, S, aMd, aux, out, rho, c4) -> (tr, ls, alpha, theta): ErrorEllipsoid.step_dense's set into out"},
     {"norm", (PyCFunction)(void (*)(void))norm, METH_FASTCALL,
      "norm(x, s) -> ||diag(s) x|| (s None: ||x||), a sum in a fixed order"},
+    {"sandwich", (PyCFunction)(void (*)(void))sandwich, METH_FASTCALL,
+     "sandwich(ip, ix, dv, S, X, Y): Y = Phi (Phi S)' for Phi in compressed rows (csr_matvecs' doubles)"},
+    {"factored", (PyCFunction)(void (*)(void))factored, METH_FASTCALL,
+     "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm) -> (tr, ls, alpha, theta)"},
+    {"kappa", (PyCFunction)(void (*)(void))kappa, METH_FASTCALL,
+     "kappa(K, H, d) -> (one, inf): the 1- and inf-norms of |D^-1 K| |H D| (sums in index order)"},
+    {"block", (PyCFunction)(void (*)(void))block, METH_FASTCALL,
+     "block(Z, cols, ha, q, B): B = ((Z + Z') ha + diag(q))[cols, cols] (numpy's operations, its doubles)"},
+    {"open_plan", (PyCFunction)(void (*)(void))open_plan, METH_FASTCALL,
+     "open_plan(Z, S, ip, ix, adv, aux, q, rho, wf, czp, c1f, c4f, mn) -> (alpha, theta, trace, tr)"},
     {"between", (PyCFunction)(void (*)(void))between, METH_FASTCALL,
      "between(S, Sa, va, theta_a, w, D) -> (c, ||w||, ||D||_F): the amortised read between anchors"},
     {NULL, NULL, 0, NULL},

@@ -1,7 +1,10 @@
 """The optional compiled form of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_dense`,
 of the amortised read's pass between anchors (:func:`between`) and of a balanced norm (:data:`NORM`,
 ``norm(x, s) = ||diag(s) x||``, ``s`` None for ``||x||``: its sum of squares in a fixed order, four
-lanes, as a numpy dot's in another) and of a Kalman sample's estimate through a fused map (:func:`correct`):
+lanes, as a numpy dot's in another), of a Kalman sample's estimate through a fused map (:func:`correct`) and of
+the exact set's step through a Kalman sample's factored map (:func:`sandwich`: ``Phi~ S Phi~'``, the same doubles
+as scipy's sparse products; :func:`factored`: the correction's rank-``2p`` term, ``w`` and the assembly; and
+:func:`open_plan`: the O(n) plan of an open-loop prior's set):
 ``_dense_step.c``, built by
 ``setup.py`` where a C compiler is found (``scripts/bootstrap.sh`` builds it into the checkout). The
 numpy code stays the reference: without the extension, or for arrays the kernel does not take (not
@@ -62,19 +65,23 @@ except ImportError:     # not built (no compiler, not x86-64), or built for anot
 if _dense_step is not None and built_from(_dense_step):
     STEP, BETWEEN, NORM = _dense_step.step, _dense_step.between, _dense_step.norm
     CORRECT, ABSROWS = _dense_step.correct, _dense_step.absrows
+    SANDWICH, FACTORED, OPEN_PLAN = _dense_step.sandwich, _dense_step.factored, _dense_step.open_plan
+    BLOCK, KAPPA = _dense_step.block, _dense_step.kappa
 else:
-    STEP = BETWEEN = NORM = CORRECT = ABSROWS = None
+    STEP = BETWEEN = NORM = CORRECT = ABSROWS = SANDWICH = FACTORED = OPEN_PLAN = BLOCK = KAPPA = None
 
 #: Calls the kernel refused (an array not C-ordered doubles of the right shape, an output sharing memory
 #: with an input) and numpy computed instead, by function: read by benchmarks and tests.
-FALLBACKS = {"step": 0, "between": 0, "correct": 0}
+FALLBACKS = {"step": 0, "between": 0, "correct": 0, "sandwich": 0, "factored": 0, "open_plan": 0, "block": 0,
+             "kappa": 0}
 
 #: Set (to anything but empty or 0) by ``scripts/test.sh``: the test that the kernel is built fails
 #: without it, so a test run cannot pass on the numpy step alone unnoticed.
 REQUIRE_ENV = "SWITCHOBS_REQUIRE_KERNEL"
 
-__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "FALLBACKS", "REQUIRE_ENV", "SOURCE", "available",
-           "built_from", "required", "numpy_step", "step", "between", "correct"]
+__all__ = ["STEP", "BETWEEN", "NORM", "CORRECT", "ABSROWS", "SANDWICH", "FACTORED", "OPEN_PLAN", "BLOCK", "KAPPA",
+           "FALLBACKS", "REQUIRE_ENV", "SOURCE", "available", "built_from", "required", "numpy_step", "numpy_factored",
+           "step", "between", "correct", "sandwich", "factored", "open_plan", "block", "kappa"]
 
 
 def available() -> bool:
@@ -97,6 +104,19 @@ def numpy_step() -> Iterator[None]:
         yield
     finally:
         STEP = kept
+
+
+@contextmanager
+def numpy_factored() -> Iterator[None]:
+    """The sparse maps' sets (:func:`sandwich`, :func:`factored`, :func:`open_plan`, :func:`block`, :func:`kappa`) in
+    numpy inside the ``with``: the reference path, for tests and benchmarks where the kernel is built."""
+    global SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA
+    kept = SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA
+    SANDWICH = FACTORED = OPEN_PLAN = BLOCK = KAPPA = None
+    try:
+        yield
+    finally:
+        SANDWICH, FACTORED, OPEN_PLAN, BLOCK, KAPPA = kept
 
 
 def step(M: np.ndarray, S: np.ndarray, aMd: np.ndarray, aux: np.ndarray, rho: float,
@@ -150,6 +170,82 @@ def correct(Phi: np.ndarray, H: np.ndarray, K: np.ndarray, x0: np.ndarray,
         FALLBACKS["correct"] += 1
         return None
     return xm, nu, xp
+
+
+def sandwich(ip: np.ndarray, ix: np.ndarray, dv: np.ndarray, T: np.ndarray, X: np.ndarray) -> np.ndarray | None:
+    """``Phi~ T' Phi~'`` (a new C-ordered array) for ``Phi~`` in compressed rows (``ip``, ``ix`` as ``np.intp``,
+    ``dv`` its values) and a C-ordered ``T``, with ``X`` (C-ordered n x n, apart from ``T``) as scratch: the
+    doubles of :meth:`~switchobs_core.bounds.kalman_map.SparseTransition.sandwich_either`'s two products
+    (each entry ``0.0`` plus the row's terms in stored order, as scipy's ``csr_matvecs``). None where the
+    kernel does not apply: the caller computes it in numpy."""
+    if SANDWICH is None:
+        return None
+    Y = np.empty(T.shape)
+    try:
+        SANDWICH(ip, ix, dv, T, X, Y)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["sandwich"] += 1
+        return None
+    return Y
+
+
+def factored(Y: np.ndarray, S: np.ndarray, ip: np.ndarray, ix: np.ndarray, adv: np.ndarray, K: np.ndarray,
+             hp: np.ndarray, hj: np.ndarray, hv: np.ndarray, aux: np.ndarray, rho: float, wf: float, czp: float,
+             c1f: float, c4f: float, inf_norm: float) -> tuple[float, float, float, float] | None:
+    """``(tr, ls, alpha, theta)`` of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_factored` by the
+    kernel, the new set written over ``Y``; None (``Y`` untouched) where the kernel does not apply (not built,
+    arrays not C-ordered doubles and ``np.intp`` indices of matching sizes, ``Y`` sharing memory with an input)."""
+    if FACTORED is None:
+        return None
+    try:
+        return FACTORED(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["factored"] += 1
+        return None
+
+
+def open_plan(Z: np.ndarray, S: np.ndarray, ip: np.ndarray, ix: np.ndarray, adv: np.ndarray, aux: np.ndarray,
+              rho: float, wf: float, czp: float, c1f: float, c4f: float,
+              mn: float) -> tuple[np.ndarray, float, float, float, float] | None:
+    """``(q, alpha, theta, trace, tr)`` of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.pending_open` by
+    the kernel (``q`` a new array), or None where it does not apply: the caller plans in numpy."""
+    if OPEN_PLAN is None:
+        return None
+    q = np.empty(Z.shape[0])
+    try:
+        alpha, theta, trace, tr = OPEN_PLAN(Z, S, ip, ix, adv, aux, q, rho, wf, czp, c1f, c4f, mn)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["open_plan"] += 1
+        return None
+    return q, alpha, theta, trace, tr
+
+
+def block(Z: np.ndarray, cols: np.ndarray, ha: float, q: np.ndarray) -> np.ndarray | None:
+    """``((Z + Z') ha + diag(q))[np.ix_(cols, cols)]`` (a new array) by the kernel, numpy's operations in its order
+    (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid._block`: the same doubles), or None where it does not
+    apply (``cols`` not ``np.intp``, ``q`` not C-ordered doubles): the caller takes numpy's path."""
+    if BLOCK is None:
+        return None
+    B = np.empty((cols.size, cols.size))
+    try:
+        BLOCK(Z, cols, ha, q, B)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["block"] += 1
+        return None
+    return B
+
+
+def kappa(K: np.ndarray, H: np.ndarray, d: np.ndarray) -> tuple[float, float] | None:
+    """``(||.||_1, ||.||_inf)`` of ``|D^-1 K| |H D|`` by the kernel (:attr:`~switchobs_core.bounds.kalman_map.
+    KalmanMap.kappa`'s sums, in index order), or None where it does not apply (arrays not C-ordered doubles of
+    matching sizes): the caller computes them in numpy."""
+    if KAPPA is None:
+        return None
+    try:
+        return KAPPA(K, H, d)
+    except (BufferError, ValueError, TypeError):
+        FALLBACKS["kappa"] += 1
+        return None
 
 
 if __name__ == "__main__":      # exit 0 where the kernel is built from the source beside it (bootstrap.sh)

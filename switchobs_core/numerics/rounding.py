@@ -89,7 +89,11 @@ nonzeros, deterministically) takes step 6's product in compressed rows, O(nnz n)
 gamma_{2k}`` and ``w = |M| s`` summed over each row's nonzeros
 (:func:`~switchobs_core.bounds.rigorous.open_loop_product`); a Kalman sample with a sparse
 ``e^{A dt}`` takes it in factors, the sparse ``e^{A dt}`` and a rank-``2p`` term, O(nnz n + n^2 p),
-with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`), and from 32 states on the
+with its own ``c`` and ``w`` (:mod:`switchobs_core.bounds.kalman_map`; where the compiled kernel is built, the
+whole step in one call, :meth:`ErrorEllipsoid.step_factored`, and an open-loop prior's plan in another,
+:meth:`ErrorEllipsoid.pending_open`: sums in index order, which the allowances above cover as any order, since
+``gamma_m`` bounds a sum of ``m`` terms in any order and every scalar sum of nonnegative terms is rounded up by
+``1 + 2 gamma_{n+2}``), and from 32 states on the
 bound is read in O(n^2) between anchors (:mod:`switchobs_core.bounds.read`). A dense map at small n
 costs mostly the calls into numpy: :meth:`ErrorEllipsoid.step_dense` takes the same step in about
 seventeen of them (the general assembly about forty), the allowance's scalar factors folded into its
@@ -100,12 +104,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from . import dense_kernel
 from .extended import expm_extended
+from .pending import PendingSet, assembled
 
 try:        # the gufunc behind np.linalg.eigvalsh (same LAPACK call, without its wrapper's 3 us)
     from numpy.linalg._umath_linalg import eigvalsh_lo as _eigvalsh_lo
@@ -135,6 +139,13 @@ def _abs(M: np.ndarray) -> tuple[np.ndarray, float]:
     """``(|M|, ||M||_inf)``."""
     aM = np.abs(M)
     return aM, float(aM.sum(axis=1).max()) if aM.size else 0.0
+
+
+def _zfactors(c: float) -> tuple[float, float]:
+    """``(c', k_1)`` of a product with ``|Z - M S M'| <= c w w'`` (step 6): ``c' = c + u (1 + c)`` (with the
+    symmetrisation's rounding) and ``q``'s factor ``c' (1 + 4u) + 3u (1 + c') (1 + 4u)`` (``_plan``, the kernel)."""
+    cz = c + _U * (1.0 + c)
+    return cz, cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)
 
 
 def _clamp(a: float) -> float:
@@ -184,6 +195,12 @@ class ErrorEllipsoid:
         self._k3 = 2.0 * _U * self._kf
         self._aux = np.concatenate((self._id2, self._d2, (self._kW, self._kR, self._gsum, self._k1, self._k3,
                                                           self._kf, _ALO, _AHI, _KTH, _K2, UNDERFLOW)))
+        # step_factored's: d, 1/d, 1/d^2, d^2 and _plan's factors (gsum, 1 + 4u, a's clamp, theta's, c_2's, eta,
+        # 1 + 8u, 2u); (n + 4) n eta of the diagonal's underflow allowance
+        self._faux = np.concatenate((self.d, self._id, self._id2, self._d2, (self._gsum, 1.0 + 4.0 * _U, _ALO, _AHI,
+                                                                             _KTH, _K2, UNDERFLOW, 1.0 + 8.0 * _U,
+                                                                             2.0 * _U)))
+        self._c4f = (self.n + 4) * self.n * UNDERFLOW
 
     # ------------------------------------------------------------------ helpers
     def lam_scaled(self, S: np.ndarray | None = None) -> float:
@@ -296,6 +313,20 @@ class ErrorEllipsoid:
         return PendingSet(self, Z, self._plan(Z.diagonal(), w, cz, rho, None if G is None else (G, c, None), mn),
                           remake)
 
+    def pending_open(self, Z: np.ndarray, phi: tuple, c: float, rho: float, mn: float,
+                     remake: Callable[[], np.ndarray] | None = None) -> PendingSet | None:
+        """:meth:`pending` of an open-loop step through a sparse ``Phi~`` (``phi = (indptr, indices, |data|)``,
+        ``Z = Phi~ S Phi~'`` with allowance ``c``, ``mn >= ||Phi~||_inf``) planned by the compiled kernel:
+        ``w = image_bound(|Phi~|)`` and :meth:`_plan`'s operations with the factors of :attr:`_faux`, its sums in
+        index order (rounded up as :meth:`step_factored` says); None where the kernel is not built or refuses."""
+        cz, c1f = _zfactors(c)
+        hit = dense_kernel.open_plan(Z, self.S, *phi, self._faux, rho, self._gsum * (1.0 + 2.0 * _U), cz, c1f,
+                                     self._c4f, mn)
+        if hit is None:
+            return None
+        q, alpha, theta, trace, tr = hit
+        return PendingSet(self, Z, (alpha, theta, None, q, trace, tr), remake)
+
     def _plan(self, zd: np.ndarray, w: np.ndarray, cz: float, rho: float, noise: tuple | None,
               mn: float) -> tuple:
         """The O(n) part of :meth:`_assemble` from ``zd``, the diagonal of ``Z`` before its symmetrisation:
@@ -304,7 +335,7 @@ class ErrorEllipsoid:
         n, d2, id2 = self.n, self._d2, self._id2
         zs = zd + zd                # the diagonal of sym Z = (Z + Z') / 2, as the full pass rounds it
         zs *= 0.5
-        cz = cz + _U * (1.0 + cz)       # the symmetrisation's rounding, relative u of |sym Z|
+        cz, c1f = _zfactors(cz)         # the symmetrisation's rounding, relative u of |sym Z|; q's factor
         wd = w * self.d
         Wz = float(w @ self._id) * self._gsum
         rz = (cz * Wz * (1.0 + 4.0 * _U)) * wd      # _diag(w, cz): the allowance of step 6
@@ -332,7 +363,7 @@ class ErrorEllipsoid:
         sd = zs * alpha if alpha != 1.0 else zs
         # alpha R_z, and the rounding of alpha Z (relative u of |alpha Z| <= alpha (1 + cz) w w',
         # dominated like step 6: 3 u alpha (1 + cz) W diag(w d))
-        q = (alpha * (cz * (1.0 + 4.0 * _U) + 3.0 * _U * (1.0 + cz) * (1.0 + 4.0 * _U)) * Wz) * wd
+        q = (alpha * c1f * Wz) * wd
         if rho > 0.0:
             q += ((theta * kappa * rho) * rho * (1.0 + 2.0 * _U) + UNDERFLOW) * d2
         tb = theta * beta
@@ -372,8 +403,11 @@ class ErrorEllipsoid:
         return Z, tr
 
     def _block(self, Z: np.ndarray, plan: tuple, cols: np.ndarray) -> np.ndarray:
-        """``S'[np.ix_(cols, cols)]`` of :meth:`_apply` without the n x n passes (the same doubles)."""
+        """``S'[np.ix_(cols, cols)]`` of :meth:`_apply` without the n x n passes (the same doubles; without a shaped
+        set by the compiled kernel where it is built, :func:`~switchobs_core.numerics.dense_kernel.block`)."""
         alpha, tb, Q, q, _, _ = plan
+        if Q is None and (B := dense_kernel.block(Z, cols, 0.5 * alpha, q)) is not None:
+            return B
         ix = cols[:, None], cols
         B = Z[ix]
         B = B + B.T
@@ -431,6 +465,25 @@ class ErrorEllipsoid:
         dS += q
         self.S, self.tr, self.symmetric = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
 
+    def step_factored(self, Y: np.ndarray, phi: tuple, inf_norm: float, K: np.ndarray, H: tuple, wf: float,
+                      c: float, rho: float) -> bool:
+        """:meth:`propagate_product` of a Kalman sample's factored map (:meth:`~switchobs_core.bounds.kalman_map.
+        KalmanMap.step`) by the compiled kernel, kept: ``Y = Phi~ S Phi~'`` (overwritten with the new ``S``),
+        ``phi = (indptr, indices, |data|)`` of ``Phi~`` (``||Phi~||_inf <= inf_norm``), ``K`` (n x p, C-ordered),
+        ``H = (indptr, indices, data)`` in compressed rows, ``w``'s factor ``wf`` and the product's allowance
+        ``c``: the kernel forms ``Z`` and ``w`` as the map's docstring says (steps 1-3) and assembles the set of
+        :meth:`_plan` and :meth:`_apply` (steps 5-8) with the factors below and in :attr:`_faux`, every sum in index
+        order (the allowances hold for any order: the standard model's ``gamma_m`` bounds a sum of ``m`` terms
+        in any order, and each scalar sum of nonnegative terms is rounded up by ``gsum`` whatever its order), so
+        the set differs from numpy's in its last bits only; :attr:`tr` and :meth:`lam_scaled` from its diagonal.
+        False (nothing changed, ``Y`` intact) where the kernel is not built or refuses the arrays."""
+        cz, c1f = _zfactors(c)
+        hit = dense_kernel.factored(Y, self.S, *phi, K, *H, self._faux, rho, wf, cz, c1f, self._c4f, inf_norm)
+        if hit is None:
+            return False
+        self.S, self.tr, self._ls = Y, hit[0], (Y, hit[0], hit[1])
+        return True
+
     def step(self, M: np.ndarray, rho: float, absM: tuple | None = None) -> None:
         """Apply one step: ``e <- M e + r`` with ``||D^{-1} r|| <= rho``."""
         self.S, self.tr = self.propagate(M, rho, absM)
@@ -479,59 +532,6 @@ class ErrorEllipsoid:
         if not math.isfinite(lam):
             return math.inf
         return max(lam, 0.0) + 2 * self.n * UNIT_ROUNDOFF * nS + 4 * self.n * UNDERFLOW
-
-
-class PendingSet:
-    """A step's set ``S'`` whose n x n assembly waits for a reader of the whole matrix
-    (:meth:`ErrorEllipsoid.pending`): :meth:`block` and :attr:`trace` read it in O(p^2 + n),
-    :meth:`full` assembles it once; every read gives the doubles of the eager assembly. Its product
-    ``Z`` may be handed over once before (:meth:`take`: a step that starts from the same product);
-    a later read forms ``Z`` again (``remake``)."""
-
-    __slots__ = ("_ell", "_Z", "_plan", "_S", "_remake", "tr", "trace", "kept")
-
-    def __init__(self, ell: ErrorEllipsoid, Z: np.ndarray, plan: tuple,
-                 remake: Callable[[], np.ndarray] | None) -> None:
-        self._ell, self._Z, self._plan, self._S, self._remake = ell, Z, plan, None, remake
-        #: Kept for a taker (:meth:`ErrorEllipsoid.keep_product`): :meth:`full` assembles a copy of ``Z``.
-        self.kept = False
-        #: ``trace S'`` (the sum of its diagonal, as ``np.trace``) and that rounded up (``ErrorEllipsoid.tr``).
-        self.trace, self.tr = plan[4], plan[5]
-
-    def _product(self) -> np.ndarray:
-        if self._Z is None:
-            self._Z = self._remake()
-        return self._Z
-
-    def full(self) -> np.ndarray:
-        """``S'`` (n x n, assembled at the first call; read-only)."""
-        if self._S is None:
-            Z = self._product()
-            if self.kept:       # Z stays for the taker
-                Z = Z.copy(order="K")
-            else:
-                self._Z = None
-            self._S = self._ell._apply(Z, self._plan)[0]
-        return self._S
-
-    def block(self, cols: np.ndarray) -> np.ndarray:
-        """``S'[np.ix_(cols, cols)]`` (a new array)."""
-        if self._S is not None:
-            return self._S[cols[:, None], cols]
-        return self._ell._block(self._product(), self._plan, cols)
-
-    def take(self) -> np.ndarray | None:
-        """The product ``Z``, handed over once (the taker may overwrite it), or None when it is gone
-        (assembled in place, or taken) or could not be formed again."""
-        if self._Z is None or self._remake is None:
-            return None
-        Z, self._Z = self._Z, None
-        return Z
-
-
-def assembled(s: Any) -> Any:
-    """``s.full()`` of a :class:`PendingSet`, else ``s`` (an array, a float, None)."""
-    return s.full() if isinstance(s, PendingSet) else s
 
 
 def largest_eigenvalue(S: np.ndarray) -> float:
