@@ -83,6 +83,7 @@ PHASES = (
     ("switchobs_ros.estimator", "EstimatorMixin._check_input_types", "timer: diagnostics (graph)"),
     ("switchobs_ros.demand", "Demand.covariance_wanted", "demand checks"),
     ("switchobs_ros.outputs", "listened", "demand checks"),
+    ("switchobs_ros.outputs", "listened_each", "demand checks"),
     ("switchobs_ros.pipeline", "EstimatorPipeline.on_input", "pipeline: on_input (pairing, attribution, clocks)"),
     ("switchobs_ros.pipeline", "EstimatorPipeline.on_channel", "pipeline: on_channel"),
     ("switchobs_ros.pipeline", "EstimatorPipeline._advance", "pipeline: advance/flush/answer"),
@@ -162,7 +163,8 @@ def install(fine: bool = False) -> None:
         owner = mod
         for o in owners:
             owner = getattr(owner, o)
-        _patch(owner, name, phase)
+        if hasattr(owner, name):        # (a tree compared with --before may not have every function)
+            _patch(owner, name, phase)
     from switchobs_core.runtime.observer import SwitchedObserver
     from switchobs_ros import estimator
     _patch_property(SwitchedObserver, "P", "covariance P")

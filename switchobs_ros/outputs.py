@@ -23,7 +23,7 @@ from typing import Any
 import msg_bridge as mb
 from msg_bridge.raw import RawLabelledArrayWriter
 
-from .demand import listened
+from .demand import listened, listened_each
 from .late_markers import LateMarkersMixin
 from .pipeline import Estimate
 
@@ -100,7 +100,7 @@ class OutputsMixin(LateMarkersMixin):
                 if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
                     send(self.pub_cov, self.w_cov.msg(e.P.ravel(), e.stamp_ns))
                     n["covariance"] += 1
-                if ev["odometry"] and k % ev["odometry"] == 0 and any(on := [listened(p) for p in self.pub_odom]):
+                if ev["odometry"] and k % ev["odometry"] == 0 and any(on := listened_each(self.pub_odom)):
                     for pub, m, yes in zip(self.pub_odom, self.w_odom.msgs(e.x_hat, e.stamp_ns, e.P), on):
                         if yes:
                             send(pub, m)
