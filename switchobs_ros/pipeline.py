@@ -366,8 +366,9 @@ class EstimatorPipeline(Counters):
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
                 self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
-            for s in self.pairing.overflow():       # the oldest one's partners are overdue
-                self._flush(s, out, now_mono)
+            if len(self.pairing.pending) > MAX_PENDING:
+                for s in self.pairing.overflow():       # the oldest one's partners are overdue
+                    self._flush(s, out, now_mono)
             self._advance(out, now_mono)
         except Exception as err:
             self.internal_error(topic, err)
@@ -520,8 +521,15 @@ class EstimatorPipeline(Counters):
         """``[z_1..z_N, paper_bound, exact_bound(, noise_bound)]`` now (nan where not computable)."""
         try:
             env = self.observer.envelope()
-            return np.concatenate([env.z, [env.paper_bound, env.exact_bound]]
-                                  + ([] if env.noise_bound is None else [[env.noise_bound]]))
+            z = env.z
+            k = len(z)
+            out = np.empty(k + 2 + (env.noise_bound is not None))     # the doubles of z and the bounds, in place
+            out[:k] = z
+            out[k] = env.paper_bound
+            out[k + 1] = env.exact_bound
+            if env.noise_bound is not None:
+                out[k + 2] = env.noise_bound
+            return out
         except (ArithmeticError, ValueError):       # e.g. the SVD of an overflowed Phi (LinAlgError)
             return np.full(self.N + 2 + (self.observer.noise_max is not None), np.nan)
 
