@@ -277,23 +277,26 @@ class EstimatorPipeline(Counters):
         out: list[Estimate] = []
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
-            rej = mb.check_channel(msg, self.N)
+            c, rej = mb.read_channel(msg, self.N)
+            att = self.attribution
             if rej is not None:
                 self.reject(topic, rej)
-                self._withdraw_all(self.attribution.remember_invalid(src_ns, seq))
+                self._withdraw_all(att.remember_invalid(src_ns, seq))
                 return out
             self.accepted[topic] += 1
-            c = mb.channel_value(msg)
-            if c != self.attribution.channel:
-                if self.attribution.channel:
+            if c != att.channel:
+                if att.channel:
                     self.switches += 1
-                self.attribution.switch(c, self.last_ns)
+                att.switch(c, self.last_ns)
                 self.dead_time.switched()
             if hasattr(msg, "header"):      # stamped: the switching instant (switchobs_ros.switching)
-                self._withdraw_all(self.attribution.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq))
-            elif src_ns is not None:
-                self._withdraw_all(self.attribution.remember(int(src_ns), c, seq))
-            self._advance(out, time.monotonic() if now_mono is None else now_mono)
+                why = att.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq)
+            else:
+                why = att.remember(int(src_ns), c, seq) if src_ns is not None else ()
+            if why:
+                self._withdraw_all(why)
+            if self.pairing.pending:
+                self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
             self.internal_error(topic, err)
         return out
