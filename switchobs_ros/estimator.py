@@ -349,13 +349,15 @@ class EstimatorMixin(OutputsMixin):
                 self.ignored_inactive += 1
                 return
             pipeline.publish_covariance = self.covariance_allowed and self.demand.covariance_wanted()
-            src_ns = info.get("source_timestamp") if info else None
-            src_ns = int(src_ns) if src_ns else None
-            if src_ns and info.get("received_timestamp") and (    # the sender's system clock against ours
-                    why := pipeline.clocks.seen(dds, src_ns, int(info["received_timestamp"]), system=True)):
-                pipeline.withdraw(why)
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
-            seq = info.get("publication_sequence_number") if info else None
+            src_ns, recv_ns, seq = (info.get("source_timestamp"), info.get("received_timestamp"),
+                                    info.get("publication_sequence_number")) if info else (None, None, None)
+            if src_ns:
+                src_ns = int(src_ns)
+                if recv_ns and (why := pipeline.clocks.seen(dds, src_ns, int(recv_ns), system=True)):
+                    pipeline.withdraw(why)          # the sender's system clock against ours
+            else:
+                src_ns = None
             if index is None:
                 self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
             else:
