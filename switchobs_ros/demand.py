@@ -20,7 +20,7 @@ table's stored prior) as much again; none of it is spent while nobody listens.
   before it), and after the last subscriber leaves an output is built and published for at most
   0.5 s more, to nobody;
 * ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before
-  every input is handled (the estimate's ``P`` is formed with it), of up to 36 publishers at 32
+  every estimate reads ``P`` (the node's ``_covariance_due``), of up to 36 publishers at 32
   agents, so the answer is kept: a yes for :attr:`Demand.period` seconds (a subscriber that
   leaves costs at most that long of covariances nobody reads), a no for :attr:`Demand.period_no`
   seconds (for at most that long after the first subscriber to an output carrying ``P`` appears,

@@ -78,7 +78,11 @@ class OutputsMixin(LateMarkersMixin):
 
     def _covariance_due(self, i: int) -> bool:
         """Whether the ``i``-th estimate of the pipeline's present call (the ``n_published + i``-th)
-        goes out on a listened output that carries ``P`` (``output.*_every``)."""
+        goes out on a listened output that carries ``P`` (``output.*_every``; the outputs listened:
+        :meth:`Demand.covariance_wanted <switchobs_ros.demand.Demand.covariance_wanted>`, asked here,
+        as the estimate is about to read ``P``)."""
+        if not self.demand.covariance_wanted():
+            return False
         k, ev = self.n_published + i, self.every
         return any(k % ev[kind] == 0 for kind in self.demand.kinds)
 
