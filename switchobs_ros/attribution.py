@@ -272,9 +272,8 @@ class ChannelAttribution:
             verdict, c, certain = self._by_stamps(pend, force)
             if verdict == "near_switch" and c and all(srcs[i].shared for i in pend.parts):
                 verdict = "channel"     # shared rows read the same in every channel: they wait for a partner
-            if not certain:
-                if self._expired(pend, now_mono):      # never a guess: ambiguous
-                    return Resolution(Verdict.NO_CHANNEL if verdict == "none" else Verdict.UNCERTAIN)
+            if not certain and self._expired(pend, now_mono):   # never a guess: ambiguous
+                return Resolution(Verdict.NO_CHANNEL if verdict == "none" else Verdict.UNCERTAIN)
             if verdict == "channel":
                 res = Resolution.of(c, certain)
             else:
