@@ -360,14 +360,16 @@ class EstimatorPipeline(Counters):
             skew = self.clocks.seen(topic, stamp_ns, now_ns)
             if skew:
                 self.withdraw(skew)
-            self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
+            dead = self.dead_time if self.dead_time.dead_ns else None     # (no dead time: nothing to follow)
+            if dead is not None:
+                dead.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
-            pend = self.pairing.add(index, stamp_ns, values, src_ns, self.attribution.channel, now_mono,
-                                    self.attribution.stamped.received)
-            res = self.attribution.resolve(pend, now_mono)
+            att = self.attribution
+            pend = self.pairing.add(index, stamp_ns, values, src_ns, att.channel, now_mono, att.stamped.received)
+            res = att.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
-                    or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
+                    or (dead is not None and src.shared and len(pend.parts) == 1 and dead.certainly_blind(stamp_ns)):
                 self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
             if len(self.pairing.pending) > MAX_PENDING:
                 for s in self.pairing.overflow():       # the oldest one's partners are overdue
