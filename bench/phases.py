@@ -96,8 +96,10 @@ PHASES = (
     ("switchobs_core.runtime.observer", "SwitchedObserver.update", "update"),
     ("switchobs_ros.outputs", "OutputsMixin._publish_all", "outputs: Python"),
     ("msg_bridge.raw", "RawLabelledArrayWriter.msg", "outputs: build (state, envelope, covariance)"),
+    ("msg_bridge.raw", "RawLabelledArrayWriter.write", "outputs: build (state, envelope, covariance)"),
     ("msg_bridge.raw", "RawOdometryBatch.msgs", "outputs: build odometry"),
     ("msg_bridge.typed", "RawStateEstimateWriter.msg", "outputs: build typed"),
+    ("msg_bridge.typed", "RawStateEstimateWriter.write", "outputs: build typed"),
     ("msg_bridge.typed", "ErrorBoundsWriter.msg", "outputs: build typed"),
     ("msg_bridge.markers", "RawMarkersWriter.msg", "outputs: build markers"),
 )
@@ -137,7 +139,7 @@ def _send_timed(send):
 
     @functools.wraps(send)
     def send_timed(pub, data):
-        return (timed if type(data) is bytes else send)(pub, data)
+        return (timed if type(data) in (bytes, bytearray) else send)(pub, data)
     return send_timed
 
 

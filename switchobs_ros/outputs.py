@@ -34,11 +34,16 @@ def send(pub: Any, data: Any) -> None:
     """Publish ``data`` on ``pub``: serialised ``bytes`` straight to rclpy's publisher handle
     (``publish_raw``: what ``Publisher.publish(bytes)`` calls after a type test and entering the
     handle, 0.7-1.4 us more per call measured here; the node's publishers are destroyed only by its
-    own spinning thread, between publications), a message object through ``Publisher.publish``."""
-    if type(data) is bytes:
+    own spinning thread, between publications), and so a writer's own ``bytearray`` (its ``write``:
+    ``publish_raw`` copies it before it returns, so the writer may rewrite it after), a message
+    object through ``Publisher.publish``."""
+    if type(data) in _SERIALISED:
         pub.handle.publish_raw(data)
     else:
         pub.publish(data)
+
+
+_SERIALISED = (bytes, bytearray)
 
 
 def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
@@ -96,13 +101,13 @@ class OutputsMixin(LateMarkersMixin):
             try:     # one estimate's failure (a writer that cannot be built) costs no other estimate
                 k = self.n_published
                 self.n_published = k + 1
-                send(self.pub_state, self.w_state.msg(e.x_hat, e.stamp_ns))
+                send(self.pub_state, self.w_state.write(e.x_hat, e.stamp_ns))
                 n["state"] += 1
                 if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
-                    send(self.pub_env, self.w_env.msg(e.envelope, e.stamp_ns))
+                    send(self.pub_env, self.w_env.write(e.envelope, e.stamp_ns))
                     n["envelope"] += 1
                 if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
-                    send(self.pub_cov, self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    send(self.pub_cov, self.w_cov.write(e.P.ravel(), e.stamp_ns))
                     n["covariance"] += 1
                 if ev["odometry"] and k % ev["odometry"] == 0 and any(on := listened_each(self.pub_odom)):
                     for pub, m, yes in zip(self.pub_odom, self.w_odom.msgs(e.x_hat, e.stamp_ns, e.P), on):
@@ -112,7 +117,7 @@ class OutputsMixin(LateMarkersMixin):
                 if ev["typed"] and k % ev["typed"] == 0:
                     pl = self.pipeline
                     if listened(self.pub_typed[0]):
-                        send(self.pub_typed[0], self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        send(self.pub_typed[0], self.w_typed[0].write(e.x_hat, e.stamp_ns, e.P))
                         n["typed"] += 1
                     if listened(self.pub_typed[1]):
                         send(self.pub_typed[1], self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,
