@@ -234,6 +234,9 @@ def run_child(a) -> dict:
     sys.path.insert(0, str(a.child))
     import gc
 
+    from switchobs_ros.heap import keep_heap
+    keep_heap()     # glibc's heap kept between samples, as the node's console script sets it (switchobs_ros.entry)
+
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.config import params_from_file
 
