@@ -163,8 +163,9 @@ class _Publisher:
 
     def publish_raw(self, data) -> None:
         self.n += 1
+        data = memoryview(data).tobytes()   # rclpy's publish_raw copies what it is given (pybind11's std::string)
         if _Publisher.digest is not None:
-            _Publisher.digest.update(self.topic_name.encode() + b"\0" + bytes(data))
+            _Publisher.digest.update(self.topic_name.encode() + b"\0" + data)
 
 
 def stream_inputs(s: dict, node) -> tuple[list, dict, dict]:
