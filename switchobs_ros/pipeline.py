@@ -278,24 +278,21 @@ class EstimatorPipeline(Counters):
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
             c, rej = mb.read_channel(msg, self.N)
-            att = self.attribution
             if rej is not None:
                 self.reject(topic, rej)
-                self._withdraw_all(att.remember_invalid(src_ns, seq))
+                self._withdraw_all(self.attribution.remember_invalid(src_ns, seq))
                 return out
             self.accepted[topic] += 1
-            if c != att.channel:
-                if att.channel:
+            if c != self.attribution.channel:
+                if self.attribution.channel:
                     self.switches += 1
-                att.switch(c, self.last_ns)
+                self.attribution.switch(c, self.last_ns)
                 self.dead_time.switched()
             if hasattr(msg, "header"):      # stamped: the switching instant (switchobs_ros.switching)
-                why = att.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq)
-            else:
-                why = att.remember(int(src_ns), c, seq) if src_ns is not None else ()
-            if why:
-                self._withdraw_all(why)
-            if self.pairing.pending:
+                self._withdraw_all(self.attribution.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq))
+            elif src_ns is not None:
+                self._withdraw_all(self.attribution.remember(int(src_ns), c, seq))
+            if self.pairing.pending:        # (none waits: nothing to answer)
                 self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
             self.internal_error(topic, err)
@@ -360,20 +357,17 @@ class EstimatorPipeline(Counters):
             skew = self.clocks.seen(topic, stamp_ns, now_ns)
             if skew:
                 self.withdraw(skew)
-            dead = self.dead_time if self.dead_time.dead_ns else None     # (no dead time: nothing to follow)
-            if dead is not None:
-                dead.accepted(src, stamp_ns, self.last_ns[topic])
+            self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
             att = self.attribution
             pend = self.pairing.add(index, stamp_ns, values, src_ns, att.channel, now_mono, att.stamped.received)
             res = att.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
-                    or (dead is not None and src.shared and len(pend.parts) == 1 and dead.certainly_blind(stamp_ns)):
+                    or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
                 self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
-            if len(self.pairing.pending) > MAX_PENDING:
-                for s in self.pairing.overflow():       # the oldest one's partners are overdue
-                    self._flush(s, out, now_mono)
+            for s in self.pairing.overflow() if len(self.pairing.pending) > MAX_PENDING else ():   # partners overdue
+                self._flush(s, out, now_mono)
             self._advance(out, now_mono)
         except Exception as err:
             self.internal_error(topic, err)
@@ -526,15 +520,8 @@ class EstimatorPipeline(Counters):
         """``[z_1..z_N, paper_bound, exact_bound(, noise_bound)]`` now (nan where not computable)."""
         try:
             env = self.observer.envelope()
-            z = env.z
-            k = len(z)
-            out = np.empty(k + 2 + (env.noise_bound is not None))     # the doubles of z and the bounds, in place
-            out[:k] = z
-            out[k] = env.paper_bound
-            out[k + 1] = env.exact_bound
-            if env.noise_bound is not None:
-                out[k + 2] = env.noise_bound
-            return out
+            return np.concatenate([env.z, [env.paper_bound, env.exact_bound]]
+                                  + ([] if env.noise_bound is None else [[env.noise_bound]]))
         except (ArithmeticError, ValueError):       # e.g. the SVD of an overflowed Phi (LinAlgError)
             return np.full(self.N + 2 + (self.observer.noise_max is not None), np.nan)
 
