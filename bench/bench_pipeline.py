@@ -139,7 +139,10 @@ class _Clock:
 
 
 class _Publisher:
-    """A publisher with one matched subscription that drops what it is given (counts it)."""
+    """A publisher with one matched subscription that drops what it is given (counts it; with
+    ``digest``, a hashlib object, hashes its topic and the bytes, a message object serialised)."""
+
+    digest = None
 
     def __init__(self, topic_name: str = "/estimator/out"):
         self.n = 0
@@ -151,9 +154,18 @@ class _Publisher:
 
     def publish(self, msg) -> None:
         self.n += 1
+        if _Publisher.digest is not None:     # serialised, its padding zeroed (rclpy leaves heap bytes there)
+            from rclpy.serialization import serialize_message
+
+            from msg_bridge.cdr_padding import zero_padding
+            self.publish_raw(zero_padding(msg, serialize_message(msg)))
+            self.n -= 1
 
     def publish_raw(self, data) -> None:
         self.n += 1
+        data = memoryview(data).tobytes()   # rclpy's publish_raw copies what it is given (pybind11's std::string)
+        if _Publisher.digest is not None:
+            _Publisher.digest.update(self.topic_name.encode() + b"\0" + data)
 
 
 def stream_inputs(s: dict, node) -> tuple[list, dict, dict]:
@@ -222,6 +234,9 @@ def run_child(a) -> dict:
     CPU times in each window (JSON on stdout)."""
     sys.path.insert(0, str(a.child))
     import gc
+
+    from switchobs_ros.heap import keep_heap
+    keep_heap()     # glibc's heap kept between samples, as the node's console script sets it (switchobs_ros.entry)
 
     from switchobs_core.threads import single_threaded_blas
     from switchobs_ros.config import params_from_file
@@ -296,6 +311,9 @@ def run_child(a) -> dict:
     else:
         topics = s["topics"]
         msgs, handlers, seq = stream_inputs(s, node)
+        if a.digest:        # every published message's bytes, by topic, in order (timing distorted)
+            import hashlib
+            digest = _Publisher.digest = hashlib.sha256()
         dropped = np.random.default_rng(7).random(n_ticks) < a.drop
         dropped[:int(rate)] = False
         gc.freeze()
@@ -347,6 +365,11 @@ def run_child(a) -> dict:
                 done = pl.updates
         answers = pl.updates
         answered = ~dropped[:n_ticks]
+    if a.digest and a.what == "pipeline":      # and the counters the diagnostics report
+        digest.update(repr((sorted(pl.accepted.items()), sorted(pl.rejected.items()), sorted(pl.dropped.items()),
+                            pl.updates, pl.parts_used, pl.partial_updates, pl.switches, pl.late_channel,
+                            pl.lost_channel, sorted(pl.loss.lost.items()), sorted(pl.loss.restarts.items()),
+                            pl.bound_valid, pl.bound_invalid_why, sorted(node.published.items()))).encode())
     if pl.errors or sum(pl.rejected.values()):
         sys.exit(f"the stream was not answered cleanly: {dict(pl.rejected)}; {pl.last_rejection}")
     out = {"answers": int(answers), "ticks": n_ticks, "first": cost[:k_first].tolist(),
@@ -354,7 +377,7 @@ def run_child(a) -> dict:
            "published": dict(getattr(node, "published", {})),
            "first_n": int(answered[:k_first].sum()), "steady_n": int(answered[k0:n_ticks].sum()),
            "online": served.get("online", 0), "screened": int(screened),
-           "digest": digest.hexdigest()[:16] if a.what in ("core", "screen") else "",
+           "digest": digest.hexdigest()[:16] if digest is not None else "",
            "tests_first": float(np.sum(tests[:k_first])), "tests_steady": float(np.sum(tests[k0:n_ticks])),
            "kalman": {k: int(getattr(pl.observer.gains, k, -1))
                       for k in ("departures", "relocks", "gaps", "gaps_retired")}}
@@ -399,6 +422,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window", default="steady", choices=("first", "steady"), help="the window --cprofile profiles")
     ap.add_argument("--drop", type=float, default=0.0, metavar="F",
                     help="drop this fraction of the ticks (both poses; the same ticks in every tree)")
+    ap.add_argument("--digest", action="store_true",
+                    help="the pipeline child also hashes every published message's bytes (by topic, in order) and "
+                         "the counters, printed with the core's digests (its CPU times then include the hashing)")
     ap.add_argument("--stream", type=Path, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -417,7 +443,7 @@ def main(argv: list[str] | None = None) -> int:
                    "--what", what, "--agents", str(a.agents), "--table", a.table, "--first", str(a.first),
                    "--steady", str(a.steady), "--steady-len", str(a.steady_len), "--every", a.every,
                    "--drop", str(a.drop), *(["--evict", str(a.evict)] if a.evict and "--evict" not in extra else []),
-                   *(["--pace", a.pace] if a.pace else []),
+                   *(["--pace", a.pace] if a.pace else []), *(["--digest"] if a.digest else []),
                    *extra]
             r = subprocess.run(cmd, env=dict(env, PYTHONPATH=str(tree)), capture_output=True, text=True)
             if r.returncode:
@@ -472,7 +498,8 @@ def main(argv: list[str] | None = None) -> int:
                 for w in ("first", "steady")))
     digests = {f"{name} {what}": runs[0]["digest"] for (name, what), runs in res.items() if runs[0].get("digest")}
     if digests:         # the estimates and bounds of every sample (core, screen), by tree
-        print("\nsha256 of the estimates and bounds:", ", ".join(f"{k} {v}" for k, v in digests.items()))
+        print("\nsha256 of the estimates and bounds (core, screen; pipeline with --digest: every published "
+              "message's bytes and the counters):", ", ".join(f"{k} {v}" for k, v in digests.items()))
     if a.before:
         print("\nthis / before (means):", ", ".join(
             f"{what} {w} {table[('this', what)][w][0] / table[('before', what)][w][0]:.2f}x"

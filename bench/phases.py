@@ -83,6 +83,7 @@ PHASES = (
     ("switchobs_ros.estimator", "EstimatorMixin._check_input_types", "timer: diagnostics (graph)"),
     ("switchobs_ros.demand", "Demand.covariance_wanted", "demand checks"),
     ("switchobs_ros.outputs", "listened", "demand checks"),
+    ("switchobs_ros.outputs", "listened_each", "demand checks"),
     ("switchobs_ros.pipeline", "EstimatorPipeline.on_input", "pipeline: on_input (pairing, attribution, clocks)"),
     ("switchobs_ros.pipeline", "EstimatorPipeline.on_channel", "pipeline: on_channel"),
     ("switchobs_ros.pipeline", "EstimatorPipeline._advance", "pipeline: advance/flush/answer"),
@@ -95,8 +96,10 @@ PHASES = (
     ("switchobs_core.runtime.observer", "SwitchedObserver.update", "update"),
     ("switchobs_ros.outputs", "OutputsMixin._publish_all", "outputs: Python"),
     ("msg_bridge.raw", "RawLabelledArrayWriter.msg", "outputs: build (state, envelope, covariance)"),
+    ("msg_bridge.raw", "RawLabelledArrayWriter.write", "outputs: build (state, envelope, covariance)"),
     ("msg_bridge.raw", "RawOdometryBatch.msgs", "outputs: build odometry"),
     ("msg_bridge.typed", "RawStateEstimateWriter.msg", "outputs: build typed"),
+    ("msg_bridge.typed", "RawStateEstimateWriter.write", "outputs: build typed"),
     ("msg_bridge.typed", "ErrorBoundsWriter.msg", "outputs: build typed"),
     ("msg_bridge.markers", "RawMarkersWriter.msg", "outputs: build markers"),
 )
@@ -136,7 +139,7 @@ def _send_timed(send):
 
     @functools.wraps(send)
     def send_timed(pub, data):
-        return (timed if type(data) is bytes else send)(pub, data)
+        return (timed if type(data) in (bytes, bytearray) else send)(pub, data)
     return send_timed
 
 
@@ -177,9 +180,8 @@ def install(fine: bool = False) -> None:
         owner = mod
         for o in owners:
             owner = getattr(owner, o)
-        if fine and not hasattr(owner, name):     # a FINE entry this tree does not have (another tree's)
-            continue
-        _patch(owner, name, phase)
+        if hasattr(owner, name):        # (a tree compared with --before may not have every function)
+            _patch(owner, name, phase)
     from switchobs_core.runtime.observer import SwitchedObserver
     from switchobs_ros import estimator
     _patch_property(SwitchedObserver, "P", "covariance P")

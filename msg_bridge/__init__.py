@@ -86,6 +86,7 @@ from .validate import (
     check_stamp,
     check_time,
     check_values,
+    read_channel,
 )
 
 __all__ = [
@@ -133,6 +134,7 @@ __all__ = [
     "UNESTIMATED_VARIANCE",
     "channel_value",
     "check_channel",
+    "read_channel",
     "check_pose",
     "check_stamp",
     "check_time",

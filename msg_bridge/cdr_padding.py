@@ -51,21 +51,23 @@ def zero_padding(msg: Any, data: bytes | bytearray) -> bytearray:
 
 class _Walk:
     """The fields of a message in CDR order over its bytes ``buf``, zeroing the padding passed;
-    ``empty`` counts the empty sequences of primitives."""
+    ``empty`` counts the empty sequences of primitives, ``zeroed`` the padding bytes passed."""
 
     def __init__(self, buf: bytearray) -> None:
         self.buf = buf
         self.empty = 0
+        self.zeroed = 0
 
     def align(self, pos: int, size: int) -> int:
         """``pos`` moved to the next multiple of ``size`` (from the origin), the bytes passed zeroed."""
         new = pos + (-(pos - _ORIGIN)) % size
         if new > pos:
             self.buf[pos:new] = bytes(new - pos)
+            self.zeroed += new - pos
         return new
 
     def fields(self, msg: Any, pos: int) -> int:
-        names = msg.get_fields_and_field_types()
+        names = _names(type(msg))
         if not names:       # a message without fields carries rosidl's hidden uint8 (one byte)
             return pos + 1
         for name, t in zip(names, type(msg).SLOT_TYPES):
@@ -103,6 +105,41 @@ class _Walk:
                 return pos
             size = _SIZE[et.typename]
             return self.align(pos, size) + size * n
-        for item in v:
+        for k, item in enumerate(v):
+            start, zeroed = pos, self.zeroed
             pos = self.value(item, et, pos)
+            if pos > start and self.zeroed == zeroed and (pos - start) % 8 == 0 and isinstance(et, NamespacedType) \
+                    and _fixed(item):
+                # an item of one size that ended on the 8-byte phase it began on, with no padding:
+                # every item after it lies the same way, without padding (the points of a line strip)
+                return pos + (len(v) - k - 1) * (pos - start)
         return pos
+
+
+_NAMES: dict[type, tuple[str, ...]] = {}
+_FIXED: dict[type, bool] = {}
+
+
+def _names(cls: type) -> tuple[str, ...]:
+    """A message class's field names, in order (rosidl's ``get_fields_and_field_types``, read once)."""
+    got = _NAMES.get(cls)
+    if got is None:
+        got = _NAMES[cls] = tuple(cls.get_fields_and_field_types())
+    return got
+
+
+def _fixed(msg: Any) -> bool:
+    """Whether every message of ``msg``'s type has one size: its fields primitives, fixed arrays of
+    primitives, or messages of that kind (no string, no sequence)."""
+    cls = type(msg)
+    got = _FIXED.get(cls)
+    if got is None:
+        got = True
+        for name, t in zip(_names(cls), cls.SLOT_TYPES):
+            if isinstance(t, BasicType) or (isinstance(t, Array) and isinstance(t.value_type, BasicType)):
+                continue
+            if not (isinstance(t, NamespacedType) and _fixed(getattr(msg, name))):
+                got = False
+                break
+        _FIXED[cls] = got
+    return got

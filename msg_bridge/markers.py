@@ -240,7 +240,7 @@ class RawMarkersWriter:
         self._color = np.array([[i4(f"c{k}", c) for c in range(4)] for k in range(B)], ip)          # (B, 4)
         self._cov_action = np.array([i4(f"a{4 * k + 2}") for k in range(B)], ip)
         self._bnd_action = np.array([i4(f"a{4 * k + 3}") for k in range(B)], ip)
-        self._ell = [(f8(f"s{k}"), f8(f"o{k}")) for k in range(B)]
+        self._ell = np.array([[f8(f"s{k}"), f8(f"s{k}", 1), f8(f"o{k}"), f8(f"o{k}", 1)] for k in range(B)], ip)
         self._circle = np.array([[f8(f"b{k}", 3 * q) for q in range(CIRCLE_POINTS)] for k in range(B)], ip)
         self._ix = np.array([b.p_x for b in self.bodies], ip)
         self._iy = np.array([-1 if b.p_y is None else b.p_y for b in self.bodies], ip)   # -1: the 0 appended to x
@@ -262,11 +262,12 @@ class RawMarkersWriter:
         f4[self._color] = self._body
         if active_body is not None:
             f4[self._color[self._names[active_body]]] = self._highlight
-        for k, ell in enumerate(ellipse_discs(P, self.bodies)):
-            i4[self._cov_action[k]] = Marker.DELETE if ell is None else Marker.ADD
-            if ell is not None:
-                s, o = self._ell[k]
-                f8[s], f8[s + 1], f8[o], f8[o + 1] = ell
+        ells = ellipse_discs(P, self.bodies)
+        shown = [k for k, ell in enumerate(ells) if ell is not None]
+        i4[self._cov_action] = Marker.DELETE
+        if shown:               # every shown ellipse's scale and orientation in one write
+            i4[self._cov_action[shown]] = Marker.ADD
+            f8[self._ell[shown]] = [ells[k] for k in shown]
         if bound is not None and math.isfinite(bound) and bound >= 0.0:
             i4[self._bnd_action] = Marker.ADD
             f8[self._circle] = px[:, None] + bound * self._unit.real

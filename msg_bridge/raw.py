@@ -187,7 +187,10 @@ def _find_each(blob: bytes, patterns: Mapping[str, bytes]) -> dict[str, set[int]
 
 class RawLabelledArrayWriter:
     """:func:`~msg_bridge.convert.labelled_array` as serialised bytes: ``w.msg(values, stamp_ns)``
-    (``values`` a float64 array of the labels' length, written in one copy)."""
+    (``values`` a float64 array of the labels' length, written in one copy); ``w.write(values,
+    stamp_ns)`` the same message in the writer's own buffer, not copied (valid until the next write:
+    for a publisher that copies it at once, as rcl's ``publish_raw``; ``~/covariance`` is 0.55 MB at
+    n = 132)."""
 
     def __init__(self, labels: Sequence[str]):
         labels = tuple(labels)
@@ -197,10 +200,13 @@ class RawLabelledArrayWriter:
         self._data = self._raw.f["data"]
 
     def msg(self, values: np.ndarray, stamp_ns: int) -> bytes:
+        return bytes(self.write(values, stamp_ns))
+
+    def write(self, values: np.ndarray, stamp_ns: int) -> bytearray:
         d = self._data
         d[0], d[1] = divmod(int(stamp_ns), NS_PER_S)
         d[STAMP_PAD:] = values
-        return self._raw.bytes()
+        return self._raw.buffer
 
 
 class RawOdometryBatch:

@@ -148,8 +148,9 @@ class ErrorBoundsWriter:
 
 class RawStateEstimateWriter:
     """:class:`StateEstimateWriter` as serialised bytes (:mod:`msg_bridge.raw`): ``w.msg(x,
-    stamp_ns, P=None)``. Two layouts, one with the n x n covariance and one with it empty; the
-    labels are serialised once, not at every publish."""
+    stamp_ns, P=None)``; ``w.write(...)`` the same message in the writer's own buffer, not copied
+    (valid until the next write). Two layouts, one with the n x n covariance and one with it empty;
+    the labels are serialised once, not at every publish."""
 
     def __init__(self, labels: Sequence[str], frame_id: str):
         w = StateEstimateWriter(labels, frame_id)
@@ -159,12 +160,15 @@ class RawStateEstimateWriter:
         self._without = RawMessage(w.msg(np.zeros(n), 0), stamp="header.stamp", doubles={"x": ("x", n)})
 
     def msg(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> bytes:
+        return bytes(self.write(x, stamp_ns, P))
+
+    def write(self, x: np.ndarray, stamp_ns: int, P: np.ndarray | None = None) -> bytearray:
         r = self._without if P is None else self._with
         r.stamp(stamp_ns)
         r.f["x"][:] = x
         if P is not None:
             r.f["P"][:] = P.reshape(-1)
-        return r.bytes()
+        return r.buffer
 
 
 # --- readers ---------------------------------------------------------------------------------

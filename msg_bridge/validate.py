@@ -22,7 +22,7 @@ from switchobs_core.exceptions import SwitchobsError
 from .stamps import time_ns, valid_time
 
 __all__ = ["BridgeError", "SpecError", "Reason", "Rejection", "channel_value", "check_after_switch", "check_channel",
-           "check_pose", "check_stamp", "check_time", "check_values"]
+           "check_pose", "check_stamp", "check_time", "check_values", "read_channel"]
 
 
 class Reason(enum.Enum):
@@ -193,11 +193,17 @@ def channel_value(msg: Any) -> int:
 def check_channel(msg: UInt8, N: int) -> Rejection | None:
     """An active channel must be one of the system's channels 1..N (either channel type,
     :func:`channel_value`)."""
+    return read_channel(msg, N)[1]
+
+
+def read_channel(msg: Any, N: int) -> tuple[int, Rejection | None]:
+    """:func:`channel_value` and :func:`check_channel` of a channel-topic message in one read:
+    ``(channel, None)``, or ``(channel, why it is refused)``."""
     c = channel_value(msg)
     if not 1 <= c <= N:
-        return Rejection(Reason.BAD_CHANNEL, "channel" if hasattr(msg, "channel") else "data",
-                         f"channel {c} is not in 1..{N}")
-    return None
+        return c, Rejection(Reason.BAD_CHANNEL, "channel" if hasattr(msg, "channel") else "data",
+                            f"channel {c} is not in 1..{N}")
+    return c, None
 
 
 class SpecError(SwitchobsError, ValueError):

@@ -97,8 +97,22 @@ class Resolution:
 
     @classmethod
     def of(cls, channel: int, certain: bool = True) -> Resolution:
-        """Channel ``channel``, or :attr:`Verdict.NO_CHANNEL` for 0 (none active)."""
-        return cls(Verdict.CHANNEL, channel, certain) if channel > 0 else cls(Verdict.NO_CHANNEL, 0, certain)
+        """Channel ``channel``, or :attr:`Verdict.NO_CHANNEL` for 0 (none active). A resolution is
+        immutable: one instance per Python ``int`` channel and ``certain`` serves every sample."""
+        if type(channel) is not int:      # (a numpy integer keeps its own type, as given)
+            return cls(Verdict.CHANNEL, channel, certain) if channel > 0 else cls(Verdict.NO_CHANNEL, 0, certain)
+        got = _OF.get((channel, certain))
+        if got is None:
+            got = _OF[(channel, certain)] = cls(Verdict.CHANNEL, channel, certain) if channel > 0 \
+                else cls(Verdict.NO_CHANNEL, 0, certain)
+        return got
+
+
+_OF: dict[tuple[int, bool], Resolution] = {}      # Resolution.of's instances
+
+
+#: ``SwitchHistory.resolve``'s verdicts other than a channel.
+_NAMED = {"near_switch": Verdict.NEAR_SWITCH, "lost": Verdict.LOST}
 
 
 def lost_between(a: int | None, b: int | None) -> int:
@@ -153,6 +167,8 @@ class ChannelAttribution:
         self._truncated = False               # older entries dropped (CHANNEL_HISTORY)
         self._answered_src = -1               # newest source timestamp of an answered sample
         self._memo: tuple | None = None       # (sample, its key, verdict) of the last _by_stamps
+        self._resolved: tuple | None = None   # (sample, its key, Resolution) of the last certain resolve by stamps
+        self._fixed = any(s.channel is not None for s in sources)     # a source of one channel exists
         self._guessed_src = -1                # the same, of one answered on the window's expiry
         self._last_fixed = 0                  # channel of the latest sample from a one-channel source
 
@@ -203,7 +219,7 @@ class ChannelAttribution:
         (:meth:`SwitchHistory.remember <switchobs_ros.switching.SwitchHistory.remember>`). Returns
         why the bounds must be withdrawn."""
         seq = sequence(seq)
-        lost = lost_between(self._stamped_seq, seq) if self.stamped else 0
+        lost = lost_between(self._stamped_seq, seq) if self.stamped.at else 0
         self._stamped_seq = seq
         late0, lost0 = self.stamped.late, self.stamped.lost_messages
         why = self.stamped.remember(int(switch_ns), channel, src_ns, seq, lost)
@@ -225,7 +241,7 @@ class ChannelAttribution:
         or it waits for its channel): no channel received yet when arrival order decides (no
         source timestamp, or no reorder window), or, without source timestamps, stamped at or
         before the switch (taken while the previous channel was active)."""
-        if self.stamped:        # by the sensors' stamps: neither arrival order nor the switch's camera stamp
+        if self.stamped.at:     # by the sensors' stamps: neither arrival order nor the switch's camera stamp
             return rej
         if rej is None and src.channel is None and self.channel_topic and not self.channel \
                 and (src_ns is None or not self.window_ns):
@@ -237,23 +253,34 @@ class ChannelAttribution:
 
     def resolve(self, pend: Pending, now_mono: float, force: bool = False) -> Resolution:
         """The channel of a pending sample and whether it is certain at ``now_mono`` (``force``:
-        the window is over)."""
+        the window is over). By stamps, a certain answer is kept for the same sample, parts, switching
+        messages received and ``force`` (:meth:`_by_stamps`): the pipeline asks again as it pairs,
+        advances and answers a sample."""
         srcs = self.sources
-        fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
-        if fixed:
-            return Resolution.of(fixed.pop()) if len(fixed) == 1 else Resolution(Verdict.CONFLICT)
+        if self._fixed:
+            fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
+            if fixed:
+                return Resolution.of(fixed.pop()) if len(fixed) == 1 else Resolution(Verdict.CONFLICT)
         if not self.channel_topic:          # shared rows only, one-channel sources elsewhere
             return Resolution.of(self._last_fixed)
-        if self.stamped:                    # by the sensors' stamps (switchobs_ros.switching)
+        stamped = self.stamped
+        if stamped.at:                      # by the sensors' stamps (switchobs_ros.switching)
+            key = (pend.stamp_ns, len(pend.parts), stamped.received, force)
+            got = self._resolved
+            if got is not None and got[0] is pend and got[1] == key:
+                return got[2]
             verdict, c, certain = self._by_stamps(pend, force)
             if verdict == "near_switch" and c and all(srcs[i].shared for i in pend.parts):
                 verdict = "channel"     # shared rows read the same in every channel: they wait for a partner
             if not certain and self._expired(pend, now_mono):   # never a guess: ambiguous
                 return Resolution(Verdict.NO_CHANNEL if verdict == "none" else Verdict.UNCERTAIN)
             if verdict == "channel":
-                return Resolution.of(c, certain)
-            named = {"near_switch": Verdict.NEAR_SWITCH, "lost": Verdict.LOST}
-            return Resolution(named.get(verdict, Verdict.NO_CHANNEL), certain=certain)
+                res = Resolution.of(c, certain)
+            else:
+                res = Resolution(_NAMED.get(verdict, Verdict.NO_CHANNEL), certain=certain)
+            if certain:
+                self._resolved = (pend, key, res)
+            return res
         dep = [p for i, p in pend.parts.items() if not srcs[i].shared] or list(pend.parts.values())
         stamps = [p.src_ns for p in dep]
         if any(s is None for s in stamps) or not self._src:
@@ -303,7 +330,8 @@ class ChannelAttribution:
         """Whether the history does not prove the channel of a sample that depends on it: no
         channel message sent after it has arrived (answered on the window's expiry)."""
         srcs = self.sources
-        if self.stamped and self.channel_topic and not any(srcs[i].channel is not None for i in pend.parts):
+        if self.stamped.at and self.channel_topic and not (self._fixed and any(srcs[i].channel is not None
+                                                                                for i in pend.parts)):
             return not self._by_stamps(pend)[2]
         if not self.channel_topic or not self._src or all(srcs[i].shared for i in pend.parts) \
                 or any(srcs[i].channel is not None for i in pend.parts):
@@ -319,13 +347,17 @@ class ChannelAttribution:
 
     def answered(self, pend: Pending, guessed: bool) -> None:
         """The sample was answered (``guessed``: on the window's expiry, :meth:`guessed`)."""
-        if self.stamped and self._by_stamps(pend)[::2] == ("channel", True):
-            self.stamped.answered_at(pend.stamp_ns)     # on a channel the stamps proved
+        if self.stamped.at:
+            verdict, _, certain = self._by_stamps(pend)
+            if certain and verdict == "channel":
+                self.stamped.answered_at(pend.stamp_ns)     # on a channel the stamps proved
         srcs = [p.src_ns for p in pend.parts.values() if p.src_ns is not None]
         if srcs:
-            self._answered_src = max(self._answered_src, max(srcs))
-            if guessed:
-                self._guessed_src = max(self._guessed_src, max(srcs))
+            newest = max(srcs)
+            if newest > self._answered_src:
+                self._answered_src = newest
+            if guessed and newest > self._guessed_src:
+                self._guessed_src = newest
 
     def reset(self) -> None:
         """The estimator reset: no switch is known for the parts that follow."""

@@ -20,7 +20,7 @@ table's stored prior) as much again; none of it is spent while nobody listens.
   before it), and after the last subscriber leaves an output is built and published for at most
   0.5 s more, to nobody;
 * ``covariance_wanted()``: does any output that carries ``P`` have a subscriber? Asked before
-  every input is handled (the estimate's ``P`` is formed with it), of up to 36 publishers at 32
+  every estimate reads ``P`` (the node's ``_covariance_due``), of up to 36 publishers at 32
   agents, so the answer is kept: a yes for :attr:`Demand.period` seconds (a subscriber that
   leaves costs at most that long of covariances nobody reads), a no for :attr:`Demand.period_no`
   seconds (for at most that long after the first subscriber to an output carrying ``P`` appears,
@@ -39,33 +39,52 @@ import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["LISTEN_PERIOD", "LISTEN_PERIOD_NO", "Demand", "listened"]
+__all__ = ["LISTEN_PERIOD", "LISTEN_PERIOD_NO", "Demand", "listened", "listened_each"]
 
 #: How long :func:`listened` keeps a publisher's yes, and its no (s).
 LISTEN_PERIOD = 0.5
 LISTEN_PERIOD_NO = 0.02
 
-_heard: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()     # publisher -> (until, answer)
+#: id(publisher) -> (until, answer, a weak reference to the publisher): a plain dict read by the
+#: publisher's id (a weak-keyed dict makes a weak reference at every look-up); an entry leaves with
+#: its publisher (the reference's callback), and a look-up checks that it is still that publisher's.
+_heard: dict[int, tuple[float, bool, weakref.ref]] = {}
 
 
 def listened(pub: Any, clock: Callable[[], float] = time.monotonic) -> bool:
     """Is a subscription matched to the publisher ``pub`` (None: no such output)? The answer of
     rcl's matched count, kept per publisher for :data:`LISTEN_PERIOD` s (a yes) or
     :data:`LISTEN_PERIOD_NO` s (a no)."""
-    if pub is None:
-        return False
+    return pub is not None and listened_each((pub,), clock)[0]
+
+
+def listened_each(pubs: Sequence[Any], clock: Callable[[], float] = time.monotonic) -> list[bool]:
+    """:func:`listened` of each publisher of ``pubs`` (none None) at one reading of the clock:
+    the 33 odometries of 32 agents in one call."""
     now = clock()
-    got = _heard.get(pub)
-    if got is not None and now < got[0]:
-        return got[1]
-    return _ask(pub, now)
+    get = _heard.get
+    out = []
+    for pub in pubs:
+        got = get(id(pub))
+        out.append(got[1] if got is not None and now < got[0] and got[2]() is pub else _ask(pub, now))
+    return out
 
 
 def _ask(pub: Any, now: float) -> bool:
     """rcl's matched count of ``pub`` now, kept for :func:`listened` (``now`` on its clock)."""
     yes = pub.get_subscription_count() > 0
-    _heard[pub] = (now + (LISTEN_PERIOD if yes else LISTEN_PERIOD_NO), yes)
+    key = id(pub)
+    got = _heard.get(key)
+    ref = got[2] if got is not None and got[2]() is pub else weakref.ref(pub, lambda r, k=key: _forget(k, r))
+    _heard[key] = (now + (LISTEN_PERIOD if yes else LISTEN_PERIOD_NO), yes, ref)
     return yes
+
+
+def _forget(key: int, ref: weakref.ref) -> None:
+    """A publisher is gone: its kept answer with it (unless the id already holds another's)."""
+    got = _heard.get(key)
+    if got is not None and got[2] is ref:
+        del _heard[key]
 
 
 class Demand:

@@ -194,7 +194,7 @@ class EstimatorMixin(OutputsMixin):
         # optional outputs, and P, only while someone listens (switchobs_ros.demand)
         self.covariance_allowed = pl.publish_covariance
         self.demand = Demand(self._covariance_carriers)
-        pl.covariance_due = self._covariance_due    # P formed only for an estimate an output carrying it takes
+        pl.covariance_due = self._covariance_due    # P formed only for an estimate a listened output carrying it takes
         self.published = dict.fromkeys(("state", "envelope", "covariance", "odometry", "typed", "markers"), 0)
         self.gc_freeze = bool(cfg["gc_freeze"])
         self.diag = EstimatorDiagnostics(self.get_fully_qualified_name(), pl, self.get_clock().now().nanoseconds)
@@ -348,18 +348,19 @@ class EstimatorMixin(OutputsMixin):
             if not self.answering:
                 self.ignored_inactive += 1
                 return
-            pipeline.publish_covariance = self.covariance_allowed and self.demand.covariance_wanted()
-            src_ns = info.get("source_timestamp") if info else None
-            src_ns = int(src_ns) if src_ns else None
-            if src_ns and info.get("received_timestamp") and (    # the sender's system clock against ours
-                    why := pipeline.clocks.seen(dds, src_ns, int(info["received_timestamp"]), system=True)):
-                pipeline.withdraw(why)
             # the sequence number shows lost messages (switchobs_ros.loss; the channel's: attribution)
-            seq = info.get("publication_sequence_number") if info else None
-            if index is None:
-                self._publish_all(pipeline.on_channel(msg, src_ns=src_ns, seq=seq))
+            src_ns, recv_ns, seq = (info.get("source_timestamp"), info.get("received_timestamp"),
+                                    info.get("publication_sequence_number")) if info else (None, None, None)
+            if src_ns:
+                src_ns = int(src_ns)
+                if recv_ns and (why := pipeline.clocks.seen(dds, src_ns, int(recv_ns), system=True)):
+                    pipeline.withdraw(why)          # the sender's system clock against ours
             else:
-                self._publish_all(pipeline.on_input(index, msg, now().nanoseconds, None, src_ns, seq))
+                src_ns = None
+            out = pipeline.on_channel(msg, src_ns=src_ns, seq=seq) if index is None \
+                else pipeline.on_input(index, msg, now().nanoseconds, None, src_ns, seq)
+            if out:
+                self._publish_all(out)
         return handle
 
     def _with_drain(self, handle):

@@ -48,10 +48,15 @@ class SequenceLoss:
         if s is None:
             return 0
         self._clock += 1
-        seqs = self._seqs.setdefault(topic, [])
-        below = [q for q in seqs if q[0] < s]
-        if below:                                  # extends the sequence whose last number is nearest below
-            q = max(below, key=lambda q: q[0])
+        seqs = self._seqs.get(topic)
+        if seqs is None:
+            seqs = self._seqs[topic] = []
+        if len(seqs) == 1:                         # one publisher (the common case): no search
+            q = seqs[0] if seqs[0][0] < s else None
+        else:                                      # the sequence whose last number is nearest below
+            below = [q for q in seqs if q[0] < s]
+            q = max(below, key=lambda q: q[0]) if below else None
+        if q is not None:                          # extends it
             lost = s - q[0] - 1
             q[0], q[1] = s, self._clock
             self.lost[topic] += lost

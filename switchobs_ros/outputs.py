@@ -23,7 +23,7 @@ from typing import Any
 import msg_bridge as mb
 from msg_bridge.raw import RawLabelledArrayWriter
 
-from .demand import listened
+from .demand import listened, listened_each
 from .late_markers import LateMarkersMixin
 from .pipeline import Estimate
 
@@ -34,11 +34,16 @@ def send(pub: Any, data: Any) -> None:
     """Publish ``data`` on ``pub``: serialised ``bytes`` straight to rclpy's publisher handle
     (``publish_raw``: what ``Publisher.publish(bytes)`` calls after a type test and entering the
     handle, 0.7-1.4 us more per call measured here; the node's publishers are destroyed only by its
-    own spinning thread, between publications), a message object through ``Publisher.publish``."""
-    if type(data) is bytes:
+    own spinning thread, between publications), and so a writer's own ``bytearray`` (its ``write``:
+    ``publish_raw`` copies it before it returns, so the writer may rewrite it after), a message
+    object through ``Publisher.publish``."""
+    if type(data) in _SERIALISED:
         pub.handle.publish_raw(data)
     else:
         pub.publish(data)
+
+
+_SERIALISED = (bytes, bytearray)
 
 
 def channel_bodies(system: Any, bodies: Any) -> dict[int, str]:
@@ -78,7 +83,11 @@ class OutputsMixin(LateMarkersMixin):
 
     def _covariance_due(self, i: int) -> bool:
         """Whether the ``i``-th estimate of the pipeline's present call (the ``n_published + i``-th)
-        goes out on a listened output that carries ``P`` (``output.*_every``)."""
+        goes out on a listened output that carries ``P`` (``output.*_every``; the outputs listened:
+        :meth:`Demand.covariance_wanted <switchobs_ros.demand.Demand.covariance_wanted>`, asked here,
+        as the estimate is about to read ``P``)."""
+        if not self.demand.covariance_wanted():
+            return False
         k, ev = self.n_published + i, self.every
         return any(k % ev[kind] == 0 for kind in self.demand.kinds)
 
@@ -92,15 +101,15 @@ class OutputsMixin(LateMarkersMixin):
             try:     # one estimate's failure (a writer that cannot be built) costs no other estimate
                 k = self.n_published
                 self.n_published = k + 1
-                send(self.pub_state, self.w_state.msg(e.x_hat, e.stamp_ns))
+                send(self.pub_state, self.w_state.write(e.x_hat, e.stamp_ns))
                 n["state"] += 1
                 if ev["envelope"] and k % ev["envelope"] == 0 and listened(self.pub_env):
-                    send(self.pub_env, self.w_env.msg(e.envelope, e.stamp_ns))
+                    send(self.pub_env, self.w_env.write(e.envelope, e.stamp_ns))
                     n["envelope"] += 1
                 if e.P is not None and ev["covariance"] and k % ev["covariance"] == 0 and listened(self.pub_cov):
-                    send(self.pub_cov, self.w_cov.msg(e.P.ravel(), e.stamp_ns))
+                    send(self.pub_cov, self.w_cov.write(e.P.ravel(), e.stamp_ns))
                     n["covariance"] += 1
-                if ev["odometry"] and k % ev["odometry"] == 0 and any(on := [listened(p) for p in self.pub_odom]):
+                if ev["odometry"] and k % ev["odometry"] == 0 and any(on := listened_each(self.pub_odom)):
                     for pub, m, yes in zip(self.pub_odom, self.w_odom.msgs(e.x_hat, e.stamp_ns, e.P), on):
                         if yes:
                             send(pub, m)
@@ -108,7 +117,7 @@ class OutputsMixin(LateMarkersMixin):
                 if ev["typed"] and k % ev["typed"] == 0:
                     pl = self.pipeline
                     if listened(self.pub_typed[0]):
-                        send(self.pub_typed[0], self.w_typed[0].msg(e.x_hat, e.stamp_ns, e.P))
+                        send(self.pub_typed[0], self.w_typed[0].write(e.x_hat, e.stamp_ns, e.P))
                         n["typed"] += 1
                     if listened(self.pub_typed[1]):
                         send(self.pub_typed[1], self.w_typed[1].msg(e.envelope, e.stamp_ns, pl.bound_valid,

@@ -74,8 +74,9 @@ class Pairing:
         self.tol = int(tolerance_ns)
         self._p = p
         # the sources every sample of channel c needs (its own and the shared ones)
-        self._required = tuple(tuple(s.index for s in sources if s.channel in (None, c))
+        self._required = tuple(frozenset(s.index for s in sources if s.channel in (None, c))
                                for c in range(1, len(p) + 1))
+        self._reads: dict[tuple, tuple] = {}     # (parts' sources, channel) -> measurement's order and rows
         self.pending: dict[int, Pending] = {}
         self.upto = -1
 
@@ -108,7 +109,7 @@ class Pairing:
 
     def complete(self, pend: Pending, channel: int) -> bool:
         """Whether every source that a sample of ``channel`` needs has arrived."""
-        return all(i in pend.parts for i in self._required[channel - 1])
+        return pend.parts.keys() >= self._required[channel - 1]
 
     def settle(self, stamp_ns: int) -> None:
         """A sample at ``stamp_ns`` is complete: older ones go with the parts they have."""
@@ -147,16 +148,23 @@ class Pairing:
                     self.sources[next(iter(pend.parts))].topic)
 
     def measurement(self, pend: Pending, channel: int) -> Measurement:
-        """The sample read as ``channel``: its parts' values in row order (rows None: all of them)."""
-        rows: list[int] = []
+        """The sample read as ``channel``: its parts' values in row order (rows None: all of them).
+        The order and the rows depend on the parts' sources and the channel only: found once for each."""
+        parts = pend.parts
+        key = (*parts, channel)
+        read = self._reads.get(key)
+        if read is None:
+            rows: list[int] = []
+            for i in parts:
+                rows.extend(self.sources[i].rows[channel - 1])
+            order = sorted(range(len(rows)), key=rows.__getitem__)
+            r = tuple(rows[k] for k in order)
+            read = self._reads[key] = (order, None if r == tuple(range(self._p[channel - 1])) else r)
         vals: list[float] = []
-        for i, part in pend.parts.items():
-            rows.extend(self.sources[i].rows[channel - 1])
+        for part in parts.values():
             vals.extend(part.values.tolist())
-        order = sorted(range(len(rows)), key=rows.__getitem__)
-        r = tuple(rows[k] for k in order)
-        y = np.array([vals[k] for k in order], dtype=float)
-        return Measurement(pend.stamp_ns, channel, None if r == tuple(range(self._p[channel - 1])) else r, y)
+        order, r = read
+        return Measurement(pend.stamp_ns, channel, r, np.array([vals[k] for k in order], dtype=float))
 
 
 class DeadTime:

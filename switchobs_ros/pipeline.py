@@ -277,13 +277,12 @@ class EstimatorPipeline(Counters):
         out: list[Estimate] = []
         topic = self.channel_topic or CHANNEL_TOPIC
         try:
-            rej = mb.check_channel(msg, self.N)
+            c, rej = mb.read_channel(msg, self.N)
             if rej is not None:
                 self.reject(topic, rej)
                 self._withdraw_all(self.attribution.remember_invalid(src_ns, seq))
                 return out
             self.accepted[topic] += 1
-            c = mb.channel_value(msg)
             if c != self.attribution.channel:
                 if self.attribution.channel:
                     self.switches += 1
@@ -293,7 +292,8 @@ class EstimatorPipeline(Counters):
                 self._withdraw_all(self.attribution.remember_switch(mb.stamp_to_ns(msg.header.stamp), c, src_ns, seq))
             elif src_ns is not None:
                 self._withdraw_all(self.attribution.remember(int(src_ns), c, seq))
-            self._advance(out, time.monotonic() if now_mono is None else now_mono)
+            if self.pairing.pending:        # (none waits: nothing to answer)
+                self._advance(out, time.monotonic() if now_mono is None else now_mono)
         except Exception as err:
             self.internal_error(topic, err)
         return out
@@ -360,13 +360,13 @@ class EstimatorPipeline(Counters):
             self.dead_time.accepted(src, stamp_ns, self.last_ns[topic])
             self.last_ns[topic] = stamp_ns
             self.last_accept_clock_ns = now_ns
-            pend = self.pairing.add(index, stamp_ns, values, src_ns, self.attribution.channel, now_mono,
-                                    self.attribution.stamped.received)
-            res = self.attribution.resolve(pend, now_mono)
+            att = self.attribution
+            pend = self.pairing.add(index, stamp_ns, values, src_ns, att.channel, now_mono, att.stamped.received)
+            res = att.resolve(pend, now_mono)
             if (res.verdict is Verdict.CHANNEL and self.pairing.complete(pend, res.channel)) \
                     or (src.shared and len(pend.parts) == 1 and self.dead_time.certainly_blind(stamp_ns)):
                 self.pairing.settle(pend.stamp_ns)       # older samples will not be completed now
-            for s in self.pairing.overflow():       # the oldest one's partners are overdue
+            for s in self.pairing.overflow() if len(self.pairing.pending) > MAX_PENDING else ():   # partners overdue
                 self._flush(s, out, now_mono)
             self._advance(out, now_mono)
         except Exception as err:

@@ -83,7 +83,7 @@ class Source:
             if tf is not None and rej is None:
                 values = self.framed.apply(every, values, tf)
                 rej = mb.check_values(values, self.fields, max_abs=max_abs)
-            return sec * NS_PER_S + nsec, values, _named(rej)      # as sent: a valid time when rej is None
+            return sec * NS_PER_S + nsec, values, rej if rej is None else _named(rej)   # as sent: a valid time
         stamp_ns = time_ns(sec, nsec)
         if stamp_ns is None:
             return 0, _EMPTY, mb.check_time(sec, nsec)

@@ -112,3 +112,27 @@ def test_a_message_without_fields_is_walked_as_its_hidden_byte():
     (a field after a nested empty message stays where it is) and zeroes what follows."""
     data = serialize_message(Empty())
     assert bytes(zero_padding(Empty(), data)) == bytes(data[:5]) + bytes(len(data) - 5)
+
+
+@pytest.mark.parametrize("frame", ["", "m", "map", "odom7"])
+@pytest.mark.parametrize("n", [0, 1, 2, 5])
+def test_sequences_of_fixed_size_messages_are_rosbags_bytes(store, frame, n):
+    """Sequences of messages of one size (a line strip's points: 24 bytes each, walked item by item
+    until one ends on the 8-byte phase it began on with no padding, the rest taken at once; colours
+    of 16 bytes; 12-byte Point32s, never taken at once) after frame ids of every length modulo 8:
+    rosbags' bytes."""
+    from geometry_msgs.msg import Point, Point32, PolygonStamped
+    from std_msgs.msg import ColorRGBA
+    from visualization_msgs.msg import Marker
+
+    _dirty()
+    m = Marker()
+    m.header.frame_id = frame
+    m.text = frame * 3
+    m.points = [Point(x=0.5 * k, y=-1.0 * k, z=float(k)) for k in range(n)]
+    m.colors = [ColorRGBA(r=0.25 * k, a=1.0) for k in range(n)]
+    poly = PolygonStamped()
+    poly.header.frame_id = frame
+    poly.polygon.points = [Point32(x=0.5 * k, y=1.5, z=-2.0) for k in range(n)]
+    for msg, type_name in ((m, "visualization_msgs/msg/Marker"), (poly, "geometry_msgs/msg/PolygonStamped")):
+        _assert_rosbags_bytes(store, zero_padding(msg, serialize_message(msg)), msg, type_name)

@@ -201,3 +201,25 @@ def test_dead_time_blind_until_a_channel_part():
     dead.switched()
     assert dead.certainly_blind(500 * MS)
     assert not DeadTime(0, shared0=0).certainly_blind(0)
+
+
+def test_a_certain_resolution_by_stamps_is_kept_until_a_switching_message_or_a_part_arrives():
+    """By stamps, a certain answer is asked again for the same sample as it is paired, advanced and
+    answered, and kept: the same answer (one instance) while nothing changed; a switching message
+    that arrives after it (a late one: a switch at or before the sample) or a new part makes it
+    resolved afresh."""
+    att = _att()
+    att.stamped.horizon = {1: 500 * MS, 2: 500 * MS}
+    assert att.remember_switch(100 * MS, 1, 100 * MS, seq=1) == []
+    pend = _sample(150 * MS, {0: 150 * MS})
+    first = att.resolve(pend, 0.0)
+    assert first == Resolution(Verdict.CHANNEL, 1, certain=True)       # within the horizon: certain at once
+    assert att.resolve(pend, 0.0) is first and att.resolve(pend, 1.0) is first
+    pend.parts[1] = _sample(150 * MS, {1: 150 * MS}).parts[1]            # the target's part
+    assert att.resolve(pend, 0.0) == first
+    assert att.answered(pend, False) is None and att.stamped.answered == 150 * MS
+    # a switch to channel 2 at 120 ms arrives after the sample was answered: withdraws, and the
+    # same sample now reads as channel 2 (never the kept channel 1)
+    assert att.remember_switch(120 * MS, 2, 160 * MS, seq=2)
+    assert att.resolve(pend, 0.0) == Resolution(Verdict.CHANNEL, 2, certain=True)
+    assert att.resolve(pend, 0.0, force=True) == Resolution(Verdict.CHANNEL, 2, certain=True)

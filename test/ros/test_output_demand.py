@@ -135,16 +135,20 @@ def test_node_publishes_optional_outputs_only_to_subscribers(paper_tables, ros_n
         assert pl.updates == 20 and n["state"] == 20
         assert n["odometry"] == 20                   # one body of three is listened to
         assert n["envelope"] == n["covariance"] == n["typed"] == n["markers"] == 0
-        assert pl.publish_covariance                 # the odometry carries P
+        assert est._covariance_due(0)                # the odometry carries P: formed for the next estimate
         assert spin_until(ros_node, lambda: len(got["odom"]) >= 20 and len(got["state"]) >= 20, 10.0)
         assert all(any(c != 0.0 for c in m.pose.covariance) for m in got["odom"])
         # nobody listens to an output carrying P any more: P is no longer formed, odometry not sent
         ros_node.destroy_subscription(odom)
         assert spin_until(ros_node, lambda: est.pub_odom[1].get_subscription_count() == 0, 20.0)
         time.sleep(0.15)                             # past the period a yes is kept
+        seen = []
+        publish_all = est._publish_all
+        est._publish_all = lambda estimates: (seen.extend(estimates), publish_all(estimates))
         _feed(est, io, 21, 10)
         assert pl.updates == 30 and n["state"] == 30 and n["odometry"] == 20
-        assert not pl.publish_covariance
+        assert len(seen) == 10 and all(e.P is None for e in seen)     # P no longer formed
+        assert not est._covariance_due(0)
     finally:
         est.destroy_node()
 

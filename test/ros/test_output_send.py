@@ -1,15 +1,18 @@
 """switchobs_ros.outputs.send: serialised bytes reach a subscriber exactly as ``Publisher.publish``
-sends them, a message object goes through ``Publisher.publish``."""
+sends them, and so does a raw writer's own buffer (``write``), rewritten after each send; a message
+object goes through ``Publisher.publish``."""
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray
 
+from msg_bridge.raw import RawLabelledArrayWriter
 from switchobs_ros.executor import KeptWaitSetExecutor
 from switchobs_ros.outputs import send
 
@@ -35,12 +38,21 @@ def test_bytes_and_messages_arrive_as_publish_sends_them():
         send(pub, raw)                      # bytes: the handle's publish_raw
         send(pub, second)                   # a message: Publisher.publish
         pub.publish(raw)                    # rclpy's own path, for comparison
-        while len(got) < 3 and time.monotonic() < end:
+        # a writer's own buffer (write: not copied), rewritten right after: each sent as it was
+        writer = RawLabelledArrayWriter(("a", "b"))
+        buf = writer.write(np.array([7.0, 8.0]), 5_000_000_001)
+        want = bytes(buf)
+        send(pub, buf)
+        writer.write(np.array([9.0, -1.0]), 6_000_000_002)
+        send(pub, buf)
+        while len(got) < 5 and time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
         assert got[0] == raw and got[2] == raw          # the bytes as given
+        assert got[3] == want and got[4] == bytes(buf) and got[3] != got[4]
+        assert got[4] == writer.msg(np.array([9.0, -1.0]), 6_000_000_002)
         # (a message serialised by the middleware may differ from ours in its alignment padding)
-        assert [list(deserialize_message(b, Float64MultiArray).data) for b in got] == [[1.5, -2.0, 3.25], [4.0],
-                                                                                      [1.5, -2.0, 3.25]]
+        assert [list(deserialize_message(b, Float64MultiArray).data) for b in got[:3]] == [[1.5, -2.0, 3.25], [4.0],
+                                                                                          [1.5, -2.0, 3.25]]
     finally:
         node.destroy_node()
         ex.shutdown()
