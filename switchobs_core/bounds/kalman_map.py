@@ -219,6 +219,21 @@ def _allowance(sp: SparseTransition, h: int, p: int) -> float:
     return (g1 + gm * (1.0 + g1)) * (1.0 + 4.0 * gamma(1))
 
 
+def factored_underflow(sp: SparseTransition, K: np.ndarray, H: np.ndarray, h: int) -> float:
+    """The factored step's underflow gain ``mn``: the plan's underflow allowance (rounding.py, step 8) holds
+    ``(n + 4) eta (2 + mn)`` per entry of ``Z``, and the products' absolute underflow errors reach ``Z`` at most
+    ``(k + h + 2p) (1 + ||Phi~||_inf) (1 + ||K||_inf)^2 (1 + ||H||_inf)^2 eta`` (``k`` and ``h`` the most
+    nonzeros in a row of ``Phi~`` and ``H``): each product ``a b`` errs by ``eta`` absolute, a sum by nothing
+    more, so ``Y`` by ``k (1 + ||Phi~||_inf) eta``, ``G = H Y`` and ``Y H'`` by ``||H||_inf`` times that plus
+    ``h eta``, ``C = G H'`` again, ``K C`` by ``||K||_inf`` times ``C``'s plus ``p eta``, and ``Z = Y - K G - V K'``
+    carries ``C``'s through ``K`` on both sides: hence ``||K||_inf^2``. Rounded up."""
+    p, n = H.shape
+    nK = float(np.abs(K).sum(axis=1).max()) if K.size else 0.0
+    nH = float(np.abs(H).sum(axis=1).max()) if H.size else 0.0
+    gain = (sp.k + h + 2 * p) * (1.0 + sp.inf_norm) * (1.0 + nK) ** 2 * (1.0 + nH) ** 2
+    return gain * (1.0 + 2.0 * gamma(n + p + 12))
+
+
 def _w_factor(n: int, p: int) -> float:
     """``w``'s factor: ``y + |K| (|H| y)`` rounded up, sums of at most ``n + p + 4`` nonnegative terms (step 3)."""
     return 1.0 + 2.0 * gamma(n + p + 4)
@@ -281,7 +296,7 @@ class KalmanMap:
         self._Hs: np.ndarray | None = None
         self._aE: tuple | None = None
         self._aEd: tuple | None = None      # (d, D |E~|) of dense_abs
-        self._aKH: tuple | None = None      # (|K|, |H|, ||J |Phi~| ||_inf) of the factored step
+        self._aKH: tuple | None = None      # (|K|, |H|, factored_underflow) of the factored step
         self._sp = sparse_transition(entry)
         self._cols: tuple | None = None
         self._dense: tuple | None = None    # (Phi~, H, K) C-ordered for the kernel's correct()
@@ -469,8 +484,7 @@ class KalmanMap:
         s = np.sqrt(np.maximum(np.diagonal(S), 0.0))
         y = sp.abs_matvec(s)
         if self._aKH is None:
-            aK, aH = np.abs(K), np.abs(H)
-            self._aKH = (aK, aH, (1.0 + float((aK @ aH.sum(axis=1)).max())) * sp.inf_norm)    # ||J |Phi~| ||_inf
+            self._aKH = (np.abs(K), np.abs(H), factored_underflow(sp, K, H, h))
         aK, aH, mn = self._aKH
         w = (y + aK @ (aH @ y)) * _w_factor(n, p)
         return Z, w, _allowance(sp, h, p), mn
@@ -488,12 +502,12 @@ class KalmanMap:
         if kh is None:
             p, n = self.H.shape
             rows, h = _rows(self.H)
-            kh = self._kern = (np.ascontiguousarray(self.K, dtype=float), rows, _w_factor(n, p),
-                               _allowance(sp, h, p))
+            kh = self._kern = (factored_underflow(sp, self.K, self.H, h), np.ascontiguousarray(self.K, dtype=float),
+                               rows, _w_factor(n, p), _allowance(sp, h, p))
         Y = ell.take_product(sp)
         if Y is None:
             Y = sp.sandwich_either(ell.S, ell.scratch())
-        if ell.step_factored(Y, sp.abs_rows, sp.inf_norm, *kh, rho):
+        if ell.step_factored(Y, sp.abs_rows, *kh, rho):
             return True
         ell.keep_product(sp, Y)
         return False

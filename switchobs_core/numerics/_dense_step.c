@@ -843,13 +843,13 @@ static void factored_kernel(Py_ssize_t n, Py_ssize_t p, double *restrict Y, cons
                             double *out)
 {
     const double *id2 = aux + 2 * n, gsum = aux[4 * n];
-    const double rho = cf[0], wf = cf[1], czp = cf[2], c1f = cf[3], c4f = cf[4], inf_norm = cf[5];
+    const double rho = cf[0], wf = cf[1], czp = cf[2], c1f = cf[3], c4f = cf[4], mn = cf[5];
     const Py_ssize_t m = 2 * p;
     double *s = work, *w = s + n, *zd = w + n, *Bm = zd + n, *Am = Bm + m * n, *Cm = Am + n * m, *hy = Cm + p * p;
     Py_ssize_t i, k, r, q, jj;
-    double mx = 0.0, tr = 0.0, ls = 0.0;
+    double tr = 0.0, ls = 0.0;
 
-    /* w = (y + |K| (|H| y)) wf, y = |Phi~| s, s = sqrt(max(diag S, 0)) (step 3); |H|'s row sums for ||M||_inf */
+    /* w = (y + |K| (|H| y)) wf, y = |Phi~| s, s = sqrt(max(diag S, 0)) (step 3) */
     for (i = 0; i < n; i++)
         s[i] = sqrt(pymax(S[i * s0 + i * s1], 0.0));
     for (i = 0; i < n; i++) {
@@ -859,23 +859,17 @@ static void factored_kernel(Py_ssize_t n, Py_ssize_t p, double *restrict Y, cons
         w[i] = t;                               /* y */
     }
     for (r = 0; r < p; r++) {
-        double t = 0.0, a = 0.0;
-        for (jj = hp[r]; jj < hp[r + 1]; jj++) {
+        double t = 0.0;
+        for (jj = hp[r]; jj < hp[r + 1]; jj++)
             t = t + fabs(hv[jj]) * w[hj[jj]];
-            a = a + fabs(hv[jj]);
-        }
         hy[r] = t;
-        Cm[r] = a;                              /* |H| 1, read before Cm is formed */
     }
     for (i = 0; i < n; i++) {
         const double *ki = K + i * p;
-        double t = fabs(ki[0]) * hy[0], a = fabs(ki[0]) * Cm[0];
-        for (r = 1; r < p; r++) {
+        double t = fabs(ki[0]) * hy[0];
+        for (r = 1; r < p; r++)
             t = t + fabs(ki[r]) * hy[r];
-            a = a + fabs(ki[r]) * Cm[r];
-        }
         w[i] = (w[i] + t) * wf;
-        mx = npmax(mx, a);
     }
     /* G = H Y into Bm's first p rows, K' into its last p; Am's rows [K_i, V_i], V = Y H' - K (G H') (step 2) */
     for (r = 0; r < p; r++) {
@@ -922,7 +916,7 @@ static void factored_kernel(Py_ssize_t n, Py_ssize_t p, double *restrict Y, cons
     /* the plan (rounding.ErrorEllipsoid._plan without an added shaped set): q into s (read no more) */
     {
         double fac[3], alpha, ha;
-        plan_core(n, zd, w, aux, rho, czp, c1f, c4f * (2.0 + (1.0 + mx) * inf_norm), s, fac);
+        plan_core(n, zd, w, aux, rho, czp, c1f, c4f * (2.0 + mn), s, fac);
         alpha = fac[0];
         /* S' = (Z + Z') (alpha / 2) + diag(q) in place, exactly symmetric, in tiles of 8 x 8 */
         ha = 0.5 * alpha;
@@ -949,13 +943,14 @@ static void factored_kernel(Py_ssize_t n, Py_ssize_t p, double *restrict Y, cons
     out[1] = pymax(ls, 0.0) * gsum;
 }
 
-/* factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm) -> (tr, ls, alpha, theta):
+/* factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, mn) -> (tr, ls, alpha, theta):
  * a Kalman sample's step of the exact set through its factored map (KalmanMap.sandwich and
  * ErrorEllipsoid.propagate_product in one call, switchobs_core.numerics.rounding.ErrorEllipsoid.step_factored):
  * Y (n x n C-ordered, the prior's Phi~ S Phi~') is overwritten with S'; S (n x n, any strides) gives diag S;
  * (ip, ix, adv) |Phi~| and (hp, hj, hv) H in compressed rows, K n x p C-ordered; aux the ellipsoid's
  * (d, 1/d, 1/d^2, d^2, gsum, 1 + 4u, alo, ahi, kth, k2, eta, 1 + 8u, 2u); the scalars: the residual rho, w's
- * factor, cz + u (1 + cz), q's factor of W (w d), (n + 4) n eta, ||Phi~||_inf rounded up. Every sum in index
+ * factor, cz + u (1 + cz), q's factor of W (w d), (n + 4) n eta, the map's underflow gain mn (KalmanMap's
+ * factored_underflow: c4 = c4f (2 + mn)). Every sum in index
  * order (within the gamma_m of the docstrings' standard model, as any order); tr and ls the trace and the
  * balanced trace of S' rounded up by gsum. */
 static PyObject *factored(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
@@ -966,7 +961,7 @@ static PyObject *factored(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
     PyObject *res = NULL;
     if (nargs != 16) {
         PyErr_SetString(PyExc_TypeError, "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, "
-                                         "inf_norm)");
+                                         "mn)");
         return NULL;
     }
     for (i = 0; i < 6; i++) {
@@ -983,6 +978,7 @@ static PyObject *factored(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
     got = 2;
     if (getcsr(args + 2, b + 2, n, n) < 0)
         goto fail;
+    got = 5;
     {       /* H's rows: p from hp's length (getcsr then checks it) */
         Py_buffer bh;
         if (PyObject_GetBuffer(args[6], &bh, PyBUF_C_CONTIGUOUS) < 0)
@@ -1233,7 +1229,7 @@ static PyMethodDef methods[] = {
     {"sandwich", (PyCFunction)(void (*)(void))sandwich, METH_FASTCALL,
      "sandwich(ip, ix, dv, S, X, Y): Y = Phi (Phi S)' for Phi in compressed rows (csr_matvecs' doubles)"},
     {"factored", (PyCFunction)(void (*)(void))factored, METH_FASTCALL,
-     "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm) -> (tr, ls, alpha, theta)"},
+     "factored(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, mn) -> (tr, ls, alpha, theta)"},
     {"kappa", (PyCFunction)(void (*)(void))kappa, METH_FASTCALL,
      "kappa(K, H, d) -> (one, inf): the 1- and inf-norms of |D^-1 K| |H D| (sums in index order)"},
     {"block", (PyCFunction)(void (*)(void))block, METH_FASTCALL,

@@ -191,14 +191,14 @@ def sandwich(ip: np.ndarray, ix: np.ndarray, dv: np.ndarray, T: np.ndarray, X: n
 
 def factored(Y: np.ndarray, S: np.ndarray, ip: np.ndarray, ix: np.ndarray, adv: np.ndarray, K: np.ndarray,
              hp: np.ndarray, hj: np.ndarray, hv: np.ndarray, aux: np.ndarray, rho: float, wf: float, czp: float,
-             c1f: float, c4f: float, inf_norm: float) -> tuple[float, float, float, float] | None:
+             c1f: float, c4f: float, mn: float) -> tuple[float, float, float, float] | None:
     """``(tr, ls, alpha, theta)`` of :meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.step_factored` by the
     kernel, the new set written over ``Y``; None (``Y`` untouched) where the kernel does not apply (not built,
     arrays not C-ordered doubles and ``np.intp`` indices of matching sizes, ``Y`` sharing memory with an input)."""
     if FACTORED is None:
         return None
     try:
-        return FACTORED(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, inf_norm)
+        return FACTORED(Y, S, ip, ix, adv, K, hp, hj, hv, aux, rho, wf, czp, c1f, c4f, mn)
     except (BufferError, ValueError, TypeError):
         FALLBACKS["factored"] += 1
         return None

@@ -27,7 +27,9 @@ class PendingSet:
         #: Kept for a taker (:meth:`~switchobs_core.numerics.rounding.ErrorEllipsoid.keep_product`): :meth:`full`
         #: assembles a copy of ``Z``.
         self.kept = False
-        #: ``trace S'`` (the sum of its diagonal, as ``np.trace``) and that rounded up (the ellipsoid's ``tr``).
+        #: ``trace S'``, the sum of its diagonal as computed (numpy's plan: as ``np.trace``; the kernel's
+        #: ``open_plan``: in index order, another rounding of the same sum), and that rounded up (the
+        #: ellipsoid's ``tr``, an upper bound whatever the order).
         self.trace, self.tr = plan[4], plan[5]
 
     def _product(self) -> np.ndarray:

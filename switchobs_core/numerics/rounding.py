@@ -319,7 +319,7 @@ class ErrorEllipsoid:
         ``Z = Phi~ S Phi~'`` with allowance ``c``, ``mn >= ||Phi~||_inf``) planned by the compiled kernel:
         ``w = image_bound(|Phi~|)`` and :meth:`_plan`'s operations with the factors of :attr:`_faux`, its sums in
         index order (rounded up as :meth:`step_factored` says); None where the kernel is not built or refuses."""
-        cz, c1f = _zfactors(c)
+        cz, c1f, rho = *_zfactors(c), (rho if rho >= 0.0 else math.inf)    # a NaN rho bounds nothing
         hit = dense_kernel.open_plan(Z, self.S, *phi, self._faux, rho, self._gsum * (1.0 + 2.0 * _U), cz, c1f,
                                      self._c4f, mn)
         if hit is None:
@@ -332,7 +332,7 @@ class ErrorEllipsoid:
         """The O(n) part of :meth:`_assemble` from ``zd``, the diagonal of ``Z`` before its symmetrisation:
         ``(alpha, tb, Q, q, trace, tr)`` with ``S' = alpha sym Z (+ tb Q)`` and ``q`` added to its diagonal,
         ``trace`` the sum of that diagonal and ``tr`` it rounded up (the doubles the n x n passes give)."""
-        n, d2, id2 = self.n, self._d2, self._id2
+        n, d2, id2, rho = self.n, self._d2, self._id2, (rho if rho >= 0.0 else math.inf)   # NaN rho: inf
         zs = zd + zd                # the diagonal of sym Z = (Z + Z') / 2, as the full pass rounds it
         zs *= 0.5
         cz, c1f = _zfactors(cz)         # the symmetrisation's rounding, relative u of |sym Z|; q's factor
@@ -465,11 +465,11 @@ class ErrorEllipsoid:
         dS += q
         self.S, self.tr, self.symmetric = S, max(float(dS.dot(self._ones)), 0.0) * self._gsum, S
 
-    def step_factored(self, Y: np.ndarray, phi: tuple, inf_norm: float, K: np.ndarray, H: tuple, wf: float,
+    def step_factored(self, Y: np.ndarray, phi: tuple, mn: float, K: np.ndarray, H: tuple, wf: float,
                       c: float, rho: float) -> bool:
         """:meth:`propagate_product` of a Kalman sample's factored map (:meth:`~switchobs_core.bounds.kalman_map.
         KalmanMap.step`) by the compiled kernel, kept: ``Y = Phi~ S Phi~'`` (overwritten with the new ``S``),
-        ``phi = (indptr, indices, |data|)`` of ``Phi~`` (``||Phi~||_inf <= inf_norm``), ``K`` (n x p, C-ordered),
+        ``phi = (indptr, indices, |data|)`` of ``Phi~``, ``mn`` the map's underflow gain (step 8), ``K`` (n x p),
         ``H = (indptr, indices, data)`` in compressed rows, ``w``'s factor ``wf`` and the product's allowance
         ``c``: the kernel forms ``Z`` and ``w`` as the map's docstring says (steps 1-3) and assembles the set of
         :meth:`_plan` and :meth:`_apply` (steps 5-8) with the factors below and in :attr:`_faux`, every sum in index
@@ -477,8 +477,8 @@ class ErrorEllipsoid:
         in any order, and each scalar sum of nonnegative terms is rounded up by ``gsum`` whatever its order), so
         the set differs from numpy's in its last bits only; :attr:`tr` and :meth:`lam_scaled` from its diagonal.
         False (nothing changed, ``Y`` intact) where the kernel is not built or refuses the arrays."""
-        cz, c1f = _zfactors(c)
-        hit = dense_kernel.factored(Y, self.S, *phi, K, *H, self._faux, rho, wf, cz, c1f, self._c4f, inf_norm)
+        cz, c1f, rho = *_zfactors(c), (rho if rho >= 0.0 else math.inf)    # a NaN rho bounds nothing
+        hit = dense_kernel.factored(Y, self.S, *phi, K, *H, self._faux, rho, wf, cz, c1f, self._c4f, mn)
         if hit is None:
             return False
         self.S, self.tr, self._ls = Y, hit[0], (Y, hit[0], hit[1])
