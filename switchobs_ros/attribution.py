@@ -253,9 +253,9 @@ class ChannelAttribution:
 
     def resolve(self, pend: Pending, now_mono: float, force: bool = False) -> Resolution:
         """The channel of a pending sample and whether it is certain at ``now_mono`` (``force``:
-        the window is over). By stamps, a certain answer is kept for the same sample, parts, switching
-        messages received and ``force`` (:meth:`_by_stamps`): the pipeline asks again as it pairs,
-        advances and answers a sample."""
+        the window is over). By stamps, a certain answer is kept for the same sample, parts (set or
+        replaced: ``Pending.changes``), switching messages received and ``force`` (:meth:`_by_stamps`): the
+        pipeline asks again as it pairs, advances and answers a sample."""
         srcs = self.sources
         if self._fixed:
             fixed = {srcs[i].channel for i in pend.parts if srcs[i].channel is not None}
@@ -265,7 +265,7 @@ class ChannelAttribution:
             return Resolution.of(self._last_fixed)
         stamped = self.stamped
         if stamped.at:                      # by the sensors' stamps (switchobs_ros.switching)
-            key = (pend.stamp_ns, len(pend.parts), stamped.received, force)
+            key = (pend.stamp_ns, pend.changes, stamped.received, force)
             got = self._resolved
             if got is not None and got[0] is pend and got[1] == key:
                 return got[2]
@@ -306,7 +306,7 @@ class ChannelAttribution:
         received (every change of the history counts one in ``received``), so the last one is kept
         for the same sample, parts, count and ``force``: a sample is resolved, answered and
         recorded with one look-up."""
-        key = (pend.stamp_ns, len(pend.parts), self.stamped.received, force)
+        key = (pend.stamp_ns, pend.changes, self.stamped.received, force)
         memo = self._memo
         if memo is not None and memo[0] is pend and memo[1] == key:
             return memo[2]

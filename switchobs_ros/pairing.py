@@ -52,14 +52,21 @@ class Part:
 
 class Pending:
     """One sample being assembled: the parts that have arrived for one stamp, by source index,
-    and ``since``, the monotonic time its first part arrived."""
+    ``since``, the monotonic time its first part arrived, and ``changes``, a count of the parts set
+    and dropped (a part replaced counts: what is kept per sample compares it, :meth:`drop`)."""
 
-    __slots__ = ("parts", "since", "stamp_ns")
+    __slots__ = ("parts", "since", "stamp_ns", "changes")
 
     def __init__(self, stamp_ns: int, since: float):
         self.stamp_ns = stamp_ns
         self.parts: dict[int, Part] = {}
         self.since = since
+        self.changes = 0
+
+    def drop(self, index: int) -> None:
+        """Remove source ``index``'s part."""
+        del self.parts[index]
+        self.changes += 1
 
 
 class Pairing:
@@ -90,6 +97,7 @@ class Pairing:
         if pend is None:
             pend = self.pending[stamp_ns] = Pending(stamp_ns, now_mono)
         pend.parts[index] = Part(values, None if src_ns is None else int(src_ns), arrival_channel, arrival)
+        pend.changes += 1
         return pend
 
     def _near(self, index: int, stamp_ns: int) -> Pending | None:

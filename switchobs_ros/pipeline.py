@@ -454,7 +454,7 @@ class EstimatorPipeline(Counters):
         self.reject_all([self.sources[i].topic for i in dropped],
                         Rejection(reason, self.channel_topic or "channel", detail))
         for i in dropped:
-            del pend.parts[i]
+            pend.drop(i)
         return Resolution.of(self.observer.channel or self.attribution.channel)
 
     def _answer(self, pend: Pending, channel: int, out: list[Estimate]) -> None:

@@ -223,3 +223,29 @@ def test_a_certain_resolution_by_stamps_is_kept_until_a_switching_message_or_a_p
     assert att.remember_switch(120 * MS, 2, 160 * MS, seq=2)
     assert att.resolve(pend, 0.0) == Resolution(Verdict.CHANNEL, 2, certain=True)
     assert att.resolve(pend, 0.0, force=True) == Resolution(Verdict.CHANNEL, 2, certain=True)
+
+
+def test_a_kept_resolution_is_resolved_afresh_when_a_part_is_replaced():
+    """A sample re-stamped to its target's stamp (tolerance 5 ms) whose camera part is then replaced by the
+    camera's next message on that stamp: the same stamp, the same number of parts and the same switching
+    messages, but a newer part, so a switching message no longer arrived after every part (a recording
+    without source timestamps) and the channel is not certain any more: resolved afresh, as an attribution
+    that never kept an answer resolves it."""
+
+    def run(keep: bool) -> Resolution:
+        att = ChannelAttribution((CAMERA, TARGET), "camera/active_channel", WINDOW, 5 * MS)
+        att.stamped.horizon = {1: 0, 2: 0}
+        pairing = Pairing((CAMERA, TARGET), (4, 4), 5 * MS)
+        v = np.zeros(2)
+        att.remember_switch(100 * MS, 1, None, seq=1)
+        a = pairing.add(0, 200 * MS, v, None, 1, 0.0, att.stamped.received)
+        assert pairing.add(1, 203 * MS, v, None, 1, 0.0, att.stamped.received) is a and a.stamp_ns == 203 * MS
+        att.remember_switch(100 * MS, 1, None, seq=2)       # a repeated switching message, after a's parts
+        if keep:
+            assert att.resolve(a, 0.0) == Resolution(Verdict.CHANNEL, 1, certain=True)
+        old = pairing.add(1, 150 * MS, v, None, 1, 0.0, att.stamped.received)   # a late, older sample
+        att.resolve(old, 0.0)
+        assert pairing.add(0, 203 * MS, v, None, 1, 0.0, att.stamped.received) is a and len(a.parts) == 2
+        return att.resolve(a, 0.0)
+
+    assert run(True) == run(False) == Resolution(Verdict.CHANNEL, 1, certain=False)
