@@ -16,6 +16,13 @@ box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
    ``target/pose`` in the first ``schedule.dead_time`` seconds after a switch, while the camera turns),
 4. ``sim/truth`` (the true state x(t_k), a labelled Float64MultiArray stamped t_k; reliable).
 
+The stamped channel message comes first only on a switching tick. On every other tick it comes after
+the poses (between 3 and 4). There it is a heartbeat sent after the tick's samples: it proves their
+channel as it arrives (:mod:`switchobs_ros.switching`: a channel message sent after a sample). So the
+estimator answers every sample of a residence at once, including the last part beyond
+``switch_horizon``, which would otherwise wait one tick for the next heartbeat. A ``std_msgs/UInt8``
+channel is attributed by arrival order, so it always comes first.
+
 ``stamp_offset_ms`` shifts the stamps of the camera's own pose and of the switching instants (a
 camera computer whose clock runs that far ahead of the targets'); ``channel_last`` publishes the
 channel message after the poses (the first pose of a new channel sent before it).
@@ -100,8 +107,9 @@ PARAMS = [
           "(stamped with the switching instant) or std_msgs/msg/UInt8 (the channel alone)."),
     Param("stamp_offset_ms", 0.0, "Milliseconds added to the stamps of the camera's own pose and of the switching "
           "instants: a camera clock ahead of the targets' (a test of clocks across computers)."),
-    Param("channel_last", False, "Publish the channel message after the tick's poses (the first pose of a new "
-          "channel is then sent before its channel message)."),
+    Param("channel_last", False, "Publish the channel message after the tick's poses on every tick, switching "
+          "ticks included (the first pose of a new channel is then sent before its channel message). Default: "
+          "a stamped channel message after the poses except on a switching tick (module docstring)."),
     Param("wait_for_subscribers", 0, "Before tick 0, wait until target/pose has this many subscribers."),
     Param("wait_for_truth_subscribers", 0, "Before tick 0, wait until sim/truth has this many subscribers."),
     Param("stamp_at_send", False, "Stamp each tick with the node clock when it is sent, as a sensor stamping "
@@ -322,13 +330,14 @@ class CameraSimNode(Node):
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
         if self.bias is not None:
             y = self.bias.add(t, rho, y)
-        if rho != self.switch[0]:
+        switched = rho != self.switch[0]
+        if switched:
             self.switch = (rho, stamp_ns)
         # while the camera turns (dead time) only the shared sources (its own pose) publish
         msgs = self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t),
                                      self.switch[1] if self.stamped else None, self.offset_ns)
-        if self.cfg["channel_last"] and self.specs.channel_topic:
-            msgs = msgs[1:] + msgs[:1]
+        if self.specs.channel_topic and (self.cfg["channel_last"] or (self.stamped and not switched)):
+            msgs = msgs[1:] + msgs[:1]     # the channel message after the poses (module docstring)
         for topic, msg in msgs:
             self.pubs[topic].publish(msg)
         self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))

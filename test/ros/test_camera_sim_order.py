@@ -1,0 +1,115 @@
+"""camera_sim's order within a tick: a stamped channel message before the poses on a switching
+tick and after them on every other tick, so that the estimator with the default ``switch_horizon``
+answers every target pose as its tick's messages arrive, never one tick later; a ``std_msgs/UInt8``
+channel (attributed by arrival order) always first. The node's callback is run with recording
+publishers, its messages fed to the pipeline in the order sent, no DDS."""
+
+from __future__ import annotations
+
+import pytest
+
+import msg_bridge as mb
+from switchobs_ros.estimator import PARAMS
+from switchobs_ros.pipeline import EstimatorPipeline
+
+S = 1_000_000_000
+MS = 1_000_000
+EPOCH_NS = 100_000 * S
+CHANNEL, CAMERA, TARGET = "camera/active_channel", "camera/pose", "target/pose"
+
+
+class _Recorder:
+    """A publisher that appends ``(topic, message)`` to the tick's list."""
+
+    def __init__(self, topic: str, sent: list) -> None:
+        self.topic, self.sent = topic, sent
+
+    def publish(self, msg) -> None:
+        self.sent.append((self.topic, msg))
+
+
+def _ticks(n: int, **params) -> list[list[tuple[str, object]]]:
+    """The messages of camera_sim's first ``n`` ticks at 50 Hz (the paper's periodic (2 s, 0.6)
+    schedule), per tick in the order published; the truth message left out."""
+    from rclpy.parameter import Parameter
+
+    from switchobs_ros.camera_sim import CameraSimNode
+
+    node = CameraSimNode(parameter_overrides=[Parameter("rate", value=50.0),
+                                              *(Parameter(k, value=v) for k, v in params.items())])
+    try:
+        node.timer.cancel()
+        node.epoch_ns, sent, ticks = EPOCH_NS, [], []
+        node.pubs = {topic: _Recorder(topic, sent) for topic in node.pubs}
+        node.pub_truth = _Recorder("sim/truth", [])
+        for k in range(n):
+            node.publish_tick(k)
+            ticks.append(list(sent))
+            sent.clear()
+        return ticks
+    finally:
+        node.destroy_node()
+
+
+def _switching_ticks(ticks) -> set[int]:
+    """The ticks whose channel differs from the tick before's (tick 0 included)."""
+    out, last = set(), None
+    for k, msgs in enumerate(ticks):
+        ch = next(mb.read_channel(m, 2)[0] for t, m in msgs if t == CHANNEL)
+        if ch != last:
+            out.add(k)
+        last = ch
+    return out
+
+
+def test_a_stamped_channel_comes_first_only_on_a_switching_tick(ros_node):
+    ticks = _ticks(150)
+    switching = _switching_ticks(ticks)
+    assert switching == {0, 60, 100}           # channel 1 for 1.2 s, channel 2 for 0.8 s, channel 1 again
+    for k, msgs in enumerate(ticks):
+        topics = [t for t, _ in msgs]
+        assert set(topics) == {CHANNEL, CAMERA, TARGET}
+        assert topics.index(CHANNEL) == (0 if k in switching else 2), (k, topics)
+
+
+@pytest.mark.parametrize("params", [{"channel_type": "std_msgs/msg/UInt8"}, {"channel_last": True}])
+def test_an_unstamped_channel_comes_first_and_channel_last_comes_last(ros_node, params):
+    ticks = _ticks(70, **params)
+    for msgs in ticks:
+        topics = [t for t, _ in msgs]
+        assert topics.index(CHANNEL) == (2 if "channel_last" in params else 0)
+
+
+def _answered_by_tick(ticks, paper_tables, reorder=None) -> dict[int, int]:
+    """Feed the ticks to the estimator's pipeline (default parameters: ``switch_horizon`` 0.9, exact
+    stamps) in their order, one source timestamp per message from one clock; ``reorder`` rearranges
+    each tick's messages first. Returns, per answered tick, the tick whose messages answered it."""
+    c = {p.name: p.default for p in PARAMS}
+    c.update(gain_table=paper_tables["periodic"], e0=20.0)
+    pl = EstimatorPipeline.from_params(c)
+    stamps = {EPOCH_NS + k * 20 * MS: k for k in range(len(ticks))}
+    src, answered = 10 * S, {}
+    for k, msgs in enumerate(ticks):
+        now_ns, now_mono = EPOCH_NS + k * 20 * MS + 2 * MS, k * 0.02
+        for topic, msg in (reorder(msgs) if reorder else msgs):
+            src += 50_000
+            if topic == CHANNEL:
+                out = pl.on_channel(msg, src_ns=src, now_mono=now_mono, seq=k)
+            else:
+                out = pl.on_pose("camera" if topic == CAMERA else "target", msg, now_ns, now_mono, src)
+            answered.update({stamps[e.stamp_ns]: k for e in out})
+    return answered
+
+
+def test_every_sample_is_answered_by_its_own_ticks_messages(ros_node, paper_tables):
+    """Through two switches (the last tenth of channel 1's residence, ticks 54-59, beyond the
+    horizon): every tick answered by its own messages. The same messages with the channel first
+    on every tick leave the last tenth waiting one tick for the next heartbeat."""
+    ticks = _ticks(110)
+    answered = _answered_by_tick(ticks, paper_tables)
+    assert answered == {k: k for k in range(110)}
+    channel_first = _answered_by_tick(ticks, paper_tables,
+                                      reorder=lambda msgs: sorted(msgs, key=lambda tm: tm[0] != CHANNEL))
+    late = sorted(k for k, by in channel_first.items() if by != k)
+    assert late and all(channel_first[k] == k + 1 for k in late)
+    assert set(range(55, 60)) <= set(late)
