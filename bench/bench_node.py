@@ -28,7 +28,9 @@ arrival in the receiver's Python callback is a second p50 column. A rate is
 Configurations (``--configs``, ``--soak-config``): ``on-change-uint8`` and ``on-change-stamped``
 (the sender switches channels by the paper's cycle and publishes the channel only on a change, as
 ``UInt8`` or as the stamped ``ActiveChannel``; otherwise it publishes channel 1 once),
-``on-change-stamped-once`` (the latter with the estimator's ``switch_horizon`` 1), the
+``on-change-stamped-once`` (the latter with the estimator's ``switch_horizon`` 1),
+``every-tick-stamped`` (camera_sim's pattern: the stamped channel every tick, after the poses but on
+a switching tick) and ``every-tick-stamped-first`` (the same messages, the channel first every tick), the
 estimator's ``default``, ``no-gc-freeze``,
 ``state-only``, ``lean-loop``, ``traced``, ``rt`` (its process under ``chrt -f 40``), ``udp``
 (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``), and ``bare`` (the republisher) for soaks. ``--load K``
@@ -70,7 +72,15 @@ CONFIGS = {
     "on-change-stamped": {"_channel": "stamped"},
     # the same, every sample of a residence certain at once (switchobs_ros.switching: switch_horizon)
     "on-change-stamped-once": {"_channel": "stamped", "switch_horizon": 1.0},
+    # camera_sim's pattern: the stamped channel on every tick, before the poses on a switching tick and
+    # after them on the others (a heartbeat that proves the tick's poses as it arrives); and the same
+    # messages with the channel before the poses on every tick (the last tenth of a residence then
+    # waits one tick for the next heartbeat: switch_horizon 0.9)
+    "every-tick-stamped": {"_channel": "tick"},
+    "every-tick-stamped-first": {"_channel": "tick-first"},
 }
+#: The sender's channel patterns that publish the stamped ``switchobs_msgs/ActiveChannel``.
+STAMPED = ("stamped", "tick", "tick-first")
 #: The soak's goal: no answer later than this (ms).
 LATE_MS = 20.0
 #: ``--perf DIR``: record the machine's context switches (``perf record -a -e sched:sched_switch``)
@@ -94,7 +104,7 @@ def republisher_main() -> None:
     node.create_subscription(PoseStamped, "target/pose", pub.publish, qos.SENSOR_SUB)
     node.create_subscription(PoseStamped, "camera/pose", lambda m: None, qos.SENSOR_SUB)
     from switchobs_msgs.msg import ActiveChannel
-    node.create_subscription(ActiveChannel if os.environ.get("BENCH_CHANNEL") == "stamped" else UInt8,
+    node.create_subscription(ActiveChannel if os.environ.get("BENCH_CHANNEL") in STAMPED else UInt8,
                              "camera/active_channel", lambda m: None, qos.CHANNEL_SUB)
     print("bare_republisher ready", flush=True)     # bench_startup.py: its interfaces exist
     try:
@@ -171,13 +181,15 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
     from switchobs_core.model.schedule import Cycle, PeriodicSchedule
     from switchobs_ros import qos
 
-    pattern = os.environ.get("BENCH_CHANNEL", "")       # '' (channel 1 once), uint8, stamped (on change)
+    # '' (channel 1 once), uint8, stamped (on change), tick, tick-first (every tick: CONFIGS)
+    pattern = os.environ.get("BENCH_CHANNEL", "")
+    stamped = pattern in STAMPED
     sched = PeriodicSchedule(Cycle.from_ts(2.0, 0.6))
     rclpy.init()
     node = rclpy.create_node("bench_sender")
     cam = node.create_publisher(PoseStamped, f"/{ns}/camera/pose", qos.SENSOR)
     tgt = node.create_publisher(PoseStamped, f"/{ns}/target/pose", qos.SENSOR)
-    kind = type(active_channel(1, 0)) if pattern == "stamped" else UInt8
+    kind = type(active_channel(1, 0)) if stamped else UInt8
     ch = node.create_publisher(kind, f"/{ns}/camera/active_channel",
                                qos.CHANNEL_PUB)
     end = time.monotonic() + 60
@@ -188,7 +200,7 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
     if not pattern:
         ch.publish(UInt8(data=1))
     time.sleep(0.2)
-    current = 0
+    current, instant = 0, 0
     n = int(rate * seconds)
     period = 1.0 / rate
     sent = np.zeros(n, dtype=np.int64)
@@ -199,11 +211,15 @@ def sender_main(ns: str, rate: float, seconds: float, out: str) -> None:
             time.sleep(d)       # no spinning: the sender must not compete with the node for a core
         s = time.time_ns()
         c = int(sched.channel_at(k * period))
-        if pattern and c != current:
-            current = c
-            ch.publish(active_channel(c, s) if pattern == "stamped" else UInt8(data=c))
+        switching = c != current
+        if switching:
+            current, instant = c, s
+        if pattern and (switching or pattern == "tick-first"):
+            ch.publish(active_channel(c, instant) if stamped else UInt8(data=c))
         cam.publish(mb.xy_to_pose((0.001 * k, 0.0), s, "map"))
         tgt.publish(mb.xy_to_pose((3.0, 1.0), s, "map"))
+        if pattern == "tick" and not switching:
+            ch.publish(active_channel(c, instant))      # the heartbeat, after the tick's poses
         sent[k] = s
         t_next += period
     np.save(out, sent)
