@@ -126,8 +126,10 @@ PARAMS = [
     Param("reorder_window_ms", 50.0, "Milliseconds a sample of a topic shared by several channels waits for its "
           "channel to be certain (a channel message sent after it) before the latest channel sent before it is "
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
-          "publisher that sends the channel every tick (camera_sim) makes samples certain one tick later; one that "
-          "sends it only on change makes them wait the whole window. 0: the latest channel received (arrival order)."),
+          "publisher that sends the channel every tick makes samples certain as the next one arrives: at once when it "
+          "follows the tick's poses (camera_sim's stamped channel), one tick later when it precedes them (camera_sim's "
+          "UInt8); one that sends it only on change makes them wait the whole window. 0: the latest channel received "
+          "(arrival order)."),
     Param("clock_tolerance_ms", 0.0, "The largest error of any source's stamps against the estimator's clock (ms; "
           "clocks of several computers: their synchronisation's budget, chrony or PTP). It enters the bounds: a stamp "
           "error d is a measurement error of at most sup_{|s|<=d} ||C (e^{A s} - I) x|| "
@@ -136,9 +138,9 @@ PARAMS = [
     Param("switch_horizon", 0.9, "With the stamped channel: a sample stamped within this fraction of its channel's "
           "shortest designed residence after the latest switching instant (less clock_tolerance_ms) is certain at "
           "once, answered without waiting for a later channel message; the rest of the residence waits for one "
-          "(about one tick with camera_sim). A switch that comes sooner than this withdraws the bounds "
-          "(switchobs_ros.switching). 0.9 leaves a tenth of the residence for a camera that switches early; 1 trusts "
-          "the schedule's residences to the nanosecond and answers every sample at once."),
+          "(camera_sim sends it right after the tick's poses). A switch that comes sooner than this withdraws the "
+          "bounds (switchobs_ros.switching). 0.9 leaves a tenth of the residence for a camera that switches early; "
+          "1 trusts the schedule's residences to the nanosecond and answers every sample at once."),
     Param("channel_type", "auto", "The channel topic's message type: switchobs_msgs/msg/ActiveChannel (the "
           "switching instant in its stamp: samples attributed by their stamps), std_msgs/msg/UInt8 (attributed by "
           "the publishers' source timestamps; for one publisher of the channel and the samples), or auto (the type "
