@@ -330,14 +330,14 @@ class CameraSimNode(Node):
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
         if self.bias is not None:
             y = self.bias.add(t, rho, y)
-        switched = rho != self.switch[0]
-        if switched:
+        if rho != self.switch[0]:
             self.switch = (rho, stamp_ns)
-        # while the camera turns (dead time) only the shared sources (its own pose) publish
+        # while the camera turns (dead time) only the shared sources (its own pose) publish; the channel
+        # message first on a switching tick, after the poses on the others (module docstring)
         msgs = self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t),
                                      self.switch[1] if self.stamped else None, self.offset_ns)
-        if self.specs.channel_topic and (self.cfg["channel_last"] or (self.stamped and not switched)):
-            msgs = msgs[1:] + msgs[:1]     # the channel message after the poses (module docstring)
+        if self.cfg["channel_last"] and self.specs.channel_topic and msgs[0][0] == self.specs.channel_topic:
+            msgs = msgs[1:] + msgs[:1]
         for topic, msg in msgs:
             self.pubs[topic].publish(msg)
         self.pub_truth.publish(mb.labelled_array(self.plant.x, self.labels, stamp_ns))

@@ -216,22 +216,28 @@ class SensorOutputs:
     def messages(self, channel: int, y, stamp_ns: int, frame_id: str, blind: bool = False,
                  switch_ns: int | None = None, shared_offset_ns: int = 0) -> list[tuple[str, object]]:
         """``[(topic, message), ...]`` of one tick on ``channel`` with output ``y`` (relative topics).
-        With ``switch_ns`` (the channel's switching instant) the channel message is a stamped
-        ``switchobs_msgs/ActiveChannel``, else a ``std_msgs/UInt8``; ``shared_offset_ns`` shifts the
-        stamps of the shared sources and of the switching instant (a camera computer whose clock is
-        that far ahead of the targets')."""
+        With ``switch_ns`` (the channel's switching instant, the stamp of its first tick) the channel
+        message is a stamped ``switchobs_msgs/ActiveChannel``, else a ``std_msgs/UInt8``;
+        ``shared_offset_ns`` shifts the stamps of the shared sources and of the switching instant (a
+        camera computer whose clock is that far ahead of the targets').
+
+        The order is camera_sim's: the channel message first on a switching tick (``switch_ns ==
+        stamp_ns``) and always as ``UInt8`` (attributed by arrival order); a stamped repetition after
+        the tick's measurements, a heartbeat that proves their channel as it arrives
+        (:mod:`switchobs_ros.switching`: a channel message sent after a sample)."""
         out: list[tuple[str, object]] = []
-        if self.specs.channel_topic:
-            if switch_ns is None:
-                from std_msgs.msg import UInt8
-                out.append((self.specs.channel_topic, UInt8(data=int(channel))))
-            else:
-                from msg_bridge.typed import active_channel
-                out.append((self.specs.channel_topic, active_channel(channel, switch_ns + shared_offset_ns)))
         for src, w in zip(self.specs.sources, self.writers):
             if src.serves(channel) and (src.shared or not blind):
                 at = stamp_ns + (shared_offset_ns if src.shared else 0)
                 out.append((src.topic, w.msg([y[r] for r in src.rows_for(channel)], at, frame_id)))
+        if self.specs.channel_topic:
+            if switch_ns is None:
+                from std_msgs.msg import UInt8
+                out.insert(0, (self.specs.channel_topic, UInt8(data=int(channel))))
+            else:
+                from msg_bridge.typed import active_channel
+                msg = (self.specs.channel_topic, active_channel(channel, switch_ns + shared_offset_ns))
+                out.insert(0 if switch_ns == stamp_ns else len(out), msg)
         return out
 
 

@@ -7,8 +7,10 @@ allows (about 1 s for 60 s of 100 Hz data). Per tick ``k`` (stamp ``clock_start 
 
 ``/clock``, ``/camera/active_channel``, ``/camera/pose``, ``/target/pose``, ``/sim/truth``
 
-all with log time = the stamp (what a recorder on the simulated clock would write). Ticks
-``k = 0 .. round(duration * rate)`` as camera_sim's ``duration``.
+(the stamped ``/camera/active_channel`` after the poses except on a switching tick, as camera_sim
+sends it: :meth:`~switchobs_ros.core_config.SensorOutputs.messages`), all with log time = the
+stamp (what a recorder on the simulated clock would write). Ticks ``k = 0 .. round(duration *
+rate)`` as camera_sim's ``duration``.
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ from .io import BagError, BagOut, type_name
 
 __all__ = ["GenerateConfig", "generate", "scenario_ticks"]
 
-#: Topics a generated bag of the paper's system holds, in the per-tick publishing order of
-#: camera_sim (another system: ``/clock``, its input topics, ``/sim/truth``).
+#: Topics a generated bag of the paper's system holds, in camera_sim's per-tick publishing order on a
+#: switching tick (another system: ``/clock``, its input topics, ``/sim/truth``).
 TOPICS = ("/clock", "/camera/active_channel", "/camera/pose", "/target/pose", "/sim/truth")
 
 
