@@ -93,9 +93,10 @@ def make_stream(agents: int, rate: float, seconds: float, out: Path) -> None:
         plant.advance(t)
         rho = int(sched.channel_at(t))
         y = plant.measure(rho)
-        if rho != switch[0]:
+        switching = rho != switch[0]
+        if switching:
             switch = (rho, stamp)
-        for topic, msg in outputs.messages(rho, y, stamp, "map", sched.blind_at(t), switch[1]):
+        for topic, msg in outputs.messages(rho, y, stamp, "map", sched.blind_at(t), switch[1], switching=switching):
             topics.append(topic)
             types.append(f"{type(msg).__module__.split('.')[0]}/msg/{type(msg).__name__}")
             blobs.append(np.frombuffer(serialize_message(msg), dtype=np.uint8))

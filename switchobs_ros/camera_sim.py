@@ -18,10 +18,13 @@ box). At every tick ``k`` (``rate`` Hz) it publishes, in this order:
 
 The stamped channel message comes first only on a switching tick. On every other tick it comes after
 the poses (between 3 and 4). There it is a heartbeat sent after the tick's samples: it proves their
-channel as it arrives (:mod:`switchobs_ros.switching`: a channel message sent after a sample). So the
-estimator answers every sample of a residence at once, including the last part beyond
-``switch_horizon``, which would otherwise wait one tick for the next heartbeat. A ``std_msgs/UInt8``
-channel is attributed by arrival order, so it always comes first.
+channel as it arrives (:mod:`switchobs_ros.switching`: a channel message sent ``2 x
+clock_tolerance_ms`` after a sample). With exact stamps (``clock_tolerance_ms: 0``, the estimator's
+default) the estimator so answers every sample of a residence at once, including the last part
+beyond ``switch_horizon``, which would otherwise wait one tick for the next heartbeat; with a
+tolerance, that part still waits for the first heartbeat sent ``2 x`` the tolerance later. A
+``std_msgs/UInt8`` channel keeps its place first on every tick
+(:meth:`~switchobs_ros.core_config.SensorOutputs.messages`).
 
 ``stamp_offset_ms`` shifts the stamps of the camera's own pose and of the switching instants (a
 camera computer whose clock runs that far ahead of the targets'); ``channel_last`` publishes the
@@ -330,12 +333,13 @@ class CameraSimNode(Node):
             y = y + self.cfg["noise_std"] * self.rng.standard_normal(y.shape)
         if self.bias is not None:
             y = self.bias.add(t, rho, y)
-        if rho != self.switch[0]:
+        switching = rho != self.switch[0]
+        if switching:
             self.switch = (rho, stamp_ns)
         # while the camera turns (dead time) only the shared sources (its own pose) publish; the channel
         # message first on a switching tick, after the poses on the others (module docstring)
         msgs = self.outputs.messages(rho, y, stamp_ns, self.frame, self.schedule.blind_at(t),
-                                     self.switch[1] if self.stamped else None, self.offset_ns)
+                                     self.switch[1] if self.stamped else None, self.offset_ns, switching=switching)
         if self.cfg["channel_last"] and self.specs.channel_topic and msgs[0][0] == self.specs.channel_topic:
             msgs = msgs[1:] + msgs[:1]
         for topic, msg in msgs:

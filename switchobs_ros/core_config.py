@@ -214,17 +214,20 @@ class SensorOutputs:
         self.writers = [mb.FieldWriter(s.type, s.fields) for s in specs.sources]
 
     def messages(self, channel: int, y, stamp_ns: int, frame_id: str, blind: bool = False,
-                 switch_ns: int | None = None, shared_offset_ns: int = 0) -> list[tuple[str, object]]:
+                 switch_ns: int | None = None, shared_offset_ns: int = 0, *,
+                 switching: bool = True) -> list[tuple[str, object]]:
         """``[(topic, message), ...]`` of one tick on ``channel`` with output ``y`` (relative topics).
         With ``switch_ns`` (the channel's switching instant, the stamp of its first tick) the channel
         message is a stamped ``switchobs_msgs/ActiveChannel``, else a ``std_msgs/UInt8``;
         ``shared_offset_ns`` shifts the stamps of the shared sources and of the switching instant (a
         camera computer whose clock is that far ahead of the targets').
 
-        The order is camera_sim's: the channel message first on a switching tick (``switch_ns ==
-        stamp_ns``) and always as ``UInt8`` (attributed by arrival order); a stamped repetition after
-        the tick's measurements, a heartbeat that proves their channel as it arrives
-        (:mod:`switchobs_ros.switching`: a channel message sent after a sample)."""
+        The order is camera_sim's: the channel message first on a ``switching`` tick (the first tick on
+        ``channel``: the first pose of the new channel then finds its channel), and always as ``UInt8``
+        (the order the unstamped format's recordings and tools were made with); a stamped repetition
+        after the tick's measurements, a heartbeat that proves their channel as it arrives
+        (:mod:`switchobs_ros.switching`: a channel message sent ``2 x clock_tolerance_ms`` after a
+        sample; with exact stamps, at once)."""
         out: list[tuple[str, object]] = []
         for src, w in zip(self.specs.sources, self.writers):
             if src.serves(channel) and (src.shared or not blind):
@@ -237,7 +240,7 @@ class SensorOutputs:
             else:
                 from msg_bridge.typed import active_channel
                 msg = (self.specs.channel_topic, active_channel(channel, switch_ns + shared_offset_ns))
-                out.insert(0 if switch_ns == stamp_ns else len(out), msg)
+                out.insert(0 if switching else len(out), msg)
         return out
 
 

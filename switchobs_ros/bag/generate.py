@@ -149,7 +149,8 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         stamp_ns = epoch_ns + k * period_ns
         plant.advance(t, w=None if accel is None or not k else accel((k - 1) * period_ns * 1e-9))
         rho = int(schedule.channel_at(t))
-        if rho != switch[0]:
+        switching = rho != switch[0]
+        if switching:
             switch = (rho, stamp_ns)
         y = plant.measure(rho, noise_std=0.0)
         if cfg.noise_std > 0:
@@ -160,7 +161,8 @@ def scenario_ticks(cfg: GenerateConfig) -> Iterator[tuple[int, list[tuple[str, o
         # the system's input topics, as camera_sim publishes them (no target pose while the camera turns)
         msgs = [("/clock", ClockMsg(clock=mb.ns_to_stamp(stamp_ns)))]
         msgs += [("/" + topic, m) for topic, m in outputs.messages(rho, y, stamp_ns, cfg.world_frame,
-                                                                  schedule.blind_at(t), switch[1] if stamped else None)]
+                                                                  schedule.blind_at(t), switch[1] if stamped else None,
+                                                                  switching=switching)]
         msgs.append(("/sim/truth", mb.labelled_array(plant.x, labels, stamp_ns)))
         yield stamp_ns, msgs
 

@@ -1,8 +1,8 @@
 """camera_sim's order within a tick: a stamped channel message before the poses on a switching
 tick and after them on every other tick, so that the estimator with the default ``switch_horizon``
 answers every target pose as its tick's messages arrive, never one tick later; a ``std_msgs/UInt8``
-channel (attributed by arrival order) always first. The node's callback is run with recording
-publishers, its messages fed to the pipeline in the order sent, no DDS."""
+channel always first. The node's callback is run with recording publishers, its messages fed to the
+pipeline in the order sent, no DDS."""
 
 from __future__ import annotations
 
@@ -28,9 +28,10 @@ class _Recorder:
         self.sent.append((self.topic, msg))
 
 
-def _ticks(n: int, **params) -> list[list[tuple[str, object]]]:
+def _ticks(n: int, skip: tuple[int, ...] = (), **params) -> list[list[tuple[str, object]]]:
     """The messages of camera_sim's first ``n`` ticks at 50 Hz (the paper's periodic (2 s, 0.6)
-    schedule), per tick in the order published; the truth message left out."""
+    schedule), per tick in the order published (``skip``: ticks its timer skipped, no messages);
+    the truth message left out."""
     from rclpy.parameter import Parameter
 
     from switchobs_ros.camera_sim import CameraSimNode
@@ -43,7 +44,8 @@ def _ticks(n: int, **params) -> list[list[tuple[str, object]]]:
         node.pubs = {topic: _Recorder(topic, sent) for topic in node.pubs}
         node.pub_truth = _Recorder("sim/truth", [])
         for k in range(n):
-            node.publish_tick(k)
+            if k not in skip:
+                node.publish_tick(k)
             ticks.append(list(sent))
             sent.clear()
         return ticks
@@ -52,9 +54,11 @@ def _ticks(n: int, **params) -> list[list[tuple[str, object]]]:
 
 
 def _switching_ticks(ticks) -> set[int]:
-    """The ticks whose channel differs from the tick before's (tick 0 included)."""
+    """The ticks whose channel differs from the tick published before's (tick 0 included)."""
     out, last = set(), None
     for k, msgs in enumerate(ticks):
+        if not msgs:
+            continue
         ch = next(mb.read_channel(m, 2)[0] for t, m in msgs if t == CHANNEL)
         if ch != last:
             out.add(k)
@@ -62,14 +66,21 @@ def _switching_ticks(ticks) -> set[int]:
     return out
 
 
-def test_a_stamped_channel_comes_first_only_on_a_switching_tick(ros_node):
-    ticks = _ticks(150)
-    switching = _switching_ticks(ticks)
-    assert switching == {0, 60, 100}           # channel 1 for 1.2 s, channel 2 for 0.8 s, channel 1 again
+@pytest.mark.parametrize(("skip", "params", "first"), [
+    ((), {}, {0, 60, 100}),                   # channel 1 for 1.2 s, channel 2 for 0.8 s, channel 1 again
+    ((), {"stamp_offset_ms": 2.0}, {0, 60, 100}),      # the switching instants shifted, not the ticks
+    ((60, 61), {}, {0, 62, 100}),             # the timer skipped the switching tick: the next one switches
+])
+def test_a_stamped_channel_comes_first_only_on_a_switching_tick(ros_node, skip, params, first):
+    ticks = _ticks(150, skip, **params)
+    assert _switching_ticks(ticks) == first
     for k, msgs in enumerate(ticks):
         topics = [t for t, _ in msgs]
+        if k in skip:
+            assert topics == []
+            continue
         assert set(topics) == {CHANNEL, CAMERA, TARGET}
-        assert topics.index(CHANNEL) == (0 if k in switching else 2), (k, topics)
+        assert topics.index(CHANNEL) == (0 if k in first else 2), (k, topics)
 
 
 @pytest.mark.parametrize("params", [{"channel_type": "std_msgs/msg/UInt8"}, {"channel_last": True}])
@@ -102,7 +113,7 @@ def _answered_by_tick(ticks, paper_tables, reorder=None) -> dict[int, int]:
 
 
 def test_every_sample_is_answered_by_its_own_ticks_messages(ros_node, paper_tables):
-    """Through two switches (the last tenth of channel 1's residence, ticks 54-59, beyond the
+    """Through two switches (the last tenth of each residence, ticks 54-59 and 96-99, beyond the
     horizon): every tick answered by its own messages. The same messages with the channel first
     on every tick leave the last tenth waiting one tick for the next heartbeat."""
     ticks = _ticks(110)
@@ -111,8 +122,9 @@ def test_every_sample_is_answered_by_its_own_ticks_messages(ros_node, paper_tabl
     channel_first = _answered_by_tick(ticks, paper_tables,
                                       reorder=lambda msgs: sorted(msgs, key=lambda tm: tm[0] != CHANNEL))
     late = sorted(k for k, by in channel_first.items() if by != k)
-    assert late and all(channel_first[k] == k + 1 for k in late)
-    assert set(range(55, 60)) <= set(late)
+    # beyond 0.9 of the residences (1.08 s of channel 1's 1.2 s, 0.72 s of channel 2's 0.8 s)
+    assert late == [*range(54, 60), *range(96, 100)]
+    assert all(channel_first[k] == k + 1 for k in late)
 
 
 def test_a_generated_bag_holds_camera_sims_order(ros_node):
