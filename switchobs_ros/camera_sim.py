@@ -23,8 +23,9 @@ clock_tolerance_ms`` after a sample). With exact stamps (``clock_tolerance_ms: 0
 default) the estimator so answers every sample of a residence at once, including the last part
 beyond ``switch_horizon``, which would otherwise wait one tick for the next heartbeat; with a
 tolerance, that part still waits for the first heartbeat sent ``2 x`` the tolerance later. A
-``std_msgs/UInt8`` channel keeps its place first on every tick
-(:meth:`~switchobs_ros.core_config.SensorOutputs.messages`).
+``std_msgs/UInt8`` channel takes the same places
+(:meth:`~switchobs_ros.core_config.SensorOutputs.messages`); without a switching instant it has no
+horizon, so only a switching tick's poses wait, for the next tick's message.
 
 ``stamp_offset_ms`` shifts the stamps of the camera's own pose and of the switching instants (a
 camera computer whose clock runs that far ahead of the targets'); ``channel_last`` publishes the

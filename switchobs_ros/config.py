@@ -127,8 +127,8 @@ PARAMS = [
           "channel to be certain (a channel message sent after it) before the latest channel sent before it is "
           "taken; DDS reorders topics under load (and stalls a reader for up to 200 ms, bench/RESULTS.md). A "
           "publisher that sends the channel every tick makes samples certain as the next one arrives: with exact "
-          "stamps (clock_tolerance_ms 0) at once when it follows the tick's poses (camera_sim's stamped channel), one "
-          "tick later when it precedes them (camera_sim's UInt8); one that sends it only on change makes them "
+          "stamps (clock_tolerance_ms 0) at once when it follows the tick's poses (camera_sim, but on a switching "
+          "tick), one tick later when it precedes them; one that sends it only on change makes them "
           "wait the whole window. 0: the latest channel received (arrival order)."),
     Param("clock_tolerance_ms", 0.0, "The largest error of any source's stamps against the estimator's clock (ms; "
           "clocks of several computers: their synchronisation's budget, chrony or PTP). It enters the bounds: a stamp "

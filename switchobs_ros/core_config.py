@@ -223,11 +223,10 @@ class SensorOutputs:
         camera computer whose clock is that far ahead of the targets').
 
         The order is camera_sim's: the channel message first on a ``switching`` tick (the first tick on
-        ``channel``: the first pose of the new channel then finds its channel), and always as ``UInt8``
-        (the order the unstamped format's recordings and tools were made with); a stamped repetition
-        after the tick's measurements, a heartbeat that proves their channel as it arrives
-        (:mod:`switchobs_ros.switching`: a channel message sent ``2 x clock_tolerance_ms`` after a
-        sample; with exact stamps, at once)."""
+        ``channel``: the first pose of the new channel then finds its channel), and after the tick's
+        measurements on the others: a repetition that proves their channel as it arrives (a channel
+        message sent after a sample, ``2 x clock_tolerance_ms`` after it with a tolerance:
+        :mod:`switchobs_ros.switching`, :mod:`switchobs_ros.attribution`)."""
         out: list[tuple[str, object]] = []
         for src, w in zip(self.specs.sources, self.writers):
             if src.serves(channel) and (src.shared or not blind):
@@ -236,11 +235,11 @@ class SensorOutputs:
         if self.specs.channel_topic:
             if switch_ns is None:
                 from std_msgs.msg import UInt8
-                out.insert(0, (self.specs.channel_topic, UInt8(data=int(channel))))
+                msg: tuple[str, object] = (self.specs.channel_topic, UInt8(data=int(channel)))
             else:
                 from msg_bridge.typed import active_channel
                 msg = (self.specs.channel_topic, active_channel(channel, switch_ns + shared_offset_ns))
-                out.insert(0 if switching else len(out), msg)
+            out.insert(0 if switching else len(out), msg)
         return out
 
 

@@ -1,7 +1,8 @@
 """camera_sim's order within a tick: a stamped channel message before the poses on a switching
 tick and after them on every other tick, so that the estimator with the default ``switch_horizon``
 answers every target pose as its tick's messages arrive, never one tick later; a ``std_msgs/UInt8``
-channel always first. The node's callback is run with recording publishers, its messages fed to the
+channel in the same places (without a switching instant, a switching tick's poses wait one tick).
+The node's callback is run with recording publishers, its messages fed to the
 pipeline in the order sent, no DDS."""
 
 from __future__ import annotations
@@ -83,12 +84,12 @@ def test_a_stamped_channel_comes_first_only_on_a_switching_tick(ros_node, skip, 
         assert topics.index(CHANNEL) == (0 if k in first else 2), (k, topics)
 
 
-@pytest.mark.parametrize("params", [{"channel_type": "std_msgs/msg/UInt8"}, {"channel_last": True}])
-def test_an_unstamped_channel_comes_first_and_channel_last_comes_last(ros_node, params):
-    ticks = _ticks(70, **params)
-    for msgs in ticks:
-        topics = [t for t, _ in msgs]
-        assert topics.index(CHANNEL) == (2 if "channel_last" in params else 0)
+def test_an_unstamped_channel_has_the_same_order_and_channel_last_comes_last(ros_node):
+    ticks = _ticks(110, channel_type="std_msgs/msg/UInt8")
+    for k, msgs in enumerate(ticks):
+        assert [t for t, _ in msgs].index(CHANNEL) == (0 if k in (0, 60, 100) else 2)
+    for msgs in _ticks(70, channel_last=True):
+        assert [t for t, _ in msgs].index(CHANNEL) == 2
 
 
 def _answered_by_tick(ticks, paper_tables, reorder=None) -> dict[int, int]:
@@ -110,6 +111,16 @@ def _answered_by_tick(ticks, paper_tables, reorder=None) -> dict[int, int]:
                 out = pl.on_pose("camera" if topic == CAMERA else "target", msg, now_ns, now_mono, src)
             answered.update({stamps[e.stamp_ns]: k for e in out})
     return answered
+
+
+def test_an_unstamped_channel_answers_all_but_the_switching_ticks_by_their_own_messages(ros_node, paper_tables):
+    """``std_msgs/UInt8`` has no switching instant, hence no horizon: a switching tick's poses (the
+    channel message before them) wait for the next tick's message; every other tick is answered by its
+    own, the repetition after its poses."""
+    answered = _answered_by_tick(_ticks(110, channel_type="std_msgs/msg/UInt8"), paper_tables)
+    assert sorted(answered) == list(range(110))
+    assert {k for k, by in answered.items() if by != k} == {0, 60, 100}
+    assert all(answered[k] == k + 1 for k in (0, 60, 100))
 
 
 def test_every_sample_is_answered_by_its_own_ticks_messages(ros_node, paper_tables):
