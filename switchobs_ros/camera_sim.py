@@ -113,7 +113,7 @@ PARAMS = [
           "instants: a camera clock ahead of the targets' (a test of clocks across computers)."),
     Param("channel_last", False, "Publish the channel message after the tick's poses on every tick, switching "
           "ticks included (the first pose of a new channel is then sent before its channel message). Default: "
-          "a stamped channel message after the poses except on a switching tick (module docstring)."),
+          "the channel message after the poses except on a switching tick (module docstring)."),
     Param("wait_for_subscribers", 0, "Before tick 0, wait until target/pose has this many subscribers."),
     Param("wait_for_truth_subscribers", 0, "Before tick 0, wait until sim/truth has this many subscribers."),
     Param("stamp_at_send", False, "Stamp each tick with the node clock when it is sent, as a sensor stamping "

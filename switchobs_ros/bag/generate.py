@@ -7,10 +7,10 @@ allows (about 1 s for 60 s of 100 Hz data). Per tick ``k`` (stamp ``clock_start 
 
 ``/clock``, ``/camera/active_channel``, ``/camera/pose``, ``/target/pose``, ``/sim/truth``
 
-(the stamped ``/camera/active_channel`` after the poses except on a switching tick, as camera_sim
-sends it: :meth:`~switchobs_ros.core_config.SensorOutputs.messages`), all with log time = the
-stamp (what a recorder on the simulated clock would write). Ticks ``k = 0 .. round(duration *
-rate)`` as camera_sim's ``duration``.
+(``/camera/active_channel`` after the poses except on a switching tick, as camera_sim sends it:
+:meth:`~switchobs_ros.core_config.SensorOutputs.messages`), all with log time = the stamp (what a
+recorder on the simulated clock would write). Ticks ``k = 0 .. round(duration * rate)`` as
+camera_sim's ``duration``.
 """
 
 from __future__ import annotations
